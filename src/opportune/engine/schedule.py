@@ -1,0 +1,411 @@
+"""The schedule: what has been installed, plus *all* admissible ways to finish.
+
+The paper's schedule is "the sequence of steps that have been completed plus
+the set of all possible sequences for completing the remaining steps".  A
+:class:`Schedule` represents that set without listing it: every question
+(how many completions, which parts can go in now, how many options each keeps,
+where each part is expected to come) is answered by counting linear
+extensions with the memoised :class:`~opportune.engine.count.Counter`.
+
+How a plan becomes posets:
+
+* **Quantities.**  A part with quantity *q* becomes *q* units chained
+  ``u1 < u2 < ... < uq``.  Sequences of part ids correspond one-to-one to
+  linear extensions of the chained units (exactly one of the *q!* orders of
+  interchangeable units is the chained one), so identical units never
+  multiply a count.
+* **Several strategies.**  The admissible sequences are the union over the
+  strategies still consistent with what was installed.  Its size is
+  computed by inclusion–exclusion: the sequences admissible under every
+  strategy of a set *T* are the linear extensions of the union of their
+  orders (zero if that union has a cycle).  One counter per set *T*, each
+  keeping its memo for the life of the plan.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from fractions import Fraction
+from itertools import combinations
+from typing import Iterable, Sequence
+
+from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.poset import CycleError, Poset
+from opportune.plan import Plan
+
+MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
+
+
+class NotAdmissible(ValueError):
+    """Installing a part would leave no admissible sequence (or the part is unknown / used up)."""
+
+    def __init__(self, message: str, part: str | None = None):
+        self.part = part
+        super().__init__(message)
+
+
+@dataclass(frozen=True)
+class CountResult:
+    """A number of admissible sequences: exact, or an estimate with its stated error.
+
+    ``value`` is an ``int`` when ``exact``; otherwise a float estimate whose
+    true value lies within ``value * (1 ± rel_error)`` with probability
+    ``confidence``.
+    """
+
+    value: int | float
+    exact: bool = True
+    rel_error: float = 0.0
+    confidence: float = 1.0
+    method: str = "exact"
+
+    @property
+    def log10(self) -> float:
+        if self.value <= 0:
+            return float("-inf")
+        if isinstance(self.value, int):
+            digits = len(str(self.value))
+            if digits > 300:
+                return digits - 1 + math.log10(int(str(self.value)[:17]) / 10**16)
+        return math.log10(self.value)
+
+
+class OrderEngine:
+    """The order engine of one plan: its unit posets and their counters.
+
+    Create one per plan and share it between all schedules, sequencers and
+    simulations of that plan: the memo (and the per-state caches below) is
+    what makes repeated questions cheap.
+
+    ``max_memo`` and ``time_limit`` bound each exact count; beyond them
+    :meth:`Schedule.count_result` falls back to an estimate and says so.
+    """
+
+    def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None):
+        self.plan = plan
+        self.max_memo = max_memo
+        self.time_limit = time_limit
+        # Units: part i owns units first[i] .. first[i] + quantity - 1, installed in that order.
+        self.first: list[int] = []
+        self.unit_part: list[int] = []
+        for i, part in enumerate(plan.parts):
+            self.first.append(len(self.unit_part))
+            self.unit_part.extend([i] * part.quantity)
+        self.n_units = len(self.unit_part)
+        self.full = (1 << self.n_units) - 1
+        chain = [(u, u + 1) for u in range(self.n_units - 1) if self.unit_part[u] == self.unit_part[u + 1]]
+        self.posets: list[Poset] = []
+        for strategy in plan.strategies:
+            pairs = list(chain)
+            for b, a in plan.index_pairs(strategy):
+                # Every constraint applies to every unit: last unit of b before first unit of a.
+                pairs.append((self.first[b] + plan.parts[b].quantity - 1, self.first[a]))
+            self.posets.append(Poset.from_pairs(self.n_units, pairs))
+        self.k = len(self.posets)
+        self.all_strategies = (1 << self.k) - 1
+        self._counters: dict[int, Counter | None] = {}
+        self._count_cache: dict[tuple[int, int], int] = {}
+        self._options_cache: dict[tuple[int, int], dict[str, int]] = {}
+
+    # ------------------------------------------------------------ posets per strategy set
+
+    def counter(self, strategies: int) -> Counter | None:
+        """Counter for the sequences admissible under *every* strategy in the bitmask (None: none are)."""
+        if strategies not in self._counters:
+            members = [self.posets[s] for s in range(self.k) if strategies >> s & 1]
+            poset = members[0]
+            try:
+                for other in members[1:]:
+                    poset = poset.union(other)
+            except CycleError:
+                self._counters[strategies] = None
+            else:
+                self._counters[strategies] = Counter(poset, max_memo=self.max_memo, time_limit=self.time_limit)
+        return self._counters[strategies]
+
+    def _terms(self, consistent: int):
+        """Inclusion–exclusion terms ``(sign, counter)`` over the non-empty subsets of ``consistent``."""
+        members = [s for s in range(self.k) if consistent >> s & 1]
+        if len(members) > MAX_STRATEGIES_EXACT:
+            raise BudgetExceeded(f"{len(members)} strategies: inclusion–exclusion over 2^{len(members)} sets")
+        for size in range(1, len(members) + 1):
+            sign = 1 if size % 2 else -1
+            for subset in combinations(members, size):
+                counter = self.counter(sum(1 << s for s in subset))
+                if counter is not None:
+                    yield sign, counter
+
+    # ------------------------------------------------------------ state questions
+
+    def consistent_after(self, mask: int, consistent: int, unit: int) -> int:
+        """Strategies (bitmask) in which ``unit`` can be installed on top of ``mask``."""
+        out = 0
+        for s in range(self.k):
+            if consistent >> s & 1 and self.posets[s].below[unit] & ~mask == 0:
+                out |= 1 << s
+        return out
+
+    def next_unit(self, mask: int, part: int) -> int | None:
+        """The next uninstalled unit of a part, or None if all are installed."""
+        first = self.first[part]
+        for u in range(first, first + self.plan.parts[part].quantity):
+            if not mask >> u & 1:
+                return u
+        return None
+
+    def count(self, mask: int, consistent: int) -> int:
+        """Exact number of admissible completions after installing ``mask`` (raises BudgetExceeded)."""
+        key = (mask, consistent)
+        cached = self._count_cache.get(key)
+        if cached is not None:
+            return cached
+        remaining = self.full & ~mask
+        total = 0
+        for sign, counter in self._terms(consistent):
+            total += sign * counter.count(remaining)
+        self._count_cache[key] = total
+        return total
+
+    def options(self, mask: int, consistent: int) -> dict[str, int]:
+        """For each part installable now: admissible completions left after installing it (declaration order)."""
+        key = (mask, consistent)
+        cached = self._options_cache.get(key)
+        if cached is not None:
+            return cached
+        out: dict[str, int] = {}
+        for i, part in enumerate(self.plan.parts):
+            u = self.next_unit(mask, i)
+            if u is None:
+                continue
+            after = self.consistent_after(mask, consistent, u)
+            if after:
+                out[part.id] = self.count(mask | 1 << u, after)
+        self._options_cache[key] = out
+        return out
+
+    def position_sums(self, mask: int, consistent: int) -> dict[int, int]:
+        """Sum over all admissible completions of each remaining unit's 1-based position."""
+        remaining = self.full & ~mask
+        sums: dict[int, int] = {}
+        for sign, counter in self._terms(consistent):
+            for unit, value in counter.position_sums(remaining).items():
+                sums[unit] = sums.get(unit, 0) + sign * value
+        return sums
+
+
+class Schedule:
+    """A schedule: the parts installed so far (in order) plus all admissible completions.
+
+    Immutable: :meth:`install` returns a new schedule sharing the plan's
+    :class:`OrderEngine` (and so its memo), which makes branching cheap.
+
+    >>> from opportune import make_plan
+    >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+    >>> s.count(), s.installable()
+    (3, ('a', 'b'))
+    >>> s.options()
+    {'a': 2, 'b': 1}
+    >>> s.install("b").count()
+    1
+    """
+
+    __slots__ = ("engine", "plan", "installed", "mask", "consistent")
+
+    def __init__(self, plan_or_engine: Plan | OrderEngine, installed: Iterable[str] = ()):
+        engine = plan_or_engine if isinstance(plan_or_engine, OrderEngine) else OrderEngine(plan_or_engine)
+        self.engine = engine
+        self.plan = engine.plan
+        self.installed: tuple[str, ...] = ()
+        self.mask = 0
+        self.consistent = engine.all_strategies
+        for part in installed:
+            self._install_in_place(part)
+
+    @classmethod
+    def _make(cls, engine, installed, mask, consistent) -> "Schedule":
+        s = object.__new__(cls)
+        s.engine, s.plan, s.installed, s.mask, s.consistent = engine, engine.plan, installed, mask, consistent
+        return s
+
+    # ------------------------------------------------------------ state
+
+    def _locate(self, part: str) -> tuple[int, int, int]:
+        if part not in self.plan:
+            raise NotAdmissible(f"unknown part '{part}'", part)
+        i = self.plan.index(part)
+        u = self.engine.next_unit(self.mask, i)
+        if u is None:
+            q = self.plan.parts[i].quantity
+            raise NotAdmissible(
+                f"part '{part}' is already installed" + (f" ({q} of {q} units)" if q > 1 else ""), part)
+        after = self.engine.consistent_after(self.mask, self.consistent, u)
+        if not after:
+            missing = self.missing_before(part)
+            raise NotAdmissible(
+                f"part '{part}' cannot be installed yet: it requires {', '.join(missing)} first"
+                if missing else f"installing '{part}' now leaves no admissible sequence", part)
+        return i, u, after
+
+    def _install_in_place(self, part: str) -> None:
+        _, u, after = self._locate(part)
+        self.installed += (part,)
+        self.mask |= 1 << u
+        self.consistent = after
+
+    def install(self, part: str) -> "Schedule":
+        """The schedule after installing one unit of ``part``; raises :class:`NotAdmissible`."""
+        _, u, after = self._locate(part)
+        return Schedule._make(self.engine, self.installed + (part,), self.mask | 1 << u, after)
+
+    def can_install(self, part: str) -> bool:
+        try:
+            self._locate(part)
+        except NotAdmissible:
+            return False
+        return True
+
+    def missing_before(self, part: str) -> list[str]:
+        """Parts still to install before ``part`` in the consistent strategy that misses the fewest."""
+        i = self.plan.index(part)
+        u = self.engine.next_unit(self.mask, i)
+        if u is None:
+            return []
+        best = None
+        for s in range(self.engine.k):
+            if self.consistent >> s & 1:
+                lacking = self.engine.posets[s].below[u] & ~self.mask
+                parts = sorted({self.engine.unit_part[v] for v in _bits(lacking)} - {i})
+                if best is None or len(parts) < len(best):
+                    best = parts
+        return [self.plan.parts[j].id for j in best or []]
+
+    @property
+    def remaining(self) -> dict[str, int]:
+        """Units still to install, per part (declaration order; parts with none left omitted)."""
+        out: dict[str, int] = {}
+        for u in _bits(self.engine.full & ~self.mask):
+            pid = self.plan.parts[self.engine.unit_part[u]].id
+            out[pid] = out.get(pid, 0) + 1
+        return out
+
+    @property
+    def is_complete(self) -> bool:
+        return self.mask == self.engine.full
+
+    @property
+    def consistent_strategies(self) -> tuple[str, ...]:
+        """Names of the strategies the installed sequence still respects."""
+        return tuple(s.name for k, s in enumerate(self.plan.strategies) if self.consistent >> k & 1)
+
+    # ------------------------------------------------------------ questions
+
+    def installable(self) -> tuple[str, ...]:
+        """Parts that can be installed now (all their required parts installed in some consistent strategy)."""
+        return tuple(self.engine.options(self.mask, self.consistent))
+
+    def count(self) -> int:
+        """Exact number of admissible completions (raises BudgetExceeded if over budget)."""
+        return self.engine.count(self.mask, self.consistent)
+
+    def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0) -> CountResult:
+        """Number of completions: exact within the engine's budget, else a clearly marked estimate."""
+        try:
+            return CountResult(self.count())
+        except BudgetExceeded:
+            pass
+        from opportune.engine.estimate import estimate_count
+
+        remaining = self.engine.full & ~self.mask
+        value, abs_err, conf, methods = 0.0, 0.0, 1.0, set()
+        terms = list(self.engine._terms(self.consistent))
+        for sign, counter in terms:
+            est = estimate_count(counter.poset, remaining, rel_error=rel_error / max(1, len(terms)),
+                                 time_limit=time_limit / max(1, len(terms)), seed=seed)
+            value += sign * est.value
+            abs_err += est.rel_error * est.value
+            conf = min(conf, est.confidence)
+            methods.add(est.method)
+        rel = abs_err / value if value > 0 else float("inf")
+        return CountResult(value, exact=False, rel_error=rel, confidence=conf, method="+".join(sorted(methods)))
+
+    def options(self) -> dict[str, int]:
+        """For each installable part, how many admissible completions remain after installing it.
+
+        These are the paper's "future sequencing options" that the opportunistic
+        policy maximises.  Cached per state, so repeated questions are dict look-ups.
+        """
+        return self.engine.options(self.mask, self.consistent)
+
+    def next_probabilities(self) -> dict[str, Fraction]:
+        """Probability that each installable part comes next in a uniformly random admissible completion."""
+        total = self.count()
+        return {p: Fraction(c, total) for p, c in self.options().items()}
+
+    def expected_positions(self) -> dict[str, Fraction]:
+        """Expected position (1 = next) of each remaining part in a uniformly random admissible completion.
+
+        For a part with several units left, the position of its next unit: when it is first needed.
+        """
+        total = self.count()
+        sums = self.engine.position_sums(self.mask, self.consistent)
+        out = {}
+        for i, part in enumerate(self.plan.parts):
+            u = self.engine.next_unit(self.mask, i)
+            if u is not None:
+                out[part.id] = Fraction(sums[u], total)
+        return out
+
+    def sample(self, seed: int | random.Random | None = 0) -> list[str]:
+        """One admissible completion drawn uniformly at random (exactly, from the counts)."""
+        rng = seed if isinstance(seed, random.Random) else random.Random(seed)
+        s, out = self, []
+        while not s.is_complete:
+            opts = s.options()
+            r = rng.randrange(sum(opts.values()))
+            for part, c in opts.items():
+                if r < c:
+                    break
+                r -= c
+            out.append(part)
+            s = s.install(part)
+        return out
+
+    def completions(self, limit: int = 100_000) -> list[tuple[str, ...]]:
+        """Every admissible completion, in lexicographic order of declaration; refuses above ``limit``."""
+        total = self.count()
+        if total > limit:
+            raise ValueError(f"{total} completions is more than the limit of {limit}: count or sample them instead")
+        out: list[tuple[str, ...]] = []
+
+        def walk(s: Schedule, prefix: tuple[str, ...]):
+            if s.is_complete:
+                out.append(prefix)
+                return
+            for part in s.options():
+                walk(s.install(part), prefix + (part,))
+
+        walk(self, ())
+        return out
+
+    def __repr__(self) -> str:
+        return f"Schedule({self.plan.name!r}, installed={list(self.installed)!r})"
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Schedule) and other.engine is self.engine and other.installed == self.installed
+
+    def __hash__(self) -> int:
+        return hash((id(self.engine), self.installed))
+
+
+def _bits(mask: int):
+    while mask:
+        low = mask & -mask
+        yield low.bit_length() - 1
+        mask ^= low
+
+
+def schedule(plan: Plan, installed: Sequence[str] = ()) -> Schedule:
+    """Shorthand for ``Schedule(plan, installed)``."""
+    return Schedule(plan, installed)

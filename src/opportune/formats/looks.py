@@ -1,0 +1,64 @@
+"""Looks files: what the vision system saw, one look per line.
+
+Text: part ids separated by spaces or commas, ``-`` for an empty look,
+``#`` starts a comment, blank lines are skipped.  JSON: a list of lists of ids.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from opportune.formats.problems import Problem
+
+
+class LooksError(ValueError):
+    def __init__(self, problem: Problem):
+        self.problem = problem
+        super().__init__(str(problem))
+
+
+def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
+    """Parse a looks file's text (text or JSON form); raise :class:`LooksError` with the line."""
+    stripped = text.lstrip()
+    if stripped.startswith("["):
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise LooksError(Problem(f"JSON syntax error: {exc.msg}", "a JSON looks file is a list of lists of part ids",
+                                     file=file, line=exc.lineno, code="syntax")) from None
+        if not isinstance(data, list) or not all(isinstance(look, list) for look in data):
+            raise LooksError(Problem("a JSON looks file must be a list of lists of part ids", 'e.g. [["rl", "ra"], []]',
+                                     file=file, code="type"))
+        for i, look in enumerate(data):
+            for part in look:
+                if not isinstance(part, (str, int)) or isinstance(part, bool):
+                    raise LooksError(Problem(f"look {i + 1}: {part!r} is not a part id", "use strings",
+                                             file=file, code="type"))
+        return [tuple(str(p) for p in look) for look in data]
+    looks = []
+    for no, line in enumerate(text.splitlines(), start=1):
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        if line == "-":
+            looks.append(())
+            continue
+        parts = tuple(p for p in line.replace(",", " ").split() if p)
+        if "-" in parts:
+            raise LooksError(Problem("'-' (an empty look) must stand alone on its line",
+                                     "write '-' alone, or list the visible parts", file=file, line=no, code="syntax"))
+        looks.append(parts)
+    return looks
+
+
+def read_looks(path: str | Path) -> list[tuple[str, ...]]:
+    """Read a looks file; raise :class:`LooksError` (missing file included)."""
+    path = Path(path)
+    try:
+        text = path.read_text("utf-8")
+    except FileNotFoundError:
+        raise LooksError(Problem(f"no such file: {path}", "check the path", code="io")) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LooksError(Problem(f"cannot read {path}: {exc}", "give a UTF-8 text file", code="io")) from None
+    return parse_looks(text, file=str(path))

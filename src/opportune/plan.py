@@ -1,0 +1,182 @@
+"""The plan: parts and the strategies that order them.
+
+A *plan* (section 3 of the paper) is a set of steps — here, installing parts —
+with the minimum set of ordering constraints, possibly as several alternative
+*strategies*.  Each strategy is a partial order, written as "for each part, the
+parts that must be installed before it".  The admissible sequences of a plan are
+the union, over its strategies, of the sequences that respect that strategy.
+
+This module holds only the data model.  Reading files lives in
+:mod:`opportune.formats`, checking in :mod:`opportune.formats.validate`, and
+every question about admissible sequences in :mod:`opportune.engine`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Iterable, Mapping
+
+
+class PlanError(ValueError):
+    """A plan that cannot be used, with every problem found.
+
+    ``problems`` is a list of :class:`opportune.formats.problems.Problem`;
+    ``str(error)`` renders all of them, one per line.
+    """
+
+    def __init__(self, problems):
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems) or "invalid plan")
+
+
+@dataclass(frozen=True)
+class Part:
+    """One kind of part, installed by one operation per unit.
+
+    ``quantity`` identical, interchangeable units (e.g. 4 screws) share every
+    constraint on the part.  ``acquire`` and ``install`` are handling costs (or
+    durations) used as tie-breaks and in timing.
+    """
+
+    id: str
+    name: str | None = None
+    quantity: int = 1
+    acquire: float = 1.0
+    install: float = 1.0
+
+    @property
+    def label(self) -> str:
+        return f"{self.id} ({self.name})" if self.name else self.id
+
+    @property
+    def cost(self) -> float:
+        """Handling cost of one unit: acquire + install."""
+        return self.acquire + self.install
+
+
+@dataclass(frozen=True)
+class Strategy:
+    """One partial order over the parts: ``requires[x]`` must precede ``x``.
+
+    The mapping holds the constraints as declared (direct, possibly redundant);
+    parts with no requirements may be absent from it.
+    """
+
+    name: str
+    requires: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+
+    def __post_init__(self):
+        frozen = {k: tuple(v) for k, v in self.requires.items()}
+        object.__setattr__(self, "requires", MappingProxyType(frozen))
+
+    def pairs(self) -> list[tuple[str, str]]:
+        """Declared constraints as ``(before, after)`` pairs, in declaration order."""
+        return [(b, a) for a, bs in self.requires.items() for b in bs]
+
+    def __hash__(self):
+        return hash((self.name, tuple(sorted(self.requires.items()))))
+
+    def __eq__(self, other):
+        return (
+            isinstance(other, Strategy)
+            and self.name == other.name
+            and dict(self.requires) == dict(other.requires)
+        )
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Parts (in declaration order) and one or more strategies.
+
+    Declaration order is meaningful: it is the final, deterministic tie-break
+    of every decision made over the plan.  Build plans with
+    :func:`opportune.formats.load_plan` (files) or :func:`make_plan` (code);
+    both validate.
+
+    >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]}, name="tiny")
+    >>> plan.part_ids
+    ('a', 'b', 'c')
+    >>> plan.strategies[0].pairs()
+    [('a', 'c'), ('b', 'c')]
+    """
+
+    name: str
+    parts: tuple[Part, ...]
+    strategies: tuple[Strategy, ...]
+    source: str | None = None
+    description: str | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "parts", tuple(self.parts))
+        object.__setattr__(self, "strategies", tuple(self.strategies))
+        object.__setattr__(self, "_index", {p.id: i for i, p in enumerate(self.parts)})
+
+    @property
+    def part_ids(self) -> tuple[str, ...]:
+        return tuple(p.id for p in self.parts)
+
+    def index(self, part_id: str) -> int:
+        """Declaration position of a part (0-based); ``KeyError`` if unknown."""
+        return self._index[part_id]
+
+    def part(self, part_id: str) -> Part:
+        return self.parts[self._index[part_id]]
+
+    def __contains__(self, part_id: object) -> bool:
+        return part_id in self._index
+
+    @property
+    def n_units(self) -> int:
+        """Total number of install operations (sum of quantities)."""
+        return sum(p.quantity for p in self.parts)
+
+    def index_pairs(self, strategy: Strategy) -> list[tuple[int, int]]:
+        """A strategy's declared constraints as ``(before, after)`` part indices."""
+        return [(self._index[b], self._index[a]) for b, a in strategy.pairs()]
+
+    def to_dict(self) -> dict:
+        """The plan in the file schema (round-trips through :func:`opportune.formats.plan_from_dict`)."""
+        parts: list = []
+        for p in self.parts:
+            extra = {
+                k: v
+                for k, v in (("name", p.name), ("quantity", p.quantity), ("acquire", p.acquire), ("install", p.install))
+                if v is not None and v != Part.__dataclass_fields__[k].default
+            }
+            parts.append({"id": p.id, **extra} if extra else p.id)
+        doc: dict = {"name": self.name}
+        if self.description:
+            doc["description"] = self.description
+        doc["parts"] = parts
+        doc["strategies"] = [
+            {"name": s.name, "requires": {k: list(v) for k, v in s.requires.items()}} for s in self.strategies
+        ]
+        return doc
+
+
+def make_plan(
+    parts: Iterable[str | dict | Part],
+    requires: Mapping[str, Iterable[str]] | None = None,
+    *,
+    strategies: Mapping[str, Mapping[str, Iterable[str]]] | None = None,
+    name: str = "plan",
+) -> Plan:
+    """Build and validate a plan from Python values.
+
+    Give either ``requires`` (one strategy) or ``strategies`` (name → requires).
+    Raises :class:`PlanError` listing every problem, as ``opportune check`` would.
+    """
+    from opportune.formats.loader import plan_from_dict
+
+    doc: dict = {"name": name, "parts": [p if isinstance(p, (str, dict)) else _part_dict(p) for p in parts]}
+    if strategies is not None:
+        doc["strategies"] = [{"name": k, "requires": {a: list(b) for a, b in v.items()}} for k, v in strategies.items()]
+    else:
+        doc["requires"] = {a: list(b) for a, b in (requires or {}).items()}
+    return plan_from_dict(doc)
+
+
+def _part_dict(p: Part) -> dict:
+    d = {"id": p.id, "name": p.name, "quantity": p.quantity, "acquire": p.acquire, "install": p.install}
+    return {k: v for k, v in d.items() if v is not None}

@@ -1,0 +1,278 @@
+"""The sequencer: the state of a cell, the looks it receives, and the actions it decides.
+
+At every *look* (the parts the vision system sees in the bin), the sequencer
+checks the look against its state, asks its policy for an action, and waits
+for the outcome report.  The state changes only on reported outcomes, so a
+crash between a decision and its report loses nothing.
+
+>>> from opportune import load_plan                     # doctest: +SKIP
+>>> seq = Sequencer(load_plan("examples/gearbox.yaml"))  # doctest: +SKIP
+>>> seq.decide(visible=["rl", "ra"]).action             # doctest: +SKIP
+Action(kind='buffer', part='rl', source=None)
+>>> seq.report("success")                               # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections import Counter as Tally
+from dataclasses import dataclass, field, replace
+from typing import Iterable, Literal
+
+from opportune.engine import OrderEngine, Schedule
+from opportune.plan import Plan
+from opportune.policies.base import Action, Decision, Policy
+
+Outcome = Literal["success", "failed", "defective"]
+OUTCOMES = ("success", "failed", "defective")
+
+
+class SequencerError(ValueError):
+    """A look or report that contradicts the state; the state is unchanged."""
+
+
+class LookError(SequencerError):
+    pass
+
+
+class OutcomeError(SequencerError):
+    pass
+
+
+@dataclass(frozen=True)
+class State:
+    """Everything the sequencer knows: installed parts (the schedule), buffer contents, what is left in the bin.
+
+    Immutable, so that simulations can branch.  ``buffer`` lists buffered parts
+    in the order they were buffered; ``capacity`` is the number of buffer
+    locations (``None``: unlimited).
+    """
+
+    schedule: Schedule
+    buffer: tuple[str, ...] = ()
+    capacity: int | None = None
+    defects: int = 0
+
+    @property
+    def plan(self) -> Plan:
+        return self.schedule.plan
+
+    @property
+    def installed(self) -> tuple[str, ...]:
+        return self.schedule.installed
+
+    @property
+    def is_complete(self) -> bool:
+        return self.schedule.is_complete
+
+    @property
+    def buffer_free(self) -> float:
+        return float("inf") if self.capacity is None else self.capacity - len(self.buffer)
+
+    @property
+    def in_bin(self) -> dict[str, int]:
+        """Units still expected in the bin, per part (needed, and neither installed nor buffered)."""
+        left = Tally(self.schedule.remaining)
+        left.subtract(Tally(self.buffer))
+        return {p: n for p, n in left.items() if n > 0}
+
+    @property
+    def consistent_strategies(self) -> tuple[str, ...]:
+        return self.schedule.consistent_strategies
+
+    def to_dict(self) -> dict:
+        return {
+            "installed": list(self.installed),
+            "buffered": list(self.buffer),
+            "in_bin": self.in_bin,
+            "capacity": self.capacity,
+            "strategies": list(self.consistent_strategies),
+            "complete": self.is_complete,
+            "defects": self.defects,
+        }
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the trace, in the layout of the paper's Table 1 (state *before* the action)."""
+
+    visible: tuple[str, ...]
+    buffered: tuple[str, ...]
+    installed: tuple[str, ...]
+    decision: Decision
+    outcome: str | None = None
+
+    @property
+    def action(self) -> Action:
+        return self.decision.action
+
+    def to_dict(self) -> dict:
+        return {"visible": list(self.visible), "buffered": list(self.buffered), "installed": list(self.installed),
+                "action": self.action.to_dict(), "outcome": self.outcome}
+
+
+def check_look(state: State, visible: Iterable[str]) -> tuple[str, ...]:
+    """Validate a look against the state; return it as a tuple or raise :class:`LookError`."""
+    if isinstance(visible, str):
+        raise LookError("a look is a list of part ids, not a single string")
+    try:
+        visible = tuple(visible)
+    except TypeError:
+        raise LookError("a look is a list of part ids") from None
+    plan = state.plan
+    for part in visible:
+        if not isinstance(part, str):
+            raise LookError(f"part ids are strings, got {part!r}")
+        if part not in plan:
+            raise LookError(f"unknown part '{part}' in the look: the plan has {', '.join(plan.part_ids)}")
+    if state.is_complete and visible:
+        raise LookError("the assembly is complete: no part should be left to see")
+    in_bin = state.in_bin
+    for part, n in Tally(visible).items():
+        have = in_bin.get(part, 0)
+        if n <= have:
+            continue
+        q = plan.part(part).quantity
+        installed = state.installed.count(part)
+        buffered = state.buffer.count(part)
+        if have == 0 and installed == q:
+            raise LookError(f"part '{part}' is already installed; it cannot be seen in the bin")
+        if have == 0 and buffered:
+            raise LookError(f"part '{part}' is in a buffer location, not in the bin")
+        raise LookError(f"the look shows {n} of part '{part}' but only {have} can be in the bin "
+                        f"({q} in the plan, {installed} installed, {buffered} buffered)")
+    return visible
+
+
+class Sequencer:
+    """Keeps the state of one assembly and decides each action with a policy.
+
+    ``decide(visible)`` checks the look and returns a :class:`Decision`; the
+    action is then *pending* until ``report(outcome)``.  ``step(visible)``
+    does both, for a world where every action succeeds.
+    """
+
+    def __init__(self, plan: Plan | OrderEngine, policy: Policy | None = None, *,
+                 buffer_capacity: int | None = None):
+        if buffer_capacity is not None and buffer_capacity < 0:
+            raise ValueError("buffer capacity must be ≥ 0 (or None for unlimited)")
+        if policy is None:
+            from opportune.policies.opportunistic import Opportunistic
+
+            policy = Opportunistic()
+        self.engine = plan if isinstance(plan, OrderEngine) else OrderEngine(plan)
+        self.plan = self.engine.plan
+        self.policy = policy
+        self.state = State(Schedule(self.engine), capacity=buffer_capacity)
+        self.pending: Row | None = None
+        self.trace: list[Row] = []
+        self.finished = False
+
+    # ------------------------------------------------------------ deciding
+
+    def decide(self, visible: Iterable[str] = ()) -> Decision:
+        """Decide the next action for a look; raises :class:`LookError` (state unchanged) on a bad look.
+
+        Once the assembly is complete, an empty look is answered once with
+        ``done``; any look after that is refused.
+        """
+        if self.pending is not None:
+            raise LookError(f"'{self.pending.action}' is pending: report its outcome (or cancel it) before the next look")
+        if self.finished:
+            raise LookError("the assembly is complete and was reported done: start a new run")
+        look = check_look(self.state, visible)
+        decision = self.policy.decide(self.state, look)
+        self._check_decision(decision, look)
+        row = Row(look, self.state.buffer, self.state.installed, decision)
+        if decision.action.kind == "done":
+            self.trace.append(row)
+            self.finished = True
+        else:
+            self.pending = row
+        return decision
+
+    def _check_decision(self, decision: Decision, look: tuple[str, ...]) -> None:
+        """A policy bug must not corrupt the state: refuse actions the state does not allow."""
+        a = decision.action
+        if a.kind == "install":
+            if a.source == "bin" and a.part not in look:
+                raise RuntimeError(f"policy {self.policy.name} installs '{a.part}' from the bin but it is not visible")
+            if a.source == "buffer" and a.part not in self.state.buffer:
+                raise RuntimeError(f"policy {self.policy.name} installs '{a.part}' from the buffer but it is not there")
+            if not self.state.schedule.can_install(a.part):
+                raise RuntimeError(f"policy {self.policy.name} installs '{a.part}', which cannot go in now")
+        elif a.kind == "buffer":
+            if a.part not in look or self.state.buffer_free <= 0:
+                raise RuntimeError(f"policy {self.policy.name} buffers '{a.part}' without a visible part or a free location")
+
+    def cancel(self) -> None:
+        """Drop the pending action (the robot did not carry it out)."""
+        if self.pending is None:
+            raise OutcomeError("no action is pending")
+        self.pending = None
+
+    # ------------------------------------------------------------ outcomes
+
+    def report(self, outcome: Outcome = "success", *, keep: Literal["bin", "buffer"] = "bin") -> State:
+        """Apply the outcome of the pending action and return the new state.
+
+        ``success``: the action happened.  ``failed``: an install or buffer move
+        did not happen; for a failed install the part either goes back to the
+        bin (``keep="bin"``) or stays in the gripper and is put in a buffer
+        location (``keep="buffer"``).  ``defective``: the part is discarded;
+        the plan waits for a replacement unit in the bin.
+        """
+        if self.pending is None:
+            raise OutcomeError("no action is pending: decide an action (send a look) before reporting its outcome")
+        if outcome not in OUTCOMES:
+            raise OutcomeError(f"unknown outcome '{outcome}': use one of {', '.join(OUTCOMES)}")
+        if keep not in ("bin", "buffer"):
+            raise OutcomeError(f"keep must be 'bin' or 'buffer', not '{keep}'")
+        action = self.pending.action
+        state = self.state
+        if action.kind == "shake":
+            if outcome != "success":
+                raise OutcomeError("a shake can only succeed")
+        elif action.kind == "buffer":
+            if outcome == "success":
+                state = replace(state, buffer=state.buffer + (action.part,))
+            elif outcome == "defective":
+                state = replace(state, defects=state.defects + 1)
+        elif action.kind == "install":
+            from_buffer = action.source == "buffer"
+            buffer = _without(state.buffer, action.part) if from_buffer else state.buffer
+            if outcome == "success":
+                state = replace(state, schedule=state.schedule.install(action.part), buffer=buffer)
+            elif outcome == "defective":
+                state = replace(state, buffer=buffer, defects=state.defects + 1)
+            elif keep == "buffer":
+                if not from_buffer:
+                    if state.buffer_free <= 0:
+                        raise OutcomeError("the buffer is full: report keep='bin' for this failed install")
+                    state = replace(state, buffer=state.buffer + (action.part,))
+            else:
+                state = replace(state, buffer=buffer)
+        self.state = state
+        self.trace.append(replace(self.pending, outcome=outcome if keep == "bin" or outcome != "failed"
+                                  else "failed, buffered"))
+        self.pending = None
+        return state
+
+    def step(self, visible: Iterable[str] = ()) -> Decision:
+        """Decide for a look and report success at once (a world where every action works)."""
+        decision = self.decide(visible)
+        if decision.action.kind != "done":
+            self.report("success")
+        return decision
+
+    def run(self, looks: Iterable[Iterable[str]]) -> list[Row]:
+        """Step through looks (every action succeeding); close with ``done`` if the assembly completes."""
+        for look in looks:
+            self.step(look)
+        if self.state.is_complete and not self.finished:
+            self.step(())
+        return self.trace
+
+
+def _without(items: tuple[str, ...], part: str) -> tuple[str, ...]:
+    i = items.index(part)
+    return items[:i] + items[i + 1:]

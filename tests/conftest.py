@@ -1,0 +1,124 @@
+"""Shared test helpers: where the shared data lives, brute-force references, random plans."""
+
+from __future__ import annotations
+
+import os
+from itertools import permutations
+from pathlib import Path
+
+import pytest
+from hypothesis import strategies as st
+
+from opportune import make_plan
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+GEARBOX = EXAMPLES / "gearbox.yaml"
+
+
+def salbp_dir() -> Path:
+    """../shared/data/salbp beside the repository (CI puts it there); OPPORTUNE_SALBP_DIR overrides."""
+    env = os.environ.get("OPPORTUNE_SALBP_DIR")
+    candidates = [Path(env)] if env else []
+    candidates += [parent / "shared" / "data" / "salbp" for parent in REPO.parents]
+    candidates.append(Path("/work/shared/data/salbp"))
+    for c in candidates:
+        if (c / "KILBRID.IN2").exists():
+            return c
+    raise FileNotFoundError("the shared SALBP graphs were not found beside the repository (../shared/data/salbp); "
+                            "set OPPORTUNE_SALBP_DIR to their folder")
+
+
+@pytest.fixture(scope="session")
+def salbp() -> Path:
+    return salbp_dir()
+
+
+SALBP_FILES = ["MERTENS", "BOWMAN8", "JAESCHKE", "JACKSON", "MANSOOR", "MITCHELL", "HESKIA", "KILBRID", "TONGE70", "ARC111"]
+
+
+# ---------------------------------------------------------------- brute force
+
+
+def multiset_permutations(items):
+    """Distinct orderings of a multiset (as tuples), by plain recursion."""
+    items = sorted(items)
+    if not items:
+        yield ()
+        return
+    seen = set()
+    for i, x in enumerate(items):
+        if x in seen:
+            continue
+        seen.add(x)
+        for rest in multiset_permutations(items[:i] + items[i + 1:]):
+            yield (x,) + rest
+
+
+def respects(seq, strategy) -> bool:
+    """Every unit of each part comes after every unit of the parts it requires."""
+    first, last = {}, {}
+    for i, p in enumerate(seq):
+        first.setdefault(p, i)
+        last[p] = i
+    return all(last[b] < first[a] for a, bs in strategy.requires.items() for b in bs)
+
+
+def brute_sequences(plan, prefix=()):
+    """All admissible complete sequences of part ids starting with ``prefix`` (brute force)."""
+    units = [p.id for p in plan.parts for _ in range(p.quantity)]
+    remaining = list(units)
+    for p in prefix:
+        remaining.remove(p)
+    out = []
+    for rest in multiset_permutations(remaining):
+        seq = tuple(prefix) + rest
+        if any(respects(seq, s) for s in plan.strategies):
+            out.append(rest)
+    return out
+
+
+# ---------------------------------------------------------------- random plans
+
+
+@st.composite
+def random_plans(draw, max_parts=6, max_units=8, max_strategies=3, quantities=True):
+    n = draw(st.integers(1, max_parts))
+    ids = [f"p{i}" for i in range(n)]
+    qty = [1] * n
+    if quantities:
+        for i in range(n):
+            if sum(qty) < max_units:
+                qty[i] = draw(st.integers(1, min(3, max_units - sum(qty) + 1)))
+    k = draw(st.integers(1, max_strategies))
+    strategies = {}
+    for s in range(k):
+        order = draw(st.permutations(range(n)))
+        req: dict[str, list[str]] = {}
+        for j in range(n):
+            for i in range(j):
+                if draw(st.booleans()) and draw(st.booleans()):
+                    req.setdefault(ids[order[j]], []).append(ids[order[i]])
+        strategies[f"s{s}"] = req
+    parts = [{"id": ids[i], "quantity": qty[i]} if qty[i] > 1 else ids[i] for i in range(n)]
+    from opportune.formats import plan_from_dict
+
+    doc = {"name": "random", "parts": parts,
+           "strategies": [{"name": name, "requires": req} for name, req in strategies.items()]}
+    # Identical strategies are an error in a plan file; keep the first of each.
+    from opportune.formats.loader import Document
+    from opportune.formats.validate import check_document
+
+    result = check_document(Document(doc))
+    if not result.ok:
+        seen, unique = [], []
+        for s in doc["strategies"]:
+            key = {a: sorted(b) for a, b in s["requires"].items()}
+            if key not in seen:
+                seen.append(key)
+                unique.append(s)
+        doc["strategies"] = unique
+        result = check_document(Document(doc))
+        if not result.ok:  # same order declared differently (e.g. redundant arcs): keep one strategy
+            doc["strategies"] = unique[:1]
+    return plan_from_dict(doc)
