@@ -12,7 +12,7 @@ setup: $(STAMP) system-deps
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[service,scale,dev]'
 	@touch $(STAMP)
 
 # System tools from Debian's packages, installed only where missing.
@@ -30,6 +30,8 @@ system-deps:
 demo: setup
 	$(BIN)/opportune check examples/gearbox.yaml
 	$(BIN)/opportune count examples/gearbox.yaml
+	$(BIN)/opportune replay examples/gearbox.yaml examples/gearbox-table1.looks
+	$(BIN)/opportune simulate examples/gearbox.yaml --out demo-output
 
 test: setup
 	$(BIN)/python -m pytest -q

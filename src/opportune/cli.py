@@ -241,12 +241,108 @@ def replay(
         out.print(f"not complete after {len(looks)} looks; still to install: {left}")
 
 
+# ---------------------------------------------------------------- simulate
+
+
+@app.command()
+def simulate(
+    plan_file: Path = PLAN_ARG,
+    strategies: Optional[str] = typer.Option(None, "--strategies", help="Comma-separated; default: all that apply"),
+    trials: int = typer.Option(10_000, "--trials", min=1, help="Trials per strategy"),
+    seed: int = typer.Option(0, "--seed", help="Seed: the same seed gives the same numbers on any number of workers"),
+    bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform, weighted, pile or conveyor (default: plan, else uniform)"),
+    visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
+    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, help="Buffer locations (default: unlimited)"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)"),
+    dask: Optional[str] = typer.Option(None, "--dask", help="Address of a Dask distributed scheduler"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="Write results.json, trials.csv and plots here"),
+    as_json: bool = typer.Option(False, "--json", help="Print the results as JSON"),
+    training_runs: int = typer.Option(200, "--training-runs", min=1, help="Training runs of the quantify strategy"),
+    optimal_states: int = typer.Option(500_000, "--optimal-states", min=1, help="State limit of the optimum"),
+    motion_cost: Optional[float] = typer.Option(None, "--motion-cost", min=0),
+    shake_cost: Optional[float] = typer.Option(None, "--shake-cost", min=0),
+    look_cost: Optional[float] = typer.Option(None, "--look-cost", min=0),
+):
+    """Run the paper's comparison by simulation: every strategy, a bin model, Monte Carlo trials."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from opportune.report import TABLE_HEADER, summary, table_rows, write_outputs
+    from opportune.simulate import MARKOV_BINS, STRATEGIES, StudyConfig, StudyError, prepare, run_study
+    from opportune.worlds import TimeModel
+
+    plan = load_or_exit(plan_file, json_errors=as_json)
+    sim = plan.simulation
+    chosen_bin = bin_model or sim.get("bin", "uniform")
+    explicit = strategies is not None
+    names = [s.strip() for s in (strategies or "").split(",") if s.strip()] if explicit else \
+        [s for s in STRATEGIES if s != "optimal" or chosen_bin in MARKOV_BINS]
+    if explicit and not names:
+        fail("--strategies is empty: name at least one of " + ", ".join(STRATEGIES), 2)
+    try:
+        costs = TimeModel.from_plan(plan, motion=motion_cost, shake=shake_cost, look=look_cost)
+        config = StudyConfig(
+            plan=plan, strategies=tuple(dict.fromkeys(names)), trials=trials, seed=seed, bin=chosen_bin,
+            visible=visible or sim.get("visible", 2),
+            buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
+            costs=costs, training_runs=training_runs, optimal_states=optimal_states,
+        ).validate()
+        try:
+            prepared = prepare(config)
+        except StudyError as exc:
+            if explicit or "optimal" not in config.strategies:
+                raise
+            err.print(f"note: {exc} — leaving 'optimal' out")
+            from dataclasses import replace
+
+            config = replace(config, strategies=tuple(s for s in config.strategies if s != "optimal"))
+            prepared = prepare(config)
+        progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                            TimeRemainingColumn(), console=err, disable=not err.is_terminal, transient=True)
+        with progress:
+            task = progress.add_task("simulating", total=trials * len(config.strategies))
+            result = run_study(config, workers=workers, dask_address=dask, prepared=prepared,
+                               progress=lambda s, n: progress.advance(task, n))
+    except (StudyError, ValueError) as exc:
+        fail(str(exc))
+    doc = summary(result)
+    if out_dir:
+        try:
+            written = write_outputs(result, out_dir)
+        except OSError as exc:
+            fail(f"cannot write to {out_dir}: {exc.strerror or exc}")
+    if as_json:
+        print(json.dumps(doc, indent=2))
+    else:
+        cap = "unlimited" if config.buffer_capacity is None else config.buffer_capacity
+        table = Table(title=f"{plan.name}: {config.bin} bin, {config.visible} visible, buffer {cap}, "
+                            f"{doc['trials']:,} trials, seed {seed}")
+        for i, col in enumerate(TABLE_HEADER):
+            table.add_column(col, justify="left" if i == 0 else "right")
+        for row in table_rows(doc):
+            table.add_row(*row)
+        out.print(table)
+        if result.prepared.optimal_start is not None:
+            out.print(f"optimal expected time (exact): {result.prepared.optimal_start:.4f} "
+                      f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
+        for note in doc["notes"]:
+            out.print(f"note: {note}")
+        if out_dir:
+            out.print(f"wrote {', '.join(str(p) for p in written)}")
+    if result.interrupted:
+        err.print("interrupted: the table shows the trials that finished")
+        raise typer.Exit(130)
+
+
 @app.command()
 def schema():
     """Print the JSON Schema of plan files."""
     from opportune.formats.validate import plan_schema
 
     print(json.dumps(plan_schema(), indent=2))
+
+
+from opportune.service.commands import register as _register_service
+_register_service(app)
 
 
 def main() -> None:  # console script entry point

@@ -44,6 +44,7 @@ class Part:
     quantity: int = 1
     acquire: float = 1.0
     install: float = 1.0
+    visibility: float = 1.0
 
     @property
     def label(self) -> str:
@@ -69,6 +70,9 @@ class Strategy:
     def __post_init__(self):
         frozen = {k: tuple(v) for k, v in self.requires.items()}
         object.__setattr__(self, "requires", MappingProxyType(frozen))
+
+    def __reduce__(self):  # read-only mappings do not pickle; rebuild from plain values
+        return (Strategy, (self.name, dict(self.requires)))
 
     def pairs(self) -> list[tuple[str, str]]:
         """Declared constraints as ``(before, after)`` pairs, in declaration order."""
@@ -106,11 +110,17 @@ class Plan:
     strategies: tuple[Strategy, ...]
     source: str | None = None
     description: str | None = None
+    simulation: Mapping = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
+        object.__setattr__(self, "simulation", MappingProxyType(dict(self.simulation)))
         object.__setattr__(self, "parts", tuple(self.parts))
         object.__setattr__(self, "strategies", tuple(self.strategies))
         object.__setattr__(self, "_index", {p.id: i for i, p in enumerate(self.parts)})
+
+    def __reduce__(self):
+        return (Plan, (self.name, self.parts, self.strategies, self.source, self.description,
+                       _plain(self.simulation)))
 
     @property
     def part_ids(self) -> tuple[str, ...]:
@@ -141,7 +151,8 @@ class Plan:
         for p in self.parts:
             extra = {
                 k: v
-                for k, v in (("name", p.name), ("quantity", p.quantity), ("acquire", p.acquire), ("install", p.install))
+                for k, v in (("name", p.name), ("quantity", p.quantity), ("acquire", p.acquire), ("install", p.install),
+                             ("visibility", p.visibility))
                 if v is not None and v != Part.__dataclass_fields__[k].default
             }
             parts.append({"id": p.id, **extra} if extra else p.id)
@@ -149,6 +160,8 @@ class Plan:
         if self.description:
             doc["description"] = self.description
         doc["parts"] = parts
+        if self.simulation:
+            doc["simulation"] = _plain(self.simulation)
         doc["strategies"] = [
             {"name": s.name, "requires": {k: list(v) for k, v in s.requires.items()}} for s in self.strategies
         ]
@@ -178,5 +191,13 @@ def make_plan(
 
 
 def _part_dict(p: Part) -> dict:
-    d = {"id": p.id, "name": p.name, "quantity": p.quantity, "acquire": p.acquire, "install": p.install}
+    d = {"id": p.id, "name": p.name, "quantity": p.quantity, "acquire": p.acquire, "install": p.install,
+         "visibility": p.visibility}
     return {k: v for k, v in d.items() if v is not None}
+
+
+def _plain(value):
+    """Mappings (including read-only proxies) as plain dicts, for serialising."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    return value

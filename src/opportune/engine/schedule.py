@@ -108,6 +108,7 @@ class OrderEngine:
         self._counters: dict[int, Counter | None] = {}
         self._count_cache: dict[tuple[int, int], int] = {}
         self._options_cache: dict[tuple[int, int], dict[str, int]] = {}
+        self._positions_cache: dict[tuple[int, int], dict[str, Fraction]] = {}
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -183,6 +184,22 @@ class OrderEngine:
             if after:
                 out[part.id] = self.count(mask | 1 << u, after)
         self._options_cache[key] = out
+        return out
+
+    def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
+        """Expected position (1 = next) of each remaining part's next unit; cached per state."""
+        key = (mask, consistent)
+        cached = self._positions_cache.get(key)
+        if cached is not None:
+            return cached
+        total = self.count(mask, consistent)
+        sums = self.position_sums(mask, consistent)
+        out = {}
+        for i, part in enumerate(self.plan.parts):
+            u = self.next_unit(mask, i)
+            if u is not None:
+                out[part.id] = Fraction(sums[u], total)
+        self._positions_cache[key] = out
         return out
 
     def position_sums(self, mask: int, consistent: int) -> dict[int, int]:
@@ -348,14 +365,7 @@ class Schedule:
 
         For a part with several units left, the position of its next unit: when it is first needed.
         """
-        total = self.count()
-        sums = self.engine.position_sums(self.mask, self.consistent)
-        out = {}
-        for i, part in enumerate(self.plan.parts):
-            u = self.engine.next_unit(self.mask, i)
-            if u is not None:
-                out[part.id] = Fraction(sums[u], total)
-        return out
+        return dict(self.engine.expected_positions(self.mask, self.consistent))
 
     def sample(self, seed: int | random.Random | None = 0) -> list[str]:
         """One admissible completion drawn uniformly at random (exactly, from the counts)."""

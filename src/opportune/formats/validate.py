@@ -62,7 +62,8 @@ def check_document(doc: Document) -> CheckResult:
     if not errors:
         name = data.get("name") or (_stem(doc.file) if doc.file else "plan")
         plan = Plan(name=str(name), parts=tuple(parts), strategies=tuple(strategies),
-                    source=doc.file, description=data.get("description") or data.get("source"))
+                    source=doc.file, description=data.get("description") or data.get("source"),
+                    simulation=data.get("simulation") or {})
     return CheckResult(plan, _sorted(problems))
 
 
@@ -90,6 +91,7 @@ FIELD_HINTS = {
     "quantity": "a whole number of identical units, at least 1",
     "acquire": "a cost or duration, a number ≥ 0",
     "install": "a cost or duration, a number ≥ 0",
+    "visibility": "a relative chance of being seen, a number > 0",
     "name": "a string",
     "id": "a part id: a string without spaces or commas",
 }
@@ -221,7 +223,8 @@ def _read_parts(data: dict, doc: Document) -> tuple[list[Part], list[Problem]]:
         if isinstance(item, dict):
             pid = str(item["id"])
             part = Part(id=pid, name=item.get("name"), quantity=int(item.get("quantity", 1)),
-                        acquire=float(item.get("acquire", 1.0)), install=float(item.get("install", 1.0)))
+                        acquire=float(item.get("acquire", 1.0)), install=float(item.get("install", 1.0)),
+                        visibility=float(item.get("visibility", 1.0)))
         else:
             pid = str(item)
             part = Part(id=pid)

@@ -19,48 +19,68 @@ from __future__ import annotations
 from opportune.policies.base import DONE, SHAKE, Action, Candidate, Decision
 
 
-def install_candidates(state, visible: tuple[str, ...]) -> list[Candidate]:
-    """Every installable candidate (one per part and source), best first by the rule-1 order."""
-    sched = state.schedule
-    options = sched.options()
+def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
+    """Installable candidates best first, as ``(sort key, part, source, buffer position)``.
+
+    The sort key is rule 1: most options, bin before buffer, lower cost,
+    buffered longest, declaration order.
+    """
+    options = state.schedule.options()
     if not options:
         return []
-    total = sched.count()
     plan = state.plan
-    out: list[Candidate] = []
-    seen_bin = set()
-    for part in visible:
-        if part in options and part not in seen_bin:
-            seen_bin.add(part)
-            out.append(Candidate(part, "bin", options[part], total, plan.part(part).cost))
-    seen_buf = set()
+    out = []
+    for part in set(visible):
+        n = options.get(part)
+        if n is not None:
+            out.append(((-n, 0, plan.part(part).cost, -1, plan.index(part)), part, "bin", None))
+    seen = set()
     for pos, part in enumerate(state.buffer):
-        if part in options and part not in seen_buf:
-            seen_buf.add(part)
-            out.append(Candidate(part, "buffer", options[part], total, plan.part(part).cost, buffered_at=pos))
-    out.sort(key=lambda c: (-c.options, c.source != "bin", c.cost,
-                            c.buffered_at if c.buffered_at is not None else -1, plan.index(c.part)))
+        n = options.get(part)
+        if n is not None and part not in seen:
+            seen.add(part)
+            out.append(((-n, 1, plan.part(part).cost, pos, plan.index(part)), part, "buffer", pos))
+    out.sort()
     return out
+
+
+def buffer_choice(state, visible: tuple[str, ...]) -> list[tuple]:
+    """Visible parts ranked by rule 2, as ``(expected position, declaration index, part)``."""
+    positions = state.schedule.expected_positions()
+    plan = state.plan
+    return sorted((positions[p], plan.index(p), p) for p in set(visible))
 
 
 class Opportunistic:
     """Install what keeps the most options; buffer what is needed earliest; shake last."""
 
     name = "opportunistic"
+    deterministic = True
+
+    def choose(self, state, visible: tuple[str, ...]) -> Action:
+        """The action alone (what :meth:`decide` decides, without building its reasons)."""
+        if state.is_complete:
+            return DONE
+        ranked = ranked_candidates(state, visible)
+        if ranked:
+            _, part, source, _ = ranked[0]
+            return Action("install", part, source)
+        if visible and state.buffer_free > 0:
+            return Action("buffer", buffer_choice(state, visible)[0][2])
+        return SHAKE
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        if state.is_complete:
+        action = self.choose(state, visible)
+        if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
-        candidates = install_candidates(state, visible)
-        if candidates:
-            best = candidates[0]
-            return Decision(Action("install", best.part, best.source),
-                            "install the candidate that keeps the most options", tuple(candidates))
-        if visible and state.buffer_free > 0:
-            positions = state.schedule.expected_positions()
-            plan = state.plan
-            ranked = sorted(set(visible), key=lambda p: (positions[p], plan.index(p)))
-            return Decision(Action("buffer", ranked[0]), "nothing can be installed: buffer the visible part needed earliest",
-                            positions=tuple((p, positions[p]) for p in ranked))
+        if action.kind == "install":
+            total = state.schedule.count()
+            candidates = tuple(Candidate(part, source, -key[0], total, key[2], pos)
+                               for key, part, source, pos in ranked_candidates(state, visible))
+            return Decision(action, "install the candidate that keeps the most options", candidates)
+        if action.kind == "buffer":
+            ranked = buffer_choice(state, visible)
+            return Decision(action, "nothing can be installed: buffer the visible part needed earliest",
+                            positions=tuple((p, pos) for pos, _, p in ranked))
         why = "nothing visible" if not visible else "nothing installable and the buffer is full"
         return Decision(SHAKE, "shake", note=why)

@@ -1,0 +1,218 @@
+"""The optimum: the least expected cost any online policy can achieve in a Markov bin.
+
+Under the ``uniform`` and ``weighted`` bin models a look depends only on what
+is in the bin, so the assembly is a Markov decision process over states
+(installed parts, buffered parts).  At a state *s*, a look *L* arrives with
+probability *p(L)*; the robot may install a visible or buffered part,
+buffer a visible part, or shake (pay and look again).  With *m(L)* the best
+non-shake continuation for look *L*, the value satisfies
+
+    V(s) = c_look + Σ_L p(L) · min(m(L), c_shake + V(s))
+
+— the shake is a self-loop.  It is solved exactly: the looks on which the
+robot acts form a threshold set (those with *m(L)* ≤ c_shake + V(s)), so V(s)
+is the minimum over prefixes *A* of the looks sorted by *m(L)* of
+``(c_look + Σ_A p m + (1 − P_A) c_shake) / P_A``.  Every non-shake action
+moves to a state with more parts installed or buffered, so the recursion
+over states terminates; it is memoised, and refuses above ``max_states``.
+"""
+
+from __future__ import annotations
+
+import sys
+from functools import lru_cache
+
+from opportune.engine import OrderEngine
+from opportune.policies.base import DONE, SHAKE, Action, Decision
+from opportune.worlds.costs import TimeModel
+
+
+class OptimalTooLarge(RuntimeError):
+    """The state space is over the limit: the optimum is not computed."""
+
+
+class OptimalSolver:
+    """Exact minimum expected cost of assembling ``engine.plan`` from a Markov bin.
+
+    ``weights`` gives per-part visibility weights (``None``: uniform bin).
+    Complexity: O(states × looks × actions), states ≤ down-sets × buffer contents.
+    """
+
+    def __init__(self, engine: OrderEngine, *, visible: int = 2, capacity: int | None = None,
+                 costs: TimeModel | None = None, weights: dict[str, float] | None = None,
+                 max_states: int = 500_000):
+        self.engine = engine
+        self.plan = engine.plan
+        self.visible = visible
+        self.capacity = capacity
+        self.costs = costs or TimeModel()
+        self.weights = [float((weights or {}).get(p.id, 1.0)) for p in self.plan.parts]
+        self.max_states = max_states
+        self.quantity = [p.quantity for p in self.plan.parts]
+        self.ids = self.plan.part_ids
+        self.move = [self.costs.move(p) for p in self.ids]
+        self._values: dict[tuple, float] = {}
+        self._looks = lru_cache(maxsize=None)(self._look_distribution)
+
+    # ------------------------------------------------------------ states
+
+    def start_key(self) -> tuple:
+        return (0, self.engine.all_strategies, (0,) * len(self.ids))
+
+    def key_of(self, state) -> tuple:
+        """The solver's key for a sequencer :class:`~opportune.sequencer.State`."""
+        buf = [0] * len(self.ids)
+        for p in state.buffer:
+            buf[self.plan.index(p)] += 1
+        return (state.schedule.mask, state.schedule.consistent, tuple(buf))
+
+    def _installed_counts(self, mask: int) -> list[int]:
+        counts = [0] * len(self.ids)
+        for i, first in enumerate(self.engine.first):
+            for u in range(first, first + self.quantity[i]):
+                if mask >> u & 1:
+                    counts[i] += 1
+        return counts
+
+    def _look_distribution(self, bin_counts: tuple[int, ...]) -> tuple[tuple[tuple[int, ...], float], ...]:
+        """Every possible look (a sorted tuple of part indices) with its probability.
+
+        Units are drawn one after another without replacement, each with chance
+        proportional to its part's weight (all 1: uniform)."""
+        total_units = sum(bin_counts)
+        k = min(self.visible, total_units)
+        out: dict[tuple[int, ...], float] = {}
+        counts = list(bin_counts)
+        w = self.weights
+
+        def draw(depth: int, prob: float, taken: list[int]):
+            if depth == k:
+                key = tuple(sorted(taken))
+                out[key] = out.get(key, 0.0) + prob
+                return
+            mass = sum(c * w[i] for i, c in enumerate(counts))
+            for i, c in enumerate(counts):
+                if c:
+                    counts[i] -= 1
+                    taken.append(i)
+                    draw(depth + 1, prob * c * w[i] / mass, taken)
+                    taken.pop()
+                    counts[i] += 1
+
+        draw(0, 1.0, [])
+        return tuple(sorted(out.items()))
+
+    def _moves(self, key: tuple, look: tuple[int, ...]):
+        """Non-shake actions for a look: ``(cost_now, next_key, action)``."""
+        mask, cons, buf = key
+        engine = self.engine
+        used = sum(buf)
+        free = self.capacity is None or used < self.capacity
+        seen = set()
+        for i in look:
+            if i in seen:
+                continue
+            seen.add(i)
+            u = engine.next_unit(mask, i)
+            after = engine.consistent_after(mask, cons, u)
+            if after:
+                yield self.move[i], (mask | 1 << u, after, buf), Action("install", self.ids[i], "bin")
+            if free:
+                nb = list(buf)
+                nb[i] += 1
+                yield self.move[i], (mask, cons, tuple(nb)), Action("buffer", self.ids[i])
+        for i, c in enumerate(buf):
+            if c:
+                u = engine.next_unit(mask, i)
+                after = engine.consistent_after(mask, cons, u)
+                if after:
+                    nb = list(buf)
+                    nb[i] -= 1
+                    yield self.move[i], (mask | 1 << u, after, tuple(nb)), Action("install", self.ids[i], "buffer")
+
+    def _bin_counts(self, key: tuple) -> tuple[int, ...]:
+        mask, _, buf = key
+        inst = self._installed_counts(mask)
+        return tuple(q - a - b for q, a, b in zip(self.quantity, inst, buf))
+
+    # ------------------------------------------------------------ values
+
+    def value(self, key: tuple | None = None) -> float:
+        """Minimum expected remaining cost from a state (default: the start)."""
+        key = self.start_key() if key is None else key
+        limit = sys.getrecursionlimit()
+        sys.setrecursionlimit(max(limit, 10_000))
+        try:
+            return self._value(key)
+        finally:
+            sys.setrecursionlimit(limit)
+
+    def _value(self, key: tuple) -> float:
+        cached = self._values.get(key)
+        if cached is not None:
+            return cached
+        if key[0] == self.engine.full:
+            self._values[key] = 0.0
+            return 0.0
+        if len(self._values) >= self.max_states:
+            raise OptimalTooLarge(
+                f"the optimum needs more than {self.max_states:,} states for this plan; "
+                "raise --optimal-states, or leave 'optimal' out of the strategies")
+        best_per_look = []
+        for look, p in self._looks(self._bin_counts(key)):
+            m = min((c + self._value(nxt) for c, nxt, _ in self._moves(key, look)), default=float("inf"))
+            best_per_look.append((m, p))
+        v = self._solve_shake_loop(best_per_look)
+        self._values[key] = v
+        return v
+
+    def _solve_shake_loop(self, best_per_look) -> float:
+        c_look, c_shake = self.costs.look, self.costs.shake
+        best_per_look.sort()
+        acc_pm, acc_p, v = 0.0, 0.0, float("inf")
+        for m, p in best_per_look:
+            if m == float("inf"):
+                break
+            acc_pm += p * m
+            acc_p += p
+            v = min(v, (c_look + acc_pm + (1.0 - acc_p) * c_shake) / acc_p)
+        if v == float("inf"):
+            raise RuntimeError("no look allows any action: the assembly cannot proceed")
+        return v
+
+    @property
+    def states(self) -> int:
+        return len(self._values)
+
+    def best_action(self, key: tuple, look: tuple[int, ...]) -> tuple[Action, float]:
+        """The optimal action for a state and look (ties: install, then buffer, then declaration order)."""
+        v = self._value(key)
+        best, best_cost = None, float("inf")
+        kind_rank = {"install": 0, "buffer": 1}
+        for c, nxt, action in self._moves(key, look):
+            total = c + self._value(nxt)
+            rank = (total, kind_rank[action.kind], self.plan.index(action.part), action.source != "bin")
+            if best is None or rank < best[0]:
+                best, best_cost = (rank, action), total
+        shake_cost = self.costs.shake + v
+        if best is None or best_cost > shake_cost + 1e-12:
+            return SHAKE, shake_cost
+        return best[1], best_cost
+
+
+class Optimal:
+    """The optimal online policy: at each look, the action of least expected total cost."""
+
+    name = "optimal"
+    deterministic = True
+
+    def __init__(self, solver: OptimalSolver):
+        self.solver = solver
+
+    def decide(self, state, visible) -> Decision:
+        if state.is_complete:
+            return Decision(DONE, "the assembly is complete")
+        key = self.solver.key_of(state)
+        look = tuple(sorted(self.solver.plan.index(p) for p in visible))
+        action, cost = self.solver.best_action(key, look)
+        return Decision(action, "least expected remaining cost", note=f"expected remaining cost {cost:.4f}")

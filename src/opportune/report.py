@@ -1,0 +1,195 @@
+"""Tables, files and plots of a simulation study.
+
+``results.json`` (the ``--json`` document), ``trials.csv`` (one row per
+trial), and plots as PNG and SVG: the distribution of total time per
+strategy, and the mean time with its 95% confidence interval against the
+optimum.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+from opportune.simulate import METRICS, StudyResult
+
+LABELS = {
+    "pallet": "pallet (eliminate)",
+    "shake": "shake (reduce)",
+    "kitting": "kitting (restore)",
+    "buffer": "buffer (restore, intelligent)",
+    "quantify": "quantify (statistics)",
+    "opportunistic": "opportunistic",
+    "random": "random (ablation)",
+    "optimal": "optimal",
+}
+
+
+def describe(values: list[float]) -> dict:
+    """Mean, standard deviation, p5/p50/p95, max and the 95% confidence interval of the mean."""
+    n = len(values)
+    if n == 0:
+        return {"n": 0, "mean": None, "sd": None, "p5": None, "p50": None, "p95": None, "max": None, "ci95": None}
+    xs = sorted(values)
+    mean = sum(xs) / n
+    sd = math.sqrt(sum((x - mean) ** 2 for x in xs) / (n - 1)) if n > 1 else 0.0
+    half = 1.959963984540054 * sd / math.sqrt(n)
+
+    def q(p):  # linear interpolation between order statistics (numpy's default)
+        pos = (n - 1) * p
+        lo = math.floor(pos)
+        hi = min(lo + 1, n - 1)
+        return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
+
+    return {"n": n, "mean": mean, "sd": sd, "p5": q(0.05), "p50": q(0.5), "p95": q(0.95), "max": xs[-1],
+            "ci95": [mean - half, mean + half]}
+
+
+def summary(result: StudyResult) -> dict:
+    """The study as the ``--json`` document."""
+    cfg = result.config
+    optimum = result.prepared.optimal_start
+    strategies = {}
+    for name, trials in result.trials.items():
+        doc = {m: describe([getattr(t, m) for t in trials]) for m in METRICS}
+        doc["buffer_peak"] = doc["buffer_peak"]
+        doc["trials"] = len(trials)
+        doc["incomplete"] = sum(not t.complete for t in trials)
+        mean_time = doc["time"]["mean"]
+        doc["ratio_to_optimal"] = (mean_time / optimum) if optimum and mean_time is not None else None
+        doc["seconds"] = result.seconds.get(name)
+        if name == "optimal":
+            doc["expected_time"] = optimum
+            doc["states"] = result.prepared.optimal_states
+            doc["solve_seconds"] = result.prepared.optimal_seconds
+        if name == "quantify":
+            doc["training_runs"] = cfg.training_runs
+        strategies[name] = doc
+    return {
+        "plan": cfg.plan.name,
+        "bin": cfg.bin,
+        "visible": cfg.visible,
+        "buffer_capacity": cfg.buffer_capacity,
+        "costs": cfg.costs.to_dict(),
+        "trials": cfg.trials,
+        "seed": cfg.seed,
+        "interrupted": result.interrupted,
+        "planned_sequence": list(result.prepared.sequence),
+        "notes": notes(result),
+        "strategies": strategies,
+    }
+
+
+def notes(result: StudyResult) -> list[str]:
+    out = []
+    if "pallet" in result.trials:
+        out.append("pallet: the cost of engineering pallets, fixtures and transport is outside the model; "
+                   "only robot motions are counted")
+    if "quantify" in result.trials:
+        out.append(f"quantify: statistics gathered over {result.config.training_runs} training runs "
+                   "(their cost is not counted)")
+    if "kitting" in result.trials:
+        out.append("kitting: every part is laid out in its own location (the buffer capacity does not apply)")
+    if result.interrupted:
+        out.append("interrupted: only the trials that finished are reported")
+    return out
+
+
+def write_outputs(result: StudyResult, out_dir: str | Path) -> list[Path]:
+    """Write results.json, trials.csv and the plots (PNG and SVG) into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    doc = summary(result)
+    (out / "results.json").write_text(json.dumps(doc, indent=2) + "\n")
+    written.append(out / "results.json")
+    with open(out / "trials.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["strategy", "trial", *METRICS, "complete"])
+        for name, trials in result.trials.items():
+            for t in trials:
+                w.writerow([name, t.trial, t.motions, t.buffer_moves, t.shakes, t.looks, t.buffer_peak,
+                            f"{t.time:g}", int(t.complete)])
+    written.append(out / "trials.csv")
+    written += plot(result, doc, out)
+    return written
+
+
+def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [n for n in result.trials if result.trials[n]]
+    written = []
+    title = (f"{doc['plan']}: {doc['bin']} bin, {doc['visible']} visible, "
+             f"{doc['trials']:,} trials, seed {doc['seed']}")
+
+    # 1. Distribution of total time per strategy.
+    fig, ax = plt.subplots(figsize=(9, 0.6 * len(names) + 2))
+    data = [[t.time for t in result.trials[n]] for n in names]
+    ax.boxplot(data, orientation="horizontal", whis=(5, 95), showfliers=True, flierprops={"markersize": 2, "alpha": 0.3})
+    ax.set_yticks(range(1, len(names) + 1), [LABELS.get(n, n) for n in names])
+    ax.set_xlabel("total time per assembly (motions + shakes, time units)")
+    ax.set_title(f"Distribution of total time\n{title}", fontsize=10)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    for ext in ("png", "svg"):
+        path = out / f"time_distribution.{ext}"
+        fig.savefig(path, dpi=120)
+        written.append(path)
+    plt.close(fig)
+
+    # 2. Mean time with 95% CI against the optimum.
+    fig, ax = plt.subplots(figsize=(9, 0.5 * len(names) + 2))
+    means = [doc["strategies"][n]["time"]["mean"] for n in names]
+    cis = [doc["strategies"][n]["time"]["ci95"] for n in names]
+    err = [[m - c[0] for m, c in zip(means, cis)], [c[1] - m for m, c in zip(means, cis)]]
+    ys = list(range(len(names)))
+    ax.barh(ys, means, xerr=err, color="#4C72B0", alpha=0.8, capsize=3)
+    ax.set_yticks(ys, [LABELS.get(n, n) for n in names])
+    optimum = result.prepared.optimal_start
+    if optimum:
+        ax.axvline(optimum, color="#C44E52", linestyle="--", label=f"optimum (exact) {optimum:.3f}")
+        ax.legend(loc="lower right")
+    for y, m in zip(ys, means):
+        label = f"{m:.2f}" + (f"  (×{m / optimum:.3f})" if optimum else "")
+        ax.text(m, y, "  " + label, va="center", fontsize=8)
+    ax.set_xlabel("mean total time per assembly, with 95% confidence interval")
+    ax.set_title(f"Mean cost against the optimum\n{title}", fontsize=10)
+    ax.set_xlim(0, max(means) * 1.25)
+    fig.tight_layout()
+    for ext in ("png", "svg"):
+        path = out / f"mean_time.{ext}"
+        fig.savefig(path, dpi=120)
+        written.append(path)
+    plt.close(fig)
+    return written
+
+
+def table_rows(doc: dict) -> list[list[str]]:
+    """Rows for the human table: one per strategy, best mean time first."""
+    rows = []
+    for name, s in sorted(doc["strategies"].items(), key=lambda kv: kv[1]["time"]["mean"] or 0):
+        t = s["time"]
+        ratio = s["ratio_to_optimal"]
+        rows.append([
+            LABELS.get(name, name),
+            f"{t['mean']:.3f}",
+            f"[{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]",
+            f"{t['sd']:.2f}",
+            f"{t['p5']:g} / {t['p50']:g} / {t['p95']:g}",
+            f"{t['max']:g}",
+            f"{s['motions']['mean']:.2f}",
+            f"{s['shakes']['mean']:.2f}",
+            f"{s['buffer_peak']['mean']:.2f}",
+            "—" if ratio is None else f"{ratio:.3f}",
+        ])
+    return rows
+
+
+TABLE_HEADER = ["strategy", "mean time", "95% CI", "sd", "p5 / p50 / p95", "max", "motions", "shakes",
+                "buffer peak", "× optimum"]

@@ -1,0 +1,498 @@
+"""Monte Carlo study: every strategy of the paper in a simulated bin, at scale, reproducibly.
+
+The simulated world acts on the same policies as the sequencer (one decision
+path); the trial loop here only keeps the cell's state in machine form
+(bitmasks) and memoises the decisions of deterministic policies, which is
+what makes tens of thousands of trials per second possible.
+:func:`run_trial_with_sequencer` plays a trial through the full
+:class:`~opportune.sequencer.Sequencer` instead; the tests check that both
+give identical trials.
+
+Reproducibility: trial *i* of a study with seed *s* draws its bin from its own
+stream ``random.Random(trial_seed(s, i, 0))`` (a random policy from a second one), so
+the numbers do not depend on how trials are split between workers or
+executors.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import time as _time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Iterable, Sequence
+
+from opportune.engine import OrderEngine
+from opportune.engine.schedule import Schedule
+from opportune.plan import Plan
+from opportune.policies.base import Action
+from opportune.worlds import PalletWorld, TimeModel, World, make_world
+
+STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", "random", "optimal")
+MARKOV_BINS = ("uniform", "weighted")
+
+
+class StudyError(ValueError):
+    """A study that cannot be run as asked (a user mistake: say what to change)."""
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """Everything that determines a study's numbers."""
+
+    plan: Plan
+    strategies: tuple[str, ...] = STRATEGIES
+    trials: int = 10_000
+    seed: int = 0
+    bin: str = "uniform"
+    visible: int = 2
+    buffer_capacity: int | None = None
+    costs: TimeModel = field(default_factory=TimeModel)
+    training_runs: int = 200
+    optimal_states: int = 500_000
+    max_steps: int | None = None
+
+    def validate(self) -> "StudyConfig":
+        unknown = [s for s in self.strategies if s not in STRATEGIES]
+        if unknown:
+            raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(STRATEGIES)}")
+        if self.bin not in ("uniform", "weighted", "pile", "conveyor"):
+            raise StudyError(f"unknown bin model '{self.bin}': use uniform, weighted, pile or conveyor")
+        if "optimal" in self.strategies and self.bin not in MARKOV_BINS:
+            raise StudyError(f"'optimal' is defined for the uniform and weighted bins, not '{self.bin}': "
+                             "leave it out of --strategies or change --bin")
+        if self.trials < 1:
+            raise StudyError("--trials must be at least 1")
+        if self.visible < 1:
+            raise StudyError("--visible must be at least 1")
+        if self.buffer_capacity is not None and self.buffer_capacity < 0:
+            raise StudyError("--buffer-capacity must be ≥ 0")
+        if self.buffer_capacity == 0 and "buffer" in self.strategies:
+            pass  # allowed: the buffer strategy then shakes like `shake`
+        return self
+
+    @property
+    def weights(self) -> dict[str, float]:
+        return {p.id: p.visibility for p in self.plan.parts}
+
+    @property
+    def step_limit(self) -> int:
+        units = self.plan.n_units
+        return self.max_steps or 1000 + 200 * units * units
+
+
+@dataclass
+class TrialResult:
+    """The costs of one trial of one strategy."""
+
+    strategy: str
+    trial: int
+    motions: int
+    buffer_moves: int
+    shakes: int
+    looks: int
+    buffer_peak: int
+    time: float
+    complete: bool = True
+
+    def row(self) -> tuple:
+        return (self.strategy, self.trial, self.motions, self.buffer_moves, self.shakes, self.looks,
+                self.buffer_peak, self.time, self.complete)
+
+
+METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time")
+
+
+# ---------------------------------------------------------------- preparing strategies
+
+
+@dataclass
+class Prepared:
+    """Heavy, shareable preparation: the optimum's value table and quantify's statistics."""
+
+    sequence: tuple[str, ...]
+    optimal_values: dict | None = None
+    optimal_start: float | None = None
+    optimal_states: int = 0
+    optimal_seconds: float = 0.0
+    quantify_rank: dict | None = None
+
+
+def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
+    """Compute once, in the parent, what every worker needs (optimum, training statistics)."""
+    from opportune.policies.fixed import Quantify, planned_sequence
+
+    engine = engine or OrderEngine(config.plan)
+    prepared = Prepared(sequence=planned_sequence(engine))
+    if "optimal" in config.strategies:
+        from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+
+        t0 = _time.perf_counter()
+        solver = _solver(engine, config)
+        try:
+            prepared.optimal_start = solver.value()
+        except OptimalTooLarge as exc:
+            raise StudyError(str(exc)) from None
+        prepared.optimal_values = solver._values
+        prepared.optimal_states = solver.states
+        prepared.optimal_seconds = _time.perf_counter() - t0
+    if "quantify" in config.strategies:
+        q = Quantify.train(engine, _world(config, prepared), runs=config.training_runs, seed=config.seed)
+        prepared.quantify_rank = q.mean_rank
+    return prepared
+
+
+def _solver(engine, config):
+    from opportune.policies.optimal import OptimalSolver
+
+    return OptimalSolver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
+                         weights=config.weights if config.bin == "weighted" else None,
+                         max_states=config.optimal_states)
+
+
+def _world(config: StudyConfig, prepared: Prepared, strategy: str = "") -> World:
+    if strategy == "pallet":
+        return PalletWorld(prepared.sequence)
+    return make_world(config.bin, visible=config.visible, weights=config.weights)
+
+
+def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepared: Prepared):
+    """The policy object for a strategy name (all implement the sequencer's Policy interface)."""
+    from opportune.policies import fixed
+    from opportune.policies.opportunistic import Opportunistic
+    from opportune.policies.random_policy import RandomChoice
+
+    if strategy == "pallet":
+        return fixed.Pallet(prepared.sequence)
+    if strategy == "shake":
+        return fixed.ShakeUntilVisible(prepared.sequence)
+    if strategy == "kitting":
+        return fixed.Kitting(prepared.sequence)
+    if strategy == "buffer":
+        return fixed.BufferFixed(prepared.sequence)
+    if strategy == "quantify":
+        return fixed.Quantify(engine, prepared.quantify_rank or {}, config.training_runs)
+    if strategy == "opportunistic":
+        return Opportunistic()
+    if strategy == "random":
+        return RandomChoice()
+    if strategy == "optimal":
+        from opportune.policies.optimal import Optimal
+
+        solver = _solver(engine, config)
+        solver._values.update(prepared.optimal_values or {})
+        return Optimal(solver)
+    raise StudyError(f"unknown strategy '{strategy}'")
+
+
+def capacity_for(strategy: str, config: StudyConfig) -> int | None:
+    """Kitting lays every part out (its own locations); pallet and shake never buffer."""
+    return None if strategy == "kitting" else config.buffer_capacity
+
+
+# ---------------------------------------------------------------- one trial
+
+
+class TrialRunner:
+    """Runs trials of one strategy; keeps decision and transition caches across trials."""
+
+    def __init__(self, strategy: str, engine: OrderEngine, config: StudyConfig, prepared: Prepared):
+        self.strategy = strategy
+        self.engine = engine
+        self.config = config
+        self.policy = make_policy(strategy, engine, config, prepared)
+        self.world = _world(config, prepared, strategy)
+        self.capacity = capacity_for(strategy, config)
+        self.costs = config.costs
+        self.units = [p.id for p in engine.plan.parts for _ in range(p.quantity)]
+        self.index = {p: i for i, p in enumerate(engine.plan.part_ids)}
+        self.cache: dict | None = {} if getattr(self.policy, "deterministic", False) else None
+        self.transitions: dict = {}
+        self.move = {p: self.costs.move(p) for p in engine.plan.part_ids}
+        self._choose = getattr(self.policy, "choose", None)  # the action without its reasons, where offered
+
+    def _decide(self, mask, cons, installed, buffer, look) -> Action:
+        from opportune.sequencer import State
+
+        state = State(Schedule._make(self.engine, tuple(installed), mask, cons), buffer=buffer,
+                      capacity=self.capacity)
+        if self._choose is not None:
+            return self._choose(state, look)
+        return self.policy.decide(state, look).action
+
+    def _install(self, mask, cons, part):
+        key = (mask, cons, part)
+        t = self.transitions.get(key)
+        if t is None:
+            engine = self.engine
+            u = engine.next_unit(mask, self.index[part])
+            t = (mask | 1 << u, engine.consistent_after(mask, cons, u))
+            self.transitions[key] = t
+        return t
+
+    def run(self, trial: int) -> TrialResult:
+        world = self.world
+        world.reset(self.units, random.Random(trial_seed(self.config.seed, trial, 0)))
+        start = getattr(self.policy, "start", None)
+        if start is not None:
+            start(random.Random(trial_seed(self.config.seed, trial, 1)))
+        engine, cache, move, costs = self.engine, self.cache, self.move, self.costs
+        transitions = self.transitions
+        look_at, take = world.look, world.take
+        full = engine.full
+        mask, cons, buffer, installed = 0, engine.all_strategies, (), []
+        motions = buffer_moves = shakes = looks = peak = 0
+        t = 0.0
+        index = self.index
+        limit = self.config.step_limit
+        while mask != full:
+            if looks >= limit:
+                break
+            look = look_at()
+            looks += 1
+            if len(look) == 2:
+                a, b = look
+                if index[a] > index[b]:
+                    look = (b, a)
+            elif len(look) > 2:
+                look = tuple(sorted(look, key=index.__getitem__))
+            if cache is not None:
+                key = (mask, cons, buffer, look)
+                code = cache.get(key)
+                if code is None:
+                    code = cache[key] = _code(self._decide(mask, cons, installed, buffer, look))
+            else:
+                code = _code(self._decide(mask, cons, installed, buffer, look))
+            op, part = code
+            if op == 0 or op == 1:  # install from the bin / from the buffer
+                if op:
+                    i = buffer.index(part)
+                    buffer = buffer[:i] + buffer[i + 1:]
+                else:
+                    take(part)
+                nxt = transitions.get((mask, cons, part))
+                if nxt is None:
+                    nxt = self._install(mask, cons, part)
+                mask, cons = nxt
+                installed.append(part)
+                motions += 1
+                t += move[part]
+            elif op == 2:  # buffer
+                take(part)
+                buffer = buffer + (part,)
+                motions += 1
+                buffer_moves += 1
+                t += move[part]
+                if len(buffer) > peak:
+                    peak = len(buffer)
+            elif op == 3:
+                world.shake()
+                shakes += 1
+                t += costs.shake
+            else:  # done before completion cannot happen; guard against a policy bug
+                raise RuntimeError(f"policy {self.strategy} said 'done' before the assembly was complete")
+        t += looks * costs.look
+        return TrialResult(self.strategy, trial, motions, buffer_moves, shakes, looks, peak, t, mask == full)
+
+
+def _code(action: Action) -> tuple[int, str | None]:
+    """An action in the compact form the trial loop caches."""
+    if action.kind == "install":
+        return (1 if action.source == "buffer" else 0, action.part)
+    return ({"buffer": 2, "shake": 3}.get(action.kind, 4), action.part)
+
+
+def trial_seed(seed: int, trial: int, stream: int) -> int:
+    """The integer seed of one random stream of one trial: independent of workers and chunking."""
+    return ((abs(seed) * 2 + (seed < 0)) << 48) | (trial << 4) | stream
+
+
+def run_trial_with_sequencer(strategy: str, engine: OrderEngine, config: StudyConfig, prepared: Prepared,
+                             trial: int) -> TrialResult:
+    """The same trial played through the full :class:`~opportune.sequencer.Sequencer` (slow; for checking)."""
+    from opportune.sequencer import Sequencer
+
+    policy = make_policy(strategy, engine, config, prepared)
+    world = _world(config, prepared, strategy)
+    units = [p.id for p in engine.plan.parts for _ in range(p.quantity)]
+    world.reset(units, random.Random(trial_seed(config.seed, trial, 0)))
+    if hasattr(policy, "start"):
+        policy.start(random.Random(trial_seed(config.seed, trial, 1)))
+    seq = Sequencer(engine, policy, buffer_capacity=capacity_for(strategy, config))
+    index = {p: i for i, p in enumerate(engine.plan.part_ids)}
+    r = TrialResult(strategy, trial, 0, 0, 0, 0, 0, 0.0)
+    while not seq.state.is_complete and r.looks < config.step_limit:
+        look = tuple(sorted(world.look(), key=index.__getitem__))
+        r.looks += 1
+        action = seq.decide(look).action
+        if action.kind in ("install", "buffer"):
+            if action.source != "buffer":
+                world.take(action.part)
+            r.motions += 1
+            r.time += config.costs.move(action.part)
+            r.buffer_moves += action.kind == "buffer"
+        elif action.kind == "shake":
+            world.shake()
+            r.shakes += 1
+            r.time += config.costs.shake
+        seq.report("success")
+        r.buffer_peak = max(r.buffer_peak, len(seq.state.buffer))
+    r.time += r.looks * config.costs.look
+    r.complete = seq.state.is_complete
+    return r
+
+
+# ---------------------------------------------------------------- many trials, many workers
+
+_WORKER_CACHE: dict = {}
+
+
+def run_chunk(config: StudyConfig, prepared: Prepared, strategy: str, start: int, stop: int) -> list[tuple]:
+    """Trials ``start .. stop-1`` of one strategy (a unit of work for a process or a Dask worker)."""
+    key = (hash_config(config), strategy)
+    runner = _WORKER_CACHE.get(key)
+    if runner is None:
+        engine_key = (hash_config(config), "engine")
+        engine = _WORKER_CACHE.get(engine_key)
+        if engine is None:
+            engine = _WORKER_CACHE[engine_key] = OrderEngine(config.plan)
+        runner = _WORKER_CACHE[key] = TrialRunner(strategy, engine, config, prepared)
+    return [runner.run(i).row() for i in range(start, stop)]
+
+
+def hash_config(config: StudyConfig) -> str:
+    import hashlib
+    import json
+
+    doc = {"plan": config.plan.to_dict(), "bin": config.bin, "visible": config.visible,
+           "capacity": config.buffer_capacity, "costs": config.costs.to_dict(), "seed": config.seed,
+           "training": config.training_runs}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def chunks(trials: int, size: int) -> list[tuple[int, int]]:
+    return [(a, min(a + size, trials)) for a in range(0, trials, size)]
+
+
+@dataclass
+class StudyResult:
+    config: StudyConfig
+    prepared: Prepared
+    trials: dict[str, list[TrialResult]]
+    seconds: dict[str, float]
+    interrupted: bool = False
+
+
+def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: str | None = None,
+              chunk_size: int | None = None, progress: Callable[[str, int], None] | None = None,
+              prepared: Prepared | None = None) -> StudyResult:
+    """Run every strategy of ``config``; locally (``workers`` processes; 1 = in this process) or on Dask.
+
+    ``progress(strategy, n)`` is called as chunks of ``n`` trials finish.  Ctrl-C stops cleanly:
+    the result holds the trials that finished, with ``interrupted`` set.
+    """
+    config.validate()
+    engine = OrderEngine(config.plan)
+    prepared = prepared or prepare(config, engine)
+    workers = workers if workers is not None else _default_workers()
+    size = chunk_size or max(50, min(2000, config.trials // max(1, 4 * workers)))
+    results: dict[str, list[TrialResult]] = {s: [] for s in config.strategies}
+    seconds: dict[str, float] = {}
+    interrupted = False
+    jobs = [(s, a, b) for s in config.strategies for a, b in chunks(config.trials, size)]
+    started: dict[str, float] = {}
+    try:
+        if dask_address:
+            _run_dask(dask_address, config, prepared, jobs, results, seconds, started, progress)
+        elif workers <= 1:
+            for s, a, b in jobs:
+                started.setdefault(s, _time.perf_counter())
+                rows = run_chunk(config, prepared, s, a, b)
+                results[s].extend(TrialResult(*r) for r in rows)
+                seconds[s] = _time.perf_counter() - started[s]
+                if progress:
+                    progress(s, len(rows))
+        else:
+            _run_processes(workers, config, prepared, jobs, results, seconds, started, progress)
+    except KeyboardInterrupt:
+        interrupted = True
+    for s in results:
+        results[s].sort(key=lambda r: r.trial)
+    return StudyResult(config, prepared, results, seconds, interrupted)
+
+
+def _default_workers() -> int:
+    import os
+
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+
+
+def _collect(s, rows, results, seconds, started, progress):
+    results[s].extend(TrialResult(*r) for r in rows)
+    seconds[s] = _time.perf_counter() - started[s]
+    if progress:
+        progress(s, len(rows))
+
+
+_FORKED_STUDY = None
+
+
+def _run_forked_chunk(strategy: str, start: int, stop: int) -> list[tuple]:
+    config, prepared = _FORKED_STUDY
+    return run_chunk(config, prepared, strategy, start, stop)
+
+
+def _run_processes(workers, config, prepared, jobs, results, seconds, started, progress):
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
+    global _FORKED_STUDY
+    # Forked workers inherit the study (no pickling of the plan or the optimum's table per chunk).
+    _FORKED_STUDY = (config, prepared) if ctx is not None else None
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    try:
+        pending = {}
+        for s, a, b in jobs:
+            if ctx is not None:
+                fut = pool.submit(_run_forked_chunk, s, a, b)
+            else:
+                fut = pool.submit(run_chunk, config, prepared, s, a, b)
+            pending[fut] = s
+        for s, _, _ in jobs:
+            started.setdefault(s, _time.perf_counter())
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                s = pending.pop(fut)
+                _collect(s, fut.result(), results, seconds, started, progress)
+    except KeyboardInterrupt:
+        for fut in list(pending):
+            fut.cancel()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
+def _run_dask(address, config, prepared, jobs, results, seconds, started, progress):
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise StudyError("--dask needs Dask distributed: pip install 'opportune[scale]'") from None
+    try:
+        client = address if not isinstance(address, str) else Client(address, timeout="10s")
+    except OSError as exc:
+        raise StudyError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+    own = isinstance(address, str)
+    try:
+        cfg = client.scatter(config, broadcast=True)
+        prep = client.scatter(prepared, broadcast=True)
+        futures = {}
+        for s, a, b in jobs:
+            futures[client.submit(run_chunk, cfg, prep, s, a, b, pure=False)] = s
+            started.setdefault(s, _time.perf_counter())
+        for fut in as_completed(list(futures)):
+            _collect(futures[fut], fut.result(), results, seconds, started, progress)
+    finally:
+        if own:
+            client.close()
