@@ -141,3 +141,14 @@ def test_count_after_prefix_cli():
     r = runner.invoke(app, ["count", str(GEARBOX), "--after", "ca,co"])
     assert r.exit_code == 1 and "not admissible" in r.output and "'co' cannot be installed yet" in r.output
     assert "Traceback" not in r.output
+
+
+@settings(max_examples=100, deadline=None)
+@given(plans_with_prefix(), st.data())
+def test_options_for_a_few_parts_agree_with_all_options(case, data):
+    plan, prefix = case
+    engine = OrderEngine(plan)
+    ask = data.draw(st.lists(st.sampled_from(plan.part_ids), max_size=4, unique=True))
+    few = Schedule(engine, prefix).options_for(ask)  # asked first: computed part by part
+    every = Schedule(OrderEngine(plan), prefix).options()
+    assert few == {p: every[p] for p in ask if p in every}

@@ -109,6 +109,7 @@ class OrderEngine:
         self._count_cache: dict[tuple[int, int], int] = {}
         self._options_cache: dict[tuple[int, int], dict[str, int]] = {}
         self._positions_cache: dict[tuple[int, int], dict[str, Fraction]] = {}
+        self._option_cache: dict[tuple[int, int, str], int] = {}
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -184,6 +185,29 @@ class OrderEngine:
             if after:
                 out[part.id] = self.count(mask | 1 << u, after)
         self._options_cache[key] = out
+        return out
+
+    def options_for(self, mask: int, consistent: int, parts: Iterable[str]) -> dict[str, int]:
+        """:meth:`options` restricted to ``parts`` (those installable), counting only what is asked.
+
+        On large plans a decision needs the options of the few visible or buffered
+        parts, not of every installable part; results are cached per state and part.
+        """
+        full = self._options_cache.get((mask, consistent))
+        if full is not None:
+            return {p: full[p] for p in parts if p in full}
+        out: dict[str, int] = {}
+        cache = self._option_cache
+        for part in parts:
+            key = (mask, consistent, part)
+            value = cache.get(key)
+            if value is None:
+                i = self.plan.index(part)
+                u = self.next_unit(mask, i)
+                after = self.consistent_after(mask, consistent, u) if u is not None else 0
+                value = cache[key] = self.count(mask | 1 << u, after) if after else -1
+            if value >= 0:
+                out[part] = value
         return out
 
     def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
@@ -327,7 +351,12 @@ class Schedule:
         return self.engine.count(self.mask, self.consistent)
 
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0) -> CountResult:
-        """Number of completions: exact within the engine's budget, else a clearly marked estimate."""
+        """Number of completions: exact within the engine's budget, else a clearly marked estimate.
+
+        The estimate reuses the exact counter's memo and samples for at most
+        ``time_limit`` seconds, stopping early once its 95% interval is within
+        ``rel_error``; the error it states is the one it achieved.
+        """
         try:
             return CountResult(self.count())
         except BudgetExceeded:
@@ -339,7 +368,8 @@ class Schedule:
         terms = list(self.engine._terms(self.consistent))
         for sign, counter in terms:
             est = estimate_count(counter.poset, remaining, rel_error=rel_error / max(1, len(terms)),
-                                 time_limit=time_limit / max(1, len(terms)), seed=seed)
+                                 time_limit=time_limit / max(1, len(terms)), seed=seed, counter=counter,
+                                 exact_memo=0)
             value += sign * est.value
             abs_err += est.rel_error * est.value
             conf = min(conf, est.confidence)
@@ -354,6 +384,10 @@ class Schedule:
         policy maximises.  Cached per state, so repeated questions are dict look-ups.
         """
         return self.engine.options(self.mask, self.consistent)
+
+    def options_for(self, parts: Iterable[str]) -> dict[str, int]:
+        """:meth:`options` for just these parts (those of them installable now), in the order given."""
+        return self.engine.options_for(self.mask, self.consistent, parts)
 
     def next_probabilities(self) -> dict[str, Fraction]:
         """Probability that each installable part comes next in a uniformly random admissible completion."""

@@ -25,7 +25,7 @@ def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
     The sort key is rule 1: most options, bin before buffer, lower cost,
     buffered longest, declaration order.
     """
-    options = state.schedule.options()
+    options = state.schedule.options_for(dict.fromkeys((*visible, *state.buffer)))
     if not options:
         return []
     plan = state.plan

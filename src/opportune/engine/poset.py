@@ -1,0 +1,440 @@
+"""Strict partial orders on ``0..n-1`` stored as bitmasks.
+
+A :class:`Poset` keeps, for every element ``i``, the bitmask ``below[i]`` of all
+elements strictly before it and ``above[i]`` of all elements strictly after it
+(the transitive closure, so "is ``a`` before ``b``" is one bit test).  Subsets of
+the elements are Python ints used as bitmasks: bit ``i`` set means element
+``i`` is in the set.
+
+>>> p = Poset.from_pairs(4, [(0, 1), (1, 2)])
+>>> [bin(m) for m in p.below]
+['0b0', '0b1', '0b11', '0b0']
+>>> p.minimal(p.full)          # elements 0 and 3
+9
+>>> p.cover_pairs()
+[(0, 1), (1, 2)]
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Iterator, Sequence
+
+__all__ = ["CycleError", "Poset", "bits", "elements"]
+
+
+def bits(mask: int) -> Iterator[int]:
+    """Yield the indices of the set bits of ``mask`` in increasing order.
+
+    O(popcount(mask)).
+
+    >>> list(bits(0b10110))
+    [1, 2, 4]
+    """
+    while mask:
+        low = mask & -mask
+        yield low.bit_length() - 1
+        mask ^= low
+
+
+def elements(mask: int) -> list[int]:
+    """The indices of the set bits of ``mask`` as a sorted list.
+
+    >>> elements(0b1001)
+    [0, 3]
+    """
+    return list(bits(mask))
+
+
+class CycleError(ValueError):
+    """The given relation has a cycle, so it is not a partial order.
+
+    ``cycle`` lists the elements of one cycle in order, closed: its first and
+    last entries are equal, and each entry is directly before the next in the
+    given relation.  ``[1, 2, 1]`` means ``1 < 2`` and ``2 < 1`` were both given;
+    ``[3, 3]`` means ``3 < 3`` was given.
+    """
+
+    def __init__(self, cycle: Sequence[int]):
+        self.cycle = list(cycle)
+        super().__init__("cycle in the order: " + " -> ".join(map(str, self.cycle)))
+
+
+def _find_cycle(n: int, succ: Sequence[int], nodes: int) -> list[int]:
+    """One directed cycle among ``nodes`` (a mask), where every node of ``nodes``
+    has a predecessor in ``nodes`` (what is left after Kahn's algorithm)."""
+    pred = [0] * n
+    for a in bits(nodes):
+        for b in bits(succ[a] & nodes):
+            pred[b] |= 1 << a
+    # Walk backwards until a node repeats: the walk then closes a cycle.
+    v = (nodes & -nodes).bit_length() - 1
+    seen: dict[int, int] = {}
+    walk: list[int] = []
+    while v not in seen:
+        seen[v] = len(walk)
+        walk.append(v)
+        p = pred[v]
+        v = (p & -p).bit_length() - 1
+    back = walk[seen[v]:]           # v <- ... (each entry's successor is the previous one)
+    cycle = back[::-1]              # forward order
+    k = cycle.index(min(cycle))     # start at the smallest element, for a stable message
+    cycle = cycle[k:] + cycle[:k]
+    return cycle + [cycle[0]]
+
+
+class Poset:
+    """Strict partial order on elements ``0..n-1`` stored as bitmasks (transitively closed).
+
+    Attributes
+    ----------
+    n : int
+        Number of elements.
+    below : tuple[int, ...]
+        ``below[i]`` is the bitmask of all ``j`` with ``j < i``.
+    above : tuple[int, ...]
+        ``above[i]`` is the bitmask of all ``j`` with ``i < j``.
+    full : int
+        ``(1 << n) - 1``, the set of all elements.
+
+    Instances are immutable, hashable and compare by value (two posets are
+    equal iff they have the same ``n`` and the same relation).  Build them with
+    :meth:`from_pairs` or :meth:`from_predecessors`, which compute the
+    transitive closure and reject cycles.
+
+    Examples
+    --------
+    >>> p = Poset.from_pairs(3, [(0, 2), (1, 2)])
+    >>> p.less(0, 2), p.less(0, 1), p.comparable(1, 2)
+    (True, False, True)
+    >>> p == Poset.from_predecessors([0, 0, 0b011])
+    True
+    """
+
+    __slots__ = ("n", "below", "above", "full", "_hash")
+
+    def __init__(self, n: int, below: Sequence[int], above: Sequence[int]):
+        # Trusted constructor: ``below``/``above`` must already be a closed,
+        # acyclic, mutually consistent relation.  Use the classmethods.
+        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "below", tuple(below))
+        object.__setattr__(self, "above", tuple(above))
+        object.__setattr__(self, "full", (1 << n) - 1)
+        object.__setattr__(self, "_hash", hash((n, self.below)))
+
+    def __setattr__(self, name, value):
+        raise AttributeError("Poset is immutable")
+
+    def __delattr__(self, name):
+        raise AttributeError("Poset is immutable")
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Poset):
+            return NotImplemented
+        return self.n == other.n and self.below == other.below
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def __repr__(self) -> str:
+        return f"Poset.from_pairs({self.n}, {self.cover_pairs()!r})"
+
+    def __reduce__(self):
+        return (Poset, (self.n, self.below, self.above))
+
+    def __len__(self) -> int:
+        return self.n
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_successors(cls, succ: Sequence[int]) -> "Poset":
+        """Poset generated by ``succ[i]`` = bitmask of elements directly after ``i``.
+
+        Computes the transitive closure by one pass in reverse topological
+        order: O(n + number of given pairs) big-int ORs.  Raises
+        :class:`CycleError` if the relation has a cycle (including ``i < i``).
+
+        >>> Poset.from_successors([0b10, 0b100, 0]).above
+        (6, 4, 0)
+        """
+        n = len(succ)
+        full = (1 << n) - 1
+        succ = [int(s) for s in succ]
+        for i, s in enumerate(succ):
+            if s < 0 or s & ~full:
+                raise ValueError(f"successor mask of {i} names elements outside 0..{n - 1}")
+            if s >> i & 1:
+                raise CycleError([i, i])
+        indeg = [0] * n
+        for s in succ:
+            for j in bits(s):
+                indeg[j] += 1
+        stack = [i for i in range(n) if indeg[i] == 0]
+        order: list[int] = []
+        while stack:
+            i = stack.pop()
+            order.append(i)
+            for j in bits(succ[i]):
+                indeg[j] -= 1
+                if indeg[j] == 0:
+                    stack.append(j)
+        if len(order) < n:
+            placed = 0
+            for i in order:
+                placed |= 1 << i
+            raise CycleError(_find_cycle(n, succ, full & ~placed))
+        above = [0] * n
+        for i in reversed(order):
+            m = 0
+            for j in bits(succ[i]):
+                m |= (1 << j) | above[j]
+            above[i] = m
+        below = [0] * n
+        for i in range(n):
+            bit = 1 << i
+            for j in bits(above[i]):
+                below[j] |= bit
+        return cls(n, below, above)
+
+    @classmethod
+    def from_pairs(cls, n: int, pairs: Iterable[tuple[int, int]]) -> "Poset":
+        """Poset on ``0..n-1`` generated by ``pairs``: ``(a, b)`` means ``a`` before ``b``.
+
+        The pairs need not be transitively closed or reduced; duplicates are
+        fine.  O(n + len(pairs)) big-int operations.  Raises
+        :class:`CycleError` (with one real cycle) if the pairs contain a cycle,
+        including ``(a, a)``; ``ValueError`` for an element outside ``0..n-1``.
+
+        >>> Poset.from_pairs(3, [(0, 1), (1, 2)]).below[2]
+        3
+        >>> Poset.from_pairs(2, [(0, 1), (1, 0)])
+        Traceback (most recent call last):
+        ...
+        opportune.engine.poset.CycleError: cycle in the order: 0 -> 1 -> 0
+        """
+        if n < 0:
+            raise ValueError("n must be >= 0")
+        succ = [0] * n
+        for a, b in pairs:
+            if not (0 <= a < n and 0 <= b < n):
+                raise ValueError(f"pair ({a}, {b}) names an element outside 0..{n - 1}")
+            if a == b:
+                raise CycleError([a, a])
+            succ[a] |= 1 << b
+        return cls.from_successors(succ)
+
+    @classmethod
+    def from_predecessors(cls, preds: Sequence[int]) -> "Poset":
+        """Poset generated by ``preds[i]`` = bitmask of elements directly before ``i``.
+
+        Same closure and checks as :meth:`from_pairs`.
+
+        >>> Poset.from_predecessors([0, 0b1, 0b1]).above[0]
+        6
+        """
+        n = len(preds)
+        full = (1 << n) - 1
+        succ = [0] * n
+        for i, p in enumerate(preds):
+            p = int(p)
+            if p < 0 or p & ~full:
+                raise ValueError(f"predecessor mask of {i} names elements outside 0..{n - 1}")
+            if p >> i & 1:
+                raise CycleError([i, i])
+            bit = 1 << i
+            for j in bits(p):
+                succ[j] |= bit
+        return cls.from_successors(succ)
+
+    @classmethod
+    def antichain(cls, n: int) -> "Poset":
+        """The empty order on ``n`` elements.
+
+        >>> Poset.antichain(2).cover_pairs()
+        []
+        """
+        return cls(n, [0] * n, [0] * n)
+
+    @classmethod
+    def chain(cls, n: int) -> "Poset":
+        """The total order ``0 < 1 < ... < n-1``.
+
+        >>> Poset.chain(3).cover_pairs()
+        [(0, 1), (1, 2)]
+        """
+        full = (1 << n) - 1
+        return cls(n, [(1 << i) - 1 for i in range(n)], [full & ~((2 << i) - 1) for i in range(n)])
+
+    # ------------------------------------------------------------------ combination
+    def union(self, other: "Poset") -> "Poset":
+        """Transitive closure of both relations on the same ``n`` elements.
+
+        Its linear extensions are those common to ``self`` and ``other``.
+        O(n + pairs).  Raises :class:`CycleError` if the two orders contradict
+        each other, ``ValueError`` if the sizes differ.
+
+        >>> a = Poset.from_pairs(3, [(0, 1)]); b = Poset.from_pairs(3, [(1, 2)])
+        >>> a.union(b).less(0, 2)
+        True
+        """
+        if self.n != other.n:
+            raise ValueError(f"cannot unite posets on {self.n} and {other.n} elements")
+        return Poset.from_successors([a | b for a, b in zip(self._cover_succ(), other._cover_succ())])
+
+    def with_pairs(self, pairs: Iterable[tuple[int, int]]) -> "Poset":
+        """This order with extra ``(a, b)`` pairs added (closed); raises :class:`CycleError`.
+
+        >>> Poset.antichain(2).with_pairs([(1, 0)]).less(1, 0)
+        True
+        """
+        succ = list(self._cover_succ())
+        for a, b in pairs:
+            if not (0 <= a < self.n and 0 <= b < self.n):
+                raise ValueError(f"pair ({a}, {b}) names an element outside 0..{self.n - 1}")
+            if a == b:
+                raise CycleError([a, a])
+            succ[a] |= 1 << b
+        return Poset.from_successors(succ)
+
+    def dual(self) -> "Poset":
+        """The reversed order (``a < b`` iff ``b < a`` here); same number of linear extensions.
+
+        >>> Poset.from_pairs(2, [(0, 1)]).dual().less(1, 0)
+        True
+        """
+        return Poset(self.n, self.above, self.below)
+
+    # ------------------------------------------------------------------ queries
+    def less(self, a: int, b: int) -> bool:
+        """Whether ``a < b`` (strictly). O(1)."""
+        return bool(self.above[a] >> b & 1)
+
+    def comparable(self, a: int, b: int) -> bool:
+        """Whether ``a < b`` or ``b < a``. O(1)."""
+        return bool((self.above[a] | self.below[a]) >> b & 1)
+
+    def minimal(self, mask: int) -> int:
+        """Bitmask of the minimal elements of the subposet induced on ``mask``.
+
+        An element of ``mask`` is minimal if nothing else in ``mask`` is
+        before it.  O(popcount(mask)).
+
+        >>> Poset.from_pairs(3, [(0, 1)]).minimal(0b111)
+        5
+        >>> Poset.from_pairs(3, [(0, 1)]).minimal(0b110)
+        6
+        """
+        below = self.below
+        out = 0
+        m = mask
+        while m:
+            low = m & -m
+            m ^= low
+            if not below[low.bit_length() - 1] & mask:
+                out |= low
+        return out
+
+    def maximal(self, mask: int) -> int:
+        """Bitmask of the maximal elements of the subposet induced on ``mask``. O(popcount(mask)).
+
+        >>> Poset.from_pairs(3, [(0, 1)]).maximal(0b111)
+        6
+        """
+        above = self.above
+        out = 0
+        m = mask
+        while m:
+            low = m & -m
+            m ^= low
+            if not above[low.bit_length() - 1] & mask:
+                out |= low
+        return out
+
+    def is_downset(self, mask: int) -> bool:
+        """Whether ``mask`` is closed downwards (everything before a member is a member).
+
+        O(popcount(mask)).
+
+        >>> p = Poset.from_pairs(3, [(0, 1)])
+        >>> p.is_downset(0b001), p.is_downset(0b010), p.is_downset(0b100)
+        (True, False, True)
+        """
+        below = self.below
+        m = mask
+        while m:
+            low = m & -m
+            m ^= low
+            if below[low.bit_length() - 1] & ~mask:
+                return False
+        return True
+
+    def is_upset(self, mask: int) -> bool:
+        """Whether ``mask`` is closed upwards. O(popcount(mask)).
+
+        >>> Poset.from_pairs(2, [(0, 1)]).is_upset(0b10)
+        True
+        """
+        above = self.above
+        m = mask
+        while m:
+            low = m & -m
+            m ^= low
+            if above[low.bit_length() - 1] & ~mask:
+                return False
+        return True
+
+    def down_closure(self, mask: int) -> int:
+        """Smallest down-set containing ``mask``. O(popcount(mask)).
+
+        >>> Poset.from_pairs(3, [(0, 1), (1, 2)]).down_closure(0b100)
+        7
+        """
+        out = mask
+        for i in bits(mask):
+            out |= self.below[i]
+        return out
+
+    def up_closure(self, mask: int) -> int:
+        """Smallest up-set containing ``mask``. O(popcount(mask)).
+
+        >>> Poset.from_pairs(3, [(0, 1), (1, 2)]).up_closure(0b001)
+        7
+        """
+        out = mask
+        for i in bits(mask):
+            out |= self.above[i]
+        return out
+
+    def _cover_succ(self) -> list[int]:
+        above = self.above
+        succ = []
+        for i in range(self.n):
+            direct = above[i]
+            for j in bits(above[i]):
+                direct &= ~above[j]
+            succ.append(direct)
+        return succ
+
+    def cover_pairs(self) -> list[tuple[int, int]]:
+        """The transitive reduction (Hasse diagram): pairs ``(a, b)`` with ``a < b`` and nothing between.
+
+        Sorted.  O(number of comparable pairs) big-int operations.
+
+        >>> Poset.from_pairs(3, [(0, 1), (1, 2), (0, 2)]).cover_pairs()
+        [(0, 1), (1, 2)]
+        """
+        return [(a, b) for a, s in enumerate(self._cover_succ()) for b in bits(s)]
+
+    def restrict(self, mask: int) -> tuple["Poset", list[int]]:
+        """The subposet induced on ``mask``, renumbered ``0..k-1``, and the old index of each new one.
+
+        >>> q, old = Poset.from_pairs(3, [(0, 2)]).restrict(0b101)
+        >>> q.cover_pairs(), old
+        ([(0, 1)], [0, 2])
+        """
+        old = elements(mask)
+        new = {o: i for i, o in enumerate(old)}
+        below, above = [], []
+        for o in old:
+            below.append(sum(1 << new[j] for j in bits(self.below[o] & mask)))
+            above.append(sum(1 << new[j] for j in bits(self.above[o] & mask)))
+        return Poset(len(old), below, above), old
