@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup system-deps bench clean
+.PHONY: demo test setup system-deps bench bench-service clean
 
 setup: $(STAMP) system-deps
 
@@ -26,6 +26,15 @@ system-deps:
 	    echo "warning: graphviz 'dot' is missing: install it (e.g. sudo apt-get install graphviz)"; \
 	  fi; \
 	fi
+	@if ! command -v chromium >/dev/null 2>&1; then \
+	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	    echo "installing chromium with apt-get (dashboard browser test)"; \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+	      || echo "warning: could not install chromium; tests/test_service_browser.py will fail"; \
+	  else \
+	    echo "warning: chromium is missing: install it (e.g. sudo apt-get install chromium)"; \
+	  fi; \
+	fi
 
 demo: setup
 	$(BIN)/opportune check examples/gearbox.yaml
@@ -38,6 +47,11 @@ test: setup
 
 bench: setup
 	$(BIN)/python benchmarks/bench_count.py
+	$(BIN)/python benchmarks/bench_options.py
+	$(BIN)/python benchmarks/bench_simulate.py
+
+bench-service: setup
+	$(BIN)/python benchmarks/load_service.py --cells 20 --duration 20
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis demo-output

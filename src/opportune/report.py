@@ -136,12 +136,7 @@ def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
     ax.set_xlabel("total time per assembly (motions + shakes, time units)")
     ax.set_title(f"Distribution of total time\n{title}", fontsize=10)
     ax.grid(axis="x", alpha=0.3)
-    fig.tight_layout()
-    for ext in ("png", "svg"):
-        path = out / f"time_distribution.{ext}"
-        fig.savefig(path, dpi=120)
-        written.append(path)
-    plt.close(fig)
+    written += _save(fig, out, "time_distribution")
 
     # 2. Mean time with 95% CI against the optimum.
     fig, ax = plt.subplots(figsize=(9, 0.5 * len(names) + 2))
@@ -161,13 +156,19 @@ def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
     ax.set_xlabel("mean total time per assembly, with 95% confidence interval")
     ax.set_title(f"Mean cost against the optimum\n{title}", fontsize=10)
     ax.set_xlim(0, max(means) * 1.25)
-    fig.tight_layout()
-    for ext in ("png", "svg"):
-        path = out / f"mean_time.{ext}"
-        fig.savefig(path, dpi=120)
-        written.append(path)
-    plt.close(fig)
+    written += _save(fig, out, "mean_time")
     return written
+
+
+def _save(fig, out: Path, stem: str) -> list[Path]:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    paths = [out / f"{stem}.{ext}" for ext in ("png", "svg")]
+    for path in paths:
+        fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return paths
 
 
 def table_rows(doc: dict) -> list[list[str]]:
@@ -176,12 +177,12 @@ def table_rows(doc: dict) -> list[list[str]]:
     for name, s in sorted(doc["strategies"].items(), key=lambda kv: kv[1]["time"]["mean"] or 0):
         t = s["time"]
         ratio = s["ratio_to_optimal"]
+        half = (t["ci95"][1] - t["ci95"][0]) / 2
         rows.append([
-            LABELS.get(name, name),
-            f"{t['mean']:.3f}",
-            f"[{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]",
+            name,
+            f"{t['mean']:.2f} ± {half:.2f}",
             f"{t['sd']:.2f}",
-            f"{t['p5']:g} / {t['p50']:g} / {t['p95']:g}",
+            f"{t['p5']:g}/{t['p50']:g}/{t['p95']:g}",
             f"{t['max']:g}",
             f"{s['motions']['mean']:.2f}",
             f"{s['shakes']['mean']:.2f}",
@@ -191,5 +192,5 @@ def table_rows(doc: dict) -> list[list[str]]:
     return rows
 
 
-TABLE_HEADER = ["strategy", "mean time", "95% CI", "sd", "p5 / p50 / p95", "max", "motions", "shakes",
-                "buffer peak", "× optimum"]
+TABLE_HEADER = ["strategy", "time (95% CI)", "sd", "p5/p50/p95", "max", "motions", "shakes", "buf peak",
+                "× opt"]

@@ -450,6 +450,16 @@ def _run_processes(workers, config, prepared, jobs, results, seconds, started, p
     global _FORKED_STUDY
     # Forked workers inherit the study (no pickling of the plan or the optimum's table per chunk).
     _FORKED_STUDY = (config, prepared) if ctx is not None else None
+    if ctx is not None:
+        # Run each strategy's first chunk here before forking: the workers then start with the
+        # decisions of the most common states already cached, instead of each computing them again.
+        first = {}
+        for job in jobs:
+            first.setdefault(job[0], job)
+        for s, a, b in first.values():
+            started.setdefault(s, _time.perf_counter())
+            _collect(s, run_chunk(config, prepared, s, a, b), results, seconds, started, progress)
+        jobs = [job for job in jobs if job not in first.values()]
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
     try:
         pending = {}

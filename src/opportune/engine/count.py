@@ -5,13 +5,20 @@ obeys three rules, applied in this order (Kangas, Hankala, Niinimäki &
 Koivisto, "Counting linear extensions of sparse posets", IJCAI 2016, plus the
 classical ordinal-sum rule):
 
-1. **Components.**  If the comparability graph of ``S`` falls into connected
-   pieces ``C1..Ck``, the pieces interleave freely:
-   ``e(S) = |S|! / (|C1|! ... |Ck|!) * e(C1) ... e(Ck)``.
-2. **Cut elements.**  If some elements of ``S`` are comparable to every other
+1. **Cut elements.**  If some elements of ``S`` are comparable to every other
    element of ``S`` (they form a chain ``z1 < ... < zk``), ``S`` is the ordinal
    sum ``B0 ⊕ z1 ⊕ B1 ⊕ ... ⊕ zk ⊕ Bk`` and ``e(S) = e(B0) ... e(Bk)``.
+2. **Components.**  If the comparability graph of ``S`` falls into connected
+   pieces ``C1..Ck``, the pieces interleave freely:
+   ``e(S) = |S|! / (|C1|! ... |Ck|!) * e(C1) ... e(Ck)``.
 3. **First element.**  Otherwise ``e(S) = sum over minimal x of e(S - {x})``.
+
+(A set with a cut element is connected, so the order of rules 1 and 2 does not
+change which sets are visited.)  Both tests are bit-parallel: one pass over
+``S`` finds the cut elements and the minimal elements, and the components are
+the overlap classes of the up-sets ``{m} ∪ (above(m) ∩ S)`` of the minimal
+elements ``m`` — every comparable pair lies in one of them — so a connected
+set costs O(width²) mask operations, not a search of its comparability graph.
 
 Every value is memoised on the set, as a Python int, for the whole life of the
 :class:`Counter`: the subproblems of a count are exactly the questions a
@@ -19,6 +26,16 @@ simulation asks next (the remaining parts after one more installation), so
 later calls are mostly dictionary lookups.  Rule 3 only ever removes minimal
 elements, so the subproblems of an up-set are up-sets: the memo is keyed on
 "what is still to do".
+
+**Position sums** are memoised the same way, one vector per set, computed by a
+forward recursion on the same decomposition (each rule has a matching rule for
+the vector: see :meth:`Counter.position_sums`).  A new set reuses the vectors
+of its components, blocks and one-smaller sets seen before, so a query for a
+remaining set that differs from a seen one by one installation costs a few new
+vectors, not a pass over its whole decomposition.  A vector is stored as one
+Python int with a fixed-width field per element (element ``i`` in bits
+``i*W .. i*W+W-1``): adding two vectors or scaling one by an integer is then a
+single big-int operation.
 
 Without rules 1–2 this is the classical dynamic programme over the lattice of
 down-sets (:mod:`opportune.engine.downsets`); with them the number of memo
@@ -29,18 +46,19 @@ from __future__ import annotations
 
 import sys
 import time
+from itertools import islice
 from math import factorial
 from typing import Callable
 
-from opportune.engine.poset import Poset, bits
+from opportune.engine.poset import Poset, bits, elements
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
 
-_CHECK_EVERY = 512  # new memo entries between clock checks
+_CHECK_EVERY = 256  # new memo entries between clock checks (a power of two)
 
 
 class BudgetExceeded(Exception):
-    """An exact count would need more memo entries or time than allowed.
+    """An exact count would need more new memo entries or more time than one call may use.
 
     The counter's memo stays valid (only finished values are stored): call
     again with a larger budget to continue where it stopped, or fall back to
@@ -63,14 +81,26 @@ class Counter:
     ----------
     poset : Poset
     max_memo : int or None
-        Most memo entries the counter may ever hold (None: unlimited).  A call
-        that would store more raises :class:`BudgetExceeded`.
+        Most *new* memo entries (counts plus position-sum vectors) one call of
+        :meth:`count` / :meth:`position_sums` may add (None: unlimited).  A call
+        that would add more raises :class:`BudgetExceeded`; what it stored so
+        far stays, so the same call with a larger budget continues from there.
+        Entries stored by earlier calls never count against a call.
     time_limit : float or None
         Most seconds one call of :meth:`count` / :meth:`position_sums` may
         spend computing (None: unlimited).
+    max_total : int or None
+        Memory cap on the memo as a whole (counts plus vectors; None:
+        unlimited).  It never makes a call fail: when a call that has to
+        compute something starts with more than ``max_total`` entries held, the
+        oldest entries are evicted until half remain (later calls recompute
+        them if needed).  One call can still add up to ``max_memo`` entries on
+        top, so the memo holds at most about ``max_total + max_memo`` entries.
+        The default, 2,000,000, bounds memory like the old lifetime
+        ``max_memo`` did, without ever failing because of the memo's age.
 
-    Both budgets are plain attributes and may be changed between calls; the
-    memo survives a :class:`BudgetExceeded`.
+    All three are plain attributes and may be changed between calls; the memo
+    survives a :class:`BudgetExceeded`.
 
     Complexity: each memo entry costs O(|S|) big-int operations plus one
     addition or multiplication per child.  The number of entries is at most the
@@ -89,13 +119,19 @@ class Counter:
     {0: 4, 1: 8, 2: 6}
     """
 
-    def __init__(self, poset: Poset, *, max_memo: int | None = 2_000_000, time_limit: float | None = None):
+    def __init__(self, poset: Poset, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
+                 max_total: int | None = 2_000_000):
         self.poset = poset
         self.max_memo = max_memo
         self.time_limit = time_limit
+        self.max_total = max_total
         self._memo: dict[int, int] = {0: 1}
-        self._budget = [0, 0.0, 0]  # [memo limit, deadline, insertions since last clock check]
+        self._vec: dict[int, int] = {}          # set -> packed position-sum vector (field width self._width)
+        self._width = 0
+        # [new-entry limit, deadline, new entries in this call]
+        self._budget: list = [sys.maxsize, float("inf"), 0]
         self._f = self._make_counter()
+        self._g: Callable[[int], int] | None = None
 
     # ------------------------------------------------------------------ public API
     def count(self, mask: int | None = None) -> int:
@@ -103,8 +139,8 @@ class Counter:
 
         ``mask`` may be any subset; in practice it is usually an up-set (what
         remains to be done).  A mask seen before is answered by one dictionary
-        lookup.  Raises :class:`BudgetExceeded` if the memo would exceed
-        ``max_memo`` entries or the call exceeds ``time_limit`` seconds.
+        lookup.  Raises :class:`BudgetExceeded` if this call would add more
+        than ``max_memo`` memo entries or take more than ``time_limit`` seconds.
 
         >>> Counter(Poset.antichain(3)).count()
         6
@@ -124,80 +160,46 @@ class Counter:
         ``position_sums(mask)[x] / count(mask)`` is the expected position of
         ``x`` in a uniformly random linear extension.  Exact ints.
 
-        Computed by one backward pass over the decomposition DAG of ``mask``
-        (every node's sums are a linear function of its children's, so each
-        node's coefficient is propagated top-down, largest sets first):
-        O(nodes × |mask|) big-int operations after :meth:`count`, whose memo it
-        reuses.  Raises :class:`BudgetExceeded` like :meth:`count`.
+        The vector ``P(S)`` of a set is computed from those of its parts by the
+        rule :meth:`count` uses for ``S``, and memoised:
+
+        * cut elements ``B0 ⊕ z1 ⊕ B1 ⊕ ...``: an element of block ``Bj`` with
+          ``o`` elements before the block has ``P(S)[x] = e(S)/e(Bj) P(Bj)[x] + o e(S)``;
+          the cut element after ``o`` elements has ``(o + 1) e(S)``;
+        * components: an element of a component ``C`` of ``k`` elements in a
+          set of ``n`` has ``P(S)[x] = e(S)/e(C) P(C)[x] (n + 1)/(k + 1)`` (the
+          ``j``-th of ``k`` random positions among ``n`` is at ``j (n+1)/(k+1)``
+          on average);
+        * first element: ``P(S)[y] = e(S) + sum over minimal x != y of P(S - x)[y]``.
+
+        Each new set costs O(children) big-int operations on packed vectors;
+        sets seen by earlier calls cost nothing.  Raises
+        :class:`BudgetExceeded` like :meth:`count` (vectors count as memo
+        entries).
 
         >>> Counter(Poset.from_pairs(3, [(0, 1)])).position_sums()
         {0: 4, 1: 8, 2: 6}
         """
         if mask is None:
             mask = self.poset.full
-        self.count(mask)
+        self._check_mask(mask)
         if mask == 0:
             return {}
-        self._start_budget()
-        memo = self._memo
-        f = self._f
-        k = mask.bit_count()
-        scale = factorial(k)          # makes every coefficient an integer (see _propagate)
-        coef: dict[int, int] = {mask: scale}
-        acc: dict[int, int] = {}      # set -> weight to add to each of its elements
-        point = [0] * self.poset.n    # weight for single elements
-        # Collect the DAG in order of decreasing size: a child is always smaller.
-        nodes = self._reachable(mask)
-        nodes.sort(key=int.bit_count, reverse=True)
-        below, above = self.poset.below, self.poset.above
-
-        def value(s: int) -> int:
-            if s & (s - 1) == 0:
-                return 1
-            v = memo.get(s)
-            return v if v is not None else f(s)
-
-        for s in nodes:
-            c = coef.pop(s, 0)
-            if not c:
-                continue
-            kind, parts = self._split(s)
-            if kind == "leaf":
-                point[s.bit_length() - 1] += c
-                continue
-            es = value(s)
-            if kind == "disc":
-                size = s.bit_count()
-                for comp in parts:
-                    csize = comp.bit_count()
-                    coef[comp] = coef.get(comp, 0) + c * (es // value(comp)) * (size + 1) // (csize + 1)
-            elif kind == "cut":
-                offset = 0
-                for block in parts:
-                    if isinstance(block, tuple):        # a cut element: ("z", bit)
-                        z = block[1]
-                        point[z.bit_length() - 1] += c * (offset + 1) * es
-                        offset += 1
-                        continue
-                    if block:
-                        coef[block] = coef.get(block, 0) + c * (es // value(block))
-                        if offset:
-                            w = c * offset * es
-                            acc[block] = acc.get(block, 0) + w
-                        offset += block.bit_count()
-            else:  # "sum": e(S) = sum over minimal x of e(S - x); every element gains e(S)
-                for b in parts:
-                    t = s ^ b
-                    coef[t] = coef.get(t, 0) + c
-                acc[s] = acc.get(s, 0) + c * es
-        for s, w in acc.items():
-            for i in bits(s):
-                point[i] += w
+        width = self._width
+        v = self._vec.get(mask)
+        if v is None:
+            self._start_budget()
+            es = self._memo.get(mask)
+            if es is None:
+                es = self._f(mask) if mask & (mask - 1) else 1
+            if self._g is None or self._need_width(es) > width:
+                self._set_width(self._need_width(es))
+                width = self._width
+            v = self._g(mask)
+        fmask = (1 << width) - 1
         out = {}
         for i in bits(mask):
-            q, r = divmod(point[i], scale)
-            assert r == 0, "position sums must be integral"
-            out[i] = q
+            out[i] = (v >> (i * width)) & fmask
         return out
 
     def expected_positions(self, mask: int | None = None) -> dict[int, float]:
@@ -246,26 +248,52 @@ class Counter:
 
     @property
     def memo_size(self) -> int:
-        """Number of entries in the memo."""
-        return len(self._memo)
+        """Number of entries in the memo (counts plus position-sum vectors)."""
+        return len(self._memo) + len(self._vec)
 
     def clear(self) -> None:
         """Forget every memoised value (frees memory; later calls recompute)."""
         self._memo.clear()
         self._memo[0] = 1
+        self._vec.clear()
 
     def __repr__(self) -> str:
-        return f"<Counter n={self.poset.n} memo={len(self._memo)}>"
+        return f"<Counter n={self.poset.n} memo={len(self._memo)} vectors={len(self._vec)}>"
 
     # ------------------------------------------------------------------ internals
+    def _check_mask(self, mask) -> None:
+        if not isinstance(mask, int) or mask < 0 or mask & ~self.poset.full:
+            raise ValueError(f"mask {mask!r} is not a subset of 0..{self.poset.n - 1}")
+
     def _start_budget(self) -> None:
+        """Start the budget of one top-level call (and evict if the memo is over ``max_total``)."""
         b = self._budget
         b[0] = self.max_memo if self.max_memo is not None else sys.maxsize
         b[1] = time.perf_counter() + self.time_limit if self.time_limit is not None else float("inf")
         b[2] = 0
+        if self.max_total is not None and len(self._memo) + len(self._vec) > self.max_total:
+            self._evict(self.max_total // 2)
         need = 3 * self.poset.n + 200
         if sys.getrecursionlimit() < need:   # Python 3.11 frames do not use the C stack
             sys.setrecursionlimit(need)
+
+    def _evict(self, keep: int) -> None:
+        """Drop the oldest entries (insertion order) until at most ``keep`` remain in all."""
+        memo, vec = self._memo, self._vec
+        total = len(memo) + len(vec)
+        if total <= keep:
+            return
+        drop = total - keep
+        # Vectors are the larger entries: drop them first, then the oldest counts.
+        k = min(drop, len(vec))
+        for key in list(islice(vec, k)):
+            del vec[key]
+        drop -= k
+        if drop:
+            for key in list(islice(memo, drop + 1)):
+                if key:
+                    del memo[key]
+            memo[0] = 1
 
     def _count_miss(self, mask: int | None) -> int:
         if mask is None:
@@ -273,56 +301,125 @@ class Counter:
             r = self._memo.get(mask)
             if r is not None:
                 return r
-        if not isinstance(mask, int) or mask < 0 or mask & ~self.poset.full:
-            raise ValueError(f"mask {mask!r} is not a subset of 0..{self.poset.n - 1}")
+        self._check_mask(mask)
         if mask & (mask - 1) == 0:
-            r = 1
-        else:
-            self._start_budget()
-            r = self._f(mask)
-        if len(self._memo) < self._budget[0] or mask & (mask - 1) == 0:
-            self._memo[mask] = r
-        return r
+            return 1
+        self._start_budget()
+        return self._f(mask)
+
+    def _need_width(self, es: int) -> int:
+        """Field width that holds every intermediate vector entry of a set with ``es`` extensions.
+
+        Entries are at most ``|S| e(S) <= n e(mask)`` and the component rule
+        multiplies by at most ``n + 1`` before dividing; every set of the
+        decomposition of ``mask`` has at most ``e(mask)`` extensions.
+        """
+        n = self.poset.n
+        top = self._memo.get(self.poset.full)
+        if top is not None and top > es:
+            es = top
+        return es.bit_length() + 2 * (n + 1).bit_length() + 1
+
+    def _set_width(self, width: int) -> None:
+        """(Re)build the vector recursion for a field width of at least ``width`` bits, repacking stored vectors."""
+        old = self._width
+        if width > old:
+            width = max(width, old + old // 2)
+            if self._vec:
+                fmask = (1 << old) - 1
+                repacked = {}
+                for s, v in self._vec.items():
+                    w = 0
+                    for i in bits(s):
+                        w |= ((v >> (i * old)) & fmask) << (i * width)
+                    repacked[s] = w
+                self._vec.clear()
+                self._vec.update(repacked)
+            self._width = width
+        self._g = self._make_vectors()
+
+    def _tables(self):
+        """Byte tables for bit-parallel scans: for byte ``k`` of a set and its value ``v``,
+        ``UP[k][v]`` is the union of ``above[i]`` and ``CAP[k][v]`` the intersection of
+        ``{i} | below[i] | above[i]`` over the elements ``i`` of that byte.
+
+        So for any set ``s``: its minimal elements are ``s & ~OR(UP)`` and its cut
+        elements (comparable to every other element) ``s & AND(CAP)``, in
+        ``ceil(n / 8)`` look-ups instead of a pass over the elements.
+        """
+        t = getattr(self, "_tabs", None)
+        if t is None:
+            t = self._tabs = _byte_tables(self.poset)
+        return t
 
     def _make_counter(self) -> Callable[[int], int]:
         memo = self._memo
         poset = self.poset
         below = list(poset.below)
         above = list(poset.above)
-        cmp_ = [b | a for b, a in zip(below, above)]
+        nbytes, UP, CAP = self._tables()
         fact = [factorial(i) for i in range(poset.n + 1)]
         budget = self._budget
         get = memo.get
         perf = time.perf_counter
+        vec = self._vec
+        check = _CHECK_EVERY - 1
 
         def store(s: int, r: int) -> int:
-            if len(memo) >= budget[0]:
+            k = budget[2] = budget[2] + 1
+            if k > budget[0]:
                 raise BudgetExceeded(
-                    f"exact count needs more than max_memo={budget[0]} memo entries",
-                    reason="memo", memo_size=len(memo))
+                    f"exact count needs more than max_memo={budget[0]} new memo entries",
+                    reason="memo", memo_size=len(memo) + len(vec))
             memo[s] = r
-            budget[2] += 1
-            if budget[2] >= _CHECK_EVERY:
-                budget[2] = 0
-                if perf() > budget[1]:
-                    raise BudgetExceeded("exact count exceeded its time limit", reason="time", memo_size=len(memo))
+            if not k & check and perf() > budget[1]:
+                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
             return r
 
         def f(s: int) -> int:
             r = get(s)
             if r is not None:
                 return r
-            # --- rule 1: connected components of the comparability graph
-            low = s & -s
-            comp = low
-            frontier = low
-            while frontier:
-                b = frontier & -frontier
-                frontier ^= b
-                new = cmp_[b.bit_length() - 1] & s & ~comp
-                if new:
-                    comp |= new
-                    frontier |= new
+            # cut elements (comparable to all of s) and minimal elements, a byte of s at a time
+            up = 0
+            cap = -1
+            for tu, tc, byte in zip(UP, CAP, s.to_bytes(nbytes, "little")):
+                if byte:
+                    up |= tu[byte]
+                    cap &= tc[byte]
+            cuts = s & cap
+            if cuts:
+                if cuts == s:
+                    return store(s, 1)          # a chain
+                # blocks between consecutive cut elements (the cuts form a chain)
+                r = 1
+                rest = s
+                for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                    block = rest & below[zi]
+                    rest &= above[zi]
+                    if block & (block - 1):
+                        v = get(block)
+                        r *= v if v is not None else f(block)
+                if rest & (rest - 1):
+                    v = get(rest)
+                    r *= v if v is not None else f(rest)
+                return store(s, r)
+            # components: overlap classes of the up-sets of the minimal elements
+            mins = elements(s & ~up)
+            ups = [(above[i] & s) | (1 << i) for i in mins]
+            comp = ups.pop()
+            grew = True
+            while grew and comp != s:
+                grew = False
+                keep = []
+                for u in ups:
+                    if u & comp:
+                        comp |= u
+                        grew = True
+                    else:
+                        keep.append(u)
+                ups = keep
             if comp != s:
                 r = fact[s.bit_count()]
                 rest = s
@@ -334,139 +431,157 @@ class Counter:
                         r *= v if v is not None else f(comp)
                     if not rest:
                         break
-                    low = rest & -rest
-                    comp = low
-                    frontier = low
-                    while frontier:
-                        b = frontier & -frontier
-                        frontier ^= b
-                        new = cmp_[b.bit_length() - 1] & rest & ~comp
-                        if new:
-                            comp |= new
-                            frontier |= new
-                return store(s, r)
-            # --- rules 2 and 3: cut elements, else minimal elements
-            cuts = 0
-            mins = []
-            m = s
-            while m:
-                b = m & -m
-                m ^= b
-                i = b.bit_length() - 1
-                if (cmp_[i] & s) | b == s:
-                    cuts |= b
-                elif not below[i] & s:
-                    mins.append(b)
-            if cuts:
-                if cuts == s:
-                    return store(s, 1)          # a chain
-                r = 1
-                for block in _blocks(s, cuts, below, above):
-                    if block & (block - 1):
-                        v = get(block)
-                        r *= v if v is not None else f(block)
+                    comp = _grow(ups, rest)
                 return store(s, r)
             r = 0
-            for b in mins:
-                t = s ^ b
+            for i in mins:
+                t = s ^ (1 << i)
                 v = get(t)
                 r += v if v is not None else f(t)
             return store(s, r)
 
         return f
 
-    def _split(self, s: int):
-        """The decomposition rule :meth:`count` applies to ``s`` (same order of rules).
-
-        Returns ``("leaf", s)``, ``("disc", components)``, ``("cut", blocks)``
-        where blocks alternate sets and ``("z", bit)`` cut elements in order,
-        or ``("sum", minimal bits)``.
-        """
-        if s & (s - 1) == 0:
-            return "leaf", s
+    def _make_vectors(self) -> Callable[[int], int]:
+        """The memoised forward recursion for packed position-sum vectors (see :meth:`position_sums`)."""
+        memo = self._memo
+        vec = self._vec
         poset = self.poset
-        below, above = poset.below, poset.above
-        comps = _components(s, below, above)
-        if len(comps) > 1:
-            return "disc", comps
-        cuts = 0
-        mins = []
-        for i in bits(s):
-            b = 1 << i
-            if ((below[i] | above[i]) & s) | b == s:
-                cuts |= b
-            elif not below[i] & s:
-                mins.append(b)
-        if cuts:
-            parts: list = []
-            zs = sorted(bits(cuts), key=lambda i: (below[i] & s).bit_count())
-            prev = None
-            for z in zs:
-                lo = s & below[z]
-                if prev is not None:
-                    lo &= above[prev]
-                parts.append(lo)
-                parts.append(("z", 1 << z))
-                prev = z
-            parts.append(s & above[prev])
-            return "cut", parts
-        return "sum", mins
+        below = list(poset.below)
+        above = list(poset.above)
+        nbytes, UP, CAP = self._tables()
+        width = self._width
+        budget = self._budget
+        get = memo.get
+        vget = vec.get
+        f = self._f
+        perf = time.perf_counter
+        check = _CHECK_EVERY - 1
+        # ones(s): 1 in the field of every element of s, built from the binary digits of s
+        zero, one = "0" * width, "0" * (width - 1) + "1"
+        table = str.maketrans({"0": zero, "1": one})
 
-    def _reachable(self, mask: int) -> list[int]:
-        """All sets in the decomposition DAG below ``mask`` (including it)."""
-        seen = {mask}
-        stack = [mask]
-        while stack:
-            s = stack.pop()
-            kind, parts = self._split(s)
-            if kind == "leaf":
-                continue
-            if kind == "disc":
-                children = parts
-            elif kind == "cut":
-                children = [p for p in parts if not isinstance(p, tuple) and p]
+        def ones(s: int) -> int:
+            return int(format(s, "b").translate(table), 2)
+
+        def cnt(s: int) -> int:
+            if s & (s - 1) == 0:
+                return 1
+            v = get(s)
+            return v if v is not None else f(s)
+
+        def vstore(s: int, v: int) -> int:
+            k = budget[2] = budget[2] + 1
+            if k > budget[0]:
+                raise BudgetExceeded(
+                    f"position sums need more than max_memo={budget[0]} new memo entries",
+                    reason="memo", memo_size=len(memo) + len(vec))
+            vec[s] = v
+            if not k & check and perf() > budget[1]:
+                raise BudgetExceeded("position sums exceeded their time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
+            return v
+
+        def g(s: int) -> int:
+            v = vget(s)
+            if v is not None:
+                return v
+            if s & (s - 1) == 0:
+                return 1 << ((s.bit_length() - 1) * width)
+            es = cnt(s)
+            up = 0
+            cap = -1
+            for tu, tc, byte in zip(UP, CAP, s.to_bytes(nbytes, "little")):
+                if byte:
+                    up |= tu[byte]
+                    cap &= tc[byte]
+            cuts = s & cap
+            if cuts:
+                v = 0
+                off = 0                 # elements before the current block
+                rest = s
+                for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                    block = rest & below[zi]
+                    rest &= above[zi]
+                    if block:
+                        v += (es // cnt(block)) * g(block)
+                        if off:
+                            v += off * es * ones(block)
+                        off += block.bit_count()
+                    v += ((off + 1) * es) << (zi * width)
+                    off += 1
+                if rest:
+                    v += (es // cnt(rest)) * g(rest) + off * es * ones(rest)
+                return vstore(s, v)
+            mins = elements(s & ~up)
+            ups = [(above[i] & s) | (1 << i) for i in mins]
+            comp = ups.pop()
+            grew = True
+            while grew and comp != s:
+                grew = False
+                keep = []
+                for u in ups:
+                    if u & comp:
+                        comp |= u
+                        grew = True
+                    else:
+                        keep.append(u)
+                ups = keep
+            if comp != s:
+                n1 = s.bit_count() + 1
+                v = 0
+                rest = s
+                while True:
+                    rest ^= comp
+                    v += (es // cnt(comp)) * n1 * g(comp) // (comp.bit_count() + 1)
+                    if not rest:
+                        break
+                    comp = _grow(ups, rest)
+                return vstore(s, v)
+            v = es * ones(s)
+            for i in mins:
+                v += g(s ^ (1 << i))
+            return vstore(s, v)
+
+        return g
+
+
+def _byte_tables(poset: Poset):
+    n = poset.n
+    nbytes = max(1, (n + 7) // 8)
+    up_t, cap_t = [], []
+    for k in range(nbytes):
+        ut = [0] * 256
+        ct = [-1] * 256
+        for v in range(1, 256):
+            low = v & -v
+            i = 8 * k + low.bit_length() - 1
+            if i < n:
+                ut[v] = ut[v ^ low] | poset.above[i]
+                ct[v] = ct[v ^ low] & (poset.below[i] | poset.above[i] | 1 << i)
+            else:                       # bits past n never occur in a valid set
+                ut[v] = ut[v ^ low]
+                ct[v] = ct[v ^ low]
+        up_t.append(ut)
+        cap_t.append(ct)
+    return nbytes, up_t, cap_t
+
+
+def _grow(ups: list[int], rest: int) -> int:
+    """One overlap class of the up-sets ``ups`` (the next component within ``rest``); removes it from ``ups``."""
+    comp = ups.pop()
+    grew = True
+    while grew:
+        grew = False
+        keep = []
+        for u in ups:
+            if u & comp:
+                comp |= u
+                grew = True
             else:
-                children = [s ^ b for b in parts]
-            for t in children:
-                if t not in seen:
-                    seen.add(t)
-                    stack.append(t)
-        return list(seen)
-
-
-def _blocks(s: int, cuts: int, below, above):
-    """The non-cut blocks of ``s`` between consecutive cut elements (the cuts form a chain)."""
-    zs = sorted(bits(cuts), key=lambda i: (below[i] & s).bit_count())
-    out = []
-    prev = None
-    for z in zs:
-        lo = s & below[z]
-        if prev is not None:
-            lo &= above[prev]
-        out.append(lo)
-        prev = z
-    out.append(s & above[prev])
-    return out
-
-
-def _components(s: int, below, above) -> list[int]:
-    """Connected components of the comparability graph induced on ``s``."""
-    out = []
-    rest = s
-    while rest:
-        low = rest & -rest
-        comp = low
-        frontier = low
-        while frontier:
-            b = frontier & -frontier
-            frontier ^= b
-            i = b.bit_length() - 1
-            new = (below[i] | above[i]) & rest & ~comp
-            comp |= new
-            frontier |= new
-        out.append(comp)
-        rest ^= comp
-    return out
+                keep.append(u)
+        ups[:] = keep
+    return comp
 
 
 def _ratio(a: int, b: int) -> float:

@@ -1,0 +1,395 @@
+"""The FastAPI application: routes, authentication, limits and error handling.
+
+Routes (all JSON; OpenAPI at ``/openapi.json``, readable at ``/docs``):
+
+=======  ==========================  =============================================================
+POST     /plans                      upload a plan (YAML, JSON or SALBP .IN2), validated as ``opportune check``
+GET      /plans, /plans/{id}         list (operator) / one plan with its summary
+GET      /cells                      cells with their run counts
+POST     /runs                       start a run: ``{"plan": id, "buffer_capacity": null, "label": ""}``
+GET      /runs                       runs visible to the token (``?cell=&status=``)
+GET      /runs/{id}                  a run's state, pending action, completions left
+POST     /runs/{id}/looks            ``{"visible": [...]}`` → the decided action with its reasons
+POST     /runs/{id}/outcomes         ``{"outcome": "success"|"failed"|"defective", "keep": "bin"|"buffer"}``
+POST     /runs/{id}/cancel           drop the pending action (the robot did not do it)
+GET      /runs/{id}/trace            the trace in the layout of the paper's Table 1
+GET      /runs/{id}/graph            the precedence graph's layout, per strategy
+POST     /runs/{id}/ticket           a short-lived ticket to open the event stream from a browser
+GET      /runs/{id}/events           server-sent events (bearer header, or ``?ticket=``)
+=======  ==========================  =============================================================
+
+State-changing run requests need an ``Idempotency-Key`` header
+(:mod:`opportune.service.idempotency`).  The dashboard is served at ``/``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Literal, Optional
+
+from fastapi import Depends, FastAPI, Header, Path as PathParam, Query, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, ConfigDict, Field
+from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from opportune import __version__
+from opportune.service import idempotency as idem
+from opportune.service.auth import Authenticator, Principal
+from opportune.service.config import Settings
+from opportune.service.errors import ApiError, forbidden, from_validation, internal, new_reference, unauthorized
+from opportune.service.events import Broker, stream
+from opportune.service.plans import PlanBook, check_upload, list_plans, store_plan
+from opportune.service.runs import RunManager
+from opportune.service.storage import Store
+
+log = logging.getLogger("opportune.service")
+STATIC = Path(__file__).parent / "static"
+RUN_ID = PathParam(..., ge=1, le=2**62, description="The run's id")
+
+# Pages and scripts come only from this server; nothing from the internet.
+CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
+       "frame-ancestors 'none'; base-uri 'none'; form-action 'self'")
+
+
+# ---------------------------------------------------------------- request bodies
+
+class RunIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    plan: str = Field(..., min_length=1, max_length=64, description="A plan id returned by POST /plans")
+    cell: Optional[str] = Field(None, description="The cell; defaults to (and must be) the token's cell")
+    buffer_capacity: Optional[int] = Field(None, ge=0, le=1_000_000, description="Buffer locations; null: unlimited")
+    label: str = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
+
+
+class LookIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    visible: list[str] = Field(..., max_length=100_000,
+                               description="Part ids seen in the bin now, repeated for several units; [] for nothing")
+
+
+class OutcomeIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    outcome: Literal["success", "failed", "defective"] = Field(..., description="What happened to the pending action")
+    keep: Literal["bin", "buffer"] = Field("bin", description="After a failed install: part back in the bin, or kept in a buffer location")
+
+
+class CancelIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---------------------------------------------------------------- middleware
+
+class BodyLimit:
+    """Refuses bodies over ``limit`` bytes with 413 before the application reads them (pure ASGI)."""
+
+    def __init__(self, app, limit: int):
+        self.app = app
+        self.limit = limit
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
+            return await self.app(scope, receive, send)
+        declared = dict(scope.get("headers") or []).get(b"content-length")
+        too_big = declared is not None and declared.isdigit() and int(declared) > self.limit
+        chunks: list[bytes] = []
+        size = 0
+        if not too_big:
+            while True:
+                message = await receive()
+                if message["type"] == "http.disconnect":
+                    return
+                chunks.append(message.get("body", b""))
+                size += len(chunks[-1])
+                if size > self.limit:
+                    too_big = True
+                    break
+                if not message.get("more_body"):
+                    break
+        if too_big:
+            err = ApiError(413, "body_too_large", f"the request body is larger than the limit of {self.limit} bytes",
+                           "send a smaller body; the limit is set with `opportune serve --max-body`", where="body")
+            response = JSONResponse(err.body(), status_code=413, headers={"Connection": "close"})
+            return await response(scope, receive, send)
+        body = b"".join(chunks)
+        sent = False
+
+        async def replay():
+            nonlocal sent
+            if not sent:
+                sent = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+
+class SecurityHeaders:
+    """``nosniff`` everywhere; a strict Content-Security-Policy on pages."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+
+        async def send_with_headers(message):
+            if message["type"] == "http.response.start":
+                headers = list(message.get("headers") or [])
+                headers.append((b"x-content-type-options", b"nosniff"))
+                headers.append((b"referrer-policy", b"no-referrer"))
+                if any(k == b"content-type" and v.startswith(b"text/html") for k, v in headers):
+                    headers.append((b"content-security-policy", CSP.encode()))
+                message = {**message, "headers": headers}
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+
+# ---------------------------------------------------------------- the application
+
+def create_app(settings: Settings | None = None, store: Store | None = None) -> FastAPI:
+    """The service's ASGI application over a store (created from ``settings.db_url`` if not given)."""
+    settings = settings or Settings()
+    store = store or Store(settings.db_url)
+    book = PlanBook(store, count_seconds=settings.count_seconds)
+    broker = Broker()
+    auth = Authenticator(store, cache_seconds=settings.token_cache_seconds, ticket_seconds=settings.ticket_seconds)
+    manager = RunManager(store, book, size=settings.live_runs, notify=broker.notify)
+
+    @asynccontextmanager
+    async def lifespan(_app):
+        broker.bind(asyncio.get_running_loop())
+        yield
+        store.dispose()
+
+    app = FastAPI(
+        title="opportune",
+        version=__version__,
+        summary="The opportunistic sequencer of Fox & Kempf as a service for robot cells.",
+        description=(
+            "A cell posts what its camera sees (`POST /runs/{id}/looks`) and gets the action to do; it then reports "
+            "the outcome (`POST /runs/{id}/outcomes`). Every look, decision and outcome is committed before the "
+            "answer is sent. Authenticate with `Authorization: Bearer <token>` (`opportune token create CELL`). "
+            "Send an `Idempotency-Key` header on POSTs that change a run and reuse it on retries. Errors are "
+            "`{\"error\": {status, code, message, hint, where}}`."),
+        docs_url=None, redoc_url=None, lifespan=lifespan,
+    )
+    app.state.store, app.state.manager, app.state.auth, app.state.broker = store, manager, auth, broker
+    bearer = HTTPBearer(auto_error=False, description="A cell or operator token from `opportune token create`")
+
+    # ------------------------------------------------------------ errors
+
+    @app.exception_handler(ApiError)
+    async def _api_error(_request, exc: ApiError):
+        return JSONResponse(exc.body(), status_code=exc.status, headers=exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(_request, exc: RequestValidationError):
+        err = from_validation(list(exc.errors()))
+        return JSONResponse(err.body(), status_code=err.status)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException):
+        if exc.status_code == 404:
+            err = ApiError(404, "not_found", f"no such resource: {request.method} {request.url.path}",
+                           "see the routes at /docs")
+        elif exc.status_code == 405:
+            err = ApiError(405, "method_not_allowed", f"{request.method} is not allowed on {request.url.path}",
+                           "see the routes at /docs")
+        else:
+            err = ApiError(exc.status_code, "http_error", str(exc.detail))
+        return JSONResponse(err.body(), status_code=err.status, headers=getattr(exc, "headers", None))
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception):
+        ref = new_reference()
+        log.error("internal error %s on %s %s", ref, request.method, request.url.path, exc_info=exc)
+        return JSONResponse(internal(ref), status_code=500)
+
+    # ------------------------------------------------------------ who is asking
+
+    def principal(creds: Optional[HTTPAuthorizationCredentials] = Depends(bearer)) -> Principal:
+        p = auth.token(creds.credentials) if creds and creds.credentials else None
+        if p is None:
+            raise unauthorized()
+        return p
+
+    def operator(p: Principal = Depends(principal)) -> Principal:
+        if not p.is_operator:
+            raise forbidden("this needs an operator token", "create one with `opportune token create --operator NAME`")
+        return p
+
+    def replayable(status: int, text: str, replayed: bool) -> Response:
+        # The same bytes the first time and on every retry: the stored answer is this JSON text.
+        return Response(text, status_code=status, media_type="application/json",
+                        headers={"Idempotent-Replayed": "true"} if replayed else None)
+
+    # ------------------------------------------------------------ pages
+
+    @app.get("/", include_in_schema=False)
+    def index():
+        return FileResponse(STATIC / "index.html", media_type="text/html")
+
+    @app.get("/ui/runs/{run_id}", include_in_schema=False)
+    def run_page(run_id: int = RUN_ID):
+        return FileResponse(STATIC / "run.html", media_type="text/html")
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon():
+        return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml")
+
+    @app.get("/docs", include_in_schema=False)
+    def docs():
+        return FileResponse(STATIC / "docs.html", media_type="text/html")
+
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/healthz", tags=["service"], summary="Liveness: the service answers and its database is reachable")
+    def healthz():
+        return {"ok": True, "version": __version__, "journal_mode": store.journal_mode()}
+
+    # ------------------------------------------------------------ plans
+
+    @app.post("/plans", tags=["plans"], status_code=201, summary="Upload a plan, validated as `opportune check` does",
+              responses={200: {"description": "The plan was already stored (same content hash)"},
+                         422: {"description": "The plan has errors: `error.problems` lists each with its line"}},
+              openapi_extra={"requestBody": {"required": True, "content": {
+                  "application/json": {"schema": {"oneOf": [
+                      {"type": "object", "description": "A plan in the JSON file schema (`opportune schema`)"},
+                      {"type": "object", "required": ["text"], "properties": {
+                          "text": {"type": "string"}, "format": {"enum": ["yaml", "json", "in2"]},
+                          "filename": {"type": "string"}}}]}},
+                  "application/yaml": {"schema": {"type": "string"}},
+                  "text/plain": {"schema": {"type": "string", "description": "YAML, JSON or SALBP .IN2, detected"}}}}})
+    async def upload_plan(request: Request, p: Principal = Depends(principal),
+                          format: Optional[Literal["yaml", "json", "in2"]] = Query(None, description="Format of a raw body"),
+                          filename: Optional[str] = Query(None, max_length=200, description="Name used in problems")):
+        raw = await request.body()
+        ctype = request.headers.get("content-type")
+        if ctype and ctype.split(";")[0].strip().lower() in ("application/yaml", "application/x-yaml", "text/yaml") and not format:
+            format = "yaml"
+
+        def work():
+            result, fmt, source = check_upload(raw, ctype, filename, format)
+            problems = [pr.to_dict() for pr in result.problems]
+            if not result.ok:
+                first = result.errors[0] if result.errors else None
+                raise ApiError(422, "invalid_plan",
+                               f"the plan has {len(result.errors)} error(s)" + (f"; first: {first}" if first else ""),
+                               "fix every problem listed (each has its line), then upload again",
+                               where=first.where if first else "body", extra={"problems": problems})
+            pid, created = store_plan(store, result, fmt, source)
+            from opportune.formats.summary import summarize
+
+            return (201 if created else 200), {"id": pid, "name": result.plan.name, "created": created,
+                                               "format": fmt, "parts": list(result.plan.part_ids),
+                                               "units": result.plan.n_units, "summary": summarize(result.plan),
+                                               "warnings": [w for w in problems if w["severity"] == "warning"]}
+
+        status, body = await run_in_threadpool(work)
+        return JSONResponse(body, status_code=status)
+
+    @app.get("/plans", tags=["plans"], summary="Every stored plan (operator)")
+    def get_plans(_p: Principal = Depends(operator)):
+        return {"plans": list_plans(store)}
+
+    @app.get("/plans/{plan_id}", tags=["plans"], summary="A plan: its document (file schema), summary and graph layout")
+    def get_plan(plan_id: str, _p: Principal = Depends(principal)):
+        loaded = book.get(plan_id)
+        return {"id": loaded.id, "name": loaded.plan.name, "plan": loaded.plan.to_dict(), "summary": loaded.summary,
+                "graph": loaded.layouts}
+
+    # ------------------------------------------------------------ cells and runs
+
+    @app.get("/cells", tags=["runs"], summary="Cells with their numbers of runs (a cell token sees itself)")
+    def list_cells(p: Principal = Depends(principal)):
+        return {"cells": manager.cells(p)}
+
+    @app.post("/runs", tags=["runs"], status_code=201, summary="Start a run of a stored plan in the token's cell")
+    def create_run(body: RunIn, request: Request, p: Principal = Depends(principal),
+                   idempotency_key: Optional[str] = Header(None, alias=idem.HEADER)):
+        key = idem.check_key(idempotency_key)
+        return replayable(*manager.create(p, body.model_dump(), key, request.url.path))
+
+    @app.get("/runs", tags=["runs"], summary="Runs this token may see, newest first")
+    def list_runs(p: Principal = Depends(principal), cell: Optional[str] = Query(None, max_length=100),
+                  status: Optional[Literal["active", "complete"]] = None,
+                  limit: int = Query(200, ge=1, le=1000), offset: int = Query(0, ge=0)):
+        return {"runs": manager.list(p, cell=cell, status=status, limit=limit, offset=offset)}
+
+    @app.get("/runs/{run_id}", tags=["runs"], summary="A run's state: installed, buffered, in the bin, pending action, completions left")
+    def get_run(run_id: int = RUN_ID, p: Principal = Depends(principal)):
+        return manager.view(p, run_id)
+
+    @app.get("/runs/{run_id}/trace", tags=["runs"], summary="The trace: Visible | Buffered | Installed | Action | Outcome (Table 1)")
+    def get_trace(run_id: int = RUN_ID, p: Principal = Depends(principal)):
+        return manager.trace(p, run_id)
+
+    @app.get("/runs/{run_id}/graph", tags=["runs"], summary="Layout of the plan's precedence graph, per strategy")
+    def get_graph(run_id: int = RUN_ID, p: Principal = Depends(principal)):
+        return {"run_id": run_id, "strategies": manager.graph(p, run_id)}
+
+    @app.post("/runs/{run_id}/looks", tags=["runs"], summary="A look: the parts seen in the bin → the action to do, with its reasons")
+    def post_look(body: LookIn, request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
+                  idempotency_key: Optional[str] = Header(None, alias=idem.HEADER)):
+        key = idem.check_key(idempotency_key)
+        return replayable(*manager.command(p, run_id, "look", body.model_dump(), key, request.url.path))
+
+    @app.post("/runs/{run_id}/outcomes", tags=["runs"], summary="The outcome of the pending action")
+    def post_outcome(body: OutcomeIn, request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
+                     idempotency_key: Optional[str] = Header(None, alias=idem.HEADER)):
+        key = idem.check_key(idempotency_key)
+        return replayable(*manager.command(p, run_id, "outcome", body.model_dump(), key, request.url.path))
+
+    @app.post("/runs/{run_id}/cancel", tags=["runs"], summary="Drop the pending action (the robot did not carry it out)")
+    def post_cancel(request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
+                    idempotency_key: Optional[str] = Header(None, alias=idem.HEADER), body: Optional[CancelIn] = None):
+        key = idem.check_key(idempotency_key)
+        return replayable(*manager.command(p, run_id, "cancel", {}, key, request.url.path))
+
+    # ------------------------------------------------------------ live updates
+
+    @app.post("/runs/{run_id}/ticket", tags=["events"], summary="A short-lived ticket to open this run's event stream from a browser")
+    def post_ticket(run_id: int = RUN_ID, p: Principal = Depends(principal)):
+        manager.row(p, run_id)
+        ticket = auth.ticket(p, run_id)
+        return {"ticket": ticket, "expires_in": int(settings.ticket_seconds),
+                "url": f"/runs/{run_id}/events?ticket={ticket}"}
+
+    @app.get("/runs/{run_id}/events", tags=["events"], summary="Server-sent events: a snapshot, then every committed change",
+             response_class=StreamingResponse,
+             responses={200: {"content": {"text/event-stream": {}}, "description": "`snapshot`, then `look`, `outcome`, `cancel` events"}})
+    async def get_events(run_id: int = RUN_ID, creds: Optional[HTTPAuthorizationCredentials] = Depends(bearer),
+                         ticket: Optional[str] = Query(None, max_length=200, description="From POST /runs/{id}/ticket")):
+        def who() -> Principal:
+            p = auth.token(creds.credentials) if creds and creds.credentials else None
+            if p is None and ticket:
+                p = auth.from_ticket(ticket, run_id)
+            if p is None:
+                raise unauthorized()
+            return p
+
+        p = await run_in_threadpool(who)
+
+        def snapshot():
+            both = manager.view(p, run_id, with_trace=True)
+            return {"run": both["run"], "trace": both["trace"], "graph": manager.graph(p, run_id)}
+
+        snap = await run_in_threadpool(snapshot)
+        return StreamingResponse(
+            stream(run_id, snap, broker, manager.events_after, lambda: auth.by_id(p.token_id) is not None,
+                   poll=settings.sse_poll_seconds, keepalive=settings.sse_keepalive_seconds),
+            media_type="text/event-stream",
+            headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
+
+    app.add_middleware(BodyLimit, limit=settings.max_body)
+    app.add_middleware(SecurityHeaders)
+    return app

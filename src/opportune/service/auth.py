@@ -1,0 +1,173 @@
+"""Access: bearer tokens per cell, operator tokens, and short-lived tickets for event streams.
+
+* A token is ``opp_`` + ``secrets.token_urlsafe(32)``; only its SHA-256 is
+  stored, and the check compares hashes in constant time.  The token itself
+  is printed once, by ``opportune token create``.
+* A *cell* token sees and drives only its own cell's runs.  An *operator*
+  token reads everything (the dashboard) and drives nothing.
+* Browsers cannot put a header on an ``EventSource``: the dashboard asks for a
+  *ticket* (``POST /runs/{id}/ticket``, with its bearer token) and opens
+  ``/runs/{id}/events?ticket=...``.  A ticket is an HMAC-signed
+  ``token id . run . expiry``, valid only for that run and only for
+  ``ticket_seconds`` to *open* a stream; it is never the token, and the
+  access log redacts it (:mod:`opportune.service.server`).
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import re
+import secrets
+import threading
+import time
+from dataclasses import dataclass
+
+from sqlalchemy import insert, select, update
+
+from opportune.service.storage import Store, cells, now, tokens
+
+TOKEN_PREFIX = "opp_"
+CELL_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+
+
+@dataclass(frozen=True)
+class Principal:
+    """Who is asking: a cell (drives its own runs) or an operator (reads everything)."""
+
+    token_id: str
+    role: str                 # "cell" | "operator"
+    cell: str | None = None
+    label: str = ""
+
+    @property
+    def is_operator(self) -> bool:
+        return self.role == "operator"
+
+    @property
+    def scope(self) -> str:
+        """Whose idempotency keys these are: all tokens of a cell share one scope."""
+        return f"cell:{self.cell}" if self.role == "cell" else f"token:{self.token_id}"
+
+    def can_see(self, cell: str) -> bool:
+        return self.is_operator or self.cell == cell
+
+
+def hash_token(token: str) -> str:
+    return hashlib.sha256(token.encode("utf-8")).hexdigest()
+
+
+class TokenError(ValueError):
+    """A token command that cannot be carried out (bad cell name, unknown token id)."""
+
+
+def check_cell_name(cell: str) -> str:
+    if not CELL_NAME.match(cell or ""):
+        raise TokenError(f"invalid cell name {cell!r}: use letters, digits, '.', '_' or '-' (at most 100, "
+                         "starting with a letter or digit)")
+    return cell
+
+
+def create_token(store: Store, *, cell: str | None = None, operator: str | None = None) -> tuple[str, str]:
+    """Create a token for a cell (creating the cell if new) or an operator; return ``(token_id, token)``.
+
+    The token is returned once and never stored.
+    """
+    if (cell is None) == (operator is None):
+        raise TokenError("give either a cell or an operator name")
+    token = TOKEN_PREFIX + secrets.token_urlsafe(32)
+    token_id = secrets.token_hex(4)
+    t = now()
+    with store.write() as c:
+        if cell is not None:
+            check_cell_name(cell)
+            if c.execute(select(cells.c.name).where(cells.c.name == cell)).first() is None:
+                c.execute(insert(cells).values(name=cell, created_at=t))
+        c.execute(insert(tokens).values(id=token_id, hash=hash_token(token), role="cell" if cell else "operator",
+                                        cell=cell, label=operator or "", created_at=t))
+    return token_id, token
+
+
+def list_tokens(store: Store) -> list[dict]:
+    """Every token without its secret: id, role, cell, label, created, revoked."""
+    with store.read() as c:
+        rows = c.execute(select(tokens.c.id, tokens.c.role, tokens.c.cell, tokens.c.label, tokens.c.created_at,
+                                tokens.c.revoked_at).order_by(tokens.c.created_at)).mappings().all()
+    return [dict(r) for r in rows]
+
+
+def revoke_token(store: Store, token_id: str) -> None:
+    with store.write() as c:
+        n = c.execute(update(tokens).where(tokens.c.id == token_id, tokens.c.revoked_at.is_(None))
+                      .values(revoked_at=now())).rowcount
+    if not n:
+        raise TokenError(f"no active token with id {token_id!r}: see `opportune token list`")
+
+
+class Authenticator:
+    """Checks bearer tokens and tickets against the store, trusting a checked token for a few seconds."""
+
+    def __init__(self, store: Store, *, cache_seconds: float = 10.0, ticket_seconds: float = 60.0):
+        self.store = store
+        self.cache_seconds = cache_seconds
+        self.ticket_seconds = ticket_seconds
+        self._cache: dict[str, tuple[Principal, float]] = {}
+        self._lock = threading.Lock()
+
+    def bearer(self, authorization: str | None) -> Principal | None:
+        """The principal of an ``Authorization: Bearer ...`` header, or None."""
+        if not authorization:
+            return None
+        scheme, _, token = authorization.partition(" ")
+        if scheme.lower() != "bearer" or not token.strip():
+            return None
+        return self.token(token.strip())
+
+    def token(self, token: str) -> Principal | None:
+        digest = hash_token(token)
+        t = time.monotonic()
+        with self._lock:
+            hit = self._cache.get(digest)
+        if hit and hit[1] > t:
+            return hit[0]
+        with self.store.read() as c:
+            row = c.execute(select(tokens).where(tokens.c.hash == digest)).mappings().first()
+        if row is None or not hmac.compare_digest(row["hash"], digest) or row["revoked_at"] is not None:
+            return None
+        p = Principal(row["id"], row["role"], row["cell"], row["label"])
+        with self._lock:
+            if len(self._cache) > 10_000:
+                self._cache.clear()
+            self._cache[digest] = (p, t + self.cache_seconds)
+        return p
+
+    def by_id(self, token_id: str) -> Principal | None:
+        with self.store.read() as c:
+            row = c.execute(select(tokens).where(tokens.c.id == token_id)).mappings().first()
+        if row is None or row["revoked_at"] is not None:
+            return None
+        return Principal(row["id"], row["role"], row["cell"], row["label"])
+
+    # ------------------------------------------------------------ tickets for event streams
+
+    def _sign(self, payload: str) -> str:
+        mac = hmac.new(self.store.ticket_secret, payload.encode(), hashlib.sha256).digest()[:18]
+        return base64.urlsafe_b64encode(mac).decode().rstrip("=")
+
+    def ticket(self, principal: Principal, run_id: int) -> str:
+        expiry = int(time.time() + self.ticket_seconds)
+        payload = f"{principal.token_id}.{run_id}.{expiry}"
+        return f"{payload}.{self._sign(payload)}"
+
+    def from_ticket(self, ticket: str, run_id: int) -> Principal | None:
+        """The principal of a valid, unexpired ticket for this run, or None."""
+        try:
+            token_id, run, expiry, mac = ticket.split(".")
+            run_ok = int(run) == run_id
+            fresh = int(expiry) >= time.time()
+        except (ValueError, AttributeError):
+            return None
+        if not hmac.compare_digest(mac, self._sign(f"{token_id}.{run}.{expiry}")) or not run_ok or not fresh:
+            return None
+        return self.by_id(token_id)

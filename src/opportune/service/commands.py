@@ -1,0 +1,129 @@
+"""``opportune serve`` and ``opportune token create|list|revoke``, added to the main command line by :func:`register`.
+
+Only typer is imported here at import time: FastAPI, uvicorn and SQLAlchemy
+(the ``service`` extra) load inside the commands, so the rest of the command
+line works without them.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Optional
+
+import typer
+
+DB_HELP = "Database: a SQLAlchemy URL (sqlite:///path, postgresql+psycopg://...) or a SQLite file path " \
+          "[default: $OPPORTUNE_DB or ./opportune.db]"
+
+
+def _fail(message: str) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(1)
+
+
+def _store(db: Optional[str]):
+    try:
+        from opportune.service.config import database_url
+        from opportune.service.storage import Store
+    except ImportError as exc:
+        _fail(f"the service needs the 'service' extra ({exc.name} is missing): pip install 'opportune[service]'")
+    url = database_url(db)
+    try:
+        return Store(url)
+    except Exception as exc:  # bad URL, missing driver, unreachable server, unwritable file
+        from opportune.service.server import safe_url
+
+        _fail(f"cannot open the database {safe_url(url)}: {type(exc).__name__}: {str(exc).splitlines()[0]}")
+
+
+def serve(
+    db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
+    host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on"),
+    port: int = typer.Option(8700, "--port", min=0, max=65535, help="TCP port"),
+    max_body: int = typer.Option(1 << 20, "--max-body", min=1024, help="Largest request body accepted, in bytes"),
+    access_log: bool = typer.Option(True, "--access-log/--no-access-log", help="Log every request (credentials redacted)"),
+):
+    """Serve the sequencer over HTTP for robot cells, with the live dashboard at /."""
+    store = _store(db)  # fail early, with a clear message, on a bad database
+    store.dispose()
+    from opportune.service.server import safe_url, serve as run
+
+    typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)})", err=True)
+    run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log)
+
+
+def token_create(
+    cell: Optional[str] = typer.Argument(None, help="The cell this token drives (created if new)", show_default=False),
+    operator: Optional[str] = typer.Option(None, "--operator", help="Create an operator token (reads every run) with this name"),
+    db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print {id, token, role, cell} as JSON"),
+):
+    """Create a bearer token and print it once (only its SHA-256 is stored)."""
+    if (cell is None) == (operator is None):
+        _fail("give a CELL, or --operator NAME (not both)")
+    from opportune.service.auth import TokenError, create_token
+
+    store = _store(db)
+    try:
+        token_id, token = create_token(store, cell=cell, operator=operator)
+    except TokenError as exc:
+        _fail(str(exc))
+    finally:
+        store.dispose()
+    role = "operator" if operator else "cell"
+    if as_json:
+        typer.echo(json.dumps({"id": token_id, "token": token, "role": role, "cell": cell, "label": operator or ""}))
+        return
+    typer.echo(token)
+    who = f"operator {operator!r}" if operator else f"cell {cell!r}"
+    typer.echo(f"token {token_id} for {who}: shown once, keep it secret "
+               f"(revoke with `opportune token revoke {token_id}`)", err=True)
+
+
+def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
+               as_json: bool = typer.Option(False, "--json", help="Machine-readable output")):
+    """List tokens (ids, roles, cells; never the tokens themselves)."""
+    from opportune.service.auth import list_tokens
+    from opportune.service.views import iso
+
+    store = _store(db)
+    try:
+        rows = list_tokens(store)
+    finally:
+        store.dispose()
+    for r in rows:
+        r["created_at"], r["revoked_at"] = iso(r["created_at"]), iso(r["revoked_at"])
+    if as_json:
+        typer.echo(json.dumps(rows, indent=2))
+        return
+    if not rows:
+        typer.echo("no tokens: create one with `opportune token create CELL`")
+    for r in rows:
+        who = f"cell {r['cell']}" if r["role"] == "cell" else f"operator {r['label']}"
+        state = f"revoked {r['revoked_at']}" if r["revoked_at"] else "active"
+        typer.echo(f"{r['id']}  {who:<30} created {r['created_at']}  {state}")
+
+
+def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from `opportune token list`"),
+                 db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False)):
+    """Revoke a token (a running server stops accepting it within seconds)."""
+    from opportune.service.auth import TokenError, revoke_token
+
+    store = _store(db)
+    try:
+        revoke_token(store, token_id)
+    except TokenError as exc:
+        _fail(str(exc))
+    finally:
+        store.dispose()
+    typer.echo(f"token {token_id} revoked", err=True)
+
+
+def register(app: typer.Typer) -> None:
+    """Add ``serve`` and ``token create|list|revoke`` to the main command line."""
+    app.command("serve")(serve)
+    tokens = typer.Typer(help="Bearer tokens for cells and operators.", no_args_is_help=True)
+    tokens.command("create")(token_create)
+    tokens.command("list")(token_list)
+    tokens.command("revoke")(token_revoke)
+    app.add_typer(tokens, name="token")

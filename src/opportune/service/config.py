@@ -1,0 +1,46 @@
+"""Settings of the service: where runs are stored and the limits on requests."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+DEFAULT_DB = "sqlite:///./opportune.db"
+DEFAULT_MAX_BODY = 1 << 20  # 1 MiB: a plan file of thousands of parts fits
+DB_ENV = "OPPORTUNE_DB"
+
+
+def database_url(db: str | None) -> str:
+    """A SQLAlchemy URL from ``--db``: a URL as given, a bare path as a SQLite file; default ``./opportune.db``.
+
+    ``OPPORTUNE_DB`` is used when ``--db`` is not given.
+    """
+    db = db or os.environ.get(DB_ENV) or DEFAULT_DB
+    if "://" in db:
+        return db
+    return "sqlite:///" + str(Path(db).expanduser().absolute())
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Everything :func:`opportune.service.app.create_app` needs.
+
+    ``max_body`` bounds request bodies (bytes); ``token_cache_seconds`` is how
+    long a checked token is trusted without asking the database again (a
+    revoked token stops working within that time); ``ticket_seconds`` is how
+    long an SSE ticket can be used to open a stream; ``live_runs`` is how many
+    runs keep their sequencer in memory (others are rebuilt from the event log
+    on demand); ``count_seconds`` bounds one exact count (the policy's
+    decisions need exact counts; a plan too large for them is refused with a
+    clear error instead of holding a request for minutes).
+    """
+
+    db_url: str = DEFAULT_DB
+    max_body: int = DEFAULT_MAX_BODY
+    token_cache_seconds: float = 10.0
+    ticket_seconds: float = 60.0
+    live_runs: int = 512
+    count_seconds: float = 10.0
+    sse_poll_seconds: float = 2.0
+    sse_keepalive_seconds: float = 15.0

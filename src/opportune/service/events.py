@@ -1,0 +1,108 @@
+"""Server-sent events: a run's changes pushed to dashboards (and to any client that wants them).
+
+A stream opens with a ``snapshot`` event (the run, its whole trace, the
+layout of its precedence graph), then sends one event per committed change
+— ``look``, ``outcome`` or ``cancel`` — carrying the answer that was sent to
+the cell (the new or completed trace row and the run's new state), with the
+run's event number as the SSE ``id``.  Events are read from the database, so
+a stream only ever shows what is committed, and it sees changes made by other
+server processes too (it polls every few seconds besides being woken at once
+by this process's commits).  A client that reconnects gets a fresh snapshot.
+Comment lines keep idle connections open through proxies.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import threading
+from typing import AsyncIterator, Callable
+
+from starlette.concurrency import run_in_threadpool
+
+
+def sse(event: str, data: dict, id: int | None = None) -> str:
+    """One event in the text/event-stream format (the JSON has no newlines)."""
+    head = f"id: {id}\n" if id is not None else ""
+    return f"{head}event: {event}\ndata: {json.dumps(data, separators=(',', ':'))}\n\n"
+
+
+class Broker:
+    """Wakes the streams of a run when this process commits a change to it (thread-safe ``notify``)."""
+
+    def __init__(self):
+        self._subs: dict[int, set[asyncio.Event]] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._lock = threading.Lock()
+
+    def bind(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+
+    def subscribe(self, run_id: int) -> asyncio.Event:
+        ev = asyncio.Event()
+        with self._lock:
+            self._subs.setdefault(run_id, set()).add(ev)
+        return ev
+
+    def unsubscribe(self, run_id: int, ev: asyncio.Event) -> None:
+        with self._lock:
+            subs = self._subs.get(run_id)
+            if subs:
+                subs.discard(ev)
+                if not subs:
+                    del self._subs[run_id]
+
+    def notify(self, run_id: int) -> None:
+        loop = self._loop
+        with self._lock:
+            subs = list(self._subs.get(run_id, ()))
+        if loop is None or not subs:
+            return
+        for ev in subs:
+            try:
+                loop.call_soon_threadsafe(ev.set)
+            except RuntimeError:  # loop closed: the server is stopping
+                return
+
+
+def event_payload(kind: str, answer: dict) -> dict:
+    """What a stream sends for a committed event: the row it added or completed and the run's state."""
+    out = {"seq": answer.get("seq"), "kind": kind, "run": answer.get("run")}
+    if kind == "look" or kind == "outcome":
+        out["row"] = answer.get("row")
+    elif kind == "cancel":
+        out["cancelled"] = answer.get("cancelled")
+    return out
+
+
+async def stream(run_id: int, snapshot: dict, broker: Broker,
+                 events_after: Callable[[int, int], list], still_allowed: Callable[[], bool], *,
+                 poll: float = 2.0, keepalive: float = 15.0) -> AsyncIterator[str]:
+    """The event stream of one run, from ``snapshot`` on (``snapshot["run"]["seq"]`` events already shown)."""
+    last = snapshot["run"]["seq"]
+    sub = broker.subscribe(run_id)
+    try:
+        yield "retry: 2000\n\n"
+        yield sse("snapshot", snapshot, id=last)
+        idle = 0.0
+        while True:
+            sub.clear()
+            batch = await run_in_threadpool(events_after, run_id, last)
+            for seq, kind, answer in batch:
+                yield sse(kind, event_payload(kind, answer), id=seq)
+                last = seq
+            if batch:
+                idle = 0.0
+                continue
+            try:
+                await asyncio.wait_for(sub.wait(), timeout=poll)
+            except asyncio.TimeoutError:
+                idle += poll
+                if idle >= keepalive:
+                    idle = 0.0
+                    if not await run_in_threadpool(still_allowed):
+                        yield sse("closed", {"reason": "the token of this stream is no longer valid"})
+                        return
+                    yield ": keepalive\n\n"
+    finally:
+        broker.unsubscribe(run_id, sub)

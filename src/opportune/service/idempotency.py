@@ -1,0 +1,78 @@
+"""Idempotent requests: a retried request returns the stored answer and changes nothing.
+
+Every state-changing POST carries an ``Idempotency-Key`` header (any string
+of 1–200 printable characters, fresh per request and reused on its retries).
+The key is stored with a hash of the request (method, path, canonical JSON
+body) and the answer, in the same transaction as the change itself.  A retry
+with the same key and the same request gets the stored answer (header
+``Idempotent-Replayed: true``); the same key with another request is refused
+with 422.  Keys are scoped per cell (all tokens of a cell share them) or per
+operator token.  Only answers that changed state are stored: a refused request
+changed nothing, and its retry is judged afresh.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+from sqlalchemy import bindparam, insert, select
+from sqlalchemy.engine import Connection
+
+from opportune.service.errors import ApiError
+from opportune.service.storage import dumps, idempotency, now
+
+HEADER = "Idempotency-Key"
+MAX_KEY = 200
+
+
+# Built once: the hot path binds values only.
+_LOOKUP = select(idempotency.c.request_hash, idempotency.c.status, idempotency.c.response).where(
+    idempotency.c.scope == bindparam("scope"), idempotency.c.key == bindparam("key"))
+_INSERT = insert(idempotency)
+
+
+@dataclass(frozen=True)
+class Stored:
+    """A stored answer: its status and its exact JSON text (sent again byte for byte)."""
+
+    status: int
+    text: str
+
+
+def check_key(key: str | None, *, required: bool = True) -> str | None:
+    """The key, validated; raises 428 when a required key is missing."""
+    if key is None or key == "":
+        if required:
+            raise ApiError(428, "idempotency_key_required", f"this request changes state and needs an {HEADER} header",
+                           f"send `{HEADER}: <a fresh random string>` and reuse it when you retry the same request",
+                           where=f"header {HEADER}")
+        return None
+    if len(key) > MAX_KEY or not key.isprintable():
+        raise ApiError(400, "bad_idempotency_key", f"the {HEADER} must be 1–{MAX_KEY} printable characters",
+                       "use e.g. a UUID", where=f"header {HEADER}")
+    return key
+
+
+def request_hash(method: str, path: str, body: object) -> str:
+    """SHA-256 of the request: the same JSON written differently hashes the same."""
+    return hashlib.sha256(f"{method} {path}\n{dumps(body)}".encode()).hexdigest()
+
+
+def lookup(conn: Connection, scope: str, key: str, req_hash: str) -> Stored | None:
+    """The stored answer for this key, or None; 422 if the key was used for another request."""
+    row = conn.execute(_LOOKUP, {"scope": scope, "key": key}).first()
+    if row is None:
+        return None
+    if row.request_hash != req_hash:
+        raise ApiError(422, "idempotency_key_reused",
+                       f"the {HEADER} {key!r} was already used for a different request",
+                       "use a fresh key for every new request; reuse a key only to retry the identical request",
+                       where=f"header {HEADER}")
+    return Stored(row.status, row.response)
+
+
+def remember(conn: Connection, scope: str, key: str, req_hash: str, status: int, text: str) -> None:
+    """Store an answer (its JSON text, as sent)."""
+    conn.execute(_INSERT, {"scope": scope, "key": key, "request_hash": req_hash, "status": status,
+                           "response": text, "created_at": now()})

@@ -1,0 +1,165 @@
+"""Plans in the service: upload (validated exactly as ``opportune check``), content hash, and a per-plan cache.
+
+A plan is stored under the SHA-256 of its canonical JSON (``plan.to_dict()``
+with sorted keys), so the same plan uploaded twice — even once as YAML and
+once as JSON — has one id.  The cache keeps, per plan, the one
+:class:`~opportune.engine.OrderEngine` that every run of the plan shares (its
+counting memo is what makes decisions cheap) and a lock that serialises the
+engine's use between threads.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+from sqlalchemy import insert, select
+
+from opportune.engine import OrderEngine
+from opportune.formats import CheckResult, check_text, plan_from_dict
+from opportune.formats.loader import detect_format
+from opportune.plan import Plan
+from opportune.service.errors import ApiError, plan_not_found
+from opportune.service.storage import Store, dumps, now, plans
+
+FORMATS = ("yaml", "json", "in2")
+
+
+def plan_id(plan: Plan) -> str:
+    return hashlib.sha256(dumps(plan.to_dict()).encode()).hexdigest()
+
+
+def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt: str | None) -> tuple[CheckResult, str, str]:
+    """Validate an uploaded plan; return the check result, the format and the source text.
+
+    ``application/json`` bodies are either a plan in JSON or a wrapper
+    ``{"text": ..., "format": ..., "filename": ...}``; any other body is the
+    plan file itself, its format from ``fmt``, the file name's suffix, or its
+    content (as ``opportune check`` detects it).
+    """
+    ctype = (content_type or "").split(";")[0].strip().lower()
+    if ctype == "application/json":
+        try:
+            data = json.loads(raw.decode("utf-8-sig"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            pos = f" at line {exc.lineno} column {exc.colno}" if isinstance(exc, json.JSONDecodeError) else ""
+            raise ApiError(400, "malformed_json", f"the request body is not valid JSON{pos}",
+                           "send a plan in JSON, or {\"text\": <plan file text>, \"format\": \"yaml\"}",
+                           where="body") from None
+        if isinstance(data, dict) and "text" in data:
+            text = data.get("text")
+            if not isinstance(text, str):
+                raise ApiError(422, "invalid_request", "`text` must be the plan file's text (a string)", where="body.text")
+            fmt = data.get("format") or fmt
+            filename = data.get("filename") or filename
+            extra = set(data) - {"text", "format", "filename"}
+            if extra:
+                raise ApiError(422, "invalid_request", f"unknown field {sorted(extra)[0]!r}",
+                               "the upload wrapper has `text`, `format` and `filename`", where=f"body.{sorted(extra)[0]}")
+            raw = text.encode("utf-8")
+        else:
+            fmt = fmt or "json"
+    if fmt is not None and fmt not in FORMATS:
+        raise ApiError(422, "invalid_request", f"unknown plan format {fmt!r}", "use yaml, json or in2", where="format")
+    name = filename or "upload"
+    if fmt is None:
+        fmt = detect_format(name, raw[:200].decode("latin-1"))
+    if fmt == "in2":
+        from opportune.formats.salbp import check_in2_bytes
+
+        return check_in2_bytes(raw, file=name), fmt, raw.decode("latin-1")
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise ApiError(422, "invalid_plan", "the plan is not valid UTF-8 text", "save it as UTF-8",
+                       where=f"{name}:{line}") from None
+    return check_text(text, fmt=fmt, file=name), fmt, text
+
+
+def store_plan(store: Store, result: CheckResult, fmt: str, source: str) -> tuple[str, bool]:
+    """Store a valid plan (if new); return its id and whether it was new."""
+    plan = result.plan
+    pid = plan_id(plan)
+    with store.write() as c:
+        if c.execute(select(plans.c.id).where(plans.c.id == pid)).first() is not None:
+            return pid, False
+        c.execute(insert(plans).values(id=pid, name=plan.name, format=fmt, source=source,
+                                       doc=dumps(plan.to_dict()), created_at=now()))
+    return pid, True
+
+
+def list_plans(store: Store) -> list[dict]:
+    """Every stored plan: id, name, format, when it was stored."""
+    from opportune.service.views import iso
+
+    with store.read() as c:
+        rows = c.execute(select(plans.c.id, plans.c.name, plans.c.format, plans.c.created_at)
+                         .order_by(plans.c.created_at)).mappings().all()
+    return [{"id": r["id"], "name": r["name"], "format": r["format"], "created_at": iso(r["created_at"])} for r in rows]
+
+
+@dataclass
+class LoadedPlan:
+    """A stored plan ready for runs: the plan, its shared engine (and the lock guarding it), summary and layout.
+
+    The engine's counts are bounded in time (``count_seconds`` per count) and
+    memory (the engine's ``max_memo``): the opportunistic policy needs exact
+    counts, and a request must not hold a plan's lock for minutes.
+    """
+
+    id: str
+    plan: Plan
+    engine: OrderEngine
+    summary: dict
+    created_at: float
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    too_large: str | None = None    # why exact counting of this plan is over the engine's memory budget
+    _layouts: list | None = None
+
+    @property
+    def layouts(self) -> list[dict]:
+        if self._layouts is None:
+            from opportune.service.graph import layouts
+
+            self._layouts = layouts(self.plan, self.summary)
+        return self._layouts
+
+
+class PlanBook:
+    """Stored plans, loaded on demand and kept (at most ``size``, least recently used dropped)."""
+
+    def __init__(self, store: Store, size: int = 64, *, count_seconds: float | None = None):
+        self.store = store
+        self.size = size
+        self.count_seconds = count_seconds
+        self._plans: OrderedDict[str, LoadedPlan] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, pid: str) -> LoadedPlan:
+        with self._lock:
+            hit = self._plans.get(pid)
+            if hit is not None:
+                self._plans.move_to_end(pid)
+                return hit
+        with self.store.read() as c:
+            row = c.execute(select(plans.c.doc, plans.c.created_at).where(plans.c.id == pid)).first()
+        if row is None:
+            raise plan_not_found(pid)
+        from opportune.formats.summary import summarize
+
+        plan = plan_from_dict(json.loads(row.doc))
+        loaded = LoadedPlan(pid, plan, OrderEngine(plan, time_limit=self.count_seconds), summarize(plan), row.created_at)
+        with self._lock:
+            hit = self._plans.setdefault(pid, loaded)
+            self._plans.move_to_end(pid)
+            while len(self._plans) > self.size:
+                self._plans.popitem(last=False)
+        return hit
+
+    def exists(self, pid: str) -> bool:
+        with self.store.read() as c:
+            return c.execute(select(plans.c.id).where(plans.c.id == pid)).first() is not None

@@ -1,0 +1,420 @@
+"""Runs: one plan being assembled in one cell, driven through the library's :class:`~opportune.sequencer.Sequencer`.
+
+Event sourcing.  A run's state is *not* stored; its event log is — every
+look (with the decision sent back), every outcome report, every cancel.  A
+run's sequencer is rebuilt by replaying the log through a fresh
+``Sequencer`` (the policy is deterministic), so the service runs exactly the
+library's code, and a restart — even after ``kill -9`` — resumes every run
+where its last committed event left it.  Replay checks each decision against
+the recorded one and refuses to go on if they differ (a changed policy must
+not silently re-interpret a robot's history).
+
+A command (look, outcome, cancel) on a run:
+
+1. takes the run's lock (requests on one run are serialised; different runs
+   proceed in parallel, sharing only the plan's engine lock while counting);
+2. answers a retried ``Idempotency-Key`` from the stored answer;
+3. applies the command to the live sequencer — a refused command raises
+   before anything changes;
+4. commits, in one transaction: the event with its answer, the run's summary
+   (guarded by the run's event count: another process that wrote first makes
+   this one rebuild and retry), and the idempotency record;
+5. only then answers, and wakes the run's event streams.
+
+If the commit fails the live sequencer is dropped and rebuilt from the log
+next time, so memory never runs ahead of the database.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Callable
+
+from sqlalchemy import bindparam, case, func, insert, select, update
+from sqlalchemy.exc import IntegrityError
+
+from opportune.engine.count import BudgetExceeded
+from opportune.sequencer import LookError, OutcomeError, Sequencer
+from opportune.service import idempotency as idem
+from opportune.service.auth import Principal
+from opportune.service.errors import ApiError, forbidden, run_not_found
+from opportune.service.plans import LoadedPlan, PlanBook
+from opportune.service.storage import Store, cells, dumps, events, now, plans, runs
+from opportune.service.views import count_view, decision_view, row_view, run_summary, run_view, trace_view
+
+# Statements of the hot path, built once (each request only binds values).
+_RUN_ROW = (select(runs, plans.c.name.label("plan_name")).join(plans, plans.c.id == runs.c.plan_id)
+            .where(runs.c.id == bindparam("run_id")))
+_ADVANCE = (update(runs).where(runs.c.id == bindparam("b_id"), runs.c.seq == bindparam("b_expected"))
+            .values(seq=bindparam("b_seq"), status=bindparam("b_status"), installed=bindparam("b_installed"),
+                    count=bindparam("b_count"), pending=bindparam("b_pending"), updated_at=bindparam("b_t")))
+_INSERT_EVENT = insert(events)
+
+
+def plan_too_large(why: str, *, retry: bool = False) -> ApiError:
+    return ApiError(503 if retry else 422, "plan_too_large",
+                    f"this plan's admissible sequences cannot be counted exactly within the engine's budget ({why})",
+                    "retry: the counting done so far is kept" if retry else
+                    "the opportunistic policy needs exact counts: split the plan or reduce its freedom", where="body.plan")
+
+
+class ReplayMismatch(Exception):
+    pass
+
+
+class _Stale(Exception):
+    """Another writer advanced the run since this process last read it."""
+
+
+@dataclass
+class LiveRun:
+    """A run with its sequencer in memory, in step with the first ``applied`` events of its log."""
+
+    id: int
+    cell: str
+    plan_id: str
+    label: str
+    capacity: int | None
+    created_at: float
+    lock: threading.RLock = field(default_factory=threading.RLock)
+    sequencer: Sequencer | None = None
+    applied: int = 0
+
+
+def apply(sequencer: Sequencer, kind: str, request: dict):
+    """Apply one command of the event log to a sequencer (the same calls the library's users make)."""
+    if kind == "look":
+        return sequencer.decide(request["visible"])
+    if kind == "outcome":
+        return sequencer.report(request["outcome"], keep=request.get("keep", "bin"))
+    if kind == "cancel":
+        return sequencer.cancel()
+    raise ValueError(f"unknown event kind {kind!r}")
+
+
+class RunManager:
+    """Creates runs, applies commands to them, and answers questions about them."""
+
+    def __init__(self, store: Store, book: PlanBook, *, size: int = 512, notify: Callable[[int], None] = lambda _: None):
+        self.store = store
+        self.book = book
+        self.size = size
+        self.notify = notify
+        self._live: OrderedDict[int, LiveRun] = OrderedDict()
+        self._mutex = threading.Lock()
+
+    # ------------------------------------------------------------ access
+
+    def row(self, principal: Principal, run_id: int, *, key: tuple[str, str, str] | None = None):
+        """The run's table row, if this principal may see it; else 404 (never saying whose it is).
+
+        With ``key=(scope, key, request hash)``, also the stored answer of that idempotency key
+        (read on the same connection): ``(row, stored or None)``.
+        """
+        with self.store.read() as c:
+            r = c.execute(_RUN_ROW, {"run_id": run_id}).mappings().first()
+            if r is None or not principal.can_see(r["cell"]):
+                raise run_not_found(run_id)
+            stored = idem.lookup(c, *key) if key else None
+        return (dict(r), stored) if key else dict(r)
+
+    def _live_for(self, r: dict) -> LiveRun:
+        with self._mutex:
+            live = self._live.get(r["id"])
+            if live is None:
+                live = LiveRun(r["id"], r["cell"], r["plan_id"], r["label"], r["buffer_capacity"], r["created_at"])
+                self._live[r["id"]] = live
+            self._live.move_to_end(r["id"])
+            if len(self._live) > self.size:
+                for rid in list(self._live)[: len(self._live) - self.size]:
+                    old = self._live[rid]
+                    if old.lock.acquire(blocking=False):  # never drop a run in use
+                        try:
+                            del self._live[rid]
+                        finally:
+                            old.lock.release()
+        return live
+
+    def _sync(self, live: LiveRun, loaded: LoadedPlan, seq_in_db: int) -> None:
+        """Bring the live sequencer up to the database's event log (replaying what it lacks). Caller holds live.lock."""
+        # ``applied`` only grows after a commit, so a live run ahead of ``seq_in_db`` is newer than that read.
+        if live.sequencer is not None and live.applied >= seq_in_db:
+            return
+        start = live.applied if live.sequencer is not None else 0
+        with self.store.read() as c:
+            rows = c.execute(select(events.c.seq, events.c.kind, events.c.request, events.c.response)
+                             .where(events.c.run_id == live.id, events.c.seq > start)
+                             .order_by(events.c.seq)).all()
+        self._replay(live, loaded, rows)
+
+    def _replay(self, live: LiveRun, loaded: LoadedPlan, rows) -> None:
+        with loaded.lock:
+            if live.sequencer is None:
+                live.sequencer = Sequencer(loaded.engine, buffer_capacity=live.capacity)
+                live.applied = 0
+            try:
+                for ev in rows:
+                    result = apply(live.sequencer, ev.kind, json.loads(ev.request))
+                    if ev.kind == "look":
+                        recorded = json.loads(ev.response)["action"]
+                        if result.action.to_dict() != recorded:
+                            raise ReplayMismatch(f"event {ev.seq}: this version decides {result.action}, "
+                                                 f"the run recorded {recorded}")
+                    live.applied = ev.seq
+            except (ReplayMismatch, LookError, OutcomeError) as exc:
+                live.sequencer, live.applied = None, 0
+                raise ApiError(500, "run_replay_mismatch",
+                               f"run {live.id} cannot be resumed by this version of opportune: {exc}",
+                               "finish the run with the version that started it, or start a new run") from None
+
+    def _loaded(self, live: LiveRun) -> LoadedPlan:
+        return self.book.get(live.plan_id)
+
+    def _forget(self, live: LiveRun) -> None:
+        live.sequencer, live.applied = None, 0
+
+    # ------------------------------------------------------------ creating runs
+
+    def create(self, principal: Principal, body: dict, key: str, path: str) -> tuple[int, str, bool]:
+        """Start a run of a stored plan in the principal's cell; return ``(status, answer JSON text, replayed)``."""
+        if principal.is_operator:
+            raise forbidden("an operator token reads runs; only a cell's token can start one",
+                            "use the token of the cell that will assemble the plan")
+        cell = body.get("cell") or principal.cell
+        if cell != principal.cell:
+            raise forbidden(f"this token drives cell {principal.cell!r} only", "omit `cell` or use that cell's token")
+        h = idem.request_hash("POST", path, body)
+        with self.store.read() as c:
+            stored = idem.lookup(c, principal.scope, key, h)
+        if stored:
+            return stored.status, stored.text, True
+        if not self.book.exists(body["plan"]):
+            raise ApiError(422, "unknown_plan", f"no plan {body['plan']!r}",
+                           "upload it first with POST /plans and use the `id` it returns", where="body.plan")
+        loaded = self.book.get(body["plan"])
+        if loaded.too_large:
+            raise plan_too_large(loaded.too_large)
+        with loaded.lock:
+            sequencer = Sequencer(loaded.engine, buffer_capacity=body.get("buffer_capacity"))
+            try:  # the policy needs exact counts: find out now, not at the robot's first look
+                sequencer.state.schedule.options()
+            except BudgetExceeded as exc:
+                if exc.reason == "memo":
+                    loaded.too_large = str(exc)
+                raise plan_too_large(str(exc), retry=exc.reason != "memo") from None
+            count = count_view(sequencer.state.schedule)
+        t = now()
+        try:
+            with self.store.write() as c:
+                stored = idem.lookup(c, principal.scope, key, h)
+                if stored:
+                    return stored.status, stored.text, True
+                run_id = c.execute(insert(runs).values(
+                    cell=cell, plan_id=loaded.id, policy=sequencer.policy.name,
+                    buffer_capacity=body.get("buffer_capacity"), label=body.get("label") or "", status="active", seq=0,
+                    installed=0, units=loaded.plan.n_units, count=count["value"] if count else None, pending=None,
+                    created_at=t, updated_at=t)).inserted_primary_key[0]
+                live = LiveRun(run_id, cell, loaded.id, body.get("label") or "", body.get("buffer_capacity"), t,
+                               sequencer=sequencer)
+                with loaded.lock:
+                    answer = run_view(live, loaded, t)
+                text = dumps(answer)
+                idem.remember(c, principal.scope, key, h, 201, text)
+        except IntegrityError:  # the same key, concurrently, in another process
+            with self.store.read() as c:
+                stored = idem.lookup(c, principal.scope, key, h)
+            if stored:
+                return stored.status, stored.text, True
+            raise
+        with self._mutex:
+            self._live[run_id] = live
+        self.notify(run_id)
+        return 201, text, False
+
+    # ------------------------------------------------------------ commands
+
+    def command(self, principal: Principal, run_id: int, kind: str, request: dict, key: str, path: str
+                ) -> tuple[int, str, bool]:
+        """Apply a look, outcome or cancel; return ``(status, answer JSON text, replayed)``."""
+        if principal.is_operator:
+            self.row(principal, run_id)  # 404 first: an operator learns nothing new from a 403 on a real run
+            raise forbidden("an operator token reads runs; only the run's cell drives it",
+                            "use the token of the cell the run belongs to")
+        h = idem.request_hash("POST", path, request)
+        for _attempt in range(3):
+            r, stored = self.row(principal, run_id, key=(principal.scope, key, h))
+            if stored:
+                return stored.status, stored.text, True
+            live = self._live_for(r)
+            with live.lock:
+                if r["seq"] != live.applied and live.sequencer is not None:
+                    # Changed since the row was read (a request on this run just finished): read again.
+                    r, stored = self.row(principal, run_id, key=(principal.scope, key, h))
+                    if stored:
+                        return stored.status, stored.text, True
+                loaded = self._loaded(live)
+                self._sync(live, loaded, r["seq"])
+                try:
+                    return self._command_locked(principal, live, loaded, kind, request, key, h)
+                except _Stale:
+                    self._forget(live)
+                    continue
+        raise ApiError(409, "run_busy", f"run {run_id} is being changed by another server process",
+                       "retry the request with the same Idempotency-Key")
+
+    def _command_locked(self, principal, live: LiveRun, loaded: LoadedPlan, kind, request, key, h):
+        seq = live.sequencer
+        expected = live.applied
+        try:
+            with loaded.lock:
+                answer = self._apply_checked(live, loaded, kind, request)  # a refusal changes nothing
+        except ApiError:
+            raise
+        except BudgetExceeded as exc:
+            self._forget(live)  # rebuilt from the log next time: memory never runs ahead of the database
+            raise ApiError(503, "counting_budget_exceeded", f"the decision needs an exact count that is over budget: {exc}",
+                           "retry the same request: the counting done so far is kept" if exc.reason == "time"
+                           else "this plan is too large for exact counting; nothing was changed") from None
+        except BaseException:
+            self._forget(live)
+            raise
+        t = now()
+        state = seq.state
+        count = answer["run"]["count"]
+        text = dumps(answer)  # serialised once: stored with the event, stored for retries, sent
+        try:
+            with self.store.write() as c:
+                n = c.execute(_ADVANCE, {
+                    "b_id": live.id, "b_expected": expected, "b_seq": expected + 1,
+                    "b_status": "complete" if seq.finished else "active", "b_installed": len(state.installed),
+                    "b_count": count["value"] if count else None,
+                    "b_pending": str(seq.pending.action) if seq.pending else None, "b_t": t}).rowcount
+                if n != 1:
+                    raise _Stale()
+                c.execute(_INSERT_EVENT, {"run_id": live.id, "seq": expected + 1, "kind": kind, "request": dumps(request),
+                                          "response": text, "created_at": t})
+                # The key's primary key makes a concurrent use of the same key (another run, another
+                # process) fail here: the transaction rolls back and the retry answers from the store.
+                idem.remember(c, principal.scope, key, h, 200, text)
+        except _Stale:
+            raise
+        except IntegrityError:
+            self._forget(live)
+            raise _Stale() from None
+        except BaseException:
+            self._forget(live)
+            raise
+        live.applied = expected + 1
+        self.notify(live.id)
+        return 200, text, False
+
+    def _apply_checked(self, live: LiveRun, loaded: LoadedPlan, kind: str, request: dict) -> dict:
+        """Apply the command to the live sequencer and build the answer; a refusal changes nothing."""
+        seq = live.sequencer
+        n_next = live.applied + 1
+        if kind == "look":
+            plan = loaded.plan
+            for i, part in enumerate(request["visible"]):
+                if part not in plan:
+                    from difflib import get_close_matches
+
+                    close = get_close_matches(part, plan.part_ids, n=1)
+                    raise ApiError(422, "unknown_part", f"unknown part {part!r} in the look",
+                                   (f"did you mean {close[0]!r}? " if close else "")
+                                   + f"the plan's parts are {', '.join(plan.part_ids)}", where=f"body.visible[{i}]")
+            code = ("action_pending" if seq.pending is not None else "run_complete" if seq.finished
+                    else "look_contradicts_state")
+            hint = {"action_pending": "report the pending action's outcome (POST /runs/{id}/outcomes) or cancel it first",
+                    "run_complete": "the assembly is done: start a new run (POST /runs)",
+                    "look_contradicts_state": "send only parts that can still be in the bin (see `state.in_bin` in GET /runs/{id})",
+                    }[code]
+            try:
+                decision = apply(seq, kind, request)
+            except LookError as exc:
+                raise ApiError(409, code, str(exc), hint.replace("{id}", str(live.id)), where="body.visible") from None
+            row = seq.pending or seq.trace[-1]
+            n_row = len(seq.trace) + (1 if seq.pending else 0)
+            run = run_view(live, loaded, now())
+            run["seq"] = n_next
+            return {"run_id": live.id, "seq": n_next, "action": decision.action.to_dict(),
+                    "decision": decision_view(decision), "row": row_view(row, n_row, loaded.engine), "run": run}
+        if kind == "outcome":
+            pending = seq.pending
+            try:
+                apply(seq, kind, request)
+            except OutcomeError as exc:
+                code = "no_pending_action" if pending is None else "outcome_refused"
+                hint = (f"send a look first (POST /runs/{live.id}/looks): an outcome reports the action it decided"
+                        if pending is None else "report another outcome for this action, or cancel it")
+                raise ApiError(409, code, str(exc), hint, where="body.outcome") from None
+            run = run_view(live, loaded, now())
+            run["seq"] = n_next
+            return {"run_id": live.id, "seq": n_next, "outcome": request["outcome"], "keep": request.get("keep", "bin"),
+                    "row": row_view(seq.trace[-1], len(seq.trace), loaded.engine), "run": run}
+        if kind == "cancel":
+            pending = seq.pending
+            try:
+                apply(seq, kind, request)
+            except OutcomeError:
+                raise ApiError(409, "no_pending_action", "no action is pending: nothing to cancel",
+                               f"send a look first (POST /runs/{live.id}/looks)") from None
+            run = run_view(live, loaded, now())
+            run["seq"] = n_next
+            return {"run_id": live.id, "seq": n_next,
+                    "cancelled": row_view(pending, len(seq.trace) + 1, loaded.engine), "run": run}
+        raise ValueError(kind)
+
+    # ------------------------------------------------------------ questions
+
+    def view(self, principal: Principal, run_id: int, *, with_trace: bool = False) -> dict:
+        r = self.row(principal, run_id)
+        live = self._live_for(r)
+        with live.lock:
+            loaded = self._loaded(live)
+            self._sync(live, loaded, r["seq"])
+            with loaded.lock:
+                out = run_view(live, loaded, r["updated_at"])
+                if with_trace:
+                    out = {"run": out, "trace": trace_view(live, loaded)}
+        return out
+
+    def trace(self, principal: Principal, run_id: int) -> dict:
+        both = self.view(principal, run_id, with_trace=True)
+        return {"run_id": run_id, "seq": both["run"]["seq"], "rows": both["trace"]}
+
+    def graph(self, principal: Principal, run_id: int) -> list[dict]:
+        r = self.row(principal, run_id)
+        return self.book.get(r["plan_id"]).layouts
+
+    def list(self, principal: Principal, *, cell: str | None = None, status: str | None = None,
+             limit: int = 200, offset: int = 0) -> list[dict]:
+        q = select(runs, plans.c.name.label("plan_name")).join(plans, plans.c.id == runs.c.plan_id)
+        if not principal.is_operator:
+            q = q.where(runs.c.cell == principal.cell)
+        if cell:
+            q = q.where(runs.c.cell == cell)
+        if status:
+            q = q.where(runs.c.status == status)
+        q = q.order_by(runs.c.id.desc()).limit(limit).offset(offset)
+        with self.store.read() as c:
+            return [run_summary(dict(r)) for r in c.execute(q).mappings().all()]
+
+    def cells(self, principal: Principal) -> list[dict]:
+        q = (select(cells.c.name, func.count(runs.c.id).label("runs"),
+                    func.coalesce(func.sum(case((runs.c.status == "active", 1), else_=0)), 0).label("active"))
+             .select_from(cells.outerjoin(runs, runs.c.cell == cells.c.name)).group_by(cells.c.name).order_by(cells.c.name))
+        if not principal.is_operator:
+            q = q.where(cells.c.name == principal.cell)
+        with self.store.read() as c:
+            return [{"name": r.name, "runs": r.runs, "active": int(r.active or 0)} for r in c.execute(q).all()]
+
+    def events_after(self, run_id: int, after: int, limit: int = 200) -> list[tuple[int, str, dict]]:
+        """Committed events of a run after ``after`` (the caller has checked access)."""
+        with self.store.read() as c:
+            rows = c.execute(select(events.c.seq, events.c.kind, events.c.response)
+                             .where(events.c.run_id == run_id, events.c.seq > after)
+                             .order_by(events.c.seq).limit(limit)).all()
+        return [(r.seq, r.kind, json.loads(r.response)) for r in rows]

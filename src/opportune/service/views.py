@@ -1,0 +1,108 @@
+"""The JSON shapes of the service: runs, trace rows (the paper's Table 1 layout), counts.
+
+Every shape is built from the library's own ``to_dict()`` methods
+(:class:`~opportune.sequencer.State`, :class:`~opportune.sequencer.Row`,
+:class:`~opportune.policies.base.Decision`) plus what a remote client needs
+and cannot compute: the admissible completions left, the parts installable
+now, progress.  Big integers are decimal strings (JSON numbers lose digits).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+
+from opportune.engine import Schedule
+from opportune.engine.count import BudgetExceeded
+from opportune.sequencer import Row
+
+
+def iso(t: float | None) -> str | None:
+    return None if t is None else dt.datetime.fromtimestamp(t, dt.timezone.utc).isoformat(timespec="milliseconds")
+
+
+def count_view(schedule: Schedule) -> dict | None:
+    """Admissible completions left: ``{"value": "336", "log10": 2.53}``, or None when over the counting budget."""
+    try:
+        n = schedule.count()
+    except BudgetExceeded:
+        return None
+    if n <= 0:
+        log10 = None
+    elif n < 10**300:
+        log10 = round(math.log10(n), 6)
+    else:
+        digits = str(n)
+        log10 = round(len(digits) - 1 + math.log10(int(digits[:15]) / 10**14), 6)
+    return {"value": str(n), "log10": log10}
+
+
+def installable(schedule: Schedule) -> list[str] | None:
+    """Parts that can go in now, or None when counting them is over budget."""
+    try:
+        return list(schedule.installable())
+    except BudgetExceeded:
+        return None
+
+
+def decision_view(decision) -> dict:
+    return decision.to_dict() | {"explain": decision.explain()}
+
+
+def row_view(row: Row, n: int, engine) -> dict:
+    """Trace row ``n`` (1-based): Visible | Buffered | Installed | Action, the outcome, the reasons.
+
+    ``count`` is the number of admissible completions *before* the action,
+    which the dashboard plots falling as the run proceeds.
+    """
+    d = row.to_dict()
+    d["n"] = n
+    d["action_text"] = "" if row.action.kind == "done" else str(row.action)
+    d["count"] = count_view(Schedule(engine, row.installed))
+    d["reasons"] = decision_view(row.decision)
+    return d
+
+
+def run_summary(r) -> dict:
+    """A run as listed (from its ``runs`` table row, without rebuilding its sequencer)."""
+    return {
+        "id": r["id"], "cell": r["cell"], "label": r["label"],
+        "plan": {"id": r["plan_id"], "name": r.get("plan_name")},
+        "status": r["status"], "policy": r["policy"], "buffer_capacity": r["buffer_capacity"],
+        "progress": {"installed": r["installed"], "units": r["units"]},
+        "count": r["count"], "pending": r["pending"], "seq": r["seq"],
+        "created_at": iso(r["created_at"]), "updated_at": iso(r["updated_at"]),
+    }
+
+
+def run_view(live, loaded, updated_at: float) -> dict:
+    """A run's full state from its live sequencer."""
+    seq = live.sequencer
+    state = seq.state
+    pending = seq.pending
+    last = pending or (seq.trace[-1] if seq.trace else None)
+    return {
+        "id": live.id, "cell": live.cell, "label": live.label,
+        "plan": {"id": loaded.id, "name": loaded.plan.name},
+        "status": "complete" if seq.finished else "active",
+        "policy": seq.policy.name, "buffer_capacity": state.capacity,
+        "seq": live.applied,
+        "state": state.to_dict(),
+        "installable": installable(state.schedule),
+        "progress": {"installed": len(state.installed), "units": loaded.plan.n_units},
+        "count": count_view(state.schedule),
+        "pending": row_view(pending, len(seq.trace) + 1, loaded.engine) if pending else None,
+        "last_look": list(last.visible) if last else [],
+        "rows": len(seq.trace) + (1 if pending else 0),
+        "finished": seq.finished,
+        "created_at": iso(live.created_at), "updated_at": iso(updated_at),
+    }
+
+
+def trace_view(live, loaded) -> list[dict]:
+    """Every row so far (pending one last, with ``outcome: null``)."""
+    seq = live.sequencer
+    rows = [row_view(r, i, loaded.engine) for i, r in enumerate(seq.trace, start=1)]
+    if seq.pending is not None:
+        rows.append(row_view(seq.pending, len(rows) + 1, loaded.engine))
+    return rows

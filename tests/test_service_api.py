@@ -1,0 +1,477 @@
+"""The service's HTTP API against a real server on a loopback port with a temporary SQLite file.
+
+Table 1 of the paper driven over HTTP, idempotent retries, every bad input
+(each refused with a JSON error and no change of state), access between
+cells, concurrency, plan uploads and server-sent events.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+import pytest
+
+from conftest import EXAMPLES, GEARBOX
+from opportune import load_plan
+from opportune.formats.looks import read_looks
+from opportune.sequencer import Sequencer
+from opportune.service.testing import Client, ServiceProcess
+from test_sequencer import TABLE1
+
+MAX_BODY = 64 * 1024
+
+
+@pytest.fixture(scope="module")
+def svc(tmp_path_factory):
+    with ServiceProcess(tmp_path_factory.mktemp("svc") / "api.db", max_body=MAX_BODY) as s:
+        yield s
+
+
+@pytest.fixture(scope="module")
+def tokens(svc):
+    return {"a": svc.token(cell="cell-a"), "b": svc.token(cell="cell-b"), "op": svc.token(operator="ops")}
+
+
+@pytest.fixture(scope="module")
+def a(svc, tokens):
+    c = Client(svc.url, tokens["a"])
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def b(svc, tokens):
+    c = Client(svc.url, tokens["b"])
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def op(svc, tokens):
+    c = Client(svc.url, tokens["op"])
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def plan_id(a):
+    r = a.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}, key=False)
+    assert r.status_code in (200, 201), r.text
+    return r.json()["id"]
+
+
+def new_run(client, plan_id, **extra) -> int:
+    r = client.post("/runs", {"plan": plan_id, **extra})
+    assert r.status_code == 201, r.text
+    return r.json()["id"]
+
+
+def split(text):
+    return [p for p in text.split(",") if p]
+
+
+def library_trace(looks):
+    """The trace the library itself gives for these looks (every action succeeding)."""
+    seq = Sequencer(load_plan(GEARBOX))
+    return [row.to_dict() for row in seq.run(looks)]
+
+
+def strip(row):
+    return {k: row[k] for k in ("visible", "buffered", "installed", "action", "outcome")}
+
+
+def drive_table1(client, run_id):
+    for visible, buffered, installed, action in TABLE1:
+        r = client.post(f"/runs/{run_id}/looks", {"visible": split(visible)})
+        assert r.status_code == 200, r.text
+        body = r.json()
+        kind, part = action.split()
+        assert (body["action"]["kind"], body["action"]["part"]) == (kind, part), (visible, body["decision"]["explain"])
+        assert body["row"]["buffered"] == split(buffered) and body["row"]["installed"] == split(installed)
+        assert body["run"]["pending"]["action_text"].startswith(action)
+        r = client.post(f"/runs/{run_id}/outcomes", {"outcome": "success"})
+        assert r.status_code == 200, r.text
+    r = client.post(f"/runs/{run_id}/looks", {"visible": []})
+    assert r.status_code == 200 and r.json()["action"]["kind"] == "done", r.text
+
+
+# ---------------------------------------------------------------- Table 1
+
+
+def test_table1_over_http_gives_table1_actions(a, plan_id):
+    run_id = new_run(a, plan_id, label="table 1")
+    start = a.get(f"/runs/{run_id}").json()
+    assert start["count"] == {"value": "336", "log10": pytest.approx(2.526339, abs=1e-6)}
+    assert start["installable"] == ["ca"] and start["status"] == "active"
+    drive_table1(a, run_id)
+    run = a.get(f"/runs/{run_id}").json()
+    assert run["status"] == "complete" and run["state"]["complete"]
+    assert run["state"]["installed"] == ["ca", "ba", "rl", "dr", "sm", "ml", "ra", "co", "st", "cl"]
+    assert run["count"]["value"] == "1" and run["progress"] == {"installed": 10, "units": 10}
+    trace = a.get(f"/runs/{run_id}/trace").json()["rows"]
+    expected = library_trace(read_looks(EXAMPLES / "gearbox-table1.looks"))
+    assert [strip(r) for r in trace] == expected
+    assert [r["n"] for r in trace] == list(range(1, 17))
+    counts = [int(r["count"]["value"]) for r in trace]  # completions left before each action: never rising
+    assert counts[0] == 336 and counts[-1] == 1 and all(x >= y for x, y in zip(counts, counts[1:]))
+    # After done, looks are refused and nothing changes.
+    r = a.post(f"/runs/{run_id}/looks", {"visible": []})
+    assert r.status_code == 409 and r.json()["error"]["code"] == "run_complete"
+    assert a.get(f"/runs/{run_id}").json()["seq"] == run["seq"]
+    listed = {x["id"]: x for x in a.get("/runs").json()["runs"]}
+    assert listed[run_id]["status"] == "complete" and listed[run_id]["progress"]["installed"] == 10
+
+
+def test_failed_and_defective_outcomes_follow_the_library(a, plan_id):
+    run_id = new_run(a, plan_id, buffer_capacity=1)
+    seq = Sequencer(load_plan(GEARBOX), buffer_capacity=1)
+    steps = [(["ca", "co"], "failed", "bin"), (["ca", "co"], "defective", "bin"), (["ca"], "success", "bin"),
+             (["rl", "st"], "failed", "buffer"), (["ba"], "success", "bin")]
+    for visible, outcome, keep in steps:
+        r = a.post(f"/runs/{run_id}/looks", {"visible": visible})
+        assert r.json()["action"] == seq.decide(visible).action.to_dict()
+        r = a.post(f"/runs/{run_id}/outcomes", {"outcome": outcome, "keep": keep})
+        assert r.status_code == 200, r.text
+        seq.report(outcome, keep=keep)
+        assert r.json()["run"]["state"] == seq.state.to_dict()
+    assert [strip(x) for x in a.get(f"/runs/{run_id}/trace").json()["rows"]] == [row.to_dict() for row in seq.trace]
+    # A cancel drops the pending action and is itself an event.
+    a.post(f"/runs/{run_id}/looks", {"visible": ["sm"]})
+    r = a.post(f"/runs/{run_id}/cancel")
+    assert r.status_code == 200 and r.json()["cancelled"]["action"]["part"] == "sm"
+    assert a.get(f"/runs/{run_id}").json()["pending"] is None
+    r = a.post(f"/runs/{run_id}/cancel")
+    assert r.status_code == 409 and r.json()["error"]["code"] == "no_pending_action"
+
+
+# ---------------------------------------------------------------- idempotency
+
+
+def test_retries_with_the_same_key_return_the_same_answer_and_change_nothing(a, plan_id):
+    r1 = a.post("/runs", {"plan": plan_id}, key="run-key-1")
+    r2 = a.post("/runs", {"plan": plan_id}, key="run-key-1")
+    assert r1.status_code == r2.status_code == 201
+    assert r1.content == r2.content and r2.headers["Idempotent-Replayed"] == "true"
+    assert "Idempotent-Replayed" not in r1.headers
+    run_id = r1.json()["id"]
+    assert sum(1 for x in a.get("/runs").json()["runs"] if x["id"] == run_id) == 1
+
+    look1 = a.post(f"/runs/{run_id}/looks", {"visible": ["rl", "ra"]}, key="look-1")
+    look2 = a.post(f"/runs/{run_id}/looks", {"visible": ["rl", "ra"]}, key="look-1")
+    assert look1.status_code == look2.status_code == 200 and look1.content == look2.content
+    # The same JSON written differently is the same request.
+    look3 = a.post(f"/runs/{run_id}/looks", content=b'{ "visible" : ["rl","ra"] }', key="look-1",
+                   headers={"Content-Type": "application/json"})
+    assert look3.content == look1.content
+    out1 = a.post(f"/runs/{run_id}/outcomes", {"outcome": "success"}, key="out-1")
+    out2 = a.post(f"/runs/{run_id}/outcomes", {"outcome": "success"}, key="out-1")
+    assert out1.content == out2.content
+    state = a.get(f"/runs/{run_id}").json()
+    assert state["seq"] == 2 and state["state"]["buffered"] == ["rl"]
+    # Replaying an old look after the state moved on still answers from the store.
+    assert a.post(f"/runs/{run_id}/looks", {"visible": ["rl", "ra"]}, key="look-1").content == look1.content
+    # Same key, different request: refused, nothing changes.
+    r = a.post(f"/runs/{run_id}/outcomes", {"outcome": "failed"}, key="out-1")
+    assert r.status_code == 422 and r.json()["error"]["code"] == "idempotency_key_reused"
+    r = a.post(f"/runs/{run_id}/looks", {"visible": ["ca"]}, key="look-1")
+    assert r.status_code == 422
+    assert a.get(f"/runs/{run_id}").json()["seq"] == 2
+    assert len(a.get(f"/runs/{run_id}/trace").json()["rows"]) == 1
+
+
+def test_keys_are_required_and_scoped_per_cell(a, b, plan_id):
+    run_id = new_run(a, plan_id)
+    r = a.post(f"/runs/{run_id}/looks", {"visible": ["ca"]}, key=False)
+    assert r.status_code == 428 and r.json()["error"]["where"] == "header Idempotency-Key"
+    r = a.post(f"/runs/{run_id}/looks", {"visible": ["ca"]}, key="x" * 201)
+    assert r.status_code == 400 and r.json()["error"]["code"] == "bad_idempotency_key"
+    assert a.get(f"/runs/{run_id}").json()["seq"] == 0
+    # The same key in another cell is another request.
+    ra = a.post("/runs", {"plan": plan_id}, key="shared-key")
+    rb = b.post("/runs", {"plan": plan_id}, key="shared-key")
+    assert ra.status_code == rb.status_code == 201 and ra.json()["id"] != rb.json()["id"]
+
+
+# ---------------------------------------------------------------- bad input
+
+
+def error_of(r, status):
+    assert r.status_code == status, r.text
+    assert r.headers["content-type"].startswith("application/json")
+    err = r.json()["error"]
+    assert err["status"] == status and err["code"] and err["message"] and "Traceback" not in r.text
+    return err
+
+
+def test_every_bad_input_is_a_clear_json_error_and_changes_nothing(a, plan_id):
+    run_id = new_run(a, plan_id)
+    a.post(f"/runs/{run_id}/looks", {"visible": ["ca", "co"]})
+    a.post(f"/runs/{run_id}/outcomes", {"outcome": "success"})
+    before = (a.get(f"/runs/{run_id}").json(), a.get(f"/runs/{run_id}/trace").json())
+    path = f"/runs/{run_id}/looks"
+    json_headers = {"Content-Type": "application/json"}
+
+    err = error_of(a.post(path, content=b'{"visible": ["ba",', headers=json_headers), 400)
+    assert err["code"] == "malformed_json" and err["where"] == "body"
+    err = error_of(a.post(path, content=b"", headers=json_headers), 422)
+    err = error_of(a.post(path, {"visible": "ba"}), 422)
+    assert err["where"] == "body.visible"
+    err = error_of(a.post(path, {"visible": ["ba", 7]}), 422)
+    assert err["where"] == "body.visible[1]"
+    err = error_of(a.post(path, {"visible": ["ba"], "extra": 1}), 422)
+    assert err["where"] == "body.extra" and "unknown field" in err["message"]
+    err = error_of(a.post(path, {"visible": ["ba", "gera"]}), 422)
+    assert err["code"] == "unknown_part" and err["where"] == "body.visible[1]" and "'gera'" in err["message"]
+    err = error_of(a.post(path, {"visible": ["ca"]}), 409)  # ca is installed
+    assert err["code"] == "look_contradicts_state" and "already installed" in err["message"]
+    err = error_of(a.post(path, {"visible": ["ba", "ba"]}), 409)  # one ba in the plan
+    assert "only 1 can be in the bin" in err["message"]
+    err = error_of(a.post(f"/runs/{run_id}/outcomes", {"outcome": "success"}), 409)
+    assert err["code"] == "no_pending_action" and "look" in err["hint"]
+    err = error_of(a.post(f"/runs/{run_id}/outcomes", {"outcome": "great"}), 422)
+    assert err["where"] == "body.outcome"
+    err = error_of(a.post(f"/runs/{run_id}/outcomes", {}), 422)
+    assert err["where"] == "body.outcome" and "required" in err["message"]
+    big = {"visible": ["ba"] * (MAX_BODY // 4)}
+    err = error_of(a.post(path, big), 413)
+    assert err["code"] == "body_too_large" and str(MAX_BODY) in err["message"]
+    err = error_of(a.post(path, content=b'{"visible": [' + b'"ba",' * 20000 + b'"ba"]}', headers=json_headers), 413)
+    error_of(a.post("/runs/abc/looks", {"visible": []}), 422)
+    error_of(a.post("/runs/999999/looks", {"visible": []}), 404)
+    error_of(a.get("/no/such/route"), 404)
+    error_of(a.http.delete(f"/runs/{run_id}"), 405)
+    error_of(a.post("/runs", {"plan": "0" * 64}), 422)
+    error_of(a.post("/runs", {"plan": plan_id, "buffer_capacity": -1}), 422)
+    after = (a.get(f"/runs/{run_id}").json(), a.get(f"/runs/{run_id}/trace").json())
+    assert after == before
+    # A pending action: a second look is refused, the pending one stands.
+    a.post(path, {"visible": ["ba"]})
+    err = error_of(a.post(path, {"visible": ["sm"]}), 409)
+    assert err["code"] == "action_pending"
+    assert a.get(f"/runs/{run_id}").json()["pending"]["action"] == {"kind": "install", "part": "ba", "source": "bin"}
+
+
+def test_plan_upload_is_checked_like_opportune_check(a, plan_id):
+    bad = "name: bad\nparts: [ca, ba, rl]\nrequires:\n  ba: [rl]\n  rl: [ba]\n  ca: [cax]\n"
+    err = error_of(a.post("/plans", content=bad, headers={"Content-Type": "application/yaml"}, key=False), 422)
+    assert err["code"] == "invalid_plan"
+    problems = err["problems"]
+    assert any("cycle" in p["message"] for p in problems)
+    unknown = [p for p in problems if "cax" in p["message"]]
+    assert unknown and unknown[0]["line"] == 6 and unknown[0]["hint"]
+    err = error_of(a.post("/plans", content="parts: [a, b\n", headers={"Content-Type": "application/yaml"}, key=False), 422)
+    assert err["problems"][0]["code"] == "syntax" and err["problems"][0]["line"]
+    error_of(a.post("/plans", content=b"\xff\xfe bad", headers={"Content-Type": "application/yaml"}, key=False), 422)
+    error_of(a.post("/plans", content=b'{"parts": [', headers={"Content-Type": "application/json"}, key=False), 400)
+    # The same plan as JSON, as a wrapper, and again as YAML: one id.
+    doc = load_plan(GEARBOX).to_dict()
+    r = a.post("/plans", doc, key=False)
+    assert r.status_code == 200 and r.json()["id"] == plan_id and r.json()["created"] is False
+    r = a.post("/plans", {"text": GEARBOX.read_text(), "format": "yaml", "filename": "gearbox.yaml"}, key=False)
+    assert r.json()["id"] == plan_id
+    r = a.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "text/plain"}, key=False)
+    assert r.json()["id"] == plan_id
+    # A SALBP .IN2 graph.
+    in2 = "4\n1\n2\n3\n4\n1,2\n1,3\n2,4\n3,4\n-1,-1\n"
+    r = a.post("/plans?format=in2&filename=TINY.IN2", content=in2, headers={"Content-Type": "text/plain"}, key=False)
+    assert r.status_code == 201, r.text
+    assert r.json()["parts"] == ["1", "2", "3", "4"] and r.json()["name"] == "TINY"
+    got = a.get(f"/plans/{r.json()['id']}").json()
+    assert got["summary"]["strategies"][0]["minimal"] == [["1", "2"], ["1", "3"], ["2", "4"], ["3", "4"]]
+    assert [n["layer"] for n in got["graph"][0]["nodes"]] == [0, 1, 1, 2]
+    error_of(a.get("/plans/" + "f" * 64), 404)
+
+
+# ---------------------------------------------------------------- access
+
+
+def test_access_is_refused_without_leaking(svc, a, b, op, plan_id):
+    run_id = new_run(a, plan_id)
+    anon = Client(svc.url, None)
+    wrong = Client(svc.url, "opp_" + "x" * 43)
+    try:
+        for client in (anon, wrong):
+            err = error_of(client.get(f"/runs/{run_id}"), 401)
+            assert err["code"] == "unauthorized"
+            assert error_of(client.get("/runs/999999"), 401) == err  # 401 before anything is looked up
+            error_of(client.post(f"/runs/{run_id}/looks", {"visible": ["ca"]}), 401)
+            error_of(client.post("/plans", content="parts: [a]", headers={"Content-Type": "application/yaml"}), 401)
+            error_of(client.get(f"/runs/{run_id}/events"), 401)
+        assert anon.get(f"/runs/{run_id}").headers["www-authenticate"] == "Bearer"
+    finally:
+        anon.close()
+        wrong.close()
+    # Another cell's run looks exactly like a run that does not exist.
+    missing = 10**9
+    for method, suffix, body in [("get", "", None), ("get", "/trace", None), ("get", "/graph", None),
+                                 ("get", "/events", None), ("post", "/looks", {"visible": ["ca"]}),
+                                 ("post", "/outcomes", {"outcome": "success"}), ("post", "/cancel", None),
+                                 ("post", "/ticket", None)]:
+        call = getattr(b, method)
+        theirs = call(f"/runs/{run_id}{suffix}", **({"json": body} if body is not None else {}))
+        nothing = call(f"/runs/{missing}{suffix}", **({"json": body} if body is not None else {}))
+        assert theirs.status_code == nothing.status_code == 404, (suffix, theirs.text)
+        assert theirs.text.replace(str(run_id), "N") == nothing.text.replace(str(missing), "N")
+    assert run_id not in [x["id"] for x in b.get("/runs").json()["runs"]]
+    assert run_id not in [x["id"] for x in b.get("/runs?cell=cell-a").json()["runs"]]
+    assert [c["name"] for c in b.get("/cells").json()["cells"]] == ["cell-b"]
+    err = error_of(b.post("/runs", {"plan": plan_id, "cell": "cell-a"}), 403)
+    assert "cell-b" in err["message"]
+    # The operator reads everything and drives nothing.
+    assert op.get(f"/runs/{run_id}").status_code == 200
+    assert run_id in [x["id"] for x in op.get("/runs").json()["runs"]]
+    assert {"cell-a", "cell-b"} <= {c["name"] for c in op.get("/cells").json()["cells"]}
+    error_of(op.post(f"/runs/{run_id}/looks", {"visible": ["ca"]}), 403)
+    error_of(op.post("/runs", {"plan": plan_id}), 403)
+    error_of(op.post(f"/runs/{missing}/looks", {"visible": ["ca"]}), 404)
+    error_of(a.get("/plans"), 403)
+    assert plan_id in [p["id"] for p in op.get("/plans").json()["plans"]]
+    assert a.get(f"/runs/{run_id}").json()["seq"] == 0
+
+
+# ---------------------------------------------------------------- concurrency
+
+
+def test_concurrent_requests_on_one_run_are_serialized(a, plan_id):
+    run_id = new_run(a, plan_id)
+    barrier = threading.Barrier(8)
+
+    def look(_):
+        barrier.wait()
+        return a.post(f"/runs/{run_id}/looks", {"visible": ["ca", "co"]})
+
+    with ThreadPoolExecutor(8) as pool:
+        results = list(pool.map(look, range(8)))
+    codes = sorted(r.status_code for r in results)
+    assert codes == [200] + [409] * 7, [r.text for r in results]
+    assert all(r.json()["error"]["code"] == "action_pending" for r in results if r.status_code == 409)
+    assert a.get(f"/runs/{run_id}").json()["seq"] == 1
+
+
+def test_runs_driven_at_once_each_follow_the_library(svc, plan_id):
+    cells = [Client(svc.url, svc.token(cell=f"par-{i}")) for i in range(4)]
+    try:
+        runs = [new_run(c, plan_id) for c in cells]
+        with ThreadPoolExecutor(4) as pool:
+            list(pool.map(lambda cr: drive_table1(*cr), zip(cells, runs)))
+        expected = library_trace(read_looks(EXAMPLES / "gearbox-table1.looks"))
+        for c, run_id in zip(cells, runs):
+            assert [strip(r) for r in c.get(f"/runs/{run_id}/trace").json()["rows"]] == expected
+    finally:
+        for c in cells:
+            c.close()
+
+
+# ---------------------------------------------------------------- server-sent events
+
+
+def read_events(response, n, timeout=10.0):
+    """The first ``n`` events of a stream: (event, id, data)."""
+    out, event, ident, data = [], None, None, None
+    deadline = time.monotonic() + timeout
+    for line in response.iter_lines():
+        if line.startswith("event: "):
+            event = line[7:]
+        elif line.startswith("id: "):
+            ident = int(line[4:])
+        elif line.startswith("data: "):
+            data = json.loads(line[6:])
+        elif line == "" and event:
+            out.append((event, ident, data))
+            event, ident, data = None, None, None
+            if len(out) == n:
+                return out
+        if time.monotonic() > deadline:
+            break
+    return out
+
+
+def test_events_stream_every_committed_change(svc, a, plan_id):
+    run_id = new_run(a, plan_id)
+    got: list = []
+
+    def listen():
+        with httpx.Client(base_url=svc.url, headers=a.http.headers, timeout=20) as h:
+            with h.stream("GET", f"/runs/{run_id}/events") as r:
+                assert r.headers["content-type"].startswith("text/event-stream")
+                got.extend(read_events(r, 4))
+
+    t = threading.Thread(target=listen)
+    t.start()
+    time.sleep(0.5)
+    a.post(f"/runs/{run_id}/looks", {"visible": ["rl", "ra"]})
+    a.post(f"/runs/{run_id}/outcomes", {"outcome": "success"})
+    a.post(f"/runs/{run_id}/looks", {"visible": ["ca"]})
+    t.join(20)
+    assert [(e, i) for e, i, _ in got] == [("snapshot", 0), ("look", 1), ("outcome", 2), ("look", 3)]
+    snap = got[0][2]
+    assert snap["trace"] == [] and snap["graph"][0]["nodes"][0]["id"] == "ca" and snap["run"]["count"]["value"] == "336"
+    assert got[1][2]["row"]["action"] == {"kind": "buffer", "part": "rl", "source": None}
+    assert got[2][2]["row"]["outcome"] == "success" and got[2][2]["run"]["state"]["buffered"] == ["rl"]
+    assert got[3][2]["run"]["pending"]["action"]["part"] == "ca"
+
+
+def test_browser_tickets_open_only_their_run_and_never_reach_the_log(svc, a, op, plan_id):
+    run_id = new_run(a, plan_id)
+    other = new_run(a, plan_id)
+    ticket = op.post(f"/runs/{run_id}/ticket").json()
+    assert ticket["url"] == f"/runs/{run_id}/events?ticket={ticket['ticket']}" and ticket["expires_in"] > 0
+    with httpx.Client(base_url=svc.url, timeout=10) as anon:
+        with anon.stream("GET", ticket["url"]) as r:
+            assert r.status_code == 200
+            assert read_events(r, 1)[0][0] == "snapshot"
+        assert anon.get(f"/runs/{other}/events?ticket={ticket['ticket']}").status_code == 401
+        forged = ticket["ticket"][:-4] + ("AAAA" if not ticket["ticket"].endswith("AAAA") else "BBBB")
+        assert anon.get(f"/runs/{run_id}/events?ticket={forged}").status_code == 401
+        assert anon.get(f"/runs/{run_id}/events?ticket=garbage").status_code == 401
+    time.sleep(0.3)
+    log = svc.log_text()
+    assert "ticket=REDACTED" in log
+    assert ticket["ticket"] not in log and ticket["ticket"].split(".")[-1] not in log
+    assert "opp_" not in log
+
+
+# ---------------------------------------------------------------- pages and docs
+
+
+def test_pages_docs_and_openapi_are_served_from_the_package(svc):
+    with httpx.Client(base_url=svc.url, timeout=10) as h:
+        spec = h.get("/openapi.json").json()
+        assert {"/plans", "/runs", "/runs/{run_id}/looks", "/runs/{run_id}/outcomes", "/runs/{run_id}/events"} <= set(spec["paths"])
+        assert "bearer" in json.dumps(spec["components"]["securitySchemes"]).lower()
+        for path in ("/", "/ui/runs/1", "/docs"):
+            r = h.get(path)
+            assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
+            assert "default-src 'self'" in r.headers["content-security-policy"]
+        for name in ("app.js", "app.css", "docs.js"):
+            assert h.get(f"/static/{name}").status_code == 200
+    from opportune.service import app as app_module
+
+    static = app_module.STATIC
+    for f in static.iterdir():
+        text = f.read_text()
+        hosts = set(re.findall(r"(?:https?:)?//([\w-]+(?:\.[\w-]+)+)", text))
+        assert hosts <= {"www.w3.org"}, (f.name, hosts)  # nothing fetched from the internet (w3.org: the SVG namespace)
+
+
+def test_a_revoked_token_is_refused(svc, plan_id):
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    created = CliRunner().invoke(app, ["token", "create", "cell-r", "--db", str(svc.db), "--json"])
+    assert created.exit_code == 0, created.output
+    doc = json.loads(created.stdout)
+    revoked = CliRunner().invoke(app, ["token", "revoke", doc["id"], "--db", str(svc.db)])
+    assert revoked.exit_code == 0, revoked.output
+    c = Client(svc.url, doc["token"])
+    try:
+        assert error_of(c.get("/runs"), 401)["code"] == "unauthorized"
+        error_of(c.post("/runs", {"plan": plan_id}), 401)
+    finally:
+        c.close()
