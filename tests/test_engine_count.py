@@ -95,6 +95,11 @@ def test_one_counter_many_masks(p, masks):
     for mask in masks + masks[::-1]:
         mask &= p.full
         assert c.count(mask) == brute(p, mask)[0]
+    # position sums from one memo of vectors, in any order (small sets first makes the fields grow)
+    d = Counter(p)
+    for mask in sorted(masks, key=lambda m: (m & p.full).bit_count()) + masks:
+        mask &= p.full
+        assert d.position_sums(mask) == brute(p, mask)[1]
     # every up-set reached by removing a minimal element (the simulation's query)
     s = p.full
     while s:
@@ -152,16 +157,19 @@ def test_kilbrid_facts():
 def test_budget_exceeded_then_recovers():
     p = salbp("KILBRID")
     exact = Counter(p).count()
+    sums = Counter(p).position_sums()
     c = Counter(p, max_memo=50)
     with pytest.raises(BudgetExceeded) as info:
         c.count()
     assert info.value.reason == "memo"
-    assert c.memo_size <= 50
+    assert c.memo_size <= 1 + 50                    # the empty set plus at most 50 new entries
+    before = c.memo_size
     with pytest.raises(BudgetExceeded):
         c.position_sums()
+    assert before < c.memo_size <= before + 50      # the budget is per call: this call added up to 50 more
     c.max_memo = None
     assert c.count() == exact
-    assert c.position_sums() == Counter(p).position_sums()
+    assert c.position_sums() == sums
 
     t = Counter(p, time_limit=0.0)
     with pytest.raises(BudgetExceeded) as info:
@@ -169,6 +177,69 @@ def test_budget_exceeded_then_recovers():
     assert info.value.reason == "time"
     t.time_limit = None
     assert t.count() == exact
+
+
+def test_budget_is_per_call_and_the_memo_stays_valid():
+    """Calls that fail on the budget keep what they finished: repeating the same small budget gets there."""
+    p = salbp("KILBRID")
+    exact = Counter(p).count()
+    sums = Counter(p).position_sums()
+    c = Counter(p, max_memo=200)
+    failures = 0
+    while True:
+        try:
+            value = c.count()
+            break
+        except BudgetExceeded:
+            failures += 1
+            assert failures < 1000
+    assert failures > 0 and value == exact
+    while True:
+        try:
+            assert c.position_sums() == sums
+            break
+        except BudgetExceeded:
+            failures += 1
+    # a long run of cheap new questions never fails, however large the memo grows
+    c.max_memo = 500
+    rng = random.Random(1)
+    grown = c.memo_size
+    for _ in range(30):
+        s = p.full
+        while s:
+            mins = list(bits(p.minimal(s)))
+            for x in mins:
+                assert c.count(s ^ 1 << x) > 0
+            if rng.random() < 0.3:
+                c.position_sums(s)
+            s ^= 1 << rng.choice(mins)
+    assert c.memo_size > grown + 500
+
+
+def test_total_cap_evicts_instead_of_failing():
+    p = salbp("KILBRID")
+    ref = Counter(p)
+    cap = 3000
+    c = Counter(p, max_memo=None, max_total=cap)
+    rng = random.Random(2)
+    peak = 0
+    for _ in range(25):
+        s = p.full
+        while s:
+            mins = list(bits(p.minimal(s)))
+            for x in mins:
+                assert c.count(s ^ 1 << x) == ref.count(s ^ 1 << x)
+            if rng.random() < 0.2:
+                assert c.position_sums(s) == ref.position_sums(s)
+            peak = max(peak, c.memo_size)
+            s ^= 1 << rng.choice(mins)
+    cold = Counter(p)
+    cold.position_sums()
+    one_call = cold.memo_size                        # the most one call adds here: a cold full position_sums
+    assert ref.memo_size > cap + one_call            # without the cap the memo is far larger
+    assert peak <= cap + one_call                    # the cap plus what one call may add
+    c.max_total = 0                                  # everything may go: answers stay exact
+    assert c.count() == ref.count() and c.memo_size <= one_call
 
 
 def test_memo_hot_path_is_a_lookup():
@@ -194,6 +265,31 @@ def test_memo_hot_path_is_a_lookup():
     per_call = (time.perf_counter() - t) / (20 * len(seen))
     assert c.memo_size == grown      # no new entries: all answered from the memo
     assert per_call < 5e-6           # a dictionary lookup (a few hundred ns on the dev machine)
+
+
+def test_position_sums_reuse_seen_vectors():
+    """After one full pass, each later remaining set needs only a few new vectors (exact, and fast)."""
+    p = salbp("KILBRID")
+    c = Counter(p)
+    c.position_sums()
+    rng = random.Random(0)
+    s = p.full
+    added, worst = [], 0.0
+    while s:
+        s ^= 1 << rng.choice(list(bits(p.minimal(s))))
+        before = c.memo_size
+        t = time.perf_counter()
+        sums = c.position_sums(s)
+        worst = max(worst, time.perf_counter() - t)
+        added.append(c.memo_size - before)
+        assert sum(sums.values()) == c.count(s) * s.bit_count() * (s.bit_count() + 1) // 2
+    assert max(added) <= 20                 # counts plus vectors of the changed component only
+    assert worst < 0.05                     # ~0.1 ms on the dev machine; was ~50 ms per call
+    # an independent check on a late set small enough for the down-set DP
+    s = p.full
+    while s.bit_count() > 20:
+        s ^= p.minimal(s) & -p.minimal(s)
+    assert c.position_sums(s) == position_sums_by_downsets(p, s)
 
 
 def test_closed_forms():

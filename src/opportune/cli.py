@@ -248,6 +248,8 @@ def replay(
 
 # ---------------------------------------------------------------- simulate
 
+OPTIMAL_DEFAULT_UNITS = 14  # above this, the optimum is only attempted when asked for
+
 
 @app.command()
 def simulate(
@@ -280,7 +282,10 @@ def simulate(
     chosen_bin = bin_model or sim.get("bin", "uniform")
     explicit = strategies is not None
     names = [s.strip() for s in (strategies or "").split(",") if s.strip()] if explicit else \
-        [s for s in STRATEGIES if s != "optimal" or chosen_bin in MARKOV_BINS]
+        [s for s in STRATEGIES if s != "optimal" or (chosen_bin in MARKOV_BINS and plan.n_units <= OPTIMAL_DEFAULT_UNITS)]
+    if not explicit and chosen_bin in MARKOV_BINS and plan.n_units > OPTIMAL_DEFAULT_UNITS:
+        err.print(f"note: 'optimal' left out: its state space grows exponentially and {plan.n_units} parts is "
+                  f"beyond the default ({OPTIMAL_DEFAULT_UNITS}); ask for it with --strategies to try anyway")
     if explicit and not names:
         fail("--strategies is empty: name at least one of " + ", ".join(STRATEGIES), 2)
     try:

@@ -50,11 +50,12 @@ from itertools import islice
 from math import factorial
 from typing import Callable
 
-from opportune.engine.poset import Poset, bits, elements
+from opportune.engine.poset import Poset, bits
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
 
 _CHECK_EVERY = 256  # new memo entries between clock checks (a power of two)
+_INF = float("inf")
 
 
 class BudgetExceeded(Exception):
@@ -130,6 +131,7 @@ class Counter:
         self._width = 0
         # [new-entry limit, deadline, new entries in this call]
         self._budget: list = [sys.maxsize, float("inf"), 0]
+        self._depth = 3 * poset.n + 200          # recursion depth a count may need
         self._f = self._make_counter()
         self._g: Callable[[int], int] | None = None
 
@@ -269,13 +271,12 @@ class Counter:
         """Start the budget of one top-level call (and evict if the memo is over ``max_total``)."""
         b = self._budget
         b[0] = self.max_memo if self.max_memo is not None else sys.maxsize
-        b[1] = time.perf_counter() + self.time_limit if self.time_limit is not None else float("inf")
+        b[1] = time.perf_counter() + self.time_limit if self.time_limit is not None else _INF
         b[2] = 0
         if self.max_total is not None and len(self._memo) + len(self._vec) > self.max_total:
             self._evict(self.max_total // 2)
-        need = 3 * self.poset.n + 200
-        if sys.getrecursionlimit() < need:   # Python 3.11 frames do not use the C stack
-            sys.setrecursionlimit(need)
+        if sys.getrecursionlimit() < self._depth:   # Python 3.11 frames do not use the C stack
+            sys.setrecursionlimit(self._depth)
 
     def _evict(self, keep: int) -> None:
         """Drop the oldest entries (insertion order) until at most ``keep`` remain in all."""
@@ -301,7 +302,8 @@ class Counter:
             r = self._memo.get(mask)
             if r is not None:
                 return r
-        self._check_mask(mask)
+        if mask.__class__ is not int or mask < 0 or mask & ~self.poset.full:
+            self._check_mask(mask)
         if mask & (mask - 1) == 0:
             return 1
         self._start_budget()
@@ -405,37 +407,35 @@ class Counter:
                     v = get(rest)
                     r *= v if v is not None else f(rest)
                 return store(s, r)
-            # components: overlap classes of the up-sets of the minimal elements
-            mins = elements(s & ~up)
-            ups = [(above[i] & s) | (1 << i) for i in mins]
-            comp = ups.pop()
-            grew = True
-            while grew and comp != s:
-                grew = False
+            # components: overlap classes of the up-sets {m} | above(m) & s of the minimal elements
+            m = s & ~up
+            mins = []
+            comps = []
+            while m:
+                b = m & -m
+                m ^= b
+                mins.append(b)
+                u = (above[b.bit_length() - 1] & s) | b
                 keep = []
-                for u in ups:
-                    if u & comp:
-                        comp |= u
-                        grew = True
+                for c in comps:
+                    if c & u:
+                        u |= c
                     else:
-                        keep.append(u)
-                ups = keep
-            if comp != s:
+                        keep.append(c)
+                keep.append(u)
+                comps = keep
+            if len(comps) > 1:
                 r = fact[s.bit_count()]
-                rest = s
-                while True:
-                    rest ^= comp
+                for comp in comps:
                     r //= fact[comp.bit_count()]
+                for comp in comps:
                     if comp & (comp - 1):
                         v = get(comp)
                         r *= v if v is not None else f(comp)
-                    if not rest:
-                        break
-                    comp = _grow(ups, rest)
                 return store(s, r)
             r = 0
-            for i in mins:
-                t = s ^ (1 << i)
+            for b in mins:
+                t = s ^ b
                 v = get(t)
                 r += v if v is not None else f(t)
             return store(s, r)
@@ -513,34 +513,31 @@ class Counter:
                 if rest:
                     v += (es // cnt(rest)) * g(rest) + off * es * ones(rest)
                 return vstore(s, v)
-            mins = elements(s & ~up)
-            ups = [(above[i] & s) | (1 << i) for i in mins]
-            comp = ups.pop()
-            grew = True
-            while grew and comp != s:
-                grew = False
+            m = s & ~up
+            mins = []
+            comps = []
+            while m:
+                b = m & -m
+                m ^= b
+                mins.append(b)
+                u = (above[b.bit_length() - 1] & s) | b
                 keep = []
-                for u in ups:
-                    if u & comp:
-                        comp |= u
-                        grew = True
+                for c in comps:
+                    if c & u:
+                        u |= c
                     else:
-                        keep.append(u)
-                ups = keep
-            if comp != s:
+                        keep.append(c)
+                keep.append(u)
+                comps = keep
+            if len(comps) > 1:
                 n1 = s.bit_count() + 1
                 v = 0
-                rest = s
-                while True:
-                    rest ^= comp
+                for comp in comps:
                     v += (es // cnt(comp)) * n1 * g(comp) // (comp.bit_count() + 1)
-                    if not rest:
-                        break
-                    comp = _grow(ups, rest)
                 return vstore(s, v)
             v = es * ones(s)
-            for i in mins:
-                v += g(s ^ (1 << i))
+            for b in mins:
+                v += g(s ^ b)
             return vstore(s, v)
 
         return g
@@ -565,23 +562,6 @@ def _byte_tables(poset: Poset):
         up_t.append(ut)
         cap_t.append(ct)
     return nbytes, up_t, cap_t
-
-
-def _grow(ups: list[int], rest: int) -> int:
-    """One overlap class of the up-sets ``ups`` (the next component within ``rest``); removes it from ``ups``."""
-    comp = ups.pop()
-    grew = True
-    while grew:
-        grew = False
-        keep = []
-        for u in ups:
-            if u & comp:
-                comp |= u
-                grew = True
-            else:
-                keep.append(u)
-        ups[:] = keep
-    return comp
 
 
 def _ratio(a: int, b: int) -> float:

@@ -232,9 +232,7 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
 
     # 1. exact, under a budget
     saved = counter.max_memo, counter.time_limit
-    counter.max_memo = counter.memo_size + exact_memo
-    if saved[0] is not None:
-        counter.max_memo = min(counter.max_memo, saved[0])
+    counter.max_memo = exact_memo if saved[0] is None else min(exact_memo, saved[0])
     counter.time_limit = time_limit / 4
     try:
         exact = counter.count(mask)

@@ -110,6 +110,8 @@ class OrderEngine:
         self._options_cache: dict[tuple[int, int], dict[str, int]] = {}
         self._positions_cache: dict[tuple[int, int], dict[str, Fraction]] = {}
         self._option_cache: dict[tuple[int, int, str], int] = {}
+        self._terms_cache: dict[int, list] = {}
+        self._quantity = [p.quantity for p in plan.parts]
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -127,17 +129,23 @@ class OrderEngine:
                 self._counters[strategies] = Counter(poset, max_memo=self.max_memo, time_limit=self.time_limit)
         return self._counters[strategies]
 
-    def _terms(self, consistent: int):
-        """Inclusion–exclusion terms ``(sign, counter)`` over the non-empty subsets of ``consistent``."""
+    def _terms(self, consistent: int) -> list:
+        """Inclusion–exclusion terms ``(sign, counter)`` over the non-empty subsets of ``consistent`` (cached)."""
+        terms = self._terms_cache.get(consistent)
+        if terms is not None:
+            return terms
         members = [s for s in range(self.k) if consistent >> s & 1]
         if len(members) > MAX_STRATEGIES_EXACT:
             raise BudgetExceeded(f"{len(members)} strategies: inclusion–exclusion over 2^{len(members)} sets")
+        terms = []
         for size in range(1, len(members) + 1):
             sign = 1 if size % 2 else -1
             for subset in combinations(members, size):
                 counter = self.counter(sum(1 << s for s in subset))
                 if counter is not None:
-                    yield sign, counter
+                    terms.append((sign, counter))
+        self._terms_cache[consistent] = terms
+        return terms
 
     # ------------------------------------------------------------ state questions
 
@@ -152,7 +160,10 @@ class OrderEngine:
     def next_unit(self, mask: int, part: int) -> int | None:
         """The next uninstalled unit of a part, or None if all are installed."""
         first = self.first[part]
-        for u in range(first, first + self.plan.parts[part].quantity):
+        q = self._quantity[part]
+        if q == 1:
+            return None if mask >> first & 1 else first
+        for u in range(first, first + q):
             if not mask >> u & 1:
                 return u
         return None
@@ -164,9 +175,13 @@ class OrderEngine:
         if cached is not None:
             return cached
         remaining = self.full & ~mask
-        total = 0
-        for sign, counter in self._terms(consistent):
-            total += sign * counter.count(remaining)
+        terms = self._terms(consistent)
+        if len(terms) == 1:  # one strategy: no inclusion–exclusion
+            total = terms[0][1].count(remaining)
+        else:
+            total = 0
+            for sign, counter in terms:
+                total += sign * counter.count(remaining)
         self._count_cache[key] = total
         return total
 
