@@ -211,6 +211,10 @@ class TrialRunner:
         self.transitions: dict = {}
         self.move = {p: self.costs.move(p) for p in engine.plan.part_ids}
         self._choose = getattr(self.policy, "choose", None)  # the action without its reasons, where offered
+        # A policy may say which situations it decides alike: fewer distinct keys, more cache hits.
+        make_key = getattr(self.policy, "decision_key", None)
+        self._key = make_key(engine, self.capacity) if make_key is not None and self.cache is not None else None
+        self._canonical: dict = {}
 
     def _decide(self, mask, cons, installed, buffer, look) -> Action:
         from opportune.sequencer import State
@@ -239,6 +243,7 @@ class TrialRunner:
             start(random.Random(trial_seed(self.config.seed, trial, 1)))
         engine, cache, move, costs = self.engine, self.cache, self.move, self.costs
         transitions = self.transitions
+        keyfn, canonical = self._key, self._canonical
         look_at, take = world.look, world.take
         full = engine.full
         mask, cons, buffer, installed = 0, engine.all_strategies, (), []
@@ -261,7 +266,14 @@ class TrialRunner:
                 key = (mask, cons, buffer, look)
                 code = cache.get(key)
                 if code is None:
-                    code = cache[key] = _code(self._decide(mask, cons, installed, buffer, look))
+                    if keyfn is None:
+                        code = _code(self._decide(mask, cons, installed, buffer, look))
+                    else:  # an equivalent situation may have been decided already
+                        alike = keyfn(mask, cons, buffer, look)
+                        code = canonical.get(alike)
+                        if code is None:
+                            code = canonical[alike] = _code(self._decide(mask, cons, installed, buffer, look))
+                    cache[key] = code
             else:
                 code = _code(self._decide(mask, cons, installed, buffer, look))
             op, part = code

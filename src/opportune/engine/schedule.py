@@ -111,6 +111,7 @@ class OrderEngine:
         self._positions_cache: dict[tuple[int, int], dict[str, Fraction]] = {}
         self._option_cache: dict[tuple[int, int, str], int] = {}
         self._terms_cache: dict[int, list] = {}
+        self._installable_cache: dict[tuple[int, int], frozenset[str]] = {}
         self._quantity = [p.quantity for p in plan.parts]
 
     # ------------------------------------------------------------ posets per strategy set
@@ -200,6 +201,17 @@ class OrderEngine:
             if after:
                 out[part.id] = self.count(mask | 1 << u, after)
         self._options_cache[key] = out
+        return out
+
+    def installable_set(self, mask: int, consistent: int) -> frozenset[str]:
+        """The parts installable in a state, as a set (cached; no counting)."""
+        key = (mask, consistent)
+        out = self._installable_cache.get(key)
+        if out is None:
+            out = frozenset(
+                part.id for i, part in enumerate(self.plan.parts)
+                if (u := self.next_unit(mask, i)) is not None and self.consistent_after(mask, consistent, u))
+            self._installable_cache[key] = out
         return out
 
     def options_for(self, mask: int, consistent: int, parts: Iterable[str]) -> dict[str, int]:

@@ -69,6 +69,24 @@ class Opportunistic:
             return Action("buffer", buffer_choice(state, visible)[0][2])
         return SHAKE
 
+    @staticmethod
+    def decision_key(engine, capacity):
+        """A function of (installed mask, strategies, buffer, sorted look) whose equal values mean equal
+        decisions — for caching decisions in simulations.  Only installable parts matter when there are
+        candidates (with the buffered ones in buffer order, for the tie-break); otherwise the look and
+        whether a buffer location is free."""
+        installable = engine.installable_set
+
+        def key(mask, cons, buffer, look):
+            can = installable(mask, cons)
+            in_look = tuple(p for p in look if p in can)
+            in_buffer = tuple(p for p in buffer if p in can)
+            if in_look or in_buffer:
+                return (mask, cons, in_look, in_buffer)
+            return (mask, cons, look, capacity is None or len(buffer) < capacity)
+
+        return key
+
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
         action = self.choose(state, visible)
         if action.kind == "done":
