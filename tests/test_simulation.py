@@ -352,3 +352,31 @@ def test_simulate_cli_errors():
     assert r.exit_code == 1 and "uniform and weighted" in r.output and "Traceback" not in r.output
     r = CliRunner().invoke(app, ["simulate", str(GEARBOX), "--strategies", "magic"])
     assert r.exit_code == 1 and "unknown strategy 'magic'" in r.output
+
+
+@settings(max_examples=60, deadline=None)
+@given(random_plans(max_parts=5, max_units=6, max_strategies=2), st.sampled_from([None, 0, 1, 2]),
+       st.integers(0, 2**32))
+def test_situations_with_equal_decision_keys_get_equal_decisions(plan, capacity, seed):
+    from opportune.engine import Schedule
+    from opportune.policies.opportunistic import Opportunistic
+    from opportune.sequencer import State
+
+    rng = random.Random(seed)
+    engine = OrderEngine(plan)
+    policy = Opportunistic()
+    key = policy.decision_key(engine, capacity)
+    index = {p: i for i, p in enumerate(plan.part_ids)}
+    decided: dict = {}
+    for _ in range(60):
+        s = Schedule(engine)
+        for _ in range(rng.randint(0, plan.n_units - 1)):
+            s = s.install(rng.choice(s.installable()))
+        left = [p for p, n in s.remaining.items() for _ in range(n)]
+        rng.shuffle(left)
+        nbuf = rng.randint(0, len(left) if capacity is None else min(capacity, len(left)))
+        buffer, in_bin = tuple(left[:nbuf]), left[nbuf:]
+        look = tuple(sorted(rng.sample(in_bin, min(len(in_bin), rng.randint(0, 3))), key=index.__getitem__))
+        action = policy.choose(State(s, buffer=buffer, capacity=capacity), look)
+        k = key(s.mask, s.consistent, buffer, look)
+        assert decided.setdefault(k, action) == action
