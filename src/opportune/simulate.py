@@ -102,6 +102,8 @@ class TrialResult:
 
 
 METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time")
+DECISION_CACHE_LIMIT = 200_000  # cached decisions per strategy and worker before starting afresh
+ALIKE_KEY_UNITS = 24  # plans up to this many units cache decisions by the policy's decision_key
 
 
 # ---------------------------------------------------------------- preparing strategies
@@ -212,8 +214,10 @@ class TrialRunner:
         self.move = {p: self.costs.move(p) for p in engine.plan.part_ids}
         self._choose = getattr(self.policy, "choose", None)  # the action without its reasons, where offered
         # A policy may say which situations it decides alike: fewer distinct keys, more cache hits.
+        # (Only on plans small enough for situations to recur; on large ones the key is pure overhead.)
         make_key = getattr(self.policy, "decision_key", None)
-        self._key = make_key(engine, self.capacity) if make_key is not None and self.cache is not None else None
+        use_key = make_key is not None and self.cache is not None and engine.n_units <= ALIKE_KEY_UNITS
+        self._key = make_key(engine, self.capacity) if use_key else None
         self._canonical: dict = {}
 
     def _decide(self, mask, cons, installed, buffer, look) -> Action:
@@ -273,6 +277,8 @@ class TrialRunner:
                         code = canonical.get(alike)
                         if code is None:
                             code = canonical[alike] = _code(self._decide(mask, cons, installed, buffer, look))
+                    if len(cache) >= DECISION_CACHE_LIMIT:  # bounded memory on large plans
+                        cache.clear()
                     cache[key] = code
             else:
                 code = _code(self._decide(mask, cons, installed, buffer, look))

@@ -36,6 +36,7 @@ from opportune.engine.poset import CycleError, Poset
 from opportune.plan import Plan
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
+STATE_CACHE_LIMIT = 300_000  # entries per per-state cache before it is cleared
 
 
 class NotAdmissible(ValueError):
@@ -169,12 +170,22 @@ class OrderEngine:
                 return u
         return None
 
+    def _trim(self) -> None:
+        """Bound the per-state caches (not the counters' memos): a long simulation of a large plan
+        visits millions of states that never recur; start afresh rather than grow without end."""
+        for cache in (self._count_cache, self._option_cache, self._options_cache, self._positions_cache,
+                      self._installable_cache):
+            if len(cache) > STATE_CACHE_LIMIT:
+                cache.clear()
+
     def count(self, mask: int, consistent: int) -> int:
         """Exact number of admissible completions after installing ``mask`` (raises BudgetExceeded)."""
         key = (mask, consistent)
         cached = self._count_cache.get(key)
         if cached is not None:
             return cached
+        if len(self._count_cache) > STATE_CACHE_LIMIT:
+            self._trim()
         remaining = self.full & ~mask
         terms = self._terms(consistent)
         if len(terms) == 1:  # one strategy: no inclusion–exclusion
@@ -229,6 +240,8 @@ class OrderEngine:
             key = (mask, consistent, part)
             value = cache.get(key)
             if value is None:
+                if len(cache) > STATE_CACHE_LIMIT:
+                    self._trim()
                 i = self.plan.index(part)
                 u = self.next_unit(mask, i)
                 after = self.consistent_after(mask, consistent, u) if u is not None else 0
