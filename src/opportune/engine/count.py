@@ -367,18 +367,6 @@ class Counter:
         vec = self._vec
         check = _CHECK_EVERY - 1
 
-        def store(s: int, r: int) -> int:
-            k = budget[2] = budget[2] + 1
-            if k > budget[0]:
-                raise BudgetExceeded(
-                    f"exact count needs more than max_memo={budget[0]} new memo entries",
-                    reason="memo", memo_size=len(memo) + len(vec))
-            memo[s] = r
-            if not k & check and perf() > budget[1]:
-                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
-            return r
-
         def f(s: int) -> int:
             r = get(s)
             if r is not None:
@@ -393,52 +381,74 @@ class Counter:
             cuts = s & cap
             if cuts:
                 if cuts == s:
-                    return store(s, 1)          # a chain
-                # blocks between consecutive cut elements (the cuts form a chain)
-                r = 1
-                rest = s
-                for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
-                    block = rest & below[zi]
-                    rest &= above[zi]
+                    r = 1                       # a chain
+                elif cuts & (cuts - 1) == 0:    # one cut element: the set below it times the set above it
+                    zi = cuts.bit_length() - 1
+                    r = 1
+                    block = s & below[zi]
+                    if block & (block - 1):
+                        v = get(block)
+                        r = v if v is not None else f(block)
+                    block = s & above[zi]
                     if block & (block - 1):
                         v = get(block)
                         r *= v if v is not None else f(block)
-                if rest & (rest - 1):
-                    v = get(rest)
-                    r *= v if v is not None else f(rest)
-                return store(s, r)
-            # components: overlap classes of the up-sets {m} | above(m) & s of the minimal elements
-            m = s & ~up
-            mins = []
-            comps = []
-            while m:
-                b = m & -m
-                m ^= b
-                mins.append(b)
-                u = (above[b.bit_length() - 1] & s) | b
-                keep = []
-                for c in comps:
-                    if c & u:
-                        u |= c
-                    else:
-                        keep.append(c)
-                keep.append(u)
-                comps = keep
-            if len(comps) > 1:
-                r = fact[s.bit_count()]
-                for comp in comps:
-                    r //= fact[comp.bit_count()]
-                for comp in comps:
-                    if comp & (comp - 1):
-                        v = get(comp)
-                        r *= v if v is not None else f(comp)
-                return store(s, r)
-            r = 0
-            for b in mins:
-                t = s ^ b
-                v = get(t)
-                r += v if v is not None else f(t)
-            return store(s, r)
+                else:
+                    # blocks between consecutive cut elements (the cuts form a chain)
+                    r = 1
+                    rest = s
+                    for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                        block = rest & below[zi]
+                        rest &= above[zi]
+                        if block & (block - 1):
+                            v = get(block)
+                            r *= v if v is not None else f(block)
+                    if rest & (rest - 1):
+                        v = get(rest)
+                        r *= v if v is not None else f(rest)
+            else:
+                # components: overlap classes of the up-sets {m} | above(m) & s of the minimal elements
+                m = s & ~up
+                mins = []
+                comps = []
+                while m:
+                    b = m & -m
+                    m ^= b
+                    mins.append(b)
+                    u = (above[b.bit_length() - 1] & s) | b
+                    keep = []
+                    for c in comps:
+                        if c & u:
+                            u |= c
+                        else:
+                            keep.append(c)
+                    keep.append(u)
+                    comps = keep
+                if len(comps) > 1:
+                    r = fact[s.bit_count()]
+                    for comp in comps:
+                        r //= fact[comp.bit_count()]
+                    for comp in comps:
+                        if comp & (comp - 1):
+                            v = get(comp)
+                            r *= v if v is not None else f(comp)
+                else:
+                    r = 0
+                    for b in mins:
+                        t = s ^ b
+                        v = get(t)
+                        r += v if v is not None else f(t)
+            # store (inline: this is the hot path of every new set)
+            k = budget[2] = budget[2] + 1
+            if k > budget[0]:
+                raise BudgetExceeded(
+                    f"exact count needs more than max_memo={budget[0]} new memo entries",
+                    reason="memo", memo_size=len(memo) + len(vec))
+            memo[s] = r
+            if not k & check and perf() > budget[1]:
+                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
+            return r
 
         return f
 

@@ -2,26 +2,41 @@
 
 :func:`estimate_count` first tries the exact :class:`~opportune.engine.count.Counter`
 under a budget; if that succeeds the answer is exact (``rel_error == 0``).
-Otherwise it runs **sequential importance sampling over the decomposition**
-(Knuth's estimator on the recursion of :mod:`opportune.engine.count`, in the
-spirit of Beichl, Jensen & Sullivan's SIS for linear extensions):
+Otherwise the set is split into independent pieces exactly as the exact
+counter splits it (cut elements, components; pieces whose count is cheap are
+counted exactly), and every remaining piece is estimated by **sequential Monte
+Carlo over the lattice of down-sets with merging** (a population version of
+Knuth's estimator, in the spirit of Rubinstein's stochastic enumeration):
 
-* a set that splits into independent pieces, or at cut elements, is estimated
-  piece by piece (multinomial × product, exactly as in the exact counter);
-* a set whose exact count is already in the counter's memo contributes it
-  exactly (the failed exact attempt leaves many late-stage sets there);
-* otherwise one minimal element ``x`` is drawn with probability ``q(x)``
-  proportional to ``1 + |{y in S: x < y}|`` (exact first-element probabilities
-  when the order is a forest growing upward: the hook-length formula), and the
-  estimate is ``e(S - x) / q(x)``.
+* the population at step ``k`` is a set of distinct remaining sets ``S``
+  (what is left after ``k`` first elements), each with a weight ``w(S)``: an
+  unbiased estimate of the number of ways to have removed the rest;
+* one step replaces every ``S`` by its children ``S - x`` (``x`` minimal) and
+  *merges* children that are the same set, adding their weights — while the
+  population is small this is the exact dynamic programme;
+* a child small enough for the exact counter (at most ``tail`` elements,
+  found by probing; each attempt under a small memo budget) leaves the
+  population and contributes ``w(S) e(S)`` exactly;
+* when there are more than ``particles`` sets, ``particles`` of them are kept
+  by systematic sampling with inclusion probability ``π(S)`` proportional to
+  ``w(S) h(S)`` (capped at 1), and a kept set's weight becomes ``w(S) / π(S)``
+  (Horvitz–Thompson, so every step stays unbiased).  ``h`` is the hook-length
+  guess ``|S|! / Π (1 + |above(y) ∩ S|)`` of ``e(S)`` (exact for forests).
 
-Every sample is an unbiased estimate of the count; the reported value is their
-mean and ``rel_error`` the half-width of the normal (CLT) confidence interval
-of the mean, divided by the mean.  The sampler runs in the direction (the
-order or its dual, which has the same count) whose pilot run has the smaller
-variance per second.  Heavy-tailed weights make the CLT interval optimistic
-when few samples dominate; ``Estimate.samples`` and ``Estimate.method`` say
-what was done.
+One run gives one unbiased estimate of the count.  Independent runs
+(replicates, each with its own random stream) are repeated until the
+``confidence`` interval of their mean — Student's t on the replicates — is
+within ``rel_error``, or the time is up.  The stated ``rel_error`` is the
+interval actually achieved.
+
+Honest limits: the estimator is unbiased, but on wide posets its distribution
+is right-skewed (rare runs find much of the mass), so with few replicates the
+interval can still be optimistic; more ``particles`` make each run both less
+variable and less skewed.  On ARC111 (111 tasks) a run of 1,024 particles takes
+~3 s and varies by ~30%, so 10 s gives tens of percent, not 1%.  The previous
+estimator (one-path importance sampling) stated ±55–120% there around
+10^102.3–10^102.9, while long runs of this one (8,000 and 40,000 particles)
+agree on about 10^103.0–10^103.1: its intervals mostly lay below that.
 """
 
 from __future__ import annotations
@@ -45,8 +60,9 @@ class Estimate:
     ``value`` is the estimate; with probability ``confidence`` the true count
     lies within ``value * (1 ± rel_error)``.  ``method`` is ``"exact"`` (then
     ``rel_error == 0``, ``confidence == 1`` and ``exact`` holds the int) or
-    ``"sis"`` / ``"sis-dual"`` (importance sampling from the bottom / top).
-    ``log10_value`` is usable when ``value`` overflows a float.
+    ``"smc"`` (sequential Monte Carlo; ``samples`` is then the number of
+    independent runs whose spread gives the interval).  ``log10_value`` is
+    usable when ``value`` overflows a float.
     """
 
     value: float
@@ -74,151 +90,249 @@ def _float_or_inf(v: int) -> float:
         return float("inf")
 
 
-class _Sampler:
-    """Knuth/SIS estimator over the decomposition of one poset (or its dual)."""
+def _t_quantile(p: float, df: int) -> float:
+    """Quantile ``p`` of Student's t with ``df`` degrees of freedom (closed forms for 1, 2; else
+    the Cornish–Fisher expansion around the normal quantile, accurate to ~1e-3 for df >= 3)."""
+    if df == 1:
+        return math.tan(math.pi * (p - 0.5))
+    if df == 2:
+        return (2 * p - 1) / math.sqrt(2 * p * (1 - p))
+    z = NormalDist().inv_cdf(p)
+    z2 = z * z
+    g1 = (z2 + 1) * z / 4
+    g2 = ((5 * z2 + 16) * z2 + 3) * z / 96
+    g3 = (((3 * z2 + 19) * z2 + 17) * z2 - 15) * z / 384
+    g4 = ((((79 * z2 + 776) * z2 + 1482) * z2 - 1920) * z2 - 945) * z / 92160
+    return z + g1 / df + g2 / df ** 2 + g3 / df ** 3 + g4 / df ** 4
 
-    def __init__(self, poset: Poset, memo: dict[int, int]):
-        self.below = list(poset.below)
+
+class _SMC:
+    """Sequential Monte Carlo with merging over the remaining sets of one poset (see the module doc)."""
+
+    def __init__(self, poset: Poset, counter: Counter, particles: int, tail_memo: int):
+        self.poset = poset
+        self.counter = counter
+        self.particles = max(2, particles)
+        self.tail_memo = tail_memo
         self.above = list(poset.above)
-        self.cmp = [b | a for b, a in zip(self.below, self.above)]
-        self.memo = memo          # exact counts by set: valid for the dual too
-        self.lfact = [math.lgamma(k + 1) for k in range(poset.n + 2)]
+        self.nbytes, self.up_t, _ = counter._tables()
+        self.log1 = [math.log(k + 1) for k in range(poset.n + 2)]
+        self.tails: dict[int, int] = {}      # piece -> tail size lowered by failures in earlier runs
 
-    def sample(self, root: int, rng: random.Random) -> float:
-        """The natural log of one unbiased estimate of e(root)."""
-        below, above, cmp_, memo, lfact = self.below, self.above, self.cmp, self.memo, self.lfact
-        rand = rng.random
-        log = math.log
-        lv = 0.0
-        stack = [root]
-        while stack:
-            s = stack.pop()
-            if s & (s - 1) == 0:
+    def _exact(self, s: int) -> int | None:
+        """e(s) from the memo, or counted under the small tail budget; None if over it."""
+        c = self.counter
+        v = c._memo.get(s)
+        if v is not None or s & (s - 1) == 0:
+            return 1 if v is None else v
+        try:
+            return c.count(s)
+        except BudgetExceeded:
+            return None
+
+    def probe_tail(self, root: int, rng: random.Random) -> int:
+        """The largest size (found by bisection on random remaining sets) the exact counter handles cheaply."""
+        below = self.poset.below
+
+        def random_rest(size: int) -> int:
+            s = root
+            while s.bit_count() > size:
+                mins = [i for i in bits(s) if not below[i] & s]
+                s ^= 1 << rng.choice(mins)
+            return s
+
+        lo, hi = 1, root.bit_count()        # lo: handled; hi: not handled (the whole piece was not)
+        while hi - lo > max(1, hi // 20):
+            mid = (lo + hi) // 2
+            if all(self._exact(random_rest(mid)) is not None for _ in range(2)):
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    def run(self, root: int, tail: int, rng: random.Random, deadline: float) -> float | None:
+        """Natural log of one unbiased estimate of e(root); None if the deadline passed first."""
+        above, up_t, nbytes, log1 = self.above, self.up_t, self.nbytes, self.log1
+        tail = min(tail, self.tails.get(root, tail))
+        log, exp = math.log, math.exp
+        exact = self._exact
+        B = self.particles
+        states: dict[int, list] = {root: [1.0, 0.0]}     # set -> [weight, log hook guess]
+        scale = 0.0                                       # log of the common factor of all weights
+        terms: list[float] = []                           # log contributions of finished sets
+        while states:
+            if time.perf_counter() > deadline:
+                return None
+            kids: dict[int, list] = {}
+            get = kids.get
+            for s, (w, lh) in states.items():
+                up = 0
+                for tu, byte in zip(up_t, s.to_bytes(nbytes, "little")):
+                    if byte:
+                        up |= tu[byte]
+                m = s & ~up
+                while m:
+                    b = m & -m
+                    m ^= b
+                    t = s ^ b
+                    e = get(t)
+                    if e is None:
+                        kids[t] = [w, lh + log1[(above[b.bit_length() - 1] & s).bit_count()]]
+                    else:
+                        e[0] += w
+            if not kids:
+                break
+            size = next(iter(kids)).bit_count()
+            if size <= tail:
+                # finish what the exact counter handles; if it keeps failing, the tail starts lower
+                states = {}
+                tried = failed = 0
+                for t, e in kids.items():
+                    if failed >= 3 and failed * 20 > tried:
+                        states[t] = e
+                        continue
+                    tried += 1
+                    if not tried & 63 and time.perf_counter() > deadline:
+                        return None
+                    v = exact(t)
+                    if v is None:
+                        failed += 1
+                        states[t] = e
+                    elif e[0] > 0:
+                        terms.append(scale + log(e[0]) + log(v))
+                if failed >= 3 and failed * 20 > tried:
+                    tail = size - 1
+                    self.tails[root] = min(self.tails.get(root, tail), tail)
+            else:
+                states = kids
+            if len(states) > B:
+                states = self._resample(states, rng)
+            if states:
+                mw = max(e[0] for e in states.values())
+                if mw > 0:
+                    for e in states.values():
+                        e[0] /= mw
+                    scale += log(mw)
+        if not terms:
+            return float("-inf")
+        mx = max(terms)
+        return mx + log(sum(exp(x - mx) for x in terms))
+
+    def _resample(self, states: dict[int, list], rng: random.Random) -> dict[int, list]:
+        """Keep ``particles`` sets, each with probability π ∝ weight × guess (capped at 1); reweight by 1/π."""
+        B = self.particles
+        items = list(states.items())
+        mlh = max(e[1] for _, e in items)
+        exp = math.exp
+        a = [e[0] * exp(e[1] - mlh) for _, e in items]
+        # the threshold c with sum(min(1, c * a_i)) == B
+        srt = sorted(a, reverse=True)
+        rest = math.fsum(srt)
+        k = 0
+        c = B / rest
+        while c * srt[k] >= 1.0:
+            rest -= srt[k]
+            k += 1
+            if k >= B or rest <= 0:
+                break
+            c = (B - k) / rest
+        # systematic sampling: the points u, u + 1, ... over the running sum of the π < 1
+        nxt = rng.random()
+        acc = 0.0
+        out: dict[int, list] = {}
+        for (t, e), ai in zip(items, a):
+            pi = c * ai
+            if pi >= 1.0:
+                out[t] = e
                 continue
-            v = memo.get(s)
-            if v is not None:
-                lv += log(v)
+            acc += pi
+            if acc > nxt:
+                nxt += 1.0
+                out[t] = [e[0] / pi, e[1]]
+        return out
+
+
+def _pieces(counter: Counter, mask: int) -> tuple[float, list[int]]:
+    """Split ``mask`` as the exact counter does (cut elements, components), counting cheap pieces exactly.
+
+    Returns the log of the exact factor (multinomials and exactly counted pieces)
+    and the pieces left to estimate: connected sets without cut elements.
+    """
+    below, above = counter.poset.below, counter.poset.above
+    memo = counter._memo
+    logf = 0.0
+    hard = []
+    stack = [mask]
+    while stack:
+        s = stack.pop()
+        if s & (s - 1) == 0:
+            continue
+        v = memo.get(s)
+        if v is not None:
+            logf += math.log(v)
+            continue
+        cuts = 0
+        for i in bits(s):
+            if ((below[i] | above[i]) & s) | 1 << i == s:
+                cuts |= 1 << i
+        if cuts:
+            rest = s
+            for z in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                stack.append(rest & below[z])
+                rest &= above[z]
+            stack.append(rest)
+            continue
+        comps = []
+        for i in bits(s):
+            if below[i] & s:
                 continue
-            # independent pieces
-            low = s & -s
-            comp = low
-            fr = low
-            while fr:
-                b = fr & -fr
-                fr ^= b
-                new = cmp_[b.bit_length() - 1] & s & ~comp
-                if new:
-                    comp |= new
-                    fr |= new
-            if comp != s:
-                lv += lfact[s.bit_count()]
-                rest = s
-                while True:
-                    lv -= lfact[comp.bit_count()]
-                    stack.append(comp)
-                    rest ^= comp
-                    if not rest:
-                        break
-                    low = rest & -rest
-                    comp = low
-                    fr = low
-                    while fr:
-                        b = fr & -fr
-                        fr ^= b
-                        new = cmp_[b.bit_length() - 1] & rest & ~comp
-                        if new:
-                            comp |= new
-                            fr |= new
-                continue
-            # cut elements, else draw a first element
-            cuts = 0
-            mins = []
-            weights = []
-            total = 0
-            m = s
-            while m:
-                b = m & -m
-                m ^= b
-                i = b.bit_length() - 1
-                if (cmp_[i] & s) | b == s:
-                    cuts |= b
-                elif not below[i] & s:
-                    w = (above[i] & s).bit_count() + 1
-                    mins.append(b)
-                    weights.append(w)
-                    total += w
-            if cuts:
-                if cuts == s:
-                    continue
-                zs = sorted(bits(cuts), key=lambda i: (below[i] & s).bit_count())
-                prev = None
-                for z in zs:
-                    lo = s & below[z]
-                    if prev is not None:
-                        lo &= above[prev]
-                    stack.append(lo)
-                    prev = z
-                stack.append(s & above[prev])
-                continue
-            r = rand() * total
-            for b, w in zip(mins, weights):
-                if r < w:
-                    break
-                r -= w
-            lv += log(total / w)
-            stack.append(s ^ b)
-        return lv
-
-
-class _Stats:
-    """Running mean / variance of exp(log-samples), kept in a shifted scale."""
-
-    def __init__(self):
-        self.logs: list[float] = []
-
-    def add(self, lv: float) -> None:
-        self.logs.append(lv)
-
-    def summary(self) -> tuple[float, float]:
-        """(log of the mean, coefficient of variation of one sample)."""
-        logs = self.logs
-        n = len(logs)
-        mx = max(logs)
-        ws = [math.exp(l - mx) for l in logs]
-        mean = sum(ws) / n
-        if n < 2:
-            return mx + math.log(mean), float("inf")
-        var = sum((w - mean) ** 2 for w in ws) / (n - 1)
-        return mx + math.log(mean), math.sqrt(var) / mean
+            u = (above[i] & s) | 1 << i
+            keep = []
+            for c in comps:
+                if c & u:
+                    u |= c
+                else:
+                    keep.append(c)
+            keep.append(u)
+            comps = keep
+        if len(comps) > 1:
+            logf += math.lgamma(s.bit_count() + 1) - sum(math.lgamma(c.bit_count() + 1) for c in comps)
+            stack.extend(comps)
+            continue
+        hard.append(s)
+    return logf, hard
 
 
 def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01, time_limit: float = 10.0,
                    seed: int = 0, confidence: float = 0.95, counter: Counter | None = None,
-                   exact_memo: int = 300_000) -> Estimate:
+                   exact_memo: int = 300_000, particles: int = 1024, tail: int | None = None,
+                   tail_memo: int = 500, min_runs: int = 4) -> Estimate:
     """Estimate the number of linear extensions of the subposet induced on ``mask``, with a stated error.
 
     Tries the exact counter first (at most ``exact_memo`` new memo entries and
     a quarter of ``time_limit``); if it finishes, returns the exact count with
-    ``rel_error=0``.  Otherwise draws importance samples (see the module doc)
-    until the ``confidence`` interval's half-width is at most ``rel_error``
-    times the estimate, or ``time_limit`` seconds have passed; the returned
-    ``rel_error`` is the half-width actually achieved — it may exceed the
-    requested one, and is then the honest statement of the error.
+    ``rel_error=0``.  Otherwise runs sequential Monte Carlo (see the module
+    doc) with ``particles`` sets per step, finishing sets of at most ``tail``
+    elements exactly (default: the largest size the counter handles within
+    ``tail_memo`` new entries, found by probing), and repeats independent runs
+    until the ``confidence`` interval of their mean is within ``rel_error`` of
+    it (after at least ``min_runs`` runs) or ``time_limit`` seconds have
+    passed.  The returned ``rel_error`` is the half-width actually achieved
+    (infinite with fewer than two runs) — it may exceed the requested one, and
+    is then the honest statement of the error.
 
     Pass the plan's ``counter`` to reuse (and extend) its memo.  Deterministic
-    given ``seed`` when it stops on accuracy or on the memo budget; a stop on
-    the clock depends on machine speed.
-
-    Complexity: O(|mask|²) word operations per sample; the error shrinks like
-    1/sqrt(samples).
+    given ``seed`` when it stops on accuracy; a stop on the clock depends on
+    machine speed.
 
     >>> p = Poset.from_pairs(4, [(0, 1), (2, 3)])
     >>> e = estimate_count(p)
     >>> e.value, e.rel_error, e.method
     (6.0, 0.0, 'exact')
-    >>> e = estimate_count(p, exact_memo=0, rel_error=0.05, seed=1)
-    >>> e.method.startswith("sis"), abs(e.value - 6) <= 6 * e.rel_error
-    (True, True)
+    >>> n = Poset.from_pairs(4, [(0, 2), (1, 2), (1, 3)])     # the "N": connected, no cut element
+    >>> e = estimate_count(n, exact_memo=0, tail=0, rel_error=0.05, seed=1)
+    >>> e.method, round(e.value, 9), e.rel_error            # 2 sets per step at most: nothing sampled
+    ('smc', 5.0, 0.0)
     """
     start = time.perf_counter()
     if mask is None:
@@ -230,56 +344,63 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
     if counter is None or counter.poset != poset:
         counter = Counter(poset, max_memo=None)
 
-    # 1. exact, under a budget
     saved = counter.max_memo, counter.time_limit
-    counter.max_memo = exact_memo if saved[0] is None else min(exact_memo, saved[0])
-    counter.time_limit = time_limit / 4
     try:
-        exact = counter.count(mask)
-    except BudgetExceeded:
-        exact = None
-    finally:
-        counter.max_memo, counter.time_limit = saved
-    if exact is not None:
-        return Estimate(_float_or_inf(exact), 0.0, 1.0, "exact", 0, _log10_int(exact), exact,
-                        time.perf_counter() - start)
+        # 1. exact, under a budget
+        counter.max_memo = exact_memo if saved[0] is None else min(exact_memo, saved[0])
+        counter.time_limit = time_limit / 4
+        try:
+            exact = counter.count(mask)
+        except BudgetExceeded:
+            exact = None
+        if exact is not None:
+            return Estimate(_float_or_inf(exact), 0.0, 1.0, "exact", 0, _log10_int(exact), exact,
+                            time.perf_counter() - start)
 
-    # 2. importance sampling; pick the direction with less variance per second
-    rng = random.Random(seed)
-    z = NormalDist().inv_cdf(0.5 + confidence / 2)
-    deadline = start + time_limit
-    memo = counter._memo
-    candidates = [("sis", _Sampler(poset, memo)), ("sis-dual", _Sampler(poset.dual(), memo))]
-    pilot_n = 50
-    best = None
-    pilots = {}
-    for name, sampler in candidates:
-        st = _Stats()
-        t0 = time.perf_counter()
-        for _ in range(pilot_n):
-            st.add(sampler.sample(mask, rng))
-        dt = (time.perf_counter() - t0) / pilot_n
-        _, cv = st.summary()
-        cost = cv * cv * dt if math.isfinite(cv) else float("inf")
-        pilots[name] = st
-        if best is None or cost < best[0]:
-            best = (cost, name, sampler)
-    _, name, sampler = best
-    stats = pilots[name]           # the pilot samples of the chosen direction are valid samples
-    batch = 64
-    while True:
-        lmean, cv = stats.summary()
-        n = len(stats.logs)
-        half = z * cv / math.sqrt(n)
-        if (half <= rel_error and n >= 200) or time.perf_counter() >= deadline:
-            break
-        for _ in range(batch):
-            stats.add(sampler.sample(mask, rng))
+        # 2. sequential Monte Carlo on the pieces that are still hard
+        counter.max_memo = tail_memo if saved[0] is None else min(tail_memo, saved[0])
+        counter.time_limit = None
+        logf, hard = _pieces(counter, mask)
+        if not hard:                    # every piece was in the memo: the whole is one cheap exact count
+            counter.max_memo = None
+            exact = counter.count(mask)
+            return Estimate(_float_or_inf(exact), 0.0, 1.0, "exact", 0, _log10_int(exact), exact,
+                            time.perf_counter() - start)
+        smc = _SMC(poset, counter, particles, tail_memo)
+        probe_rng = random.Random(seed * 7919 + 1)
+        tails = [tail if tail is not None else smc.probe_tail(s, probe_rng) for s in hard]
+        deadline = start + time_limit
+        runs: list[float] = []
+        p = 0.5 + confidence / 2
+        half = math.inf
+        while True:
+            rng = random.Random(seed * 1_000_003 + len(runs))
+            total = 0.0
+            for s, t in zip(hard, tails):
+                lv = smc.run(s, t, rng, deadline)
+                if lv is None:
+                    break
+                total += lv
+            else:
+                runs.append(total)
+            n = len(runs)
+            if n >= 2:
+                mx = max(runs)
+                ws = [math.exp(x - mx) for x in runs]
+                mean = sum(ws) / n
+                sd = math.sqrt(sum((w - mean) ** 2 for w in ws) / (n - 1))
+                half = _t_quantile(p, n - 1) * sd / math.sqrt(n) / mean if mean > 0 else math.inf
+                if half <= rel_error and n >= min_runs:
+                    break
             if time.perf_counter() >= deadline:
                 break
-        batch = min(batch * 2, 4096)
-    lmean, cv = stats.summary()
-    n = len(stats.logs)
-    half = z * cv / math.sqrt(n)
+    finally:
+        counter.max_memo, counter.time_limit = saved
+    if not runs:
+        return Estimate(float("nan"), math.inf, confidence, "smc", 0, float("nan"), None,
+                        time.perf_counter() - start)
+    mx = max(runs)
+    lmean = mx + math.log(sum(math.exp(x - mx) for x in runs) / len(runs)) + logf
     value = math.exp(lmean) if lmean < 709 else float("inf")
-    return Estimate(value, half, confidence, name, n, lmean / math.log(10), None, time.perf_counter() - start)
+    return Estimate(value, half, confidence, "smc", len(runs), lmean / math.log(10), None,
+                    time.perf_counter() - start)
