@@ -15,26 +15,22 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[service,scale,dev]'
 	@touch $(STAMP)
 
-# System tools from Debian's packages, installed only where missing.
+# System tools from Debian's packages, installed only where missing: $(call apt,COMMAND,PACKAGE,WHAT FOR)
+define apt
+	@if ! command -v $(1) >/dev/null 2>&1; then \
+	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	    echo "installing $(2) with apt-get ($(3))"; \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(2) >/dev/null) \
+	      || echo "warning: could not install $(2): $(3) will not work"; \
+	  else \
+	    echo "warning: $(1) is missing: install it (e.g. sudo apt-get install $(2)); $(3) needs it"; \
+	  fi; \
+	fi
+endef
+
 system-deps:
-	@if ! command -v dot >/dev/null 2>&1; then \
-	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
-	    echo "installing graphviz (dot) with apt-get"; \
-	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq graphviz >/dev/null) \
-	      || echo "warning: could not install graphviz; 'opportune graph' to svg/png will not work"; \
-	  else \
-	    echo "warning: graphviz 'dot' is missing: install it (e.g. sudo apt-get install graphviz)"; \
-	  fi; \
-	fi
-	@if ! command -v chromium >/dev/null 2>&1; then \
-	  if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
-	    echo "installing chromium with apt-get (dashboard browser test)"; \
-	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
-	      || echo "warning: could not install chromium; tests/test_service_browser.py will fail"; \
-	  else \
-	    echo "warning: chromium is missing: install it (e.g. sudo apt-get install chromium)"; \
-	  fi; \
-	fi
+	$(call apt,dot,graphviz,opportune graph to svg/png)
+	$(call apt,chromium,chromium,the dashboard browser test)
 
 demo: setup
 	$(BIN)/opportune check examples/gearbox.yaml

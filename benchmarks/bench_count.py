@@ -41,22 +41,9 @@ from pathlib import Path
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.estimate import estimate_count
 from opportune.engine.poset import Poset
+from opportune.formats.salbp import read_in2
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "salbp"
-
-
-def read_in2(path: Path) -> tuple[int, list[tuple[int, int]]]:
-    """Private minimal .IN2 reader (n, durations, 1-based pairs up to ``-1,-1``), 0-based pairs out."""
-    lines = [ln.strip() for ln in path.read_bytes().decode("latin-1").splitlines()]
-    lines = [ln for ln in lines if ln]
-    n = int(lines[0])
-    pairs = []
-    for ln in lines[1 + n:]:
-        a, b = (int(t) for t in ln.split(","))
-        if (a, b) == (-1, -1):
-            break
-        pairs.append((a - 1, b - 1))
-    return n, pairs
 
 
 def show_count(v: int) -> str:
@@ -88,8 +75,8 @@ def main(argv=None) -> int:
         return 2
     rows = []
     for path in args.data.glob("*.IN2"):
-        n, pairs = read_in2(path)
-        rows.append((n, path, pairs))
+        graph = read_in2(path)
+        rows.append((graph.n, path, [(a - 1, b - 1) for a, b in graph.pairs]))
     rows.sort()
     head = f"{'file':<13} {'tasks':>5} {'pairs':>5}  {'count':<28} {'exact?':<16} {'seconds':>8} {'memo':>9} {'lookup':>8}"
     print(head)

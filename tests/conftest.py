@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import os
-from itertools import permutations
 from pathlib import Path
 
 import pytest
 from hypothesis import strategies as st
 
-from opportune import make_plan
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
@@ -32,6 +30,15 @@ def salbp_dir() -> Path:
 @pytest.fixture(scope="session")
 def salbp() -> Path:
     return salbp_dir()
+
+
+def salbp_poset(name: str):
+    """A shared SALBP graph (by file stem) as an engine Poset, read with the package's own .IN2 reader."""
+    from opportune.engine.poset import Poset
+    from opportune.formats.salbp import read_in2
+
+    graph = read_in2(salbp_dir() / f"{name}.IN2")
+    return Poset.from_pairs(graph.n, [(a - 1, b - 1) for a, b in graph.pairs])
 
 
 SALBP_FILES = ["MERTENS", "BOWMAN8", "JAESCHKE", "JACKSON", "MANSOOR", "MITCHELL", "HESKIA", "KILBRID", "TONGE70", "ARC111"]

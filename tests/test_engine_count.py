@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import os
 import random
 import time
 from itertools import permutations
 from math import factorial, prod
-from pathlib import Path
 
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -15,35 +13,14 @@ from hypothesis import given, settings, strategies as st
 from opportune.engine.count import BudgetExceeded, Counter, count_linear_extensions
 from opportune.engine.downsets import count_by_downsets, count_downsets, position_sums_by_downsets
 from opportune.engine.poset import Poset, bits
+from conftest import salbp_dir, salbp_poset
 
 MAX_N = 8
-SALBP = Path(os.environ.get("OPPORTUNE_SALBP_DIR", Path(__file__).resolve().parents[2] / "shared" / "data" / "salbp"))
 SMALL_FILES = ["MERTENS", "BOWMAN8", "JAESCHKE", "JACKSON", "MANSOOR", "MITCHELL", "HESKIA", "KILBRID"]
 
 
-def read_in2(path: Path) -> tuple[int, list[tuple[int, int]]]:
-    """Tiny private .IN2 reader: n, then n durations, then 1-based ``i,j`` pairs up to ``-1,-1``."""
-    lines = [ln.strip() for ln in path.read_bytes().decode("latin-1").splitlines()]
-    lines = [ln for ln in lines if ln]
-    n = int(lines[0])
-    pairs = []
-    for ln in lines[1 + n:]:
-        a, b = (int(t) for t in ln.split(","))
-        if (a, b) == (-1, -1):
-            break
-        pairs.append((a - 1, b - 1))
-    return n, pairs
-
-
 def salbp(name: str) -> Poset:
-    if not SALBP.is_dir():
-        pytest.fail(f"SALBP data folder not found at {SALBP} (expected ../shared/data/salbp next to the repo; "
-                    f"set OPPORTUNE_SALBP_DIR to override)")
-    path = SALBP / f"{name}.IN2"
-    if not path.is_file():
-        pytest.fail(f"SALBP file missing: {path}")
-    n, pairs = read_in2(path)
-    return Poset.from_pairs(n, pairs)
+    return salbp_poset(name)
 
 
 def brute(poset: Poset, mask: int) -> tuple[int, dict[int, int]]:
@@ -120,7 +97,7 @@ def test_dual_and_position_symmetry(p):
 
 
 def test_data_folder_present():
-    assert SALBP.is_dir(), f"SALBP data folder not found at {SALBP}"
+    assert (salbp_dir() / "KILBRID.IN2").is_file()
 
 
 @pytest.mark.parametrize("name", SMALL_FILES)

@@ -3,35 +3,17 @@
 from __future__ import annotations
 
 import math
-import os
 import random
-from pathlib import Path
 
 import pytest
 
 from opportune.engine.count import Counter
 from opportune.engine.estimate import Estimate, _t_quantile, estimate_count
 from opportune.engine.poset import Poset
-
-SALBP = Path(os.environ.get("OPPORTUNE_SALBP_DIR", Path(__file__).resolve().parents[2] / "shared" / "data" / "salbp"))
-
+from conftest import salbp_poset
 
 def salbp(name: str) -> Poset:
-    """A SALBP precedence graph as a Poset (tiny private .IN2 reader; fails clearly if the data is missing)."""
-    path = SALBP / f"{name}.IN2"
-    if not path.is_file():
-        pytest.fail(f"SALBP file missing: {path} (expected ../shared/data/salbp next to the repo; "
-                    f"set OPPORTUNE_SALBP_DIR to override)")
-    lines = [ln.strip() for ln in path.read_bytes().decode("latin-1").splitlines()]
-    lines = [ln for ln in lines if ln]
-    n = int(lines[0])
-    pairs = []
-    for ln in lines[1 + n:]:
-        a, b = (int(t) for t in ln.split(","))
-        if (a, b) == (-1, -1):
-            break
-        pairs.append((a - 1, b - 1))
-    return Poset.from_pairs(n, pairs)
+    return salbp_poset(name)
 
 
 def random_poset(n: int, density: float, rng: random.Random) -> Poset:
