@@ -7,25 +7,20 @@ count exceeds the budget get an :func:`estimate_count` with its stated error
 (sequential Monte Carlo; the runs line says how many independent runs gave
 the interval).
 
-Reference (2-core dev machine, Python 3.11; exact attempt 10 s, then the estimator 10 s):
+Reference (2-core dev machine, Python 3.11; plain exact attempt 2 s, then hub split / estimator 10 s):
 
     file          tasks pairs  count                        exact?            seconds      memo   lookup
-    MITCHELL.IN2     21    27  1449624                      yes                 0.001        67    149ns
-    HESKIA.IN2       28    39  10^20.2317 (21 digits)       yes                 0.001        16    156ns
-    KILBRID.IN2      45    62  10^29.2974 (30 digits)       yes                 0.028      3239    158ns
-    TONGE70.IN2      70    86  10^46.9716 (47 digits)       yes                 0.149     15141    167ns
-    ARC111.IN2      111   176  -                            no: time budget    10.007    754433
-      └ estimate               10^103.0493                  est ±36.37%        10.021    904020
-                               (smc: 3 runs of 1024 particles; 95% CI 10^102.853 .. 10^103.184)
+    MITCHELL.IN2     21    27  1449624                      yes                 0.001        67    168ns
+    HESKIA.IN2       28    39  10^20.2317 (21 digits)       yes                 0.001        16    170ns
+    KILBRID.IN2      45    62  10^29.2974 (30 digits)       yes                 0.025      3239    160ns
+    TONGE70.IN2      70    86  10^46.9716 (47 digits)       yes                 0.135     15141    161ns
+    ARC111.IN2      111   176  -                            no: time budget     2.006    256513
+      └ exact                  10^103.0294 (104 digits)     yes: hub split      6.496    286763
 
-(before this version: KILBRID 0.070 s, TONGE70 0.657 s, ARC111 estimate
-10^102.5753 ±79.93% from one-path importance sampling.)
-
-ARC111 is not exact in 10 s (600 s and 46M memo entries were not enough
-either).  Long estimator runs (3 runs of 8,000 and 2 of 40,000 particles,
-minutes each) agree on about 10^103.0–10^103.1; the earlier one-path
-estimator reported ~10^102.3–10^102.9 with ±55–120%: its intervals mostly lie
-below that (heavy-tailed weights made them optimistic).
+ARC111 defeats the plain recursion (600 s and 46M memo entries were not enough)
+but is exact through its hub, task 91 (see ``opportune.engine.hub``).  The
+sequential Monte Carlo estimator, used only when the hub split fails too,
+stated 10^103.05 ±36% in 10 s there, and long runs agree with the exact count.
 
     PYTHONPATH=src python3 benchmarks/bench_count.py [--data DIR] [--exact-time S] [--estimate-time S]
 """
@@ -64,7 +59,7 @@ def lookup_ns(counter: Counter, mask: int, reps: int = 200_000) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    ap.add_argument("--exact-time", type=float, default=10.0, help="time limit of the exact attempt per file")
+    ap.add_argument("--exact-time", type=float, default=2.0, help="time limit of the plain exact attempt per file")
     ap.add_argument("--max-memo", type=int, default=2_000_000)
     ap.add_argument("--estimate-time", type=float, default=10.0)
     ap.add_argument("--rel-error", type=float, default=0.01)
@@ -97,13 +92,16 @@ def main(argv=None) -> int:
                   f"{dt:>8.3f} {counter.memo_size:>9} {'':>8}", flush=True)
             t = time.perf_counter()
             counter.max_memo = None
-            # the exact attempt above already had its budget: the estimator samples for its whole time
+            # the plain attempt above already had its budget: next the hub split, then (if needed) sampling
             est = estimate_count(poset, rel_error=args.rel_error, time_limit=args.estimate_time, counter=counter,
                                  particles=args.particles, exact_memo=0)
             dt = time.perf_counter() - t
-            shown = f"10^{est.log10_value:.4f}" if est.samples else "-"
-            status = f"est ±{100 * est.rel_error:.2f}%" if est.exact is None else "yes (estimator)"
-            print(f"{'  └ estimate':<13} {'':>5} {'':>5}  {shown:<28} {status:<16} {dt:>8.3f} "
+            if est.exact is not None:
+                shown, status, label = show_count(est.exact), "yes: hub split", "  └ exact"
+            else:
+                shown = f"10^{est.log10_value:.4f}" if est.samples else "-"
+                status, label = f"est ±{100 * est.rel_error:.2f}%", "  └ estimate"
+            print(f"{label:<13} {'':>5} {'':>5}  {shown:<28} {status:<16} {dt:>8.3f} "
                   f"{counter.memo_size:>9} {'':>8}", flush=True)
             if est.exact is None:
                 hi = est.log10_value + math.log10(1 + est.rel_error)

@@ -248,6 +248,32 @@ class Counter:
             s ^= b
         return out
 
+    def learn(self, mask: int, value: int) -> None:
+        """Store the exact count ``value`` of ``mask`` found by another exact method (see :mod:`.hub`).
+
+        Later counts that meet ``mask`` as a piece use it instead of recursing.
+        """
+        self._check_mask(mask)
+        self._memo[mask] = value
+
+    def scan(self, mask: int) -> tuple[int, int]:
+        """``(minimal elements, cut elements)`` of ``mask``: a cut element is comparable to every other element.
+
+        Bit-parallel (a table look-up per byte of ``mask``); the recursions of
+        this package use it to split a set before they recurse.
+
+        >>> Counter(Poset.from_pairs(3, [(0, 1), (0, 2)])).scan(0b111)   # 0 is minimal and a cut
+        (1, 1)
+        """
+        nbytes, UP, CAP = self._tables()
+        up = 0
+        cap = -1
+        for tu, tc, byte in zip(UP, CAP, mask.to_bytes(nbytes, "little")):
+            if byte:
+                up |= tu[byte]
+                cap &= tc[byte]
+        return mask & ~up, mask & cap
+
     @property
     def memo_size(self) -> int:
         """Number of entries in the memo (counts plus position-sum vectors)."""
@@ -371,7 +397,7 @@ class Counter:
             r = get(s)
             if r is not None:
                 return r
-            # cut elements (comparable to all of s) and minimal elements, a byte of s at a time
+            # cut elements and minimal elements, a byte of s at a time (Counter.scan, inlined: hot path)
             up = 0
             cap = -1
             for tu, tc, byte in zip(UP, CAP, s.to_bytes(nbytes, "little")):
@@ -407,7 +433,7 @@ class Counter:
                         v = get(rest)
                         r *= v if v is not None else f(rest)
             else:
-                # components: overlap classes of the up-sets {m} | above(m) & s of the minimal elements
+                # components (poset.components, inlined: this is the hot path)
                 m = s & ~up
                 mins = []
                 comps = []

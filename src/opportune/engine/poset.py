@@ -45,6 +45,31 @@ def elements(mask: int) -> list[int]:
     return list(bits(mask))
 
 
+def components(above: Sequence[int], s: int, mins: int) -> list[int]:
+    """The connected pieces of ``s`` under comparability, given its minimal elements ``mins``.
+
+    Every element lies above a minimal one, so the pieces are the overlap
+    classes of the sets ``{m} | above[m] & s``.  O(|mins| · pieces).
+
+    >>> components([0b010, 0, 0], 0b111, 0b101)     # 0 < 1; 2 alone
+    [3, 4]
+    """
+    comps: list[int] = []
+    while mins:
+        b = mins & -mins
+        mins ^= b
+        u = (above[b.bit_length() - 1] & s) | b
+        keep = []
+        for c in comps:
+            if c & u:
+                u |= c
+            else:
+                keep.append(c)
+        keep.append(u)
+        comps = keep
+    return comps
+
+
 class CycleError(ValueError):
     """The given relation has a cycle, so it is not a partial order.
 

@@ -405,15 +405,19 @@ class Schedule:
 
         remaining = self.engine.full & ~self.mask
         value, abs_err, conf, methods = 0.0, 0.0, 1.0, set()
+        exact: int | None = 0
         terms = list(self.engine._terms(self.consistent))
         for sign, counter in terms:
             est = estimate_count(counter.poset, remaining, rel_error=rel_error / max(1, len(terms)),
                                  time_limit=time_limit / max(1, len(terms)), seed=seed, counter=counter,
                                  exact_memo=0)
+            exact = None if exact is None or est.exact is None else exact + sign * est.exact
             value += sign * est.value
             abs_err += est.rel_error * est.value
             conf = min(conf, est.confidence)
             methods.add(est.method)
+        if exact is not None:           # every term was counted exactly after all (through a hub)
+            return CountResult(exact)
         rel = abs_err / value if value > 0 else float("inf")
         return CountResult(value, exact=False, rel_error=rel, confidence=conf, method="+".join(sorted(methods)))
 

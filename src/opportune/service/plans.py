@@ -107,7 +107,8 @@ class LoadedPlan:
     """A stored plan ready for runs: the plan, its shared engine (and the lock guarding it), summary and layout.
 
     The engine's counts are bounded in time (``count_seconds`` per count) and
-    memory (the engine's ``max_memo``): the opportunistic policy needs exact
+    memory (each counter's per-call ``max_memo`` and its ``max_total`` cap, beyond which the
+    oldest memo entries are evicted): the opportunistic policy needs exact
     counts, and a request must not hold a plan's lock for minutes.
     """
 

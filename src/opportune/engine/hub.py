@@ -1,0 +1,358 @@
+"""Exact counting through a hub: an element that glues everything below it.
+
+Assembly graphs often have a *hub* ``h``: a sub-assembly step that needs
+dozens of earlier steps and that the rest of the product is built on (ARC111:
+task 91 needs 56 tasks and 19 come after it).  While ``h`` is not yet done, all
+its predecessors stay in one connected piece, so the decomposition of
+:class:`~opportune.engine.count.Counter` cannot split them and its memo
+explodes.  Yet the count factors neatly around ``h``:
+
+* ``A`` = what must come after ``h``; ``B`` = the rest (``↓h`` and the steps
+  unrelated to ``h``).  If every relation between ``B`` and ``A`` goes through
+  ``h``, a linear extension is a linear extension of ``B``, then ``h`` and the
+  steps of ``A`` merged into the ``b`` steps of ``B`` that follow the last
+  predecessor of ``h``:
+
+      e(S) = e(A) · Σ_b D(b) · C(b + 1 + |A|, 1 + |A|)
+
+  where ``D(b)`` is the number of linear extensions of ``B`` with exactly ``b``
+  steps after the last element of ``↓h``: the *tail distribution*,
+  :func:`TailCounter.tail`.  ``B`` without ``h`` splits freely, so ``D`` is cheap.
+* A few relations ``b < a`` from unrelated steps into ``A`` ("coupling") are
+  removed and put back by inclusion–exclusion: with ``Q`` the order without
+  them, ``e(P) = Σ_F (-1)^|F| e(Q + {a < b for (b, a) in F})``; with the
+  relation reversed, ``b`` (and all above it) joins ``A``, so every term has
+  the same form.
+
+The tail distribution is computed by the same recursion as the counter
+(components, cut elements, minimal elements) on vectors instead of numbers.
+Merging two independent pieces is a convolution once each vector is scaled
+by binomials (the shuffle count factors into "before the mark" and "after
+the mark" parts).
+"""
+
+from __future__ import annotations
+
+import time
+from itertools import combinations
+from math import comb
+
+from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.poset import CycleError, Poset, bits, components
+
+__all__ = ["TailCounter", "hub_count", "hub_candidates", "hub_split"]
+
+
+class TailCounter:
+    """Tail distributions for one poset and one set of marked elements, with a memo.
+
+    ``tail(s)[b]`` is the number of linear extensions of the subposet on ``s``
+    in which exactly ``b`` elements come after the last marked element of
+    ``s`` (``s`` must contain a marked element).  Unmarked pieces are counted
+    by ``counter`` (whose memo is shared).
+
+    Complexity: one vector of at most ``|s|`` ints per set visited; the sets
+    visited are those the counter would visit for ``s`` with the marks
+    present.  A merge of two pieces of sizes ``n1``, ``n2`` costs
+    ``O(n1 · n2)`` big-int products.
+
+    >>> p = Poset.from_pairs(3, [(0, 1)])          # 0 < 1, 2 free
+    >>> TailCounter(Counter(p), marks=0b001).tail(0b111)   # 012, 021: two after 0; 201: one
+    [0, 1, 2]
+    """
+
+    def __init__(self, counter: Counter, marks: int, *, deadline: float = float("inf")):
+        self.counter = counter
+        self.poset = counter.poset
+        self.marks = marks
+        self.deadline = deadline
+        self._memo: dict[int, list[int]] = {}
+        n = self.poset.n
+        self._binom = [[comb(i, k) for k in range(i + 1)] for i in range(n + 2)]
+        self._rec = None
+
+    def tail(self, s: int) -> list[int]:
+        if not s & self.marks:
+            raise ValueError("the set holds no marked element")
+        d = self._tail(s)
+        return d + [0] * (s.bit_count() - len(d))
+
+    # -------------------------------------------------------------- recursion
+    def _tail(self, s: int) -> list[int]:
+        r = self._memo.get(s)
+        if r is not None:
+            return r
+        if self._rec is None:
+            self._rec = self._make_recursion()
+        return self._rec(s)
+
+    def _make_recursion(self):
+        """The memoised recursion as a closure over local names (it is the hot path)."""
+        memo = self._memo
+        get = memo.get
+        below, above = self.poset.below, self.poset.above
+        marks = self.marks
+        count = self.counter.count
+        scan = self.counter.scan
+        binom = self._binom
+        merge, merge_plain = self._merge, self._merge_plain
+        perf = time.perf_counter
+        calls = [0]
+
+        def f(s: int) -> list[int]:
+            calls[0] += 1
+            if not calls[0] & 1023 and perf() > self.deadline:
+                raise BudgetExceeded("hub count exceeded its time limit", reason="time", memo_size=len(memo))
+            n = s.bit_count()
+            mins, cuts = scan(s)
+            comps = components(above, s, mins) if not cuts else ()
+            if len(comps) > 1:
+                # marked pieces merge pairwise; the unmarked ones form one block (multinomial × counts)
+                r = None
+                size = 0
+                plain_n, plain_e = 0, 1
+                for c in comps:
+                    k = c.bit_count()
+                    if c & marks:
+                        d = get(c) or f(c)
+                        r = d if r is None else merge(r, size, d, k)
+                        size += k
+                    else:
+                        plain_e *= (count(c) if k > 1 else 1) * binom[plain_n + k][k]
+                        plain_n += k
+                if plain_n:
+                    r = merge_plain(r, size, plain_e, plain_n)
+            elif cuts and n > 1:
+                cut = cuts.bit_length() - 1     # any cut element splits s into below and above it
+                lo, hi = s & below[cut], s & above[cut]
+                nh = hi.bit_count()
+                if hi & marks:
+                    e = count(lo) if lo else 1
+                    r = [v * e for v in (get(hi) or f(hi))]
+                elif marks >> cut & 1:
+                    r = [0] * (nh + 1)
+                    r[nh] = (count(lo) if lo else 1) * (count(hi) if hi else 1)
+                else:
+                    e = count(hi) if hi else 1
+                    r = [0] * (nh + 1) + [v * e for v in (get(lo) or f(lo))]
+            else:
+                r = None
+                last = 0
+                m = mins
+                while m:
+                    b = m & -m
+                    m ^= b
+                    rest = s ^ b
+                    if rest & marks:
+                        d = get(rest) or f(rest)
+                        if r is None:
+                            r = d
+                        elif len(r) >= len(d):
+                            r = [x + y for x, y in zip(r, d)] + r[len(d):]
+                        else:
+                            r = [x + y for x, y in zip(d, r)] + d[len(r):]
+                    else:                       # b is the last marked element
+                        last += count(rest) if rest else 1
+                if last:
+                    r = (r or []) + [0] * (n - len(r or ()))
+                    r[n - 1] += last
+            while not r[-1]:
+                r.pop()                         # no orders with that many elements after the last mark
+            memo[s] = r
+            return r
+
+        return f
+
+    def _merge_plain(self, d: list[int], n1: int, e: int, m: int) -> list[int]:
+        """Shuffle a marked piece (vector ``d``, ``n1`` elements) with an unmarked one (``m`` elements, ``e`` orders)."""
+        row = self._binom[n1 - 1]
+        u = [v * row[i] for i, v in enumerate(d)]
+        w = [e * c for c in self._binom[m]]
+        return self._unscale(_convolve(u, w), n1, m)
+
+    def _merge(self, d1: list[int], n1: int, d2: list[int], n2: int) -> list[int]:
+        """Shuffle two marked pieces: the later of the two marks is the last mark of the union."""
+        out = None
+        for da, na, db, nb in ((d1, n1, d2, n2), (d2, n2, d1, n1)):
+            # the mark of piece a comes last: j <= b_b elements of piece b follow it
+            tails = [0] * len(db)
+            acc = 0
+            for j in range(len(db) - 1, -1, -1):
+                acc += db[j]
+                tails[j] = acc
+            row_a, row_b = self._binom[na - 1], self._binom[nb]
+            u = [v * row_a[i] for i, v in enumerate(da)]
+            w = [t * row_b[j] for j, t in enumerate(tails)]
+            part = self._unscale(_convolve(u, w), na, nb)
+            out = part if out is None else _add(out, part)
+        return out
+
+    def _unscale(self, w: list[int], na: int, nb: int) -> list[int]:
+        """Undo the binomial scaling of a merge of pieces of ``na`` (marked) and ``nb`` elements.
+
+        Entry ``c`` of the merged vector is ``w[c] (N-1-c)! c! / ((na-1)! nb!)``
+        with ``N = na + nb``, i.e. ``w[c] C(N-1, nb) / C(N-1, c)`` (exact).
+        """
+        row = self._binom[na + nb - 1]
+        k = row[nb]
+        total = na + nb
+        return [w[c] * k // row[c] for c in range(min(len(w), total))]
+
+
+def _add(u: list[int], w: list[int]) -> list[int]:
+    """Elementwise sum of two coefficient lists of any lengths."""
+    if len(u) < len(w):
+        u, w = w, u
+    return [x + y for x, y in zip(u, w)] + u[len(w):]
+
+
+def _convolve(u: list[int], w: list[int]) -> list[int]:
+    """Coefficients of the product of two polynomials with non-negative int coefficients.
+
+    Long ones go through one big-int product (Kronecker substitution: pack
+    each list into an int with fields wide enough for any coefficient).
+    """
+    nu, nw = len(u), len(w)
+    if nu < 6 or nw < 6:
+        out = [0] * (nu + nw - 1)
+        for i, a in enumerate(u):
+            if a:
+                for j, b in enumerate(w):
+                    out[i + j] += a * b
+        return out
+    width = (max(u).bit_length() + max(w).bit_length() + min(nu, nw).bit_length() + 8) // 8
+    pu = int.from_bytes(b"".join(x.to_bytes(width, "little") for x in u), "little")
+    pw = int.from_bytes(b"".join(x.to_bytes(width, "little") for x in w), "little")
+    k = nu + nw - 1
+    raw = (pu * pw).to_bytes(width * k, "little")
+    return [int.from_bytes(raw[i * width:(i + 1) * width], "little") for i in range(k)]
+
+
+def hub_candidates(poset: Poset, s: int, *, max_coupling: int = 4) -> list[tuple[int, list[tuple[int, int]]]]:
+    """Elements of ``s`` worth splitting at, best first, with their coupling relations.
+
+    A candidate ``h`` has elements both below and above it in ``s``; its
+    coupling relations are the cover pairs ``(b, a)`` with ``a`` above ``h`` and
+    ``b`` neither below nor above ``h``.  Candidates with more than
+    ``max_coupling`` of them are left out (inclusion–exclusion doubles the work
+    per relation).  Order: most cover predecessors first (the branches ``h``
+    joins are the glue the split removes), then most elements below, then
+    fewest coupling relations.  O(n + covers) per element.
+
+    >>> p = Poset.from_pairs(5, [(0, 2), (1, 2), (2, 3), (2, 4)])
+    >>> hub_candidates(p, p.full)
+    [(2, [])]
+    """
+    below, above = poset.below, poset.above
+    covers = [(a, b) for a, b in poset.cover_pairs() if s >> a & 1 and s >> b & 1]
+    indegree = [0] * poset.n
+    for _, b in covers:
+        indegree[b] += 1
+    out = []
+    for h in bits(s):
+        up, down = above[h] & s, below[h] & s
+        if not up or down.bit_count() < 2:
+            continue
+        related = up | down | 1 << h
+        coupling = [(b, a) for b, a in covers if up >> a & 1 and not related >> b & 1]
+        if len(coupling) <= max_coupling:
+            out.append((-indegree[h], -down.bit_count(), len(coupling), h, coupling))
+    out.sort()
+    return [(h, coupling) for *_, h, coupling in out]
+
+
+def hub_split(counter: Counter, s: int, *, time_limit: float, tries: int = 3, probe_memo: int = 100_000) -> int | None:
+    """Exact count of ``s`` by the first hub split that works within ``time_limit`` seconds, else None.
+
+    Takes up to ``tries`` candidates of :func:`hub_candidates`; a candidate is
+    used only if the part left without the hub and what follows it is cheap
+    for the plain counter (at most ``probe_memo`` new memo entries) — that is
+    the sign that the hub was the glue.  On success the count is stored in
+    ``counter``'s memo, so later counts that contain ``s`` as a piece are exact.
+
+    >>> p = Poset.from_pairs(6, [(0, 2), (1, 2), (2, 3), (4, 3), (2, 5)])
+    >>> hub_split(Counter(p), p.full, time_limit=5) == Counter(p).count()
+    True
+    """
+    deadline = time.perf_counter() + time_limit
+    above = counter.poset.above
+    saved = counter.max_memo, counter.time_limit
+    try:
+        for h, coupling in hub_candidates(counter.poset, s)[:tries]:
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                return None
+            counter.max_memo, counter.time_limit = probe_memo, left
+            try:
+                counter.count(s & ~above[h] & ~(1 << h))
+            except BudgetExceeded:
+                continue
+            counter.max_memo, counter.time_limit = None, None
+            try:
+                value = hub_count(counter, s, h, coupling, time_limit=deadline - time.perf_counter())
+            except BudgetExceeded:
+                return None
+            if value is not None:
+                counter.learn(s, value)
+                return value
+        return None
+    finally:
+        counter.max_memo, counter.time_limit = saved
+
+
+def hub_count(counter: Counter, s: int, h: int, coupling: list[tuple[int, int]], *,
+              time_limit: float | None = None) -> int | None:
+    """Exact number of linear extensions of ``s`` by splitting at hub ``h`` (see the module doc).
+
+    ``coupling`` is the list from :func:`hub_candidates`.  Returns None when a
+    term of the inclusion–exclusion does not have the hub form (a reversed
+    relation brings new coupling); raises :class:`BudgetExceeded` after
+    ``time_limit`` seconds.  Cost: ``2^len(coupling)`` tail distributions
+    (sharing one memo) plus small counts of the parts above ``h``.
+
+    >>> p = Poset.from_pairs(6, [(0, 2), (1, 2), (2, 3), (4, 3), (2, 5)])
+    >>> hub_count(Counter(p), p.full, 2, [(4, 3)]) == Counter(p).count()
+    True
+    """
+    poset = counter.poset
+    deadline = time.perf_counter() + time_limit if time_limit is not None else float("inf")
+    below, above = poset.below, poset.above
+    down = below[h] & s
+    tails = TailCounter(counter, down, deadline=deadline)
+    dropped = set(coupling)
+    base = [pair for pair in poset.cover_pairs() if pair not in dropped and s >> pair[0] & 1 and s >> pair[1] & 1]
+    # Twins (same elements below and above within s) are interchangeable, so flipping
+    # the relation of one twin or of the other gives the same count: compute it once.
+    twin = {}
+    for b, _ in coupling:
+        twin[b] = min(x for x in bits(s) if (below[x] ^ below[b]) & s == 0 and (above[x] ^ above[b]) & s == 0)
+    seen: dict[tuple, int] = {}
+    total = 0
+    for k in range(len(coupling) + 1):
+        for flipped in combinations(coupling, k):
+            key = tuple(sorted((twin[b], a) for b, a in flipped))
+            term = seen.get(key)
+            if term is None:
+                term = seen[key] = _hub_term(counter, tails, s, h, down, base, flipped)
+                if term is None:
+                    return None                 # still coupled: not of the hub form
+            total += -term if k % 2 else term
+    return total
+
+
+def _hub_term(counter, tails, s, h, down, base, flipped) -> int | None:
+    """e(Q + reversed ``flipped``) on ``s`` by the hub formula (0 if the reversals form a cycle)."""
+    poset = counter.poset
+    try:
+        q = Poset.from_pairs(poset.n, base + [(a, b) for b, a in flipped])
+    except CycleError:
+        return 0                                # the reversed relations contradict each other: no orders
+    up = q.above[h] & s
+    rest = s & ~up & ~(1 << h)
+    if any(q.above[b] & up for b in bits(rest & ~down)):
+        return None
+    # relations inside `rest` are those of the original order (only relations into A changed)
+    size_a = up.bit_count()
+    e_a = Counter(q, max_memo=None).count(up) if up else 1
+    d = tails.tail(rest)
+    return e_a * sum(v * comb(b + 1 + size_a, 1 + size_a) for b, v in enumerate(d))
