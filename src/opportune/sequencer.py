@@ -14,6 +14,7 @@ Action(kind='buffer', part='rl', source=None)
 
 from __future__ import annotations
 
+import math
 from collections import Counter as Tally
 from dataclasses import dataclass, field, replace
 from typing import Iterable, Literal
@@ -52,6 +53,15 @@ class State:
     capacity: int | None = None
     defects: int = 0
 
+    @classmethod
+    def _make(cls, schedule: Schedule, buffer: tuple[str, ...], capacity: int | None) -> "State":
+        """A state from trusted values, without the dataclass's keyword handling (a simulation
+        builds one per decision)."""
+        s = object.__new__(cls)
+        d = s.__dict__
+        d["schedule"], d["buffer"], d["capacity"], d["defects"] = schedule, buffer, capacity, 0
+        return s
+
     @property
     def plan(self) -> Plan:
         return self.schedule.plan
@@ -66,7 +76,7 @@ class State:
 
     @property
     def buffer_free(self) -> float:
-        return float("inf") if self.capacity is None else self.capacity - len(self.buffer)
+        return math.inf if self.capacity is None else self.capacity - len(self.buffer)
 
     @property
     def in_bin(self) -> dict[str, int]:

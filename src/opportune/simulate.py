@@ -27,6 +27,7 @@ from opportune.engine import OrderEngine
 from opportune.engine.schedule import Schedule
 from opportune.plan import Plan
 from opportune.policies.base import Action
+from opportune.sequencer import State
 from opportune.worlds import PalletWorld, TimeModel, World, make_world
 
 STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", "random", "optimal")
@@ -103,6 +104,8 @@ class TrialResult:
 
 METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time")
 DECISION_CACHE_LIMIT = 200_000  # cached decisions per strategy and worker before starting afresh
+CACHE_PROBE_LOOKS = 20_000  # looks after which a decision cache that rarely answers is dropped
+CACHE_MIN_HITS = 0.2  # the share of looks a decision cache must answer to be kept
 ALIKE_KEY_UNITS = 24  # plans up to this many units cache decisions by the policy's decision_key
 
 
@@ -197,7 +200,10 @@ def capacity_for(strategy: str, config: StudyConfig) -> int | None:
 
 
 class TrialRunner:
-    """Runs trials of one strategy; keeps decision and transition caches across trials."""
+    """Runs trials of one strategy; keeps decision and transition caches across trials.
+
+    The decision cache is dropped once it is seen to answer few looks (see :meth:`_review_cache`).
+    """
 
     def __init__(self, strategy: str, engine: OrderEngine, config: StudyConfig, prepared: Prepared):
         self.strategy = strategy
@@ -219,15 +225,24 @@ class TrialRunner:
         use_key = make_key is not None and self.cache is not None and engine.n_units <= ALIKE_KEY_UNITS
         self._key = make_key(engine, self.capacity) if use_key else None
         self._canonical: dict = {}
+        self._looked = self._decided = 0  # looks and decisions made, while there is a cache
+        self.limit = config.step_limit
 
     def _decide(self, mask, cons, installed, buffer, look) -> Action:
-        from opportune.sequencer import State
-
-        state = State(Schedule._make(self.engine, tuple(installed), mask, cons), buffer=buffer,
-                      capacity=self.capacity)
+        state = State._make(Schedule._make(self.engine, tuple(installed), mask, cons), buffer, self.capacity)
         if self._choose is not None:
             return self._choose(state, look)
         return self.policy.decide(state, look).action
+
+    def _review_cache(self, looks: int, decided: int) -> None:
+        """Drop the decision cache if it answers too few looks to pay for its keys and memory
+        (on large plans situations rarely recur: every look is then a new key)."""
+        self._looked += looks
+        self._decided += decided
+        if self._looked >= CACHE_PROBE_LOOKS and self._decided > (1 - CACHE_MIN_HITS) * self._looked:
+            self.cache = None
+            self._key = None
+            self._canonical = {}
 
     def _install(self, mask, cons, part):
         key = (mask, cons, part)
@@ -236,6 +251,8 @@ class TrialRunner:
             engine = self.engine
             u = engine.next_unit(mask, self.index[part])
             t = (mask | 1 << u, engine.consistent_after(mask, cons, u))
+            if len(self.transitions) >= DECISION_CACHE_LIMIT:  # bounded memory, as for decisions
+                self.transitions.clear()
             self.transitions[key] = t
         return t
 
@@ -251,10 +268,10 @@ class TrialRunner:
         look_at, take = world.look, world.take
         full = engine.full
         mask, cons, buffer, installed = 0, engine.all_strategies, (), []
-        motions = buffer_moves = shakes = looks = peak = 0
+        motions = buffer_moves = shakes = looks = peak = decided = 0
         t = 0.0
         index = self.index
-        limit = self.config.step_limit
+        limit = self.limit
         while mask != full:
             if looks >= limit:
                 break
@@ -272,11 +289,13 @@ class TrialRunner:
                 if code is None:
                     if keyfn is None:
                         code = _code(self._decide(mask, cons, installed, buffer, look))
+                        decided += 1
                     else:  # an equivalent situation may have been decided already
                         alike = keyfn(mask, cons, buffer, look)
                         code = canonical.get(alike)
                         if code is None:
                             code = canonical[alike] = _code(self._decide(mask, cons, installed, buffer, look))
+                            decided += 1
                     if len(cache) >= DECISION_CACHE_LIMIT:  # bounded memory on large plans
                         cache.clear()
                     cache[key] = code
@@ -311,14 +330,19 @@ class TrialRunner:
             else:  # done before completion cannot happen; guard against a policy bug
                 raise RuntimeError(f"policy {self.strategy} said 'done' before the assembly was complete")
         t += looks * costs.look
+        if cache is not None:
+            self._review_cache(looks, decided)
         return TrialResult(self.strategy, trial, motions, buffer_moves, shakes, looks, peak, t, mask == full)
+
+
+_OPS = {"buffer": 2, "shake": 3}
 
 
 def _code(action: Action) -> tuple[int, str | None]:
     """An action in the compact form the trial loop caches."""
     if action.kind == "install":
         return (1 if action.source == "buffer" else 0, action.part)
-    return ({"buffer": 2, "shake": 3}.get(action.kind, 4), action.part)
+    return (_OPS.get(action.kind, 4), action.part)
 
 
 def trial_seed(seed: int, trial: int, stream: int) -> int:
@@ -462,22 +486,18 @@ def _run_forked_chunk(strategy: str, start: int, stop: int) -> list[tuple]:
 
 
 def _run_processes(workers, config, prepared, jobs, results, seconds, started, progress):
+    """The chunks on a pool of ``workers`` processes, each handed out as a worker frees up.
+
+    No chunk runs here before the pool starts: each worker's caches warm up on its own first
+    trials about as fast as they would on a warm-up run here, while a warm-up run here would
+    leave every other core idle for its whole length.
+    """
     import multiprocessing as mp
 
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else None
     global _FORKED_STUDY
     # Forked workers inherit the study (no pickling of the plan or the optimum's table per chunk).
     _FORKED_STUDY = (config, prepared) if ctx is not None else None
-    if ctx is not None:
-        # Run each strategy's first chunk here before forking: the workers then start with the
-        # decisions of the most common states already cached, instead of each computing them again.
-        first = {}
-        for job in jobs:
-            first.setdefault(job[0], job)
-        for s, a, b in first.values():
-            started.setdefault(s, _time.perf_counter())
-            _collect(s, run_chunk(config, prepared, s, a, b), results, seconds, started, progress)
-        jobs = [job for job in jobs if job not in first.values()]
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
     try:
         pending = {}

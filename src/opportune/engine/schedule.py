@@ -29,7 +29,7 @@ import random
 from dataclasses import dataclass
 from fractions import Fraction
 from itertools import combinations
-from typing import Iterable, Sequence
+from typing import Collection, Iterable, Sequence
 
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.poset import CycleError, Poset
@@ -107,13 +107,18 @@ class OrderEngine:
         self.k = len(self.posets)
         self.all_strategies = (1 << self.k) - 1
         self._counters: dict[int, Counter | None] = {}
-        self._count_cache: dict[tuple[int, int], int] = {}
-        self._options_cache: dict[tuple[int, int], dict[str, int]] = {}
-        self._positions_cache: dict[tuple[int, int], dict[str, Fraction]] = {}
-        self._option_cache: dict[tuple[int, int, str], int] = {}
+        # Per-state caches, keyed by mask | consistent << n_units: one int, no tuple to build and hash.
+        self._count_cache: dict[int, int] = {}
+        self._options_cache: dict[int, dict[str, int]] = {}
+        self._positions_cache: dict[int, tuple[int, dict[int, int]]] = {}  # (count, unit sums)
+        self._option_cache: dict[int, tuple[dict, dict[str, int]]] = {}  # (installable, options)
+        self._installable_cache: dict[int, frozenset[str]] = {}
         self._terms_cache: dict[int, list] = {}
-        self._installable_cache: dict[tuple[int, int], frozenset[str]] = {}
         self._quantity = [p.quantity for p in plan.parts]
+        self._nbytes = max(1, (self.n_units + 7) // 8)
+        self._above: list | None = None
+        self._unit_ids = [plan.parts[i].id for i in self.unit_part]
+        self._part_units = {p.id: ((1 << p.quantity) - 1) << self.first[i] for i, p in enumerate(plan.parts)}
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -153,6 +158,8 @@ class OrderEngine:
 
     def consistent_after(self, mask: int, consistent: int, unit: int) -> int:
         """Strategies (bitmask) in which ``unit`` can be installed on top of ``mask``."""
+        if self.k == 1:  # the common case: no loop
+            return consistent if self.posets[0].below[unit] & ~mask == 0 else 0
         out = 0
         for s in range(self.k):
             if consistent >> s & 1 and self.posets[s].below[unit] & ~mask == 0:
@@ -180,26 +187,27 @@ class OrderEngine:
 
     def count(self, mask: int, consistent: int) -> int:
         """Exact number of admissible completions after installing ``mask`` (raises BudgetExceeded)."""
-        key = (mask, consistent)
+        terms = self._terms_cache.get(consistent)
+        if terms is None:
+            terms = self._terms(consistent)
+        if len(terms) == 1:  # one strategy: no inclusion–exclusion, and the counter's memo is the cache
+            return terms[0][1].count(self.full & ~mask)
+        key = mask | consistent << self.n_units
         cached = self._count_cache.get(key)
         if cached is not None:
             return cached
         if len(self._count_cache) > STATE_CACHE_LIMIT:
             self._trim()
         remaining = self.full & ~mask
-        terms = self._terms(consistent)
-        if len(terms) == 1:  # one strategy: no inclusion–exclusion
-            total = terms[0][1].count(remaining)
-        else:
-            total = 0
-            for sign, counter in terms:
-                total += sign * counter.count(remaining)
+        total = 0
+        for sign, counter in terms:
+            total += sign * counter.count(remaining)
         self._count_cache[key] = total
         return total
 
     def options(self, mask: int, consistent: int) -> dict[str, int]:
         """For each part installable now: admissible completions left after installing it (declaration order)."""
-        key = (mask, consistent)
+        key = mask | consistent << self.n_units
         cached = self._options_cache.get(key)
         if cached is not None:
             return cached
@@ -216,61 +224,115 @@ class OrderEngine:
 
     def installable_set(self, mask: int, consistent: int) -> frozenset[str]:
         """The parts installable in a state, as a set (cached; no counting)."""
-        key = (mask, consistent)
+        key = mask | consistent << self.n_units
         out = self._installable_cache.get(key)
         if out is None:
-            out = frozenset(
-                part.id for i, part in enumerate(self.plan.parts)
-                if (u := self.next_unit(mask, i)) is not None and self.consistent_after(mask, consistent, u))
+            out = frozenset(self._installable_parts(mask, consistent))
             self._installable_cache[key] = out
         return out
 
-    def options_for(self, mask: int, consistent: int, parts: Iterable[str]) -> dict[str, int]:
+    def options_for(self, mask: int, consistent: int, parts: Collection[str]) -> dict[str, int]:
         """:meth:`options` restricted to ``parts`` (those installable), counting only what is asked.
 
         On large plans a decision needs the options of the few visible or buffered
-        parts, not of every installable part; results are cached per state and part.
+        parts, not of every installable part.  Per state, the installable parts are
+        found once and each count is cached; a decision then walks the installable
+        parts (usually fewer than the parts asked about: a buffer can be long).
+        Declaration order, like :meth:`options`.
         """
-        full = self._options_cache.get((mask, consistent))
-        if full is not None:
-            return {p: full[p] for p in parts if p in full}
+        key = mask | consistent << self.n_units
+        entry = self._option_cache.get(key)
+        if entry is None:
+            full = self._options_cache.get(key)
+            if full is not None:
+                return {p: n for p, n in full.items() if p in parts}
+            if len(self._option_cache) > STATE_CACHE_LIMIT:
+                self._trim()
+            entry = self._option_cache[key] = (self._installable_parts(mask, consistent), {})
+        can, known = entry
         out: dict[str, int] = {}
-        cache = self._option_cache
-        for part in parts:
-            key = (mask, consistent, part)
-            value = cache.get(key)
-            if value is None:
-                if len(cache) > STATE_CACHE_LIMIT:
-                    self._trim()
-                i = self.plan.index(part)
-                u = self.next_unit(mask, i)
-                after = self.consistent_after(mask, consistent, u) if u is not None else 0
-                value = cache[key] = self.count(mask | 1 << u, after) if after else -1
-            if value >= 0:
+        for part, unit in can.items():
+            if part in parts:
+                value = known.get(part)
+                if value is None:
+                    after = self.consistent_after(mask, consistent, unit.bit_length() - 1)
+                    value = known[part] = self.count(mask | unit, after)
                 out[part] = value
         return out
 
-    def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
-        """Expected position (1 = next) of each remaining part's next unit; cached per state."""
-        key = (mask, consistent)
-        cached = self._positions_cache.get(key)
-        if cached is not None:
-            return cached
-        total = self.count(mask, consistent)
-        sums = self.position_sums(mask, consistent)
+    def _installable_parts(self, mask: int, consistent: int) -> dict[str, int]:
+        """The parts installable in a state, each with its next unit as a bit (declaration order)."""
+        can = self.installable_units(mask, consistent)
+        ids = self._unit_ids
         out = {}
-        for i, part in enumerate(self.plan.parts):
-            u = self.next_unit(mask, i)
-            if u is not None:
-                out[part.id] = Fraction(sums[u], total)
-        self._positions_cache[key] = out
+        while can:
+            low = can & -can
+            out[ids[low.bit_length() - 1]] = low
+            can ^= low
         return out
+
+    def installable_units(self, mask: int, consistent: int) -> int:
+        """Bitmask of the units that can be installed now: the minimal remaining units under some
+        consistent strategy (at most one per part, its next unit: a part's units are chained).
+
+        A unit is minimal unless it is above some remaining unit; the union of what lies above
+        the remaining units is gathered a byte of the set at a time from :meth:`_above_tables`.
+        """
+        remaining = self.full & ~mask
+        data = remaining.to_bytes(self._nbytes, "little")
+        out = 0
+        for s, tables in enumerate(self._above_tables()):
+            if consistent >> s & 1:
+                up = 0
+                for table, byte in zip(tables, data):
+                    if byte:
+                        up |= table[byte]
+                out |= remaining & ~up
+        return out
+
+    def _above_tables(self) -> list[list[list[int]]]:
+        """Per strategy and byte ``j`` of a unit set: ``table[v]`` is the union of ``above[u]``
+        over the units ``u`` that the byte value ``v`` holds (built on first use)."""
+        tables = self._above
+        if tables is None:
+            tables = self._above = [_byte_unions(poset.above, self.n_units) for poset in self.posets]
+        return tables
+
+    def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
+        """Expected position (1 = next) of each remaining part's next unit (declaration order)."""
+        total, sums = self.position_sums_for(mask, consistent, (p.id for p in self.plan.parts))
+        return {part: Fraction(s, total) for part, s in sums.items()}
+
+    def position_sums_for(self, mask: int, consistent: int, parts: Iterable[str]) -> tuple[int, dict[str, int]]:
+        """``(completions, {part: sum of its next unit's positions})`` for those of ``parts`` remaining.
+
+        Each sum over the completions count is an expected position: one denominator for
+        all, so comparing sums compares expected positions, without fractions.  Computed
+        once per state (a buffer decision compares the two or three visible parts).
+        """
+        key = mask | consistent << self.n_units
+        table = self._positions_cache.get(key)
+        if table is None:
+            if len(self._positions_cache) > STATE_CACHE_LIMIT:
+                self._trim()
+            table = self._positions_cache[key] = (self.count(mask, consistent), self.position_sums(mask, consistent))
+        total, by_unit = table
+        units = self._part_units
+        out: dict[str, int] = {}
+        for part in parts:
+            left = units[part] & ~mask
+            if left:  # the next unit is the lowest one left
+                out[part] = by_unit[(left & -left).bit_length() - 1]
+        return total, out
 
     def position_sums(self, mask: int, consistent: int) -> dict[int, int]:
         """Sum over all admissible completions of each remaining unit's 1-based position."""
         remaining = self.full & ~mask
+        terms = self._terms(consistent)
+        if len(terms) == 1:  # one strategy: the counter's own (fresh) table
+            return terms[0][1].position_sums(remaining)
         sums: dict[int, int] = {}
-        for sign, counter in self._terms(consistent):
+        for sign, counter in terms:
             for unit, value in counter.position_sums(remaining).items():
                 sums[unit] = sums.get(unit, 0) + sign * value
         return sums
@@ -429,8 +491,8 @@ class Schedule:
         """
         return self.engine.options(self.mask, self.consistent)
 
-    def options_for(self, parts: Iterable[str]) -> dict[str, int]:
-        """:meth:`options` for just these parts (those of them installable now), in the order given."""
+    def options_for(self, parts: Collection[str]) -> dict[str, int]:
+        """:meth:`options` for just these parts (those of them installable now; declaration order)."""
         return self.engine.options_for(self.mask, self.consistent, parts)
 
     def next_probabilities(self) -> dict[str, Fraction]:
@@ -443,7 +505,12 @@ class Schedule:
 
         For a part with several units left, the position of its next unit: when it is first needed.
         """
-        return dict(self.engine.expected_positions(self.mask, self.consistent))
+        return self.engine.expected_positions(self.mask, self.consistent)
+
+    def position_sums_for(self, parts: Iterable[str]) -> tuple[int, dict[str, int]]:
+        """``(completions, position sums)`` of these parts (those remaining): each sum divided by
+        the completions is the part's expected position (see :meth:`expected_positions`)."""
+        return self.engine.position_sums_for(self.mask, self.consistent, parts)
 
     def sample(self, seed: int | random.Random | None = 0) -> list[str]:
         """One admissible completion drawn uniformly at random (exactly, from the counts)."""
@@ -485,6 +552,20 @@ class Schedule:
 
     def __hash__(self) -> int:
         return hash((id(self.engine), self.installed))
+
+
+def _byte_unions(sets: Sequence[int], n: int) -> list[list[int]]:
+    """For each byte ``j`` of an ``n``-bit set: the union of ``sets[8 j + i]`` over the bits ``i`` of
+    every byte value (index 0..255)."""
+    out = []
+    for j in range((n + 7) // 8 or 1):
+        table = [0] * 256
+        for v in range(1, 256):
+            low = v & -v
+            i = 8 * j + low.bit_length() - 1
+            table[v] = table[v ^ low] | (sets[i] if i < n else 0)
+        out.append(table)
+    return out
 
 
 def _bits(mask: int):

@@ -48,6 +48,17 @@ class Action:
 INSTALL_FROM_BIN = "bin"
 SHAKE = Action("shake")
 DONE = Action("done")
+_SHARED_ACTIONS: dict[tuple, Action] = {}
+
+
+def shared_action(kind: ActionKind, part: str | None = None, source: Source | None = None) -> Action:
+    """``Action(kind, part, source)``, one shared object per value (actions are immutable, and
+    a simulation asks for millions of the same few)."""
+    key = (kind, part, source)
+    a = _SHARED_ACTIONS.get(key)
+    if a is None:
+        a = _SHARED_ACTIONS[key] = Action(kind, part, source)
+    return a
 
 
 @dataclass(frozen=True)

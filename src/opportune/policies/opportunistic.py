@@ -16,39 +16,49 @@ in the bin and those in buffer locations.
 
 from __future__ import annotations
 
-from opportune.policies.base import DONE, SHAKE, Action, Candidate, Decision
+from fractions import Fraction
+
+from opportune.policies.base import DONE, SHAKE, Action, Candidate, Decision, shared_action
 
 
 def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
     """Installable candidates best first, as ``(sort key, part, source, buffer position)``.
 
     The sort key is rule 1: most options, bin before buffer, lower cost,
-    buffered longest, declaration order.
+    buffered longest, declaration order.  A part both visible and buffered is
+    a candidate from each; a part buffered twice, from its first location.
     """
-    options = state.schedule.options_for(dict.fromkeys((*visible, *state.buffer)))
+    buffer = state.buffer
+    options = state.schedule.options_for((*visible, *buffer))  # the installable ones, with their options
     if not options:
         return []
     plan = state.plan
     out = []
-    for part in set(visible):
-        n = options.get(part)
-        if n is not None:
-            out.append(((-n, 0, plan.part(part).cost, -1, plan.index(part)), part, "bin", None))
-    seen = set()
-    for pos, part in enumerate(state.buffer):
-        n = options.get(part)
-        if n is not None and part not in seen:
-            seen.add(part)
-            out.append(((-n, 1, plan.part(part).cost, pos, plan.index(part)), part, "buffer", pos))
+    for part, n in options.items():  # only the installable ones: usually few, while the buffer can be long
+        cost, index = plan.part(part).cost, plan.index(part)
+        if part in visible:
+            out.append(((-n, 0, cost, -1, index), part, "bin", None))
+        if part in buffer:
+            pos = buffer.index(part)
+            out.append(((-n, 1, cost, pos, index), part, "buffer", pos))
     out.sort()
     return out
 
 
 def buffer_choice(state, visible: tuple[str, ...]) -> list[tuple]:
     """Visible parts ranked by rule 2, as ``(expected position, declaration index, part)``."""
-    positions = state.schedule.expected_positions()
+    total, ranked = _buffer_ranking(state, visible)
+    return [(Fraction(s, total), index, part) for s, index, part in ranked]
+
+
+def _buffer_ranking(state, visible: tuple[str, ...]) -> tuple[int, list[tuple]]:
+    """Rule 2 on integers: ``(completions, [(position sum, declaration index, part), ...])``, best first.
+
+    The expected positions are the sums over one denominator, the completions.
+    """
+    total, sums = state.schedule.position_sums_for(set(visible))
     plan = state.plan
-    return sorted((positions[p], plan.index(p), p) for p in set(visible))
+    return total, sorted((s, plan.index(p), p) for p, s in sums.items())
 
 
 class Opportunistic:
@@ -64,9 +74,9 @@ class Opportunistic:
         ranked = ranked_candidates(state, visible)
         if ranked:
             _, part, source, _ = ranked[0]
-            return Action("install", part, source)
+            return shared_action("install", part, source)
         if visible and state.buffer_free > 0:
-            return Action("buffer", buffer_choice(state, visible)[0][2])
+            return shared_action("buffer", _buffer_ranking(state, visible)[1][0][2])
         return SHAKE
 
     @staticmethod
