@@ -16,6 +16,7 @@ executors.
 
 from __future__ import annotations
 
+import gc
 import math
 import random
 import time as _time
@@ -104,7 +105,7 @@ class TrialResult:
 
 METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time")
 DECISION_CACHE_LIMIT = 200_000  # cached decisions per strategy and worker before starting afresh
-CACHE_PROBE_LOOKS = 20_000  # looks after which a decision cache that rarely answers is dropped
+CACHE_PROBE_LOOKS = 2_000  # looks after which a decision cache that rarely answers is dropped
 CACHE_MIN_HITS = 0.2  # the share of looks a decision cache must answer to be kept
 ALIKE_KEY_UNITS = 24  # plans up to this many units cache decisions by the policy's decision_key
 
@@ -218,7 +219,8 @@ class TrialRunner:
         self.cache: dict | None = {} if getattr(self.policy, "deterministic", False) else None
         self.transitions: dict = {}
         self.move = {p: self.costs.move(p) for p in engine.plan.part_ids}
-        self._choose = getattr(self.policy, "choose", None)  # the action without its reasons, where offered
+        # The action without its reasons, on the machine form of the state, where the policy offers it.
+        self._choose_at = getattr(self.policy, "choose_at", None)
         # A policy may say which situations it decides alike: fewer distinct keys, more cache hits.
         # (Only on plans small enough for situations to recur; on large ones the key is pure overhead.)
         make_key = getattr(self.policy, "decision_key", None)
@@ -229,16 +231,41 @@ class TrialRunner:
         self.limit = config.step_limit
 
     def _decide(self, mask, cons, installed, buffer, look) -> Action:
+        if self._choose_at is not None:
+            free = math.inf if self.capacity is None else self.capacity - len(buffer)
+            return self._choose_at(self.engine, mask, cons, buffer, free, look)
         state = State._make(Schedule._make(self.engine, tuple(installed), mask, cons), buffer, self.capacity)
-        if self._choose is not None:
-            return self._choose(state, look)
         return self.policy.decide(state, look).action
 
-    def _review_cache(self, looks: int, decided: int) -> None:
+    def _fill(self, mask, cons, installed, buffer, look) -> tuple:
+        """The cached decision for a situation not seen yet, as ``(op, part, next (mask, strategies) or None)``:
+        an install carries the state it leads to, so a cache hit needs no second look-up."""
+        keyfn = self._key
+        if keyfn is not None:  # an equivalent situation may have been decided already
+            alike = keyfn(mask, cons, buffer, look)
+            code = self._canonical.get(alike)
+            if code is None:
+                code = self._canonical[alike] = _code(self._decide(mask, cons, installed, buffer, look))
+                self._decided += 1
+        else:
+            code = _code(self._decide(mask, cons, installed, buffer, look))
+            self._decided += 1
+        op, part = code
+        if op < 2:
+            nxt = self.transitions.get((mask, cons, part)) or self._install(mask, cons, part)
+            entry = (op, part, nxt)
+        else:
+            entry = (op, part, None)
+        cache = self.cache
+        if len(cache) >= DECISION_CACHE_LIMIT:  # bounded memory on large plans
+            cache.clear()
+        cache[(mask, cons, buffer, look)] = entry
+        return entry
+
+    def _review_cache(self, looks: int) -> None:
         """Drop the decision cache if it answers too few looks to pay for its keys and memory
         (on large plans situations rarely recur: every look is then a new key)."""
         self._looked += looks
-        self._decided += decided
         if self._looked >= CACHE_PROBE_LOOKS and self._decided > (1 - CACHE_MIN_HITS) * self._looked:
             self.cache = None
             self._key = None
@@ -264,11 +291,10 @@ class TrialRunner:
             start(random.Random(trial_seed(self.config.seed, trial, 1)))
         engine, cache, move, costs = self.engine, self.cache, self.move, self.costs
         transitions = self.transitions
-        keyfn, canonical = self._key, self._canonical
         look_at, take = world.look, world.take
         full = engine.full
         mask, cons, buffer, installed = 0, engine.all_strategies, (), []
-        motions = buffer_moves = shakes = looks = peak = decided = 0
+        motions = buffer_moves = shakes = looks = peak = 0
         t = 0.0
         index = self.index
         limit = self.limit
@@ -284,33 +310,21 @@ class TrialRunner:
             elif len(look) > 2:
                 look = tuple(sorted(look, key=index.__getitem__))
             if cache is not None:
-                key = (mask, cons, buffer, look)
-                code = cache.get(key)
+                code = cache.get((mask, cons, buffer, look))
                 if code is None:
-                    if keyfn is None:
-                        code = _code(self._decide(mask, cons, installed, buffer, look))
-                        decided += 1
-                    else:  # an equivalent situation may have been decided already
-                        alike = keyfn(mask, cons, buffer, look)
-                        code = canonical.get(alike)
-                        if code is None:
-                            code = canonical[alike] = _code(self._decide(mask, cons, installed, buffer, look))
-                            decided += 1
-                    if len(cache) >= DECISION_CACHE_LIMIT:  # bounded memory on large plans
-                        cache.clear()
-                    cache[key] = code
+                    code = self._fill(mask, cons, installed, buffer, look)
+                op, part, nxt = code
             else:
-                code = _code(self._decide(mask, cons, installed, buffer, look))
-            op, part = code
-            if op == 0 or op == 1:  # install from the bin / from the buffer
+                op, part = _code(self._decide(mask, cons, installed, buffer, look))
+                nxt = None
+            if op < 2:  # install from the bin (0) / from the buffer (1)
                 if op:
                     i = buffer.index(part)
                     buffer = buffer[:i] + buffer[i + 1:]
                 else:
                     take(part)
-                nxt = transitions.get((mask, cons, part))
                 if nxt is None:
-                    nxt = self._install(mask, cons, part)
+                    nxt = transitions.get((mask, cons, part)) or self._install(mask, cons, part)
                 mask, cons = nxt
                 installed.append(part)
                 motions += 1
@@ -331,7 +345,7 @@ class TrialRunner:
                 raise RuntimeError(f"policy {self.strategy} said 'done' before the assembly was complete")
         t += looks * costs.look
         if cache is not None:
-            self._review_cache(looks, decided)
+            self._review_cache(looks)
         return TrialResult(self.strategy, trial, motions, buffer_moves, shakes, looks, peak, t, mask == full)
 
 
@@ -400,7 +414,15 @@ def run_chunk(config: StudyConfig, prepared: Prepared, strategy: str, start: int
         if engine is None:
             engine = _WORKER_CACHE[engine_key] = OrderEngine(config.plan)
         runner = _WORKER_CACHE[key] = TrialRunner(strategy, engine, config, prepared)
-    return [runner.run(i).row() for i in range(start, stop)]
+    # Trials make no reference cycles, but they allocate millions of small tuples, and the cyclic
+    # collector would walk the ever-growing caches each time: pause it for the chunk.
+    paused = gc.isenabled()
+    gc.disable()
+    try:
+        return [runner.run(i).row() for i in range(start, stop)]
+    finally:
+        if paused:
+            gc.enable()
 
 
 def hash_config(config: StudyConfig) -> str:

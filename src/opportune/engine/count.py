@@ -50,11 +50,12 @@ from itertools import islice
 from math import factorial
 from typing import Callable
 
-from opportune.engine.poset import Poset, bits
+from opportune.engine.poset import Poset, bits, components
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
 
 _CHECK_EVERY = 256  # new memo entries between clock checks (a power of two)
+_NARROW = 48        # posets up to this size scan with three chunk tables of at most 16 bits
 _INF = float("inf")
 
 
@@ -380,12 +381,41 @@ class Counter:
             t = self._tabs = _byte_tables(self.poset)
         return t
 
+    def _narrow_tables(self):
+        """Tables for scanning a set of a poset of at most ``_NARROW`` elements in three look-ups.
+
+        The set is cut into three chunks of ``c = ceil(n / 3)`` bits; for chunk
+        ``j`` and its value ``v``, ``CAP[j][v]`` is the intersection of
+        ``{i} | below[i] | above[i]``, ``UP[j][v]`` the union of ``above[i]`` and
+        ``NB[j][v]`` the union of ``below[i] | above[i]`` over the elements ``i``
+        of that chunk (the byte tables of :meth:`_tables`, a chunk at a time).
+        """
+        t = getattr(self, "_ntabs", None)
+        if t is None:
+            p = self.poset
+            n = p.n
+            c = max(1, -(-n // 3))
+            t = self._ntabs = (
+                c,
+                _chunk_tables(c, [p.below[i] | p.above[i] | 1 << i for i in range(n)], -1, True),
+                _chunk_tables(c, list(p.above), 0, False),
+                _chunk_tables(c, [p.below[i] | p.above[i] for i in range(n)], 0, False))
+        return t
+
     def _make_counter(self) -> Callable[[int], int]:
         memo = self._memo
         poset = self.poset
         below = list(poset.below)
         above = list(poset.above)
-        nbytes, UP, CAP = self._tables()
+        # Small posets scan a set with three look-ups in chunk tables; larger ones a byte at a time.
+        narrow = poset.n <= _NARROW
+        if narrow:
+            c, (C0, C1, C2), (U0, U1, U2), (N0, N1, N2) = self._narrow_tables()
+            cmask = (1 << c) - 1
+            c2 = 2 * c
+            nbr = [below[i] | above[i] | 1 << i for i in range(poset.n)]
+        else:
+            nbytes, UP, CAP = self._tables()
         fact = [factorial(i) for i in range(poset.n + 1)]
         budget = self._budget
         get = memo.get
@@ -397,14 +427,20 @@ class Counter:
             r = get(s)
             if r is not None:
                 return r
-            # cut elements and minimal elements, a byte of s at a time (Counter.scan, inlined: hot path)
-            up = 0
-            cap = -1
-            for tu, tc, byte in zip(UP, CAP, s.to_bytes(nbytes, "little")):
-                if byte:
-                    up |= tu[byte]
-                    cap &= tc[byte]
-            cuts = s & cap
+            # cut elements (Counter.scan, inlined: this is the hot path)
+            if narrow:
+                a0 = s & cmask
+                a1 = (s >> c) & cmask
+                a2 = s >> c2
+                cuts = s & C0[a0] & C1[a1] & C2[a2]
+            else:
+                up = 0
+                cap = -1
+                for tu, tc, byte in zip(UP, CAP, s.to_bytes(nbytes, "little")):
+                    if byte:
+                        up |= tu[byte]
+                        cap &= tc[byte]
+                cuts = s & cap
             if cuts:
                 if cuts == s:
                     r = 1                       # a chain
@@ -420,47 +456,85 @@ class Counter:
                         v = get(block)
                         r *= v if v is not None else f(block)
                 else:
-                    # blocks between consecutive cut elements (the cuts form a chain)
+                    lo = cuts & -cuts
+                    hi = cuts ^ lo
+                    if hi & (hi - 1) == 0:      # two cut elements z1 < z2 (common: no sort needed)
+                        z1 = lo.bit_length() - 1
+                        z2 = hi.bit_length() - 1
+                        if not below[z2] >> z1 & 1:
+                            z1, z2 = z2, z1
+                        blocks = (s & below[z1], s & above[z1] & below[z2], s & above[z2])
+                    else:
+                        # blocks between consecutive cut elements (the cuts form a chain)
+                        blocks = []
+                        rest = s
+                        for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                            blocks.append(rest & below[zi])
+                            rest &= above[zi]
+                        blocks.append(rest)
                     r = 1
-                    rest = s
-                    for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
-                        block = rest & below[zi]
-                        rest &= above[zi]
+                    for block in blocks:
                         if block & (block - 1):
                             v = get(block)
                             r *= v if v is not None else f(block)
-                    if rest & (rest - 1):
-                        v = get(rest)
-                        r *= v if v is not None else f(rest)
             else:
-                # components (poset.components, inlined: this is the hot path)
-                m = s & ~up
-                mins = []
-                comps = []
-                while m:
-                    b = m & -m
-                    m ^= b
-                    mins.append(b)
-                    u = (above[b.bit_length() - 1] & s) | b
-                    keep = []
-                    for c in comps:
-                        if c & u:
-                            u |= c
-                        else:
-                            keep.append(c)
-                    keep.append(u)
-                    comps = keep
-                if len(comps) > 1:
+                # components
+                if narrow:
+                    # An element comparable to nothing else in s is a component by itself; the rest
+                    # falls into the closures, under comparability, of its top elements (a few look-ups
+                    # each, however many minimal elements s has).
+                    iso = s & ~(N0[a0] | N1[a1] | N2[a2])
+                    rest = s ^ iso
+                    comps = []
+                    while rest:
+                        x = nbr[rest.bit_length() - 1] & rest
+                        while True:
+                            y = rest & (x | N0[x & cmask] | N1[(x >> c) & cmask] | N2[x >> c2])
+                            if y == x:
+                                break
+                            x = y
+                        comps.append(x)
+                        rest ^= x
+                    if len(comps) > 1 or not iso:
+                        mins = s & ~(U0[a0] | U1[a1] | U2[a2])
+                        # recurse in the order of the overlap classes below (by highest minimal element),
+                        # so the memo fills in the same order whichever scan is used
+                        if len(comps) == 2:
+                            if comps[0] & mins > comps[1] & mins:
+                                comps.reverse()
+                        elif len(comps) > 2:
+                            comps.sort(key=mins.__and__)
+                else:
+                    # the overlap classes of the up-sets of the minimal elements (poset.components)
+                    mins = s & ~up
+                    iso = 0
+                    comps = []
+                    m = mins
+                    while m:
+                        b = m & -m
+                        m ^= b
+                        u = (above[b.bit_length() - 1] & s) | b
+                        keep = []
+                        for comp in comps:
+                            if comp & u:
+                                u |= comp
+                            else:
+                                keep.append(comp)
+                        keep.append(u)
+                        comps = keep
+                if iso or len(comps) > 1:
+                    # s!/(|C1|!...|Ck|!) e(C1)...e(Ck); every partial quotient is exact
                     r = fact[s.bit_count()]
-                    for comp in comps:
-                        r //= fact[comp.bit_count()]
                     for comp in comps:
                         if comp & (comp - 1):
                             v = get(comp)
-                            r *= v if v is not None else f(comp)
+                            r = r // fact[comp.bit_count()] * (v if v is not None else f(comp))
                 else:
                     r = 0
-                    for b in mins:
+                    m = mins
+                    while m:
+                        b = m & -m
+                        m ^= b
                         t = s ^ b
                         v = get(t)
                         r += v if v is not None else f(t)
@@ -478,14 +552,60 @@ class Counter:
 
         return f
 
+    def _make_split(self) -> Callable[[int], tuple]:
+        """``split(s)`` for a set of at least two elements: how rules 1–2 apply to it, as in the counter.
+
+        Returns ``(chain, comps, iso, mins)``: ``chain`` is the list of cut
+        elements in order (None if there are none, and then the rest is not
+        computed); otherwise ``comps`` are the components, in the order the
+        counter recurses into them, ``iso`` a mask of one-element components
+        not listed in ``comps``, and ``mins`` the minimal elements of ``s``.
+        """
+        poset = self.poset
+        below = list(poset.below)
+        above = list(poset.above)
+        if poset.n <= _NARROW:
+            c, (C0, C1, C2), (U0, U1, U2), (N0, N1, N2) = self._narrow_tables()
+            cmask = (1 << c) - 1
+            c2 = 2 * c
+            nbr = [below[i] | above[i] | 1 << i for i in range(poset.n)]
+
+            def split(s: int) -> tuple:
+                a0, a1, a2 = s & cmask, (s >> c) & cmask, s >> c2
+                cuts = s & C0[a0] & C1[a1] & C2[a2]
+                if cuts:
+                    return sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()), None, 0, 0
+                iso = s & ~(N0[a0] | N1[a1] | N2[a2])
+                rest = s ^ iso
+                comps = []
+                while rest:
+                    x = nbr[rest.bit_length() - 1] & rest
+                    while True:
+                        y = rest & (x | N0[x & cmask] | N1[(x >> c) & cmask] | N2[x >> c2])
+                        if y == x:
+                            break
+                        x = y
+                    comps.append(x)
+                    rest ^= x
+                mins = s & ~(U0[a0] | U1[a1] | U2[a2])
+                comps.sort(key=mins.__and__)
+                return None, comps, iso, mins
+        else:
+            def split(s: int) -> tuple:
+                mins, cuts = self.scan(s)
+                if cuts:
+                    return sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()), None, 0, 0
+                return None, components(above, s, mins), 0, mins
+
+        return split
+
     def _make_vectors(self) -> Callable[[int], int]:
         """The memoised forward recursion for packed position-sum vectors (see :meth:`position_sums`)."""
         memo = self._memo
         vec = self._vec
-        poset = self.poset
-        below = list(poset.below)
-        above = list(poset.above)
-        nbytes, UP, CAP = self._tables()
+        below = list(self.poset.below)
+        above = list(self.poset.above)
+        split = self._make_split()
         width = self._width
         budget = self._budget
         get = memo.get
@@ -525,18 +645,12 @@ class Counter:
             if s & (s - 1) == 0:
                 return 1 << ((s.bit_length() - 1) * width)
             es = cnt(s)
-            up = 0
-            cap = -1
-            for tu, tc, byte in zip(UP, CAP, s.to_bytes(nbytes, "little")):
-                if byte:
-                    up |= tu[byte]
-                    cap &= tc[byte]
-            cuts = s & cap
-            if cuts:
+            chain, comps, iso, mins = split(s)
+            if chain is not None:
                 v = 0
                 off = 0                 # elements before the current block
                 rest = s
-                for zi in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                for zi in chain:
                     block = rest & below[zi]
                     rest &= above[zi]
                     if block:
@@ -549,30 +663,22 @@ class Counter:
                 if rest:
                     v += (es // cnt(rest)) * g(rest) + off * es * ones(rest)
                 return vstore(s, v)
-            m = s & ~up
-            mins = []
-            comps = []
-            while m:
-                b = m & -m
-                m ^= b
-                mins.append(b)
-                u = (above[b.bit_length() - 1] & s) | b
-                keep = []
-                for c in comps:
-                    if c & u:
-                        u |= c
-                    else:
-                        keep.append(c)
-                keep.append(u)
-                comps = keep
-            if len(comps) > 1:
+            if iso or len(comps) > 1:
                 n1 = s.bit_count() + 1
                 v = 0
                 for comp in comps:
                     v += (es // cnt(comp)) * n1 * g(comp) // (comp.bit_count() + 1)
+                if iso:
+                    # a one-element component is at (n + 1) / 2 on average; es (n + 1) is even
+                    t = es * n1 >> 1
+                    for i in bits(iso):
+                        v += t << (i * width)
                 return vstore(s, v)
             v = es * ones(s)
-            for b in mins:
+            m = mins
+            while m:
+                b = m & -m
+                m ^= b
                 v += g(s ^ b)
             return vstore(s, v)
 
@@ -598,6 +704,39 @@ def _byte_tables(poset: Poset):
         up_t.append(ut)
         cap_t.append(ct)
     return nbytes, up_t, cap_t
+
+
+def _chunk_tables(c: int, values: list[int], identity: int, meet: bool) -> list[list[int]]:
+    """Three tables, one per ``c``-bit chunk of a set: entry ``v`` of table ``j`` combines
+    ``values[i]`` (``&`` if ``meet``, else ``|``) over the elements ``i`` of value ``v`` of chunk ``j``.
+
+    Each table is built from the tables of the two halves of its chunk (at most 256
+    entries each), a row per distinct value of the upper half, and its entries are
+    shared objects (few distinct values): a 16-bit chunk costs 65,536 pointers, not ints.
+    """
+    def subsets(vals):
+        t = [identity] * (1 << len(vals))
+        for v in range(1, len(t)):
+            low = v & -v
+            x = vals[low.bit_length() - 1]
+            t[v] = t[v ^ low] & x if meet else t[v ^ low] | x
+        return t
+
+    out = []
+    for j in range(3):
+        vals = values[j * c:(j + 1) * c]
+        half = len(vals) // 2
+        lo, hi = subsets(vals[:half]), subsets(vals[half:])
+        shared: dict[int, int] = {}
+        rows: dict[int, list[int]] = {}
+        table: list[int] = []
+        for h in hi:
+            row = rows.get(h)
+            if row is None:
+                row = rows[h] = [shared.setdefault(x, x) for x in ([h & x for x in lo] if meet else [h | x for x in lo])]
+            table += row
+        out.append(table)
+    return out
 
 
 def _ratio(a: int, b: int) -> float:

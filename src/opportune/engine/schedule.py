@@ -246,9 +246,7 @@ class OrderEngine:
             full = self._options_cache.get(key)
             if full is not None:
                 return {p: n for p, n in full.items() if p in parts}
-            if len(self._option_cache) > STATE_CACHE_LIMIT:
-                self._trim()
-            entry = self._option_cache[key] = (self._installable_parts(mask, consistent), {})
+            entry = self._option_entry(key, mask, consistent)
         can, known = entry
         out: dict[str, int] = {}
         for part, unit in can.items():
@@ -259,6 +257,32 @@ class OrderEngine:
                     value = known[part] = self.count(mask | unit, after)
                 out[part] = value
         return out
+
+    def installable_among(self, mask: int, consistent: int, parts: Collection[str]) -> list[str]:
+        """Those of ``parts`` installable now (declaration order), without counting anything.
+
+        Shares the per-state table of :meth:`options_for`, so asking this first and the
+        options next costs one scan of the state.  A decision with a single candidate
+        needs no count at all.
+
+        >>> from opportune import make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> engine.installable_among(0, engine.all_strategies, ("c", "b"))
+        ['b']
+        """
+        key = mask | consistent << self.n_units
+        entry = self._option_cache.get(key)
+        if entry is None:
+            entry = self._option_entry(key, mask, consistent)
+        return [part for part in entry[0] if part in parts]
+
+    def _option_entry(self, key: int, mask: int, consistent: int) -> tuple[dict[str, int], dict[str, int]]:
+        """The per-state table of :meth:`options_for`: installable parts (with their next unit's bit)
+        and the options counted so far."""
+        if len(self._option_cache) > STATE_CACHE_LIMIT:
+            self._trim()
+        entry = self._option_cache[key] = (self._installable_parts(mask, consistent), {})
+        return entry
 
     def _installable_parts(self, mask: int, consistent: int) -> dict[str, int]:
         """The parts installable in a state, each with its next unit as a bit (declaration order)."""

@@ -69,14 +69,47 @@ class Opportunistic:
 
     def choose(self, state, visible: tuple[str, ...]) -> Action:
         """The action alone (what :meth:`decide` decides, without building its reasons)."""
-        if state.is_complete:
+        schedule = state.schedule
+        return self.choose_at(schedule.engine, schedule.mask, schedule.consistent, state.buffer,
+                              state.buffer_free, visible)
+
+    @staticmethod
+    def choose_at(engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        """:meth:`choose` on the machine form of a state: the engine's installed mask and consistent
+        strategies, the buffer and its free locations.  A simulation calls this directly, without
+        building a :class:`~opportune.sequencer.State` per look; the sequencer reaches it through
+        :meth:`choose`, so both take the same decision.
+
+        The best candidate is the least sort key of :func:`ranked_candidates` (keys are distinct:
+        a part's bin and buffer candidates differ in the source), found without sorting.
+        """
+        if mask == engine.full:
             return DONE
-        ranked = ranked_candidates(state, visible)
-        if ranked:
-            _, part, source, _ = ranked[0]
-            return shared_action("install", part, source)
-        if visible and state.buffer_free > 0:
-            return shared_action("buffer", _buffer_ranking(state, visible)[1][0][2])
+        asked = (*visible, *buffer)
+        can = engine.installable_among(mask, consistent, asked)
+        if len(can) == 1:  # one candidate part: nothing to compare, so nothing to count
+            part = can[0]
+            return shared_action("install", part, "bin" if part in visible else "buffer")
+        if can:
+            options = engine.options_for(mask, consistent, can)
+            plan = engine.plan
+            best = None
+            for part, n in options.items():
+                cost, index = plan.part(part).cost, plan.index(part)
+                if part in visible:
+                    key = (-n, 0, cost, -1, index, part, "bin")
+                    if best is None or key < best:
+                        best = key
+                if part in buffer:
+                    key = (-n, 1, cost, buffer.index(part), index, part, "buffer")
+                    if best is None or key < best:
+                        best = key
+            return shared_action("install", best[5], best[6])
+        if visible and free > 0:
+            _, sums = engine.position_sums_for(mask, consistent, set(visible))
+            plan = engine.plan
+            return shared_action("buffer", min((s, plan.index(p), p) for p, s in sums.items())[2])
         return SHAKE
 
     @staticmethod
@@ -89,8 +122,8 @@ class Opportunistic:
 
         def key(mask, cons, buffer, look):
             can = installable(mask, cons)
-            in_look = tuple(p for p in look if p in can)
-            in_buffer = tuple(p for p in buffer if p in can)
+            in_look = can.intersection(look)  # a set: which candidate comes from the bin, not in what order
+            in_buffer = tuple([p for p in buffer if p in can]) if buffer else ()
             if in_look or in_buffer:
                 return (mask, cons, in_look, in_buffer)
             return (mask, cons, look, capacity is None or len(buffer) < capacity)
