@@ -14,7 +14,7 @@ import random
 from typing import Callable, Sequence
 
 from opportune.engine import OrderEngine, Schedule
-from opportune.policies.base import DONE, SHAKE, Action, Decision
+from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
 
 
 def planned_sequence(plan_or_engine, prefer: Callable[[str], object] | None = None) -> tuple[str, ...]:
@@ -52,18 +52,33 @@ class FixedSequencePolicy:
     def earliest(self, parts) -> str:
         return min(parts, key=self._rank.__getitem__)
 
+    def _choose(self, state, visible) -> Action:
+        """:meth:`choose_at` (each subclass's) on a :class:`~opportune.sequencer.State`."""
+        sched = state.schedule
+        return self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+
 
 class ShakeUntilVisible(FixedSequencePolicy):
     """Reduce uncertainty: a fixed sequence; install the next part when visible, otherwise shake."""
 
     name = "shake"
 
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        """The action on the machine form of a state (see ``Opportunistic.choose_at``); :meth:`decide`
+        adds the reasons.  The next part is the sequence's entry after the installed units."""
+        if mask == engine.full:
+            return DONE
+        nxt = self.sequence[mask.bit_count()]
+        return shared_action("install", nxt, "bin") if nxt in visible else SHAKE
+
     def decide(self, state, visible) -> Decision:
-        if state.is_complete:
+        action = self._choose(state, visible)
+        if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         nxt = self.next_part(state)
-        if nxt in visible:
-            return Decision(Action("install", nxt, "bin"), f"'{nxt}' is next in the fixed sequence and visible")
+        if action.kind == "install":
+            return Decision(action, f"'{nxt}' is next in the fixed sequence and visible")
         return Decision(SHAKE, f"'{nxt}' is next in the fixed sequence and not visible: shake")
 
 
@@ -80,16 +95,26 @@ class Kitting(FixedSequencePolicy):
 
     name = "kitting"
 
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        """The action on the machine form of a state; units still in the bin are those neither
+        installed nor laid out."""
+        if mask == engine.full:
+            return DONE
+        installed = mask.bit_count()
+        if installed + len(buffer) < engine.n_units:
+            return shared_action("buffer", self.earliest(visible)) if visible else SHAKE
+        return shared_action("install", self.sequence[installed], "buffer")
+
     def decide(self, state, visible) -> Decision:
-        if state.is_complete:
+        action = self._choose(state, visible)
+        if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
-        if state.in_bin:
-            if visible:
-                part = self.earliest(visible)
-                return Decision(Action("buffer", part), "lay every part out before assembling")
+        if action.kind == "buffer":
+            return Decision(action, "lay every part out before assembling")
+        if action.kind == "shake":
             return Decision(SHAKE, "parts remain in the bin but none is visible")
-        nxt = self.next_part(state)
-        return Decision(Action("install", nxt, "buffer"), "all parts laid out: assemble in the fixed sequence")
+        return Decision(action, "all parts laid out: assemble in the fixed sequence")
 
 
 class BufferFixed(FixedSequencePolicy):
@@ -98,17 +123,30 @@ class BufferFixed(FixedSequencePolicy):
 
     name = "buffer"
 
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        """The action on the machine form of a state (see ``Opportunistic.choose_at``)."""
+        if mask == engine.full:
+            return DONE
+        nxt = self.sequence[mask.bit_count()]
+        if nxt in buffer:
+            return shared_action("install", nxt, "buffer")
+        if nxt in visible:
+            return shared_action("install", nxt, "bin")
+        if visible and free > 0:
+            return shared_action("buffer", self.earliest(visible))
+        return SHAKE
+
     def decide(self, state, visible) -> Decision:
-        if state.is_complete:
+        action = self._choose(state, visible)
+        if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         nxt = self.next_part(state)
-        if nxt in state.buffer:
-            return Decision(Action("install", nxt, "buffer"), f"'{nxt}' is next and waiting in the buffer")
-        if nxt in visible:
-            return Decision(Action("install", nxt, "bin"), f"'{nxt}' is next and visible")
-        if visible and state.buffer_free > 0:
-            part = self.earliest(visible)
-            return Decision(Action("buffer", part), f"'{nxt}' is next but not here: buffer the visible part needed first")
+        if action.kind == "install":
+            where = "waiting in the buffer" if action.source == "buffer" else "visible"
+            return Decision(action, f"'{nxt}' is next and {where}")
+        if action.kind == "buffer":
+            return Decision(action, f"'{nxt}' is next but not here: buffer the visible part needed first")
         return Decision(SHAKE, f"'{nxt}' is next and not visible" + (", buffer full" if visible else ""))
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import random
 
-from opportune.policies.base import DONE, SHAKE, Action, Decision
+from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
 
 
 class RandomChoice:
@@ -20,17 +20,36 @@ class RandomChoice:
     def start(self, rng: random.Random) -> None:
         self.rng = rng
 
-    def decide(self, state, visible) -> Decision:
-        if state.is_complete:
-            return Decision(DONE, "the assembly is complete")
-        sched = state.schedule
-        cands = sorted({(p, "bin") for p in visible if sched.can_install(p)}
-                       | {(p, "buffer") for p in state.buffer if sched.can_install(p)},
-                       key=lambda c: (state.plan.index(c[0]), c[1]))
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        """The action on the machine form of a state (see ``Opportunistic.choose_at``).
+
+        Candidates are drawn from a list in declaration order, bin before buffer, so a seed
+        gives the same choices however the look is ordered.
+        """
+        if mask == engine.full:
+            return DONE
+        cands = []
+        for part in engine.installable_among(mask, consistent, (*visible, *buffer)):  # declaration order
+            if part in visible:
+                cands.append((part, "bin"))
+            if part in buffer:
+                cands.append((part, "buffer"))
         if cands:
             part, source = cands[self.rng.randrange(len(cands))]
-            return Decision(Action("install", part, source), "a random installable candidate")
-        if visible and state.buffer_free > 0:
-            choices = sorted(set(visible), key=state.plan.index)
-            return Decision(Action("buffer", choices[self.rng.randrange(len(choices))]), "a random visible part")
+            return shared_action("install", part, source)
+        if visible and free > 0:
+            choices = sorted(set(visible), key=engine.plan.index)
+            return shared_action("buffer", choices[self.rng.randrange(len(choices))])
+        return SHAKE
+
+    def decide(self, state, visible) -> Decision:
+        sched = state.schedule
+        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        if action.kind == "install":
+            return Decision(action, "a random installable candidate")
+        if action.kind == "buffer":
+            return Decision(action, "a random visible part")
+        if action.kind == "done":
+            return Decision(DONE, "the assembly is complete")
         return Decision(SHAKE, "nothing installable")
