@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import random
+import sys
 
 import pytest
 
-from opportune.engine import count as count_mod
 from opportune.engine.count import Counter
 from opportune.engine.poset import Poset
 
@@ -32,40 +32,38 @@ def up_sets(rng: random.Random, p: Poset, k: int) -> list[int]:
     return out
 
 
-@pytest.mark.parametrize("n,density", [(1, 0.5), (5, 0.3), (12, 0.15), (20, 0.1), (31, 0.08), (47, 0.06), (48, 0.2)])
-def test_narrow_and_wide_scans_agree(monkeypatch, n, density):
+@pytest.mark.parametrize("n,density", [(1, 0.5), (5, 0.3), (12, 0.15), (20, 0.1), (31, 0.1), (47, 0.2), (48, 0.2)])
+def test_narrow_and_wide_scans_agree(n, density):
     rng = random.Random(n)
     for _ in range(3):
         p = random_poset(rng, n, density)
-        masks = up_sets(rng, p, 40) + [rng.getrandbits(n) if n else 0 for _ in range(20)]
+        masks = up_sets(rng, p, 40) + [rng.getrandbits(n) if n else 0 for _ in range(20 if n <= 20 else 0)]
         narrow = Counter(p, max_memo=None)
-        monkeypatch.setattr(count_mod, "_NARROW", -1)      # force the byte-table path
+        narrow._narrow_after = 0                   # chunk tables from the first call
         wide = Counter(p, max_memo=None)
-        monkeypatch.undo()
+        wide._narrow_after = sys.maxsize           # byte tables only
+        default = Counter(p, max_memo=None)        # switches when its memo is large enough
         for m in masks:
-            assert narrow.count(m) == wide.count(m)
-            assert narrow.position_sums(m) == wide.position_sums(m)
+            assert narrow.count(m) == wide.count(m) == default.count(m)
+            assert narrow.position_sums(m) == wide.position_sums(m) == default.position_sums(m)
         # same sets visited in the same order: eviction and budgets behave alike
-        assert list(narrow._memo) == list(wide._memo)
-        assert list(narrow._vec) == list(wide._vec)
-        for m in masks[:10]:
-            assert narrow.scan(m) == wide.scan(m)
+        assert list(narrow._memo) == list(wide._memo) == list(default._memo)
+        assert list(narrow._vec) == list(wide._vec) == list(default._vec)
+        assert hasattr(narrow, "_ntabs") and not hasattr(wide, "_ntabs")
 
 
 def test_chunk_tables_match_byte_tables():
     rng = random.Random(7)
     for n in (0, 1, 2, 3, 16, 17, 45, 48):
         p = random_poset(rng, n, 0.1)
-        c, cap, up, nb = Counter(p)._narrow_tables()
+        counter = Counter(p)
+        c, (t0, t1, t2) = counter._narrow_tables()
         cmask = (1 << c) - 1
         for _ in range(200):
             s = rng.getrandbits(n) if n else 0
-            a = (s & cmask, (s >> c) & cmask, s >> 2 * c)
-            mins, cuts = Counter(p).scan(s)
-            assert s & cap[0][a[0]] & cap[1][a[1]] & cap[2][a[2]] == cuts
-            assert s & ~(up[0][a[0]] | up[1][a[1]] | up[2][a[2]]) == mins
-            comparable = 0
-            for i in range(n):
-                if s >> i & 1:
-                    comparable |= p.below[i] | p.above[i]
-            assert nb[0][a[0]] | nb[1][a[1]] | nb[2][a[2]] == comparable
+            x = t0[s & cmask] & t1[(s >> c) & cmask] & t2[s >> 2 * c]
+            mins, cuts = counter.scan(s)
+            assert s & x == cuts
+            assert s & x >> 2 * n == mins
+            alone = [i for i in range(n) if s >> i & 1 and not (p.below[i] | p.above[i]) & s]
+            assert s & x >> n == sum(1 << i for i in alone)

@@ -15,10 +15,15 @@ classical ordinal-sum rule):
 
 (A set with a cut element is connected, so the order of rules 1 and 2 does not
 change which sets are visited.)  Both tests are bit-parallel: one pass over
-``S`` finds the cut elements and the minimal elements, and the components are
-the overlap classes of the up-sets ``{m} ∪ (above(m) ∩ S)`` of the minimal
-elements ``m`` — every comparable pair lies in one of them — so a connected
-set costs O(width²) mask operations, not a search of its comparability graph.
+``S``, a table look-up per chunk of its bits, finds the cut elements and the
+minimal elements.  The components are the overlap classes of the up-sets
+``{m} ∪ (above(m) ∩ S)`` of the minimal elements ``m`` — every comparable pair
+lies in one of them — so a connected set costs O(width²) mask operations, not
+a search of its comparability graph.  A poset of at most 48 elements, once its
+counter has done some work, scans in three look-ups instead (chunks of up to
+16 bits), which also give the elements comparable to nothing else in ``S``;
+the other components grow from a top element by closure steps of three
+look-ups each.  Both ways visit the pieces in the same order.
 
 Every value is memoised on the set, as a Python int, for the whole life of the
 :class:`Counter`: the subproblems of a count are exactly the questions a
@@ -55,7 +60,7 @@ from opportune.engine.poset import Poset, bits, components
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
 
 _CHECK_EVERY = 256  # new memo entries between clock checks (a power of two)
-_NARROW = 48        # posets up to this size scan with three chunk tables of at most 16 bits
+_NARROW = 48        # posets up to this size may scan with three chunk tables of at most 16 bits
 _INF = float("inf")
 
 
@@ -133,6 +138,11 @@ class Counter:
         # [new-entry limit, deadline, new entries in this call]
         self._budget: list = [sys.maxsize, float("inf"), 0]
         self._depth = 3 * poset.n + 200          # recursion depth a count may need
+        # Chunk tables (see _narrow_tables) take about as long to build as 2^c / 16 memo entries take
+        # to compute with byte tables (KILBRID: ~8 ms): switch to them once the memo is that large, so
+        # one-shot counters never pay for them.
+        c = max(1, -(-poset.n // 3))
+        self._narrow_after = 1 << max(0, c - 4) if poset.n <= _NARROW else sys.maxsize
         self._f = self._make_counter()
         self._g: Callable[[int], int] | None = None
 
@@ -200,10 +210,7 @@ class Counter:
                 width = self._width
             v = self._g(mask)
         fmask = (1 << width) - 1
-        out = {}
-        for i in bits(mask):
-            out[i] = (v >> (i * width)) & fmask
-        return out
+        return {i: v >> i * width & fmask for i in bits(mask)}
 
     def expected_positions(self, mask: int | None = None) -> dict[int, float]:
         """Expected 1-based position of each element of ``mask`` in a uniformly random linear extension.
@@ -295,13 +302,23 @@ class Counter:
             raise ValueError(f"mask {mask!r} is not a subset of 0..{self.poset.n - 1}")
 
     def _start_budget(self) -> None:
-        """Start the budget of one top-level call (and evict if the memo is over ``max_total``)."""
+        """Start the budget of one top-level call (evict if the memo is over ``max_total``;
+        switch to chunk-table scans once the memo shows they pay)."""
         b = self._budget
-        b[0] = self.max_memo if self.max_memo is not None else sys.maxsize
-        b[1] = time.perf_counter() + self.time_limit if self.time_limit is not None else _INF
+        limit = self.max_memo
+        b[0] = limit if limit is not None else sys.maxsize
+        limit = self.time_limit
+        b[1] = time.perf_counter() + limit if limit is not None else _INF
         b[2] = 0
-        if self.max_total is not None and len(self._memo) + len(self._vec) > self.max_total:
-            self._evict(self.max_total // 2)
+        limit = self.max_total
+        if limit is not None and len(self._memo) + len(self._vec) > limit:
+            self._evict(limit // 2)
+        if len(self._memo) >= self._narrow_after:
+            self._narrow_after = sys.maxsize
+            self._narrow_tables()
+            self._f = self._make_counter()
+            if self._g is not None:
+                self._g = self._make_vectors()
         if sys.getrecursionlimit() < self._depth:   # Python 3.11 frames do not use the C stack
             sys.setrecursionlimit(self._depth)
 
@@ -353,7 +370,7 @@ class Counter:
         """(Re)build the vector recursion for a field width of at least ``width`` bits, repacking stored vectors."""
         old = self._width
         if width > old:
-            width = max(width, old + old // 2)
+            width = -(-max(width, old + old // 2) // 8) * 8     # whole bytes: see ones() in _make_vectors
             if self._vec:
                 fmask = (1 << old) - 1
                 repacked = {}
@@ -381,25 +398,28 @@ class Counter:
             t = self._tabs = _byte_tables(self.poset)
         return t
 
-    def _narrow_tables(self):
-        """Tables for scanning a set of a poset of at most ``_NARROW`` elements in three look-ups.
+    def _narrow_tables(self) -> tuple[int, list[list[int]]]:
+        """``(c, T)``: tables that scan a set of a poset of at most ``_NARROW`` elements in three look-ups.
 
-        The set is cut into three chunks of ``c = ceil(n / 3)`` bits; for chunk
-        ``j`` and its value ``v``, ``CAP[j][v]`` is the intersection of
-        ``{i} | below[i] | above[i]``, ``UP[j][v]`` the union of ``above[i]`` and
-        ``NB[j][v]`` the union of ``below[i] | above[i]`` over the elements ``i``
-        of that chunk (the byte tables of :meth:`_tables`, a chunk at a time).
+        The set is cut into three chunks of ``c = ceil(n / 3)`` bits.  Each
+        element ``i`` has a packed mask of three ``n``-bit fields: the elements
+        comparable to ``i`` or ``i`` itself, those not comparable to ``i``, and
+        those not above ``i``.  ``T[j][v]`` is the intersection of these over
+        the elements of value ``v`` of chunk ``j``, so for ``x = T[0][..] &
+        T[1][..] & T[2][..]`` of a set ``s``: ``s & x`` are its cut elements,
+        ``s & x >> n`` the elements comparable to no other element of ``s`` and
+        ``s & x >> 2n`` its minimal elements (what :meth:`scan` finds a byte at
+        a time with :meth:`_tables`).
         """
         t = getattr(self, "_ntabs", None)
         if t is None:
             p = self.poset
             n = p.n
+            full = p.full
             c = max(1, -(-n // 3))
-            t = self._ntabs = (
-                c,
-                _chunk_tables(c, [p.below[i] | p.above[i] | 1 << i for i in range(n)], -1, True),
-                _chunk_tables(c, list(p.above), 0, False),
-                _chunk_tables(c, [p.below[i] | p.above[i] for i in range(n)], 0, False))
+            packed = [(p.below[i] | p.above[i] | 1 << i) | (full & ~(p.below[i] | p.above[i])) << n
+                      | (full & ~p.above[i]) << 2 * n for i in range(n)]
+            t = self._ntabs = (c, _chunk_tables(c, packed))
         return t
 
     def _make_counter(self) -> Callable[[int], int]:
@@ -407,13 +427,16 @@ class Counter:
         poset = self.poset
         below = list(poset.below)
         above = list(poset.above)
-        # Small posets scan a set with three look-ups in chunk tables; larger ones a byte at a time.
-        narrow = poset.n <= _NARROW
+        # Scan a set with three look-ups in chunk tables once they are built (small posets, after
+        # some work: see _start_budget), else a byte at a time.
+        narrow = getattr(self, "_ntabs", None) is not None
         if narrow:
-            c, (C0, C1, C2), (U0, U1, U2), (N0, N1, N2) = self._narrow_tables()
+            c, (T0, T1, T2) = self._narrow_tables()
             cmask = (1 << c) - 1
             c2 = 2 * c
-            nbr = [below[i] | above[i] | 1 << i for i in range(poset.n)]
+            n = poset.n
+            n2 = 2 * n
+            nbr = [below[i] | above[i] | 1 << i for i in range(n)]
         else:
             nbytes, UP, CAP = self._tables()
         fact = [factorial(i) for i in range(poset.n + 1)]
@@ -432,7 +455,8 @@ class Counter:
                 a0 = s & cmask
                 a1 = (s >> c) & cmask
                 a2 = s >> c2
-                cuts = s & C0[a0] & C1[a1] & C2[a2]
+                sc = T0[a0] & T1[a1] & T2[a2]
+                cuts = s & sc
             else:
                 up = 0
                 cap = -1
@@ -483,27 +507,28 @@ class Counter:
                     # An element comparable to nothing else in s is a component by itself; the rest
                     # falls into the closures, under comparability, of its top elements (a few look-ups
                     # each, however many minimal elements s has).
-                    iso = s & ~(N0[a0] | N1[a1] | N2[a2])
+                    iso = s & sc >> n
                     rest = s ^ iso
                     comps = []
                     while rest:
+                        # (x is connected, with two elements or more: the elements of rest comparable
+                        # to some element of x include x)
                         x = nbr[rest.bit_length() - 1] & rest
-                        while True:
-                            y = rest & (x | N0[x & cmask] | N1[(x >> c) & cmask] | N2[x >> c2])
+                        while x != rest:
+                            y = rest & ~((T0[x & cmask] & T1[(x >> c) & cmask] & T2[x >> c2]) >> n)
                             if y == x:
                                 break
                             x = y
                         comps.append(x)
                         rest ^= x
-                    if len(comps) > 1 or not iso:
-                        mins = s & ~(U0[a0] | U1[a1] | U2[a2])
-                        # recurse in the order of the overlap classes below (by highest minimal element),
-                        # so the memo fills in the same order whichever scan is used
-                        if len(comps) == 2:
-                            if comps[0] & mins > comps[1] & mins:
-                                comps.reverse()
-                        elif len(comps) > 2:
-                            comps.sort(key=mins.__and__)
+                    mins = s & sc >> n2
+                    # recurse in the order of the overlap classes below (by highest minimal element),
+                    # so the memo fills in the same order whichever scan is used
+                    if len(comps) == 2:
+                        if comps[0] & mins > comps[1] & mins:
+                            comps.reverse()
+                    elif len(comps) > 2:
+                        comps.sort(key=mins.__and__)
                 else:
                     # the overlap classes of the up-sets of the minimal elements (poset.components)
                     mins = s & ~up
@@ -564,30 +589,31 @@ class Counter:
         poset = self.poset
         below = list(poset.below)
         above = list(poset.above)
-        if poset.n <= _NARROW:
-            c, (C0, C1, C2), (U0, U1, U2), (N0, N1, N2) = self._narrow_tables()
+        if getattr(self, "_ntabs", None) is not None:
+            c, (T0, T1, T2) = self._narrow_tables()
             cmask = (1 << c) - 1
             c2 = 2 * c
-            nbr = [below[i] | above[i] | 1 << i for i in range(poset.n)]
+            n = poset.n
+            nbr = [below[i] | above[i] | 1 << i for i in range(n)]
 
             def split(s: int) -> tuple:
-                a0, a1, a2 = s & cmask, (s >> c) & cmask, s >> c2
-                cuts = s & C0[a0] & C1[a1] & C2[a2]
+                sc = T0[s & cmask] & T1[(s >> c) & cmask] & T2[s >> c2]
+                cuts = s & sc
                 if cuts:
                     return sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()), None, 0, 0
-                iso = s & ~(N0[a0] | N1[a1] | N2[a2])
+                iso = s & sc >> n
                 rest = s ^ iso
                 comps = []
                 while rest:
                     x = nbr[rest.bit_length() - 1] & rest
-                    while True:
-                        y = rest & (x | N0[x & cmask] | N1[(x >> c) & cmask] | N2[x >> c2])
+                    while x != rest:
+                        y = rest & ~((T0[x & cmask] & T1[(x >> c) & cmask] & T2[x >> c2]) >> n)
                         if y == x:
                             break
                         x = y
                     comps.append(x)
                     rest ^= x
-                mins = s & ~(U0[a0] | U1[a1] | U2[a2])
+                mins = s & sc >> 2 * n
                 comps.sort(key=mins.__and__)
                 return None, comps, iso, mins
         else:
@@ -613,12 +639,15 @@ class Counter:
         f = self._f
         perf = time.perf_counter
         check = _CHECK_EVERY - 1
-        # ones(s): 1 in the field of every element of s, built from the binary digits of s
-        zero, one = "0" * width, "0" * (width - 1) + "1"
-        table = str.maketrans({"0": zero, "1": one})
+        # ones(s): 1 in the field of every element of s, joined from the little-endian bytes of the
+        # fields of each byte of s (fields are whole bytes: see _set_width)
+        nbytes = max(1, (self.poset.n + 7) // 8)
+        spread = [b"".join((b"\1" if v >> j & 1 else b"\0") + bytes(width // 8 - 1) for j in range(8))
+                  for v in range(256)]
+        spread_at = spread.__getitem__
 
         def ones(s: int) -> int:
-            return int(format(s, "b").translate(table), 2)
+            return int.from_bytes(b"".join(map(spread_at, s.to_bytes(nbytes, "little"))), "little")
 
         def cnt(s: int) -> int:
             if s & (s - 1) == 0:
@@ -706,20 +735,19 @@ def _byte_tables(poset: Poset):
     return nbytes, up_t, cap_t
 
 
-def _chunk_tables(c: int, values: list[int], identity: int, meet: bool) -> list[list[int]]:
-    """Three tables, one per ``c``-bit chunk of a set: entry ``v`` of table ``j`` combines
-    ``values[i]`` (``&`` if ``meet``, else ``|``) over the elements ``i`` of value ``v`` of chunk ``j``.
+def _chunk_tables(c: int, values: list[int]) -> list[list[int]]:
+    """Three tables, one per ``c``-bit chunk of a set: entry ``v`` of table ``j`` is the
+    intersection (``&``) of ``values[i]`` over the elements ``i`` of value ``v`` of chunk ``j``.
 
     Each table is built from the tables of the two halves of its chunk (at most 256
     entries each), a row per distinct value of the upper half, and its entries are
     shared objects (few distinct values): a 16-bit chunk costs 65,536 pointers, not ints.
     """
     def subsets(vals):
-        t = [identity] * (1 << len(vals))
+        t = [-1] * (1 << len(vals))
         for v in range(1, len(t)):
             low = v & -v
-            x = vals[low.bit_length() - 1]
-            t[v] = t[v ^ low] & x if meet else t[v ^ low] | x
+            t[v] = t[v ^ low] & vals[low.bit_length() - 1]
         return t
 
     out = []
@@ -733,7 +761,7 @@ def _chunk_tables(c: int, values: list[int], identity: int, meet: bool) -> list[
         for h in hi:
             row = rows.get(h)
             if row is None:
-                row = rows[h] = [shared.setdefault(x, x) for x in ([h & x for x in lo] if meet else [h | x for x in lo])]
+                row = rows[h] = [shared.setdefault(x, x) for x in [h & x for x in lo]]
             table += row
         out.append(table)
     return out
