@@ -9,6 +9,7 @@ never with a traceback.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Optional
@@ -28,6 +29,8 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 out = Console(highlight=False, soft_wrap=True)
+if not out.is_terminal and "COLUMNS" not in os.environ:
+    out.width = 132  # piped or logged output has no width of its own: rich would squeeze tables into 80
 err = Console(stderr=True, highlight=False, soft_wrap=True)
 
 PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json or SALBP .IN2", show_default=False)
@@ -331,7 +334,9 @@ def simulate(
             table.add_column(col, justify="left" if i == 0 else "right")
         for row in table_rows(doc):
             table.add_row(*row)
-        out.print(table)
+        # Piped or logged output has no width of its own: rich would squeeze the table into 80 columns.
+        import sys; print("DBG", out.is_terminal, out.width, file=sys.stderr)
+        out.print(table, width=None if out.is_terminal else 132)
         if result.prepared.optimal_start is not None:
             out.print(f"optimal expected time (exact): {result.prepared.optimal_start:.4f} "
                       f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
