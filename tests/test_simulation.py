@@ -16,7 +16,7 @@ from conftest import GEARBOX, random_plans
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver
-from opportune.report import describe, summary, write_outputs
+from opportune.report import describe, summary, table_rows, write_outputs
 from opportune.simulate import (STRATEGIES, StudyConfig, StudyError, TrialRunner, prepare, run_study,
                                 run_trial_with_sequencer)
 from opportune.worlds import ConveyorBin, PileBin, TimeModel, UniformBin, WeightedBin
@@ -291,6 +291,25 @@ def test_interrupt_reports_what_finished():
 
     r = run_study(cfg, workers=1, chunk_size=100, progress=progress)
     assert r.interrupted and len(r.trials["opportunistic"]) == 300
+
+
+def test_interrupted_before_a_strategy_finished_a_trial_still_reports(tmp_path):
+    cfg = StudyConfig(plan=GEAR, strategies=("opportunistic", "shake"), trials=400)
+
+    def progress(strategy, n):
+        raise KeyboardInterrupt  # at the first finished chunk: shake has none
+
+    r = run_study(cfg, workers=1, chunk_size=100, progress=progress)
+    assert r.interrupted and len(r.trials["opportunistic"]) == 100 and not r.trials["shake"]
+    rows = {row[0]: row for row in table_rows(summary(r))}
+    assert rows["shake"][1] == "no trial finished" and float(rows["opportunistic"][1].split(" ± ")[0]) > 10
+    assert list(rows) == ["opportunistic", "shake"]  # strategies without trials last
+    files = {p.name for p in write_outputs(r, tmp_path)}
+    assert "mean_time.png" in files
+    doc = json.loads((tmp_path / "results.json").read_text())
+    assert doc["strategies"]["shake"]["time"]["n"] == 0
+    r.trials["opportunistic"].clear()  # nothing finished at all: the files, without plots
+    assert {p.name for p in write_outputs(r, tmp_path / "empty")} == {"results.json", "trials.csv"}
 
 
 def test_bad_study_configurations():

@@ -334,9 +334,7 @@ def simulate(
             table.add_column(col, justify="left" if i == 0 else "right")
         for row in table_rows(doc):
             table.add_row(*row)
-        # Piped or logged output has no width of its own: rich would squeeze the table into 80 columns.
-        import sys; print("DBG", out.is_terminal, out.width, file=sys.stderr)
-        out.print(table, width=None if out.is_terminal else 132)
+        out.print(table)
         if result.prepared.optimal_start is not None:
             out.print(f"optimal expected time (exact): {result.prepared.optimal_start:.4f} "
                       f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")

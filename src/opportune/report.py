@@ -125,6 +125,8 @@ def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
 
     names = [n for n in result.trials if result.trials[n]]
     written = []
+    if not names:  # interrupted before any trial finished: nothing to draw
+        return written
     title = (f"{doc['plan']}: {doc['bin']} bin, {doc['visible']} visible, "
              f"{doc['trials']:,} trials, seed {doc['seed']}")
 
@@ -174,9 +176,13 @@ def _save(fig, out: Path, stem: str) -> list[Path]:
 def table_rows(doc: dict) -> list[list[str]]:
     """Rows for the human table: one per strategy, best mean time first."""
     rows = []
-    for name, s in sorted(doc["strategies"].items(), key=lambda kv: kv[1]["time"]["mean"] or 0):
+    for name, s in sorted(doc["strategies"].items(),
+                          key=lambda kv: (kv[1]["time"]["mean"] is None, kv[1]["time"]["mean"] or 0)):
         t = s["time"]
         ratio = s["ratio_to_optimal"]
+        if not t["n"]:  # a study interrupted before any trial of this strategy finished
+            rows.append([name, "no trial finished", *["—"] * 7])
+            continue
         half = (t["ci95"][1] - t["ci95"][0]) / 2
         rows.append([
             name,
