@@ -12,13 +12,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import GEARBOX, random_plans
+from conftest import GEARBOX, random_plans, salbp_dir
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver
 from opportune.report import describe, summary, table_rows, write_outputs
-from opportune.simulate import (STRATEGIES, StudyConfig, StudyError, TrialRunner, prepare, run_study,
-                                run_trial_with_sequencer)
+from opportune.simulate import (STRATEGIES, StrategyUnavailable, StudyConfig, StudyError, TrialRunner, prepare,
+                                run_study, run_trial_with_sequencer)
 from opportune.worlds import ConveyorBin, PileBin, TimeModel, UniformBin, WeightedBin
 
 GEAR = load_plan(GEARBOX)
@@ -371,6 +371,49 @@ def test_simulate_cli_errors():
     assert r.exit_code == 1 and "uniform and weighted" in r.output and "Traceback" not in r.output
     r = CliRunner().invoke(app, ["simulate", str(GEARBOX), "--strategies", "magic"])
     assert r.exit_code == 1 and "unknown strategy 'magic'" in r.output
+
+
+def test_a_plan_too_large_for_exact_counts_runs_the_strategies_that_need_none():
+    """ARC111 (111 tasks): the first look's exact counts take seconds, so with a short limit the
+    opportunistic policy is refused up front, with a message; the fixed-sequence strategies still run
+    (their sequence needs no count), and on the command line the default set leaves it out with a note."""
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    arc = salbp_dir() / "ARC111.IN2"
+    plan = load_plan(arc)
+    cfg = StudyConfig(plan=plan, strategies=("shake", "opportunistic"), trials=3, count_time_limit=0.3)
+    with pytest.raises(StrategyUnavailable, match="'opportunistic' ranks the candidates by exact counts") as info:
+        prepare(cfg)
+    assert info.value.strategy == "opportunistic" and "--strategies" in str(info.value)
+    r = run_study(StudyConfig(plan=plan, strategies=("kitting", "buffer"), trials=3), workers=1)
+    assert [t.motions for t in r.trials["kitting"]] == [2 * plan.n_units] * 3
+    assert all(t.complete for t in r.trials["buffer"])
+
+    args = ["simulate", str(arc), "--trials", "2", "--workers", "1", "--count-time-limit", "0.3"]
+    out = CliRunner().invoke(app, [*args, "--strategies", "opportunistic,kitting"])
+    assert out.exit_code == 1 and "count-time-limit" in out.output and "Traceback" not in out.output
+    out = CliRunner().invoke(app, [*args, "--strategies", "kitting,pallet"])
+    assert out.exit_code == 0 and "kitting" in out.output
+    out = CliRunner().invoke(app, [*args, "--json"])
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert "opportunistic" not in doc["strategies"] and {"kitting", "buffer", "shake"} <= set(doc["strategies"])
+    assert "leaving 'opportunistic' out" in out.stderr
+
+
+def test_time_limited_counts_give_up_and_restore_the_limits():
+    from opportune.engine.count import BudgetExceeded
+
+    engine = OrderEngine(load_plan(salbp_dir() / "ARC111.IN2"))
+    assert engine.installable(0, engine.all_strategies) == tuple(
+        p for p in engine.plan.part_ids if not engine.plan.strategies[0].requires.get(p))  # without counting
+    with pytest.raises(BudgetExceeded) as info:
+        with engine.time_limited(0.2):
+            engine.count(0, engine.all_strategies)
+    assert info.value.reason == "time" and info.value.elapsed < 5
+    assert engine.time_limit is None and engine.counter(engine.all_strategies).time_limit is None
 
 
 @settings(max_examples=60, deadline=None)

@@ -270,6 +270,8 @@ def simulate(
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON"),
     training_runs: int = typer.Option(200, "--training-runs", min=1, help="Training runs of the quantify strategy"),
     optimal_states: int = typer.Option(500_000, "--optimal-states", min=1, help="State limit of the optimum"),
+    count_time_limit: float = typer.Option(10.0, "--count-time-limit", min=0.1,
+                                           help="Seconds the opportunistic policy's first exact counts may take"),
     motion_cost: Optional[float] = typer.Option(None, "--motion-cost", min=0),
     shake_cost: Optional[float] = typer.Option(None, "--shake-cost", min=0),
     look_cost: Optional[float] = typer.Option(None, "--look-cost", min=0),
@@ -278,7 +280,10 @@ def simulate(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from opportune.report import TABLE_HEADER, summary, table_rows, write_outputs
-    from opportune.simulate import MARKOV_BINS, STRATEGIES, StudyConfig, StudyError, prepare, run_study
+    from dataclasses import replace
+
+    from opportune.simulate import (MARKOV_BINS, STRATEGIES, StrategyUnavailable, StudyConfig, StudyError, prepare,
+                                    run_study)
     from opportune.worlds import TimeModel
 
     plan = load_or_exit(plan_file, json_errors=as_json)
@@ -299,17 +304,17 @@ def simulate(
             visible=visible or sim.get("visible", 2),
             buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
             costs=costs, training_runs=training_runs, optimal_states=optimal_states,
+            count_time_limit=count_time_limit,
         ).validate()
-        try:
-            prepared = prepare(config)
-        except StudyError as exc:
-            if explicit or "optimal" not in config.strategies:
-                raise
-            err.print(f"note: {exc} — leaving 'optimal' out")
-            from dataclasses import replace
-
-            config = replace(config, strategies=tuple(s for s in config.strategies if s != "optimal"))
-            prepared = prepare(config)
+        while True:
+            try:
+                prepared = prepare(config)
+                break
+            except StrategyUnavailable as exc:
+                if explicit or len(config.strategies) == 1:
+                    raise
+                err.print(f"note: {exc} — leaving '{exc.strategy}' out")
+                config = replace(config, strategies=tuple(s for s in config.strategies if s != exc.strategy))
         progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                             TimeRemainingColumn(), console=err, disable=not err.is_terminal, transient=True)
         with progress:

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterable, Sequence
 
 from opportune.engine import OrderEngine
+from opportune.engine.count import BudgetExceeded
 from opportune.engine.schedule import Schedule
 from opportune.plan import Plan
 from opportune.policies.base import Action
@@ -37,6 +38,17 @@ MARKOV_BINS = ("uniform", "weighted")
 
 class StudyError(ValueError):
     """A study that cannot be run as asked (a user mistake: say what to change)."""
+
+
+class StrategyUnavailable(StudyError):
+    """One strategy cannot be run on this plan (too large for it); the others can."""
+
+    def __init__(self, strategy: str, message: str):
+        self.strategy = strategy
+        super().__init__(message)
+
+
+COUNTING_STRATEGIES = ("opportunistic",)  # decide by exact counts of the admissible completions, at every look
 
 
 @dataclass(frozen=True)
@@ -53,6 +65,7 @@ class StudyConfig:
     costs: TimeModel = field(default_factory=TimeModel)
     training_runs: int = 200
     optimal_states: int = 500_000
+    count_time_limit: float = 10.0  # seconds the first look's exact counts may take (see prepare)
     max_steps: int | None = None
 
     def validate(self) -> "StudyConfig":
@@ -131,6 +144,21 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
 
     engine = engine or OrderEngine(config.plan)
     prepared = Prepared(sequence=planned_sequence(engine))
+    counting = [s for s in config.strategies if s in COUNTING_STRATEGIES]
+    if counting:
+        # Such a policy counts at every look: if the first look's counts do not finish in reasonable
+        # time, no trial will.  Say so now rather than hang (the counts made stay in the memo).
+        limit = config.count_time_limit
+        try:
+            with engine.time_limited(limit):
+                engine.options(0, engine.all_strategies)
+        except BudgetExceeded as exc:
+            within, more = ((f"in {limit:g} s", ", or allow more time with --count-time-limit")
+                            if exc.reason == "time" else ("within the counter's memory budget", ""))
+            raise StrategyUnavailable(counting[0], (
+                f"'{counting[0]}' ranks the candidates by exact counts of admissible completions at every look, "
+                f"and on {config.plan.name} ({config.plan.n_units} parts) the counts of the first look do not "
+                f"finish {within}: leave it out with --strategies{more}")) from None
     if "optimal" in config.strategies:
         from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 
@@ -139,7 +167,7 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
         try:
             prepared.optimal_start = solver.value()
         except OptimalTooLarge as exc:
-            raise StudyError(str(exc)) from None
+            raise StrategyUnavailable("optimal", str(exc)) from None
         prepared.optimal_values = solver._values
         prepared.optimal_states = solver.states
         prepared.optimal_seconds = _time.perf_counter() - t0

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import random
+from contextlib import contextmanager
 from dataclasses import dataclass
 from fractions import Fraction
 from itertools import combinations
@@ -258,6 +259,41 @@ class OrderEngine:
                 out[part] = value
         return out
 
+    def installable(self, mask: int, consistent: int) -> tuple[str, ...]:
+        """The parts installable in a state, in declaration order, without counting anything.
+
+        >>> from opportune import make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"a": ["c"]}))
+        >>> engine.installable(0, engine.all_strategies)
+        ('b', 'c')
+        """
+        key = mask | consistent << self.n_units
+        entry = self._option_cache.get(key)
+        if entry is None:
+            entry = self._option_entry(key, mask, consistent)
+        return tuple(entry[0])
+
+    @contextmanager
+    def time_limited(self, seconds: float | None):
+        """Within the block, every exact count of this engine gives up after ``seconds``
+        (raising :class:`BudgetExceeded`; what it counted stays in the memo).
+
+        For a caller that must know early whether exact counting is affordable on a plan,
+        without waiting for the memo budget to run out.
+        """
+        saved = self.time_limit, {key: c.time_limit for key, c in self._counters.items() if c is not None}
+        self.time_limit = seconds
+        for c in self._counters.values():
+            if c is not None:
+                c.time_limit = seconds
+        try:
+            yield self
+        finally:
+            self.time_limit = saved[0]
+            for key, c in self._counters.items():
+                if c is not None:
+                    c.time_limit = saved[1].get(key, saved[0])
+
     def installable_among(self, mask: int, consistent: int, parts: Collection[str]) -> list[str]:
         """Those of ``parts`` installable now (declaration order), without counting anything.
 
@@ -470,7 +506,7 @@ class Schedule:
 
     def installable(self) -> tuple[str, ...]:
         """Parts that can be installed now (all their required parts installed in some consistent strategy)."""
-        return tuple(self.engine.options(self.mask, self.consistent))
+        return self.engine.installable(self.mask, self.consistent)
 
     def count(self) -> int:
         """Exact number of admissible completions (raises BudgetExceeded if over budget)."""
