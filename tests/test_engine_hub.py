@@ -142,3 +142,26 @@ def test_schedule_count_result_is_exact_through_a_hub_when_the_plain_budget_is_t
     result = sched.count_result(time_limit=30)
     assert result.exact and result.value == exact and isinstance(result.value, int)
     assert splits and all(v is not None for v in splits)      # it was the hub split that made it exact
+
+
+def test_count_result_gives_the_plain_count_a_tenth_of_its_time_unless_the_engine_has_a_limit(monkeypatch):
+    """Without this, a plan too large for the plain counter (ARC111) spent half a minute filling the memo
+    budget before the hub split or the estimate got their turn."""
+    from opportune.engine import OrderEngine, Schedule
+    from opportune.plan import make_plan
+
+    plan = make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["b", "c"]})
+    given = []
+    real = OrderEngine.time_limited
+
+    def recording(self, seconds):
+        given.append(seconds)
+        return real(self, seconds)
+
+    monkeypatch.setattr(OrderEngine, "time_limited", recording)
+    engine = OrderEngine(plan)
+    assert Schedule(engine).count_result(time_limit=10).value == 3
+    assert given == [1.0] and engine.time_limit is None
+    assert engine.counter(engine.all_strategies).time_limit is None
+    assert Schedule(OrderEngine(plan, time_limit=4.0)).count_result(time_limit=10).value == 3
+    assert given == [1.0, 4.0]

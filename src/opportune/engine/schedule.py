@@ -515,12 +515,18 @@ class Schedule:
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0) -> CountResult:
         """Number of completions: exact within the engine's budget, else a clearly marked estimate.
 
-        The estimate reuses the exact counter's memo and samples for at most
-        ``time_limit`` seconds, stopping early once its 95% interval is within
-        ``rel_error``; the error it states is the one it achieved.
+        The plain exact count gets the engine's own time limit, or a tenth of
+        ``time_limit`` if the engine has none (so a plan too large for it costs
+        seconds, not the minutes it takes to fill the memo budget).  Then the
+        hub split (exact, see :mod:`opportune.engine.hub`) and the estimate get
+        ``time_limit`` seconds; the estimate reuses the exact counter's memo,
+        stops early once its 95% interval is within ``rel_error``, and states
+        the error it achieved.
         """
+        plain = self.engine.time_limit if self.engine.time_limit is not None else time_limit / 10
         try:
-            return CountResult(self.count())
+            with self.engine.time_limited(plain):
+                return CountResult(self.count())
         except BudgetExceeded:
             pass
         from opportune.engine.estimate import estimate_count
