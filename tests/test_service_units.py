@@ -150,6 +150,43 @@ def test_a_replay_that_disagrees_with_the_record_is_refused(store):
     assert e.value.status == 404
 
 
+def test_stored_answers_are_forgotten_after_their_time(store):
+    """Idempotency records do not pile up forever: past ``keep_answers`` they are deleted (at most once a
+    minute, with a later write); a fresh one stays, and a retry after the clean-up is judged afresh."""
+    import json
+
+    from sqlalchemy import func, select, update
+
+    from opportune.service.auth import Principal
+    from opportune.service.plans import PlanBook, check_upload, store_plan
+    from opportune.service.runs import RunManager
+    from opportune.service.storage import idempotency
+
+    result, fmt, source = check_upload(GEARBOX.read_bytes(), "application/yaml", "g.yaml", "yaml")
+    pid, _ = store_plan(store, result, fmt, source)
+    create_token(store, cell="c1")
+    me = Principal("t", "cell", "c1")
+    m = RunManager(store, PlanBook(store), keep_answers=3600.0)
+    first = json.loads(m.create(me, {"plan": pid}, "old", "/runs")[1])
+    with store.write() as c:  # the first answer is two hours old
+        c.execute(update(idempotency).where(idempotency.c.key == "old").values(created_at=time.time() - 7200))
+
+    def keys():
+        with store.read() as c:
+            return {r.key for r in c.execute(select(idempotency.c.key))}
+
+    assert m.create(me, {"plan": pid}, "old", "/runs")[2] is True  # still there: replayed
+    m.command(me, first["id"], "look", {"visible": ["ca", "ba"]}, "k2", "/runs/1/looks")
+    assert keys() == {"old", "k2"}  # the clean-up ran at the first write, before "old" aged: a minute later
+    m._next_forget = 0.0             # ... it runs again
+    m.command(me, first["id"], "outcome", {"outcome": "success"}, "k3", "/runs/1/outcomes")
+    assert keys() == {"k2", "k3"}
+    status, text, replayed = m.create(me, {"plan": pid}, "old", "/runs")  # judged afresh: a new run
+    assert status == 201 and not replayed and json.loads(text)["id"] != first["id"]
+    with store.read() as c:
+        assert c.execute(select(func.count()).select_from(idempotency)).scalar() == 3
+
+
 def test_a_plan_too_large_to_count_is_refused_clearly(store):
     import json
 

@@ -162,7 +162,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     book = PlanBook(store, count_seconds=settings.count_seconds)
     broker = Broker()
     auth = Authenticator(store, cache_seconds=settings.token_cache_seconds, ticket_seconds=settings.ticket_seconds)
-    manager = RunManager(store, book, size=settings.live_runs, notify=broker.notify)
+    manager = RunManager(store, book, size=settings.live_runs, notify=broker.notify,
+                         keep_answers=settings.idempotency_seconds)
 
     @asynccontextmanager
     async def lifespan(_app):

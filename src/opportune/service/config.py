@@ -33,7 +33,9 @@ class Settings:
     runs keep their sequencer in memory (others are rebuilt from the event log
     on demand); ``count_seconds`` bounds one exact count (the policy's
     decisions need exact counts; a plan too large for them is refused with a
-    clear error instead of holding a request for minutes).
+    clear error instead of holding a request for minutes); ``idempotency_seconds``
+    is how long the stored answer of an idempotent request is kept (a retry
+    after that is judged afresh).
     """
 
     db_url: str = DEFAULT_DB
@@ -42,5 +44,6 @@ class Settings:
     ticket_seconds: float = 60.0
     live_runs: int = 512
     count_seconds: float = 10.0
+    idempotency_seconds: float = 7 * 24 * 3600.0
     sse_poll_seconds: float = 2.0
     sse_keepalive_seconds: float = 15.0

@@ -9,6 +9,11 @@ with the same key and the same request gets the stored answer (header
 with 422.  Keys are scoped per cell (all tokens of a cell share them) or per
 operator token.  Only answers that changed state are stored: a refused request
 changed nothing, and its retry is judged afresh.
+
+Stored answers are kept for ``Settings.idempotency_seconds`` (7 days by default:
+far longer than any retry loop) and then forgotten, so the table does not grow
+with every request the service ever answered; a request retried after that is
+judged afresh.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 
-from sqlalchemy import bindparam, insert, select
+from sqlalchemy import bindparam, delete, insert, select
 from sqlalchemy.engine import Connection
 
 from opportune.service.errors import ApiError
@@ -24,12 +29,14 @@ from opportune.service.storage import dumps, idempotency, now
 
 HEADER = "Idempotency-Key"
 MAX_KEY = 200
+KEEP_SECONDS = 7 * 24 * 3600.0  # how long a stored answer is kept (the default of Settings.idempotency_seconds)
 
 
 # Built once: the hot path binds values only.
 _LOOKUP = select(idempotency.c.request_hash, idempotency.c.status, idempotency.c.response).where(
     idempotency.c.scope == bindparam("scope"), idempotency.c.key == bindparam("key"))
 _INSERT = insert(idempotency)
+_FORGET = delete(idempotency).where(idempotency.c.created_at < bindparam("before"))
 
 
 @dataclass(frozen=True)
@@ -76,3 +83,8 @@ def remember(conn: Connection, scope: str, key: str, req_hash: str, status: int,
     """Store an answer (its JSON text, as sent)."""
     conn.execute(_INSERT, {"scope": scope, "key": key, "request_hash": req_hash, "status": status,
                            "response": text, "created_at": now()})
+
+
+def forget_before(conn: Connection, before: float) -> int:
+    """Forget the answers stored before the time ``before`` (seconds since the epoch); how many."""
+    return conn.execute(_FORGET, {"before": before}).rowcount

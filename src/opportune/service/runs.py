@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Callable
@@ -46,6 +47,8 @@ from opportune.service.storage import Store, cells, dumps, events, now, plans, r
 from opportune.service.views import count_view, decision_view, row_view, run_summary, run_view, trace_view
 
 # Statements of the hot path, built once (each request only binds values).
+FORGET_EVERY = 60.0  # seconds between clean-ups of stored idempotent answers past their time
+
 _RUN_ROW = (select(runs, plans.c.name.label("plan_name")).join(plans, plans.c.id == runs.c.plan_id)
             .where(runs.c.id == bindparam("run_id")))
 _ADVANCE = (update(runs).where(runs.c.id == bindparam("b_id"), runs.c.seq == bindparam("b_expected"))
@@ -98,13 +101,24 @@ def apply(sequencer: Sequencer, kind: str, request: dict):
 class RunManager:
     """Creates runs, applies commands to them, and answers questions about them."""
 
-    def __init__(self, store: Store, book: PlanBook, *, size: int = 512, notify: Callable[[int], None] = lambda _: None):
+    def __init__(self, store: Store, book: PlanBook, *, size: int = 512, notify: Callable[[int], None] = lambda _: None,
+                 keep_answers: float = idem.KEEP_SECONDS):
         self.store = store
         self.book = book
         self.size = size
         self.notify = notify
+        self.keep_answers = keep_answers  # seconds a stored idempotent answer is kept
+        self._next_forget = 0.0           # monotonic time of the next clean-up of old answers
         self._live: OrderedDict[int, LiveRun] = OrderedDict()
         self._mutex = threading.Lock()
+
+    def _remember(self, c, scope: str, key: str, h: str, status: int, text: str) -> None:
+        """Store an answer; at most once a minute, in the same transaction, forget those past their time."""
+        idem.remember(c, scope, key, h, status, text)
+        clock = time.monotonic()
+        if clock >= self._next_forget:
+            self._next_forget = clock + FORGET_EVERY
+            idem.forget_before(c, now() - self.keep_answers)
 
     # ------------------------------------------------------------ access
 
@@ -222,7 +236,7 @@ class RunManager:
                 with loaded.lock:
                     answer = run_view(live, loaded, t)
                 text = dumps(answer)
-                idem.remember(c, principal.scope, key, h, 201, text)
+                self._remember(c, principal.scope, key, h, 201, text)
         except IntegrityError:  # the same key, concurrently, in another process
             with self.store.read() as c:
                 stored = idem.lookup(c, principal.scope, key, h)
@@ -298,7 +312,7 @@ class RunManager:
                                           "response": text, "created_at": t})
                 # The key's primary key makes a concurrent use of the same key (another run, another
                 # process) fail here: the transaction rolls back and the retry answers from the store.
-                idem.remember(c, principal.scope, key, h, 200, text)
+                self._remember(c, principal.scope, key, h, 200, text)
         except _Stale:
             raise
         except IntegrityError:

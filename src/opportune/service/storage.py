@@ -112,6 +112,7 @@ idempotency = Table(
     Column("status", Integer, nullable=False),
     Column("response", Text, nullable=False),
     Column("created_at", Float, nullable=False),
+    Index("idempotency_created", "created_at"),                       # old answers are forgotten by age
 )
 
 meta = Table(
@@ -143,6 +144,8 @@ class Store:
         else:
             self.writer = self.reader = create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
         metadata.create_all(self.writer)
+        for index in idempotency.indexes:  # a database made by an older version has the table, not the index
+            index.create(self.writer, checkfirst=True)
         self._init_meta()
 
     @staticmethod
