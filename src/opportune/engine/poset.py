@@ -214,10 +214,10 @@ class Poset:
                 m |= (1 << j) | above[j]
             above[i] = m
         below = [0] * n
-        for i in range(n):
-            bit = 1 << i
-            for j in bits(above[i]):
-                below[j] |= bit
+        for i in order:  # the same pass forwards: O(given pairs), not O(comparable pairs)
+            m = below[i] | 1 << i
+            for j in bits(succ[i]):
+                below[j] |= m
         return cls(n, below, above)
 
     @classmethod
@@ -430,12 +430,29 @@ class Poset:
         return out
 
     def _cover_succ(self) -> list[int]:
-        above = self.above
+        """For each element, the bitmask of the elements that cover it.
+
+        The covers of ``i`` are the minimal elements of ``above[i]``: take a minimal element
+        of what is left (descend from its lowest bit), keep it, drop it with everything above
+        it, repeat.  One round per cover, and the descent is one step when the elements are
+        numbered in a topological order (as plans usually are), so a long chain costs O(n)
+        big-int operations, not O(n^2).
+        """
+        above, below = self.above, self.below
         succ = []
         for i in range(self.n):
-            direct = above[i]
-            for j in bits(above[i]):
-                direct &= ~above[j]
+            rest = above[i]
+            direct = 0
+            while rest:
+                low = rest & -rest
+                j = low.bit_length() - 1
+                under = below[j] & rest
+                while under:  # j is not minimal in rest: go down
+                    low = under & -under
+                    j = low.bit_length() - 1
+                    under = below[j] & rest
+                direct |= low
+                rest &= ~(above[j] | low)
             succ.append(direct)
         return succ
 
