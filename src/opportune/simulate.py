@@ -279,11 +279,7 @@ class TrialRunner:
             code = _code(self._decide(mask, cons, installed, buffer, look))
             self._decided += 1
         op, part = code
-        if op < 2:
-            nxt = self.transitions.get((mask, cons, part)) or self._install(mask, cons, part)
-            entry = (op, part, nxt)
-        else:
-            entry = (op, part, None)
+        entry = (op, part, self._install(mask, cons, part) if op < 2 else None)
         cache = self.cache
         if len(cache) >= DECISION_CACHE_LIMIT:  # bounded memory on large plans
             cache.clear()
