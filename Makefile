@@ -5,14 +5,14 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup system-deps bench bench-service clean
+.PHONY: demo test setup system-deps pg-deps bench bench-service clean
 
 setup: $(STAMP) system-deps
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[service,scale,dev]'
+	$(BIN)/python -m pip install --quiet -e '.[service,postgres,scale,dev]'
 	@touch $(STAMP)
 
 # System tools from Debian's packages, installed only where missing: $(call apt,COMMAND,PACKAGE,WHAT FOR)
@@ -31,6 +31,11 @@ endef
 system-deps:
 	$(call apt,dot,graphviz,opportune graph to svg/png)
 	$(call apt,chromium,chromium,the dashboard browser test)
+	@# PostgreSQL's server programs live off the PATH (/usr/lib/postgresql/N/bin): look there too
+	@PATH="$$PATH:$$(ls -d /usr/lib/postgresql/*/bin 2>/dev/null | tr '\n' ':')" $(MAKE) --no-print-directory pg-deps
+
+pg-deps:
+	$(call apt,initdb,postgresql,the service tests on PostgreSQL)
 
 demo: setup
 	$(BIN)/opportune check examples/gearbox.yaml

@@ -32,6 +32,15 @@ def salbp() -> Path:
     return salbp_dir()
 
 
+@pytest.fixture(scope="session")
+def postgres():
+    """A throwaway PostgreSQL server for the session (`make test` installs the server programs)."""
+    from opportune.service.testing import PostgresServer
+
+    with PostgresServer() as pg:
+        yield pg
+
+
 def salbp_poset(name: str):
     """A shared SALBP graph (by file stem) as an engine Poset, read with the package's own .IN2 reader."""
     from opportune.engine.poset import Poset

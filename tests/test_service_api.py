@@ -1,4 +1,5 @@
-"""The service's HTTP API against a real server on a loopback port with a temporary SQLite file.
+"""The service's HTTP API against a real server on a loopback port, over a temporary SQLite file and
+over a throwaway PostgreSQL server.
 
 Table 1 of the paper driven over HTTP, idempotent retries, every bad input
 (each refused with a JSON error and no change of state), access between
@@ -26,9 +27,15 @@ from test_sequencer import TABLE1
 MAX_BODY = 64 * 1024
 
 
-@pytest.fixture(scope="module")
-def svc(tmp_path_factory):
-    with ServiceProcess(tmp_path_factory.mktemp("svc") / "api.db", max_body=MAX_BODY) as s:
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def svc(request, tmp_path_factory):
+    """The same API suite on both stores the service supports: a SQLite file and a PostgreSQL server."""
+    where = tmp_path_factory.mktemp("svc")
+    if request.param == "sqlite":
+        db = where / "api.db"
+    else:
+        db = request.getfixturevalue("postgres").database("api")
+    with ServiceProcess(db, max_body=MAX_BODY, log=where / "api.log") as s:
         yield s
 
 

@@ -12,6 +12,7 @@ import sqlite3
 import threading
 
 import httpx
+import pytest
 
 from conftest import EXAMPLES, GEARBOX
 from opportune import load_plan
@@ -98,9 +99,10 @@ def drive(client: Client, run_id: int, rng: random.Random, acknowledged: list, s
             acknowledged.append(r.json()["seq"])
 
 
-def test_kill_9_under_load_loses_no_acknowledged_answer(tmp_path):
-    db = tmp_path / "load.db"
-    svc = ServiceProcess(db, extra_args=("--no-access-log",))
+@pytest.mark.parametrize("store", ["sqlite", "postgresql"])
+def test_kill_9_under_load_loses_no_acknowledged_answer(tmp_path, request, store):
+    db = tmp_path / "load.db" if store == "sqlite" else request.getfixturevalue("postgres").database("load")
+    svc = ServiceProcess(db, extra_args=("--no-access-log",), log=tmp_path / "load.log")
     n = 4
     try:
         svc.start()

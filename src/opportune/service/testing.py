@@ -32,13 +32,16 @@ def free_port() -> int:
 
 
 class ServiceProcess:
-    """``opportune serve`` on 127.0.0.1 with a SQLite file; a context manager that always stops it."""
+    """``opportune serve`` on 127.0.0.1 over a SQLite file or a database URL; a context manager that
+    always stops it.  With a URL, give ``log`` (where the server's output goes)."""
 
     def __init__(self, db: str | Path, *, max_body: int | None = None, log: str | Path | None = None,
                  extra_args: tuple[str, ...] = ()):
-        self.db = Path(db)
+        self.db = str(db)
+        if log is None and "://" in self.db:
+            raise ValueError("with a database URL, say where the server's log goes: log=PATH")
         self.max_body = max_body
-        self.log_path = Path(log) if log else self.db.with_suffix(".log")
+        self.log_path = Path(log) if log else Path(db).with_suffix(".log")
         self.extra_args = extra_args
         self.proc: subprocess.Popen | None = None
         self.port: int | None = None
@@ -52,7 +55,7 @@ class ServiceProcess:
 
         for _attempt in range(3):  # another process may take the free port first
             self.port = free_port()
-            args = [sys.executable, "-m", "opportune.cli", "serve", "--db", str(self.db),
+            args = [sys.executable, "-m", "opportune.cli", "serve", "--db", self.db,
                     "--host", "127.0.0.1", "--port", str(self.port), *self.extra_args]
             if self.max_body:
                 args += ["--max-body", str(self.max_body)]
@@ -101,7 +104,7 @@ class ServiceProcess:
         from opportune.service.config import database_url
         from opportune.service.storage import Store
 
-        store = Store(database_url(str(self.db)))
+        store = Store(database_url(self.db))
         try:
             return create_token(store, cell=cell, operator=operator)[1]
         finally:
@@ -134,3 +137,89 @@ class Client:
 
     def close(self) -> None:
         self.http.close()
+
+
+class PostgresServer:
+    """A throwaway PostgreSQL server in a temporary directory, on 127.0.0.1 and a free port, for tests.
+
+    Needs the server programs (Debian: ``apt-get install postgresql``); as root it runs them as the
+    ``postgres`` user, as PostgreSQL requires.  :meth:`database` makes a fresh database and returns
+    its SQLAlchemy URL (driver psycopg 3).
+
+    The server lives in a fresh directory under the system's temporary directory (the ``postgres``
+    user must be able to reach it) and is deleted by :meth:`stop`.
+
+    >>> with PostgresServer() as pg:                                    # doctest: +SKIP
+    ...     url = pg.database("runs")
+    """
+
+    def __init__(self):
+        self.root: Path | None = None
+        self.data: Path | None = None
+        self.port: int | None = None
+        self.bindir = self._find_bindir()
+        self._as = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
+
+    @staticmethod
+    def _find_bindir() -> Path:
+        import glob
+        import shutil
+
+        found = shutil.which("initdb")
+        if found:
+            return Path(found).parent
+        versions = sorted(glob.glob("/usr/lib/postgresql/*/bin/initdb"), key=lambda p: int(Path(p).parts[-3]))
+        if versions:
+            return Path(versions[-1]).parent
+        raise RuntimeError("PostgreSQL's server programs (initdb, pg_ctl) were not found: install them "
+                           "(Debian: apt-get install postgresql; `make test` does)")
+
+    def _run(self, *args: str) -> None:
+        done = subprocess.run([*self._as, *args], capture_output=True, text=True)
+        if done.returncode:
+            raise RuntimeError(f"{' '.join(args[:2])} failed: {done.stdout}{done.stderr}")
+
+    def start(self) -> "PostgresServer":
+        import tempfile
+
+        self.root = Path(tempfile.mkdtemp(prefix="opportune-pg-"))
+        self.data = self.root / "data"
+        self.data.mkdir()
+        if self._as:
+            subprocess.run(["chown", "-R", "postgres", str(self.root)], check=True)
+        self._run(str(self.bindir / "initdb"), "-D", str(self.data), "-A", "trust", "-U", "postgres", "-E", "UTF8")
+        self.port = free_port()
+        self._run(str(self.bindir / "pg_ctl"), "-D", str(self.data), "-w", "-l", str(self.root / "server.log"),
+                  "-o", f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off", "start")
+        return self
+
+    def database(self, name: str) -> str:
+        """Create database ``name``; its URL."""
+        from sqlalchemy import create_engine, text
+
+        admin = create_engine(f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/postgres",
+                              isolation_level="AUTOCOMMIT")
+        try:
+            with admin.connect() as c:
+                c.execute(text(f'CREATE DATABASE "{name}"'))
+        finally:
+            admin.dispose()
+        return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{name}"
+
+    def stop(self) -> None:
+        import shutil
+
+        if self.root is None:
+            return
+        try:
+            if (self.data / "postmaster.pid").exists():
+                self._run(str(self.bindir / "pg_ctl"), "-D", str(self.data), "-m", "immediate", "-w", "stop")
+        finally:
+            shutil.rmtree(self.root, ignore_errors=True)
+            self.root = None
+
+    def __enter__(self) -> "PostgresServer":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
