@@ -270,8 +270,10 @@ def simulate(
     as_json: bool = typer.Option(False, "--json", help="Print the results as JSON"),
     training_runs: int = typer.Option(200, "--training-runs", min=1, help="Training runs of the quantify strategy"),
     optimal_states: int = typer.Option(500_000, "--optimal-states", min=1, help="State limit of the optimum"),
-    count_time_limit: float = typer.Option(10.0, "--count-time-limit", min=0.1,
-                                           help="Seconds the opportunistic policy's first exact counts may take"),
+    count_time_limit: Optional[float] = typer.Option(
+        None, "--count-time-limit", min=0.1, show_default=False,
+        help="Seconds the opportunistic policy's first exact counts may take (default: 10 when it is asked for "
+             "with --strategies, else 2: a plan that slow to count takes minutes per trial)"),
     motion_cost: Optional[float] = typer.Option(None, "--motion-cost", min=0),
     shake_cost: Optional[float] = typer.Option(None, "--shake-cost", min=0),
     look_cost: Optional[float] = typer.Option(None, "--look-cost", min=0),
@@ -304,7 +306,7 @@ def simulate(
             visible=visible or sim.get("visible", 2),
             buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
             costs=costs, training_runs=training_runs, optimal_states=optimal_states,
-            count_time_limit=count_time_limit,
+            count_time_limit=count_time_limit if count_time_limit is not None else (10.0 if explicit else 2.0),
         ).validate()
         while True:
             try:

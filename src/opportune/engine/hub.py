@@ -40,7 +40,7 @@ from math import comb
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.poset import CycleError, Poset, bits, components
 
-__all__ = ["TailCounter", "hub_count", "hub_candidates", "hub_split"]
+__all__ = ["HubPath", "TailCounter", "hub_count", "hub_candidates", "hub_split"]
 
 
 class TailCounter:
@@ -321,8 +321,17 @@ def hub_count(counter: Counter, s: int, h: int, coupling: list[tuple[int, int]],
     tails = TailCounter(counter, down, deadline=deadline)
     dropped = set(coupling)
     base = [pair for pair in poset.cover_pairs() if pair not in dropped and s >> pair[0] & 1 and s >> pair[1] & 1]
-    # Twins (same elements below and above within s) are interchangeable, so flipping
-    # the relation of one twin or of the other gives the same count: compute it once.
+    return _over_couplings(poset, s, coupling, lambda flipped: _hub_term(counter, tails, s, h, down, base, flipped))
+
+
+def _over_couplings(poset: Poset, s: int, coupling: list[tuple[int, int]], term) -> int | None:
+    """``Σ_F (-1)^|F| term(F)`` over the subsets ``F`` of the coupling relations (the module doc's
+    inclusion–exclusion); None as soon as a term is None (still coupled: not of the hub form).
+
+    Twins (same elements below and above within ``s``) are interchangeable, so flipping the
+    relation of one twin or of the other gives the same term: it is computed once.
+    """
+    below, above = poset.below, poset.above
     twin = {}
     for b, _ in coupling:
         twin[b] = min(x for x in bits(s) if (below[x] ^ below[b]) & s == 0 and (above[x] ^ above[b]) & s == 0)
@@ -331,12 +340,12 @@ def hub_count(counter: Counter, s: int, h: int, coupling: list[tuple[int, int]],
     for k in range(len(coupling) + 1):
         for flipped in combinations(coupling, k):
             key = tuple(sorted((twin[b], a) for b, a in flipped))
-            term = seen.get(key)
-            if term is None:
-                term = seen[key] = _hub_term(counter, tails, s, h, down, base, flipped)
-                if term is None:
-                    return None                 # still coupled: not of the hub form
-            total += -term if k % 2 else term
+            value = seen.get(key)
+            if value is None:
+                value = seen[key] = term(flipped)
+                if value is None:
+                    return None
+            total += -value if k % 2 else value
     return total
 
 
@@ -356,3 +365,264 @@ def _hub_term(counter, tails, s, h, down, base, flipped) -> int | None:
     e_a = Counter(q, max_memo=None).count(up) if up else 1
     d = tails.tail(rest)
     return e_a * sum(v * comb(b + 1 + size_a, 1 + size_a) for b, v in enumerate(d))
+
+
+class _Unavailable(Exception):
+    """A piece :class:`HubPath` cannot count (no known hub): the caller counts plainly."""
+
+
+class HubPath:
+    """Exact counts through hubs with memos that persist across calls (one per poset).
+
+    :func:`hub_split` counts one set; a simulation asks for thousands of
+    nested sets (what remains, minus one more step each time).  This keeps,
+    per hub, one :class:`TailCounter` whose marks are all of ``↓h``: the tail
+    distribution of a set depends only on the set, so the vectors of one
+    state serve every later state, every inclusion–exclusion term and every
+    call, exactly as the plain counter's memo does.  The orders ``Q`` of the
+    terms and the counts of the parts above the hub are cached too.
+
+    It works on the poset extended by a *probe* ``z_x = n + x`` above each
+    element ``x`` and nothing else: sets without probes are counted as in the
+    original poset, and ``e(S + z_x) = Σ over the orders of S of
+    (|S| + 1 - position of x)``, so :meth:`position_sum` is two counts (the
+    probe is maximal and unrelated to the hub unless ``x`` is above it, so the
+    hub form is kept).
+
+    Sets must be up-sets of the original poset (plus probes): then the
+    relations inside a set do not depend on the elements outside it, which the
+    caches rely on.  :meth:`count` returns None when it cannot help.
+
+    >>> p = Poset.from_pairs(6, [(0, 2), (1, 2), (2, 3), (4, 3), (2, 5)])
+    >>> hp = HubPath(p)
+    >>> hp.count(p.full, discover=True) == Counter(p).count()
+    True
+    >>> hp.position_sum(p.full, 4) == Counter(p).position_sums()[4]
+    True
+    """
+
+    def __init__(self, poset: Poset, *, max_coupling: int = 4, min_down: int = 2, probe_memo: int = 100_000,
+                 max_memo: int | None = 2_000_000):
+        n = self.n = poset.n
+        self.base = poset
+        self.poset = Poset.from_pairs(2 * n, poset.cover_pairs() + [(x, n + x) for x in range(n)])
+        self.counter = Counter(self.poset, max_memo=max_memo, max_total=None)
+        self.max_coupling = max_coupling
+        self.min_down = min_down
+        self.probe_memo = probe_memo
+        self.tails: dict[int, TailCounter] = {}
+        self._covers = self.poset.cover_pairs()
+        self._cover_below = [0] * (2 * n)
+        for a, b in self._covers:
+            self._cover_below[b] |= 1 << a
+        self._q: dict[tuple, Poset | None] = {}
+        self._up: dict[tuple, int] = {}
+
+    # ------------------------------------------------------------ public
+    def applies(self, s: int) -> bool:
+        """Whether ``s`` (a set of the original poset) holds a known hub with at least ``min_down`` below it."""
+        below = self.base.below
+        return any(s >> h & 1 and (below[h] & s).bit_count() >= self.min_down for h in self.tails)
+
+    def count(self, s: int, *, deadline: float = float("inf"), discover: bool = False) -> int | None:
+        """Exact count of ``s``: hard pieces through their hub, the rest by the plain counter.
+
+        With ``discover``, a hard piece without a known hub is tried at the
+        candidates of :func:`hub_candidates` (as :func:`hub_split` does);
+        without, such a piece makes the answer None (the caller counts plainly).
+        """
+        c = self.counter
+        v = c._memo.get(s)
+        if v is not None:
+            return v
+        if not self._is_upset(s):
+            return None
+        return self._count(s, deadline, discover)
+
+    def position_sum(self, s: int, x: int, *, deadline: float = float("inf")) -> int | None:
+        """Sum over the orders of ``s`` of the 1-based position of ``x`` (None when :meth:`count` cannot help).
+
+        Splits ``s`` as the counter does (cut elements, components) down to the
+        piece holding ``x``; on that piece, ``(|piece| + 1) e(piece) - e(piece + z_x)``.
+        """
+        if not self._is_upset(s) or not s >> x & 1:
+            return None
+        try:
+            return self._pos(s, x, deadline)
+        except _Unavailable:
+            return None
+
+    def _pos(self, t: int, x: int, deadline: float) -> int:
+        if t == 1 << x:
+            return 1
+        below, above = self.poset.below, self.poset.above
+        e = self._count(t, deadline, False)
+        if e is None:
+            raise _Unavailable
+        mins, cuts = self.counter.scan(t)
+        if cuts:
+            if cuts >> x & 1:
+                return ((below[x] & t).bit_count() + 1) * e
+            block = t & ~cuts
+            offset = 0
+            for z in bits(cuts):
+                if below[x] >> z & 1:
+                    block &= above[z]
+                    offset = max(offset, (below[z] & t).bit_count() + 1)
+                else:
+                    block &= below[z]
+            eb = self._count(block, deadline, False) if block & (block - 1) else 1
+            if eb is None:
+                raise _Unavailable
+            return e // eb * self._pos(block, x, deadline) + offset * e
+        comps = components(above, t, mins)
+        if len(comps) > 1:
+            piece = next(c for c in comps if c >> x & 1)
+            ec = self._count(piece, deadline, False) if piece & (piece - 1) else 1
+            if ec is None:
+                raise _Unavailable
+            n, k = t.bit_count(), piece.bit_count()
+            return e // ec * (n + 1) // (k + 1) * self._pos(piece, x, deadline)
+        plus = self._count(t | 1 << (self.n + x), deadline, False)
+        if plus is None:
+            raise _Unavailable
+        return (t.bit_count() + 1) * e - plus
+
+    def _count(self, s: int, deadline: float, discover: bool) -> int | None:
+        c = self.counter
+        v = c._memo.get(s)
+        if v is not None:
+            return v
+        for piece in self._hard_pieces(s):
+            v = self._piece(piece, deadline, discover)
+            if v is None:
+                return None
+            c.learn(piece, v)
+        return self._plain(s, deadline)
+
+    # ------------------------------------------------------------ internals
+    def _is_upset(self, s: int) -> bool:
+        above = self.base.above
+        core = s & ((1 << self.n) - 1)
+        for x in bits(core):
+            if above[x] & ~core:
+                return False
+        return True
+
+    def _hard_pieces(self, s: int) -> list[int]:
+        """The pieces of ``s`` the plain counter cannot split (connected, no cut element) and has not counted."""
+        c = self.counter
+        memo = c._memo
+        below, above = self.poset.below, self.poset.above
+        out = []
+        stack = [s]
+        while stack:
+            t = stack.pop()
+            if t & (t - 1) == 0 or t in memo:
+                continue
+            mins, cuts = c.scan(t)
+            if cuts:
+                rest = t
+                for z in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
+                    stack.append(rest & below[z])
+                    rest &= above[z]
+                stack.append(rest)
+                continue
+            comps = components(above, t, mins)
+            if len(comps) > 1:
+                stack.extend(comps)
+                continue
+            out.append(t)
+        return out
+
+    def _piece(self, s: int, deadline: float, discover: bool) -> int | None:
+        below = self.poset.below
+        best = None
+        for h in self.tails:
+            if s >> h & 1:
+                k = (below[h] & s).bit_count()
+                if k >= self.min_down and (best is None or k > best[0]):
+                    best = (k, h)
+        if best is not None:
+            v = self._hub_count(s, best[1], deadline)
+            if v is not None:
+                return v
+        if s.bit_count() < 24:
+            return self._plain(s, deadline)     # small pieces: nothing to gain
+        if not discover:
+            return None                         # the caller counts it plainly, under its own budget
+        above = self.poset.above
+        c = self.counter
+        for h, _ in hub_candidates(self.poset, s, max_coupling=self.max_coupling)[:3]:
+            if h in self.tails or (below[h] & s).bit_count() < self.min_down:
+                continue
+            saved = c.max_memo, c.time_limit
+            c.max_memo, c.time_limit = self.probe_memo, max(deadline - time.perf_counter(), 0.0) if deadline != float("inf") else None
+            try:
+                c.count(s & ~above[h] & ~(1 << h))     # the hub is the glue only if the rest is cheap
+            except BudgetExceeded as exc:
+                if exc.reason == "time":
+                    raise
+                continue
+            finally:
+                c.max_memo, c.time_limit = saved
+            self.tails[h] = TailCounter(c, below[h])
+            v = self._hub_count(s, h, deadline)
+            if v is not None:
+                return v
+            del self.tails[h]
+        return None
+
+    def _plain(self, s: int, deadline: float) -> int:
+        """The plain counter's count of ``s`` (its hard pieces already learnt), within ``deadline``."""
+        c = self.counter
+        saved = c.time_limit
+        c.time_limit = max(deadline - time.perf_counter(), 0.0) if deadline != float("inf") else None
+        try:
+            return c.count(s)
+        finally:
+            c.time_limit = saved
+
+    def _hub_count(self, s: int, h: int, deadline: float) -> int | None:
+        """:func:`hub_count` with the persistent tail memo of ``h`` and cached orders ``Q``."""
+        below, above = self.poset.below, self.poset.above
+        down = below[h] & s
+        up0 = above[h] & s
+        related = up0 | down | 1 << h
+        cb = self._cover_below
+        coupling = [(b, a) for a in bits(up0) for b in bits(cb[a] & s & ~related)]
+        if len(coupling) > self.max_coupling:
+            return None
+        tails = self.tails[h]
+        tails.deadline = deadline
+        ckey = tuple(sorted(coupling))
+        return _over_couplings(self.poset, s, coupling,
+                               lambda flipped: self._term(s, h, down, ckey, tuple(flipped), tails))
+
+    def _term(self, s, h, down, ckey, flipped, tails) -> int | None:
+        qkey = (h, ckey, flipped)
+        if qkey in self._q:
+            q = self._q[qkey]
+        else:
+            dropped = set(ckey)
+            try:
+                q = Poset.from_pairs(self.poset.n, [p for p in self._covers if p not in dropped]
+                                     + [(a, b) for b, a in flipped])
+            except CycleError:
+                q = None
+            self._q[qkey] = q
+        if q is None:
+            return 0
+        up = q.above[h] & s
+        rest = s & ~up & ~(1 << h)
+        qa = q.above
+        for b in bits(rest & ~down):
+            if qa[b] & up:
+                return None
+        size_a = up.bit_count()
+        ukey = (qkey, up)
+        e_a = self._up.get(ukey)
+        if e_a is None:
+            e_a = self._up[ukey] = Counter(q, max_memo=None).count(up) if up else 1
+        d = tails.tail(rest)
+        return e_a * sum(v * comb(b + 1 + size_a, 1 + size_a) for b, v in enumerate(d))

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import random
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from fractions import Fraction
@@ -33,11 +34,13 @@ from itertools import combinations
 from typing import Collection, Iterable, Sequence
 
 from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.hub import HubPath
 from opportune.engine.poset import CycleError, Poset
 from opportune.plan import Plan
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
 STATE_CACHE_LIMIT = 300_000  # entries per per-state cache before it is cleared
+HUB_PROBE = 100_000  # new memo entries a plain count may add before counting through a hub is tried
 
 
 class NotAdmissible(ValueError):
@@ -120,6 +123,8 @@ class OrderEngine:
         self._above: list | None = None
         self._unit_ids = [plan.parts[i].id for i in self.unit_part]
         self._part_units = {p.id: ((1 << p.quantity) - 1) << self.first[i] for i, p in enumerate(plan.parts)}
+        # Per counter whose plain count failed on a hub: its persistent hub path (None: no hub found).
+        self._hubs: dict[Counter, HubPath | None] = {}
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -192,7 +197,9 @@ class OrderEngine:
         if terms is None:
             terms = self._terms(consistent)
         if len(terms) == 1:  # one strategy: no inclusion–exclusion, and the counter's memo is the cache
-            return terms[0][1].count(self.full & ~mask)
+            remaining = self.full & ~mask
+            r = terms[0][1]._memo.get(remaining)
+            return r if r is not None else self._term_count(terms[0][1], remaining)
         key = mask | consistent << self.n_units
         cached = self._count_cache.get(key)
         if cached is not None:
@@ -202,9 +209,77 @@ class OrderEngine:
         remaining = self.full & ~mask
         total = 0
         for sign, counter in terms:
-            total += sign * counter.count(remaining)
+            total += sign * self._term_count(counter, remaining)
         self._count_cache[key] = total
         return total
+
+    # ------------------------------------------------------------ counting through a hub
+
+    def _term_count(self, counter: Counter, s: int) -> int:
+        """``counter.count(s)``, through a hub (:class:`~opportune.engine.hub.HubPath`) when the plain count fails.
+
+        The plain count is tried first with at most ``HUB_PROBE`` new memo entries; only if
+        that fails is a hub looked for (once per counter).  A counter with a hub sends
+        every set holding it (with some of what precedes it) to the hub path, whose memos
+        persist: the nested sets of a simulation cost milliseconds.  Counts are exact
+        either way; a plan the plain counter handles never leaves it.
+        """
+        r = counter._memo.get(s)
+        if r is not None:
+            return r
+        if counter in self._hubs:
+            hub = self._hubs[counter]
+            if hub is not None and hub.applies(s):
+                v = hub.count(s, deadline=self._deadline(counter))
+                if v is not None:
+                    counter.learn(s, v)
+                    return v
+            return counter.count(s)
+        limit = counter.max_memo
+        if limit is not None and limit <= HUB_PROBE:
+            return counter.count(s)
+        counter.max_memo = HUB_PROBE
+        try:
+            return counter.count(s)
+        except BudgetExceeded as exc:
+            if exc.reason != "memo":
+                raise
+        finally:
+            counter.max_memo = limit
+        hub = HubPath(counter.poset, max_memo=limit)
+        v = hub.count(s, deadline=self._deadline(counter), discover=True)
+        if v is not None and hub.tails:
+            self._hubs[counter] = hub
+            counter.learn(s, v)
+            return v
+        self._hubs[counter] = None
+        return counter.count(s)             # plainly, continuing from the probe's memo
+
+    @staticmethod
+    def _deadline(counter: Counter) -> float:
+        return time.perf_counter() + counter.time_limit if counter.time_limit is not None else float("inf")
+
+    def _hub_for(self, counter: Counter, s: int) -> HubPath | None:
+        """The hub path of ``counter`` if it applies to ``s`` (after a count of ``s`` has chosen the way)."""
+        hub = self._hubs.get(counter)
+        return hub if hub is not None and hub.applies(s) else None
+
+    def _term_position_sums(self, counter: Counter, s: int, units: Iterable[int] | None = None) -> dict[int, int]:
+        """Position sums of ``units`` (default: all of ``s``) over the orders of ``s`` under one counter."""
+        self._term_count(counter, s)            # chooses the way (and finds the hub) if not done yet
+        hub = self._hub_for(counter, s)
+        if hub is None:
+            sums = counter.position_sums(s)
+            return sums if units is None else {u: sums[u] for u in units}
+        out = {}
+        deadline = self._deadline(counter)
+        for u in (_bits(s) if units is None else units):
+            v = hub.position_sum(s, u, deadline=deadline)
+            if v is None:       # not of the hub form after all: the plain vectors (may exceed the budget)
+                sums = counter.position_sums(s)
+                return sums if units is None else {u: sums[u] for u in (_bits(s) if units is None else units)}
+            out[u] = v
+        return out
 
     def options(self, mask: int, consistent: int) -> dict[str, int]:
         """For each part installable now: admissible completions left after installing it (declaration order)."""
@@ -375,25 +450,45 @@ class OrderEngine:
         if table is None:
             if len(self._positions_cache) > STATE_CACHE_LIMIT:
                 self._trim()
-            table = self._positions_cache[key] = (self.count(mask, consistent), self.position_sums(mask, consistent))
+            total = self.count(mask, consistent)
+            if self._hub_state(mask, consistent):   # through a hub: only the units asked for, one by one
+                table = self._positions_cache[key] = (total, {})
+            else:
+                table = self._positions_cache[key] = (total, self.position_sums(mask, consistent))
         total, by_unit = table
         units = self._part_units
         out: dict[str, int] = {}
         for part in parts:
             left = units[part] & ~mask
             if left:  # the next unit is the lowest one left
-                out[part] = by_unit[(left & -left).bit_length() - 1]
+                unit = (left & -left).bit_length() - 1
+                value = by_unit.get(unit)
+                if value is None:
+                    value = by_unit[unit] = self._unit_position_sum(mask, consistent, unit)
+                out[part] = value
         return total, out
+
+    def _hub_state(self, mask: int, consistent: int) -> bool:
+        """Whether some counter of the state counts it through a hub (never on plans the plain counter handles)."""
+        if not self._hubs:
+            return False
+        remaining = self.full & ~mask
+        return any(self._hub_for(counter, remaining) is not None for _, counter in self._terms(consistent))
+
+    def _unit_position_sum(self, mask: int, consistent: int, unit: int) -> int:
+        remaining = self.full & ~mask
+        return sum(sign * self._term_position_sums(counter, remaining, (unit,))[unit]
+                   for sign, counter in self._terms(consistent))
 
     def position_sums(self, mask: int, consistent: int) -> dict[int, int]:
         """Sum over all admissible completions of each remaining unit's 1-based position."""
         remaining = self.full & ~mask
         terms = self._terms(consistent)
         if len(terms) == 1:  # one strategy: the counter's own (fresh) table
-            return terms[0][1].position_sums(remaining)
+            return self._term_position_sums(terms[0][1], remaining)
         sums: dict[int, int] = {}
         for sign, counter in terms:
-            for unit, value in counter.position_sums(remaining).items():
+            for unit, value in self._term_position_sums(counter, remaining).items():
                 sums[unit] = sums.get(unit, 0) + sign * value
         return sums
 
