@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter as Tally
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Iterable, Literal
 
 from opportune.engine import OrderEngine, Schedule

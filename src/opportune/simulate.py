@@ -21,8 +21,8 @@ import math
 import random
 import time as _time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
-from typing import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Callable
 
 from opportune.engine import OrderEngine
 from opportune.engine.count import BudgetExceeded
@@ -160,7 +160,7 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
                 f"and on {config.plan.name} ({config.plan.n_units} parts) the counts of the first look do not "
                 f"finish {within}: leave it out with --strategies{more}")) from None
     if "optimal" in config.strategies:
-        from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+        from opportune.policies.optimal import OptimalTooLarge
 
         t0 = _time.perf_counter()
         solver = _solver(engine, config)

@@ -52,7 +52,7 @@ from statistics import NormalDist
 
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.hub import hub_split
-from opportune.engine.poset import Poset, bits, components
+from opportune.engine.poset import Poset, bits, components, cut_blocks
 
 __all__ = ["Estimate", "estimate_count"]
 
@@ -126,7 +126,7 @@ class _SMC:
     def _exact(self, s: int) -> int | None:
         """e(s) from the memo, or counted under the small tail budget; None if over it."""
         c = self.counter
-        v = c._memo.get(s)
+        v = c.cached(s)
         if v is not None or s & (s - 1) == 0:
             return 1 if v is None else v
         try:
@@ -263,7 +263,6 @@ def _pieces(counter: Counter, mask: int) -> tuple[float, list[int]]:
     and the pieces left to estimate: connected sets without cut elements.
     """
     below, above = counter.poset.below, counter.poset.above
-    memo = counter._memo
     logf = 0.0
     hard = []
     stack = [mask]
@@ -271,7 +270,7 @@ def _pieces(counter: Counter, mask: int) -> tuple[float, list[int]]:
         s = stack.pop()
         if s & (s - 1) == 0:
             continue
-        v = memo.get(s)
+        v = counter.cached(s)
         if v is not None:
             logf += math.log(v)
             continue
@@ -280,11 +279,7 @@ def _pieces(counter: Counter, mask: int) -> tuple[float, list[int]]:
             if ((below[i] | above[i]) & s) | 1 << i == s:
                 cuts |= 1 << i
         if cuts:
-            rest = s
-            for z in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
-                stack.append(rest & below[z])
-                rest &= above[z]
-            stack.append(rest)
+            stack.extend(cut_blocks(below, above, s, cuts))
             continue
         comps = components(above, s, counter.scan(s)[0])
         if len(comps) > 1:

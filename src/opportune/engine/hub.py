@@ -38,7 +38,7 @@ from itertools import combinations
 from math import comb
 
 from opportune.engine.count import BudgetExceeded, Counter
-from opportune.engine.poset import CycleError, Poset, bits, components
+from opportune.engine.poset import CycleError, Poset, bits, components, cut_blocks
 
 __all__ = ["HubPath", "TailCounter", "hub_count", "hub_candidates", "hub_split"]
 
@@ -316,7 +316,7 @@ def hub_count(counter: Counter, s: int, h: int, coupling: list[tuple[int, int]],
     """
     poset = counter.poset
     deadline = time.perf_counter() + time_limit if time_limit is not None else float("inf")
-    below, above = poset.below, poset.above
+    below = poset.below
     down = below[h] & s
     tails = TailCounter(counter, down, deadline=deadline)
     dropped = set(coupling)
@@ -432,7 +432,7 @@ class HubPath:
         without, such a piece makes the answer None (the caller counts plainly).
         """
         c = self.counter
-        v = c._memo.get(s)
+        v = c.cached(s)
         if v is not None:
             return v
         if not self._is_upset(s):
@@ -490,7 +490,7 @@ class HubPath:
 
     def _count(self, s: int, deadline: float, discover: bool) -> int | None:
         c = self.counter
-        v = c._memo.get(s)
+        v = c.cached(s)
         if v is not None:
             return v
         for piece in self._hard_pieces(s):
@@ -512,21 +512,16 @@ class HubPath:
     def _hard_pieces(self, s: int) -> list[int]:
         """The pieces of ``s`` the plain counter cannot split (connected, no cut element) and has not counted."""
         c = self.counter
-        memo = c._memo
         below, above = self.poset.below, self.poset.above
         out = []
         stack = [s]
         while stack:
             t = stack.pop()
-            if t & (t - 1) == 0 or t in memo:
+            if t & (t - 1) == 0 or c.cached(t) is not None:
                 continue
             mins, cuts = c.scan(t)
             if cuts:
-                rest = t
-                for z in sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count()):
-                    stack.append(rest & below[z])
-                    rest &= above[z]
-                stack.append(rest)
+                stack.extend(cut_blocks(below, above, t, cuts))
                 continue
             comps = components(above, t, mins)
             if len(comps) > 1:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Iterable, Iterator, Sequence
 
-__all__ = ["CycleError", "Poset", "bits", "elements"]
+__all__ = ["CycleError", "Poset", "bits", "components", "cut_blocks", "cut_chain", "elements"]
 
 
 def bits(mask: int) -> Iterator[int]:
@@ -68,6 +68,35 @@ def components(above: Sequence[int], s: int, mins: int) -> list[int]:
         keep.append(u)
         comps = keep
     return comps
+
+
+def cut_chain(below: Sequence[int], cuts: int) -> list[int]:
+    """The cut elements of a set (each comparable to every other element of it) in order, lowest first.
+
+    They form a chain, so an element's rank is the number of cut elements below it.  O(k log k).
+
+    >>> cut_chain([0, 0b001, 0b011], 0b101)    # 0 < 1 < 2; cuts 0 and 2
+    [0, 2]
+    """
+    return sorted(bits(cuts), key=lambda i: (below[i] & cuts).bit_count())
+
+
+def cut_blocks(below: Sequence[int], above: Sequence[int], s: int, cuts: int) -> list[int]:
+    """The parts of ``s`` between its cut elements: before the first, between each two, after the last.
+
+    ``s`` is their ordinal sum with the cuts in between, so ``e(s)`` is the product of their counts.
+    ``k + 1`` sets for ``k`` cuts, some maybe empty.
+
+    >>> cut_blocks([0, 0b001, 0b011, 0b011], [0b1110, 0b1100, 0, 0], 0b1111, 0b0010)   # 0 < 1 < {2, 3}
+    [1, 12]
+    """
+    out = []
+    rest = s
+    for z in cut_chain(below, cuts):
+        out.append(rest & below[z])
+        rest &= above[z]
+    out.append(rest)
+    return out
 
 
 class CycleError(ValueError):

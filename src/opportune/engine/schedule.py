@@ -198,7 +198,7 @@ class OrderEngine:
             terms = self._terms(consistent)
         if len(terms) == 1:  # one strategy: no inclusion–exclusion, and the counter's memo is the cache
             remaining = self.full & ~mask
-            r = terms[0][1]._memo.get(remaining)
+            r = terms[0][1].cached(remaining)
             return r if r is not None else self._term_count(terms[0][1], remaining)
         key = mask | consistent << self.n_units
         cached = self._count_cache.get(key)
@@ -224,7 +224,7 @@ class OrderEngine:
         persist: the nested sets of a simulation cost milliseconds.  Counts are exact
         either way; a plan the plain counter handles never leaves it.
         """
-        r = counter._memo.get(s)
+        r = counter.cached(s)
         if r is not None:
             return r
         if counter in self._hubs:
@@ -303,7 +303,7 @@ class OrderEngine:
         key = mask | consistent << self.n_units
         out = self._installable_cache.get(key)
         if out is None:
-            out = frozenset(self._installable_parts(mask, consistent))
+            out = frozenset(self.installable(mask, consistent))  # the scan options_for keeps for the state
             self._installable_cache[key] = out
         return out
 
