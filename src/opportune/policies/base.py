@@ -9,7 +9,7 @@ simulation and the service share one decision path.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
@@ -110,6 +110,22 @@ class Decision:
             "candidates": [c.to_dict() for c in self.candidates],
             "positions": [{"part": p, "expected": float(v), "exact": str(v)} for p, v in self.positions],
         }
+
+
+class DecidesOnMasks:
+    """Mixin for a policy whose action depends only on the machine form of a state.
+
+    Such a policy defines ``choose_at(engine, mask, consistent, buffer, free, visible)``:
+    the engine's installed-units mask and consistent strategies, the buffer, its free
+    locations and the look.  A simulation calls it directly, with no
+    :class:`~opportune.sequencer.State` per look; :meth:`choose` adapts a ``State`` to it,
+    and the policy's ``decide`` adds the reasons, so every world takes the same decision.
+    """
+
+    def choose(self, state: "State", visible: tuple[str, ...]) -> Action:
+        """The action alone (what ``decide`` decides, without building its reasons)."""
+        sched = state.schedule
+        return self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
 
 
 @runtime_checkable

@@ -14,7 +14,7 @@ import random
 from typing import Callable, Sequence
 
 from opportune.engine import OrderEngine, Schedule
-from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
 
 
 def planned_sequence(plan_or_engine, prefer: Callable[[str], object] | None = None) -> tuple[str, ...]:
@@ -34,7 +34,7 @@ def planned_sequence(plan_or_engine, prefer: Callable[[str], object] | None = No
     return tuple(out)
 
 
-class FixedSequencePolicy:
+class FixedSequencePolicy(DecidesOnMasks):
     """Common ground: a fixed admissible sequence and the part it needs next."""
 
     name = "fixed"
@@ -52,11 +52,6 @@ class FixedSequencePolicy:
     def earliest(self, parts) -> str:
         return min(parts, key=self._rank.__getitem__)
 
-    def _choose(self, state, visible) -> Action:
-        """:meth:`choose_at` (each subclass's) on a :class:`~opportune.sequencer.State`."""
-        sched = state.schedule
-        return self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
-
 
 class ShakeUntilVisible(FixedSequencePolicy):
     """Reduce uncertainty: a fixed sequence; install the next part when visible, otherwise shake."""
@@ -65,7 +60,7 @@ class ShakeUntilVisible(FixedSequencePolicy):
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """The action on the machine form of a state (see ``Opportunistic.choose_at``); :meth:`decide`
+        """The action on the machine form of a state (see :class:`~opportune.policies.base.DecidesOnMasks`); :meth:`decide`
         adds the reasons.  The next part is the sequence's entry after the installed units."""
         if mask == engine.full:
             return DONE
@@ -73,7 +68,7 @@ class ShakeUntilVisible(FixedSequencePolicy):
         return shared_action("install", nxt, "bin") if nxt in visible else SHAKE
 
     def decide(self, state, visible) -> Decision:
-        action = self._choose(state, visible)
+        action = self.choose(state, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         nxt = self.next_part(state)
@@ -107,7 +102,7 @@ class Kitting(FixedSequencePolicy):
         return shared_action("install", self.sequence[installed], "buffer")
 
     def decide(self, state, visible) -> Decision:
-        action = self._choose(state, visible)
+        action = self.choose(state, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         if action.kind == "buffer":
@@ -125,7 +120,7 @@ class BufferFixed(FixedSequencePolicy):
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """The action on the machine form of a state (see ``Opportunistic.choose_at``)."""
+        """The action on the machine form of a state (see :class:`~opportune.policies.base.DecidesOnMasks`)."""
         if mask == engine.full:
             return DONE
         nxt = self.sequence[mask.bit_count()]
@@ -138,7 +133,7 @@ class BufferFixed(FixedSequencePolicy):
         return SHAKE
 
     def decide(self, state, visible) -> Decision:
-        action = self._choose(state, visible)
+        action = self.choose(state, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         nxt = self.next_part(state)

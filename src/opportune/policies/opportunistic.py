@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from fractions import Fraction
 
-from opportune.policies.base import DONE, SHAKE, Action, Candidate, Decision, shared_action
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Candidate, Decision, shared_action
 
 
 def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
@@ -61,25 +61,16 @@ def _buffer_ranking(state, visible: tuple[str, ...]) -> tuple[int, list[tuple]]:
     return total, sorted((s, plan.index(p), p) for p, s in sums.items())
 
 
-class Opportunistic:
+class Opportunistic(DecidesOnMasks):
     """Install what keeps the most options; buffer what is needed earliest; shake last."""
 
     name = "opportunistic"
     deterministic = True
 
-    def choose(self, state, visible: tuple[str, ...]) -> Action:
-        """The action alone (what :meth:`decide` decides, without building its reasons)."""
-        schedule = state.schedule
-        return self.choose_at(schedule.engine, schedule.mask, schedule.consistent, state.buffer,
-                              state.buffer_free, visible)
-
     @staticmethod
     def choose_at(engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """:meth:`choose` on the machine form of a state: the engine's installed mask and consistent
-        strategies, the buffer and its free locations.  A simulation calls this directly, without
-        building a :class:`~opportune.sequencer.State` per look; the sequencer reaches it through
-        :meth:`choose`, so both take the same decision.
+        """The action on the machine form of a state (see :class:`~opportune.policies.base.DecidesOnMasks`).
 
         The best candidate is the least sort key of :func:`ranked_candidates` (keys are distinct:
         a part's bin and buffer candidates differ in the source), found without sorting.

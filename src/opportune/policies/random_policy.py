@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import random
 
-from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
 
 
-class RandomChoice:
+class RandomChoice(DecidesOnMasks):
     """Install a random installable candidate (visible or buffered); else buffer a random visible
     part if a location is free; else shake.  Seeded per trial through :meth:`start`."""
 
@@ -22,7 +22,7 @@ class RandomChoice:
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """The action on the machine form of a state (see ``Opportunistic.choose_at``).
+        """The action on the machine form of a state (see :class:`~opportune.policies.base.DecidesOnMasks`).
 
         Candidates are drawn from a list in declaration order, bin before buffer, so a seed
         gives the same choices however the look is ordered.
@@ -44,8 +44,7 @@ class RandomChoice:
         return SHAKE
 
     def decide(self, state, visible) -> Decision:
-        sched = state.schedule
-        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        action = self.choose(state, visible)
         if action.kind == "install":
             return Decision(action, "a random installable candidate")
         if action.kind == "buffer":
