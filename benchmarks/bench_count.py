@@ -38,7 +38,9 @@ from opportune.engine.estimate import estimate_count
 from opportune.engine.poset import Poset
 from opportune.formats.salbp import read_in2
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "salbp"
+from opportune import datasets
+
+DEFAULT_DATA = datasets.salbp_path("KILBRID").parent  # the graphs shipped in the package
 
 
 def show_count(v: int) -> str:

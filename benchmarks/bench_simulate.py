@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -22,14 +21,6 @@ from opportune import load_plan
 from opportune.simulate import STRATEGIES, StudyConfig, prepare, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def salbp(name: str) -> Path:
-    env = os.environ.get("OPPORTUNE_SALBP_DIR")
-    for base in ([Path(env)] if env else []) + [p / "shared/data/salbp" for p in ROOT.parents]:
-        if (base / name).exists():
-            return base / name
-    sys.exit(f"{name} not found: put ../shared/data/salbp beside the repository or set OPPORTUNE_SALBP_DIR")
 
 
 def measure(plan, strategies, trials, workers, table, label):
@@ -62,7 +53,7 @@ def main():
         gear = load_plan(ROOT / "examples/gearbox.yaml")
         measure(gear, STRATEGIES, args.trials or 20_000, args.workers, table, "gearbox")
     if args.only in (None, "kilbrid"):
-        kil = load_plan(salbp("KILBRID.IN2"))
+        kil = load_plan("salbp:KILBRID")
         strategies = [s for s in STRATEGIES if s != "optimal"]  # the optimum's state space is far too large
         measure(kil, strategies, args.trials or 2_000, args.workers, table, "KILBRID")
     console.print(table)

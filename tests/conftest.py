@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -15,16 +14,10 @@ GEARBOX = EXAMPLES / "gearbox.yaml"
 
 
 def salbp_dir() -> Path:
-    """../shared/data/salbp beside the repository (CI puts it there); OPPORTUNE_SALBP_DIR overrides."""
-    env = os.environ.get("OPPORTUNE_SALBP_DIR")
-    candidates = [Path(env)] if env else []
-    candidates += [parent / "shared" / "data" / "salbp" for parent in REPO.parents]
-    candidates.append(Path("/work/shared/data/salbp"))
-    for c in candidates:
-        if (c / "KILBRID.IN2").exists():
-            return c
-    raise FileNotFoundError("the shared SALBP graphs were not found beside the repository (../shared/data/salbp); "
-                            "set OPPORTUNE_SALBP_DIR to their folder")
+    """The SALBP graphs shipped inside the package (opportune/datasets/salbp)."""
+    from opportune import datasets
+
+    return datasets.salbp_path("KILBRID").parent
 
 
 @pytest.fixture(scope="session")

@@ -82,7 +82,18 @@ def detect_format(path: str | Path, text: str | None = None) -> str:
 
 
 def read_plan(path: str | Path) -> CheckResult:
-    """Read and check a plan file of any supported format; never raises for bad content."""
+    """Read and check a plan file of any supported format; never raises for bad content.
+
+    ``salbp:NAME`` reads a SALBP graph shipped with the package (:mod:`opportune.datasets`).
+    """
+    if str(path).lower().startswith("salbp:"):
+        from opportune import datasets
+
+        try:
+            path = datasets.salbp_path(str(path)[len("salbp:"):])
+        except KeyError as exc:
+            return CheckResult(None, [Problem(str(exc.args[0]), "use one of these names, e.g. salbp:KILBRID",
+                                              code="io")])
     path = Path(path)
     name = str(path)
     try:
