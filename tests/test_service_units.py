@@ -211,3 +211,37 @@ def test_a_plan_too_large_to_count_is_refused_clearly(store):
     assert time.monotonic() - started < 5
     assert e.value.code == "plan_too_large" and e.value.status == 503 and "retry" in e.value.hint
     assert m.list(me) == []  # nothing was stored
+
+
+def test_with_a_decision_budget_a_plan_too_large_to_count_runs_on_estimates_and_resumes(store):
+    """The same wide plan, with a decision budget: the run starts, its looks are answered with estimated
+    decisions (marked so), and a restarted server resumes it from the recorded actions."""
+    import json
+    import random
+
+    from opportune import make_plan
+    from opportune.formats.loader import CheckResult
+    from opportune.service.auth import Principal
+    from opportune.service.plans import PlanBook, store_plan
+    from opportune.service.runs import RunManager
+
+    rng = random.Random(1)
+    bottom, top = [f"b{i}" for i in range(30)], [f"t{i}" for i in range(30)]
+    wide = make_plan(bottom + top, {t: rng.sample(bottom, 3) for t in top}, name="wide")
+    pid, _ = store_plan(store, CheckResult(wide, []), "json", json.dumps(wide.to_dict()))
+    me = Principal("t", "cell", "c1")
+    create_token(store, cell="c1")
+    m = RunManager(store, PlanBook(store, count_seconds=0.05), budget=0.02, warm_up=0.05)
+    run = json.loads(m.create(me, {"plan": pid}, "k1", "/runs")[1])
+    estimated = 0
+    for i, look in enumerate([["t0", "t1", "t2"], ["b3", "b4", "t5"], ["b7", "t8", "b9"]]):
+        answer = json.loads(m.command(me, run["id"], "look", {"visible": look}, f"l{i}", "/x")[1])
+        estimated += answer["decision"]["exact"] is False
+        m.command(me, run["id"], "outcome", {"outcome": "success"}, f"o{i}", "/y")
+    assert estimated >= 1
+    before = m.view(me, run["id"])["state"]
+    fresh = RunManager(store, PlanBook(store, count_seconds=0.05), budget=0.02, warm_up=0.05)   # a restart
+    assert fresh.view(me, run["id"])["state"] == before
+    rows = fresh.trace(me, run["id"])["rows"]
+    assert [r["action"] for r in rows] == [r["action"] for r in m.trace(me, run["id"])["rows"]]
+    assert any(r["reasons"]["exact"] is False and r["reasons"]["estimates"] for r in rows)   # as recorded

@@ -25,6 +25,8 @@ from opportune.policies.base import Action, Decision, Policy
 
 Outcome = Literal["success", "failed", "defective"]
 OUTCOMES = ("success", "failed", "defective")
+DEFAULT_BUDGET = 0.05   # seconds per decision: a cell looks every 1–3 s
+WARM_UP = 10.0          # seconds a new sequencer may spend counting its first state
 
 
 class SequencerError(ValueError):
@@ -162,13 +164,23 @@ class Sequencer:
     """
 
     def __init__(self, plan: Plan | OrderEngine, policy: Policy | None = None, *,
-                 buffer_capacity: int | None = None):
+                 buffer_capacity: int | None = None, budget: float | None = DEFAULT_BUDGET,
+                 warm_up: float | None = WARM_UP):
+        """``budget``: seconds per decision for the default (opportunistic) policy; None: always
+        exact, however long it takes.  A policy given explicitly keeps its own budget.
+
+        ``warm_up``: seconds spent here, before the first look, counting the first state
+        exactly (on a large plan this chooses how it is counted and fills the memos later
+        decisions use; on small plans it takes microseconds).  None: no limit; 0: none.
+        """
         if buffer_capacity is not None and buffer_capacity < 0:
             raise ValueError("buffer capacity must be ≥ 0 (or None for unlimited)")
+        if budget is not None and not budget > 0:
+            raise ValueError("the decision budget must be a positive number of seconds (or None: exact)")
         if policy is None:
             from opportune.policies.opportunistic import Opportunistic
 
-            policy = Opportunistic()
+            policy = Opportunistic(budget=budget)
         self.engine = plan if isinstance(plan, OrderEngine) else OrderEngine(plan)
         self.plan = self.engine.plan
         self.policy = policy
@@ -176,6 +188,7 @@ class Sequencer:
         self.pending: Row | None = None
         self.trace: list[Row] = []
         self.finished = False
+        self.warmed = warm_up == 0 or self.engine.warm_up(warm_up)
 
     # ------------------------------------------------------------ deciding
 
@@ -185,13 +198,33 @@ class Sequencer:
         Once the assembly is complete, an empty look is answered once with
         ``done``; any look after that is refused.
         """
+        look = self._check_ready(visible)
+        decision = self.policy.decide(self.state, look)
+        self._check_decision(decision, look)
+        return self._pend(look, decision)
+
+    def replay(self, visible: Iterable[str], action: Action | Decision) -> Decision:
+        """Take a recorded action (or the whole recorded decision) for a look without asking the
+        policy: an estimated decision depends on time and chance, so a log is replayed by what
+        was done, not decided again.  Raises :class:`LookError` if the look or the action does
+        not fit the state (which is then unchanged)."""
+        look = self._check_ready(visible)
+        decision = action if isinstance(action, Decision) else Decision(action, "replayed from the log", exact=False,
+                                                                       method="replayed")
+        try:
+            self._check_decision(decision, look)
+        except RuntimeError as exc:
+            raise LookError(f"the recorded action does not fit the state: {exc}") from None
+        return self._pend(look, decision)
+
+    def _check_ready(self, visible: Iterable[str]) -> tuple[str, ...]:
         if self.pending is not None:
             raise LookError(f"'{self.pending.action}' is pending: report its outcome (or cancel it) before the next look")
         if self.finished:
             raise LookError("the assembly is complete and was reported done: start a new run")
-        look = check_look(self.state, visible)
-        decision = self.policy.decide(self.state, look)
-        self._check_decision(decision, look)
+        return check_look(self.state, visible)
+
+    def _pend(self, look: tuple[str, ...], decision: Decision) -> Decision:
         row = Row(look, self.state.buffer, self.state.installed, decision)
         if decision.action.kind == "done":
             self.trace.append(row)

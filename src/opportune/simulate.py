@@ -67,6 +67,7 @@ class StudyConfig:
     optimal_states: int = 500_000
     count_time_limit: float = 10.0  # seconds the first look's exact counts may take (see prepare)
     max_steps: int | None = None
+    decision_budget: float | None = None  # seconds per opportunistic decision (None: exact, reproducible)
 
     def validate(self) -> "StudyConfig":
         unknown = [s for s in self.strategies if s not in STRATEGIES]
@@ -83,6 +84,8 @@ class StudyConfig:
             raise StudyError("--visible must be at least 1")
         if self.buffer_capacity is not None and self.buffer_capacity < 0:
             raise StudyError("--buffer-capacity must be ≥ 0")
+        if self.decision_budget is not None and not self.decision_budget > 0:
+            raise StudyError("--decision-budget must be a positive number of seconds")
         if self.buffer_capacity == 0 and "buffer" in self.strategies:
             pass  # allowed: the buffer strategy then shakes like `shake`
         return self
@@ -145,7 +148,11 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
     engine = engine or OrderEngine(config.plan)
     prepared = Prepared(sequence=planned_sequence(engine))
     counting = [s for s in config.strategies if s in COUNTING_STRATEGIES]
-    if counting:
+    if counting and config.decision_budget is not None:
+        # Budgeted decisions estimate what they cannot count: nothing to refuse; count the first
+        # state now (within the time limit) so that the workers start from a chosen way of counting.
+        engine.warm_up(config.count_time_limit)
+    elif counting:
         # Such a policy counts at every look: if the first look's counts do not finish in reasonable
         # time, no trial will.  Say so now rather than hang (the counts made stay in the memo).
         limit = config.count_time_limit
@@ -208,7 +215,7 @@ def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepare
     if strategy == "quantify":
         return fixed.Quantify(engine, prepared.quantify_rank or {}, config.training_runs)
     if strategy == "opportunistic":
-        return Opportunistic()
+        return Opportunistic(budget=config.decision_budget, seed=config.seed)
     if strategy == "random":
         return RandomChoice()
     if strategy == "optimal":
@@ -456,6 +463,8 @@ def hash_config(config: StudyConfig) -> str:
     doc = {"plan": config.plan.to_dict(), "bin": config.bin, "visible": config.visible,
            "capacity": config.buffer_capacity, "costs": config.costs.to_dict(), "seed": config.seed,
            "training": config.training_runs}
+    if config.decision_budget is not None:   # another policy (an unbudgeted study keeps its hash)
+        doc["budget"] = config.decision_budget
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 

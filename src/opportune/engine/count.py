@@ -59,7 +59,16 @@ from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chai
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
 
-_CHECK_EVERY = 256  # new memo entries between clock checks (a power of two)
+_CHECK_EVERY = 256  # new memo entries between clock checks (a power of two), on small posets
+
+
+def _check_every(n: int) -> int:
+    """New memo entries between clock checks: fewer on large posets, whose entries cost O(n) big-int
+    operations each (a 1,000-element poset's 256 entries take ~0.1 s: a deadline would be missed by that)."""
+    every = _CHECK_EVERY
+    while every > 1 and every * n > 16_384:
+        every //= 2
+    return every
 _NARROW = 48        # posets up to this size may scan with three chunk tables of at most 16 bits
 _INF = float("inf")
 
@@ -482,12 +491,23 @@ class Counter:
         get = memo.get
         perf = time.perf_counter
         vec = self._vec
-        check = _CHECK_EVERY - 1
+        check = _check_every(self.poset.n) - 1
 
         def f(s: int) -> int:
             r = get(s)
             if r is not None:
                 return r
+            # Budget: counted when a new set is entered, not when it is stored, so that a deep first
+            # descent (a large poset, nothing stored yet) still looks at the clock.  Every entered set
+            # is stored once finished, so this counts the same new entries.
+            k = budget[2] = budget[2] + 1
+            if k > budget[0]:
+                raise BudgetExceeded(
+                    f"exact count needs more than max_memo={budget[0]} new memo entries",
+                    reason="memo", memo_size=len(memo) + len(vec))
+            if not k & check and perf() > budget[1]:
+                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
             # cut elements (Counter.scan, inlined: this is the hot path)
             if narrow:
                 a0 = s & cmask
@@ -593,16 +613,7 @@ class Counter:
                         t = s ^ b
                         v = get(t)
                         r += v if v is not None else f(t)
-            # store (inline: this is the hot path of every new set)
-            k = budget[2] = budget[2] + 1
-            if k > budget[0]:
-                raise BudgetExceeded(
-                    f"exact count needs more than max_memo={budget[0]} new memo entries",
-                    reason="memo", memo_size=len(memo) + len(vec))
             memo[s] = r
-            if not k & check and perf() > budget[1]:
-                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
             return r
 
         return f
@@ -658,7 +669,7 @@ class Counter:
         vget = vec.get
         f = self._f
         perf = time.perf_counter
-        check = _CHECK_EVERY - 1
+        check = _check_every(self.poset.n) - 1
         # ones(s): 1 in the field of every element of s, joined from the little-endian bytes of the
         # fields of each byte of s (fields are whole bytes: see _set_width)
         nbytes = max(1, (self.poset.n + 7) // 8)

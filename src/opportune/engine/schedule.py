@@ -125,6 +125,9 @@ class OrderEngine:
         self._part_units = {p.id: ((1 << p.quantity) - 1) << self.first[i] for i, p in enumerate(plan.parts)}
         # Per counter whose plain count failed on a hub: its persistent hub path (None: no hub found).
         self._hubs: dict[Counter, HubPath | None] = {}
+        self._hub_search: dict[Counter, HubPath] = {}   # a hub search cut short by a deadline, to resume
+        self._probe_left: dict[Counter, int] = {}       # new memo entries the plain probe may still add
+        self._until: float | None = None                # the deadline of :meth:`deadline`, if any
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -218,15 +221,19 @@ class OrderEngine:
     def _term_count(self, counter: Counter, s: int) -> int:
         """``counter.count(s)``, through a hub (:class:`~opportune.engine.hub.HubPath`) when the plain count fails.
 
-        The plain count is tried first with at most ``HUB_PROBE`` new memo entries; only if
-        that fails is a hub looked for (once per counter).  A counter with a hub sends
-        every set holding it (with some of what precedes it) to the hub path, whose memos
-        persist: the nested sets of a simulation cost milliseconds.  Counts are exact
-        either way; a plan the plain counter handles never leaves it.
+        The plain count is tried first with at most ``HUB_PROBE`` new memo entries (over all
+        calls: a probe cut short by a time limit resumes where it stopped); only if that
+        fails is a hub looked for (once per counter; a search cut short by a time limit
+        resumes too, its memos kept).  A counter with a hub sends every set holding it
+        (with some of what precedes it) to the hub path, whose memos persist: the nested
+        sets of a simulation cost milliseconds.  Counts are exact either way; a plan the
+        plain counter handles never leaves it.
         """
         r = counter.cached(s)
         if r is not None:
             return r
+        if self._until is not None:
+            counter.time_limit = max(0.0, self._until - time.perf_counter())
         if counter in self._hubs:
             hub = self._hubs[counter]
             if hub is not None and hub.applies(s):
@@ -235,25 +242,62 @@ class OrderEngine:
                     counter.learn(s, v)
                     return v
             return counter.count(s)
-        limit = counter.max_memo
-        if limit is not None and limit <= HUB_PROBE:
-            return counter.count(s)
-        counter.max_memo = HUB_PROBE
-        try:
-            return counter.count(s)
-        except BudgetExceeded as exc:
-            if exc.reason != "memo":
-                raise
-        finally:
-            counter.max_memo = limit
-        hub = HubPath(counter.poset, max_memo=limit)
-        v = hub.count(s, deadline=self._deadline(counter), discover=True)
+        hub = self._hub_search.get(counter)
+        if hub is None:
+            limit = counter.max_memo
+            if limit is not None and limit <= HUB_PROBE:
+                return counter.count(s)
+            left = self._probe_left.get(counter, HUB_PROBE)
+            counter.max_memo = left
+            before = counter.memo_size
+            try:
+                return counter.count(s)
+            except BudgetExceeded as exc:
+                if exc.reason != "memo":
+                    self._probe_left[counter] = left - (counter.memo_size - before)
+                    if self._probe_left[counter] > 0:
+                        raise
+            finally:
+                counter.max_memo = limit
+            hub = self._hub_search[counter] = HubPath(counter.poset, max_memo=limit)
+        v = hub.count(s, deadline=self._deadline(counter), discover=True)   # a time limit raises: resumed later
+        del self._hub_search[counter]
         if v is not None and hub.tails:
             self._hubs[counter] = hub
             counter.learn(s, v)
             return v
         self._hubs[counter] = None
         return counter.count(s)             # plainly, continuing from the probe's memo
+
+    @contextmanager
+    def deadline(self, until: float | None):
+        """Within the block, every exact count of this engine stops at ``until`` (a
+        ``time.perf_counter()`` value), raising :class:`BudgetExceeded`: one deadline for
+        all the counts of a decision, not a limit per count.  What was counted stays in
+        the memos, so a later call continues from there.
+        """
+        saved = self._until, self.time_limit, {key: c.time_limit for key, c in self._counters.items() if c is not None}
+        self._until = until
+        try:
+            yield self
+        finally:
+            self._until, self.time_limit = saved[0], saved[1]
+            for key, c in self._counters.items():
+                if c is not None:
+                    c.time_limit = saved[2].get(key, saved[1])
+
+    def warm_up(self, time_limit: float | None = None) -> bool:
+        """Count the first state exactly, within ``time_limit`` seconds: this chooses how the
+        plan is counted (finding a hub if it has one) and fills the memos every later
+        question uses.  True if it finished; if not, what it counted is kept.
+        """
+        until = time.perf_counter() + time_limit if time_limit is not None else None
+        try:
+            with self.deadline(until):
+                self.count(0, self.all_strategies)
+        except BudgetExceeded:
+            return False
+        return True
 
     @staticmethod
     def _deadline(counter: Counter) -> float:
@@ -267,6 +311,8 @@ class OrderEngine:
     def _term_position_sums(self, counter: Counter, s: int, units: Iterable[int] | None = None) -> dict[int, int]:
         """Position sums of ``units`` (default: all of ``s``) over the orders of ``s`` under one counter."""
         self._term_count(counter, s)            # chooses the way (and finds the hub) if not done yet
+        if self._until is not None:
+            counter.time_limit = max(0.0, self._until - time.perf_counter())
         hub = self._hub_for(counter, s)
         if hub is None:
             sums = counter.position_sums(s)

@@ -13,8 +13,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from opportune.formats.problems import Problem
 from opportune.plan import Plan, PlanError
 
@@ -104,6 +102,10 @@ def read_plan(path: str | Path) -> CheckResult:
         return CheckResult(None, [Problem(f"{name} is a directory, not a plan file", "give a .yaml, .json or .IN2 file", code="io")])
     except OSError as exc:
         return CheckResult(None, [Problem(f"cannot read {name}: {exc.strerror}", "check the file's permissions", code="io")])
+    from opportune.formats.alb import check_alb_bytes, is_alb
+
+    if is_alb(path, raw):
+        return check_alb_bytes(raw, file=name)
     fmt = detect_format(path, raw[:200].decode("latin-1"))
     if fmt == "in2":
         from opportune.formats.salbp import check_in2_bytes
@@ -153,6 +155,8 @@ def plan_from_dict(data: Any, *, file: str | None = None) -> Plan:
 
 def parse_yaml(text: str, file: str | None = None) -> Document:
     """Safe-load YAML keeping each value's line; duplicate keys are problems (PyYAML would silently keep the last)."""
+    import yaml  # here, not at the top: a SALBP graph or `--help` never needs PyYAML
+
     doc = Document(None, {}, file)
     try:
         loader = yaml.SafeLoader(text)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from opportune.formats.graphs import GraphFormatError, check_graph, text_lines
 from opportune.formats.loader import CheckResult
 from opportune.formats.problems import Problem
 
@@ -27,16 +28,13 @@ class In2:
     lines: dict = field(default_factory=dict, compare=False, repr=False)  # (before, after) -> line number
 
 
-class In2Error(ValueError):
-    def __init__(self, problems: list[Problem]):
-        self.problems = problems
-        super().__init__("\n".join(map(str, problems)))
+class In2Error(GraphFormatError):
+    """An ``.IN2`` file that cannot be read; ``problems`` lists every problem."""
 
 
 def parse_in2(raw: bytes, file: str | None = None) -> tuple[In2 | None, list[Problem]]:
     """Parse ``.IN2`` bytes; return the content (``None`` on error) and every problem found."""
-    text = raw.decode("latin-1")  # the files are ASCII up to the end marker; comments after it are Latin-1
-    lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
+    lines = text_lines(raw)  # ASCII up to the end marker; comments after it are Latin-1
     problems: list[Problem] = []
 
     def err(msg, hint, line):
@@ -120,26 +118,6 @@ def check_in2_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     content, problems = parse_in2(raw, file)
     if content is None:
         return CheckResult(None, problems)
-    from opportune.formats.loader import Document
-    from opportune.formats.validate import check_document
-
-    requires: dict[str, list[str]] = {}
-    for a, b in content.pairs:
-        requires.setdefault(str(b), []).append(str(a))
-    name = Path(file).stem if file else "salbp"
-    data = {
-        "name": name,
-        "source": f"SALBP precedence graph {Path(file).name if file else ''}".strip(),
-        "parts": [{"id": str(i + 1), "install": d} for i, d in enumerate(content.durations)],
-        "requires": requires,
-    }
-    result = check_document(Document(data, {}, file))
-    # Lines of the document we built are not lines of the file: take them from the pair a problem names.
-    def line_of(p: Problem):
-        if len(p.parts) >= 2 and all(x.isdigit() for x in p.parts[:2]):
-            return content.lines.get((int(p.parts[0]), int(p.parts[1])))
-        return None
-
-    cleaned = [Problem(p.message, p.hint, file=p.file, line=line_of(p), parts=p.parts, severity=p.severity, code=p.code)
-               for p in result.problems]
-    return CheckResult(result.plan, problems + cleaned)
+    checked = check_graph(content.durations, content.pairs, content.lines, file=file,
+                          source="SALBP precedence graph", default_name="salbp")
+    return CheckResult(checked.plan, problems + checked.problems)

@@ -11,10 +11,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import Any, Literal, Protocol, runtime_checkable
 
-if TYPE_CHECKING:  # pragma: no cover
-    from opportune.sequencer import State
+# A policy reads the sequencer's State (``schedule``, ``buffer``, ``buffer_free``, ``plan``) but does not
+# import it: the sequencer uses the policies, not the other way round.
+State = Any
 
 ActionKind = Literal["install", "buffer", "shake", "done"]
 Source = Literal["bin", "buffer"]
@@ -68,22 +69,47 @@ class Candidate:
     part: str
     source: Source
     options: int          # admissible completions left after installing it
-    total: int            # admissible completions now
+    total: int | None     # admissible completions now (None: not counted within the decision budget)
     cost: float           # acquire + install
     buffered_at: int | None = None  # position in the buffer (0 = buffered longest)
 
     def to_dict(self) -> dict:
         return {"part": self.part, "source": self.source, "options": str(self.options),
-                "total": str(self.total), "cost": self.cost, "buffered_at": self.buffered_at}
+                "total": None if self.total is None else str(self.total), "cost": self.cost, "buffered_at": self.buffered_at}
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """An estimated quantity of one part that decided an action, with its standard error.
+
+    ``kind`` is ``"share"`` (the share of admissible completions that keep the part next:
+    its options over all completions) or ``"position"`` (its expected position, 1 = next).
+    """
+
+    part: str
+    kind: Literal["share", "position"]
+    value: float
+    se: float
+    source: Source | None = None
+
+    def to_dict(self) -> dict:
+        return {"part": self.part, "kind": self.kind, "value": self.value, "se": self.se, "source": self.source}
 
 
 @dataclass(frozen=True)
 class Decision:
-    """An action with the reasons it was chosen.
+    """An action with the reasons it was chosen, and how sure it is.
 
     ``candidates`` lists every installable candidate (best first) with the
     options each keeps; ``positions`` the expected positions (1 = next) of the
     visible parts that decided a buffer choice; ``rule`` which rule applied.
+
+    ``exact`` says whether the rule was applied to exact numbers.  When the exact
+    numbers did not fit the decision budget, ``method`` names the estimate (e.g.
+    ``"mcmc"``), ``estimates`` gives each candidate's estimated share of completions
+    or expected position with its standard error, and ``confidence`` the estimated
+    probability that the action is the one the exact rule would choose.
+    ``seconds`` is the time the decision took.
     """
 
     action: Action
@@ -91,25 +117,58 @@ class Decision:
     candidates: tuple[Candidate, ...] = ()
     positions: tuple[tuple[str, Fraction], ...] = ()
     note: str = ""
+    exact: bool = True
+    method: str = "exact"
+    estimates: tuple[Estimate, ...] = ()
+    confidence: float = 1.0
+    seconds: float = 0.0
 
     def explain(self) -> str:
         """The reasons in words, as ``--explain`` prints them."""
         lines = [f"{self.action}: {self.rule}" + (f" ({self.note})" if self.note else "")]
         for c in self.candidates:
             src = "bin" if c.source == "bin" else f"buffer #{c.buffered_at + 1}"
-            lines.append(f"  candidate {c.part} from {src}: keeps {c.options} of {c.total} completions, cost {c.cost:g}")
+            of = f" of {c.total}" if c.total is not None else ""
+            lines.append(f"  candidate {c.part} from {src}: keeps {c.options}{of} completions, cost {c.cost:g}")
         for part, pos in self.positions:
             lines.append(f"  visible {part}: expected position {float(pos):.3f} ({pos})")
+        for e in self.estimates:
+            if e.kind == "share":
+                lines.append(f"  candidate {e.part}" + (f" from {e.source}" if e.source else "")
+                             + f": keeps ~{100 * e.value:.2f}% ± {100 * e.se:.2f}% of completions (estimated)")
+            else:
+                lines.append(f"  visible {e.part}: expected position ~{e.value:.2f} ± {e.se:.2f} (estimated)")
+        if not self.exact:
+            lines.append(f"  estimated by {self.method} within the decision budget ({1000 * self.seconds:.0f} ms): "
+                         f"{100 * self.confidence:.1f}% sure this is the exact rule's choice")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
-        return {
+        """The decision as JSON values.  An exact decision's dict depends only on the state and
+        the look (no timing in it), so replays and stored answers compare equal."""
+        out = {
             "action": self.action.to_dict(),
             "rule": self.rule,
             "note": self.note,
             "candidates": [c.to_dict() for c in self.candidates],
             "positions": [{"part": p, "expected": float(v), "exact": str(v)} for p, v in self.positions],
+            "exact": self.exact,
+            "method": self.method,
         }
+        if not self.exact:
+            out.update(estimates=[e.to_dict() for e in self.estimates], confidence=self.confidence,
+                       seconds=round(self.seconds, 6))
+        return out
+
+    @classmethod
+    def recorded(cls, d: dict) -> "Decision":
+        """An estimated decision as :meth:`to_dict` recorded it (its action, rule and estimates; the
+        exact candidates and positions, which such a decision never has, are not restored)."""
+        return cls(Action.from_dict(d["action"]), d.get("rule", ""), note=d.get("note", ""), exact=False,
+                   method=d.get("method", "estimate"),
+                   estimates=tuple(Estimate(e["part"], e["kind"], e["value"], e["se"], e.get("source"))
+                                   for e in d.get("estimates", ())),
+                   confidence=d.get("confidence", 0.0), seconds=d.get("seconds", 0.0))
 
 
 class DecidesOnMasks:
@@ -122,7 +181,7 @@ class DecidesOnMasks:
     and the policy's ``decide`` adds the reasons, so every world takes the same decision.
     """
 
-    def choose(self, state: "State", visible: tuple[str, ...]) -> Action:
+    def choose(self, state: State, visible: tuple[str, ...]) -> Action:
         """The action alone (what ``decide`` decides, without building its reasons)."""
         sched = state.schedule
         return self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
@@ -138,4 +197,4 @@ class Policy(Protocol):
 
     name: str
 
-    def decide(self, state: "State", visible: tuple[str, ...]) -> Decision: ...
+    def decide(self, state: State, visible: tuple[str, ...]) -> Decision: ...

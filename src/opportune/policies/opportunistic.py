@@ -12,13 +12,30 @@ in the bin and those in buffer locations.
    visible part needed earliest: the smallest expected position in a uniformly
    random admissible completion.  Ties: declaration order.
 3. Else shake.
+
+With a decision budget (``Opportunistic(budget=0.05)``, seconds per decision) the rule
+is applied to exact counts when they fit a share of the budget, and otherwise to
+estimates from random completions (:mod:`opportune.engine.sampling`) that fill the rest
+of it.  The decision then says so: ``exact=False``, the method, each candidate's
+estimated share of completions or expected position with its standard error, and the
+estimated probability that the action is the exact rule's.  Steps that are
+interchangeable in the state (the same predecessors and successors among what
+remains) have equal exact values, so estimates treat them as tied and the exact
+tie-breaks decide between them.
 """
 
 from __future__ import annotations
 
+import time
+from dataclasses import dataclass
 from fractions import Fraction
 
-from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Candidate, Decision, shared_action
+from opportune.engine.count import BudgetExceeded
+from opportune.engine.sampling import CompletionChains
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Candidate, Decision, Estimate, shared_action
+
+MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
+EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
 
 
 def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
@@ -61,47 +78,160 @@ def _buffer_ranking(state, visible: tuple[str, ...]) -> tuple[int, list[tuple]]:
     return total, sorted((s, plan.index(p), p) for p, s in sums.items())
 
 
+@dataclass(frozen=True)
+class _How:
+    """How a budgeted choice was reached (exact, or which estimates and how sure)."""
+
+    exact: bool = True
+    method: str = "exact"
+    estimates: tuple[Estimate, ...] = ()
+    confidence: float = 1.0
+    note: str = ""
+
+
+_EXACT = _How()
+
+
+def choose_exact(engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                 visible: tuple[str, ...]) -> Action:
+    """The paper's rule on exact counts, on the machine form of a state (see
+    :class:`~opportune.policies.base.DecidesOnMasks`).
+
+    The best candidate is the least sort key of :func:`ranked_candidates` (keys are distinct:
+    a part's bin and buffer candidates differ in the source), found without sorting.
+    """
+    if mask == engine.full:
+        return DONE
+    asked = (*visible, *buffer)
+    can = engine.installable_among(mask, consistent, asked)
+    if len(can) == 1:  # one candidate part: nothing to compare, so nothing to count
+        part = can[0]
+        return shared_action("install", part, "bin" if part in visible else "buffer")
+    if can:
+        options = engine.options_for(mask, consistent, can)
+        plan = engine.plan
+        best = None
+        for part, n in options.items():
+            cost, index = plan.part(part).cost, plan.index(part)
+            if part in visible:
+                key = (-n, 0, cost, -1, index, part, "bin")
+                if best is None or key < best:
+                    best = key
+            if part in buffer:
+                key = (-n, 1, cost, buffer.index(part), index, part, "buffer")
+                if best is None or key < best:
+                    best = key
+        return shared_action("install", best[5], best[6])
+    if visible and free > 0:
+        parts = set(visible)
+        if len(parts) == 1:  # one part to buffer: nothing to compare
+            return shared_action("buffer", visible[0])
+        _, sums = engine.position_sums_for(mask, consistent, parts)
+        plan = engine.plan
+        return shared_action("buffer", min((s, plan.index(p), p) for p, s in sums.items())[2])
+    return SHAKE
+
+
 class Opportunistic(DecidesOnMasks):
-    """Install what keeps the most options; buffer what is needed earliest; shake last."""
+    """Install what keeps the most options; buffer what is needed earliest; shake last.
+
+    ``budget``: seconds per decision (None: always exact, however long it takes).  With a
+    budget, ``seed`` and ``chains`` set the estimates' random streams and population.
+    """
 
     name = "opportunistic"
-    deterministic = True
 
-    @staticmethod
-    def choose_at(engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+    def __init__(self, budget: float | None = None, *, seed: int = 0, chains: int = 8):
+        if budget is not None and not budget > 0:
+            raise ValueError("the decision budget must be a positive number of seconds (or None)")
+        self.budget = budget
+        self.seed = seed
+        self.chains = chains
+        # Exact decisions depend only on the state and the look, so a simulation may cache them.
+        self.deterministic = budget is None
+        self._population: tuple | None = None   # (engine, strategy, CompletionChains)
+        self._starts = 0
+        self._share = {"install": EXACT_SHARE[1], "buffer": EXACT_SHARE[1]}
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """The action on the machine form of a state (see :class:`~opportune.policies.base.DecidesOnMasks`).
+        """The action on the machine form of a state: :func:`choose_exact`, or within the budget."""
+        if self.budget is None:
+            return choose_exact(engine, mask, consistent, buffer, free, visible)
+        return self._budgeted(engine, mask, consistent, buffer, free, visible)[0]
 
-        The best candidate is the least sort key of :func:`ranked_candidates` (keys are distinct:
-        a part's bin and buffer candidates differ in the source), found without sorting.
-        """
+    # ------------------------------------------------------------ within a budget
+
+    def _budgeted(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
+        start = time.perf_counter()
+        end = start + self.budget * (1 - MARGIN)
         if mask == engine.full:
-            return DONE
+            return DONE, _EXACT
         asked = (*visible, *buffer)
         can = engine.installable_among(mask, consistent, asked)
-        if len(can) == 1:  # one candidate part: nothing to compare, so nothing to count
-            part = can[0]
-            return shared_action("install", part, "bin" if part in visible else "buffer")
+        if len(can) == 1 or (not can and len(set(visible)) == 1) or not can and not (visible and free > 0):
+            # one candidate, one part to buffer, or a shake: nothing to count
+            return choose_exact(engine, mask, consistent, buffer, free, visible), _EXACT
+        kind = "install" if can else "buffer"
+        try:
+            with engine.deadline(start + self.budget * self._share[kind]):
+                action = choose_exact(engine, mask, consistent, buffer, free, visible)
+            self._share[kind] = EXACT_SHARE[1]
+            return action, _EXACT
+        except BudgetExceeded:
+            self._share[kind] = EXACT_SHARE[0]
+        chains, note = self._chains(engine, mask, consistent)
+        remaining = engine.full & ~mask
+        units = engine._part_units
+        plan = engine.plan
         if can:
-            options = engine.options_for(mask, consistent, can)
-            plan = engine.plan
-            best = None
-            for part, n in options.items():
+            first = {p: _lowest(units[p] & ~mask) for p in can}
+            est = chains.estimate(first=set(first.values()), deadline=end, clock=time.perf_counter)
+            value = _tied_means(chains, remaining, first, est.first)
+            keys = []
+            for part in can:
                 cost, index = plan.part(part).cost, plan.index(part)
                 if part in visible:
-                    key = (-n, 0, cost, -1, index, part, "bin")
-                    if best is None or key < best:
-                        best = key
+                    keys.append(((-value[part], 0, cost, -1, index), part, "bin"))
                 if part in buffer:
-                    key = (-n, 1, cost, buffer.index(part), index, part, "buffer")
-                    if best is None or key < best:
-                        best = key
-            return shared_action("install", best[5], best[6])
-        if visible and free > 0:
-            _, sums = engine.position_sums_for(mask, consistent, set(visible))
-            plan = engine.plan
-            return shared_action("buffer", min((s, plan.index(p), p) for p, s in sums.items())[2])
-        return SHAKE
+                    keys.append(((-value[part], 1, cost, buffer.index(part), index), part, "buffer"))
+            keys.sort()
+            best = keys[0][1]
+            conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
+            estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1], source)
+                              for _, part, source in keys)
+            return (shared_action("install", best, keys[0][2]),
+                    _How(False, "mcmc", estimates, conf, note))
+        parts = list(dict.fromkeys(visible))
+        at = {p: _lowest(units[p] & ~mask) for p in parts}
+        est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter)
+        value = _tied_means(chains, remaining, at, est.positions)
+        ranked = sorted((value[p], plan.index(p), p) for p in parts)
+        best = ranked[0][2]
+        conf = _confidence(est, "positions", at, best, chains, remaining, higher=False)
+        estimates = tuple(Estimate(p, "position", v, est.positions[at[p]][1]) for v, _, p in ranked)
+        return shared_action("buffer", best), _How(False, "mcmc", estimates, conf, note)
+
+    def _chains(self, engine, mask: int, consistent: int) -> tuple[CompletionChains, str]:
+        """The population of chains for this state: carried on from the last look if the state
+        only moved forward, else started afresh."""
+        strategies = [s for s in range(engine.k) if consistent >> s & 1]
+        strategy = strategies[0]
+        note = ""
+        if len(strategies) > 1:   # the chains follow one order: say which
+            note = f"estimated on strategy '{engine.plan.strategies[strategy].name}' alone"
+        remaining = engine.full & ~mask
+        pop = self._population
+        if pop is None or pop[0] is not engine or pop[1] != strategy or remaining & ~pop[2].remaining:
+            self._starts += 1
+            chains = CompletionChains(engine.posets[strategy], remaining, chains=self.chains,
+                                      seed=self.seed * 1_000_003 + self._starts)
+            self._population = pop = (engine, strategy, chains)
+        else:
+            pop[2].advance(remaining)
+        return pop[2], note
+
+    # ------------------------------------------------------------ decisions with reasons
 
     @staticmethod
     def decision_key(engine, capacity):
@@ -122,17 +252,91 @@ class Opportunistic(DecidesOnMasks):
         return key
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        action = self.choose(state, visible)
+        start = time.perf_counter()
+        if self.budget is None:
+            action, how = self.choose(state, visible), _EXACT
+        else:
+            sched = state.schedule
+            action, how = self._budgeted(sched.engine, sched.mask, sched.consistent, state.buffer,
+                                         state.buffer_free, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
+        if not how.exact:
+            rule = ("install the candidate that keeps the most options" if action.kind == "install"
+                    else "nothing can be installed: buffer the visible part needed earliest")
+            return Decision(action, rule, note=how.note, exact=False, method=how.method, estimates=how.estimates,
+                            confidence=how.confidence, seconds=time.perf_counter() - start)
         if action.kind == "install":
-            total = state.schedule.count()
-            candidates = tuple(Candidate(part, source, -key[0], total, key[2], pos)
-                               for key, part, source, pos in ranked_candidates(state, visible))
-            return Decision(action, "install the candidate that keeps the most options", candidates)
+            rule = "install the candidate that keeps the most options"
+            try:   # the options of a lone candidate were not needed to decide: count them if they fit
+                with state.schedule.engine.deadline(None if self.budget is None
+                                                    else start + self.budget * (1 - MARGIN)):
+                    ranked = ranked_candidates(state, visible)
+            except BudgetExceeded:
+                return Decision(action, rule, note="the only candidate; its options were not counted within the budget",
+                                seconds=time.perf_counter() - start)
+            total = self._total(state, start)
+            candidates = tuple(Candidate(part, source, -key[0], total, key[2], pos) for key, part, source, pos in ranked)
+            return Decision(action, rule, candidates, seconds=time.perf_counter() - start)
         if action.kind == "buffer":
-            ranked = buffer_choice(state, visible)
-            return Decision(action, "nothing can be installed: buffer the visible part needed earliest",
-                            positions=tuple((p, pos) for pos, _, p in ranked))
+            rule = "nothing can be installed: buffer the visible part needed earliest"
+            try:
+                with state.schedule.engine.deadline(None if self.budget is None
+                                                    else start + self.budget * (1 - MARGIN)):
+                    ranked = buffer_choice(state, visible)
+            except BudgetExceeded:   # a lone visible part: decided without them, and they do not fit
+                return Decision(action, rule, note="its expected position was not computed within the budget",
+                                seconds=time.perf_counter() - start)
+            return Decision(action, rule, positions=tuple((p, pos) for pos, _, p in ranked),
+                            seconds=time.perf_counter() - start)
         why = "nothing visible" if not visible else "nothing installable and the buffer is full"
         return Decision(SHAKE, "shake", note=why)
+
+    def _total(self, state, start: float) -> int | None:
+        """The completions now, for the reasons: within what is left of the budget (None if it does not fit)."""
+        if self.budget is None:
+            return state.schedule.count()
+        engine = state.schedule.engine
+        try:
+            with engine.deadline(start + self.budget * (1 - MARGIN)):
+                return state.schedule.count()
+        except BudgetExceeded:
+            return None
+
+
+def _lowest(mask: int) -> int:
+    return (mask & -mask).bit_length() - 1
+
+
+def _signature(chains: CompletionChains, remaining: int, unit: int) -> tuple[int, int]:
+    return chains.below[unit] & remaining, chains.above[unit] & remaining
+
+
+def _tied_means(chains, remaining: int, unit_of: dict, estimates: dict) -> dict:
+    """Each part's estimate, averaged over the parts interchangeable with it in this state
+    (equal exact values: the exact tie-breaks then decide between them, as in the exact rule)."""
+    groups: dict[tuple, list] = {}
+    for part, u in unit_of.items():
+        groups.setdefault(_signature(chains, remaining, u), []).append(part)
+    out = {}
+    for members in groups.values():
+        mean = sum(estimates[unit_of[p]][0] for p in members) / len(members)
+        for p in members:
+            out[p] = mean
+    return out
+
+
+def _confidence(est, kind: str, unit_of: dict, best: str, chains, remaining: int, *, higher: bool) -> float:
+    """Estimated probability that ``best`` is the exact rule's choice: every other part (not
+    interchangeable with it) is truly worse; a union bound over them (paired over the chains)."""
+    ub = unit_of[best]
+    sig = _signature(chains, remaining, ub)
+    miss = 0.0
+    seen = set()
+    for part, u in unit_of.items():
+        if u == ub or u in seen or _signature(chains, remaining, u) == sig:
+            continue
+        seen.add(u)
+        p = est.prob_greater(kind, ub, u) if higher else est.prob_greater(kind, u, ub)
+        miss += 1 - p
+    return max(0.0, 1 - miss)

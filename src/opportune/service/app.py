@@ -163,7 +163,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     broker = Broker()
     auth = Authenticator(store, cache_seconds=settings.token_cache_seconds, ticket_seconds=settings.ticket_seconds)
     manager = RunManager(store, book, size=settings.live_runs, notify=broker.notify,
-                         keep_answers=settings.idempotency_seconds)
+                         keep_answers=settings.idempotency_seconds, budget=settings.decision_budget,
+                         warm_up=settings.count_seconds)
 
     @asynccontextmanager
     async def lifespan(_app):

@@ -35,7 +35,10 @@ class Settings:
     decisions need exact counts; a plan too large for them is refused with a
     clear error instead of holding a request for minutes); ``idempotency_seconds``
     is how long the stored answer of an idempotent request is kept (a retry
-    after that is judged afresh).
+    after that is judged afresh).  ``decision_budget`` is the seconds a look's decision
+    may take (estimated, and marked so, when exact counts do not fit; the answer's
+    counts are bounded by as much again, a read's by 1 s; a count that misses its
+    time is null); None: every decision exact, each count bounded by ``count_seconds``.
     """
 
     db_url: str = DEFAULT_DB
@@ -44,6 +47,7 @@ class Settings:
     ticket_seconds: float = 60.0
     live_runs: int = 512
     count_seconds: float = 10.0
+    decision_budget: float | None = 0.05
     idempotency_seconds: float = 7 * 24 * 3600.0
     sse_poll_seconds: float = 2.0
     sse_keepalive_seconds: float = 15.0

@@ -38,6 +38,7 @@ from sqlalchemy import bindparam, case, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 
 from opportune.engine.count import BudgetExceeded
+from opportune.policies.base import Decision
 from opportune.sequencer import LookError, OutcomeError, Sequencer
 from opportune.service import idempotency as idem
 from opportune.service.auth import Principal
@@ -98,12 +99,17 @@ def apply(sequencer: Sequencer, kind: str, request: dict):
     raise ValueError(f"unknown event kind {kind!r}")
 
 
+READ_COUNT_SECONDS = 1.0   # with a decision budget: most time a read spends counting (counts that miss it are null)
+
+
 class RunManager:
     """Creates runs, applies commands to them, and answers questions about them."""
 
     def __init__(self, store: Store, book: PlanBook, *, size: int = 512, notify: Callable[[int], None] = lambda _: None,
-                 keep_answers: float = idem.KEEP_SECONDS):
+                 keep_answers: float = idem.KEEP_SECONDS, budget: float | None = None, warm_up: float | None = 10.0):
         self.store = store
+        self.budget = budget        # seconds per decision (None: exact decisions)
+        self.warm_up = warm_up      # seconds a run's first state may take to count
         self.book = book
         self.size = size
         self.notify = notify
@@ -167,11 +173,18 @@ class RunManager:
     def _replay(self, live: LiveRun, loaded: LoadedPlan, rows) -> None:
         with loaded.lock:
             if live.sequencer is None:
-                live.sequencer = Sequencer(loaded.engine, buffer_capacity=live.capacity)
+                live.sequencer = self._sequencer(loaded, live.capacity)
                 live.applied = 0
             try:
                 for ev in rows:
-                    result = apply(live.sequencer, ev.kind, json.loads(ev.request))
+                    request = json.loads(ev.request)
+                    recorded = json.loads(ev.response).get("decision", {}) if ev.kind == "look" else {}
+                    if recorded.get("exact") is False:
+                        # An estimated decision depends on time and chance: replay it as it was taken.
+                        live.sequencer.replay(request["visible"], Decision.recorded(recorded))
+                        live.applied = ev.seq
+                        continue
+                    result = apply(live.sequencer, ev.kind, request)
                     if ev.kind == "look":
                         recorded = json.loads(ev.response)["action"]
                         if result.action.to_dict() != recorded:
@@ -183,6 +196,11 @@ class RunManager:
                 raise ApiError(500, "run_replay_mismatch",
                                f"run {live.id} cannot be resumed by this version of opportune: {exc}",
                                "finish the run with the version that started it, or start a new run") from None
+
+    def _sequencer(self, loaded: LoadedPlan, capacity: int | None) -> Sequencer:
+        """A new sequencer of the service's policy (its first state counted within the warm-up time)."""
+        return Sequencer(loaded.engine, buffer_capacity=capacity, budget=self.budget,
+                         warm_up=self.warm_up if self.budget is not None else 0)
 
     def _loaded(self, live: LiveRun) -> LoadedPlan:
         return self.book.get(live.plan_id)
@@ -212,13 +230,14 @@ class RunManager:
         if loaded.too_large:
             raise plan_too_large(loaded.too_large)
         with loaded.lock:
-            sequencer = Sequencer(loaded.engine, buffer_capacity=body.get("buffer_capacity"))
-            try:  # the policy needs exact counts: find out now, not at the robot's first look
-                sequencer.state.schedule.options()
-            except BudgetExceeded as exc:
-                if exc.reason == "memo":
-                    loaded.too_large = str(exc)
-                raise plan_too_large(str(exc), retry=exc.reason != "memo") from None
+            sequencer = self._sequencer(loaded, body.get("buffer_capacity"))
+            if self.budget is None:
+                try:  # the policy needs exact counts: find out now, not at the robot's first look
+                    sequencer.state.schedule.options()
+                except BudgetExceeded as exc:
+                    if exc.reason == "memo":
+                        loaded.too_large = str(exc)
+                    raise plan_too_large(str(exc), retry=exc.reason != "memo") from None
             count = count_view(sequencer.state.schedule)
         t = now()
         try:
@@ -283,7 +302,9 @@ class RunManager:
         seq = live.sequencer
         expected = live.applied
         try:
-            with loaded.lock:
+            # With a decision budget, the answer's counts get as much time again as the decision.
+            until = time.perf_counter() + 2 * self.budget if self.budget is not None else None
+            with loaded.lock, loaded.engine.deadline(until):
                 answer = self._apply_checked(live, loaded, kind, request)  # a refusal changes nothing
         except ApiError:
             raise
@@ -389,7 +410,9 @@ class RunManager:
         with live.lock:
             loaded = self._loaded(live)
             self._sync(live, loaded, r["seq"])
-            with loaded.lock:
+            # With a decision budget, a read's counts (one per trace row) share a bounded time too.
+            until = time.perf_counter() + READ_COUNT_SECONDS if self.budget is not None else None
+            with loaded.lock, loaded.engine.deadline(until):
                 out = run_view(live, loaded, r["updated_at"])
                 if with_trace:
                     out = {"run": out, "trace": trace_view(live, loaded)}

@@ -306,7 +306,10 @@ function initRun() {
       el("td", { text: fmtList(r.visible) }),
       el("td", { text: fmtList(r.buffered) }),
       el("td", { text: fmtList(r.installed) }),
-      el("td", { text: r.action_text, title: r.reasons ? r.reasons.explain : "" }),
+      // An estimated decision (exact counts did not fit the decision budget) is marked, with how sure it is.
+      el("td", { text: r.action_text + (r.reasons && r.reasons.exact === false && r.reasons.method !== "replayed"
+                   ? ` (≈ ${(100 * r.reasons.confidence).toFixed(0)}% sure)` : ""),
+                 title: r.reasons ? r.reasons.explain : "" }),
       el("td", { text: r.outcome === null ? (r.action.kind === "done" ? "" : "pending") : r.outcome })));
     tbody.replaceChildren(...rows);
   }
