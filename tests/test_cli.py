@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+import sys
 
 import pytest
 from typer.testing import CliRunner
@@ -118,3 +120,71 @@ def test_graph_bad_format():
 def test_schema_command_prints_the_published_schema():
     doc = json.loads(run("schema").output)
     assert doc["title"] == "opportune plan" and "parts" in doc["required"]
+
+
+# ---------------------------------------------------------------- start-up (issue 11)
+
+# Packages the command line must not load unless a command needs them (the service, plotting,
+# distributed runs, drawing); benchmarks/bench_startup.py has the times.
+SERVICE_AND_EXTRAS = ("matplotlib", "fastapi", "sqlalchemy", "uvicorn", "starlette", "dask", "distributed", "graphviz")
+# ... nor these, before a command has a plan to read (unless typer itself loads them).
+PLAN_MACHINERY = ("jsonschema", "yaml", "pydantic", "rich", "opportune.engine", "opportune.formats")
+
+
+def loaded_by(*argv: str, code: str | None = None) -> set[str]:
+    """The modules in ``sys.modules`` of a fresh interpreter after ``code``, or after running
+    ``opportune ARGV...`` (exit included) in it."""
+    if code is None:
+        code = ("import sys\nfrom opportune.cli import main\nsys.argv = ['opportune', *%r]\n"
+                "try:\n    main()\nexcept SystemExit:\n    pass\n" % (argv,))
+    code += "\nimport sys; print('\\nMODULES', ' '.join(sorted(sys.modules)))"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          cwd=GEARBOX.parent.parent)
+    line = proc.stdout.rstrip().splitlines()[-1]
+    assert line.startswith("MODULES "), proc.stdout + proc.stderr
+    return set(line.split()[1:])
+
+
+def heavy_beyond_typer(mods: set[str]) -> set[str]:
+    """The heavy packages in ``mods`` that ``import typer`` alone does not load."""
+    typer_mods = loaded_by(code="import typer")
+    return {m for m in (*SERVICE_AND_EXTRAS, *PLAN_MACHINERY) if m in mods and m not in typer_mods}
+
+
+def test_importing_the_cli_loads_no_heavy_package():
+    assert heavy_beyond_typer(loaded_by(code="import opportune.cli")) == set()
+
+
+def test_help_loads_no_plan_machinery():
+    # typer (0.29) builds a pydantic adapter for any parameter whose value is not a bool: the main
+    # group's absent --help flag is False, not None (cli._Group), so help never needs pydantic
+    assert heavy_beyond_typer(loaded_by("count", "--help")) == set()
+    assert heavy_beyond_typer(loaded_by("--help")) == set()
+
+
+def test_count_loads_only_what_it_needs():
+    mods = loaded_by("count", "salbp:KILBRID")
+    assert "opportune.engine.schedule" in mods  # it did count
+    assert {m for m in (*SERVICE_AND_EXTRAS, "yaml") if m in mods} == set()
+    mods = loaded_by("count", "examples/gearbox.yaml")
+    assert "yaml" in mods and {m for m in SERVICE_AND_EXTRAS if m in mods} == set()
+
+
+def test_replay_with_a_decision_budget_says_how_each_decision_was_reached(tmp_path):
+    """Replay within a budget: every decision carries `exact` (and, when estimated, its method,
+    estimates and confidence); with the default (no budget) the reasons are exact and reproducible."""
+    looks = tmp_path / "k.looks"
+    looks.write_text("1 2\n3 4\n5 6\n")
+    timed = json.loads(run("replay", "salbp:KILBRID", looks, "--json", "--explain", "--decision-budget", "0.05").stdout)
+    assert timed and all("exact" in row["reasons"] for row in timed)
+    for row in timed:
+        if not row["reasons"]["exact"]:
+            assert row["reasons"]["estimates"] and 0 <= row["reasons"]["confidence"] <= 1
+    a = run("replay", "salbp:KILBRID", looks, "--json", "--explain").stdout
+    assert a == run("replay", "salbp:KILBRID", looks, "--json", "--explain").stdout
+    assert all(row["reasons"]["exact"] is True for row in json.loads(a))
+
+
+def test_simulate_rejects_a_budget_that_is_not_positive():
+    result = runner.invoke(app, ["simulate", str(GEARBOX), "--decision-budget", "0", "--trials", "5"])
+    assert result.exit_code != 0 and "decision-budget" in (result.stdout + (result.stderr or ""))

@@ -7,9 +7,32 @@ been installed plus all admissible ways to finish; *execution* installs
 whatever visible part can go in now, keeping the most future options.
 """
 
-from opportune.formats import load_plan
-from opportune.plan import Part, Plan, PlanError, Strategy, make_plan
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
 __all__ = ["Part", "Plan", "PlanError", "Strategy", "load_plan", "make_plan", "__version__"]
+
+# The names below load on first use (PEP 562), so that ``import opportune.cli`` (every run of the
+# command line, `--help` included) does not pay for the plan loader and PyYAML.
+_LAZY = {"load_plan": "opportune.formats.loader", "Part": "opportune.plan", "Plan": "opportune.plan",
+         "PlanError": "opportune.plan", "Strategy": "opportune.plan", "make_plan": "opportune.plan"}
+
+if TYPE_CHECKING:
+    from opportune.formats.loader import load_plan
+    from opportune.plan import Part, Plan, PlanError, Strategy, make_plan
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        # __import__ rather than importlib.import_module: `python -X importtime` then shows what loaded
+        value = getattr(__import__(_LAZY[name], fromlist=(name,)), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

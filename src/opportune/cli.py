@@ -9,35 +9,90 @@ never with a traceback.
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
-from rich.console import Console
-from rich.table import Table
+from typer.core import TyperGroup
 
-from opportune.formats import CheckResult, read_plan
-from opportune.plan import Plan
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from opportune.formats import CheckResult
+    from opportune.plan import Plan
+
+# Start-up (issue 11): this module imports only typer.  rich, the plan loader, the engine and every
+# command's own machinery load when a command needs them, so `opportune count --help` never pays for
+# them (tests/test_cli.py checks that the heavy packages stay out; benchmarks/bench_startup.py times it).
+
+
+class _Group(TyperGroup):
+    """The main group, with a help flag that is ``False`` rather than ``None`` when not given.
+
+    typer (0.29) coerces every parameter's value through a pydantic adapter that it builds on first
+    use, except a bool flag whose value is already a bool.  An absent help flag is ``None``, so every
+    run, ``opportune count --help`` included, imported pydantic (~0.1 s) for the main group's
+    ``--help`` alone.  ``False`` means the same to the flag's callback.
+    """
+
+    def get_help_option(self, ctx):
+        option = super().get_help_option(ctx)
+        if option is not None and option.default is None:
+            option.default = False
+        return option
+
 
 app = typer.Typer(
+    cls=_Group,
     name="opportune",
     help="Least-commitment planning, scheduling and opportunistic execution (Fox & Kempf).",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # Help and usage errors in click's plain format: typer's rich help imports rich.markdown,
+    # rich.traceback, pygments and attrs (~0.1 s, most of `opportune count --help`).  Help uses the
+    # terminal's width, up to 120 columns, as the rich panels did.
+    rich_markup_mode=None,
+    context_settings={"max_content_width": 120},
 )
-out = Console(highlight=False, soft_wrap=True)
-if not out.is_terminal and "COLUMNS" not in os.environ:
-    out.width = 132  # piped or logged output has no width of its own: rich would squeeze tables into 80
-err = Console(stderr=True, highlight=False, soft_wrap=True)
+_consoles: dict[str, Console] = {}
+
+
+def _console(stderr: bool) -> Console:
+    """The shared stdout (``out``) or stderr (``err``) console, made on first use."""
+    key = "err" if stderr else "out"
+    if key not in _consoles:
+        import os
+
+        from rich.console import Console
+
+        console = Console(stderr=stderr, highlight=False, soft_wrap=True)
+        if not stderr and not console.is_terminal and "COLUMNS" not in os.environ:
+            console.width = 132  # piped or logged output has no width of its own: rich would squeeze tables into 80
+        _consoles[key] = console
+    return _consoles[key]
+
+
+def _out() -> Console:
+    return _console(stderr=False)
+
+
+def _err() -> Console:
+    return _console(stderr=True)
+
+
+def __getattr__(name: str):  # ``cli.out`` and ``cli.err``, as before, without making them at import
+    if name in ("out", "err"):
+        return _console(stderr=name == "err")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json or SALBP .IN2", show_default=False)
 
 
 def fail(message: str, code: int = 1) -> None:
-    err.print(f"[bold red]error:[/] {message}", markup=True)
+    _err().print(f"[bold red]error:[/] {message}", markup=True)
     raise typer.Exit(code)
 
 
@@ -57,14 +112,16 @@ def _escape(text: str) -> str:
 
 def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
     """Load a plan, or print every error and exit 1."""
+    from opportune.formats.loader import CheckResult, read_plan
+
     result = read_plan(path)
     if not result.ok:
         if json_errors:
             print(json.dumps({"file": str(path), "valid": False,
                               "problems": [p.to_dict() for p in result.problems]}, indent=2))
         else:
-            _print_problems(CheckResult(None, result.errors), err)
-            err.print(f"{path}: {len(result.errors)} error(s); run `opportune check {path}` for details")
+            _print_problems(CheckResult(None, result.errors), _err())
+            _err().print(f"{path}: {len(result.errors)} error(s); run `opportune check {path}` for details")
         raise typer.Exit(1)
     return result.plan
 
@@ -75,6 +132,7 @@ def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
 @app.command()
 def check(plan_file: Path = PLAN_ARG, as_json: bool = typer.Option(False, "--json", help="Machine-readable output")):
     """Validate a plan: exit 0 with a summary, or 1 with every problem found."""
+    from opportune.formats.loader import read_plan
     from opportune.formats.summary import summarize
 
     result = read_plan(plan_file)
@@ -86,26 +144,26 @@ def check(plan_file: Path = PLAN_ARG, as_json: bool = typer.Option(False, "--jso
         print(json.dumps(doc, indent=2))
         raise typer.Exit(0 if result.ok else 1)
     if not result.ok:
-        _print_problems(result, out)
+        _print_problems(result, _out())
         n = len(result.errors)
-        out.print(f"[red]{plan_file}: invalid[/] — {n} error{'s' if n != 1 else ''}"
-                  + (f", {len(result.warnings)} warning(s)" if result.warnings else ""))
+        _out().print(f"[red]{plan_file}: invalid[/] — {n} error{'s' if n != 1 else ''}"
+                     + (f", {len(result.warnings)} warning(s)" if result.warnings else ""))
         raise typer.Exit(1)
     s = summary
-    out.print(f"[bold]{_escape(s['plan'])}[/] ({_escape(str(plan_file))}): [green]valid[/]")
+    _out().print(f"[bold]{_escape(s['plan'])}[/] ({_escape(str(plan_file))}): [green]valid[/]")
     units = f" ({s['units']} units)" if s["units"] != s["parts"] else ""
-    out.print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
+    _out().print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
     for st in s["strategies"]:
-        out.print(f"  strategy '{_escape(st['name'])}': {st['declared']} constraints declared, "
-                  f"{len(st['minimal'])} minimal, {st['implied']} implied in all (transitive closure)")
+        _out().print(f"  strategy '{_escape(st['name'])}': {st['declared']} constraints declared, "
+                     f"{len(st['minimal'])} minimal, {st['implied']} implied in all (transitive closure)")
         shown = st["minimal"][:40]
         text = ", ".join(f"{a} -> {b}" for a, b in shown) or "(none: any order)"
         if len(st["minimal"]) > len(shown):
             text += f", … ({len(st['minimal']) - len(shown)} more; --json lists all)"
-        out.print(f"    minimal constraints: {_escape(text)}", crop=False)
+        _out().print(f"    minimal constraints: {_escape(text)}", crop=False)
     if result.warnings:
-        out.print(f"  {len(result.warnings)} warning(s):")
-        _print_problems(result, out)
+        _out().print(f"  {len(result.warnings)} warning(s):")
+        _print_problems(result, _out())
 
 
 # ---------------------------------------------------------------- count
@@ -152,11 +210,11 @@ def count(
         return
     state = f" after {' '.join(prefix)}" if prefix else ""
     if result.exact:
-        out.print(f"{_escape(plan.name)}{state}: {result.value} admissible sequences (log10 {result.log10:.3f})")
+        _out().print(f"{_escape(plan.name)}{state}: {result.value} admissible sequences (log10 {result.log10:.3f})")
     else:
-        out.print(f"{_escape(plan.name)}{state}: about {result.value:.4e} admissible sequences "
-                  f"(log10 {result.log10:.3f}) — ESTIMATE, ±{100 * result.rel_error:.2f}% at "
-                  f"{100 * result.confidence:.0f}% confidence ({result.method}); the exact count exceeded the budget")
+        _out().print(f"{_escape(plan.name)}{state}: about {result.value:.4e} admissible sequences "
+                     f"(log10 {result.log10:.3f}) — ESTIMATE, ±{100 * result.rel_error:.2f}% at "
+                     f"{100 * result.confidence:.0f}% confidence ({result.method}); the exact count exceeded the budget")
 
 
 # ---------------------------------------------------------------- graph
@@ -179,7 +237,7 @@ def graph(
         source = to_dot(plan)
         if output:
             output.write_text(source)
-            out.print(f"wrote {output}")
+            _out().print(f"wrote {output}")
         else:
             sys.stdout.write(source)
         return
@@ -191,7 +249,7 @@ def graph(
         fail(str(exc))
     except OSError as exc:
         fail(f"cannot write {output}: {exc.strerror or exc}")
-    out.print(f"wrote {output}")
+    _out().print(f"wrote {output}")
 
 
 # ---------------------------------------------------------------- replay
@@ -205,8 +263,14 @@ def replay(
     explain: bool = typer.Option(False, "--explain", help="Print the reasons of every decision"),
     buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,
                                                   help="Buffer locations (default: unlimited)"),
+    decision_budget: Optional[float] = typer.Option(
+        None, "--decision-budget", min=1e-6, show_default=False,
+        help="Seconds per decision, as a cell would give: exact when the counts fit, else estimated and marked so "
+             "(default: every decision exact)"),
 ):
     """Run the opportunistic policy over a file of looks and print the trace like the paper's Table 1."""
+    from rich.table import Table
+
     from opportune.formats.looks import LooksError, read_looks
     from opportune.sequencer import Sequencer, SequencerError
 
@@ -215,7 +279,7 @@ def replay(
         looks = read_looks(looks_file)
     except LooksError as exc:
         fail(str(exc.problem))
-    seq = Sequencer(plan, buffer_capacity=buffer_capacity)
+    seq = Sequencer(plan, buffer_capacity=buffer_capacity, budget=decision_budget)
     for i, look in enumerate(looks, start=1):
         try:
             seq.step(look)
@@ -239,15 +303,15 @@ def replay(
         action = "" if row.action.kind == "done" else str(row.action)
         cells = [",".join(row.visible), ",".join(row.buffered), ",".join(row.installed), action]
         table.add_row(*([str(i)] if explain else []), *cells)
-    out.print(table)
+    _out().print(table)
     if explain:
         for i, row in enumerate(rows, start=1):
-            out.print(f"{i:>2}. " + _escape(row.decision.explain()).replace("\n", "\n   "), crop=False)
+            _out().print(f"{i:>2}. " + _escape(row.decision.explain()).replace("\n", "\n   "), crop=False)
     if seq.state.is_complete:
-        out.print(f"complete: {','.join(seq.state.installed)}")
+        _out().print(f"complete: {','.join(seq.state.installed)}")
     else:
         left = ", ".join(f"{p}×{n}" if n > 1 else p for p, n in seq.state.schedule.remaining.items())
-        out.print(f"not complete after {len(looks)} looks; still to install: {left}")
+        _out().print(f"not complete after {len(looks)} looks; still to install: {left}")
 
 
 # ---------------------------------------------------------------- simulate
@@ -277,9 +341,14 @@ def simulate(
     motion_cost: Optional[float] = typer.Option(None, "--motion-cost", min=0),
     shake_cost: Optional[float] = typer.Option(None, "--shake-cost", min=0),
     look_cost: Optional[float] = typer.Option(None, "--look-cost", min=0),
+    decision_budget: Optional[float] = typer.Option(
+        None, "--decision-budget", min=1e-6, show_default=False,
+        help="Seconds per opportunistic decision: exact when the counts fit, else estimated (the numbers then "
+             "depend on the machine's speed; default: every decision exact, the same numbers everywhere)"),
 ):
     """Run the paper's comparison by simulation: every strategy, a bin model, Monte Carlo trials."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.table import Table
 
     from opportune.report import TABLE_HEADER, summary, table_rows, write_outputs
     from dataclasses import replace
@@ -295,8 +364,8 @@ def simulate(
     names = [s.strip() for s in (strategies or "").split(",") if s.strip()] if explicit else \
         [s for s in STRATEGIES if s != "optimal" or (chosen_bin in MARKOV_BINS and plan.n_units <= OPTIMAL_DEFAULT_UNITS)]
     if not explicit and chosen_bin in MARKOV_BINS and plan.n_units > OPTIMAL_DEFAULT_UNITS:
-        err.print(f"note: 'optimal' left out: its state space grows exponentially and {plan.n_units} parts is "
-                  f"beyond the default ({OPTIMAL_DEFAULT_UNITS}); ask for it with --strategies to try anyway")
+        _err().print(f"note: 'optimal' left out: its state space grows exponentially and {plan.n_units} parts is "
+                     f"beyond the default ({OPTIMAL_DEFAULT_UNITS}); ask for it with --strategies to try anyway")
     if explicit and not names:
         fail("--strategies is empty: name at least one of " + ", ".join(STRATEGIES), 2)
     try:
@@ -307,6 +376,7 @@ def simulate(
             buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
             costs=costs, training_runs=training_runs, optimal_states=optimal_states,
             count_time_limit=count_time_limit if count_time_limit is not None else (10.0 if explicit else 2.0),
+            decision_budget=decision_budget,
         ).validate()
         while True:
             try:
@@ -315,10 +385,10 @@ def simulate(
             except StrategyUnavailable as exc:
                 if explicit or len(config.strategies) == 1:
                     raise
-                err.print(f"note: {exc} — leaving '{exc.strategy}' out")
+                _err().print(f"note: {exc} — leaving '{exc.strategy}' out")
                 config = replace(config, strategies=tuple(s for s in config.strategies if s != exc.strategy))
         progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                            TimeRemainingColumn(), console=err, disable=not err.is_terminal, transient=True)
+                            TimeRemainingColumn(), console=_err(), disable=not _err().is_terminal, transient=True)
         with progress:
             task = progress.add_task("simulating", total=trials * len(config.strategies))
             result = run_study(config, workers=workers, dask_address=dask, prepared=prepared,
@@ -341,16 +411,19 @@ def simulate(
             table.add_column(col, justify="left" if i == 0 else "right")
         for row in table_rows(doc):
             table.add_row(*row)
-        out.print(table)
+        _out().print(table)
         if result.prepared.optimal_start is not None:
-            out.print(f"optimal expected time (exact): {result.prepared.optimal_start:.4f} "
-                      f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
+            _out().print(f"optimal expected time (exact): {result.prepared.optimal_start:.4f} "
+                         f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
         for note in doc["notes"]:
-            out.print(f"note: {note}")
+            _out().print(f"note: {note}")
+        if decision_budget is not None and "opportunistic" in config.strategies:
+            _out().print(f"note: opportunistic decided within {1000 * decision_budget:g} ms per decision (estimated "
+                         "where exact counts did not fit): its numbers depend on this machine's speed")
         if out_dir:
-            out.print(f"wrote {', '.join(str(p) for p in written)}")
+            _out().print(f"wrote {', '.join(str(p) for p in written)}")
     if result.interrupted:
-        err.print("interrupted: the table shows the trials that finished")
+        _err().print("interrupted: the table shows the trials that finished")
         raise typer.Exit(130)
 
 

@@ -165,7 +165,8 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
             raise StrategyUnavailable(counting[0], (
                 f"'{counting[0]}' ranks the candidates by exact counts of admissible completions at every look, "
                 f"and on {config.plan.name} ({config.plan.n_units} parts) the counts of the first look do not "
-                f"finish {within}: leave it out with --strategies{more}")) from None
+                f"finish {within}: leave it out with --strategies{more}, or let it decide within a time budget "
+                f"(estimating what it cannot count) with --decision-budget 0.05")) from None
     if "optimal" in config.strategies:
         from opportune.policies.optimal import OptimalTooLarge
 

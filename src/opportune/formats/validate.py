@@ -12,13 +12,14 @@ import difflib
 import json
 from functools import lru_cache
 from importlib import resources
-from typing import Any
-
-import jsonschema
+from typing import TYPE_CHECKING, Any
 
 from opportune.formats.loader import CheckResult, Document
 from opportune.formats.problems import Problem
 from opportune.plan import Part, Plan, Strategy
+
+if TYPE_CHECKING:
+    import jsonschema
 
 DEFAULT_STRATEGY = "default"
 
@@ -98,6 +99,8 @@ FIELD_HINTS = {
 
 
 def _schema_problems(data: dict, doc: Document) -> list[Problem]:
+    import jsonschema  # here, not at the top: `opportune schema` and `--help` never need it
+
     validator = jsonschema.Draft202012Validator(plan_schema())
     out = []
     for error in validator.iter_errors(data):
