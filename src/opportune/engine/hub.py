@@ -618,6 +618,9 @@ class HubPath:
         ukey = (qkey, up)
         e_a = self._up.get(ukey)
         if e_a is None:
-            e_a = self._up[ukey] = Counter(q, max_memo=None).count(up) if up else 1
+            left = tails.deadline - time.perf_counter() if tails.deadline != float("inf") else None
+            # what follows the hub can be large too (a big plan): bounded by the same deadline
+            e_a = self._up[ukey] = (Counter(q, max_memo=None, time_limit=max(0.0, left) if left is not None else None)
+                                    .count(up) if up else 1)
         d = tails.tail(rest)
         return e_a * sum(v * comb(b + 1 + size_a, 1 + size_a) for b, v in enumerate(d))

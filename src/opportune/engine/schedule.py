@@ -299,8 +299,11 @@ class OrderEngine:
             return False
         return True
 
-    @staticmethod
-    def _deadline(counter: Counter) -> float:
+    def _deadline(self, counter: Counter) -> float:
+        """When the work on one count must stop: the deadline of :meth:`deadline` if one is set (it
+        covers everything a decision counts), else the counter's own time limit from now."""
+        if self._until is not None:
+            return self._until
         return time.perf_counter() + counter.time_limit if counter.time_limit is not None else float("inf")
 
     def _hub_for(self, counter: Counter, s: int) -> HubPath | None:
@@ -653,33 +656,78 @@ class Schedule:
         """Exact number of admissible completions (raises BudgetExceeded if over budget)."""
         return self.engine.count(self.mask, self.consistent)
 
-    def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0) -> CountResult:
+    def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
+                     exact_share: float = 0.5) -> CountResult:
         """Number of completions: exact within the engine's budget, else a clearly marked estimate.
 
-        The plain exact count gets the engine's own time limit, or a tenth of
-        ``time_limit`` if the engine has none (so a plan too large for it costs
-        seconds, not the minutes it takes to fill the memo budget).  Then the
-        hub split (exact, see :mod:`opportune.engine.hub`) and the estimate get
-        ``time_limit`` seconds; the estimate reuses the exact counter's memo,
-        stops early once its 95% interval is within ``rel_error``, and states
-        the error it achieved.
+        Three phases, each under one deadline for every count of the engine
+        (:meth:`OrderEngine.deadline`), so the call returns within
+        ``plain + time_limit`` seconds plus the granularity of the deadline
+        checks (milliseconds), where ``plain`` is the engine's own time limit,
+        or a tenth of ``time_limit`` if it has none:
+
+        1. the plain exact count, ``plain`` seconds: each counter by itself,
+           choosing a method per hard piece (see :class:`~opportune.engine.count.Counter`);
+           a plan too large for it costs seconds, not the minutes it takes to
+           fill the memo budget;
+        2. if that did not finish, the engine's exact count (which also looks
+           for a hub: :mod:`opportune.engine.hub`) continues for
+           ``exact_share`` of ``time_limit`` from where it stopped (the memos
+           and each piece's progress are kept);
+        3. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
+           gets the rest (without its own hub split if the exact phases
+           looked for a hub already): it reuses the exact counter's memo, stops early once
+           its 95% interval is within ``rel_error``, and states the error it
+           achieved.  Its first two runs may overrun its share by a fifth of it
+           (without two runs no error can be stated); past that it returns what
+           it has, with an infinite stated error (or no value: nan) if too little.
         """
+        import contextlib
+
+        start = time.perf_counter()
         plain = self.engine.time_limit if self.engine.time_limit is not None else time_limit / 10
+        end = start + plain + time_limit
         try:
-            with self.engine.time_limited(plain):
-                return CountResult(self.count())
+            terms = list(self.engine._terms(self.consistent))
         except BudgetExceeded:
-            pass
+            terms = []
+
+        def exact_by(until: float, plain_only: bool) -> CountResult:
+            # every count of the engine stops at `until`: the engine's deadline sets each count's time
+            # limit when it starts, and the counters' own deadline holds whatever runs after that
+            saved = [(c, c.deadline) for _, c in terms]
+            for c, _ in saved:
+                c.deadline = until
+            try:
+                with (self.engine.time_limited(plain) if plain_only else contextlib.nullcontext()), \
+                        self.engine.deadline(until):
+                    if plain_only:      # each term's counter by itself (its own choice of method per piece)
+                        remaining = self.engine.full & ~self.mask
+                        for _, c in terms:
+                            c.count(remaining)
+                    return CountResult(self.count())
+            finally:
+                for c, d in saved:
+                    c.deadline = d
+
+        for until, plain_only in ((start + plain, True), (start + plain + exact_share * time_limit, False)):
+            try:
+                return exact_by(until, plain_only)
+            except BudgetExceeded:
+                pass
         from opportune.engine.estimate import estimate_count
 
         remaining = self.engine.full & ~self.mask
         value, abs_err, conf, methods = 0.0, 0.0, 1.0, set()
         exact: int | None = 0
         terms = list(self.engine._terms(self.consistent))
-        for sign, counter in terms:
+        for i, (sign, counter) in enumerate(terms):
+            share = max(0.0, end - time.perf_counter()) / (len(terms) - i)
+            # the hub split again only if the exact phases did not already look for a hub
+            hub = {"hub": 0.0} if counter in self.engine._hubs else {}
             est = estimate_count(counter.poset, remaining, rel_error=rel_error / max(1, len(terms)),
-                                 time_limit=time_limit / max(1, len(terms)), seed=seed, counter=counter,
-                                 exact_memo=0)
+                                 time_limit=share / 1.2, overrun=share / 6, seed=seed, counter=counter,
+                                 exact_memo=0, **hub)
             exact = None if exact is None or est.exact is None else exact + sign * est.exact
             value += sign * est.value
             abs_err += est.rel_error * est.value
