@@ -8,7 +8,7 @@ import random
 import pytest
 
 from opportune.engine.count import Counter
-from opportune.engine.estimate import Estimate, _t_quantile, estimate_count
+from opportune.engine.estimate import Estimate, _stated_error, _t_quantile, estimate_count
 from opportune.engine.poset import Poset
 from conftest import salbp_poset
 
@@ -59,7 +59,7 @@ def test_salbp_truth_within_stated_error(name, particles, tail):
     e = estimate_count(p, exact_memo=0, hub=0, particles=particles, tail=tail, rel_error=0.05, time_limit=4.0, seed=1)
     assert e.method == "smc" and e.samples >= 2
     assert e.confidence == 0.95
-    assert e.rel_error < 0.5                 # ~0.1-0.15 on the dev machine; the interval is what it is
+    assert e.rel_error < 1.0                 # ~0.15-0.6 with 10-40 runs, by machine load; it is what it is
     assert within(e, exact), (e, exact)
     assert abs(e.log10_value - math.log10(exact)) < 0.1
 
@@ -92,7 +92,7 @@ def test_deterministic_given_seed_when_accuracy_reached():
     a = estimate_count(p, exact_memo=0, hub=0, particles=16, tail=4, rel_error=0.2, time_limit=30, seed=3)
     b = estimate_count(p, exact_memo=0, hub=0, particles=16, tail=4, rel_error=0.2, time_limit=30, seed=3)
     assert a == b
-    assert a.rel_error <= 0.2 and a.samples >= 4
+    assert a.rel_error <= 0.2 and a.samples >= 20        # no stop on accuracy before min_runs=20 runs
 
 
 def test_out_of_time_is_stated_honestly():
@@ -102,6 +102,86 @@ def test_out_of_time_is_stated_honestly():
     assert e.method == "smc" and e.samples == 2 and 0 < e.rel_error < math.inf
     exact = Counter(p).count()
     assert e.rel_error > abs(e.value / exact - 1) or e.rel_error > 0.5    # wide, as two runs must be
+
+
+@pytest.mark.parametrize("n, density, particles", [(24, 0.15, 3), (26, 0.12, 2)])
+def test_repeated_seeds_cover_the_truth(n, density, particles):
+    """The stated 95% interval holds the exact count in at least 90% of 80 estimates (8 random orders x
+    10 seeds).  Very few particles make the runs vary several-fold and right-skewed; each estimate stops
+    on accuracy (±50%: deterministic), after 10-30 runs.  Measured: 79/80 and 75/80; the statement
+    before issue 11 (plain t interval, a stop from 4 runs on) covered 67/80 and 66/80."""
+    rng = random.Random(7)
+    posets = [random_poset(n, density, rng) for _ in range(8)]
+    exact = [Counter(p).count() for p in posets]
+    hits = 0
+    for k in range(80):
+        p, true = posets[k % 8], exact[k % 8]
+        e = estimate_count(p, exact_memo=0, hub=0, particles=particles, tail=2, rel_error=0.5, time_limit=120,
+                           seed=k)
+        assert e.method == "smc" and e.samples >= 20 and 0 < e.rel_error <= 0.5
+        hits += within(e, true)
+    print(hits)
+    assert hits >= 72, hits
+
+
+def _plain_t_error(runs: list[float]) -> float:
+    """The statement before issue 11: Student's t on the estimates themselves, no margin."""
+    n = len(runs)
+    mx = max(runs)
+    ws = [math.exp(x - mx) for x in runs]
+    mean = sum(ws) / n
+    sd = math.sqrt(sum((w - mean) ** 2 for w in ws) / (n - 1))
+    return _t_quantile(0.975, n - 1) * sd / math.sqrt(n) / mean
+
+
+def _coverage(stated, draw, n: int, sets: int, seed: int) -> float:
+    """Share of ``sets`` samples of ``n`` run logs (``draw(rng)``: the log of an unbiased estimate of 1)
+    whose stated interval around their mean holds 1."""
+    rng = random.Random(seed)
+    hits = 0
+    for _ in range(sets):
+        runs = [draw(rng) for _ in range(n)]
+        mx = max(runs)
+        value = math.exp(mx) * sum(math.exp(x - mx) for x in runs) / n
+        hits += abs(1 / value - 1) <= stated(runs)
+    return hits / sets
+
+
+@pytest.mark.parametrize("n", [2, 4, 6, 10])
+def test_stated_error_covers_skewed_runs(n):
+    """Runs whose estimates are right-skewed, as sequential Monte Carlo's are: from 4 runs on, a few runs
+    that happen to agree below the truth made the plain t interval miss it in 13-14% of 1,500 samples
+    (lognormal, log spread 0.8) and 10-12% (logs skewed 0.7, spread 0.42); the stated error covers it in
+    94.5-98% (required: 93%)."""
+    sigma = 0.8
+
+    def lognormal(rng):
+        return rng.gauss(-sigma * sigma / 2, sigma)
+
+    def skewed(rng):       # normal + exponential logs: E[e^x] = e^(0.045) / 0.7, shifted to 1
+        return rng.gauss(0, 0.3) + rng.expovariate(1 / 0.3) - (0.045 - math.log(0.7))
+
+    new = lambda runs: _stated_error(runs, 0.95)
+    for draw in (lognormal, skewed):
+        assert _coverage(new, draw, n, 1500, seed=n) >= 0.93
+    if n >= 4:      # the statement it replaces was too narrow here
+        assert _coverage(_plain_t_error, lognormal, n, 1500, seed=n) < 0.9
+        assert _coverage(_plain_t_error, skewed, n, 1500, seed=n) < 0.915
+
+
+def test_stated_error_edge_cases():
+    assert _stated_error([], 0.95) == math.inf
+    assert _stated_error([3.0], 0.95) == math.inf
+    assert _stated_error([3.0, 3.0, 3.0], 0.95) == 0.0
+    assert _stated_error([3.0, -math.inf, 2.0], 0.95) == math.inf      # a run that found nothing
+    runs = [10.0, 10.2, 9.9, 10.1]
+    e = _stated_error(runs, 0.95)
+    assert 0 < e < 1
+    assert _stated_error(runs[::-1], 0.95) == pytest.approx(e)
+    assert _stated_error([x + 1000.0 for x in runs], 0.95) == pytest.approx(e)     # scale-free
+    assert _stated_error(runs, 0.99) > e > _stated_error(runs, 0.8)
+    assert _stated_error(runs + runs, 0.95) < e                                       # more runs, narrower
+    assert _stated_error([10.0, 10.4, 9.8, 10.2], 0.95) > e                           # more spread, wider
 
 
 def test_t_quantiles():

@@ -181,6 +181,7 @@ def count(
 ):
     """Count the admissible sequences of a plan (exact integer; an estimate, marked so, only over budget)."""
     from opportune.engine import NotAdmissible, OrderEngine, Schedule
+    from opportune.engine.schedule import decimal
 
     plan = load_or_exit(plan_file, json_errors=as_json)
     prefix = [p for p in (after or "").replace(",", " ").split() if p]
@@ -200,7 +201,7 @@ def count(
             "parts": len(plan.parts),
             "strategies": len(plan.strategies),
             "after": prefix,
-            "sequences": str(result.value) if result.exact else f"{result.value:.6e}",
+            "sequences": decimal(result.value) if result.exact else f"{result.value:.6e}",
             "log10": round(result.log10, 6),
             "exact": result.exact,
         }
@@ -210,7 +211,8 @@ def count(
         return
     state = f" after {' '.join(prefix)}" if prefix else ""
     if result.exact:
-        _out().print(f"{_escape(plan.name)}{state}: {result.value} admissible sequences (log10 {result.log10:.3f})")
+        _out().print(f"{_escape(plan.name)}{state}: {decimal(result.value)} admissible sequences "
+                     f"(log10 {result.log10:.3f})")
     else:
         _out().print(f"{_escape(plan.name)}{state}: about {result.value:.4e} admissible sequences "
                      f"(log10 {result.log10:.3f}) — ESTIMATE, ±{100 * result.rel_error:.2f}% at "

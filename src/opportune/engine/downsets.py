@@ -125,3 +125,165 @@ def position_sums_by_downsets(poset: Poset, mask: int | None = None) -> dict[int
             nb[d] = total
         back = nb
     return sums
+
+
+# ---------------------------------------------------------------- the fast versions the counter uses
+
+
+def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int = 20_000) -> int | None:
+    """Number of down-sets of the subposet induced on ``mask``, or None if finding it would take
+    more than ``limit`` memoised sets (then there are usually very many).
+
+    Much cheaper than listing them: branch on the element ``x`` with the most
+    comparable elements — a down-set either holds ``x`` (and everything below
+    it) or not (and nothing above it) — and multiply the counts of pieces
+    that fall apart, memoised on what is left.  The counter uses it to tell
+    whether the dynamic programme over down-sets is affordable for a piece.
+
+    >>> count_downsets_bounded(Poset.antichain(3)), count_downsets_bounded(Poset.chain(3))
+    (8, 4)
+    >>> count_downsets_bounded(Poset.antichain(40), limit=10) == 2 ** 40     # found without listing them
+    True
+    """
+    if mask is None:
+        mask = poset.full
+    below, above = poset.below, poset.above
+    nbr = [b | a for b, a in zip(below, above)]
+    memo: dict[int, int] = {0: 1}
+    calls = [0]
+
+    def f(s: int) -> int | None:
+        r = memo.get(s)
+        if r is not None:
+            return r
+        calls[0] += 1
+        if calls[0] > limit:
+            return None
+        # elements comparable to nothing else in s double the count; then one connected piece
+        # (closure under comparability from the lowest element)
+        near = 0
+        m = s
+        while m:
+            b = m & -m
+            m ^= b
+            near |= nbr[b.bit_length() - 1]
+        iso = s & ~near
+        if iso:
+            r = f(s ^ iso)
+            r = r << iso.bit_count() if r is not None else None
+            if r is not None:
+                memo[s] = r
+            return r
+        comp = front = s & -s
+        while front:
+            b = front & -front
+            front ^= b
+            new = nbr[b.bit_length() - 1] & s & ~comp
+            comp |= new
+            front |= new
+        if comp != s:
+            a = f(comp)
+            b = f(s ^ comp) if a is not None else None
+            r = a * b if b is not None else None
+        else:
+            x = max(bits(s), key=lambda i: (nbr[i] & s).bit_count())
+            a = f(s & ~(below[x] | 1 << x))          # x in the down-set: what is left above/beside it
+            b = f(s & ~(above[x] | 1 << x)) if a is not None else None
+            r = a + b if b is not None else None
+        if r is not None:
+            memo[s] = r
+        return r
+
+    import sys
+
+    if sys.getrecursionlimit() < 3 * mask.bit_count() + 200:
+        sys.setrecursionlimit(3 * mask.bit_count() + 200)
+    return f(mask)
+
+
+def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1, deadline: float = float("inf"),
+                 max_sets: int | None = None) -> tuple[int, dict[int, int]] | None:
+    """``(e(mask), top)`` by the dynamic programme over the up-sets of ``mask``, smallest first.
+
+    ``e(U) = sum over minimal m of e(U - m)``: every up-set ``U`` of ``mask``
+    is reached from the up-sets one smaller, level by level, so the cost is
+    the number of down-sets (as :func:`count_by_downsets`) at a few
+    bytecodes each, with no decomposition and no memo; the levels are
+    forgotten as it goes.  ``top`` holds ``e(U)`` of the up-sets with at
+    least ``|mask| - keep`` elements (``mask`` itself and what remains after
+    removing up to ``keep`` first elements: the questions a simulation asks
+    next).  None if ``time.perf_counter()`` passes ``deadline`` or the sets
+    visited exceed ``max_sets``.
+
+    Elements are renumbered to the piece, and "minimal in what is left" is a
+    table look-up per chunk of up to 14 bits.
+
+    >>> upset_counts(Poset.from_pairs(3, [(0, 1)]))
+    (3, {3: 1, 6: 2, 7: 3})
+    """
+    import time
+
+    if mask is None:
+        mask = poset.full
+    sub, old = poset.restrict(mask)
+    k = sub.n
+    if k <= 1:
+        return 1, {mask: 1}
+    below = sub.below
+    nch = -(-k // 14)
+    c = -(-k // nch)
+    cm = (1 << c) - 1
+    tables = []
+    for j in range(nch):
+        vals = below[j * c:(j + 1) * c]
+        t = [0] * (1 << len(vals))
+        for v in range(1, len(t)):
+            low = v & -v
+            t[v] = t[v ^ low] | vals[low.bit_length() - 1]
+        tables.append(t)
+    unrolled = nch <= 4
+    T0, T1, T2, T3 = (tables + [[0], [0], [0]])[:4]
+    c2, c3 = 2 * c, 3 * c
+    full = sub.full
+    perf = time.perf_counter
+    limit = max_sets if max_sets is not None else float("inf")
+    seen = 1
+    level: dict[int, int] = {0: 1}
+    top_local: dict[int, int] = {}
+    for size in range(k):
+        nxt: dict[int, int] = {}
+        get = nxt.get
+        done = 0
+        for u, v in level.items():
+            r = full ^ u                        # not yet in U: its maximal elements may join
+            if unrolled:
+                d = T0[r & cm] | T1[r >> c & cm] | T2[r >> c2 & cm] | T3[r >> c3]
+            else:
+                d = 0
+                x = r
+                for t in tables:
+                    d |= t[x & cm]
+                    x >>= c
+            m = r & ~d
+            while m:
+                b = m & -m
+                m ^= b
+                w = u | b
+                nxt[w] = get(w, 0) + v
+            done += 1
+            if not done & 4095 and perf() > deadline:
+                return None
+        level = nxt
+        seen += len(level)
+        if seen > limit or perf() > deadline:
+            return None
+        if size + 1 >= k - keep:
+            top_local.update(level)
+    (value,) = level.values()
+    top = {}
+    for u, v in top_local.items():
+        g = 0
+        for i in bits(u):
+            g |= 1 << old[i]
+        top[g] = v
+    return value, top

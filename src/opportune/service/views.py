@@ -10,10 +10,10 @@ now, progress.  Big integers are decimal strings (JSON numbers lose digits).
 from __future__ import annotations
 
 import datetime as dt
-import math
 
 from opportune.engine import Schedule
 from opportune.engine.count import BudgetExceeded
+from opportune.engine.schedule import decimal, log10_int
 from opportune.sequencer import Row
 
 
@@ -27,14 +27,8 @@ def count_view(schedule: Schedule) -> dict | None:
         n = schedule.count()
     except BudgetExceeded:
         return None
-    if n <= 0:
-        log10 = None
-    elif n < 10**300:
-        log10 = round(math.log10(n), 6)
-    else:
-        digits = str(n)
-        log10 = round(len(digits) - 1 + math.log10(int(digits[:15]) / 10**14), 6)
-    return {"value": str(n), "log10": log10}
+    log10 = round(log10_int(n), 6) if n > 0 else None
+    return {"value": decimal(n), "log10": log10}
 
 
 def installable(schedule: Schedule) -> list[str] | None:
