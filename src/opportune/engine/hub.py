@@ -34,6 +34,7 @@ the mark" parts).
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from itertools import combinations
 from math import comb
 
@@ -437,7 +438,19 @@ class HubPath:
             return v
         if not self._is_upset(s):
             return None
-        return self._count(s, deadline, discover)
+        with self._until(deadline):
+            return self._count(s, deadline, discover)
+
+    @contextmanager
+    def _until(self, deadline: float):
+        """Every count of this path's counter (the tails' included) stops at ``deadline``."""
+        c = self.counter
+        saved = c.deadline
+        c.deadline = deadline if deadline != float("inf") else None
+        try:
+            yield
+        finally:
+            c.deadline = saved
 
     def position_sum(self, s: int, x: int, *, deadline: float = float("inf")) -> int | None:
         """Sum over the orders of ``s`` of the 1-based position of ``x`` (None when :meth:`count` cannot help).
@@ -448,7 +461,8 @@ class HubPath:
         if not self._is_upset(s) or not s >> x & 1:
             return None
         try:
-            return self._pos(s, x, deadline)
+            with self._until(deadline):
+                return self._pos(s, x, deadline)
         except _Unavailable:
             return None
 
