@@ -258,7 +258,7 @@ class OrderEngine:
         if r is not None:
             return r
         if self._until is not None:
-            counter.time_limit = max(0.0, self._until - time.perf_counter())
+            counter.deadline = self._until if counter.deadline is None else min(counter.deadline, self._until)
         if counter in self._hubs:
             hub = self._hubs[counter]
             if hub is not None and hub.applies(s):
@@ -301,15 +301,17 @@ class OrderEngine:
         all the counts of a decision, not a limit per count.  What was counted stays in
         the memos, so a later call continues from there.
         """
-        saved = self._until, self.time_limit, {key: c.time_limit for key, c in self._counters.items() if c is not None}
+        # An absolute stop (Counter.deadline), not a time limit from each count's start: work done
+        # before a count (a probe, a hub search) must not push the end of the decision later.
+        saved = self._until, {key: c.deadline for key, c in self._counters.items() if c is not None}
         self._until = until
         try:
             yield self
         finally:
-            self._until, self.time_limit = saved[0], saved[1]
+            self._until = saved[0]
             for key, c in self._counters.items():
                 if c is not None:
-                    c.time_limit = saved[2].get(key, saved[1])
+                    c.deadline = saved[1].get(key)
 
     def warm_up(self, time_limit: float | None = None) -> bool:
         """Count the first state exactly, within ``time_limit`` seconds: this chooses how the
@@ -340,7 +342,7 @@ class OrderEngine:
         """Position sums of ``units`` (default: all of ``s``) over the orders of ``s`` under one counter."""
         self._term_count(counter, s)            # chooses the way (and finds the hub) if not done yet
         if self._until is not None:
-            counter.time_limit = max(0.0, self._until - time.perf_counter())
+            counter.deadline = self._until if counter.deadline is None else min(counter.deadline, self._until)
         hub = self._hub_for(counter, s)
         if hub is None:
             sums = counter.position_sums(s)
