@@ -507,8 +507,11 @@ class Counter:
             order = [("down", downs, 1.0), ("up", ups, 0.5)]
         ideals = self._ideals.get(s, 0)
         if ideals == 0:
-            ideals = self._ideals[s] = (count_downsets_bounded(poset, s, limit=_IDEAL_PROBE)
-                                        if s.bit_count() <= _DP_MAX_N else None)
+            ideals = (count_downsets_bounded(poset, s, limit=_IDEAL_PROBE, deadline=b[1])
+                      if s.bit_count() <= _DP_MAX_N else None)
+            if ideals is None and time.perf_counter() > b[1]:   # cut by the deadline: not "too many"
+                raise BudgetExceeded("exact count exceeded its time limit", reason="time", memo_size=self.memo_size)
+            self._ideals[s] = ideals
         share = self._shares.get(s, max(2, self.probe))
         while s not in memo:
             for name, run, part in order:

@@ -10,6 +10,8 @@ and small cases.  :class:`~opportune.engine.count.Counter` is the fast method.
 
 from __future__ import annotations
 
+import time
+
 from opportune.engine.poset import Poset, bits
 
 __all__ = ["count_by_downsets", "position_sums_by_downsets", "count_downsets"]
@@ -130,9 +132,11 @@ def position_sums_by_downsets(poset: Poset, mask: int | None = None) -> dict[int
 # ---------------------------------------------------------------- the fast versions the counter uses
 
 
-def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int = 20_000) -> int | None:
+def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int = 20_000,
+                           deadline: float | None = None) -> int | None:
     """Number of down-sets of the subposet induced on ``mask``, or None if finding it would take
-    more than ``limit`` memoised sets (then there are usually very many).
+    more than ``limit`` memoised sets (then there are usually very many), or would end after
+    ``deadline`` (a ``time.perf_counter()`` value; the caller tells the two apart by the clock).
 
     Much cheaper than listing them: branch on the element ``x`` with the most
     comparable elements — a down-set either holds ``x`` (and everything below
@@ -158,6 +162,8 @@ def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int 
             return r
         calls[0] += 1
         if calls[0] > limit:
+            return None
+        if deadline is not None and not calls[0] & 63 and time.perf_counter() > deadline:
             return None
         # elements comparable to nothing else in s double the count; then one connected piece
         # (closure under comparability from the lowest element)
