@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from opportune._lazy import attach
+
 __version__ = "0.1.0"
 
 __all__ = ["Part", "Plan", "PlanError", "Strategy", "load_plan", "make_plan", "__version__"]
@@ -25,14 +27,4 @@ if TYPE_CHECKING:
     from opportune.plan import Part, Plan, PlanError, Strategy, make_plan
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        # __import__ rather than importlib.import_module: `python -X importtime` then shows what loaded
-        value = getattr(__import__(_LAZY[name], fromlist=(name,)), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = attach(globals(), _LAZY, __all__)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from opportune._lazy import attach
+
 __all__ = ["CheckResult", "Problem", "check_text", "load_plan", "plan_from_dict", "read_plan"]
 
 # Loaded on first use (PEP 562): importing a submodule (``opportune.formats.summary``, ``.salbp``)
@@ -17,14 +19,4 @@ if TYPE_CHECKING:
     from opportune.formats.problems import Problem
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        # __import__ rather than importlib.import_module: `python -X importtime` then shows what loaded
-        value = getattr(__import__(_LAZY[name], fromlist=(name,)), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = attach(globals(), _LAZY, __all__)
