@@ -10,20 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import random_plans
+from test_engine_count_scans import random_poset
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.engine.count import BudgetExceeded, Counter
-from opportune.engine.poset import Poset
 from opportune.engine.sampling import CompletionChains, _t_cdf, t_quantile
 from opportune.policies.opportunistic import Opportunistic, choose_exact
 from opportune.sequencer import LookError, Sequencer
-
-
-def random_poset(rng: random.Random, n: int, p: float) -> Poset:
-    order = list(range(n))
-    rng.shuffle(order)
-    pairs = [(order[i], order[j]) for i in range(n) for j in range(i + 1, n) if rng.random() < p]
-    return Poset.from_pairs(n, pairs)
 
 
 def test_chain_estimates_cover_the_exact_values_as_stated():

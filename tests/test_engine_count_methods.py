@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import random
 import time
-from itertools import permutations
 from unittest.mock import patch
 
 import pytest
@@ -18,29 +17,17 @@ from opportune.engine import count as count_module
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.downsets import count_by_downsets, count_downsets, count_downsets_bounded, upset_counts
 from opportune.engine.poset import Poset, bits
+from test_engine_count import brute
+from test_engine_count_scans import random_poset
 
 
 def sparse_order(n: int, k: float, seed: int) -> Poset:
     """linext's random sparse orders: a random permutation, each pair joined with probability k / (n - 1)."""
-    rng = random.Random(seed)
-    perm = list(range(n))
-    rng.shuffle(perm)
-    p = k / max(1, n - 1)
-    return Poset.from_pairs(n, [(perm[i], perm[j]) for i in range(n) for j in range(i + 1, n) if rng.random() < p])
+    return random_poset(random.Random(seed), n, k / max(1, n - 1))
 
 
 def brute_count(p: Poset, mask: int) -> int:
-    members = list(bits(mask))
-    total = 0
-    for perm in permutations(members):
-        seen = 0
-        for x in perm:
-            if p.below[x] & mask & ~seen:
-                break
-            seen |= 1 << x
-        else:
-            total += 1
-    return total
+    return brute(p, mask)[0]
 
 
 @st.composite

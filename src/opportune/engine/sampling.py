@@ -35,7 +35,7 @@ Complexity: one move is a few C-level scans of the sequence (O(n) each, one per 
 neighbour of the step moved); one sample of ``m`` questions is O(n m) (a scan of the
 sequence per question).
 
->>> from opportune.engine.poset import Poset
+>>> from opportune.engine.poset import Poset, bits
 >>> p = Poset.from_pairs(3, [(0, 2)])          # 0 before 2; 1 free: 3 completions
 >>> chains = CompletionChains(p, 0b111, seed=1)
 >>> est = chains.estimate(first=[0, 1], positions=[1], steps=20_000)
@@ -52,7 +52,7 @@ import random
 from dataclasses import dataclass
 from statistics import NormalDist
 
-from opportune.engine.poset import Poset
+from opportune.engine.poset import Poset, bits
 
 __all__ = ["ChainEstimate", "CompletionChains", "t_quantile"]
 
@@ -104,7 +104,6 @@ class CompletionChains:
         self._covers: tuple | None = None
         self.below = poset.below
         self.above = poset.above
-        self.comparable = [b | a for b, a in zip(poset.below, poset.above)]
         self.rng = random.Random(seed)
         self.remaining = remaining
         self.orders = [self._random_topological(remaining) for _ in range(chains)]
@@ -115,7 +114,7 @@ class CompletionChains:
         down-set), by Kahn's algorithm on the cover relations with a random minimal step each time:
         not uniform, just spread.  O(n + covers)."""
         up, rng = self._neighbours()[1], self.rng
-        waiting = {u: 0 for u in _bits(remaining)}
+        waiting = {u: 0 for u in bits(remaining)}
         for u in waiting:
             for v in up[u]:
                 if v in waiting:
@@ -321,10 +320,3 @@ def _betacf(a: float, b: float, x: float) -> float:
         if abs(delta - 1) < 1e-12:
             break
     return h
-
-
-def _bits(mask: int):
-    while mask:
-        low = mask & -mask
-        yield low.bit_length() - 1
-        mask ^= low

@@ -182,10 +182,9 @@ class Opportunistic(DecidesOnMasks):
             self._share[kind] = EXACT_SHARE[0]
         chains, note = self._chains(engine, mask, consistent)
         remaining = engine.full & ~mask
-        units = engine._part_units
         plan = engine.plan
         if can:
-            first = {p: _lowest(units[p] & ~mask) for p in can}
+            first = {p: engine.next_unit(mask, plan.index(p)) for p in can}
             est = chains.estimate(first=set(first.values()), deadline=end, clock=time.perf_counter)
             value = _tied_means(chains, remaining, first, est.first)
             keys = []
@@ -203,7 +202,7 @@ class Opportunistic(DecidesOnMasks):
             return (shared_action("install", best, keys[0][2]),
                     _How(False, "mcmc", estimates, conf, note))
         parts = list(dict.fromkeys(visible))
-        at = {p: _lowest(units[p] & ~mask) for p in parts}
+        at = {p: engine.next_unit(mask, plan.index(p)) for p in parts}
         est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter)
         value = _tied_means(chains, remaining, at, est.positions)
         ranked = sorted((value[p], plan.index(p), p) for p in parts)
@@ -302,10 +301,6 @@ class Opportunistic(DecidesOnMasks):
                 return state.schedule.count()
         except BudgetExceeded:
             return None
-
-
-def _lowest(mask: int) -> int:
-    return (mask & -mask).bit_length() - 1
 
 
 def _signature(chains: CompletionChains, remaining: int, unit: int) -> tuple[int, int]:
