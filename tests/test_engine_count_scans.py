@@ -38,14 +38,16 @@ def test_narrow_and_wide_scans_agree(n, density):
     for _ in range(3):
         p = random_poset(rng, n, density)
         masks = up_sets(rng, p, 40) + [rng.getrandbits(n) if n else 0 for _ in range(20 if n <= 20 else 0)]
-        narrow = Counter(p, max_memo=None)
+        narrow = Counter(p, max_memo=None, native=False)
         narrow._narrow_after = 0                   # chunk tables from the first call
-        wide = Counter(p, max_memo=None)
+        wide = Counter(p, max_memo=None, native=False)
         wide._narrow_after = sys.maxsize           # byte tables only
-        default = Counter(p, max_memo=None)        # switches when its memo is large enough
+        default = Counter(p, max_memo=None, native=False)  # switches when its memo is large enough
+        compiled = Counter(p, max_memo=None)       # the compiled core where it is built
         for m in masks:
-            assert narrow.count(m) == wide.count(m) == default.count(m)
-            assert narrow.position_sums(m) == wide.position_sums(m) == default.position_sums(m)
+            assert narrow.count(m) == wide.count(m) == default.count(m) == compiled.count(m)
+            assert (narrow.position_sums(m) == wide.position_sums(m) == default.position_sums(m)
+                    == compiled.position_sums(m))
         # same sets visited in the same order: eviction and budgets behave alike
         assert list(narrow._memo) == list(wide._memo) == list(default._memo)
         assert list(narrow._vec) == list(wide._vec) == list(default._vec)

@@ -148,7 +148,14 @@ class Counter:
         The default, 2,000,000, bounds memory like the old lifetime
         ``max_memo`` did, without ever failing because of the memo's age.
 
-    All three are plain attributes and may be changed between calls; the memo
+    native : bool or None
+        Run the recursion in the compiled core (:mod:`opportune.engine.native`)
+        when it is built and the order has at most 1024 elements (None, the
+        default), or never (False).  Results are the same exact integers; the
+        compiled memo holds the counts of every set the recursion visits, the
+        Python memo only those asked for.
+
+    All three budgets are plain attributes and may be changed between calls; the memo
     survives a :class:`BudgetExceeded`.
 
     Complexity: each memo entry costs O(|S|) big-int operations plus one
@@ -169,8 +176,13 @@ class Counter:
     """
 
     def __init__(self, poset: Poset, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
-                 max_total: int | None = 2_000_000):
+                 max_total: int | None = 2_000_000, native: bool | None = None):
         self.poset = poset
+        self._native = None
+        self._direction = 0                     # 1 for the reversed view (see _reverse)
+        if native is not False:
+            from opportune.engine.native import native_counter
+            self._native = native_counter(poset, max_total)
         self.max_memo = max_memo
         self.time_limit = time_limit
         self.max_total = max_total
@@ -317,7 +329,15 @@ class Counter:
         >>> c.cached(0b11), c.count(0b11), c.cached(0b11)
         (None, 2, 2)
         """
-        return self._memo.get(mask)
+        r = self._memo.get(mask)
+        if r is None and self._native is not None and mask.__class__ is int and 0 <= mask <= self.poset.full:
+            r = self._native.lookup(mask)
+        return r
+
+    @property
+    def compiled(self) -> bool:
+        """True when this counter runs its recursion in the compiled core."""
+        return self._native is not None
 
     def learn(self, mask: int, value: int) -> None:
         """Store the exact count ``value`` of ``mask`` found by another exact method (see :mod:`.hub`).
@@ -326,6 +346,8 @@ class Counter:
         """
         self._check_mask(mask)
         self._memo[mask] = value
+        if self._native is not None:
+            self._native.put(mask, value)
 
     def scan(self, mask: int) -> tuple[int, int]:
         """``(minimal elements, cut elements)`` of ``mask``: a cut element is comparable to every other element.
@@ -348,10 +370,12 @@ class Counter:
     @property
     def memo_size(self) -> int:
         """Number of entries in the memo (counts plus position-sum vectors)."""
-        return len(self._memo) + len(self._vec)
+        return len(self._memo) + len(self._vec) + (self._native.size() if self._native is not None else 0)
 
     def clear(self) -> None:
         """Forget every memoised value (frees memory; later calls recompute)."""
+        if self._native is not None:
+            self._native.reset()
         self._memo.clear()
         self._memo[0] = 1
         self._vec.clear()
@@ -385,7 +409,7 @@ class Counter:
 
     def _maybe_narrow(self) -> None:
         """Switch to chunk-table scans once the memo is large enough for them to pay."""
-        if len(self._memo) >= self._narrow_after:
+        if self._native is None and len(self._memo) >= self._narrow_after:
             self._narrow_after = sys.maxsize
             self._narrow_tables()
             self._f = self._make_counter()
@@ -443,14 +467,14 @@ class Counter:
     def _hard_pieces(self, mask: int) -> list[int]:
         """The connected pieces without cut elements that ``mask`` splits into by rules 1-2 and that
         are not in the memo (largest first)."""
-        memo = self._memo
+        known = self._known
         below, above = self.poset.below, self.poset.above
         split = self._make_split()
         out = []
         stack = [mask]
         while stack:
             s = stack.pop()
-            if s & (s - 1) == 0 or s in memo:
+            if s & (s - 1) == 0 or known(s):
                 continue
             chain, comps, iso, _ = split(s)
             if chain is not None:
@@ -524,6 +548,8 @@ class Counter:
                     for u, v in top.items():
                         if u not in memo:
                             memo[u] = v
+                            if self._native is not None:
+                                self._native.put(u, v)
                             b[2] += 1
                     self.methods["downsets"] = self.methods.get("downsets", 0) + 1
                     return
@@ -542,13 +568,20 @@ class Counter:
             share *= 2
             self._shares[s] = share
 
+    def _known(self, s: int) -> bool:
+        """Whether the count of ``s`` is in a memo (never computes)."""
+        return s in self._memo or (self._native is not None and self._native.lookup(s) is not None)
+
     def _reverse(self) -> "Counter":
         """A counter of the reversed order that shares this one's memo and budget (see :meth:`_count_piece`)."""
         r = self._rev
         if r is None:
-            r = self._rev = Counter(self.poset.dual(), max_memo=None, time_limit=None, max_total=None)
+            r = self._rev = Counter(self.poset.dual(), max_memo=None, time_limit=None, max_total=None, native=False)
             r._memo = self._memo
             r._budget = self._budget
+            # the compiled core counts the reversed order by removing maximal elements of this one
+            r._native = self._native
+            r._direction = 1
             r.probe = sys.maxsize
             r._f = r._make_counter()
         r._maybe_narrow()
@@ -657,6 +690,8 @@ class Counter:
         return pieces
 
     def _make_counter(self) -> Callable[[int], int]:
+        if self._native is not None:
+            return self._make_compiled()
         memo = self._memo
         poset = self.poset
         below = list(poset.below)
@@ -828,6 +863,40 @@ class Counter:
                         t = s ^ b
                         v = get(t)
                         r += v if v is not None else f(t)
+            memo[s] = r
+            return r
+
+        return f
+
+    def _make_compiled(self) -> Callable[[int], int]:
+        """The recursion of :meth:`_make_counter`, run by the compiled core under the same budget."""
+        memo = self._memo
+        get = memo.get
+        budget = self._budget
+        core = self._native
+        direction = self._direction
+        perf = time.perf_counter
+
+        def f(s: int) -> int:
+            r = get(s)
+            if r is not None:
+                return r
+            if s & (s - 1) == 0:
+                return 1
+            room = budget[0] - budget[2]
+            if room <= 0:
+                raise BudgetExceeded(f"exact count needs more than max_memo={budget[0]} new memo entries",
+                                     reason="memo", memo_size=self.memo_size)
+            deadline = budget[1]
+            seconds = -1.0 if deadline == _INF else max(0.0, deadline - perf())
+            status, r, added = core.count(s, direction, room if room < sys.maxsize else -1, seconds, self.max_total)
+            budget[2] += added
+            if status == 1:
+                raise BudgetExceeded(f"exact count needs more than max_memo={budget[0]} new memo entries",
+                                     reason="memo", memo_size=self.memo_size)
+            if status == 2:
+                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                     memo_size=self.memo_size)
             memo[s] = r
             return r
 

@@ -1,0 +1,549 @@
+// opportune._native: the counter's memoised recursion (Counter._f in engine/count.py) in C++.
+//
+// Same three rules as the pure-Python counter, same results (exact integers):
+//   1. cut elements (comparable to every other element of the set) split it into blocks counted
+//      separately and multiplied;
+//   2. components (of the comparability graph) multiply, times the multinomial coefficient;
+//   3. otherwise e(S) = sum over the minimal (direction 0) or maximal (direction 1) elements x of
+//      e(S \ {x}).
+// Sets are W-word bitsets (W = 1, 2, 4, 8, 16: up to 1024 elements); counts are unsigned big
+// integers kept as 64-bit limbs in one arena; the memo is an open-addressing hash table.  A call
+// stops with a status (no exception crosses into Python) when it would add more than `max_new`
+// entries or outlive its time limit; what it stored stays, like the Python counter's memo.
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <sys/mman.h>
+
+namespace py = pybind11;
+
+namespace {
+
+using u64 = std::uint64_t;
+using u128 = unsigned __int128;
+using Clock = std::chrono::steady_clock;
+
+struct Stop {
+    int reason;  // 1: new-entry limit, 2: time limit
+};
+
+template <int W>
+struct Bits {
+    u64 w[W];
+
+    static Bits zero() {
+        Bits b;
+        for (int i = 0; i < W; ++i) b.w[i] = 0;
+        return b;
+    }
+    bool none() const {
+        u64 x = 0;
+        for (int i = 0; i < W; ++i) x |= w[i];
+        return x == 0;
+    }
+    int count() const {
+        int c = 0;
+        for (int i = 0; i < W; ++i) c += __builtin_popcountll(w[i]);
+        return c;
+    }
+    bool at_most_one() const {  // popcount <= 1
+        int c = 0;
+        for (int i = 0; i < W; ++i) {
+            if (w[i] & (w[i] - 1)) return false;
+            c += w[i] != 0;
+        }
+        return c <= 1;
+    }
+    Bits operator&(const Bits& o) const {
+        Bits r;
+        for (int i = 0; i < W; ++i) r.w[i] = w[i] & o.w[i];
+        return r;
+    }
+    Bits operator|(const Bits& o) const {
+        Bits r;
+        for (int i = 0; i < W; ++i) r.w[i] = w[i] | o.w[i];
+        return r;
+    }
+    Bits without(const Bits& o) const {
+        Bits r;
+        for (int i = 0; i < W; ++i) r.w[i] = w[i] & ~o.w[i];
+        return r;
+    }
+    bool operator==(const Bits& o) const {
+        for (int i = 0; i < W; ++i)
+            if (w[i] != o.w[i]) return false;
+        return true;
+    }
+    void set(int i) { w[i >> 6] |= u64(1) << (i & 63); }
+    void flip(int i) { w[i >> 6] ^= u64(1) << (i & 63); }
+    bool is_single(int i) const {  // == {i}
+        for (int k = 0; k < W; ++k)
+            if (w[k] != (k == (i >> 6) ? u64(1) << (i & 63) : 0)) return false;
+        return true;
+    }
+    int lowest() const {
+        for (int i = 0; i < W; ++i)
+            if (w[i]) return i * 64 + __builtin_ctzll(w[i]);
+        return -1;
+    }
+    u64 hash() const {  // splitmix64's finaliser over the words
+        u64 h = 0;
+        for (int i = 0; i < W; ++i) {
+            h ^= w[i] + 0x9E3779B97F4A7C15ull * (i + 1);
+            h ^= h >> 30;
+            h *= 0xBF58476D1CE4E5B9ull;
+            h ^= h >> 27;
+            h *= 0x94D049BB133111EBull;
+            h ^= h >> 31;
+        }
+        return h;
+    }
+    template <class F>
+    void each(F f) const {
+        for (int k = 0; k < W; ++k) {
+            u64 x = w[k];
+            while (x) {
+                f(k * 64 + __builtin_ctzll(x));
+                x &= x - 1;
+            }
+        }
+    }
+};
+
+// A zero-filled buffer of T from mmap, in 2 MiB pages where the kernel allows: the memo is read at
+// random, and with 4 KiB pages most look-ups in a memo of hundreds of megabytes also miss the TLB.
+template <class T>
+class Buffer {
+   public:
+    Buffer() = default;
+    explicit Buffer(size_t n) { allocate(n); }
+    Buffer(const Buffer&) = delete;
+    Buffer& operator=(const Buffer&) = delete;
+    Buffer(Buffer&& o) noexcept { swap(o); }
+    Buffer& operator=(Buffer&& o) noexcept {
+        swap(o);
+        return *this;
+    }
+    ~Buffer() { release(); }
+    void swap(Buffer& o) noexcept {
+        std::swap(base_, o.base_);
+        std::swap(bytes_, o.bytes_);
+        std::swap(data_, o.data_);
+        std::swap(n_, o.n_);
+    }
+    T* data() const { return data_; }
+    size_t size() const { return n_; }
+    size_t bytes() const { return bytes_; }
+    T& operator[](size_t i) { return data_[i]; }
+    const T& operator[](size_t i) const { return data_[i]; }
+
+   private:
+    void* base_ = nullptr;
+    size_t bytes_ = 0;
+    T* data_ = nullptr;
+    size_t n_ = 0;
+
+    void allocate(size_t n) {
+        const size_t page = size_t(1) << 21;
+        size_t want = n * sizeof(T);
+        size_t bytes = want >= page ? want + page : want;
+        void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (p == MAP_FAILED) throw std::bad_alloc();
+        uintptr_t at = reinterpret_cast<uintptr_t>(p);
+        if (want >= page) {
+            at = (at + page - 1) & ~(page - 1);
+#ifdef MADV_HUGEPAGE
+            madvise(reinterpret_cast<void*>(at), want & ~(page - 1), MADV_HUGEPAGE);
+#endif
+        }
+        base_ = p;
+        bytes_ = bytes;
+        data_ = reinterpret_cast<T*>(at);
+        n_ = n;
+    }
+    void release() {
+        if (base_) munmap(base_, bytes_);
+        base_ = nullptr;
+        data_ = nullptr;
+        bytes_ = n_ = 0;
+    }
+};
+
+// ---------------------------------------------------------------- unsigned big integers (limbs)
+using Limbs = std::vector<u64>;
+
+void trim(Limbs& a) {
+    while (a.size() > 1 && a.back() == 0) a.pop_back();
+}
+
+void add_into(Limbs& acc, const u64* b, size_t nb) {
+    if (acc.size() < nb) acc.resize(nb, 0);
+    u64 carry = 0;
+    size_t i = 0;
+    for (; i < nb; ++i) {
+        u128 t = (u128)acc[i] + b[i] + carry;
+        acc[i] = (u64)t;
+        carry = (u64)(t >> 64);
+    }
+    for (; carry && i < acc.size(); ++i) {
+        u128 t = (u128)acc[i] + carry;
+        acc[i] = (u64)t;
+        carry = (u64)(t >> 64);
+    }
+    if (carry) acc.push_back(carry);
+}
+
+void mul_into(const Limbs& a, const u64* b, size_t nb, Limbs& out) {
+    out.assign(a.size() + nb, 0);
+    for (size_t i = 0; i < a.size(); ++i) {
+        u64 carry = 0;
+        u64 ai = a[i];
+        if (!ai) continue;
+        for (size_t j = 0; j < nb; ++j) {
+            u128 t = (u128)ai * b[j] + out[i + j] + carry;
+            out[i + j] = (u64)t;
+            carry = (u64)(t >> 64);
+        }
+        size_t k = i + nb;
+        while (carry) {
+            u128 t = (u128)out[k] + carry;
+            out[k] = (u64)t;
+            carry = (u64)(t >> 64);
+            ++k;
+        }
+    }
+    trim(out);
+}
+
+void div_small(Limbs& a, std::uint32_t d) {  // exact division by d < 2^32, in 32-bit halves (no 128-bit division)
+    u64 rem = 0;
+    for (size_t i = a.size(); i-- > 0;) {
+        u64 hi = (rem << 32) | (a[i] >> 32);
+        u64 qh = hi / d;
+        rem = hi % d;
+        u64 lo = (rem << 32) | (a[i] & 0xFFFFFFFFull);
+        u64 ql = lo / d;
+        rem = lo % d;
+        a[i] = (qh << 32) | ql;
+    }
+    trim(a);
+}
+
+// ---------------------------------------------------------------- the counter
+template <int W>
+class Counter {
+   public:
+    using B = Bits<W>;
+
+    Counter(int n, const std::vector<std::string>& below, const std::vector<std::string>& above)
+        : n_(n) {
+        if (n < 0 || n > 64 * W) throw std::invalid_argument("poset too large for this width");
+        if ((int)below.size() != n || (int)above.size() != n)
+            throw std::invalid_argument("below and above need one mask per element");
+        below_.resize(n);
+        above_.resize(n);
+        nbr_.resize(n);
+        for (int i = 0; i < n; ++i) {
+            below_[i] = unpack(below[i]);
+            above_[i] = unpack(above[i]);
+            nbr_[i] = below_[i] | above_[i];
+        }
+        fact_.resize(n + 1);
+        fact_[0] = Limbs{1};
+        for (int k = 1; k <= n; ++k) {
+            Limbs f = fact_[k - 1];
+            u64 carry = 0;
+            for (auto& x : f) {
+                u128 t = (u128)x * (u64)k + carry;
+                x = (u64)t;
+                carry = (u64)(t >> 64);
+            }
+            if (carry) f.push_back(carry);
+            fact_[k] = f;
+        }
+        acc_.resize(n + 2);
+        tmp_.resize(n + 2);
+        comps_.resize(n + 2);
+        reset();
+    }
+
+    // Returns (status, value bytes or None, new entries): status 0 done, 1 entry limit, 2 time limit.
+    py::tuple count(const std::string& mask, int direction, long long max_new, double seconds,
+                    long long max_total) {
+        B s = unpack(mask);
+        if ((long long)size_ > max_total) reset();
+        added_ = 0;
+        max_new_ = max_new < 0 ? std::numeric_limits<long long>::max() : max_new;
+        timed_ = seconds >= 0 && seconds < 1e9;
+        if (timed_) {
+            deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                          std::chrono::duration<double>(seconds));
+        }
+        dir_ = direction;
+        int status = 0;
+        Val v{0, 1};
+        {
+            py::gil_scoped_release release;
+            try {
+                v = rec(s, 0);
+            } catch (const Stop& stop) {
+                status = stop.reason;
+            }
+        }
+        if (status) return py::make_tuple(status, py::none(), added_);
+        return py::make_tuple(0, to_bytes(v), added_);
+    }
+
+    py::object lookup(const std::string& mask) const {
+        B s = unpack(mask);
+        if (s.at_most_one()) return to_bytes(Val{0, 1});
+        const Slot* slot = find(s);
+        if (!slot->len) return py::none();
+        return to_bytes(Val{slot->off, slot->len});
+    }
+
+    // Store the exact count of a set found by another method (the hub split, the down-set programme).
+    void put(const std::string& mask, const std::string& value) {
+        B s = unpack(mask);
+        if (s.at_most_one() || value.empty() || value.size() % 8) return;
+        if (find(s)->len) return;
+        Limbs v(value.size() / 8);
+        std::memcpy(v.data(), value.data(), value.size());
+        trim(v);
+        store(s, v);
+    }
+
+    size_t size() const { return size_; }
+    size_t memory() const {
+        return table_.bytes() + arena_cap_ * sizeof(u64);
+    }
+    void reset() {
+        table_ = Buffer<Slot>(1024);
+        size_ = 0;
+        arena_ = Buffer<u64>(1 << 16);  // arena[0] = 1: the value of every set of at most one element and of chains
+        arena_cap_ = 1 << 16;
+        arena_[0] = 1;
+        arena_size_ = 1;
+    }
+
+   private:
+    struct Val {
+        u64 off;
+        std::uint32_t len;
+    };
+    struct Slot {
+        B key;
+        u64 off = 0;
+        std::uint32_t len = 0;  // 0: empty
+    };
+
+    int n_;
+    std::vector<B> below_, above_, nbr_;
+    std::vector<Limbs> fact_;
+    std::vector<Limbs> acc_, tmp_;  // scratch per recursion depth
+    std::vector<std::vector<B>> comps_;
+    Buffer<Slot> table_;
+    size_t size_ = 0;
+    Buffer<u64> arena_;
+    size_t arena_size_ = 0, arena_cap_ = 0;
+    long long added_ = 0, max_new_ = 0;
+    bool timed_ = false;
+    Clock::time_point deadline_;
+    int dir_ = 0;
+
+    B unpack(const std::string& bytes) const {
+        if (bytes.size() != 8 * W) throw std::invalid_argument("mask has the wrong number of bytes");
+        B b;
+        std::memcpy(b.w, bytes.data(), 8 * W);
+        return b;
+    }
+    py::bytes to_bytes(Val v) const {
+        return py::bytes(reinterpret_cast<const char*>(arena_.data() + v.off), 8 * size_t(v.len));
+    }
+
+    const Slot* find(const B& s) const {
+        size_t m = table_.size() - 1;
+        size_t i = s.hash() & m;
+        while (table_[i].len && !(table_[i].key == s)) i = (i + 1) & m;
+        return &table_[i];
+    }
+    Slot* find(const B& s) { return const_cast<Slot*>(static_cast<const Counter*>(this)->find(s)); }
+
+    void grow() {
+        Buffer<Slot> old(table_.size() * 2);
+        old.swap(table_);
+        size_t m = table_.size() - 1;
+        for (size_t j = 0; j < old.size(); ++j) {
+            const Slot& sl = old[j];
+            if (!sl.len) continue;
+            size_t i = sl.key.hash() & m;
+            while (table_[i].len) i = (i + 1) & m;
+            table_[i] = sl;
+        }
+    }
+
+    Val store(const B& s, const Limbs& value) {
+        Val v{arena_size_, (std::uint32_t)value.size()};
+        if (value.size() == 1 && value[0] == 1) {
+            v = Val{0, 1};
+        } else {
+            if (arena_size_ + value.size() > arena_cap_) {
+                Buffer<u64> more(2 * (arena_size_ + value.size()));
+                std::memcpy(more.data(), arena_.data(), arena_size_ * sizeof(u64));
+                arena_.swap(more);
+                arena_cap_ = arena_.size();
+            }
+            std::memcpy(arena_.data() + arena_size_, value.data(), value.size() * sizeof(u64));
+            arena_size_ += value.size();
+        }
+        if (2 * (size_ + 1) > table_.size()) grow();
+        Slot* slot = find(s);
+        slot->key = s;
+        slot->off = v.off;
+        slot->len = v.len;
+        ++size_;
+        return v;
+    }
+
+    Val rec(const B& s, int depth) {
+        if (s.at_most_one()) return Val{0, 1};
+        {
+            const Slot* slot = find(s);
+            if (slot->len) return Val{slot->off, slot->len};
+        }
+        // budget: counted when a set is entered (every entered set is stored once finished)
+        if (++added_ > max_new_) throw Stop{1};
+        if (timed_ && !(added_ & 63) && Clock::now() > deadline_) throw Stop{2};
+
+        B mins = B::zero(), maxs = B::zero();
+        B cuts = B::zero();  // elements comparable to every other element of s
+        int k = 0, nmin = 0, nmax = 0;
+        s.each([&](int x) {
+            ++k;
+            if ((below_[x] & s).none()) mins.set(x), ++nmin;
+            if ((above_[x] & s).none()) maxs.set(x), ++nmax;
+            if (s.without(nbr_[x]).is_single(x)) cuts.set(x);
+        });
+        // direction 2: per set, the side with fewer extremal elements
+        const B& ext = dir_ == 0 ? mins : dir_ == 1 ? maxs : (nmax < nmin ? maxs : mins);
+        Limbs& acc = acc_[depth];
+        Limbs& tmp = tmp_[depth];
+        if (!cuts.none()) {
+            if (cuts == s) return store(s, Limbs{1});
+            // the cut elements form a chain: order them by how many elements of s lie below
+            std::vector<std::pair<int, int>> chain;
+            cuts.each([&](int z) { chain.emplace_back((below_[z] & s).count(), z); });
+            std::sort(chain.begin(), chain.end());
+            acc.assign(1, 1);
+            B rest = s;
+            auto times = [&](const B& block) {
+                if (block.at_most_one()) return;
+                Val v = rec(block, depth + 1);
+                mul_into(acc, arena_.data() + v.off, v.len, tmp);
+                acc.swap(tmp);
+            };
+            for (auto& [_, z] : chain) {
+                B block = rest & below_[z];
+                rest = rest & above_[z];
+                times(block);
+            }
+            times(rest);
+            return store(s, acc);
+        }
+        // components of the comparability graph on s
+        std::vector<B>& comps = comps_[depth];
+        comps.clear();
+        B rest = s;
+        while (!rest.none()) {
+            int x = rest.lowest();
+            B comp = B::zero();
+            comp.set(x);
+            B frontier = comp;
+            while (!frontier.none()) {
+                B grow = B::zero();
+                frontier.each([&](int y) { grow = grow | (nbr_[y] & rest); });
+                frontier = grow.without(comp);
+                comp = comp | grow;
+            }
+            rest = rest.without(comp);
+            comps.push_back(comp);
+        }
+        if (comps.size() > 1) {
+            // |s|! / (|C1|! ... |Cm|!) e(C1) ... e(Cm); dividing by 2..|C| one at a time stays exact
+            acc = fact_[k];
+            // divide by the factors 2..|C| of each component, batched into products below 2^32
+            u64 batch = 1;
+            for (const B& c : comps) {
+                int ck = c.count();
+                for (int d = 2; d <= ck; ++d) {
+                    if (batch * (u64)d >> 32) {
+                        div_small(acc, (std::uint32_t)batch);
+                        batch = 1;
+                    }
+                    batch *= (u64)d;
+                }
+            }
+            if (batch > 1) div_small(acc, (std::uint32_t)batch);
+            for (const B& c : comps) {
+                if (c.at_most_one()) continue;
+                Val v = rec(c, depth + 1);
+                mul_into(acc, arena_.data() + v.off, v.len, tmp);
+                acc.swap(tmp);
+            }
+            return store(s, acc);
+        }
+        // look the children up together: their slots are fetched from memory in parallel
+        {
+            const size_t m = table_.size() - 1;
+            ext.each([&](int x) {
+                B t = s;
+                t.flip(x);
+                __builtin_prefetch(&table_[t.hash() & m]);
+            });
+        }
+        acc.assign(1, 0);
+        ext.each([&](int x) {
+            B t = s;
+            t.flip(x);
+            Val v = rec(t, depth + 1);
+            add_into(acc, arena_.data() + v.off, v.len);
+        });
+        return store(s, acc);
+    }
+};
+
+template <int W>
+void bind(py::module_& m, const char* name) {
+    py::class_<Counter<W>>(m, name)
+        .def(py::init<int, const std::vector<std::string>&, const std::vector<std::string>&>(),
+             py::arg("n"), py::arg("below"), py::arg("above"))
+        .def("count", &Counter<W>::count, py::arg("mask"), py::arg("direction"), py::arg("max_new"),
+             py::arg("seconds"), py::arg("max_total"),
+             "(status, little-endian value bytes or None, new entries); status 0 done, 1 entry limit, "
+             "2 time limit")
+        .def("lookup", &Counter<W>::lookup, py::arg("mask"))
+        .def("put", &Counter<W>::put, py::arg("mask"), py::arg("value"))
+        .def("size", &Counter<W>::size)
+        .def("memory", &Counter<W>::memory)
+        .def("reset", &Counter<W>::reset)
+        .def_property_readonly_static("words", [](py::object) { return W; });
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_native, m) {
+    m.doc() = "Compiled core of opportune's order engine (see opportune.engine.native)";
+    bind<1>(m, "Counter1");
+    bind<2>(m, "Counter2");
+    bind<4>(m, "Counter4");
+    bind<8>(m, "Counter8");
+    bind<16>(m, "Counter16");
+}

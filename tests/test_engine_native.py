@@ -1,0 +1,193 @@
+"""The compiled counter (opportune._native) gives the same exact counts as the pure-Python one.
+
+``make test`` builds the compiled core (``pip install -e .`` runs CMake through
+scikit-build-core), so these tests require it: a build that silently fell back to pure
+Python would fail here rather than pass unnoticed.  ``OPPORTUNE_PURE_PYTHON=1`` turns the
+core off on purpose; then only the fallback is checked.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+from itertools import permutations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from opportune.engine import native
+from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.poset import Poset
+
+PURE = os.environ.get("OPPORTUNE_PURE_PYTHON", "") not in ("", "0")
+needs_core = pytest.mark.skipif(PURE, reason="OPPORTUNE_PURE_PYTHON is set: the compiled core is off on purpose")
+
+
+def random_poset(rng: random.Random, n: int, density: float) -> Poset:
+    perm = list(range(n))
+    rng.shuffle(perm)
+    pairs = [(perm[i], perm[j]) for i in range(n) for j in range(i + 1, n) if rng.random() < density]
+    return Poset.from_pairs(n, pairs)
+
+
+def brute_force(p: Poset, mask: int) -> int:
+    elems = [i for i in range(p.n) if mask >> i & 1]
+    return sum(all(not p.less(b, a) for i, a in enumerate(order) for b in order[i + 1:])
+               for order in permutations(elems))
+
+
+def random_subsets(rng: random.Random, p: Poset, k: int) -> list[int]:
+    return [p.full] + [rng.getrandbits(p.n) for _ in range(k)]
+
+
+@needs_core
+def test_the_core_is_built():
+    assert native.available(), "opportune._native is missing: `pip install -e .` should have compiled it"
+    assert Counter(Poset.chain(3)).compiled
+    assert not Counter(Poset.chain(3), native=False).compiled
+
+
+@needs_core
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 8), density=st.floats(0.0, 0.6), seed=st.integers(0, 10**6))
+def test_compiled_equals_brute_force_on_small_orders(n, density, seed):
+    rng = random.Random(seed)
+    p = random_poset(rng, n, density)
+    core = native.native_counter(p)
+    for mask in random_subsets(rng, p, 6):
+        expected = brute_force(p, mask)
+        for direction in (0, 1):
+            status, value, _ = core.count(mask, direction, -1, -1.0)
+            assert status == 0 and value == expected
+
+
+@needs_core
+@settings(max_examples=12, deadline=None)
+@given(n=st.sampled_from([20, 40, 63, 64, 65, 90, 128, 129, 200]), density=st.floats(0.02, 0.3),
+       seed=st.integers(0, 10**6))
+def test_compiled_equals_pure_python_on_random_orders(n, density, seed):
+    """Every word width (1, 2, 4 words) against the pure-Python counter, on random subsets."""
+    rng = random.Random(seed)
+    p = random_poset(rng, n, density if n <= 64 else max(density, 3.0 / n))
+    compiled = Counter(p, max_memo=None)
+    pure = Counter(p, max_memo=None, native=False)
+    assert compiled.compiled and not pure.compiled
+    # random up-sets (what remains to be done) are what the engine asks; keep them easy enough
+    masks = []
+    for _ in range(5):
+        done = 0
+        for _ in range(rng.randrange(p.n + 1)):
+            ready = [i for i in range(p.n) if not done >> i & 1 and p.below[i] & ~done == 0]
+            done |= 1 << rng.choice(ready)
+        masks.append(p.full & ~done)
+    for mask in masks:
+        try:
+            expected = Counter(p, max_memo=20_000, native=False).count(mask)
+        except BudgetExceeded:
+            continue
+        assert compiled.count(mask) == expected
+        assert pure.count(mask) == expected
+
+
+@needs_core
+def test_big_counts_and_every_width():
+    """Counts far beyond 64 bits, components and cut elements, on 1 to 16 words."""
+    for n in (30, 64, 100, 250, 500, 1000):
+        anti = Poset.antichain(n)
+        assert Counter(anti).count() == math.factorial(n)
+        # two chains joined by a cut element in the middle: C(2k, k) on each side
+        k = n // 4
+        pairs = [(i, i + 1) for i in range(k - 1)] + [(k + i, k + i + 1) for i in range(k - 1)]
+        hub = 2 * k
+        pairs += [(k - 1, hub), (2 * k - 1, hub)]
+        rest = list(range(hub + 1, hub + 1 + 2 * k))
+        pairs += [(hub, rest[0]), (hub, rest[k])]
+        pairs += [(rest[i], rest[i + 1]) for i in range(k - 1)] + [(rest[k + i], rest[k + i + 1]) for i in range(k - 1)]
+        p = Poset.from_pairs(hub + 1 + 2 * k, pairs)
+        assert Counter(p).count() == math.comb(2 * k, k) ** 2
+        assert Counter(p).count() == Counter(p, native=False).count()
+
+
+@needs_core
+def test_budgets_stop_the_core_and_its_memo_survives():
+    rng = random.Random(3)
+    p = random_poset(rng, 36, 0.08)
+    exact = Counter(p, max_memo=None, native=False).count()
+    c = Counter(p, max_memo=500)
+    with pytest.raises(BudgetExceeded) as info:
+        c.count()
+    assert info.value.reason == "memo"
+    kept = c.memo_size
+    assert kept > 0                          # what it stored stays, and the next call goes on from it
+    c.max_memo = None
+    assert c.count() == exact
+    assert c.memo_size > kept
+    # a time limit of zero stops at once (the core looks at the clock every 64 new entries)
+    t = Counter(p, max_memo=None)
+    t.time_limit = 0.0
+    with pytest.raises(BudgetExceeded) as info:
+        t.count()
+    assert info.value.reason == "time"
+
+
+@needs_core
+def test_learn_and_cached_reach_the_compiled_memo():
+    p = Poset.from_pairs(4, [(0, 2), (1, 2), (1, 3)])
+    c = Counter(p)
+    assert c.cached(0b1110) is None
+    assert c.count() == brute_force(p, p.full)
+    # the recursion stored the sets it visited in the core (removing 0 leaves {1, 2, 3}, two orders):
+    # cached() finds them although Python's memo holds only the set asked for
+    assert 0b1110 not in c._memo and c.cached(0b1110) == 2
+    p = Poset.from_pairs(5, [(0, 1), (2, 3)])
+    core = native.native_counter(p)
+    core.put(0b00111, 3)
+    assert core.lookup(0b00111) == 3
+    assert core.count(0b00111, 0, -1, -1.0) == (0, 3, 0)     # answered from the stored value
+
+
+@needs_core
+def test_compiled_counter_agrees_through_the_whole_engine(monkeypatch):
+    """Options, expected positions and installable parts on a real graph, compiled against pure."""
+    from opportune.datasets import salbp
+    from opportune.engine.schedule import OrderEngine, Schedule
+
+    plan = salbp("KILBRID")
+    compiled = Schedule(OrderEngine(plan))
+    compiled.count()                                   # its counter is made now, compiled
+    monkeypatch.setattr(native, "_native", None)      # counters made from here on are pure Python
+    pure = Schedule(OrderEngine(plan))
+    rng = random.Random(5)
+    for _ in range(15):
+        assert compiled.count() == pure.count()
+        assert compiled.options() == pure.options()
+        assert compiled.expected_positions() == pure.expected_positions()
+        if compiled.is_complete:
+            break
+        part = rng.choice(sorted(compiled.installable()))
+        compiled, pure = compiled.install(part), pure.install(part)
+    assert compiled.engine.counter(compiled.engine.all_strategies).compiled
+    assert not pure.engine.counter(pure.engine.all_strategies).compiled
+
+
+def test_pure_python_fallback_when_the_core_is_off():
+    """With OPPORTUNE_PURE_PYTHON=1 the package runs without the core and counts the same."""
+    import subprocess
+    import sys
+
+    code = ("from opportune.engine import native; from opportune.engine.count import Counter; "
+            "from opportune.datasets import salbp_path; from opportune.formats.loader import load_plan; "
+            "from opportune.engine.schedule import Schedule; "
+            "print(native.available(), Schedule(load_plan(salbp_path('KILBRID'))).count())")
+    env = dict(os.environ, OPPORTUNE_PURE_PYTHON="1")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    available, value = out.stdout.split()
+    assert available == "False"
+    from opportune.datasets import salbp_path
+    from opportune.engine.schedule import Schedule
+    from opportune.formats.loader import load_plan
+
+    assert int(value) == Schedule(load_plan(salbp_path("KILBRID"))).count()
