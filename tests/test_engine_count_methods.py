@@ -193,3 +193,34 @@ def test_tiny_time_limit_on_a_hard_order_returns():
     result = Schedule(engine).count_result(time_limit=0.5)
     assert time.perf_counter() - t < 10.0
     assert not result.exact and result.method != "exact"
+
+
+def test_an_estimate_over_several_strategies_states_the_joint_confidence(monkeypatch):
+    """With k inclusion-exclusion terms estimated, each term is estimated at confidence 1 - 0.05/k
+    and the sum's stated confidence is the union bound 1 - sum of the terms' misses (not the smallest
+    term confidence, which would overstate it)."""
+    import opportune.engine.estimate as estimate_module
+    from opportune import make_plan
+    from opportune.engine import OrderEngine, Schedule
+
+    p = sparse_order(64, 3, 11)
+    ids = [f"t{i}" for i in range(p.n)]
+    base: dict[str, list[str]] = {}
+    for a, b in p.cover_pairs():
+        base.setdefault(ids[b], []).append(ids[a])
+    other = {k: list(v) for k, v in base.items()}
+    free = next((a, b) for a in range(p.n) for b in range(p.n) if a != b and not p.comparable(a, b))
+    other.setdefault(ids[free[1]], []).append(ids[free[0]])
+    plan = make_plan(ids, strategies={"a": base, "b": other})
+    asked = []
+    real = estimate_module.estimate_count
+
+    def spy(*args, **kwargs):
+        asked.append(kwargs["confidence"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(estimate_module, "estimate_count", spy)
+    result = Schedule(OrderEngine(plan, time_limit=0.05)).count_result(time_limit=1.0)
+    assert not result.exact
+    assert len(asked) == 3 and all(abs(c - (1 - 0.05 / 3)) < 1e-12 for c in asked)
+    assert abs(result.confidence - 0.95) < 1e-9
