@@ -13,6 +13,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <memory>
+#include <unordered_map>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
@@ -280,14 +283,7 @@ class Counter {
                     long long max_total) {
         B s = unpack(mask);
         if ((long long)size_ > max_total) reset();
-        added_ = 0;
-        max_new_ = max_new < 0 ? std::numeric_limits<long long>::max() : max_new;
-        timed_ = seconds >= 0 && seconds < 1e9;
-        if (timed_) {
-            deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                          std::chrono::duration<double>(seconds));
-        }
-        dir_ = direction;
+        start_budget(max_new, seconds, direction);
         int status = 0;
         Val v{0, 1};
         {
@@ -321,6 +317,43 @@ class Counter {
         store(s, v);
     }
 
+    // ------------------------------------------------------------ tail distributions (hub.py)
+    // A new memo of tail distributions for the marked elements `marks`; returns its handle.
+    int tails_new(const std::string& marks) {
+        if (binom_.empty()) make_binomials();
+        tails_.push_back(std::make_unique<Tails>());
+        tails_.back()->marks = unpack(marks);
+        return int(tails_.size()) - 1;
+    }
+    void tails_drop(int handle) {
+        if (handle >= 0 && handle < (int)tails_.size()) tails_[handle].reset();
+    }
+    // (status, list of little-endian bytes or None, new count entries): the tail distribution of
+    // `mask` (see TailCounter in engine/hub.py); status 0 done, 1 entry limit, 2 time limit.
+    py::tuple tail(int handle, const std::string& mask, long long max_new, double seconds) {
+        if (handle < 0 || handle >= (int)tails_.size() || !tails_[handle])
+            throw std::invalid_argument("no such tail memo");
+        B s = unpack(mask);
+        Tails& tm = *tails_[handle];
+        if ((s & tm.marks).none()) throw std::invalid_argument("the set holds no marked element");
+        start_budget(max_new, seconds, 0);
+        int status = 0;
+        const Vec* r = nullptr;
+        {
+            py::gil_scoped_release release;
+            try {
+                r = &tail_rec(tm, s);
+            } catch (const Stop& stop) {
+                status = stop.reason;
+            }
+        }
+        if (status) return py::make_tuple(status, py::none(), added_);
+        py::list out;
+        for (const Limbs& v : *r)
+            out.append(py::bytes(reinterpret_cast<const char*>(v.data()), 8 * v.size()));
+        return py::make_tuple(0, out, added_);
+    }
+
     size_t size() const { return size_; }
     size_t memory() const {
         return table_.bytes() + arena_cap_ * sizeof(u64);
@@ -335,6 +368,211 @@ class Counter {
     }
 
    private:
+    void start_budget(long long max_new, double seconds, int direction) {
+        added_ = 0;
+        calls_ = 0;
+        max_new_ = max_new < 0 ? std::numeric_limits<long long>::max() : max_new;
+        timed_ = seconds >= 0 && seconds < 1e9;
+        if (timed_) {
+            deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                          std::chrono::duration<double>(seconds));
+        }
+        dir_ = direction;
+    }
+
+    using Vec = std::vector<Limbs>;
+    struct Hash {
+        size_t operator()(const B& b) const { return b.hash(); }
+    };
+    struct Tails {
+        B marks;
+        std::unordered_map<B, Vec, Hash> memo;
+    };
+    std::vector<std::unique_ptr<Tails>> tails_;
+    std::vector<std::vector<Limbs>> binom_;  // Pascal's triangle up to n + 1
+    long long calls_ = 0;
+
+    void make_binomials() {
+        binom_.resize(n_ + 2);
+        for (int a = 0; a <= n_ + 1; ++a) {
+            binom_[a].resize(a + 1);
+            binom_[a][0] = binom_[a][a] = Limbs{1};
+            for (int b = 1; b < a; ++b) {
+                binom_[a][b] = binom_[a - 1][b - 1];
+                const Limbs& o = binom_[a - 1][b];
+                add_into(binom_[a][b], o.data(), o.size());
+            }
+        }
+    }
+    const Limbs& C(int a, int b) const { return binom_[a][b]; }
+
+    // exact count of a set (no tail): the recursion, from depth 0 (no count is in progress)
+    Limbs count_of(const B& s) {
+        if (s.at_most_one()) return Limbs{1};
+        Val v = rec(s, 0);
+        return Limbs(arena_.data() + v.off, arena_.data() + v.off + v.len);
+    }
+
+    static void mul_to(Limbs& a, const Limbs& b) {
+        Limbs out;
+        mul_into(a, b.data(), b.size(), out);
+        a.swap(out);
+    }
+
+    // out[c] += sum_{i+j=c} a[i] b[j] C(c, i) C(N-1-c, na-1-i), N = na + nb: the merge of two pieces
+    // after the binomial scaling of hub.py's _merge/_merge_plain and its exact _unscale (the same
+    // numbers: C(na-1,i) C(nb,j) C(N-1,nb) / C(N-1,c) = C(c,i) C(N-1-c, na-1-i)).
+    void shuffle_into(Vec& out, const Vec& a, int na, const Vec& b, int nb) {
+        int N = na + nb;
+        if ((int)out.size() < N) out.resize(N, Limbs{0});
+        Limbs term, tmp;
+        for (size_t i = 0; i < a.size(); ++i) {
+            if (a[i].size() == 1 && a[i][0] == 0) continue;
+            for (size_t j = 0; j < b.size(); ++j) {
+                if (b[j].size() == 1 && b[j][0] == 0) continue;
+                int c = int(i + j);
+                if (c >= N) break;
+                mul_into(a[i], b[j].data(), b[j].size(), term);
+                mul_into(term, C(c, int(i)).data(), C(c, int(i)).size(), tmp);
+                const Limbs& k = C(N - 1 - c, na - 1 - int(i));
+                mul_into(tmp, k.data(), k.size(), term);
+                add_into(out[c], term.data(), term.size());
+            }
+        }
+    }
+
+    static void pop_zeros(Vec& r) {
+        while (!r.empty() && r.back().size() == 1 && r.back()[0] == 0) r.pop_back();
+    }
+
+    const Vec& tail_rec(Tails& tm, const B& s) {
+        auto it = tm.memo.find(s);
+        if (it != tm.memo.end()) return it->second;
+        if (timed_ && !(++calls_ & 63) && Clock::now() > deadline_) throw Stop{2};
+        const B& marks = tm.marks;
+        int n = s.count();
+        B mins = B::zero(), cuts = B::zero();
+        int top_cut = -1;
+        s.each([&](int x) {
+            if ((below_[x] & s).none()) mins.set(x);
+            if (s.without(nbr_[x]).is_single(x)) cuts.set(x), top_cut = x;
+        });
+        Vec r;
+        if (cuts.none()) {
+            std::vector<B> comps;
+            B rest = s;
+            while (!rest.none()) {
+                int x = rest.lowest();
+                B comp = B::zero();
+                comp.set(x);
+                B frontier = comp;
+                while (!frontier.none()) {
+                    B grow = B::zero();
+                    frontier.each([&](int y) { grow = grow | (nbr_[y] & rest); });
+                    frontier = grow.without(comp);
+                    comp = comp | grow;
+                }
+                rest = rest.without(comp);
+                comps.push_back(comp);
+            }
+            if (comps.size() > 1) {
+                // marked pieces merge pairwise; the unmarked ones form one block (multinomial x counts)
+                bool have = false;
+                int size = 0, plain_n = 0;
+                Limbs plain_e{1};
+                for (const B& c : comps) {
+                    int k = c.count();
+                    if (!(c & marks).none()) {
+                        const Vec& d = tail_rec(tm, c);  // memo nodes stay put when the map grows
+                        if (!have) {
+                            r = d;
+                            have = true;
+                        } else {
+                            // the later of the two marks is the last mark of the union
+                            Vec out;
+                            for (int side = 0; side < 2; ++side) {
+                                const Vec& da = side ? d : r;
+                                const Vec& db = side ? r : d;
+                                int na = side ? k : size, nb = side ? size : k;
+                                Vec suffix(db.size());
+                                Limbs acc{0};
+                                for (size_t j = db.size(); j-- > 0;) {
+                                    add_into(acc, db[j].data(), db[j].size());
+                                    suffix[j] = acc;
+                                }
+                                shuffle_into(out, da, na, suffix, nb);
+                            }
+                            r.swap(out);
+                        }
+                        size += k;
+                    } else {
+                        Limbs e = count_of(c);
+                        mul_to(e, C(plain_n + k, k));
+                        mul_to(plain_e, e);
+                        plain_n += k;
+                    }
+                }
+                if (plain_n) {
+                    Vec block(plain_n + 1, plain_e);  // every position of the unmarked block, e orders each
+                    Vec out;
+                    shuffle_into(out, r, size, block, plain_n);
+                    r.swap(out);
+                }
+                pop_zeros(r);
+                return tm.memo.emplace(s, std::move(r)).first->second;
+            }
+        }
+        if (!cuts.none() && n > 1) {
+            int cut = top_cut;  // any cut element splits s into below and above it
+            B lo = s & below_[cut], hi = s & above_[cut];
+            int nh = hi.count();
+            if (!(hi & marks).none()) {
+                Limbs e = count_of(lo);
+                r = tail_rec(tm, hi);
+                for (Limbs& v : r) mul_to(v, e);
+            } else if (!(marks & single(cut)).none()) {
+                r.assign(nh + 1, Limbs{0});
+                Limbs e = count_of(lo);
+                mul_to(e, count_of(hi));
+                r[nh] = e;
+            } else {
+                Limbs e = count_of(hi);
+                Vec d = tail_rec(tm, lo);
+                r.assign(nh + 1, Limbs{0});
+                for (Limbs& v : d) {
+                    mul_to(v, e);
+                    r.push_back(std::move(v));
+                }
+            }
+        } else {
+            Limbs last{0};
+            mins.each([&](int x) {
+                B rest = s;
+                rest.flip(x);
+                if (!(rest & marks).none()) {
+                    const Vec& d = tail_rec(tm, rest);  // memo nodes stay put when the map grows
+                    if (r.size() < d.size()) r.resize(d.size(), Limbs{0});
+                    for (size_t i = 0; i < d.size(); ++i) add_into(r[i], d[i].data(), d[i].size());
+                } else {  // x is the last marked element
+                    Limbs e = count_of(rest);
+                    add_into(last, e.data(), e.size());
+                }
+            });
+            if (!(last.size() == 1 && last[0] == 0)) {
+                if ((int)r.size() < n) r.resize(n, Limbs{0});
+                add_into(r[n - 1], last.data(), last.size());
+            }
+        }
+        pop_zeros(r);
+        return tm.memo.emplace(s, std::move(r)).first->second;
+    }
+
+    static B single(int i) {
+        B b = B::zero();
+        b.set(i);
+        return b;
+    }
+
     struct Val {
         u64 off;
         std::uint32_t len;
@@ -531,6 +769,10 @@ void bind(py::module_& m, const char* name) {
              "2 time limit")
         .def("lookup", &Counter<W>::lookup, py::arg("mask"))
         .def("put", &Counter<W>::put, py::arg("mask"), py::arg("value"))
+        .def("tails_new", &Counter<W>::tails_new, py::arg("marks"))
+        .def("tails_drop", &Counter<W>::tails_drop, py::arg("handle"))
+        .def("tail", &Counter<W>::tail, py::arg("handle"), py::arg("mask"), py::arg("max_new"),
+             py::arg("seconds"))
         .def("size", &Counter<W>::size)
         .def("memory", &Counter<W>::memory)
         .def("reset", &Counter<W>::reset)

@@ -43,6 +43,10 @@ from opportune.engine.poset import CycleError, Poset, bits, components, cut_bloc
 
 __all__ = ["HubPath", "TailCounter", "hub_count", "hub_candidates", "hub_split"]
 
+#: Largest order whose tail distributions the compiled core computes (it keeps Pascal's triangle up
+#: to n, about n^2/2 big integers); larger ones run in Python.
+NATIVE_TAILS = 256
+
 
 class TailCounter:
     """Tail distributions for one poset and one set of marked elements, with a memo.
@@ -71,6 +75,14 @@ class TailCounter:
         n = self.poset.n
         self._binom = [[comb(i, k) for k in range(i + 1)] for i in range(n + 2)]
         self._rec = None
+        # the compiled core runs this recursion too (its counts from the counter's compiled memo)
+        self._core = counter._native if counter.compiled and counter._direction == 0 and n <= NATIVE_TAILS else None
+        self._handle = self._core.tails_new(marks) if self._core is not None else -1
+
+    def __del__(self):
+        core = getattr(self, "_core", None)
+        if core is not None:
+            core.tails_drop(self._handle)
 
     def tail(self, s: int) -> list[int]:
         if not s & self.marks:
@@ -83,9 +95,28 @@ class TailCounter:
         r = self._memo.get(s)
         if r is not None:
             return r
+        if self._core is not None:
+            return self._compiled(s)
         if self._rec is None:
             self._rec = self._make_recursion()
         return self._rec(s)
+
+    def _compiled(self, s: int) -> list[int]:
+        """The recursion in the compiled core, under this counter's deadline and the counter's budget."""
+        c = self.counter
+        c._start_budget()
+        b = c._budget
+        deadline = min(self.deadline, b[1])
+        seconds = -1.0 if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
+        room = b[0] - b[2]
+        status, r, added = self._core.tail(self._handle, s, room if room < 1 << 62 else -1, seconds)
+        if status == 2:
+            raise BudgetExceeded("hub count exceeded its time limit", reason="time", memo_size=c.memo_size)
+        if status == 1:
+            raise BudgetExceeded(f"hub count needs more than max_memo={b[0]} new memo entries",
+                                 reason="memo", memo_size=c.memo_size)
+        self._memo[s] = r
+        return r
 
     def _make_recursion(self):
         """The memoised recursion as a closure over local names (it is the hot path)."""

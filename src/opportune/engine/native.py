@@ -79,6 +79,20 @@ class NativeCounter:
         """Store the exact count ``value`` of ``mask`` found by another method."""
         self._core.put(mask.to_bytes(self._nbytes, "little"), value.to_bytes(max(8, -(-value.bit_length() // 64) * 8), "little"))
 
+    def tails_new(self, marks: int) -> int:
+        """A new compiled memo of tail distributions for ``marks`` (see :class:`~opportune.engine.hub.TailCounter`)."""
+        return self._core.tails_new(marks.to_bytes(self._nbytes, "little"))
+
+    def tails_drop(self, handle: int) -> None:
+        self._core.tails_drop(handle)
+
+    def tail(self, handle: int, mask: int, max_new: int, seconds: float) -> tuple[int, list[int] | None, int]:
+        """``(status, tail distribution or None, new count entries)``, statuses as for :meth:`count`."""
+        status, values, added = self._core.tail(handle, mask.to_bytes(self._nbytes, "little"), max_new, seconds)
+        if values is None:
+            return status, None, added
+        return status, [int.from_bytes(v, "little") for v in values], added
+
     def _cap(self, max_total: int | None) -> int:
         # entries held before a call starts afresh: the caller's cap, and never more than MAX_BYTES
         size = self._core.size()
