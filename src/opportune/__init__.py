@@ -15,16 +15,21 @@ from opportune._lazy import attach
 
 __version__ = "0.1.0"
 
-__all__ = ["Part", "Plan", "PlanError", "Strategy", "load_plan", "make_plan", "__version__"]
+__all__ = ["NotAdmissible", "OrderEngine", "Part", "Plan", "PlanError", "Schedule", "Sequencer", "Strategy",
+           "load_plan", "make_plan", "__version__"]
 
 # The names below load on first use (PEP 562), so that ``import opportune.cli`` (every run of the
 # command line, `--help` included) does not pay for the plan loader and PyYAML.
 _LAZY = {"load_plan": "opportune.formats.loader", "Part": "opportune.plan", "Plan": "opportune.plan",
-         "PlanError": "opportune.plan", "Strategy": "opportune.plan", "make_plan": "opportune.plan"}
+         "PlanError": "opportune.plan", "Strategy": "opportune.plan", "make_plan": "opportune.plan",
+         "Schedule": "opportune.engine.schedule", "OrderEngine": "opportune.engine.schedule",
+         "NotAdmissible": "opportune.engine.schedule", "Sequencer": "opportune.sequencer"}
 
 if TYPE_CHECKING:
+    from opportune.engine.schedule import NotAdmissible, OrderEngine, Schedule
     from opportune.formats.loader import load_plan
     from opportune.plan import Part, Plan, PlanError, Strategy, make_plan
+    from opportune.sequencer import Sequencer
 
 
 __getattr__, __dir__ = attach(globals(), _LAZY, __all__)
