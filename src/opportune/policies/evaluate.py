@@ -1,0 +1,117 @@
+"""Exact expected cost of a deterministic policy in a Markov bin: the yardstick for policies.
+
+Under the ``uniform`` and ``weighted`` bin models a look depends only on what is in the bin, so
+a deterministic policy turns the assembly into a Markov chain over states (installed parts,
+buffered parts).  At a state *s* a look *L* arrives with probability *p(L)*; the policy either
+moves (cost *c(a)*, to state *s'*) or shakes (cost ``c_shake``, back to *s*).  So
+
+    V(s) = (c_look + Σ_moves p(L) (c(a) + V(s')) + P_shake c_shake) / (1 − P_shake)
+
+which this module solves exactly by memoised recursion over the states the policy reaches (every
+move installs or buffers a part, so the recursion terminates).  Beside it, the optimum of
+:class:`~opportune.policies.optimal.OptimalSolver` gives the best any online policy can do, and
+their ratio says how far the policy is from it — with no Monte Carlo error.
+
+Example
+-------
+>>> from opportune import make_plan
+>>> from opportune.engine import OrderEngine
+>>> from opportune.policies.opportunistic import Opportunistic
+>>> engine = OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))
+>>> # one part visible: a first (2 moves), or b first (buffer b, install a, install b: 3 moves)
+>>> PolicyEvaluator(engine, Opportunistic(), visible=1).value()
+2.5
+"""
+
+from __future__ import annotations
+
+import sys
+
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+
+__all__ = ["PolicyEvaluator", "PolicyStuck"]
+
+
+class PolicyStuck(RuntimeError):
+    """The policy shakes at every look of some state it reaches: it never finishes."""
+
+
+class PolicyEvaluator(OptimalSolver):
+    """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at`` or ``decide``).
+
+    Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
+    shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it).
+    Complexity: O(states × looks × one decision of the policy).
+    """
+
+    def __init__(self, engine, policy, **settings):
+        super().__init__(engine, **settings)
+        if getattr(policy, "deterministic", True) is False:
+            raise ValueError(f"'{getattr(policy, 'name', policy)}' chooses at random: its expected cost is "
+                             "not defined by one decision rule; estimate it with `opportune simulate`")
+        self.policy = policy
+        self._choose = getattr(policy, "choose_at", None)
+        if self._choose is None:
+            raise ValueError(f"'{getattr(policy, 'name', policy)}' cannot be evaluated exactly: it does not "
+                             "decide on the state alone (no choose_at)")
+        self._policy_values: dict[tuple, float] = {}
+
+    def value(self, key: tuple | None = None) -> float:
+        """Expected remaining cost of the policy from a state (default: the start)."""
+        key = self.start_key() if key is None else key
+        limit = sys.getrecursionlimit()
+        sys.setrecursionlimit(max(limit, 10_000))
+        try:
+            return self._policy_value(key)
+        finally:
+            sys.setrecursionlimit(limit)
+
+    def optimal(self) -> float:
+        """The optimum from the start, for comparison (see :class:`OptimalSolver`)."""
+        return OptimalSolver.value(self)
+
+    @property
+    def policy_states(self) -> int:
+        """States the policy reaches from the start (after :meth:`value`)."""
+        return len(self._policy_values)
+
+    # ------------------------------------------------------------ internals
+
+    def _act(self, key: tuple, look: tuple[int, ...]):
+        mask, cons, buf = key
+        ids = self.ids
+        visible = tuple(ids[i] for i in look)
+        buffer = tuple(ids[i] for i, c in enumerate(buf) for _ in range(c))
+        free = float("inf") if self.capacity is None else self.capacity - sum(buf)
+        return self._choose(self.engine, mask, cons, buffer, free, visible)
+
+    def _policy_value(self, key: tuple) -> float:
+        cached = self._policy_values.get(key)
+        if cached is not None:
+            return cached
+        if key[0] == self.engine.full:
+            self._policy_values[key] = 0.0
+            return 0.0
+        if len(self._policy_values) >= self.max_states:
+            raise OptimalTooLarge(f"evaluating the policy needs more than {self.max_states:,} states for this "
+                                  "plan; raise the state limit, or estimate with `opportune simulate`")
+        moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
+        p_shake = 0.0
+        for look, p in self._looks(self._bin_counts(key)):
+            action = self._act(key, look)
+            if action.kind == "shake":
+                p_shake += p
+                continue
+            for cost, nxt, move in self._moves(key, look):
+                if move.kind == action.kind and move.part == action.part and (
+                        action.kind != "install" or (move.source or "bin") == (action.source or "bin")):
+                    moved += p * (cost + self._policy_value(nxt))
+                    break
+            else:
+                raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
+        if p_shake >= 1.0 - 1e-15:
+            raise PolicyStuck(f"'{getattr(self.policy, 'name', 'the policy')}' shakes at every look of a state "
+                              "it reaches: it never finishes there")
+        v = (self.costs.look + moved + p_shake * self.costs.shake) / (1.0 - p_shake)
+        self._policy_values[key] = v
+        return v
