@@ -337,9 +337,12 @@ def test_bad_in2_files(tmp_path):
     assert "requires itself" in check(b"2\r\n1\r\n1\r\n2,2\r\n-1,-1\r\n").errors[0].message
     cyc = check(b"2\r\n1\r\n1\r\n1,2\r\n2,1\r\n-1,-1\r\n")
     assert any("1 -> 2 -> 1" in p.message for p in cyc.errors)
-    # No end marker is tolerated, as are blank lines and LF ends.
-    ok = check(b"2\n\n5\n7\n1,2\n")
+    # Blank lines and LF ends are tolerated; a missing end marker is not (issue 12: a file cut short
+    # would be a valid graph with fewer constraints, and its count wrong).
+    ok = check(b"2\n\n5\n7\n1,2\n-1,-1\n")
     assert ok.ok and ok.plan.part("2").install == 7
+    cut = check(b"2\n\n5\n7\n1,2\n").errors
+    assert [(p.code, p.line) for p in cut] == [("truncated", 5)] and "-1,-1" in cut[0].message
 
 
 # ---------------------------------------------------------------- properties

@@ -92,8 +92,17 @@ PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json or SALBP .IN2", sho
 
 
 def fail(message: str, code: int = 1) -> None:
-    _err().print(f"[bold red]error:[/] {message}", markup=True)
+    """Print ``error: message`` (the one prefix; the message is text, never markup) and exit."""
+    _err().print(f"[bold red]error:[/] {_escape(message)}", markup=True)
     raise typer.Exit(code)
+
+
+def fail_problem(problem) -> None:
+    """Print one :class:`~opportune.formats.problems.Problem` as ``check`` does (``where: error: ...``) and exit 1."""
+    from opportune.formats.loader import CheckResult
+
+    _print_problems(CheckResult(None, [problem]), _err())
+    raise typer.Exit(1)
 
 
 def _print_problems(result: CheckResult, console: Console) -> None:
@@ -105,9 +114,11 @@ def _print_problems(result: CheckResult, console: Console) -> None:
 
 
 def _escape(text: str) -> str:
+    """Text for rich: markup escaped, and characters that cannot be written as UTF-8 (the lone
+    surrogates that stand for undecodable bytes in file names and arguments) written as escapes."""
     from rich.markup import escape
 
-    return escape(text)
+    return escape(text.encode("utf-8", "backslashreplace").decode("utf-8"))
 
 
 def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
@@ -280,7 +291,7 @@ def replay(
     try:
         looks = read_looks(looks_file)
     except LooksError as exc:
-        fail(str(exc.problem))
+        fail_problem(exc.problem)
     seq = Sequencer(plan, buffer_capacity=buffer_capacity, budget=decision_budget)
     for i, look in enumerate(looks, start=1):
         try:
@@ -289,9 +300,12 @@ def replay(
             fail(f"{looks_file}: look {i} ({' '.join(look) or '-'}): {exc}")
     if seq.state.is_complete and not seq.finished:
         seq.step(())
+    from opportune.formats.summary import printable_decision
+
     rows = seq.trace
     if as_json:
-        doc = [row.to_dict() | ({"reasons": row.decision.to_dict()} if explain else {}) for row in rows]
+        doc = [row.to_dict() | ({"reasons": printable_decision(row.decision).to_dict()} if explain else {})
+               for row in rows]
         for d in doc:
             d.pop("outcome", None)
         print(json.dumps(doc, indent=2))
@@ -308,7 +322,8 @@ def replay(
     _out().print(table)
     if explain:
         for i, row in enumerate(rows, start=1):
-            _out().print(f"{i:>2}. " + _escape(row.decision.explain()).replace("\n", "\n   "), crop=False)
+            _out().print(f"{i:>2}. " + _escape(printable_decision(row.decision).explain()).replace("\n", "\n   "),
+                         crop=False)
     if seq.state.is_complete:
         _out().print(f"complete: {','.join(seq.state.installed)}")
     else:
@@ -427,6 +442,69 @@ def simulate(
     if result.interrupted:
         _err().print("interrupted: the table shows the trials that finished")
         raise typer.Exit(130)
+
+
+@app.command()
+def evaluate(
+    plan_file: Path = PLAN_ARG,
+    policy: str = typer.Option("opportunistic", "--policy",
+                               help="The policy to evaluate: opportunistic (the paper's rule), buffer, shake "
+                                    "or quantify"),
+    bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform or weighted (default: plan, else uniform)"),
+    visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
+    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,
+                                                  help="Buffer locations (default: plan, else unlimited)"),
+    max_states: int = typer.Option(500_000, "--max-states", min=1,
+                                   help="Most states of the dynamic programme (refused above it)"),
+    as_json: bool = typer.Option(False, "--json", help="Machine-readable output"),
+):
+    """Exact expected cost of a policy and of the optimum (a dynamic programme, no Monte Carlo error)."""
+    from opportune.engine import OrderEngine
+    from opportune.policies.evaluate import PolicyEvaluator, PolicyStuck
+    from opportune.policies.optimal import OptimalTooLarge
+    from opportune.simulate import MARKOV_BINS, STRATEGIES, StudyConfig, StudyError, make_policy, prepare
+    from opportune.worlds import TimeModel
+
+    plan = load_or_exit(plan_file, json_errors=as_json)
+    sim = plan.simulation
+    chosen_bin = bin_model or sim.get("bin", "uniform")
+    if chosen_bin not in MARKOV_BINS:
+        fail(f"exact evaluation needs a bin whose looks depend only on its contents (uniform or weighted), "
+             f"not '{chosen_bin}': use `opportune simulate --bin {chosen_bin}` for a Monte Carlo estimate", 2)
+    unsuitable = ("optimal", "random", "pallet", "kitting")
+    if policy not in STRATEGIES or policy in unsuitable:
+        fail(f"unknown or unsuitable policy '{policy}': choose from "
+             f"{', '.join(s for s in STRATEGIES if s not in unsuitable)} (the optimum is printed beside it; "
+             "random has no single decision rule; pallet and kitting do not draw from the bin)", 2)
+    try:
+        config = StudyConfig(plan=plan, strategies=(policy,), trials=1, bin=chosen_bin,
+                             visible=visible or sim.get("visible", 2),
+                             buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
+                             costs=TimeModel.from_plan(plan), optimal_states=max_states).validate()
+        engine = OrderEngine(plan)
+        chosen = make_policy(policy, engine, config, prepare(config, engine))
+        ev = PolicyEvaluator(engine, chosen, visible=config.visible, capacity=config.buffer_capacity,
+                             costs=config.costs, weights=config.weights if chosen_bin == "weighted" else None,
+                             max_states=max_states)
+        value = ev.value()
+        best = ev.optimal()
+    except OptimalTooLarge:
+        fail(f"the exact evaluation of {plan.name} needs more than {max_states:,} states: raise --max-states, "
+             "or estimate with `opportune simulate`")
+    except (PolicyStuck, StudyError, ValueError) as exc:
+        fail(str(exc))
+    doc = {"plan": plan.name, "policy": policy, "bin": chosen_bin, "visible": config.visible,
+           "buffer_capacity": config.buffer_capacity, "expected_time": value, "optimal": best,
+           "ratio": value / best if best else None, "states": ev.states, "policy_states": ev.policy_states}
+    if as_json:
+        print(json.dumps(doc, indent=2))
+        return
+    cap = "unlimited" if config.buffer_capacity is None else config.buffer_capacity
+    _out().print(f"{plan.name}: {chosen_bin} bin, {config.visible} visible, buffer {cap}")
+    _out().print(f"  {policy}: expected time {value:.4f}")
+    _out().print(f"  optimum: expected time {best:.4f}")
+    _out().print(f"  ratio {value / best:.5f} ({100 * (value / best - 1):+.2f}%); "
+                 f"{ev.states:,} states for the optimum, {ev.policy_states:,} reached by the policy")
 
 
 @app.command()

@@ -18,6 +18,17 @@ from types import MappingProxyType
 from typing import Iterable, Mapping
 
 
+# Limits on every plan, whatever its format (YAML, JSON, .IN2, .alb), enforced by
+# :func:`opportune.formats.validate.check_document` before anything is counted, so that the command
+# line and the service refuse the same plans with the same message.  The engine's tables grow with
+# the square of the number of units: 10,000 units (a 10,000-step chain) take about 0.5 GB.
+MAX_PARTS = 10_000          # parts declared
+MAX_QUANTITY = 10_000       # identical units of one part
+MAX_UNITS = 10_000          # install operations in all (the sum of the quantities)
+MAX_STRATEGIES = 64         # alternative strategies (checking compares every pair of them)
+MAX_CONSTRAINTS = 1_000_000  # declared constraints, over all strategies
+
+
 class PlanError(ValueError):
     """A plan that cannot be used, with every problem found.
 

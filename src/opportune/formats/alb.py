@@ -36,24 +36,20 @@ from __future__ import annotations
 import codecs
 import math
 import re
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Iterable
 
-from opportune.formats.graphs import GraphFormatError, check_graph, text_lines
+from opportune.formats.graphs import (MAX_PAIRS, MAX_PER_KIND, MAX_TASKS, DECIMAL as _DECIMAL, Findings,
+                                      GraphFormatError, PAIR as _PAIR, check_graph, in_file_order as _in_file_order,
+                                      last_nonblank as _last_nonblank, show as _show, text_lines, to_int as _int)
 from opportune.formats.loader import CheckResult
 from opportune.formats.problems import Problem
 
-MAX_TASKS = 20_000
-MAX_PAIRS = 1_000_000
 SECTIONS = ("number of tasks", "cycle time", "order strength", "task times", "precedence relations", "end")
-_INT = re.compile(r"[+-]?[0-9]{1,18}")  # ASCII digits only: str.isdigit() would accept '²'
-_PAIR = re.compile(r"([+-]?[0-9]{1,18})\s*,\s*([+-]?[0-9]{1,18})")  # the line is stripped already
-_DECIMAL = re.compile(r"[+-]?(?:[0-9]{1,18}(?:[.,][0-9]{0,18})?|[.,][0-9]{1,18})")
 _HEAD = re.compile(rb"\A(?:\xef\xbb\xbf)?\s*<\s*number\s+of\s+tasks\s*>", re.IGNORECASE)
-# A garbage file could give a problem per line; past this many of one kind, one line sums up the rest.
-MAX_PER_KIND = 50
+__all__ = ["Alb", "AlbError", "MAX_PAIRS", "MAX_PER_KIND", "MAX_TASKS", "alb_text", "check_alb_bytes", "graph_text",
+           "is_alb", "order_strength", "parse_alb", "poset_order_strength", "read_alb", "write_alb"]
 
 
 @dataclass(frozen=True)
@@ -88,7 +84,7 @@ def parse_alb(raw: bytes, file: str | None = None) -> tuple[Alb | None, list[Pro
     O(size of the file): each line is looked at once, repeated pairs are found
     with a dictionary.
     """
-    out = _Findings(file)
+    out = Findings(file, code="alb")
     lines = text_lines(raw.removeprefix(codecs.BOM_UTF8))
     sections, end_line = _sections(lines, out)
     last_line = _last_nonblank(lines)
@@ -135,40 +131,6 @@ def check_alb_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     return CheckResult(checked.plan, _in_file_order(problems))
 
 
-def _in_file_order(problems: list[Problem]) -> list[Problem]:
-    """Errors first, each kind by line (as :func:`~opportune.formats.validate.check_document` orders them)."""
-    return sorted(problems, key=lambda p: (p.severity != "error", p.line or 0))
-
-
-class _Findings:
-    """The problems of one file, at most :data:`MAX_PER_KIND` per code and severity, then one summary."""
-
-    def __init__(self, file: str | None):
-        self.file = file
-        self.problems: list[Problem] = []
-        self.has_errors = False
-        self._seen: Counter = Counter()
-        self._first_dropped: dict[tuple[str, str], int | None] = {}
-
-    def add(self, message: str, hint: str, line: int | None, *, code: str = "alb", severity: str = "error",
-            parts: tuple[str, ...] = ()) -> None:
-        self.has_errors |= severity == "error"
-        key = (code, severity)
-        self._seen[key] += 1
-        if self._seen[key] > MAX_PER_KIND:
-            self._first_dropped.setdefault(key, line)
-            return
-        self.problems.append(Problem(message, hint, file=self.file, line=line, parts=parts, severity=severity, code=code))
-
-    def finish(self) -> list[Problem]:
-        for (code, severity), line in self._first_dropped.items():
-            more = self._seen[(code, severity)] - MAX_PER_KIND
-            self.problems.append(Problem(f"{more} more problems like the ones above ({code}), the first of them here",
-                                         "fix the ones listed and check again", file=self.file, line=line,
-                                         severity=severity, code=code))
-        return self.problems
-
-
 @dataclass
 class _Section:
     name: str
@@ -176,7 +138,7 @@ class _Section:
     rows: list[tuple[int, str]] = field(default_factory=list)  # (line number, stripped text)
 
 
-def _sections(lines: list[str], out: _Findings) -> tuple[dict[str, _Section], int | None]:
+def _sections(lines: list[str], out: Findings) -> tuple[dict[str, _Section], int | None]:
     """The non-blank lines grouped under their known section headers, up to ``<end>``, and the line of ``<end>``.
 
     O(number of lines).  Unknown sections warn and are skipped; a repeated
@@ -214,7 +176,7 @@ def _sections(lines: list[str], out: _Findings) -> tuple[dict[str, _Section], in
     return sections, None
 
 
-def _single_value(sec: _Section, out: _Findings) -> tuple[int, str] | None:
+def _single_value(sec: _Section, out: Findings) -> tuple[int, str] | None:
     """The one value line of a scalar section, or ``None`` (reported) if there is none."""
     if not sec.rows:
         out.add(f"<{sec.name}> has no value", "write the value on the line after the header", sec.line)
@@ -225,7 +187,7 @@ def _single_value(sec: _Section, out: _Findings) -> tuple[int, str] | None:
     return sec.rows[0]
 
 
-def _task_count(sec: _Section | None, out: _Findings) -> int | None:
+def _task_count(sec: _Section | None, out: Findings) -> int | None:
     if sec is None:
         out.add("no <number of tasks> section",
                 "an .alb file starts with a line `<number of tasks>` and the number on the next line", 1,
@@ -246,7 +208,7 @@ def _task_count(sec: _Section | None, out: _Findings) -> int | None:
     return n
 
 
-def _cycle_time(sec: _Section | None, out: _Findings) -> int | None:
+def _cycle_time(sec: _Section | None, out: Findings) -> int | None:
     row = _single_value(sec, out) if sec is not None else None
     if row is None:
         return None
@@ -257,7 +219,7 @@ def _cycle_time(sec: _Section | None, out: _Findings) -> int | None:
     return value
 
 
-def _order_strength_value(sec: _Section | None, out: _Findings) -> tuple[float | None, int | None]:
+def _order_strength_value(sec: _Section | None, out: Findings) -> tuple[float | None, int | None]:
     """The stated order strength and its line (``None``s if absent or bad)."""
     row = _single_value(sec, out) if sec is not None else None
     if row is None:
@@ -271,7 +233,7 @@ def _order_strength_value(sec: _Section | None, out: _Findings) -> tuple[float |
     return value, no
 
 
-def _task_times(sec: _Section | None, n: int | None, out: _Findings, where_end: int) -> list[int]:
+def _task_times(sec: _Section | None, n: int | None, out: Findings, where_end: int) -> list[int]:
     """Task times in task order (0 where missing: then there is an error).  O(lines of the section)."""
     if sec is None:
         out.add("no <task times> section", "add `<task times>` with one line `task time` per task", where_end,
@@ -312,7 +274,7 @@ def _task_times(sec: _Section | None, n: int | None, out: _Findings, where_end: 
     return times
 
 
-def _precedences(sec: _Section | None, n: int | None, out: _Findings,
+def _precedences(sec: _Section | None, n: int | None, out: Findings,
                  where_end: int) -> tuple[list[tuple[int, int]], dict[tuple[int, int], int]]:
     """Distinct precedence pairs in file order and the line of each.  O(lines of the section).
 
@@ -375,24 +337,8 @@ def _strength_mismatch(content: Alb, file: str | None) -> list[Problem]:
                     file=file, line=content.order_strength_line, severity="warning", code="order-strength")]
 
 
-def _int(s: str) -> int | None:
-    return int(s) if _INT.fullmatch(s) else None
-
-
-def _show(s: str, width: int = 40) -> str:
-    """A value quoted for a message, cut short: a mangled line can be megabytes long."""
-    return repr(s if len(s) <= width else s[: width - 3] + "...")
-
-
 def _few(tasks: list[int], k: int = 10) -> str:
     return ", ".join(map(str, tasks[:k])) + (", ..." if len(tasks) > k else "")
-
-
-def _last_nonblank(lines: list[str]) -> int:
-    for i in range(len(lines) - 1, -1, -1):
-        if lines[i].strip():
-            return i + 1
-    return 1
 
 
 # ---------------------------------------------------------------- order strength

@@ -9,11 +9,24 @@ on the line of the file that caused it.
 
 from __future__ import annotations
 
+import re
+from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
 from opportune.formats.loader import CheckResult
 from opportune.formats.problems import Problem
+from opportune.plan import MAX_UNITS
+
+# Limits of both readers, checked while reading (before anything is built from the file).  A graph
+# read is then a plan like any other, limited to MAX_UNITS tasks (opportune.plan).
+MAX_TASKS = 2 * MAX_UNITS   # tasks
+MAX_PAIRS = 1_000_000       # precedence lines
+# A garbage file could give a problem per line; past this many of one kind, one line sums up the rest.
+MAX_PER_KIND = 50
+INT = re.compile(r"[+-]?[0-9]{1,18}")  # ASCII digits only: str.isdigit() would accept '²'
+PAIR = re.compile(r"([+-]?[0-9]{1,18})\s*,\s*([+-]?[0-9]{1,18})")  # the line is stripped already
+DECIMAL = re.compile(r"[+-]?(?:[0-9]{1,18}(?:[.,][0-9]{0,18})?|[.,][0-9]{1,18})")
 
 
 class GraphFormatError(ValueError):
@@ -31,6 +44,62 @@ def text_lines(raw: bytes) -> list[str]:
     text after the end marker of real files is often Latin-1.
     """
     return raw.decode("latin-1").replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
+def show(s: str, width: int = 40) -> str:
+    """A value quoted for a message, cut short (a mangled line can be megabytes long), every character
+    that is not printable ASCII escaped (``'\\xff\\xfe'``): bytes that are not text are described, never
+    printed raw to a terminal or a log."""
+    return ascii(s if len(s) <= width else s[: width - 3] + "...")
+
+
+def to_int(s: str) -> int | None:
+    """A whole number written in ASCII digits (at most 18 of them), or None."""
+    return int(s) if INT.fullmatch(s) else None
+
+
+def last_nonblank(lines: list[str]) -> int:
+    """The 1-based number of the last line that is not blank (1 for a blank file)."""
+    for i in range(len(lines) - 1, -1, -1):
+        if lines[i].strip():
+            return i + 1
+    return 1
+
+
+class Findings:
+    """The problems of one file, at most :data:`MAX_PER_KIND` per code and severity, then one summary."""
+
+    def __init__(self, file: str | None, code: str = "graph"):
+        self.file = file
+        self.code = code
+        self.problems: list[Problem] = []
+        self.has_errors = False
+        self._seen: Counter = Counter()
+        self._first_dropped: dict[tuple[str, str], int | None] = {}
+
+    def add(self, message: str, hint: str, line: int | None, *, code: str | None = None, severity: str = "error",
+            parts: tuple[str, ...] = ()) -> None:
+        code = code or self.code
+        self.has_errors |= severity == "error"
+        key = (code, severity)
+        self._seen[key] += 1
+        if self._seen[key] > MAX_PER_KIND:
+            self._first_dropped.setdefault(key, line)
+            return
+        self.problems.append(Problem(message, hint, file=self.file, line=line, parts=parts, severity=severity, code=code))
+
+    def finish(self) -> list[Problem]:
+        for (code, severity), line in self._first_dropped.items():
+            more = self._seen[(code, severity)] - MAX_PER_KIND
+            self.problems.append(Problem(f"{more} more problems like the ones above ({code}), the first of them here",
+                                         "fix the ones listed and check again", file=self.file, line=line,
+                                         severity=severity, code=code))
+        return self.problems
+
+
+def in_file_order(problems: list[Problem]) -> list[Problem]:
+    """Errors first, each kind by line (as :func:`~opportune.formats.validate.check_document` orders them)."""
+    return sorted(problems, key=lambda p: (p.severity != "error", p.line or 0))
 
 
 def check_graph(

@@ -4,17 +4,34 @@ Every reader returns a :class:`~opportune.plan.Plan` or raises
 :class:`~opportune.plan.PlanError` carrying *every* problem found, each with
 its file, line and what to do.  YAML is read with PyYAML's safe loader only:
 no tag in a plan file can run code.
+
+Every size is bounded before it can cost time or memory, and each refusal
+states its limit: a file holds at most :data:`MAX_FILE_BYTES`; values nest at
+most :data:`MAX_DEPTH` deep; a document holds at most :data:`MAX_VALUES`
+values; a YAML file uses at most :data:`MAX_ALIASES` aliases, none of them
+inside the value it names, and its aliases add at most
+:data:`MAX_ALIAS_VALUES` values by repeating what they name (an "alias bomb"
+of a few hundred bytes would otherwise expand to billions).  The limits on
+plans themselves (parts, units, strategies, constraints) are in
+:mod:`opportune.plan`.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from opportune.formats.problems import Problem
 from opportune.plan import Plan, PlanError
+
+MAX_FILE_BYTES = 32 << 20   # a plan file (32 MiB)
+MAX_DEPTH = 64              # nesting of values (a plan needs 6)
+MAX_ALIASES = 1_000         # YAML aliases (*name) in one file
+MAX_VALUES = 2_000_000      # values of a document, aliases expanded
+MAX_ALIAS_VALUES = 100_000  # values that aliases add to a YAML document by repeating what they name
 
 YAML_SUFFIXES = {".yaml", ".yml"}
 JSON_SUFFIXES = {".json"}
@@ -95,7 +112,12 @@ def read_plan(path: str | Path) -> CheckResult:
     path = Path(path)
     name = str(path)
     try:
-        raw = path.read_bytes()
+        with path.open("rb") as f:  # read at most the limit (and one byte more, to know): /dev/zero is a file too
+            raw = f.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            return CheckResult(None, [Problem(f"{name} is larger than {MAX_FILE_BYTES:,} bytes; plan files of at most "
+                                              f"{MAX_FILE_BYTES:,} bytes are read", "split the plan into smaller ones",
+                                              file=name, code="limit")])
     except FileNotFoundError:
         return CheckResult(None, [Problem(f"no such file: {name}", "check the path", code="io")])
     except IsADirectoryError:
@@ -114,9 +136,19 @@ def read_plan(path: str | Path) -> CheckResult:
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        return CheckResult(None, [Problem("the file is not valid UTF-8 text", "save it as UTF-8", file=name, line=line, code="syntax")])
+        return CheckResult(None, [not_utf8(raw, exc, name)])
     return check_text(text, fmt=fmt, file=name)
+
+
+def not_utf8(raw: bytes, exc: UnicodeDecodeError, file: str | None) -> Problem:
+    """The problem of bytes that are not UTF-8: the line, the column and the bytes, described (never printed raw)."""
+    start = exc.start
+    line_start = raw.rfind(b"\n", 0, start) + 1
+    bad = raw[start: max(exc.end, start + 1)][:4]
+    shown = " ".join(f"0x{b:02x}" for b in bad)
+    return Problem(f"the file is not valid UTF-8 text: byte{'s' if len(bad) > 1 else ''} {shown} at column "
+                   f"{start - line_start + 1}", "save the file as UTF-8 (an editor's 'save with encoding')",
+                   file=file, line=raw.count(b"\n", 0, start) + 1, code="syntax")
 
 
 def load_plan(path: str | Path) -> Plan:
@@ -153,17 +185,105 @@ def plan_from_dict(data: Any, *, file: str | None = None) -> Plan:
 # ---------------------------------------------------------------- parsing
 
 
+class _Refused(Exception):
+    """A document over one of the loader's limits: the problem to report."""
+
+    def __init__(self, message: str, hint: str, line: int | None):
+        super().__init__(message)
+        self.message, self.hint, self.line = message, hint, line
+
+
+_DEPTH_HINT = "a plan nests at most 6 levels (strategies, requires, lists): remove the extra brackets or indentation"
+_loader_class = None
+
+
+def _bounded_loader():
+    """PyYAML's safe loader, composing at most :data:`MAX_DEPTH` levels and :data:`MAX_ALIASES` aliases.
+
+    Events come from libyaml's C parser when PyYAML has it (about ten times faster than the pure
+    Python one), else from the pure Python parser; they are composed into nodes here, in Python, so
+    that the bounds hold (the composer is recursive: bounding its depth keeps it far from Python's
+    recursion limit).
+    """
+    global _loader_class
+    if _loader_class is None:
+        import yaml
+        from yaml.composer import Composer
+        from yaml.constructor import SafeConstructor
+        from yaml.resolver import Resolver
+
+        class BoundedComposer(Composer):
+            def __init__(self):
+                super().__init__()
+                self._depth = 0
+                self._aliases = 0
+
+            def compose_node(self, parent, index):
+                if self.check_event(yaml.AliasEvent):
+                    self._aliases += 1
+                    if self._aliases > MAX_ALIASES:
+                        raise _Refused(f"more than {MAX_ALIASES:,} YAML aliases (*name)",
+                                       "write the values out instead of repeating them with aliases",
+                                       self.peek_event().start_mark.line + 1)
+                    return super().compose_node(parent, index)
+                self._depth += 1
+                try:
+                    if self._depth > MAX_DEPTH:
+                        raise _Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT,
+                                       self.peek_event().start_mark.line + 1)
+                    return super().compose_node(parent, index)
+                finally:
+                    self._depth -= 1
+
+        if getattr(yaml, "__with_libyaml__", False):
+            from yaml._yaml import CParser
+
+            class BoundedLoader(BoundedComposer, CParser, SafeConstructor, Resolver):
+                def __init__(self, stream):
+                    CParser.__init__(self, stream)
+                    SafeConstructor.__init__(self)
+                    Resolver.__init__(self)
+                    BoundedComposer.__init__(self)
+        else:
+            from yaml.parser import Parser
+            from yaml.reader import Reader
+            from yaml.scanner import Scanner
+
+            class BoundedLoader(BoundedComposer, Reader, Scanner, Parser, SafeConstructor, Resolver):
+                def __init__(self, stream):
+                    Reader.__init__(self, stream)
+                    Scanner.__init__(self)
+                    Parser.__init__(self)
+                    SafeConstructor.__init__(self)
+                    Resolver.__init__(self)
+                    BoundedComposer.__init__(self)
+
+        _loader_class = BoundedLoader
+    return _loader_class
+
+
 def parse_yaml(text: str, file: str | None = None) -> Document:
-    """Safe-load YAML keeping each value's line; duplicate keys are problems (PyYAML would silently keep the last)."""
+    """Safe-load YAML keeping each value's line; duplicate keys are problems (PyYAML would silently keep the last).
+
+    Bounded (see the module's limits): depth, aliases, and the values the document expands to; an
+    alias inside the value it names (``parts: &a [a, *a]``) is refused rather than followed forever.
+    """
     import yaml  # here, not at the top: a SALBP graph or `--help` never needs PyYAML
 
     doc = Document(None, {}, file)
+
+    def refused(exc: _Refused) -> Document:
+        doc.problems.append(Problem(exc.message, exc.hint, file=file, line=exc.line, code="limit"))
+        return doc
+
     try:
-        loader = yaml.SafeLoader(text)
+        loader = _bounded_loader()(text)
         try:
             node = loader.get_single_node()
         finally:
             loader.dispose()
+    except _Refused as exc:
+        return refused(exc)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         what = exc.problem or exc.context or "invalid YAML"
@@ -183,46 +303,129 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
     if node is None:
         doc.problems.append(Problem("the file is empty", "write a plan with at least `parts:`", file=file, line=1, code="empty"))
         return doc
+    try:
+        _measure(node, yaml)  # before anything is built: aliases could make it huge, or endless
+    except _Refused as exc:
+        return refused(exc)
     constructor = yaml.SafeLoader("")
 
     def build(n, path):
-        doc.lines[path] = n.start_mark.line + 1
+        line = n.start_mark.line + 1
+        doc.lines[path] = line
         if isinstance(n, yaml.MappingNode):
-            out = {}
-            for knode, vnode in n.value:
-                key = build(knode, path + ("<key>",))
-                if isinstance(key, (dict, list)):
-                    doc.problems.append(
-                        Problem("a mapping key must be a plain value", "use a part id or field name as key",
-                                file=file, line=knode.start_mark.line + 1, code="type")
-                    )
-                    continue
-                if key in out:
-                    doc.problems.append(
-                        Problem(
-                            f"duplicate key {key!r}",
-                            "each key may appear once per mapping: merge the two entries",
-                            file=file,
-                            line=knode.start_mark.line + 1,
-                            parts=(str(key),),
-                            code="duplicate-key",
-                        )
-                    )
-                    continue
-                out[key] = build(vnode, path + (key,))
-                doc.lines[path + (key,)] = knode.start_mark.line + 1
-            return out
+            return build_mapping(n, path)
         if isinstance(n, yaml.SequenceNode):
             return [build(item, path + (i,)) for i, item in enumerate(n.value)]
         try:
             return constructor.construct_object(n, deep=True)
-        except yaml.YAMLError as exc:
-            doc.problems.append(Problem(f"cannot read value: {exc}", "write a plain string or number",
-                                        file=file, line=n.start_mark.line + 1, code="type"))
+        except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of more than 4,300 digits
+            message = exc.args[0] if isinstance(exc, ValueError) and exc.args else exc
+            doc.problems.append(Problem(f"cannot read value: {message}", "write a plain string or number",
+                                        file=file, line=line, code="type"))
             return None
+
+    def build_mapping(n, path):
+        out = {}
+        for knode, vnode in n.value:
+            key = build(knode, path + ("<key>",))
+            if isinstance(key, (dict, list)):
+                doc.problems.append(
+                    Problem("a mapping key must be a plain value", "use a part id or field name as key",
+                            file=file, line=knode.start_mark.line + 1, code="type")
+                )
+                continue
+            if key in out:
+                doc.problems.append(
+                    Problem(
+                        f"duplicate key {key!r}",
+                        "each key may appear once per mapping: merge the two entries",
+                        file=file,
+                        line=knode.start_mark.line + 1,
+                        parts=(str(key),),
+                        code="duplicate-key",
+                    )
+                )
+                continue
+            out[key] = build(vnode, path + (key,))
+            doc.lines[path + (key,)] = knode.start_mark.line + 1
+        return out
 
     doc.data = build(node, ())
     return doc
+
+
+def _measure(root, yaml) -> None:
+    """Refuse a composed YAML document whose values, aliases expanded, are endless, too many or too deep.
+
+    Aliases make the composed document a graph that shares nodes; this walks it once (each node's
+    expanded size and height memoised), iteratively, so it costs O(nodes composed) however much
+    the aliases would expand, and raises :class:`_Refused` with the line of the node at fault.
+    """
+    size: dict[int, int] = {}
+    height: dict[int, int] = {}
+    open_: set[int] = set()  # entered, not yet left: the ancestors of the node being entered
+
+    def children(n):
+        if isinstance(n, yaml.MappingNode):
+            return [x for pair in n.value for x in pair]
+        if isinstance(n, yaml.SequenceNode):
+            return n.value
+        return ()
+
+    stack = [(root, False)]
+    while stack:
+        n, leaving = stack.pop()
+        key = id(n)
+        if leaving:
+            open_.discard(key)
+            kids = children(n)
+            size[key] = 1 + sum(size[id(c)] for c in kids)
+            height[key] = 1 + max((height[id(c)] for c in kids), default=0)
+            line = n.start_mark.line + 1
+            if size[key] > MAX_VALUES:
+                raise _Refused(f"the document expands to more than {MAX_VALUES:,} values: each alias (*name) repeats "
+                               "the whole value it names", "write the values out, or use far fewer aliases", line)
+            if height[key] > MAX_DEPTH:
+                raise _Refused(f"values nested more than {MAX_DEPTH} levels deep (aliases expanded)", _DEPTH_HINT, line)
+            continue
+        if key in size:
+            continue
+        if key in open_:
+            raise _Refused("an alias (*name) stands inside the value it names: the value would contain itself "
+                           "without end", "use the alias outside the anchored value, or write the values out",
+                           n.start_mark.line + 1)
+        kids = children(n)
+        if not kids:
+            size[key], height[key] = 1, 1
+            continue
+        open_.add(key)
+        stack.append((n, True))
+        stack.extend((c, False) for c in kids if id(c) not in size)
+    added = size[id(root)] - len(size)  # values repeated by aliases
+    if added > MAX_ALIAS_VALUES:
+        raise _Refused(f"the aliases (*name) of this document repeat {added:,} values; at most {MAX_ALIAS_VALUES:,} "
+                       "are accepted", "write the values out, or use far fewer aliases", root.start_mark.line + 1)
+
+
+_SURROGATE_ESCAPE = re.compile(r"\\u[dD][89a-fA-F][0-9a-fA-F]{2}")
+
+
+def _too_big(data: Any) -> str | None:
+    """Why already-parsed data is over the loader's limits (depth, values), or None.  Iterative, O(values)."""
+    values = 0
+    stack = [(data, 1)]
+    while stack:
+        value, depth = stack.pop()
+        values += 1
+        if values > MAX_VALUES:
+            return f"the document has more than {MAX_VALUES:,} values"
+        if depth > MAX_DEPTH:
+            return f"values nested more than {MAX_DEPTH} levels deep"
+        if isinstance(value, dict):
+            stack.extend((v, depth + 1) for v in value.values())
+        elif isinstance(value, list):
+            stack.extend((v, depth + 1) for v in value)
+    return None
 
 
 def parse_json(text: str, file: str | None = None) -> Document:
@@ -237,11 +440,28 @@ def parse_json(text: str, file: str | None = None) -> Document:
                     file=file, line=exc.lineno, code="syntax")
         )
         return doc
-    # JSON is (almost) YAML: reuse the YAML composer only for line numbers.
-    located = parse_yaml(text, file)
+    except RecursionError:  # nested deeper than Python's parser goes: the YAML pass finds where
+        doc.problems.extend(p for p in parse_yaml(text, file).problems if p.code == "limit")
+        if not doc.problems:
+            doc.problems.append(Problem(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT,
+                                        file=file, code="limit"))
+        return doc
+    except ValueError as exc:  # e.g. an integer of more than 4,300 digits
+        doc.problems.append(Problem(f"cannot read the JSON: {exc.args[0] if exc.args else exc}",
+                                    "write numbers of ordinary size", file=file, code="type"))
+        return doc
+    # JSON is (almost) YAML: reuse the YAML composer only for line numbers.  libyaml refuses the
+    # escapes of UTF-16 surrogates that JSON allows (\\ud83d\\ude00): for this pass they become '?'
+    # (the same length: every line and column stays where it was).
+    located = parse_yaml(_SURROGATE_ESCAPE.sub(r"\\u003f", text), file)
     if not located.problems:
         doc.lines = located.lines
     else:
-        # The YAML pass may object where JSON does not (e.g. duplicate keys): keep those findings.
-        doc.problems.extend(p for p in located.problems if p.code == "duplicate-key")
+        # The YAML pass may object where JSON does not (e.g. duplicate keys, or a limit): keep those findings.
+        doc.problems.extend(p for p in located.problems if p.code in ("duplicate-key", "limit"))
+    if not any(p.code == "limit" for p in doc.problems):
+        why = _too_big(doc.data)
+        if why:
+            doc.problems.append(Problem(why, _DEPTH_HINT if "nested" in why else "split the plan into smaller ones",
+                                        file=file, line=1, code="limit"))
     return doc

@@ -10,18 +10,24 @@ from __future__ import annotations
 
 import difflib
 import json
+import math
+import re
+from collections import Counter
 from functools import lru_cache
 from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 from opportune.formats.loader import CheckResult, Document
 from opportune.formats.problems import Problem
-from opportune.plan import Part, Plan, Strategy
+from opportune.plan import MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS, Part, Plan, Strategy
 
 if TYPE_CHECKING:
     import jsonschema
 
 DEFAULT_STRATEGY = "default"
+# A file can hold a problem on every line: past this many of one kind, one problem sums up the rest.
+MAX_PER_KIND = 100
+_SURROGATE = re.compile("[\ud800-\udfff]")
 
 
 @lru_cache(maxsize=1)
@@ -45,13 +51,29 @@ def check_document(doc: Document) -> CheckResult:
                     "start the file with `parts: [...]`", file=doc.file, line=1, code="type")
         )
         return CheckResult(None, problems)
+    # Text that is not Unicode (half of a surrogate pair) or numbers that are not finite cannot be
+    # shown, stored or computed with: refused first, each with its place.
+    problems += _value_problems(data, doc)
+    if problems:
+        return CheckResult(None, _capped(_sorted(problems)))
     data = _normalize_keys(data)
+    # Sizes first: the schema validator's time grows with them.
+    problems += _size_problems(data, doc)
+    if problems:
+        return CheckResult(None, _capped(_sorted(problems)))
     problems += _schema_problems(data, doc)
     if problems:
-        return CheckResult(None, _sorted(problems))
+        return CheckResult(None, _capped(_sorted(problems)))
 
     parts, part_problems = _read_parts(data, doc)
     problems += part_problems
+    units = sum(p.quantity for p in parts)
+    if units > MAX_UNITS:
+        problems.append(Problem(
+            f"the plan has {units:,} units in all (the sum of the quantities); at most {MAX_UNITS:,} are accepted",
+            "split the plan, or lower the quantities (the engine's memory grows with the square of the units)",
+            file=doc.file, line=doc.line(("parts",)), code="limit"))
+        return CheckResult(None, _capped(_sorted(problems)))
     ids = [p.id for p in parts]
     known = set(ids)
     strategies, strat_problems = _read_strategies(data, doc, known)
@@ -65,7 +87,86 @@ def check_document(doc: Document) -> CheckResult:
         plan = Plan(name=str(name), parts=tuple(parts), strategies=tuple(strategies),
                     source=doc.file, description=data.get("description") or data.get("source"),
                     simulation=data.get("simulation") or {})
-    return CheckResult(plan, _sorted(problems))
+    return CheckResult(plan, _capped(_sorted(problems)))
+
+
+def _size_problems(data: dict, doc: Document) -> list[Problem]:
+    """Parts, strategies and declared constraints over the stated limits (:mod:`opportune.plan`)."""
+    out = []
+    parts, strategies = data.get("parts"), data.get("strategies")
+    if isinstance(parts, list) and len(parts) > MAX_PARTS:
+        out.append(Problem(f"parts: {len(parts):,} parts; at most {MAX_PARTS:,} are accepted",
+                           "split the plan into smaller ones", file=doc.file, line=doc.line(("parts",)), code="limit"))
+    if isinstance(strategies, list) and len(strategies) > MAX_STRATEGIES:
+        out.append(Problem(f"strategies: {len(strategies):,} strategies; at most {MAX_STRATEGIES:,} are accepted",
+                           "keep the strategies that add sequences (check warns of those that do not)",
+                           file=doc.file, line=doc.line(("strategies",)), code="limit"))
+        return out
+    declared = 0
+    for req in [data.get("requires")] + [s.get("requires") for s in (strategies if isinstance(strategies, list) else ())
+                                         if isinstance(s, dict)]:
+        if isinstance(req, dict):
+            declared += sum(len(v) if isinstance(v, list) else 1 for v in req.values())
+    if declared > MAX_CONSTRAINTS:
+        out.append(Problem(f"the plan declares {declared:,} constraints; at most {MAX_CONSTRAINTS:,} are accepted",
+                           "split the plan; list each constraint once", file=doc.file, line=1, code="limit"))
+    return out
+
+
+def _value_problems(data: Any, doc: Document) -> list[Problem]:
+    """Strings with lone surrogates and numbers that are not finite, anywhere in the document.
+
+    An iterative walk, O(number of values); a parsed file's depth is already bounded by the loader.
+    """
+    out: list[Problem] = []
+    stack: list[tuple[Any, tuple]] = [(data, ())]
+    while stack:
+        value, path = stack.pop()
+        if isinstance(value, dict):
+            for k, v in value.items():
+                if isinstance(k, str) and _SURROGATE.search(k):
+                    out.append(_bad_text(k, path, doc))
+                    continue
+                stack.append((v, path + (k,)))
+        elif isinstance(value, (list, tuple)):
+            stack.extend((v, path + (i,)) for i, v in enumerate(value))
+        elif isinstance(value, str):
+            if _SURROGATE.search(value):
+                out.append(_bad_text(value, path, doc))
+        elif isinstance(value, float) and not math.isfinite(value):
+            out.append(Problem(f"{_path_text(path)}: {value!r} is not a finite number",
+                               "write a number (costs and weights are finite numbers ≥ 0)",
+                               file=doc.file, line=doc.line(path), code="type"))
+    return out
+
+
+def _bad_text(text: str, path: tuple, doc: Document) -> Problem:
+    char = _SURROGATE.search(text).group()
+    shown = ascii(text if len(text) <= 40 else text[:37] + "...")
+    return Problem(f"{_path_text(path)}: {shown} contains {ascii(char)[1:-1]}, half of a UTF-16 surrogate pair: "
+                   "it is not valid Unicode text",
+                   "write the character itself, or both halves of the pair (e.g. \\ud83d\\ude00)",
+                   file=doc.file, line=doc.line(path), code="text")
+
+
+def _capped(problems: list[Problem]) -> list[Problem]:
+    """At most :data:`MAX_PER_KIND` problems of each code and severity, then one that counts the rest."""
+    seen: Counter = Counter()
+    kept: list[Problem] = []
+    dropped: dict[tuple[str, str], Problem] = {}
+    for p in problems:
+        key = (p.code, p.severity)
+        seen[key] += 1
+        if seen[key] <= MAX_PER_KIND:
+            kept.append(p)
+        else:
+            dropped.setdefault(key, p)
+    for (code, severity), first in dropped.items():
+        more = seen[(code, severity)] - MAX_PER_KIND
+        kept.append(Problem(f"and {more:,} more problems like the ones above ({code}), the first of them here",
+                            "fix the ones listed and check again", file=first.file, line=first.line,
+                            severity=severity, code=code))
+    return kept
 
 
 # ---------------------------------------------------------------- schema
@@ -89,7 +190,7 @@ def _normalize_keys(data: dict) -> dict:
 
 
 FIELD_HINTS = {
-    "quantity": "a whole number of identical units, at least 1",
+    "quantity": "a whole number of identical units, from 1 to 10,000",
     "acquire": "a cost or duration, a number ≥ 0",
     "install": "a cost or duration, a number ≥ 0",
     "visibility": "a relative chance of being seen, a number > 0",
@@ -98,13 +199,157 @@ FIELD_HINTS = {
 }
 
 
+_PART_ID = re.compile(r"^[^\s,#]+$")
+_PLAN_KEYS = frozenset({"name", "description", "source", "parts", "requires", "strategies"})
+_PART_KEYS = frozenset({"id", "name", "quantity", "acquire", "install", "visibility"})
+_STRATEGY_KEYS = frozenset({"name", "description", "requires"})
+
+
+def _is_part_id(v) -> bool:
+    if isinstance(v, str):
+        return _PART_ID.fullmatch(v) is not None
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 0
+
+
+def _is_cost(v, *, positive: bool = False) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and (v > 0 if positive else v >= 0)
+
+
+def _is_requires(req) -> bool:
+    if req is None:
+        return True
+    if not isinstance(req, dict):
+        return False
+    for before in req.values():
+        if isinstance(before, list):
+            if not all(_is_part_id(b) for b in before):
+                return False
+        elif before is not None and not _is_part_id(before):
+            return False
+    return True
+
+
+def _fits_schema(data: dict) -> bool:
+    """True only if ``data`` certainly satisfies the plan schema: a plain, linear-time walk.
+
+    It accepts a subset of what the schema accepts (anything unusual, e.g. a ``simulation`` section
+    or a quantity written ``2.0``, answers False), so that the schema validator, which costs about
+    30 µs a value, runs only on documents that may have problems, and explains them.
+    """
+    if not _PLAN_KEYS.issuperset(data) or "parts" not in data or ("requires" in data and "strategies" in data):
+        return False
+    for k in ("name", "description", "source"):
+        if k in data and not (isinstance(data[k], str) and (data[k] or k != "name")):
+            return False
+    parts = data["parts"]
+    if not isinstance(parts, list) or not 1 <= len(parts) <= MAX_PARTS:
+        return False
+    for item in parts:
+        if isinstance(item, dict):
+            if not _PART_KEYS.issuperset(item) or not _is_part_id(item.get("id")):
+                return False
+            if "name" in item and not isinstance(item["name"], str):
+                return False
+            q = item.get("quantity", 1)
+            if not (isinstance(q, int) and not isinstance(q, bool) and 1 <= q <= MAX_QUANTITY):
+                return False
+            if not all(_is_cost(item[k]) for k in ("acquire", "install") if k in item):
+                return False
+            if "visibility" in item and not _is_cost(item["visibility"], positive=True):
+                return False
+        elif not _is_part_id(item):
+            return False
+    if "requires" in data and not _is_requires(data["requires"]):
+        return False
+    if "strategies" in data:
+        strategies = data["strategies"]
+        if not isinstance(strategies, list) or not 1 <= len(strategies) <= MAX_STRATEGIES:
+            return False
+        for st in strategies:
+            if not isinstance(st, dict) or not _STRATEGY_KEYS.issuperset(st) or "requires" not in st:
+                return False
+            if "name" in st and not (isinstance(st["name"], str) and st["name"]):
+                return False
+            if "description" in st and not isinstance(st["description"], str):
+                return False
+            if not _is_requires(st["requires"]):
+                return False
+    return True
+
+
+def _is_part(item) -> bool:
+    """True only if ``item`` certainly satisfies the schema's ``parts`` items (an id or a part mapping)."""
+    if not isinstance(item, dict):
+        return _is_part_id(item)
+    q = item.get("quantity", 1)
+    return (_PART_KEYS.issuperset(item) and _is_part_id(item.get("id"))
+            and ("name" not in item or isinstance(item["name"], str))
+            and isinstance(q, int) and not isinstance(q, bool) and 1 <= q <= MAX_QUANTITY
+            and all(_is_cost(item[k]) for k in ("acquire", "install") if k in item)
+            and ("visibility" not in item or _is_cost(item["visibility"], positive=True)))
+
+
+def _for_schema(data: dict) -> tuple[dict, dict[tuple, list[int]]]:
+    """A copy of ``data`` without the entries the schema certainly accepts, and where the kept items were.
+
+    The schema judges every item of ``parts`` and of a requirement list, and every entry of a
+    ``requires`` mapping, on its own (no uniqueness, no size limit on them but the ones checked
+    before), so the ones that certainly fit are left out: the validator then costs time only for
+    what may be wrong, however long the lists.  Returns the copy and, per shortened list, the
+    original index of each item kept (see :func:`_original_path`).
+    """
+    where: dict[tuple, list[int]] = {}
+
+    def keep(items: list, path: tuple, fits, at_least_one: bool = False) -> list:
+        kept = [i for i, v in enumerate(items) if not fits(v)]
+        if at_least_one and not kept and items:
+            kept = [0]
+        if len(kept) < len(items):
+            where[path] = kept
+            return [items[i] for i in kept]
+        return items
+
+    def requires(req, path: tuple):
+        if not isinstance(req, dict):
+            return req
+        out = {}
+        for k, v in req.items():
+            if v is None or _is_part_id(v):
+                continue
+            out[k] = keep(v, path + (k,), _is_part_id) if isinstance(v, list) else v
+        return out
+
+    data = dict(data)
+    if isinstance(data.get("parts"), list):
+        data["parts"] = keep(data["parts"], ("parts",), _is_part, at_least_one=True)
+    if "requires" in data:
+        data["requires"] = requires(data["requires"], ("requires",))
+    if isinstance(data.get("strategies"), list):
+        data["strategies"] = [{**st, "requires": requires(st["requires"], ("strategies", i, "requires"))}
+                              if isinstance(st, dict) and "requires" in st else st
+                              for i, st in enumerate(data["strategies"])]
+    return data, where
+
+
+def _original_path(path: tuple, where: dict[tuple, list[int]]) -> tuple:
+    """A path into the copy made by :func:`_for_schema` as a path into the original document."""
+    for k in range(len(path)):
+        kept = where.get(path[:k])
+        if kept is not None and isinstance(path[k], int) and path[k] < len(kept):
+            path = path[:k] + (kept[path[k]],) + path[k + 1:]
+    return path
+
+
 def _schema_problems(data: dict, doc: Document) -> list[Problem]:
+    if _fits_schema(data):
+        return []
     import jsonschema  # here, not at the top: `opportune schema` and `--help` never need it
 
     validator = jsonschema.Draft202012Validator(plan_schema())
+    reduced, where = _for_schema(data)
     out = []
-    for error in validator.iter_errors(data):
-        out += _explain(error, doc)
+    for error in validator.iter_errors(reduced):
+        out += _explain(error, doc, where)
     # One problem per place and message.
     seen, unique = set(), []
     for p in out:
@@ -145,8 +390,8 @@ def _type_fits(error: jsonschema.ValidationError) -> bool:
     return True
 
 
-def _explain(error: jsonschema.ValidationError, doc: Document) -> list[Problem]:
-    path = tuple(error.absolute_path)
+def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict | None = None) -> list[Problem]:
+    path = _original_path(tuple(error.absolute_path), where_kept or {})
     line = doc.line(path)
     where = _path_text(path)
     v = error.validator
@@ -165,7 +410,7 @@ def _explain(error: jsonschema.ValidationError, doc: Document) -> list[Problem]:
         if len(matching) == 1:
             out = []
             for sub in matching[0]:
-                out += _explain(sub, doc)
+                out += _explain(sub, doc, where_kept)
             if out:
                 return out
         if "parts" in path and len(path) == 2:
@@ -198,6 +443,13 @@ def _explain(error: jsonschema.ValidationError, doc: Document) -> list[Problem]:
         expected = " or ".join(expected) if isinstance(expected, list) else expected
         return [problem(f"{where}: expected {expected}, got {_describe(error.instance)}",
                         FIELD_HINTS.get(field, f"write a {expected}") if field else f"write a {expected}", "type")]
+    if v == "maximum" and field == "quantity":
+        return [problem(f"{where}: quantity must be at most {error.validator_value:,}, got {_describe(error.instance)}",
+                        f"a plan holds at most {MAX_UNITS:,} units in all: split the plan", "limit")]
+    if v == "maxItems":
+        what = "parts" if path == ("parts",) else "strategies" if path == ("strategies",) else "entries"
+        return [problem(f"{where}: {len(error.instance):,} {what}; at most {error.validator_value:,} are accepted",
+                        "split the plan into smaller ones", "limit")]
     if v == "minimum":
         if field == "quantity":
             return [problem(f"{where}: quantity must be at least 1, got {error.instance}",
@@ -249,6 +501,8 @@ def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[S
     else:
         entries = [((), DEFAULT_STRATEGY, data.get("requires"))]
     strategies, problems, names = [], [], {}
+    choices = sorted(known)
+    unknown_seen = 0  # suggestions cost O(parts) each: only the problems shown get one
     for path, name, requires in entries:
         if name in names:
             problems.append(Problem(f"two strategies are named '{name}'", "give each strategy its own name",
@@ -264,28 +518,30 @@ def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[S
             elif not isinstance(before, list):
                 before = [before]
             before = [str(b) for b in before]
-            ok = True
+            # Every problem of the entry is reported, and what is left of it (its known parts) still
+            # takes part in the search for cycles: an unknown id does not hide a cycle.
+            unknown = set()
             for pid in [key] + before:
-                if pid not in known:
-                    ok = False
-                    guess = difflib.get_close_matches(pid, sorted(known), n=1)
+                if pid not in known and pid not in unknown:
+                    unknown.add(pid)
+                    unknown_seen += 1
+                    guess = difflib.get_close_matches(pid, choices, n=1) if unknown_seen <= MAX_PER_KIND else []
                     role = "listed with requirements" if pid == key else f"in the requirements of '{key}'"
                     problems.append(Problem(
                         f"unknown part '{pid}' {role} (strategy '{name}')",
                         (f"did you mean '{guess[0]}'? " if guess else "") + "declare it under `parts` or fix the id",
                         file=doc.file, line=line, parts=(pid,), code="unknown-part"))
             if key in before:
-                ok = False
                 problems.append(Problem(f"part '{key}' requires itself (strategy '{name}')",
                                         f"remove '{key}' from its own list", file=doc.file, line=line,
                                         parts=(key,), code="self-requirement"))
-            dups = sorted({b for b in before if before.count(b) > 1})
-            for d in dups:
+            counts = Counter(before)  # linear: a list repeating one id 100,000 times costs 100,000 steps
+            for d in sorted(b for b, k in counts.items() if k > 1):
                 problems.append(Problem(f"'{key}' lists '{d}' more than once (strategy '{name}')",
                                         "list each required part once", file=doc.file, line=line,
                                         parts=(key, d), severity="warning", code="repeated"))
-            if ok:
-                req[key] = tuple(dict.fromkeys(before))
+            if key in known:
+                req[key] = tuple(b for b in counts if b in known and b != key)
         strategies.append(Strategy(name=str(name), requires=req))
     return strategies, problems
 
@@ -298,6 +554,7 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document) -
     problems: list[Problem] = []
     posets: list[Poset | None] = []
     spath = ("strategies",) if len(strategies) > 1 or "strategies" in (doc.data or {}) else ()
+    redundant = 0  # the chain that implies a redundant constraint is searched for the first few only
     for si, s in enumerate(strategies):
         base = spath + (si,) if spath else ()
         cycles = find_cycles(ids, s.requires)
@@ -313,12 +570,22 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document) -
         pairs = [(index[b], index[a]) for b, a in s.pairs()]
         poset = Poset.from_pairs(len(ids), pairs)
         posets.append(poset)
-        cover = set(poset.cover_pairs())
+        cover_list = poset.cover_pairs()
+        cover = set(cover_list)
+        covers: dict[int, list[int]] | None = None
         for b, a in pairs:
             if (b, a) not in cover:
-                via = _path_between(poset, b, a, ids)
+                redundant += 1
+                if redundant <= MAX_PER_KIND:
+                    if covers is None:
+                        covers = {}
+                        for x, y in cover_list:
+                            covers.setdefault(x, []).append(y)
+                    implied = " -> ".join(_path_between(poset, b, a, ids, covers))
+                else:
+                    implied = "other constraints"
                 problems.append(Problem(
-                    f"'{ids[a]}' requires '{ids[b]}', which is already implied by {' -> '.join(via)} (strategy '{s.name}')",
+                    f"'{ids[a]}' requires '{ids[b]}', which is already implied by {implied} (strategy '{s.name}')",
                     "the constraint is redundant: remove it, or keep it as documentation",
                     file=doc.file, line=doc.line(base + ("requires", ids[a])), parts=(ids[b], ids[a]),
                     severity="warning", code="redundant"))
@@ -346,20 +613,27 @@ def _contains(stricter, looser) -> bool:
     return all((looser.below[k] & ~stricter.below[k]) == 0 for k in range(stricter.n))
 
 
-def _path_between(poset, b: int, a: int, ids: list[str]) -> list[str]:
-    """A chain of covers from b to a that is longer than the direct edge."""
-    covers: dict[int, list[int]] = {}
-    for x, y in poset.cover_pairs():
-        covers.setdefault(x, []).append(y)
-    # DFS over covers from b to a.
-    stack = [(b, [b])]
+def _path_between(poset, b: int, a: int, ids: list[str], covers: dict[int, list[int]]) -> list[str]:
+    """A chain of covers (``covers``: each element's upper covers) from b to a that is longer than the direct edge.
+
+    A search that visits each element below ``a`` once: O(elements + covers).
+    """
+    prev: dict[int, int | None] = {b: None}
+    stack = [b]
     while stack:
-        node, path = stack.pop()
-        if node == a and len(path) > 2:
-            return [ids[k] for k in path]
-        for nxt in covers.get(node, []):
-            if nxt == a or (poset.below[a] >> nxt) & 1:
-                stack.append((nxt, path + [nxt]))
+        node = stack.pop()
+        for nxt in covers.get(node, ()):
+            if nxt in prev or not (nxt == a or (poset.below[a] >> nxt) & 1):
+                continue
+            prev[nxt] = node
+            if nxt == a:
+                path = [a]
+                while prev[path[-1]] is not None:
+                    path.append(prev[path[-1]])
+                if len(path) > 2:
+                    return [ids[k] for k in reversed(path)]
+                continue
+            stack.append(nxt)
     return [ids[b], ids[a]]
 
 

@@ -26,24 +26,27 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import re
 from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Annotated, Literal, Optional
 
 from fastapi import Depends, FastAPI, Header, Path as PathParam, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from opportune import __version__
 from opportune.service import idempotency as idem
 from opportune.service.auth import Authenticator, Principal
 from opportune.service.config import Settings
-from opportune.service.errors import ApiError, forbidden, from_validation, internal, new_reference, unauthorized
+from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, new_reference,
+                                      unauthorized)
 from opportune.service.events import Broker, stream
 from opportune.service.plans import PlanBook, check_upload, list_plans, store_plan
 from opportune.service.runs import RunManager
@@ -52,6 +55,19 @@ from opportune.service.storage import Store
 log = logging.getLogger("opportune.service")
 STATIC = Path(__file__).parent / "static"
 RUN_ID = PathParam(..., ge=1, le=2**62, description="The run's id")
+MAX_OFFSET = 1_000_000_000  # GET /runs?offset=: far beyond any store, and within every database's integers
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _unicode(text: str) -> str:
+    """Refuse text with half of a UTF-16 surrogate pair (JSON's "\\ud800"): it cannot be stored or sent back."""
+    if _SURROGATE.search(text):
+        raise ValueError("not valid Unicode text: it contains half of a UTF-16 surrogate pair (\\ud800-\\udfff); "
+                         "send the character itself or both halves of the pair")
+    return text
+
+
+Text = Annotated[str, AfterValidator(_unicode)]
 
 # Pages and scripts come only from this server; nothing from the internet.
 CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
@@ -62,16 +78,16 @@ CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' 
 
 class RunIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    plan: str = Field(..., min_length=1, max_length=64, description="A plan id returned by POST /plans")
-    cell: Optional[str] = Field(None, description="The cell; defaults to (and must be) the token's cell")
+    plan: Text = Field(..., min_length=1, max_length=64, description="A plan id returned by POST /plans")
+    cell: Optional[Text] = Field(None, max_length=100, description="The cell; defaults to (and must be) the token's cell")
     buffer_capacity: Optional[int] = Field(None, ge=0, le=1_000_000, description="Buffer locations; null: unlimited")
-    label: str = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
+    label: Text = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
 
 
 class LookIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    visible: list[str] = Field(..., max_length=100_000,
-                               description="Part ids seen in the bin now, repeated for several units; [] for nothing")
+    visible: list[Annotated[Text, Field(max_length=200)]] = Field(
+        ..., max_length=100_000, description="Part ids seen in the bin now, repeated for several units; [] for nothing")
 
 
 class OutcomeIn(BaseModel):
@@ -115,7 +131,7 @@ class BodyLimit:
         if too_big:
             err = ApiError(413, "body_too_large", f"the request body is larger than the limit of {self.limit} bytes",
                            "send a smaller body; the limit is set with `opportune serve --max-body`", where="body")
-            response = JSONResponse(err.body(), status_code=413, headers={"Connection": "close"})
+            response = error_response(err.body(), 413, {"Connection": "close"})
             return await response(scope, receive, send)
         body = b"".join(chunks)
         sent = False
@@ -128,6 +144,41 @@ class BodyLimit:
             return await receive()
 
         await self.app(scope, replay, send)
+
+
+class CatchAll:
+    """The last line of defence: an exception no handler turned into an answer becomes a JSON 500 (pure ASGI).
+
+    Starlette's own handler of last resort answers 500 but then re-raises, and the server closes the
+    connection: a client's keep-alive connection, and any request pipelined on it, would be lost.
+    Here the exception is logged (with a reference the client is given) and the request ends
+    normally.  Nothing was committed: every change is committed just before its answer is sent.
+    """
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        started = False
+
+        async def tracking_send(message):
+            nonlocal started
+            if message["type"] == "http.response.start":
+                started = True
+            await send(message)
+
+        try:
+            await self.app(scope, receive, tracking_send)
+        except Exception as exc:  # MemoryError and RecursionError included: the request fails, the server lives
+            ref = new_reference()
+            log.error("internal error %s on %s %s", ref, scope.get("method"), scope.get("path"), exc_info=exc)
+            if started:  # half an answer is out: nothing more can be said on this connection
+                return
+            response = error_response(internal(ref), 500)
+            response.headers["x-content-type-options"] = "nosniff"
+            await response(scope, receive, send)
 
 
 class SecurityHeaders:
@@ -191,30 +242,43 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
 
     @app.exception_handler(ApiError)
     async def _api_error(_request, exc: ApiError):
-        return JSONResponse(exc.body(), status_code=exc.status, headers=exc.headers)
+        return error_response(exc.body(), exc.status, exc.headers)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_request, exc: RequestValidationError):
         err = from_validation(list(exc.errors()))
-        return JSONResponse(err.body(), status_code=err.status)
+        return error_response(err.body(), err.status)
+
+    def allowed_methods(request: Request) -> list[str]:
+        """Every method some route serves at this path (Starlette names only the first route's)."""
+        methods: set[str] = set()
+        for route in app.router.routes:
+            match, _scope = route.matches(request.scope)
+            if match is not Match.NONE and getattr(route, "methods", None):
+                methods |= set(route.methods)
+        return sorted(methods | {"OPTIONS"}) if methods else []
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException):
+        headers = dict(getattr(exc, "headers", None) or {})
         if exc.status_code == 404:
             err = ApiError(404, "not_found", f"no such resource: {request.method} {request.url.path}",
                            "see the routes at /docs")
         elif exc.status_code == 405:
+            allowed = allowed_methods(request)
+            headers["Allow"] = ", ".join(allowed)
+            if request.method == "OPTIONS" and allowed:  # what may be done here: 204 with the Allow header
+                return Response(status_code=204, headers=headers)
             err = ApiError(405, "method_not_allowed", f"{request.method} is not allowed on {request.url.path}",
+                           f"this path serves {', '.join(m for m in allowed if m not in ('HEAD', 'OPTIONS'))}; "
                            "see the routes at /docs")
+        elif exc.status_code == 400:  # the body could not be parsed at all (e.g. JSON nested too deep)
+            err = ApiError(400, "malformed_body", f"the request body could not be read: {exc.detail}",
+                           "send a JSON object with `Content-Type: application/json`, as described at /docs",
+                           where="body")
         else:
             err = ApiError(exc.status_code, "http_error", str(exc.detail))
-        return JSONResponse(err.body(), status_code=err.status, headers=getattr(exc, "headers", None))
-
-    @app.exception_handler(Exception)
-    async def _unexpected(request: Request, exc: Exception):
-        ref = new_reference()
-        log.error("internal error %s on %s %s", ref, request.method, request.url.path, exc_info=exc)
-        return JSONResponse(internal(ref), status_code=500)
+        return error_response(err.body(), err.status, headers)
 
     # ------------------------------------------------------------ who is asking
 
@@ -274,6 +338,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     async def upload_plan(request: Request, p: Principal = Depends(principal),
                           format: Optional[Literal["yaml", "json", "in2"]] = Query(None, description="Format of a raw body"),
                           filename: Optional[str] = Query(None, max_length=200, description="Name used in problems")):
+        if p.is_operator:
+            raise forbidden("an operator token reads plans and runs; only a cell's token can upload a plan",
+                            "upload the plan with the token of the cell that will assemble it")
         raw = await request.body()
         ctype = request.headers.get("content-type")
         if ctype and ctype.split(";")[0].strip().lower() in ("application/yaml", "application/x-yaml", "text/yaml") and not format:
@@ -324,7 +391,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     @app.get("/runs", tags=["runs"], summary="Runs this token may see, newest first")
     def list_runs(p: Principal = Depends(principal), cell: Optional[str] = Query(None, max_length=100),
                   status: Optional[Literal["active", "complete"]] = None,
-                  limit: int = Query(200, ge=1, le=1000), offset: int = Query(0, ge=0)):
+                  limit: int = Query(200, ge=1, le=1000, description="At most this many runs (1–1,000)"),
+                  offset: int = Query(0, ge=0, le=MAX_OFFSET, description="Skip this many runs (0–1,000,000,000)")):
         return {"runs": manager.list(p, cell=cell, status=status, limit=limit, offset=offset)}
 
     @app.get("/runs/{run_id}", tags=["runs"], summary="A run's state: installed, buffered, in the bin, pending action, completions left")
@@ -388,10 +456,12 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         snap = await run_in_threadpool(snapshot)
         return StreamingResponse(
             stream(run_id, snap, broker, manager.events_after, lambda: auth.by_id(p.token_id) is not None,
-                   poll=settings.sse_poll_seconds, keepalive=settings.sse_keepalive_seconds),
+                   poll=settings.sse_poll_seconds, keepalive=settings.sse_keepalive_seconds,
+                   recheck=settings.token_cache_seconds),
             media_type="text/event-stream",
             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
 
     app.add_middleware(BodyLimit, limit=settings.max_body)
     app.add_middleware(SecurityHeaders)
+    app.add_middleware(CatchAll)  # outermost of ours: covers the other two as well
     return app

@@ -21,12 +21,26 @@ def _fail(message: str) -> None:
     raise typer.Exit(1)
 
 
+SERVICE_EXTRA = "pip install 'opportune[service]'"
+
+
+def _require(*modules: str) -> None:
+    """Exit with one line naming the extra to install if a module of the ``service`` extra is missing."""
+    import importlib
+
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except ImportError as exc:
+            missing = exc.name or name
+            _fail(f"this command needs the 'service' extra ({missing} is not installed): {SERVICE_EXTRA}")
+
+
 def _store(db: Optional[str]):
-    try:
-        from opportune.service.config import database_url
-        from opportune.service.storage import Store
-    except ImportError as exc:
-        _fail(f"the service needs the 'service' extra ({exc.name} is missing): pip install 'opportune[service]'")
+    _require("sqlalchemy")
+    from opportune.service.config import database_url
+    from opportune.service.storage import Store
+
     url = database_url(db)
     try:
         return Store(url)
@@ -44,6 +58,7 @@ def serve(
     access_log: bool = typer.Option(True, "--access-log/--no-access-log", help="Log every request (credentials redacted)"),
 ):
     """Serve the sequencer over HTTP for robot cells, with the live dashboard at /."""
+    _require("sqlalchemy", "fastapi", "uvicorn")
     store = _store(db)  # fail early, with a clear message, on a bad database
     store.dispose()
     from opportune.service.server import safe_url, serve as run
@@ -61,6 +76,7 @@ def token_create(
     """Create a bearer token and print it once (only its SHA-256 is stored)."""
     if (cell is None) == (operator is None):
         _fail("give a CELL, or --operator NAME (not both)")
+    _require("sqlalchemy")
     from opportune.service.auth import TokenError, create_token
 
     store = _store(db)
@@ -83,6 +99,7 @@ def token_create(
 def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
                as_json: bool = typer.Option(False, "--json", help="Machine-readable output")):
     """List tokens (ids, roles, cells; never the tokens themselves)."""
+    _require("sqlalchemy")
     from opportune.service.auth import list_tokens
     from opportune.service.views import iso
 
@@ -107,6 +124,7 @@ def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show
 def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from `opportune token list`"),
                  db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False)):
     """Revoke a token (a running server stops accepting it within seconds)."""
+    _require("sqlalchemy")
     from opportune.service.auth import TokenError, revoke_token
 
     store = _store(db)

@@ -11,6 +11,7 @@ reference the client is given.
 
 from __future__ import annotations
 
+import json
 import logging
 import secrets
 from typing import Any
@@ -38,6 +39,21 @@ class ApiError(Exception):
             err["where"] = self.where
         err.update(self.extra)
         return {"error": err}
+
+
+def error_response(body: dict, status: int, headers: dict | None = None):
+    """A JSON error answer that can always be sent.
+
+    UTF-8 as every answer is; should a message carry text that UTF-8 cannot encode (half of a
+    surrogate pair quoted from a request), the same JSON with every such character escaped.
+    """
+    from starlette.responses import Response
+
+    try:
+        content = json.dumps(body, ensure_ascii=False, separators=(",", ":")).encode("utf-8")
+    except UnicodeEncodeError:
+        content = json.dumps(body, ensure_ascii=True, separators=(",", ":")).encode("ascii")
+    return Response(content, status_code=status, headers=headers, media_type="application/json")
 
 
 # ---------------------------------------------------------------- the common ones

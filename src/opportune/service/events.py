@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import json
 import threading
+import time
 from typing import AsyncIterator, Callable
 
 from starlette.concurrency import run_in_threadpool
@@ -77,32 +78,41 @@ def event_payload(kind: str, answer: dict) -> dict:
 
 async def stream(run_id: int, snapshot: dict, broker: Broker,
                  events_after: Callable[[int, int], list], still_allowed: Callable[[], bool], *,
-                 poll: float = 2.0, keepalive: float = 15.0) -> AsyncIterator[str]:
-    """The event stream of one run, from ``snapshot`` on (``snapshot["run"]["seq"]`` events already shown)."""
+                 poll: float = 2.0, keepalive: float = 15.0, recheck: float = 10.0) -> AsyncIterator[str]:
+    """The event stream of one run, from ``snapshot`` on (``snapshot["run"]["seq"]`` events already shown).
+
+    ``still_allowed`` (whether the stream's token is still valid, asked of the database) is checked
+    every ``recheck`` seconds (the token cache time), whether events are flowing or not, so a revoked
+    token's stream ends within that time: with a last ``closed`` event, and nothing after it.
+    """
     last = snapshot["run"]["seq"]
     sub = broker.subscribe(run_id)
+    clock = time.monotonic
     try:
         yield "retry: 2000\n\n"
         yield sse("snapshot", snapshot, id=last)
-        idle = 0.0
+        next_check = clock() + recheck
+        next_keepalive = clock() + keepalive
         while True:
+            if clock() >= next_check:
+                if not await run_in_threadpool(still_allowed):
+                    yield sse("closed", {"reason": "the token of this stream is no longer valid"})
+                    return
+                next_check = clock() + recheck
             sub.clear()
             batch = await run_in_threadpool(events_after, run_id, last)
             for seq, kind, answer in batch:
                 yield sse(kind, event_payload(kind, answer), id=seq)
                 last = seq
             if batch:
-                idle = 0.0
+                next_keepalive = clock() + keepalive
                 continue
+            wait = max(0.0, min(poll, next_check - clock(), next_keepalive - clock()))
             try:
-                await asyncio.wait_for(sub.wait(), timeout=poll)
+                await asyncio.wait_for(sub.wait(), timeout=wait)
             except asyncio.TimeoutError:
-                idle += poll
-                if idle >= keepalive:
-                    idle = 0.0
-                    if not await run_in_threadpool(still_allowed):
-                        yield sse("closed", {"reason": "the token of this stream is no longer valid"})
-                        return
+                if clock() >= next_keepalive:
+                    next_keepalive = clock() + keepalive
                     yield ": keepalive\n\n"
     finally:
         broker.unsubscribe(run_id, sub)

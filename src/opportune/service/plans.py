@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -20,12 +21,28 @@ from sqlalchemy import insert, select
 
 from opportune.engine import OrderEngine
 from opportune.formats import CheckResult, check_text, plan_from_dict
-from opportune.formats.loader import detect_format
-from opportune.plan import Plan
+from opportune.formats.loader import detect_format, not_utf8
+from opportune.plan import Plan, PlanError
 from opportune.service.errors import ApiError, plan_not_found
 from opportune.service.storage import Store, dumps, now, plans
 
 FORMATS = ("yaml", "json", "in2")
+MAX_FILENAME = 200  # characters of an upload's file name (the name used in problems)
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _text_field(data: dict, name: str, max_length: int) -> str | None:
+    """An optional string field of the upload wrapper, checked: 422 saying which and what is wrong."""
+    value = data.get(name)
+    if value is None:
+        return None
+    if not isinstance(value, str) or not value or len(value) > max_length or _SURROGATE.search(value) \
+            or not value.isprintable():
+        raise ApiError(422, "invalid_request",
+                       f"`{name}` must be a string of 1–{max_length} printable characters",
+                       "e.g. \"format\": \"yaml\"" if name == "format" else "e.g. \"filename\": \"gearbox.yaml\"",
+                       where=f"body.{name}")
+    return value
 
 
 def plan_id(plan: Plan) -> str:
@@ -49,21 +66,30 @@ def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt
             raise ApiError(400, "malformed_json", f"the request body is not valid JSON{pos}",
                            "send a plan in JSON, or {\"text\": <plan file text>, \"format\": \"yaml\"}",
                            where="body") from None
+        except (RecursionError, ValueError):
+            # Nested deeper than the parser goes, or a number too long to read: a plan in JSON, whose
+            # check below says what and where.
+            data = None
         if isinstance(data, dict) and "text" in data:
             text = data.get("text")
-            if not isinstance(text, str):
-                raise ApiError(422, "invalid_request", "`text` must be the plan file's text (a string)", where="body.text")
-            fmt = data.get("format") or fmt
-            filename = data.get("filename") or filename
+            if not isinstance(text, str) or _SURROGATE.search(text):
+                raise ApiError(422, "invalid_request", "`text` must be the plan file's text (a string of valid Unicode)",
+                               "send the file's text as a JSON string", where="body.text")
             extra = set(data) - {"text", "format", "filename"}
             if extra:
-                raise ApiError(422, "invalid_request", f"unknown field {sorted(extra)[0]!r}",
-                               "the upload wrapper has `text`, `format` and `filename`", where=f"body.{sorted(extra)[0]}")
+                shown = ascii(sorted(map(str, extra))[0])[:60]
+                raise ApiError(422, "invalid_request", f"unknown field {shown}",
+                               "the upload wrapper has `text`, `format` and `filename`", where="body")
+            fmt = _text_field(data, "format", 10) or fmt
+            filename = _text_field(data, "filename", MAX_FILENAME) or filename
             raw = text.encode("utf-8")
         else:
             fmt = fmt or "json"
     if fmt is not None and fmt not in FORMATS:
         raise ApiError(422, "invalid_request", f"unknown plan format {fmt!r}", "use yaml, json or in2", where="format")
+    if filename is not None and (_SURROGATE.search(filename) or not filename.isprintable()):
+        raise ApiError(422, "invalid_request", "`filename` must be printable text", "e.g. ?filename=gearbox.yaml",
+                       where="filename")
     name = filename or "upload"
     if fmt is None:
         fmt = detect_format(name, raw[:200].decode("latin-1"))
@@ -74,9 +100,9 @@ def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise ApiError(422, "invalid_plan", "the plan is not valid UTF-8 text", "save it as UTF-8",
-                       where=f"{name}:{line}") from None
+        problem = not_utf8(raw, exc, name)
+        raise ApiError(422, "invalid_plan", problem.message, problem.hint, where=problem.where,
+                       extra={"problems": [problem.to_dict()]}) from None
     return check_text(text, fmt=fmt, file=name), fmt, text
 
 
@@ -152,7 +178,13 @@ class PlanBook:
             raise plan_not_found(pid)
         from opportune.formats.summary import summarize
 
-        plan = plan_from_dict(json.loads(row.doc))
+        try:
+            plan = plan_from_dict(json.loads(row.doc))
+        except PlanError as exc:  # stored by an earlier version, over this version's limits
+            raise ApiError(422, "plan_refused", f"plan {pid} is stored, but this version refuses it: "
+                           f"{exc.problems[0].message if exc.problems else exc}",
+                           "upload a plan within the limits (opportune check says what they are)",
+                           where="body.plan", extra={"problems": [p.to_dict() for p in exc.problems]}) from None
         loaded = LoadedPlan(pid, plan, OrderEngine(plan, time_limit=self.count_seconds), summarize(plan), row.created_at)
         with self._lock:
             hit = self._plans.setdefault(pid, loaded)

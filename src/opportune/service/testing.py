@@ -2,9 +2,11 @@
 
 :class:`ServiceProcess` runs ``opportune serve`` in a subprocess on
 127.0.0.1 and a free port, waits until it answers, and stops it — politely,
-or with ``kill -9`` to test recovery.  :class:`Client` is a thin ``httpx``
-client that sends the bearer token and a fresh ``Idempotency-Key`` on every
-POST unless told which key to use.
+or with ``kill -9`` to test recovery.  It needs only the ``service`` extra
+(it asks ``/healthz`` with the standard library).  :class:`Client` is a thin
+``httpx`` client (httpx is not in the ``service`` extra: ``pip install httpx``)
+that sends the bearer token and a fresh ``Idempotency-Key`` on every POST
+unless told which key to use.
 
 >>> with ServiceProcess(tmp_path / "t.db") as svc:                  # doctest: +SKIP
 ...     cell = Client(svc.url, svc.token(cell="cell-1"))
@@ -31,6 +33,19 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def _healthy(url: str) -> bool:
+    """True if ``GET url`` answers 200 within a second (standard library only)."""
+    import urllib.error
+    import urllib.request
+
+    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # loopback: never through a proxy
+    try:
+        with opener.open(url, timeout=1.0) as r:
+            return r.status == 200
+    except (urllib.error.URLError, OSError, ValueError):
+        return False
+
+
 class ServiceProcess:
     """``opportune serve`` on 127.0.0.1 over a SQLite file or a database URL; a context manager that
     always stops it.  With a URL, give ``log`` (where the server's output goes)."""
@@ -51,8 +66,6 @@ class ServiceProcess:
         return f"http://127.0.0.1:{self.port}"
 
     def start(self, timeout: float = 30.0) -> "ServiceProcess":
-        import httpx
-
         for _attempt in range(3):  # another process may take the free port first
             self.port = free_port()
             args = [sys.executable, "-m", "opportune.cli", "serve", "--db", self.db,
@@ -67,11 +80,8 @@ class ServiceProcess:
             while time.monotonic() < deadline:
                 if self.proc.poll() is not None:
                     break
-                try:
-                    if httpx.get(self.url + "/healthz", timeout=1.0).status_code == 200:
-                        return self
-                except httpx.HTTPError:
-                    pass
+                if _healthy(self.url + "/healthz"):
+                    return self
                 time.sleep(0.05)
             self.stop()
         raise RuntimeError(f"the service did not start; its log:\n{self.log_text()[-3000:]}")
@@ -121,7 +131,12 @@ class Client:
     """An ``httpx.Client`` for one token; POSTs carry a fresh ``Idempotency-Key`` unless ``key=`` is given."""
 
     def __init__(self, base_url: str, token: str | None, timeout: float = 30.0):
-        import httpx
+        try:
+            import httpx
+        except ImportError:
+            raise ImportError("opportune.service.testing.Client needs httpx, which the 'service' extra does not "
+                              "install: pip install httpx (ServiceProcess itself needs only the extra)",
+                              name="httpx") from None
 
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self.http = httpx.Client(base_url=base_url, headers=headers, timeout=timeout)

@@ -14,6 +14,7 @@ import datetime as dt
 from opportune.engine import Schedule
 from opportune.engine.count import BudgetExceeded
 from opportune.engine.schedule import decimal, log10_int
+from opportune.formats.summary import printable_decision
 from opportune.sequencer import Row
 
 
@@ -40,6 +41,7 @@ def installable(schedule: Schedule) -> list[str] | None:
 
 
 def decision_view(decision) -> dict:
+    decision = printable_decision(decision)  # counts of any size written as decimal text
     return decision.to_dict() | {"explain": decision.explain()}
 
 
