@@ -64,3 +64,27 @@ def test_exact_evaluation_equals_monte_carlo(seed):
 def test_random_policies_are_refused():
     with pytest.raises(ValueError, match="random"):
         PolicyEvaluator(OrderEngine(GEAR), RandomChoice(), visible=2)
+
+
+def test_evaluate_command_prints_both_values_and_refuses_what_it_cannot_do():
+    import json
+
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    runner = CliRunner()
+    out = runner.invoke(app, ["evaluate", str(GEARBOX)])
+    assert out.exit_code == 0, out.output
+    assert "13.7057" in out.output and "13.5711" in out.output
+    out = runner.invoke(app, ["evaluate", str(GEARBOX), "--buffer-capacity", "1", "--json"])
+    doc = json.loads(out.output)
+    assert {"plan", "policy", "expected_time", "optimal", "ratio", "states"} <= set(doc)
+    assert round(doc["expected_time"], 4) == 16.1236 and round(doc["optimal"], 4) == 15.8398
+    assert abs(doc["ratio"] - doc["expected_time"] / doc["optimal"]) < 1e-12
+    for args, code, words in ((["--bin", "pile"], 2, "uniform or weighted"),
+                              (["--policy", "random"], 2, "single decision rule"),
+                              (["--policy", "nonsense"], 2, "choose from"),
+                              (["--max-states", "10"], 1, "--max-states")):
+        out = runner.invoke(app, ["evaluate", str(GEARBOX), *args])
+        assert out.exit_code == code and words in out.output and "Traceback" not in out.output, out.output

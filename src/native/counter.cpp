@@ -325,6 +325,9 @@ class Counter {
         tails_.back()->marks = unpack(marks);
         return int(tails_.size()) - 1;
     }
+    size_t tails_size(int handle) const {
+        return handle >= 0 && handle < (int)tails_.size() && tails_[handle] ? tails_[handle]->memo.size() : 0;
+    }
     void tails_drop(int handle) {
         if (handle >= 0 && handle < (int)tails_.size()) tails_[handle].reset();
     }
@@ -771,6 +774,7 @@ void bind(py::module_& m, const char* name) {
         .def("put", &Counter<W>::put, py::arg("mask"), py::arg("value"))
         .def("tails_new", &Counter<W>::tails_new, py::arg("marks"))
         .def("tails_drop", &Counter<W>::tails_drop, py::arg("handle"))
+        .def("tails_size", &Counter<W>::tails_size, py::arg("handle"))
         .def("tail", &Counter<W>::tail, py::arg("handle"), py::arg("mask"), py::arg("max_new"),
              py::arg("seconds"))
         .def("size", &Counter<W>::size)
