@@ -188,3 +188,18 @@ def test_replay_with_a_decision_budget_says_how_each_decision_was_reached(tmp_pa
 def test_simulate_rejects_a_budget_that_is_not_positive():
     result = runner.invoke(app, ["simulate", str(GEARBOX), "--decision-budget", "0", "--trials", "5"])
     assert result.exit_code != 0 and "decision-budget" in (result.stdout + (result.stderr or ""))
+
+
+@pytest.mark.parametrize("rel_error,words,absent", [
+    (0.1, "±10.00% at 95% confidence", "order of magnitude"),
+    (5.6, "only the order of magnitude is known: at most 6.6e+65", "±"),
+])
+def test_count_states_a_wide_estimate_as_an_order_of_magnitude(monkeypatch, rel_error, words, absent):
+    """An interval of ±100% or more bounds nothing from below: the command says what is known instead."""
+    from opportune.engine.schedule import CountResult, Schedule
+
+    monkeypatch.setattr(Schedule, "count_result", lambda self, **kw: CountResult(
+        1e65, exact=False, rel_error=rel_error, confidence=0.95, method="smc"))
+    result = runner.invoke(app, ["count", str(GEARBOX)])
+    assert result.exit_code == 0, result.output
+    assert words in result.output and absent not in result.output

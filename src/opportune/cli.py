@@ -224,10 +224,17 @@ def count(
     if result.exact:
         _out().print(f"{_escape(plan.name)}{state}: {decimal(result.value)} admissible sequences "
                      f"(log10 {result.log10:.3f})")
-    else:
+    elif result.rel_error < 1:
         _out().print(f"{_escape(plan.name)}{state}: about {result.value:.4e} admissible sequences "
                      f"(log10 {result.log10:.3f}) — ESTIMATE, ±{100 * result.rel_error:.2f}% at "
                      f"{100 * result.confidence:.0f}% confidence ({result.method}); the exact count exceeded the budget")
+    else:
+        # an interval of ±100% or more bounds nothing from below: say what is known, not a percentage
+        high = result.value * (1 + result.rel_error)
+        _out().print(f"{_escape(plan.name)}{state}: about {result.value:.1e} admissible sequences "
+                     f"(log10 {result.log10:.1f}) — ESTIMATE, only the order of magnitude is known: at most "
+                     f"{high:.1e} at {100 * result.confidence:.0f}% confidence ({result.method}); the exact count "
+                     f"exceeded the budget (a longer --time-limit narrows it)")
 
 
 # ---------------------------------------------------------------- graph
