@@ -442,3 +442,17 @@ def test_situations_with_equal_decision_keys_get_equal_decisions(plan, capacity,
         action = policy.choose(State(s, buffer=buffer, capacity=capacity), look)
         k = key(s.mask, s.consistent, buffer, look)
         assert decided.setdefault(k, action) == action
+
+
+def test_opportunistic_is_refused_when_the_first_looks_positions_do_not_fit(monkeypatch):
+    """The rule needs expected positions (what to buffer) as well as counts: a plan whose counts fit but
+    whose positions do not (ARC111 through its hub) is refused up front, not run for minutes a trial."""
+    from opportune.engine.count import BudgetExceeded
+
+    def too_slow(self, *args, **kwargs):
+        raise BudgetExceeded("exact count exceeded its time limit", reason="time")
+
+    monkeypatch.setattr(OrderEngine, "position_sums_for", too_slow)
+    with pytest.raises(StrategyUnavailable) as info:
+        prepare(StudyConfig(plan=GEAR, strategies=("opportunistic",), trials=1, count_time_limit=1.0))
+    assert "expected positions" in str(info.value) and "--decision-budget" in str(info.value)

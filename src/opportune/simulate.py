@@ -157,14 +157,19 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
         # time, no trial will.  Say so now rather than hang (the counts made stay in the memo).
         limit = config.count_time_limit
         try:
-            with engine.time_limited(limit):
+            # the rule needs counts (what to install) and expected positions (what to buffer): both for
+            # the first state, under one deadline (on ARC111 the counts fit in a second, the positions
+            # through its hub take about a second per part)
+            with engine.time_limited(limit), engine.deadline(_time.perf_counter() + limit):
                 engine.options(0, engine.all_strategies)
+                engine.position_sums_for(0, engine.all_strategies, set(config.plan.part_ids))
         except BudgetExceeded as exc:
             within, more = ((f"in {limit:g} s", ", or allow more time with --count-time-limit")
                             if exc.reason == "time" else ("within the counter's memory budget", ""))
             raise StrategyUnavailable(counting[0], (
                 f"'{counting[0]}' ranks the candidates by exact counts of admissible completions at every look, "
-                f"and on {config.plan.name} ({config.plan.n_units} parts) the counts of the first look do not "
+                f"and on {config.plan.name} ({config.plan.n_units} parts) the counts and expected positions of the "
+                f"first look do not "
                 f"finish {within}: leave it out with --strategies{more}, or let it decide within a time budget "
                 f"(estimating what it cannot count) with --decision-budget 0.05")) from None
     if "optimal" in config.strategies:
