@@ -287,6 +287,10 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         what = exc.problem or exc.context or "invalid YAML"
+        if "nesting depth" in what:
+            # libyaml's own depth limit (PyYAML >= 6.0.4) can stop the parser before ours: the same refusal
+            return refused(_Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT,
+                                    mark.line + 1 if mark else None))
         doc.problems.append(
             Problem(
                 f"YAML syntax error: {what}",
