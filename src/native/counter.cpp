@@ -463,21 +463,7 @@ class Counter {
         Vec r;
         if (cuts.none()) {
             std::vector<B> comps;
-            B rest = s;
-            while (!rest.none()) {
-                int x = rest.lowest();
-                B comp = B::zero();
-                comp.set(x);
-                B frontier = comp;
-                while (!frontier.none()) {
-                    B grow = B::zero();
-                    frontier.each([&](int y) { grow = grow | (nbr_[y] & rest); });
-                    frontier = grow.without(comp);
-                    comp = comp | grow;
-                }
-                rest = rest.without(comp);
-                comps.push_back(comp);
-            }
+            components(s, comps);
             if (comps.size() > 1) {
                 // marked pieces merge pairwise; the unmarked ones form one block (multinomial x counts)
                 bool have = false;
@@ -568,6 +554,26 @@ class Counter {
         }
         pop_zeros(r);
         return tm.memo.emplace(s, std::move(r)).first->second;
+    }
+
+    // the connected components of the comparability graph on s (breadth-first, O(|s| W))
+    void components(const B& s, std::vector<B>& comps) const {
+        comps.clear();
+        B rest = s;
+        while (!rest.none()) {
+            int x = rest.lowest();
+            B comp = B::zero();
+            comp.set(x);
+            B frontier = comp;
+            while (!frontier.none()) {
+                B grow = B::zero();
+                frontier.each([&](int y) { grow = grow | (nbr_[y] & rest); });
+                frontier = grow.without(comp);
+                comp = comp | grow;
+            }
+            rest = rest.without(comp);
+            comps.push_back(comp);
+        }
     }
 
     static B single(int i) {
@@ -701,22 +707,7 @@ class Counter {
         }
         // components of the comparability graph on s
         std::vector<B>& comps = comps_[depth];
-        comps.clear();
-        B rest = s;
-        while (!rest.none()) {
-            int x = rest.lowest();
-            B comp = B::zero();
-            comp.set(x);
-            B frontier = comp;
-            while (!frontier.none()) {
-                B grow = B::zero();
-                frontier.each([&](int y) { grow = grow | (nbr_[y] & rest); });
-                frontier = grow.without(comp);
-                comp = comp | grow;
-            }
-            rest = rest.without(comp);
-            comps.push_back(comp);
-        }
+        components(s, comps);
         if (comps.size() > 1) {
             // |s|! / (|C1|! ... |Cm|!) e(C1) ... e(Cm); dividing by 2..|C| one at a time stays exact
             acc = fact_[k];
