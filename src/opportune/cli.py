@@ -377,8 +377,8 @@ def simulate(
     from opportune.report import TABLE_HEADER, summary, table_rows, write_outputs
     from dataclasses import replace
 
-    from opportune.simulate import (MARKOV_BINS, STRATEGIES, StrategyUnavailable, StudyConfig, StudyError, prepare,
-                                    run_study)
+    from opportune.simulate import (COUNTING_STRATEGIES, MARKOV_BINS, STRATEGIES, StrategyUnavailable, StudyConfig,
+                                    StudyError, prepare, run_study)
     from opportune.worlds import TimeModel
 
     plan = load_or_exit(plan_file, json_errors=as_json)
@@ -441,7 +441,7 @@ def simulate(
                          f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
         for note in doc["notes"]:
             _out().print(f"note: {note}")
-        if decision_budget is not None and "opportunistic" in config.strategies:
+        if decision_budget is not None and set(COUNTING_STRATEGIES) & set(config.strategies):
             _out().print(f"note: opportunistic decided within {1000 * decision_budget:g} ms per decision (estimated "
                          "where exact counts did not fit): its numbers depend on this machine's speed")
         if out_dir:
@@ -455,8 +455,8 @@ def simulate(
 def evaluate(
     plan_file: Path = PLAN_ARG,
     policy: str = typer.Option("opportunistic", "--policy",
-                               help="The policy to evaluate: opportunistic (the paper's rule), buffer, shake "
-                                    "or quantify"),
+                               help="The policy to evaluate: opportunistic or paper (the paper's rule), "
+                                    "bin-first, slack, lookahead, buffer, shake or quantify"),
     bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform or weighted (default: plan, else uniform)"),
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
     buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,
@@ -469,7 +469,7 @@ def evaluate(
     from opportune.engine import OrderEngine
     from opportune.policies.evaluate import PolicyEvaluator, PolicyStuck
     from opportune.policies.optimal import OptimalTooLarge
-    from opportune.simulate import MARKOV_BINS, STRATEGIES, StudyConfig, StudyError, make_policy, prepare
+    from opportune.simulate import ALL_STRATEGIES, MARKOV_BINS, StudyConfig, StudyError, make_policy, prepare
     from opportune.worlds import TimeModel
 
     plan = load_or_exit(plan_file, json_errors=as_json)
@@ -479,9 +479,9 @@ def evaluate(
         fail(f"exact evaluation needs a bin whose looks depend only on its contents (uniform or weighted), "
              f"not '{chosen_bin}': use `opportune simulate --bin {chosen_bin}` for a Monte Carlo estimate", 2)
     unsuitable = ("optimal", "random", "pallet", "kitting")
-    if policy not in STRATEGIES or policy in unsuitable:
+    if policy not in ALL_STRATEGIES or policy in unsuitable:
         fail(f"unknown or unsuitable policy '{policy}': choose from "
-             f"{', '.join(s for s in STRATEGIES if s not in unsuitable)} (the optimum is printed beside it; "
+             f"{', '.join(s for s in ALL_STRATEGIES if s not in unsuitable)} (the optimum is printed beside it; "
              "random has no single decision rule; pallet and kitting do not draw from the bin)", 2)
     try:
         config = StudyConfig(plan=plan, strategies=(policy,), trials=1, bin=chosen_bin,

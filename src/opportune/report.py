@@ -24,6 +24,10 @@ LABELS = {
     "opportunistic": "opportunistic",
     "random": "random (ablation)",
     "optimal": "optimal",
+    "paper": "paper (the paper's rule)",
+    "bin-first": "bin-first",
+    "slack": "slack",
+    "lookahead": "lookahead",
 }
 
 

@@ -33,6 +33,10 @@ from opportune.sequencer import State
 from opportune.worlds import PalletWorld, TimeModel, World, make_world
 
 STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", "random", "optimal")
+#: Policies beyond the paper's (policies/variants.py), run when asked for by name; "paper" is the
+#: paper's rule under the name issue 13 gives it (the same as "opportunistic").
+MORE_STRATEGIES = ("paper", "bin-first", "slack", "lookahead")
+ALL_STRATEGIES = STRATEGIES + MORE_STRATEGIES
 MARKOV_BINS = ("uniform", "weighted")
 
 
@@ -48,7 +52,7 @@ class StrategyUnavailable(StudyError):
         super().__init__(message)
 
 
-COUNTING_STRATEGIES = ("opportunistic",)  # decide by exact counts of the admissible completions, at every look
+COUNTING_STRATEGIES = ("opportunistic", "paper", "bin-first", "slack", "lookahead")  # decide by exact counts of the admissible completions, at every look
 
 
 @dataclass(frozen=True)
@@ -70,9 +74,9 @@ class StudyConfig:
     decision_budget: float | None = None  # seconds per opportunistic decision (None: exact, reproducible)
 
     def validate(self) -> "StudyConfig":
-        unknown = [s for s in self.strategies if s not in STRATEGIES]
+        unknown = [s for s in self.strategies if s not in ALL_STRATEGIES]
         if unknown:
-            raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(STRATEGIES)}")
+            raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(ALL_STRATEGIES)}")
         if self.bin not in ("uniform", "weighted", "pile", "conveyor"):
             raise StudyError(f"unknown bin model '{self.bin}': use uniform, weighted, pile or conveyor")
         if "optimal" in self.strategies and self.bin not in MARKOV_BINS:
@@ -220,8 +224,17 @@ def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepare
         return fixed.BufferFixed(prepared.sequence)
     if strategy == "quantify":
         return fixed.Quantify(engine, prepared.quantify_rank or {}, config.training_runs)
-    if strategy == "opportunistic":
+    if strategy in ("opportunistic", "paper"):
         return Opportunistic(budget=config.decision_budget, seed=config.seed)
+    if strategy in MORE_STRATEGIES:
+        from opportune.policies import variants
+
+        if strategy == "bin-first":
+            return variants.BinFirst(budget=config.decision_budget, seed=config.seed)
+        if strategy == "slack":
+            return variants.Slack(budget=config.decision_budget, seed=config.seed)
+        return variants.Lookahead(visible=config.visible, capacity=capacity_for(strategy, config), costs=config.costs,
+                                  weights=config.weights if config.bin == "weighted" else None)
     if strategy == "random":
         return RandomChoice()
     if strategy == "optimal":

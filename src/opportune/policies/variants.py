@@ -1,0 +1,200 @@
+"""Policies beyond the paper's rule, measured against the optimum with :mod:`.evaluate`.
+
+The paper's rule (:class:`~opportune.policies.opportunistic.Opportunistic`) installs the
+candidate that keeps the most completions, and otherwise buffers the visible part needed
+earliest.  Exact evaluation shows where it loses (issue 13): taking a buffered part while an
+installable part is visible in the bin wastes the bin's opportunity, and "needed earliest"
+ignores how soon a part can actually go in and how much waits on it.  Three variants:
+
+* :class:`BinFirst` (``bin-first``): a visible installable part before any buffered one (the
+  buffer keeps; the bin's part may be gone at the next look); otherwise the paper's rule.
+* :class:`Slack` (``slack``): bin first, and when nothing can be installed it buffers the visible
+  part with the least *slack*: expected position, minus the installs still needed before the
+  part can go in, minus ``weight`` times the steps that wait on it.
+* :class:`Lookahead` (``lookahead``): one step of policy improvement over a base policy: every
+  legal action is scored by its cost plus the base policy's exact expected cost of finishing from
+  where it leads (a dynamic programme, :class:`~opportune.policies.evaluate.PolicyEvaluator`), and
+  the least wins.  It is never worse than its base.  On plans too large for the programme
+  (more than ``max_states`` states) it decides as its base does, and says so.
+
+All decide on the machine form of a state (``choose_at``), so simulations, replays and the
+exact evaluation use them as they use the paper's rule.
+"""
+
+from __future__ import annotations
+
+import time
+
+from opportune.engine.count import BudgetExceeded
+from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
+from opportune.policies.opportunistic import Opportunistic
+
+__all__ = ["BinFirst", "Lookahead", "Slack"]
+
+
+class BinFirst(Opportunistic):
+    """The paper's rule, with a visible installable part always before a buffered one.
+
+    >>> from opportune import make_plan, Sequencer
+    >>> plan = make_plan(["a", "b", "c"], {"c": ["a"]})
+    >>> BinFirst().choose_at(Sequencer(plan).state.schedule.engine, 0b001, 1, ("c",), 1.0, ("b",))
+    Action(kind='install', part='b', source='bin')
+    """
+
+    name = "bin-first"
+    rule_install = "install a visible candidate before a buffered one, the one that keeps the most options"
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        if buffer and visible and engine.installable_among(mask, consistent, visible):
+            buffer = ()     # the bin's candidates only: the buffered ones keep for a later look
+        return super().choose_at(engine, mask, consistent, buffer, free, visible)
+
+    def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        action = self.choose(state, visible)
+        if action.kind == "install" and action.source == "bin" and state.buffer:
+            return Decision(action, self.rule_install)
+        return super().decide(state, visible)
+
+
+class Slack(BinFirst):
+    """Bin first; when nothing can be installed, buffer the visible part with the least slack.
+
+    ``slack(p) = E[position of p] - (installs still needed before p can go in) - weight * (steps after p)``
+    in a uniformly random completion, all counted in units of the remaining work.
+    """
+
+    name = "slack"
+    rule_buffer = "nothing can be installed: buffer the visible part with the least slack"
+
+    def __init__(self, weight: float = 0.1, **kwargs):
+        super().__init__(**kwargs)
+        self.weight = weight
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        action = super().choose_at(engine, mask, consistent, buffer, free, visible)
+        if action.kind != "buffer" or len(set(visible)) == 1:
+            return action
+        if self.budget is None:
+            return shared_action("buffer", self.least_slack(engine, mask, consistent, visible))
+        try:    # within a budget: the slack if its positions fit half a budget more, else the paper's choice
+            with engine.deadline(time.perf_counter() + self.budget / 2):
+                return shared_action("buffer", self.least_slack(engine, mask, consistent, visible))
+        except BudgetExceeded:
+            return action
+
+    def least_slack(self, engine, mask: int, consistent: int, visible: tuple[str, ...]) -> str:
+        """The visible part with the least slack (ties: declaration order)."""
+        total, sums = engine.position_sums_for(mask, consistent, set(visible))
+        # several strategies may still be open: a part's slack under the one that frees it soonest
+        posets = [engine.posets[i] for i in range(engine.k) if consistent >> i & 1]
+        remaining = engine.full & ~mask
+        plan = engine.plan
+        best = None
+        for part, s in sums.items():
+            u = engine.next_unit(mask, plan.index(part))
+            needed = min((p.below[u] & remaining).bit_count() for p in posets)
+            after = min((p.above[u] & remaining).bit_count() for p in posets)
+            key = (s / total - needed - self.weight * after, plan.index(part), part)
+            if best is None or key < best:
+                best = key
+        return best[2]
+
+    def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        action = self.choose(state, visible)
+        if action.kind == "buffer":
+            return Decision(action, self.rule_buffer, note=f"slack weight {self.weight:g} per step waiting on it")
+        return super().decide(state, visible)
+
+
+class Lookahead(BinFirst):
+    """One step of policy improvement over ``base`` (default :class:`Slack`), exact on small plans.
+
+    ``solver_settings`` are the bin and costs of the world it acts in (``visible``, ``capacity``,
+    ``costs``, ``weights``; see :class:`~opportune.policies.evaluate.PolicyEvaluator`): the scores
+    are expected costs in that world.  ``max_states`` bounds the base policy's programme; above it
+    (a large plan) the policy decides as its base does.
+    """
+
+    name = "lookahead"
+    rule = "the action with the least expected cost of finishing by the base rule"
+    decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
+    #: Plans of more units than this decide as the base does (the programme would take too long).
+    MAX_UNITS = 16
+
+    def __init__(self, base=None, *, max_states: int = 200_000, **solver_settings):
+        super().__init__()
+        self.base = base if base is not None else Slack()
+        self.max_states = max_states
+        self.settings = solver_settings
+        self._evaluator = None
+        self._too_large = False
+        self.last_cost: float | None = None
+
+    def _values(self, engine):
+        from opportune.policies.evaluate import PolicyEvaluator
+
+        if self._evaluator is None or self._evaluator.engine is not engine:
+            self._evaluator = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
+            self._too_large = False
+        return self._evaluator
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        from opportune.policies.optimal import OptimalTooLarge
+
+        if mask == engine.full:
+            return DONE
+        self.last_cost = None
+        if engine.n_units > self.MAX_UNITS:
+            self._too_large = True
+        if not self._too_large:
+            ev = self._values(engine)
+            try:
+                action, self.last_cost = self._best(ev, engine, mask, consistent, buffer, visible)
+                return action
+            except OptimalTooLarge:
+                self._too_large = True      # a large plan: decide as the base does from now on
+        return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
+
+    def _best(self, ev, engine, mask, consistent, buffer, visible) -> Action:
+        plan = engine.plan
+        counts = [0] * len(plan.parts)
+        for p in buffer:
+            counts[plan.index(p)] += 1
+        key = (mask, consistent, tuple(counts))
+        look = tuple(sorted(plan.index(p) for p in visible))
+        # the base's own action first, so that ties keep it (the improvement is then never worse)
+        base = self.base.choose_at(engine, mask, consistent, buffer,
+                                   float("inf") if ev.capacity is None else ev.capacity - len(buffer), visible)
+        here = ev.value(key)
+        best, best_cost = base, None
+        kind_rank = {"install": 0, "buffer": 1}
+        ranked = []
+        for cost, nxt, action in ev._moves(key, look):
+            ranked.append((cost + ev.value(nxt), kind_rank[action.kind], plan.index(action.part), action))
+        ranked.append((ev.costs.shake + here, 2, 0, SHAKE))
+        for total, _, _, action in ranked:
+            if _same(action, base):
+                best_cost = total
+        for total, _, _, action in sorted(ranked, key=lambda r: r[:3]):
+            if best_cost is None or total < best_cost - 1e-12:
+                best, best_cost = action, total
+            break
+        return best, best_cost
+
+    def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        action = self.choose(state, visible)
+        if action.kind == "done":
+            return Decision(DONE, "the assembly is complete")
+        if self.last_cost is None:
+            return Decision(action, f"as the base rule ({self.base.name}): the plan is too large for the "
+                                    f"look-ahead's exact programme (more than {self.max_states:,} states)")
+        return Decision(action, self.rule, note=f"expected remaining cost {self.last_cost:.4f} "
+                                                f"(base: {self.base.name})")
+
+
+def _same(a: Action, b: Action) -> bool:
+    return a.kind == b.kind and a.part == b.part and (a.kind != "install" or (a.source or "bin") == (b.source or "bin"))
+
