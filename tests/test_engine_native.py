@@ -211,3 +211,31 @@ def test_compiled_tail_distributions_equal_the_pure_python_ones(n, density, seed
         d = compiled.tail(s)
         assert d == pure.tail(s)
         assert sum(d) == Counter(p, native=False).count(s)     # every order has its mark somewhere
+
+
+@needs_core
+def test_the_compiled_memo_starts_again_only_between_calls():
+    """Over its cap the compiled memo is reset at the start of a top-level call, never within one: the
+    recursions above it (position sums, the hub) make many calls into the core per top-level call, and
+    a reset within one would make them recompute everything again and again."""
+    rng = random.Random(9)
+    p = random_poset(rng, 30, 0.1)
+    pure = Counter(p, native=False)
+    c = Counter(p, max_total=50)
+    assert c.count() == pure.count()
+    held = c._native.size()
+    assert held > 50                                   # kept through the call that filled it
+    resets = []
+
+    class Spy(type(c._native)):      # NativeCounter has __slots__: count the resets in a subclass
+        __slots__ = ()
+
+        def reset(self):
+            resets.append(1)
+            super().reset()
+
+    c._native.__class__ = Spy
+    assert c.position_sums() == pure.position_sums()   # one call: many core calls, no reset among them
+    assert len(resets) == 1                            # once, at its start (the memo was over its cap)
+    c.clear()
+    assert c._native.size() == 0

@@ -403,6 +403,8 @@ class Counter:
         limit = self.max_total
         if limit is not None and len(self._memo) + len(self._vec) > limit:
             self._evict(limit // 2)
+        if self._native is not None and self._native.over(limit):
+            self._native.reset()        # the compiled memo starts again (Python's keeps what it holds)
         self._maybe_narrow()
         if sys.getrecursionlimit() < self._depth:   # Python 3.11 frames do not use the C stack
             sys.setrecursionlimit(self._depth)
@@ -889,7 +891,7 @@ class Counter:
                                      reason="memo", memo_size=self.memo_size)
             deadline = budget[1]
             seconds = -1.0 if deadline == _INF else max(0.0, deadline - perf())
-            status, r, added = core.count(s, direction, room if room < sys.maxsize else -1, seconds, self.max_total)
+            status, r, added = core.count(s, direction, room if room < sys.maxsize else -1, seconds)
             budget[2] += added
             if status == 1:
                 raise BudgetExceeded(f"exact count needs more than max_memo={budget[0]} new memo entries",

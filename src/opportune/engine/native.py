@@ -12,7 +12,7 @@ Examples
 --------
 >>> from opportune.engine.poset import Poset
 >>> core = native_counter(Poset.from_pairs(4, [(0, 1), (2, 3)]))
->>> core is None or core.count(0b1111, 0, -1, -1.0, 10**6)[1] == 6
+>>> core is None or core.count(0b1111, 0, -1, -1.0)[1] == 6
 True
 """
 
@@ -26,7 +26,8 @@ from opportune.engine.poset import Poset
 MAX_ELEMENTS = 1024
 
 #: Bytes of memo the compiled counter holds for one order before it starts again (at the start of
-#: a call; one call may add its ``max_memo`` entries on top).  About 60-100 bytes an entry.
+#: a top-level count; one count may add its ``max_memo`` entries on top).  About 100 bytes an entry
+#: on orders of 50 elements, about 1.5 KB on orders of 1,000 (keys of 128 bytes, counts of ~1 KB).
 MAX_BYTES = 400 * 2**20
 
 try:
@@ -64,12 +65,18 @@ class NativeCounter:
                          [m.to_bytes(nb, "little") for m in poset.above])
         self.max_total = max_total
 
-    def count(self, mask: int, direction: int, max_new: int, seconds: float,
-              max_total: int | None = None) -> tuple[int, int | None, int]:
-        cap = self._cap(max_total)
-        status, value, added = self._core.count(mask.to_bytes(self._nbytes, "little"), direction,
-                                                max_new, seconds, cap)
+    def count(self, mask: int, direction: int, max_new: int, seconds: float) -> tuple[int, int | None, int]:
+        big = 1 << 62     # the core's "no limit" (a memo never holds that many)
+        status, value, added = self._core.count(mask.to_bytes(self._nbytes, "little"), direction, max_new, seconds, big)
         return status, (int.from_bytes(value, "little") if value is not None else None), added
+
+    def over(self, max_total: int | None = None) -> bool:
+        """Whether the memo holds more than ``max_total`` entries or :data:`MAX_BYTES` bytes (the
+        caller then resets it, at the start of a top-level call: never within one, where the
+        recursions above the core rely on what it has stored)."""
+        if max_total is None:
+            max_total = self.max_total
+        return (max_total is not None and self._core.size() > max_total) or self._core.memory() > MAX_BYTES
 
     def lookup(self, mask: int) -> int | None:
         value = self._core.lookup(mask.to_bytes(self._nbytes, "little"))
@@ -92,16 +99,6 @@ class NativeCounter:
         if values is None:
             return status, None, added
         return status, [int.from_bytes(v, "little") for v in values], added
-
-    def _cap(self, max_total: int | None) -> int:
-        # entries held before a call starts afresh: the caller's cap, and never more than MAX_BYTES
-        size = self._core.size()
-        per = self._core.memory() / size if size > 1000 else 100
-        cap = int(MAX_BYTES / max(per, 40))
-        for limit in (max_total, self.max_total):
-            if limit is not None:
-                cap = min(cap, limit)
-        return cap
 
     def size(self) -> int:
         """Entries in the compiled memo."""

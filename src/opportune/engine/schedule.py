@@ -279,7 +279,7 @@ class OrderEngine:
                 return counter.count(s)
             except BudgetExceeded as exc:
                 if exc.reason != "memo":
-                    self._probe_left[counter] = left - (counter.memo_size - before)
+                    self._probe_left[counter] = left - max(0, counter.memo_size - before)   # (a memo reset shrinks it)
                     if self._probe_left[counter] > 0:
                         raise
             finally:
