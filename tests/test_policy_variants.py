@@ -87,3 +87,20 @@ def test_lookahead_decides_as_its_base_on_a_large_plan():
         assert ahead.choose_at(engine, 0, engine.all_strategies, (), math.inf, look) == \
             base.choose_at(engine, 0, engine.all_strategies, (), math.inf, look)
     assert "too large" in Sequencer(plan, ahead, budget=None).decide(("1", "2")).rule
+
+
+def test_replay_takes_a_policy_by_name():
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    looks = str(GEARBOX.parent / "gearbox-table1.looks")
+    runner = CliRunner()
+    out = runner.invoke(app, ["replay", str(GEARBOX), looks, "--policy", "bin-first", "--json"])
+    assert out.exit_code == 0, out.output
+    out = runner.invoke(app, ["replay", str(GEARBOX), looks, "--policy", "nonsense"])
+    assert out.exit_code == 2 and "unknown policy" in out.output
+    # Table 1's looks were recorded under the paper's rule: slack buffers another part at look 5, so
+    # the sixth look shows a part that is in its buffer: refused with the look's number, no traceback
+    out = runner.invoke(app, ["replay", str(GEARBOX), looks, "--policy", "slack"])
+    assert out.exit_code == 1 and "look 6" in out.output and "Traceback" not in out.output

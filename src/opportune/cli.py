@@ -287,8 +287,11 @@ def replay(
         None, "--decision-budget", min=1e-6, show_default=False,
         help="Seconds per decision, as a cell would give: exact when the counts fit, else estimated and marked so "
              "(default: every decision exact)"),
+    policy: str = typer.Option("paper", "--policy",
+                               help="paper (the paper's rule, also 'opportunistic'), bin-first, slack or lookahead"),
 ):
-    """Run the opportunistic policy over a file of looks and print the trace like the paper's Table 1."""
+    """Run a policy (the paper's opportunistic rule by default) over a file of looks and print the trace
+    like the paper's Table 1."""
     from rich.table import Table
 
     from opportune.formats.looks import LooksError, read_looks
@@ -299,7 +302,18 @@ def replay(
         looks = read_looks(looks_file)
     except LooksError as exc:
         fail_problem(exc.problem)
-    seq = Sequencer(plan, buffer_capacity=buffer_capacity, budget=decision_budget)
+    from opportune.policies import variants
+    from opportune.policies.opportunistic import Opportunistic
+
+    makers = {"paper": Opportunistic, "opportunistic": Opportunistic, "bin-first": variants.BinFirst,
+              "slack": variants.Slack}
+    if policy == "lookahead":
+        chosen = variants.Lookahead(visible=plan.simulation.get("visible", 2), capacity=buffer_capacity)
+    elif policy in makers:
+        chosen = makers[policy](budget=decision_budget)
+    else:
+        fail(f"unknown policy '{policy}': choose from paper, bin-first, slack or lookahead", 2)
+    seq = Sequencer(plan, chosen, buffer_capacity=buffer_capacity, budget=decision_budget)
     for i, look in enumerate(looks, start=1):
         try:
             seq.step(look)
