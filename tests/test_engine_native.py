@@ -96,7 +96,10 @@ def test_big_counts_and_every_width():
     """Counts far beyond 64 bits, components and cut elements, on 1 to 16 words."""
     for n in (30, 64, 100, 250, 500, 1000):
         anti = Poset.antichain(n)
+        core = native.NativeCounter(anti)            # directly: the counter hands over only n <= 256
+        assert core.count(anti.full, 0, -1, -1.0)[1] == math.factorial(n)
         assert Counter(anti).count() == math.factorial(n)
+        assert Counter(anti).compiled == (n <= native.MAX_ELEMENTS)
         # two chains joined by a cut element in the middle: C(2k, k) on each side
         k = n // 4
         pairs = [(i, i + 1) for i in range(k - 1)] + [(k + i, k + i + 1) for i in range(k - 1)]
@@ -106,6 +109,7 @@ def test_big_counts_and_every_width():
         pairs += [(hub, rest[0]), (hub, rest[k])]
         pairs += [(rest[i], rest[i + 1]) for i in range(k - 1)] + [(rest[k + i], rest[k + i + 1]) for i in range(k - 1)]
         p = Poset.from_pairs(hub + 1 + 2 * k, pairs)
+        assert native.NativeCounter(p).count(p.full, 1, -1, -1.0)[1] == math.comb(2 * k, k) ** 2
         assert Counter(p).count() == math.comb(2 * k, k) ** 2
         assert Counter(p).count() == Counter(p, native=False).count()
 

@@ -3,7 +3,7 @@
 ``pip install`` builds :mod:`opportune._native` (C++, ``src/native/counter.cpp``) with the
 machine's compiler.  It runs the same memoised recursion as the pure-Python
 :class:`~opportune.engine.count.Counter` (cut elements, components, removing a minimal or a
-maximal element), 10-40 times faster per memo entry, for orders of up to
+maximal element), 5-10 times faster per memo entry, for orders of up to
 :data:`MAX_ELEMENTS` elements.  Where the module is missing (a build without a compiler, or
 ``OPPORTUNE_PURE_PYTHON=1`` in the environment) every count runs in pure Python and gives the
 same exact numbers; a test compares the two on random orders.
@@ -22,8 +22,14 @@ import os
 
 from opportune.engine.poset import Poset
 
-#: Largest order the compiled counter takes (sets are at most 16 machine words).
-MAX_ELEMENTS = 1024
+#: Largest order the counter hands to the compiled core.  The core takes up to 1,024 elements (16
+#: machine words), but above a few hundred its memo's slots and counts are large (a key of 128 bytes,
+#: a count of ~1 KB): growing the table is one uninterruptible copy of hundreds of megabytes, and on
+#: 1,000-task graphs budgeted decisions stalled for up to 1.4 s (pure Python: 0.2 s), without being
+#: exact more often.  So larger orders run in Python.
+MAX_ELEMENTS = 256
+#: What the core itself can take (``NativeCounter`` directly, e.g. in tests).
+CORE_MAX_ELEMENTS = 1024
 
 #: Bytes of memo the compiled counter holds for one order before it starts again (at the start of
 #: a top-level count; one count may add its ``max_memo`` entries on top).  About 100 bytes an entry
@@ -55,6 +61,8 @@ class NativeCounter:
     __slots__ = ("_core", "_nbytes", "max_total")
 
     def __init__(self, poset: Poset, max_total: int | None = None):
+        if poset.n > CORE_MAX_ELEMENTS:
+            raise ValueError(f"the compiled core takes orders of at most {CORE_MAX_ELEMENTS} elements")
         words = 1
         while 64 * words < poset.n:
             words *= 2
