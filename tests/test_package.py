@@ -28,3 +28,36 @@ def test_the_package_says_it_is_typed_and_carries_its_licence_files():
     if (repo / "pyproject.toml").exists():          # a source checkout
         for name in ("LICENSE", "CITATION.cff", "CHANGELOG.md"):
             assert (repo / name).stat().st_size > 0
+
+
+def test_examples_ship_in_the_package_and_load_by_name():
+    import json
+
+    from typer.testing import CliRunner
+
+    from opportune import datasets
+    from opportune.cli import app
+    from opportune.formats.looks import read_looks
+
+    names = [name for name, _, _ in datasets.examples()]
+    assert names == ["gearbox", "gearbox-table1"]
+    assert datasets.example_path("gearbox").parent.parent.name == "datasets"   # inside the package
+    plan = opportune.load_plan("example:gearbox")
+    assert plan.name == "gearbox" and len(plan.parts) == 10
+    assert len(read_looks("example:gearbox-table1")) > 5
+    runner = CliRunner()
+    out = runner.invoke(app, ["replay", "example:gearbox", "example:gearbox-table1", "--json"])
+    assert out.exit_code == 0, out.output
+    listed = json.loads(runner.invoke(app, ["examples", "--json"]).output)
+    assert {"example:gearbox", "example:gearbox-table1", "salbp:KILBRID"} <= {r["name"] for r in listed}
+    out = runner.invoke(app, ["count", "example:nope"])
+    assert out.exit_code == 1 and "no example named 'nope'" in out.output and "Traceback" not in out.output
+
+
+def test_version():
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    out = CliRunner().invoke(app, ["--version"])
+    assert out.exit_code == 0 and out.output.strip() == f"opportune {opportune.__version__}"

@@ -88,7 +88,22 @@ def __getattr__(name: str):  # ``cli.out`` and ``cli.err``, as before, without m
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json or SALBP .IN2", show_default=False)
+PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json, SALBP .IN2 or .alb; or salbp:NAME, example:NAME "
+                                     "(shipped: see `opportune examples`)", show_default=False)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from opportune import __version__
+
+        print(f"opportune {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                          help="Print the version and exit")) -> None:
+    """Least-commitment planning, scheduling and opportunistic execution (Fox & Kempf)."""
 
 
 def fail(message: str, code: int = 1) -> None:
@@ -527,6 +542,23 @@ def evaluate(
     _out().print(f"  ratio {value / best:.5f} ({100 * (value / best - 1):+.2f}%); "
                  f"{ev.states:,} states for the optimum, {ev.policy_states:,} reached by the policy")
 
+
+
+@app.command()
+def examples(as_json: bool = typer.Option(False, "--json", help="Machine-readable output")):
+    """List the examples and data sets shipped with the package (use them as example:NAME, salbp:NAME)."""
+    from opportune import datasets
+
+    rows = [{"name": f"example:{name}", "kind": kind, "about": about} for name, kind, about in datasets.examples()]
+    rows += [{"name": f"salbp:{name}", "kind": "plan", "about": "SALBP precedence graph (Scholl's benchmark data)"}
+             for name in datasets.salbp_names()]
+    if as_json:
+        print(json.dumps(rows, indent=2))
+        return
+    width = max(len(r["name"]) for r in rows)
+    for r in rows:
+        _out().print(f"{_escape(r['name']):<{width}}  {r['kind']:<5}  {_escape(r['about'])}")
+    _out().print("e.g. opportune replay example:gearbox example:gearbox-table1; opportune count salbp:KILBRID")
 
 @app.command()
 def schema():

@@ -1,4 +1,4 @@
-"""Data sets shipped with the package: the public SALBP precedence graphs.
+"""Data sets shipped with the package: the public SALBP precedence graphs and the examples.
 
 Scholl's benchmark data for simple assembly line balancing: real precedence
 graphs of assembled products, 7 to 111 tasks (see ``salbp/README.md``).
@@ -10,6 +10,12 @@ Each is loadable by name wherever a plan file is accepted, as ``salbp:NAME``
 ('MERTENS', 'BOWMAN8', 'JAESCHKE')
 >>> len(datasets.salbp("KILBRID").parts)
 45
+
+The examples (the paper's gearbox and the looks of its Table 1) ship too, as ``example:NAME``
+(``opportune replay example:gearbox example:gearbox-table1``; ``opportune examples`` lists them):
+
+>>> [name for name, _, _ in datasets.examples()]
+['gearbox', 'gearbox-table1']
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from pathlib import Path
 SALBP = ("MERTENS", "BOWMAN8", "JAESCHKE", "JACKSON", "MANSOOR", "MITCHELL", "HESKIA", "KILBRID",
          "TONGE70", "ARC111")
 PREFIX = "salbp:"
+EXAMPLE_PREFIX = "example:"
 
 
 def salbp_names() -> tuple[str, ...]:
@@ -44,3 +51,52 @@ def salbp(name: str):
     from opportune.formats import load_plan
 
     return load_plan(salbp_path(name))
+
+
+def examples() -> list[tuple[str, str, str]]:
+    """The shipped examples as ``(name, kind, description)``: kind ``plan`` or ``looks``; the
+    description is the plan's ``description`` or the looks file's first comment line."""
+    folder = resources.files(__name__).joinpath("examples")
+    out = []
+    for entry in sorted(folder.iterdir(), key=lambda e: e.name.rpartition(".")[0]):
+        name, _, suffix = entry.name.rpartition(".")
+        if suffix not in ("yaml", "looks"):
+            continue
+        text = entry.read_text(encoding="utf-8")
+        if suffix == "yaml":
+            import yaml
+
+            doc = yaml.safe_load(text) or {}
+            about = str(doc.get("description", "")) if isinstance(doc, dict) else ""
+        else:
+            about = next((line.lstrip("# ").strip() for line in text.splitlines() if line.startswith("#")), "")
+        out.append((name, "plan" if suffix == "yaml" else "looks", about))
+    return out
+
+
+def example_path(name: str) -> Path:
+    """The file of a shipped example, by name (``gearbox``, ``gearbox-table1``; a suffix is optional).
+
+    Raises ``KeyError`` naming the examples there are.
+    """
+    stem = name.removesuffix(".yaml").removesuffix(".looks")
+    folder = resources.files(__name__).joinpath("examples")
+    for suffix in ("yaml", "looks"):
+        entry = folder.joinpath(f"{stem}.{suffix}")
+        if entry.is_file():
+            return Path(str(entry))
+    names = ", ".join(n for n, _, _ in examples())
+    raise KeyError(f"no example named '{name}': the package ships {names}")
+
+
+def resolve(path: str | Path) -> Path:
+    """``salbp:NAME`` and ``example:NAME`` as the shipped files they name; any other path as it is.
+
+    Raises ``KeyError`` (naming what there is) for an unknown name.
+    """
+    text = str(path)
+    if text.lower().startswith(PREFIX):
+        return salbp_path(text[len(PREFIX):])
+    if text.lower().startswith(EXAMPLE_PREFIX):
+        return example_path(text[len(EXAMPLE_PREFIX):])
+    return Path(path)

@@ -99,15 +99,17 @@ def detect_format(path: str | Path, text: str | None = None) -> str:
 def read_plan(path: str | Path) -> CheckResult:
     """Read and check a plan file of any supported format; never raises for bad content.
 
-    ``salbp:NAME`` reads a SALBP graph shipped with the package (:mod:`opportune.datasets`).
+    ``salbp:NAME`` reads a SALBP graph shipped with the package, ``example:NAME`` an example
+    (:mod:`opportune.datasets`).
     """
-    if str(path).lower().startswith("salbp:"):
+    if str(path).lower().startswith(("salbp:", "example:")):
         from opportune import datasets
 
         try:
-            path = datasets.salbp_path(str(path)[len("salbp:"):])
+            path = datasets.resolve(path)
         except KeyError as exc:
-            return CheckResult(None, [Problem(str(exc.args[0]), "use one of these names, e.g. salbp:KILBRID",
+            example = "salbp:KILBRID" if str(path).lower().startswith("salbp:") else "example:gearbox"
+            return CheckResult(None, [Problem(str(exc.args[0]), f"use one of these names, e.g. {example}",
                                               code="io")])
     path = Path(path)
     name = str(path)

@@ -72,7 +72,15 @@ def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
 
 
 def read_looks(path: str | Path) -> list[tuple[str, ...]]:
-    """Read a looks file; raise :class:`LooksError` (missing file included)."""
+    """Read a looks file (or ``example:NAME``, a shipped one); raise :class:`LooksError` (missing file included)."""
+    if str(path).lower().startswith("example:"):
+        from opportune import datasets
+
+        try:
+            path = datasets.example_path(str(path)[len("example:"):])
+        except KeyError as exc:
+            raise LooksError(Problem(str(exc.args[0]), "use one of these names, e.g. example:gearbox-table1",
+                                     code="io")) from None
     path = Path(path)
     try:
         with path.open("rb") as f:
