@@ -61,3 +61,20 @@ def test_version():
 
     out = CliRunner().invoke(app, ["--version"])
     assert out.exit_code == 0 and out.output.strip() == f"opportune {opportune.__version__}"
+
+
+def test_a_plan_from_standard_input():
+    import subprocess
+    import sys
+
+    from opportune.datasets import example_path, salbp_path
+
+    for source, expected in ((example_path("gearbox"), "336 admissible sequences"),
+                             (salbp_path("MITCHELL"), "1449624 admissible sequences")):
+        out = subprocess.run([sys.executable, "-m", "opportune.cli", "count", "-"], input=source.read_bytes(),
+                             capture_output=True, timeout=120)
+        assert out.returncode == 0, out.stderr
+        assert expected in out.stdout.decode()
+    out = subprocess.run([sys.executable, "-m", "opportune.cli", "check", "-"], input=b"parts: [a, a]\n",
+                         capture_output=True, timeout=120)
+    assert out.returncode == 1 and b"<stdin>" in out.stdout + out.stderr and b"Traceback" not in out.stderr

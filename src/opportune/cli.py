@@ -88,7 +88,7 @@ def __getattr__(name: str):  # ``cli.out`` and ``cli.err``, as before, without m
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json, SALBP .IN2 or .alb; or salbp:NAME, example:NAME "
+PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json, SALBP .IN2 or .alb; - for standard input; salbp:NAME, example:NAME "
                                      "(shipped: see `opportune examples`)", show_default=False)
 
 

@@ -100,7 +100,7 @@ def read_plan(path: str | Path) -> CheckResult:
     """Read and check a plan file of any supported format; never raises for bad content.
 
     ``salbp:NAME`` reads a SALBP graph shipped with the package, ``example:NAME`` an example
-    (:mod:`opportune.datasets`).
+    (:mod:`opportune.datasets`), and ``-`` standard input.
     """
     if str(path).lower().startswith(("salbp:", "example:")):
         from opportune import datasets
@@ -111,11 +111,17 @@ def read_plan(path: str | Path) -> CheckResult:
             example = "salbp:KILBRID" if str(path).lower().startswith("salbp:") else "example:gearbox"
             return CheckResult(None, [Problem(str(exc.args[0]), f"use one of these names, e.g. {example}",
                                               code="io")])
-    path = Path(path)
+    stdin = str(path) == "-"
+    path = Path("<stdin>") if stdin else Path(path)
     name = str(path)
     try:
-        with path.open("rb") as f:  # read at most the limit (and one byte more, to know): /dev/zero is a file too
-            raw = f.read(MAX_FILE_BYTES + 1)
+        if stdin:       # `-`: the plan on standard input (YAML or JSON by its content, .IN2 or .alb by its shape)
+            import sys
+
+            raw = sys.stdin.buffer.read(MAX_FILE_BYTES + 1)
+        else:
+            with path.open("rb") as f:  # read at most the limit (and one byte more, to know): /dev/zero is a file too
+                raw = f.read(MAX_FILE_BYTES + 1)
         if len(raw) > MAX_FILE_BYTES:
             return CheckResult(None, [Problem(f"{name} is larger than {MAX_FILE_BYTES:,} bytes; plan files of at most "
                                               f"{MAX_FILE_BYTES:,} bytes are read", "split the plan into smaller ones",
