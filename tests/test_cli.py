@@ -203,3 +203,10 @@ def test_count_states_a_wide_estimate_as_an_order_of_magnitude(monkeypatch, rel_
     result = runner.invoke(app, ["count", str(GEARBOX)])
     assert result.exit_code == 0, result.output
     assert words in result.output and absent not in result.output
+
+
+def test_count_after_an_unknown_part_answers_in_json_when_asked():
+    result = runner.invoke(app, ["count", str(GEARBOX), "--after", "zz", "--json"])
+    assert result.exit_code == 1
+    doc = json.loads(result.stdout)
+    assert "unknown part 'zz'" in doc["error"]["message"]

@@ -106,9 +106,13 @@ def _options(version: bool = typer.Option(False, "--version", callback=_version,
     """Least-commitment planning, scheduling and opportunistic execution (Fox & Kempf)."""
 
 
-def fail(message: str, code: int = 1) -> None:
-    """Print ``error: message`` (the one prefix; the message is text, never markup) and exit."""
-    _err().print(f"[bold red]error:[/] {_escape(message)}", markup=True)
+def fail(message: str, code: int = 1, *, as_json: bool = False) -> None:
+    """Print ``error: message`` (the one prefix; the message is text, never markup) and exit; with
+    ``as_json``, ``{"error": {"message": ...}}`` on standard output instead, for a caller reading JSON."""
+    if as_json:
+        print(json.dumps({"error": {"message": message, "exit_code": code}}, indent=2))
+    else:
+        _err().print(f"[bold red]error:[/] {_escape(message)}", markup=True)
     raise typer.Exit(code)
 
 
@@ -219,7 +223,7 @@ def count(
             sched = sched.install(part)
         except NotAdmissible as exc:
             done = " ".join(prefix[:i]) or "nothing"
-            fail(f"--after: {exc} (after installing {done}); the prefix is not admissible")
+            fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
     result = sched.count_result(time_limit=time_limit * 9 / 10)
     if as_json:
         doc = {
