@@ -456,3 +456,20 @@ def test_opportunistic_is_refused_when_the_first_looks_positions_do_not_fit(monk
     with pytest.raises(StrategyUnavailable) as info:
         prepare(StudyConfig(plan=GEAR, strategies=("opportunistic",), trials=1, count_time_limit=1.0))
     assert "expected positions" in str(info.value) and "--decision-budget" in str(info.value)
+
+
+def test_results_carry_their_provenance(tmp_path):
+    from opportune import __version__
+    from opportune.simulate import hash_config
+
+    one = study(strategies=("opportunistic",), trials=50)
+    doc = summary(one)["provenance"]
+    assert doc["opportune"] == __version__ and doc["schema_version"] >= 1
+    assert doc["study_sha256"] == hash_config(one.config) and doc["strategies"] == ["opportunistic"]
+    other = study(plan=make_plan(["a", "b"], {"b": ["a"]}), strategies=("opportunistic",), trials=50)
+    assert summary(other)["provenance"]["plan_sha256"] != doc["plan_sha256"]
+    # the same study on more workers: the same provenance (nothing in it depends on the machine or the run)
+    again = run_study(StudyConfig(plan=GEAR, strategies=("opportunistic",), trials=50), workers=2)
+    assert summary(again)["provenance"] == doc
+    write_outputs(one, tmp_path)
+    assert json.loads((tmp_path / "results.json").read_text())["provenance"]["plan_sha256"] == doc["plan_sha256"]

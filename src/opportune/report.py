@@ -11,6 +11,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shlex
+import sys
 from pathlib import Path
 
 from opportune.simulate import METRICS, StudyResult
@@ -83,6 +85,37 @@ def summary(result: StudyResult) -> dict:
         "planned_sequence": list(result.prepared.sequence),
         "notes": notes(result),
         "strategies": strategies,
+        "provenance": provenance(result),
+    }
+
+
+SCHEMA_VERSION = 1   # of this document; raised when a field changes meaning
+
+
+def provenance(result: StudyResult) -> dict:
+    """What made these numbers: versions, the plan's and the study's hashes, the policy settings.
+
+    The same study (same plan, settings and seed) gives the same document on any machine and any
+    number of workers, so nothing here depends on the machine or the time.
+    """
+    import hashlib
+    import platform
+
+    from opportune import __version__
+    from opportune.engine import native
+    from opportune.simulate import hash_config
+
+    cfg = result.config
+    plan_doc = json.dumps(cfg.plan.to_dict(), sort_keys=True, default=str)
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "opportune": __version__,
+        "python": platform.python_version(),
+        "compiled_core": native.available(),
+        "plan_sha256": hashlib.sha256(plan_doc.encode()).hexdigest(),
+        "study_sha256": hash_config(cfg),
+        "strategies": list(cfg.strategies),
+        "decision_budget": cfg.decision_budget,
     }
 
 
@@ -107,6 +140,8 @@ def write_outputs(result: StudyResult, out_dir: str | Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = []
     doc = summary(result)
+    if sys.argv and Path(sys.argv[0]).name == "opportune":   # the command that wrote the file, when it was one
+        doc["provenance"]["command"] = " ".join(shlex.quote(a) for a in ["opportune", *sys.argv[1:]])
     (out / "results.json").write_text(json.dumps(doc, indent=2) + "\n")
     written.append(out / "results.json")
     with open(out / "trials.csv", "w", newline="") as f:
