@@ -104,3 +104,26 @@ def test_replay_takes_a_policy_by_name():
     # the sixth look shows a part that is in its buffer: refused with the look's number, no traceback
     out = runner.invoke(app, ["replay", str(GEARBOX), looks, "--policy", "slack"])
     assert out.exit_code == 1 and "look 6" in out.output and "Traceback" not in out.output
+
+
+def test_lookahead_within_a_budget_goes_on_from_where_it_stopped():
+    """With a decision budget the programme gets most of each decision and resumes at the next; until
+    it has finished, decisions are the base's, marked as not the look-ahead's."""
+    import time
+
+    engine = OrderEngine(GEAR)
+    ahead = Lookahead(budget=0.005, visible=2)
+    exact = Lookahead(visible=2)
+    plan = engine.plan
+    rng = random.Random(3)
+    marked = 0
+    for _ in range(400):
+        look = tuple(sorted(rng.sample(plan.part_ids, 2), key=plan.index))
+        start = time.perf_counter()
+        action = ahead.choose_at(engine, 0, engine.all_strategies, (), math.inf, look)
+        assert time.perf_counter() - start < 1.0           # never the whole programme in one decision
+        if ahead.last_cost is None:
+            marked += 1
+            continue
+        assert action == exact.choose_at(engine, 0, engine.all_strategies, (), math.inf, look)
+    assert marked > 0 and ahead.last_cost is not None     # it did not fit at first, and then it did

@@ -327,7 +327,8 @@ def replay(
     makers = {"paper": Opportunistic, "opportunistic": Opportunistic, "bin-first": variants.BinFirst,
               "slack": variants.Slack}
     if policy == "lookahead":
-        chosen = variants.Lookahead(visible=plan.simulation.get("visible", 2), capacity=buffer_capacity)
+        chosen = variants.Lookahead(budget=decision_budget, visible=plan.simulation.get("visible", 2),
+                                    capacity=buffer_capacity)
     elif policy in makers:
         chosen = makers[policy](budget=decision_budget)
     else:
@@ -474,9 +475,11 @@ def simulate(
                          f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
         for note in doc["notes"]:
             _out().print(f"note: {note}")
-        if decision_budget is not None and set(COUNTING_STRATEGIES) & set(config.strategies):
-            _out().print(f"note: opportunistic decided within {1000 * decision_budget:g} ms per decision (estimated "
-                         "where exact counts did not fit): its numbers depend on this machine's speed")
+        budgeted = [s for s in config.strategies if s in COUNTING_STRATEGIES]
+        if decision_budget is not None and budgeted:
+            _out().print(f"note: {', '.join(budgeted)} decided within {1000 * decision_budget:g} ms per decision "
+                         "(estimated where exact counts did not fit): "
+                         f"{'its' if len(budgeted) == 1 else 'their'} numbers depend on this machine's speed")
         if out_dir:
             _out().print(f"wrote {', '.join(str(p) for p in written)}")
     if result.interrupted:

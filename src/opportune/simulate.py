@@ -233,7 +233,8 @@ def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepare
             return variants.BinFirst(budget=config.decision_budget, seed=config.seed)
         if strategy == "slack":
             return variants.Slack(budget=config.decision_budget, seed=config.seed)
-        return variants.Lookahead(visible=config.visible, capacity=capacity_for(strategy, config), costs=config.costs,
+        return variants.Lookahead(budget=config.decision_budget, visible=config.visible,
+                                  capacity=capacity_for(strategy, config), costs=config.costs,
                                   weights=config.weights if config.bin == "weighted" else None)
     if strategy == "random":
         return RandomChoice()

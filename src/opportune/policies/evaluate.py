@@ -26,14 +26,19 @@ Example
 from __future__ import annotations
 
 import sys
+import time
 
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 
-__all__ = ["PolicyEvaluator", "PolicyStuck"]
+__all__ = ["OutOfTime", "PolicyEvaluator", "PolicyStuck"]
 
 
 class PolicyStuck(RuntimeError):
     """The policy shakes at every look of some state it reaches: it never finishes."""
+
+
+class OutOfTime(RuntimeError):
+    """The programme passed its ``deadline``; the states it finished stay memoised."""
 
 
 class PolicyEvaluator(OptimalSolver):
@@ -50,6 +55,9 @@ class PolicyEvaluator(OptimalSolver):
             raise ValueError(f"'{getattr(policy, 'name', policy)}' chooses at random: its expected cost is "
                              "not defined by one decision rule; estimate it with `opportune simulate`")
         self.policy = policy
+        #: A ``time.perf_counter()`` value past which :meth:`value` raises :class:`OutOfTime` (None: none);
+        #: what it finished before stays, so a later call goes on from there.
+        self.deadline: float | None = None
         self._choose = getattr(policy, "choose_at", None)
         if self._choose is None:
             raise ValueError(f"'{getattr(policy, 'name', policy)}' cannot be evaluated exactly: it does not "
@@ -92,6 +100,8 @@ class PolicyEvaluator(OptimalSolver):
         if key[0] == self.engine.full:
             self._policy_values[key] = 0.0
             return 0.0
+        if self.deadline is not None and not len(self._policy_values) & 63 and time.perf_counter() > self.deadline:
+            raise OutOfTime("the policy's evaluation passed its deadline")
         if len(self._policy_values) >= self.max_states:
             raise OptimalTooLarge(f"evaluating the policy needs more than {self.max_states:,} states for this "
                                   "plan; raise the state limit, or estimate with `opportune simulate`")

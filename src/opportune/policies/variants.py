@@ -27,6 +27,7 @@ import time
 
 from opportune.engine.count import BudgetExceeded
 from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
+from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.opportunistic import Opportunistic
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
@@ -123,9 +124,14 @@ class Lookahead(BinFirst):
     #: Plans of more units than this decide as the base does (the programme would take too long).
     MAX_UNITS = 16
 
-    def __init__(self, base=None, *, max_states: int = 200_000, **solver_settings):
+    def __init__(self, base=None, *, budget: float | None = None, max_states: int = 200_000, **solver_settings):
         super().__init__()
-        self.base = base if base is not None else Slack()
+        # With a budget, the programme gets most of it at each decision, resuming where it stopped; a
+        # decision it does not finish in time is the base's (itself within the rest of the budget).
+        self.lookahead_budget = budget
+        self.deterministic = budget is None
+        self.base = base if base is not None else Slack()      # exact: the programme evaluates it
+        self.fallback = self.base if budget is None else Slack(budget=budget / 4)
         self.max_states = max_states
         self.settings = solver_settings
         self._evaluator = None
@@ -133,7 +139,6 @@ class Lookahead(BinFirst):
         self.last_cost: float | None = None
 
     def _values(self, engine):
-        from opportune.policies.evaluate import PolicyEvaluator
 
         if self._evaluator is None or self._evaluator.engine is not engine:
             self._evaluator = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
@@ -151,12 +156,18 @@ class Lookahead(BinFirst):
             self._too_large = True
         if not self._too_large:
             ev = self._values(engine)
+            if self.lookahead_budget is not None:
+                ev.deadline = time.perf_counter() + 0.7 * self.lookahead_budget
             try:
                 action, self.last_cost = self._best(ev, engine, mask, consistent, buffer, visible)
                 return action
+            except OutOfTime:
+                pass                        # this decision is the base's; the next one goes on from here
             except OptimalTooLarge:
                 self._too_large = True      # a large plan: decide as the base does from now on
-        return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
+            finally:
+                ev.deadline = None
+        return self.fallback.choose_at(engine, mask, consistent, buffer, free, visible)
 
     def _best(self, ev, engine, mask, consistent, buffer, visible) -> Action:
         plan = engine.plan
@@ -188,9 +199,13 @@ class Lookahead(BinFirst):
         action = self.choose(state, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
-        if self.last_cost is None:
+        if self.last_cost is None and self._too_large:
             return Decision(action, f"as the base rule ({self.base.name}): the plan is too large for the "
                                     f"look-ahead's exact programme (more than {self.max_states:,} states)")
+        if self.last_cost is None:
+            return Decision(action, f"as the base rule ({self.base.name}): the look-ahead's programme did not "
+                                    "finish within the decision budget (it goes on at the next look)",
+                            exact=False, method=self.base.name)
         return Decision(action, self.rule, note=f"expected remaining cost {self.last_cost:.4f} "
                                                 f"(base: {self.base.name})")
 
