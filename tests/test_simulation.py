@@ -473,3 +473,23 @@ def test_results_carry_their_provenance(tmp_path):
     assert summary(again)["provenance"] == doc
     write_outputs(one, tmp_path)
     assert json.loads((tmp_path / "results.json").read_text())["provenance"]["plan_sha256"] == doc["plan_sha256"]
+
+
+def test_figures_are_paper_ready_and_byte_identical_for_the_same_study(tmp_path):
+    """PNG at 300 dpi, SVG with its text as text, PDF; no dates: the same study writes the same bytes."""
+    one = study(strategies=("opportunistic", "random", "buffer"), trials=60)
+    again = study(strategies=("opportunistic", "random", "buffer"), trials=60)
+    a, b = tmp_path / "a", tmp_path / "b"
+    write_outputs(one, a)
+    write_outputs(again, b)
+    for stem in ("time_distribution", "mean_time"):
+        for ext in ("png", "svg", "pdf"):
+            assert (a / f"{stem}.{ext}").read_bytes() == (b / f"{stem}.{ext}").read_bytes(), f"{stem}.{ext}"
+        svg = (a / f"{stem}.svg").read_text()
+        assert "<text" in svg and "opportunistic" in svg and "<dc:date>" not in svg
+        assert (a / f"{stem}.pdf").read_bytes()[:4] == b"%PDF"
+    import struct
+    png = (a / "mean_time.png").read_bytes()
+    width = struct.unpack(">I", png[16:20])[0]
+    assert width >= 2000                                      # 9 inches at 300 dpi
+    assert "5th-95th percentile" in (a / "time_distribution.svg").read_text()
