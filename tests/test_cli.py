@@ -210,3 +210,17 @@ def test_count_after_an_unknown_part_answers_in_json_when_asked():
     assert result.exit_code == 1
     doc = json.loads(result.stdout)
     assert "unknown part 'zz'" in doc["error"]["message"]
+
+
+def test_graph_dpi_and_part_names(tmp_path):
+    import struct
+
+    small, large = tmp_path / "small.png", tmp_path / "large.png"
+    assert run("graph", GEARBOX, "-o", small, "--dpi", "72").exit_code == 0
+    assert run("graph", GEARBOX, "-o", large, "--dpi", "300").exit_code == 0
+    w_small = struct.unpack(">I", small.read_bytes()[16:20])[0]
+    w_large = struct.unpack(">I", large.read_bytes()[16:20])[0]
+    assert 3.5 < w_large / w_small < 4.7          # 300 / 72 = 4.2
+    dot = run("graph", GEARBOX, "--names").output
+    assert "cover" in dot                          # the cover's name, under its id "co"
+    assert "cover" not in run("graph", GEARBOX).output.replace("tooltip=cover", "")

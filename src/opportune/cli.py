@@ -264,6 +264,8 @@ def graph(
     plan_file: Path = PLAN_ARG,
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Output file: .svg, .png, .pdf or .dot"),
     fmt: Optional[str] = typer.Option(None, "--format", help="svg, png, pdf or dot (default: from the -o suffix)"),
+    names: bool = typer.Option(False, "--names", help="Write each part's name under its id"),
+    dpi: int = typer.Option(300, "--dpi", min=36, max=1200, help="Resolution of PNG output"),
 ):
     """Draw each strategy as a layered precedence diagram (like the paper's Figure 2)."""
     from opportune.formats.draw import DotMissing, render, to_dot
@@ -273,7 +275,7 @@ def graph(
     if fmt not in {"svg", "png", "pdf", "dot"}:
         fail(f"unknown format '{fmt}': use svg, png, pdf or dot", 2)
     if fmt == "dot":
-        source = to_dot(plan)
+        source = to_dot(plan, names=names)
         if output:
             output.write_text(source)
             _out().print(f"wrote {output}")
@@ -283,7 +285,7 @@ def graph(
     if output is None:
         fail(f"give an output file with -o FILE.{fmt}", 2)
     try:
-        render(plan, output, fmt)
+        render(plan, output, fmt, names=names, dpi=dpi if fmt == "png" else None)
     except DotMissing as exc:
         fail(str(exc))
     except OSError as exc:
