@@ -569,6 +569,44 @@ def examples(as_json: bool = typer.Option(False, "--json", help="Machine-readabl
         _out().print(f"{_escape(r['name']):<{width}}  {r['kind']:<5}  {_escape(r['about'])}")
     _out().print("e.g. opportune replay example:gearbox example:gearbox-table1; opportune count salbp:KILBRID")
 
+
+@app.command()
+def convert(
+    plan_file: Path = PLAN_ARG,
+    output: Path = typer.Argument(..., help="Output file: .yaml, .json, .graphml, .dot or .alb ('-' for standard "
+                                            "output with --to)", show_default=False),
+    to: Optional[str] = typer.Option(None, "--to", help="yaml, json, graphml, dot or alb (default: from the suffix)"),
+):
+    """Write a plan in another format (a GraphML or DOT file holds one strategy per graph; .alb one strategy)."""
+    import yaml
+
+    from opportune.formats.alb import alb_text
+    from opportune.formats.graphfiles import to_dot_precedence, to_graphml
+
+    plan = load_or_exit(plan_file)
+    fmt = (to or output.suffix.lstrip(".")).lower().replace("yml", "yaml").replace("gv", "dot")
+    writers = {"yaml": lambda: yaml.safe_dump(plan.to_dict(), sort_keys=False, allow_unicode=True),
+               "json": lambda: json.dumps(plan.to_dict(), indent=2, ensure_ascii=False) + "\n",
+               "graphml": lambda: to_graphml(plan), "dot": lambda: to_dot_precedence(plan),
+               "alb": lambda: alb_text(plan)}
+    if fmt not in writers:
+        fail(f"unknown output format '{fmt or output}': use .yaml, .json, .graphml, .dot or .alb (or --to)", 2)
+    if fmt in ("dot", "alb") and len(plan.strategies) > 1:
+        fail(f"{plan.name} has {len(plan.strategies)} strategies and a .{fmt} file holds one: write .yaml, .json "
+             "or .graphml (one graph per strategy)", 2)
+    try:
+        text = writers[fmt]()
+    except ValueError as exc:
+        fail(str(exc))
+    if str(output) == "-":
+        sys.stdout.write(text)
+        return
+    try:
+        output.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        fail(f"cannot write {output}: {exc.strerror or exc}")
+    _out().print(f"wrote {output}")
+
 @app.command()
 def schema():
     """Print the JSON Schema of plan files."""

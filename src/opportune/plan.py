@@ -156,6 +156,20 @@ class Plan:
         """A strategy's declared constraints as ``(before, after)`` part indices."""
         return [(self._index[b], self._index[a]) for b, a in strategy.pairs()]
 
+    def to_networkx(self, strategy: int = 0):
+        """One strategy as a ``networkx.DiGraph`` (parts as nodes with their data, cover relations as
+        edges); networkx is optional (``pip install networkx``)."""
+        from opportune.formats.graphfiles import plan_to_networkx
+
+        return plan_to_networkx(self, strategy)
+
+    @staticmethod
+    def from_networkx(graph, name: str | None = None) -> "Plan":
+        """A plan from a directed graph (edge ``a -> b``: a before b); raises :class:`PlanError`."""
+        from opportune.formats.graphfiles import plan_from_networkx
+
+        return plan_from_networkx(graph, name)
+
     def to_dict(self) -> dict:
         """The plan in the file schema (round-trips through :func:`opportune.formats.plan_from_dict`)."""
         parts: list = []

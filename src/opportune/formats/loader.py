@@ -136,6 +136,16 @@ def read_plan(path: str | Path) -> CheckResult:
 
     if is_alb(path, raw):
         return check_alb_bytes(raw, file=name)
+    suffix = path.suffix.lower()
+    head = raw[:400].lstrip()
+    if suffix == ".graphml" or (suffix not in YAML_SUFFIXES | JSON_SUFFIXES and head.startswith(b"<")):
+        from opportune.formats.graphfiles import check_graphml_bytes
+
+        return check_graphml_bytes(raw, file=name)
+    if suffix in (".dot", ".gv") or re.match(rb"(?:strict\s+)?digraph\b", head):
+        from opportune.formats.graphfiles import check_dot_bytes
+
+        return check_dot_bytes(raw, file=name)
     fmt = detect_format(path, raw[:200].decode("latin-1"))
     if fmt == "in2":
         from opportune.formats.salbp import check_in2_bytes
@@ -160,7 +170,7 @@ def not_utf8(raw: bytes, exc: UnicodeDecodeError, file: str | None) -> Problem:
 
 
 def load_plan(path: str | Path) -> Plan:
-    """Load a plan file (YAML, JSON or SALBP ``.IN2``); raise :class:`PlanError` with every problem.
+    """Load a plan file (YAML, JSON, SALBP ``.IN2`` or ``.alb``, GraphML, DOT); raise :class:`PlanError` with every problem.
 
     >>> plan = load_plan("examples/gearbox.yaml")  # doctest: +SKIP
     """

@@ -1,0 +1,430 @@
+"""Precedence graphs as GraphML and Graphviz DOT files, in and out, and as NetworkX graphs.
+
+A graph is a plan: each node a part (its id; ``label`` or ``name`` data its name; ``quantity``,
+``install`` and ``acquire`` data as in a plan file), each edge ``a -> b`` "a before b".  Several
+``<graph>`` elements of a GraphML file (or several ``digraph`` blocks... not in DOT: one per file)
+are several strategies over the same parts.  What is read goes through the same checks as a plan
+file (:func:`~opportune.formats.validate.check_document`), with every problem placed on the line of
+the file that caused it.
+
+Bounds: the file size of :func:`~opportune.formats.loader.read_plan`; no DTD or entity in GraphML
+(refused: they are how XML bombs work); the plan limits of :mod:`opportune.plan`.
+
+>>> from opportune import make_plan
+>>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+>>> check_dot_bytes(to_dot_precedence(plan).encode()).plan.strategies[0].requires["c"]
+('a', 'b')
+>>> check_graphml_bytes(to_graphml(plan).encode()).plan.part_ids
+('a', 'b', 'c')
+"""
+
+from __future__ import annotations
+
+import re
+from xml.parsers import expat
+from xml.sax.saxutils import escape, quoteattr
+
+from opportune.formats.loader import CheckResult, Document
+from opportune.formats.problems import Problem
+
+__all__ = ["check_dot_bytes", "check_graphml_bytes", "plan_from_networkx", "plan_to_networkx",
+           "to_dot_precedence", "to_graphml"]
+
+_NUMERIC = ("quantity", "install", "acquire")
+
+
+class _Bad(Exception):
+    def __init__(self, message: str, hint: str, line: int | None):
+        super().__init__(message)
+        self.problem = (message, hint, line)
+
+
+def _build(name: str, source: str, nodes: dict[str, dict], node_lines: dict[str, int],
+           graphs: list[tuple[str, list[tuple[str, str, int]]]], file: str | None) -> CheckResult:
+    """The plan document of parsed nodes and edges, checked like a plan file, problems on file lines."""
+    from opportune.formats.validate import check_document
+
+    lines: dict[tuple, int] = {}
+    parts = []
+    for i, (pid, attrs) in enumerate(nodes.items()):
+        entry: dict = {"id": pid}
+        for key in ("name", *_NUMERIC):
+            if key in attrs:
+                entry[key] = attrs[key]
+        parts.append(entry if len(entry) > 1 else pid)
+        lines[("parts", i)] = node_lines.get(pid, 1)
+    data: dict = {"name": name, "source": source, "parts": parts}
+
+    def requires_of(edges, prefix):
+        req: dict[str, list[str]] = {}
+        for a, b, line in edges:
+            req.setdefault(b, []).append(a)
+            lines[(*prefix, b, len(req[b]) - 1)] = line
+            lines.setdefault((*prefix, b), line)
+        return req
+
+    if len(graphs) == 1:
+        data["requires"] = requires_of(graphs[0][1], ("requires",))
+    else:
+        data["strategies"] = [{"name": gname, "requires": requires_of(edges, ("strategies", k, "requires"))}
+                              for k, (gname, edges) in enumerate(graphs)]
+    return check_document(Document(data, lines, file))
+
+
+def _number(text: str, what: str, line: int):
+    try:
+        value = float(text)
+    except ValueError:
+        raise _Bad(f"{what} is {text[:40]!r}, not a number", "write a number", line) from None
+    return int(value) if value.is_integer() and what.endswith("quantity") else value
+
+
+def _given(part, key: str):
+    """A part's cost as the plan gives it (None when it is the default, so files stay short)."""
+    value = getattr(part, key)
+    default = type(part).__dataclass_fields__[key].default
+    return None if value is None or value == default else value
+
+
+# ---------------------------------------------------------------- GraphML
+
+def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
+    """Read a GraphML file as a plan (one strategy per ``<graph>``), checked like any plan."""
+    keys: dict[str, str] = {}          # key id -> attribute name
+    nodes: dict[str, dict] = {}
+    node_lines: dict[str, int] = {}
+    graphs: list[tuple[str, list[tuple[str, str, int]]]] = []
+    stack: list[tuple[str, dict]] = []
+    text: list[str] = []
+    parser = expat.ParserCreate()
+
+    def refuse_dtd(*_args):
+        raise _Bad("the file declares a DTD or entities", "remove the <!DOCTYPE ...> and <!ENTITY ...> "
+                   "declarations: GraphML needs none", parser.CurrentLineNumber)
+
+    def start(tag, attrs):
+        tag = tag.rpartition(":")[2]
+        line = parser.CurrentLineNumber
+        if tag == "key":
+            keys[attrs.get("id", "")] = attrs.get("attr.name", attrs.get("id", ""))
+        elif tag == "graph":
+            if attrs.get("edgedefault", "directed") != "directed" and not stack_has("graph"):
+                raise _Bad("the graph is undirected", "a precedence graph is directed: edgedefault=\"directed\"",
+                           line)
+            graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
+        elif tag == "node":
+            pid = attrs.get("id")
+            if not pid:
+                raise _Bad("a node has no id", "give every <node> an id attribute", line)
+            nodes.setdefault(pid, {})
+            node_lines.setdefault(pid, line)
+        elif tag == "edge":
+            a, b = attrs.get("source"), attrs.get("target")
+            if not a or not b:
+                raise _Bad("an edge lacks its source or target", "write <edge source=\"a\" target=\"b\"/>", line)
+            if not graphs:
+                raise _Bad("an edge outside any <graph>", "put edges inside a <graph> element", line)
+            graphs[-1][1].append((a, b, line))
+        elif tag == "data":
+            text.clear()
+        stack.append((tag, attrs))
+
+    def stack_has(tag):
+        return any(t == tag for t, _ in stack)
+
+    def end(tag):
+        tag = tag.rpartition(":")[2]
+        _, attrs = stack.pop()
+        if tag == "data" and stack and stack[-1][0] == "node":
+            key = keys.get(attrs.get("key", ""), attrs.get("key", ""))
+            pid = stack[-1][1].get("id")
+            value = "".join(text).strip()
+            line = parser.CurrentLineNumber
+            if key in ("label", "name"):
+                nodes[pid]["name"] = value
+            elif key in _NUMERIC:
+                nodes[pid][key] = _number(value, f"node {pid}'s {key}", line)
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = text.append
+    parser.StartDoctypeDeclHandler = refuse_dtd
+    parser.EntityDeclHandler = refuse_dtd
+    try:
+        parser.Parse(raw, True)
+    except _Bad as exc:
+        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code="syntax")])
+    except expat.ExpatError as exc:
+        return CheckResult(None, [Problem(f"XML syntax error: {expat.ErrorString(exc.code)}",
+                                          "fix the XML at this line", file=file, line=exc.lineno, code="syntax")])
+    if not graphs:
+        return CheckResult(None, [Problem("no <graph> element", "a GraphML file holds its nodes and edges in a "
+                                          "<graph edgedefault=\"directed\">", file=file, line=1, code="syntax")])
+    for _, edges in graphs:
+        for a, b, line in edges:     # an edge may name a node declared nowhere: it is a part too
+            for pid in (a, b):
+                if pid not in nodes:
+                    nodes[pid] = {}
+                    node_lines[pid] = line
+    name = file.rsplit("/", 1)[-1].rsplit(".", 1)[0] if file else "graphml"
+    return _build(name, "GraphML precedence graph", nodes, node_lines, graphs, file)
+
+
+def to_graphml(plan) -> str:
+    """The plan as GraphML: one directed ``<graph>`` per strategy, its cover relations as edges."""
+    from opportune.engine.poset import Poset
+
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           '<graphml xmlns="http://graphml.graphdrawing.org/xmlns">',
+           '  <key id="name" for="node" attr.name="name" attr.type="string"/>',
+           '  <key id="quantity" for="node" attr.name="quantity" attr.type="int"/>',
+           '  <key id="install" for="node" attr.name="install" attr.type="double"/>',
+           '  <key id="acquire" for="node" attr.name="acquire" attr.type="double"/>']
+    ids = plan.part_ids
+    for strategy in plan.strategies:
+        out.append(f"  <graph id={quoteattr(strategy.name)} edgedefault=\"directed\">")
+        for part in plan.parts:
+            data = []
+            if part.name and part.name != part.id:
+                data.append(f'<data key="name">{escape(part.name)}</data>')
+            if part.quantity != 1:
+                data.append(f'<data key="quantity">{part.quantity}</data>')
+            for key in ("install", "acquire"):
+                value = _given(part, key)
+                if value is not None:
+                    data.append(f'<data key="{key}">{value:g}</data>')
+            out.append(f"    <node id={quoteattr(part.id)}>{''.join(data)}</node>" if data
+                       else f"    <node id={quoteattr(part.id)}/>")
+        pairs = [(ids.index(a), ids.index(b)) for b, before in strategy.requires.items() for a in before]
+        for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs():
+            out.append(f"    <edge source={quoteattr(ids[a])} target={quoteattr(ids[b])}/>")
+        out.append("  </graph>")
+    out.append("</graphml>")
+    return "\n".join(out) + "\n"
+
+
+# ---------------------------------------------------------------- DOT
+
+_TOKEN = re.compile(r'''
+    (?P<space>[ \t\r]+) | (?P<newline>\n) |
+    (?P<comment>//[^\n]*|\#[^\n]*|/\*.*?\*/) |
+    (?P<string>"(?:\\.|[^"\\])*") |
+    (?P<arrow>->) | (?P<undirected>--) |
+    (?P<punct>[{}\[\];,=:]) |
+    (?P<id>[A-Za-z_\x80-\uffff][A-Za-z_0-9\x80-\uffff]*|-?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)) |
+    (?P<other>.)''', re.VERBOSE | re.DOTALL)
+
+
+def _tokens(text: str) -> list[tuple[str, str, int]]:
+    out, line = [], 1
+    for m in _TOKEN.finditer(text):
+        kind, value = m.lastgroup, m.group()
+        if kind in ("space",):
+            continue
+        if kind == "newline":
+            line += 1
+            continue
+        if kind == "comment":
+            line += value.count("\n")
+            continue
+        if kind == "string":
+            value = re.sub(r'\\(.)', lambda s: s.group(1) if s.group(1) in '"\\' else "\\" + s.group(1), value[1:-1])
+            kind = "id"
+        if kind == "other":
+            raise _Bad(f"unexpected character {value!r}", "check the DOT syntax here", line)
+        if kind == "undirected":
+            raise _Bad("an undirected edge '--'", "a precedence graph is a digraph: write a -> b", line)
+        out.append((kind, value, line))
+    return out
+
+
+def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
+    """Read a Graphviz DOT digraph as a plan (edges ``a -> b -> c`` chain), checked like any plan.
+
+    The subset read: ``[strict] digraph [ID] { ... }`` with node statements (attributes ``label``
+    or ``name``, ``quantity``, ``install``, ``acquire``), edge chains with attributes, default
+    attribute statements and ``ID = ID`` (ignored), and subgraph blocks (their contents read as if
+    inline).  An edge to a subgraph is refused with its line.
+    """
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        from opportune.formats.loader import not_utf8
+
+        return CheckResult(None, [not_utf8(raw, exc, file)])
+    nodes: dict[str, dict] = {}
+    node_lines: dict[str, int] = {}
+    edges: list[tuple[str, str, int]] = []
+    try:
+        toks = _tokens(text)
+        i = 0
+
+        def peek(k=0):
+            return toks[i + k] if i + k < len(toks) else ("eof", "", toks[-1][2] if toks else 1)
+
+        def take(kind=None, value=None):
+            nonlocal i
+            tok = peek()
+            if (kind and tok[0] != kind) or (value is not None and tok[1] != value):
+                want = value or kind
+                raise _Bad(f"expected {want!r} but found {tok[1] or 'the end of the file'!r}",
+                           "check the DOT syntax here", tok[2])
+            i += 1
+            return tok
+
+        def attrs() -> dict[str, str]:
+            out: dict[str, str] = {}
+            while peek()[1] == "[":
+                take(value="[")
+                while peek()[1] != "]":
+                    key = take("id")
+                    take(value="=")
+                    out[key[1]] = take("id")[1]
+                    if peek()[1] in (",", ";"):
+                        take()
+                take(value="]")
+            return out
+
+        def node(pid: str, line: int, given: dict | None = None) -> None:
+            entry = nodes.setdefault(pid, {})
+            node_lines.setdefault(pid, line)
+            for key, value in (given or {}).items():
+                if key in ("label", "name"):
+                    entry["name"] = value
+                elif key in _NUMERIC:
+                    entry[key] = _number(value, f"node {pid}'s {key}", line)
+
+        def statements(depth: int) -> None:
+            if depth > 64:
+                raise _Bad("subgraphs nested more than 64 levels deep", "flatten the subgraphs", peek()[2])
+            while peek()[1] != "}":
+                if peek()[0] == "eof":
+                    raise _Bad("the file ends before the closing '}'", "close the digraph with '}'", peek()[2])
+                tok = peek()
+                if tok[1] == "subgraph" or tok[1] == "{":
+                    if tok[1] == "subgraph":
+                        take()
+                        if peek()[0] == "id":
+                            take()
+                    take(value="{")
+                    statements(depth + 1)
+                    take(value="}")
+                elif tok[1] in ("graph", "node", "edge") and peek(1)[1] == "[":
+                    take()
+                    attrs()
+                elif tok[0] == "id" and peek(1)[1] == "=":
+                    take(), take(), take("id")
+                elif tok[0] == "id":
+                    chain = [take("id")]
+                    while peek()[0] == "arrow":
+                        take()
+                        if peek()[1] in ("{", "subgraph"):
+                            raise _Bad("an edge to a subgraph", "write one edge per pair: a -> b; a -> c", peek()[2])
+                        chain.append(take("id"))
+                    given = attrs()
+                    if len(chain) == 1:
+                        node(chain[0][1], chain[0][2], given)
+                    for (_, a, la), (_, b, _) in zip(chain, chain[1:]):
+                        node(a, la)
+                        node(b, la)
+                        edges.append((a, b, la))
+                else:
+                    raise _Bad(f"unexpected {tok[1]!r}", "check the DOT syntax here", tok[2])
+                if peek()[1] in (";", ","):
+                    take()
+
+        if peek()[1] == "strict":
+            take()
+        head = take("id")
+        if head[1] == "graph":
+            raise _Bad("an undirected graph", "a precedence graph is a digraph: write 'digraph NAME { a -> b; }'",
+                       head[2])
+        if head[1] != "digraph":
+            raise _Bad(f"expected 'digraph' but found {head[1]!r}", "a DOT precedence graph starts with 'digraph'",
+                       head[2])
+        name = take("id")[1] if peek()[0] == "id" else (file.rsplit("/", 1)[-1].rsplit(".", 1)[0] if file else "dot")
+        take(value="{")
+        statements(0)
+        take(value="}")
+        if peek()[0] != "eof":
+            raise _Bad("more after the digraph's closing '}'", "one digraph per file", peek()[2])
+    except _Bad as exc:
+        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code="syntax")])
+    return _build(name, "DOT precedence graph", nodes, node_lines, [(name, edges)], file)
+
+
+def _dot_id(s: str) -> str:
+    return s if re.fullmatch(r"[A-Za-z_][A-Za-z_0-9]*", s) else '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def to_dot_precedence(plan, strategy: int = 0) -> str:
+    """One strategy of the plan as a DOT digraph: its cover relations, names as labels, the rest as
+    node attributes — the format :func:`check_dot_bytes` reads (a drawing is ``opportune graph``)."""
+    from opportune.engine.poset import Poset
+
+    s = plan.strategies[strategy]
+    ids = plan.part_ids
+    lines = [f"digraph {_dot_id(plan.name)} {{"]
+    for part in plan.parts:
+        attrs = []
+        if part.name and part.name != part.id:
+            attrs.append(f"label={_dot_id(part.name)}")
+        if part.quantity != 1:
+            attrs.append(f"quantity={part.quantity}")
+        for key in ("install", "acquire"):
+            value = _given(part, key)
+            if value is not None:
+                attrs.append(f"{key}={value:g}")
+        lines.append(f"  {_dot_id(part.id)}" + (f" [{', '.join(attrs)}]" if attrs else "") + ";")
+    pairs = [(ids.index(a), ids.index(b)) for b, before in s.requires.items() for a in before]
+    for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs():
+        lines.append(f"  {_dot_id(ids[a])} -> {_dot_id(ids[b])};")
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------- NetworkX (optional)
+
+def plan_to_networkx(plan, strategy: int = 0):
+    """One strategy as a ``networkx.DiGraph``: a node per part (its plan attributes as node data), an
+    edge per cover relation.  Needs networkx (``pip install networkx``)."""
+    try:
+        import networkx as nx
+    except ImportError:
+        raise ImportError("Plan.to_networkx needs networkx: pip install networkx") from None
+    from opportune.engine.poset import Poset
+
+    g = nx.DiGraph(name=plan.name)
+    for part in plan.parts:
+        data = {k: getattr(part, k) for k in ("name", "quantity", "install", "acquire") if getattr(part, k) is not None}
+        g.add_node(part.id, **data)
+    ids = plan.part_ids
+    s = plan.strategies[strategy]
+    pairs = [(ids.index(a), ids.index(b)) for b, before in s.requires.items() for a in before]
+    g.add_edges_from((ids[a], ids[b]) for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs())
+    return g
+
+
+def plan_from_networkx(graph, name: str | None = None):
+    """A plan from a directed graph (edges ``a -> b``: a before b; node data ``name``/``label``,
+    ``quantity``, ``install``, ``acquire``).  Raises :class:`~opportune.plan.PlanError` listing every
+    problem (a cycle among them), as ``opportune check`` would."""
+    from opportune.plan import PlanError
+
+    if not getattr(graph, "is_directed", lambda: False)():
+        raise PlanError([Problem("the graph is undirected", "a precedence graph is directed: use a networkx.DiGraph")])
+    nodes = {}
+    for pid, data in graph.nodes(data=True):
+        entry = {}
+        if "name" in data or "label" in data:
+            entry["name"] = str(data.get("name", data.get("label")))
+        for key in _NUMERIC:
+            if key in data:
+                entry[key] = data[key]
+        nodes[str(pid)] = entry
+    edges = [(str(a), str(b), 0) for a, b in graph.edges()]
+    result = _build(name or str(graph.graph.get("name") or "networkx"), "NetworkX graph", nodes, {},
+                    [("main", edges)], None)
+    if result.plan is None or result.errors:
+        raise PlanError(result.problems)
+    return result.plan
