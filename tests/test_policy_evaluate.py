@@ -82,7 +82,7 @@ def test_evaluate_command_prints_both_values_and_refuses_what_it_cannot_do():
     assert {"plan", "policy", "expected_time", "optimal", "ratio", "states"} <= set(doc)
     assert round(doc["expected_time"], 4) == 16.1236 and round(doc["optimal"], 4) == 15.8398
     assert abs(doc["ratio"] - doc["expected_time"] / doc["optimal"]) < 1e-12
-    for args, code, words in ((["--bin", "pile"], 2, "uniform or weighted"),
+    for args, code, words in ((["--bin", "conveyor"], 2, "uniform, weighted and pile"),
                               (["--policy", "random"], 2, "single decision rule"),
                               (["--policy", "nonsense"], 2, "choose from"),
                               (["--max-states", "10"], 1, "--max-states")):

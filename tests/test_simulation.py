@@ -315,8 +315,8 @@ def test_interrupted_before_a_strategy_finished_a_trial_still_reports(tmp_path):
 def test_bad_study_configurations():
     with pytest.raises(StudyError, match="unknown strategy 'magic'"):
         StudyConfig(plan=GEAR, strategies=("magic",)).validate()
-    with pytest.raises(StudyError, match="'optimal' is defined for the uniform and weighted"):
-        StudyConfig(plan=GEAR, strategies=("optimal",), bin="pile").validate()
+    with pytest.raises(StudyError, match="'optimal' is defined for the uniform, weighted and pile"):
+        StudyConfig(plan=GEAR, strategies=("optimal",), bin="conveyor").validate()
 
 
 # ---------------------------------------------------------------- report and CLI
@@ -367,8 +367,8 @@ def test_simulate_cli_errors():
 
     from opportune.cli import app
 
-    r = CliRunner().invoke(app, ["simulate", str(GEARBOX), "--strategies", "optimal", "--bin", "pile"])
-    assert r.exit_code == 1 and "uniform and weighted" in r.output and "Traceback" not in r.output
+    r = CliRunner().invoke(app, ["simulate", str(GEARBOX), "--strategies", "optimal", "--bin", "conveyor"])
+    assert r.exit_code == 1 and "uniform, weighted and pile" in r.output and "Traceback" not in r.output
     r = CliRunner().invoke(app, ["simulate", str(GEARBOX), "--strategies", "magic"])
     assert r.exit_code == 1 and "unknown strategy 'magic'" in r.output
 

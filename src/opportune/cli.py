@@ -413,7 +413,7 @@ def simulate(
     from opportune.report import TABLE_HEADER, summary, table_rows, write_outputs
     from dataclasses import replace
 
-    from opportune.simulate import (COUNTING_STRATEGIES, MARKOV_BINS, STRATEGIES, StrategyUnavailable, StudyConfig,
+    from opportune.simulate import (COUNTING_STRATEGIES, OPTIMAL_BINS, STRATEGIES, StrategyUnavailable, StudyConfig,
                                     StudyError, prepare, run_study)
     from opportune.worlds import TimeModel
 
@@ -422,8 +422,8 @@ def simulate(
     chosen_bin = bin_model or sim.get("bin", "uniform")
     explicit = strategies is not None
     names = [s.strip() for s in (strategies or "").split(",") if s.strip()] if explicit else \
-        [s for s in STRATEGIES if s != "optimal" or (chosen_bin in MARKOV_BINS and plan.n_units <= OPTIMAL_DEFAULT_UNITS)]
-    if not explicit and chosen_bin in MARKOV_BINS and plan.n_units > OPTIMAL_DEFAULT_UNITS:
+        [s for s in STRATEGIES if s != "optimal" or (chosen_bin in OPTIMAL_BINS and plan.n_units <= OPTIMAL_DEFAULT_UNITS)]
+    if not explicit and chosen_bin in OPTIMAL_BINS and plan.n_units > OPTIMAL_DEFAULT_UNITS:
         _err().print(f"note: 'optimal' left out: its state space grows exponentially and {plan.n_units} parts is "
                      f"beyond the default ({OPTIMAL_DEFAULT_UNITS}); ask for it with --strategies to try anyway")
     if explicit and not names:
@@ -507,15 +507,15 @@ def evaluate(
     from opportune.engine import OrderEngine
     from opportune.policies.evaluate import PolicyEvaluator, PolicyStuck
     from opportune.policies.optimal import OptimalTooLarge
-    from opportune.simulate import ALL_STRATEGIES, MARKOV_BINS, StudyConfig, StudyError, make_policy, prepare
+    from opportune.simulate import ALL_STRATEGIES, OPTIMAL_BINS, StudyConfig, StudyError, make_policy, prepare
     from opportune.worlds import TimeModel
 
     plan = load_or_exit(plan_file, json_errors=as_json)
     sim = plan.simulation
     chosen_bin = bin_model or sim.get("bin", "uniform")
-    if chosen_bin not in MARKOV_BINS:
-        fail(f"exact evaluation needs a bin whose looks depend only on its contents (uniform or weighted), "
-             f"not '{chosen_bin}': use `opportune simulate --bin {chosen_bin}` for a Monte Carlo estimate", 2)
+    if chosen_bin not in OPTIMAL_BINS:
+        fail(f"exact evaluation is defined for the uniform, weighted and pile bins, not '{chosen_bin}': use "
+             f"`opportune simulate --bin {chosen_bin}` for a Monte Carlo estimate", 2)
     unsuitable = ("optimal", "random", "pallet", "kitting")
     if policy not in ALL_STRATEGIES or policy in unsuitable:
         fail(f"unknown or unsuitable policy '{policy}': choose from "
@@ -528,11 +528,19 @@ def evaluate(
                              costs=TimeModel.from_plan(plan), optimal_states=max_states).validate()
         engine = OrderEngine(plan)
         chosen = make_policy(policy, engine, config, prepare(config, engine))
-        ev = PolicyEvaluator(engine, chosen, visible=config.visible, capacity=config.buffer_capacity,
-                             costs=config.costs, weights=config.weights if chosen_bin == "weighted" else None,
-                             max_states=max_states)
-        value = ev.value()
-        best = ev.optimal()
+        settings = dict(visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
+                        max_states=max_states)
+        if chosen_bin == "pile":
+            from opportune.policies.pile import PileSolver
+
+            ev, optimum = PileSolver(engine, chosen, **settings), PileSolver(engine, **settings)
+            value, best = ev.value(), optimum.value()
+            states, policy_states = optimum.states, ev.states
+        else:
+            ev = PolicyEvaluator(engine, chosen, weights=config.weights if chosen_bin == "weighted" else None,
+                                 **settings)
+            value, best = ev.value(), ev.optimal()
+            states, policy_states = ev.states, ev.policy_states
     except OptimalTooLarge:
         fail(f"the exact evaluation of {plan.name} needs more than {max_states:,} states: raise --max-states, "
              "or estimate with `opportune simulate`")
@@ -540,7 +548,7 @@ def evaluate(
         fail(str(exc))
     doc = {"plan": plan.name, "policy": policy, "bin": chosen_bin, "visible": config.visible,
            "buffer_capacity": config.buffer_capacity, "expected_time": value, "optimal": best,
-           "ratio": value / best if best else None, "states": ev.states, "policy_states": ev.policy_states}
+           "ratio": value / best if best else None, "states": states, "policy_states": policy_states}
     if as_json:
         print(json.dumps(doc, indent=2))
         return
@@ -549,7 +557,7 @@ def evaluate(
     _out().print(f"  {policy}: expected time {value:.4f}")
     _out().print(f"  optimum: expected time {best:.4f}")
     _out().print(f"  ratio {value / best:.5f} ({100 * (value / best - 1):+.2f}%); "
-                 f"{ev.states:,} states for the optimum, {ev.policy_states:,} reached by the policy")
+                 f"{states:,} states for the optimum, {policy_states:,} reached by the policy")
 
 
 

@@ -38,6 +38,7 @@ STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic
 MORE_STRATEGIES = ("paper", "bin-first", "slack", "lookahead")
 ALL_STRATEGIES = STRATEGIES + MORE_STRATEGIES
 MARKOV_BINS = ("uniform", "weighted")
+OPTIMAL_BINS = MARKOV_BINS + ("pile",)   # bins whose exact optimum is computed (policies/optimal.py, pile.py)
 
 
 class StudyError(ValueError):
@@ -79,8 +80,8 @@ class StudyConfig:
             raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(ALL_STRATEGIES)}")
         if self.bin not in ("uniform", "weighted", "pile", "conveyor"):
             raise StudyError(f"unknown bin model '{self.bin}': use uniform, weighted, pile or conveyor")
-        if "optimal" in self.strategies and self.bin not in MARKOV_BINS:
-            raise StudyError(f"'optimal' is defined for the uniform and weighted bins, not '{self.bin}': "
+        if "optimal" in self.strategies and self.bin not in OPTIMAL_BINS:
+            raise StudyError(f"'optimal' is defined for the uniform, weighted and pile bins, not '{self.bin}': "
                              "leave it out of --strategies or change --bin")
         if self.trials < 1:
             raise StudyError("--trials must be at least 1")
@@ -196,6 +197,12 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
 
 def _solver(engine, config):
     from opportune.policies.optimal import OptimalSolver
+
+    if config.bin == "pile":
+        from opportune.policies.pile import PileSolver
+
+        return PileSolver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
+                          max_states=config.optimal_states)
 
     return OptimalSolver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
                          weights=config.weights if config.bin == "weighted" else None,

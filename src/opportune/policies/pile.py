@@ -1,0 +1,189 @@
+"""The exact optimum, and the exact value of a policy, when the bin is a pile.
+
+In the ``pile`` bin (:class:`~opportune.worlds.bins.PileBin`) the robot sees the top ``visible``
+units of a randomly stacked pile; taking one uncovers the next, and a shake reshuffles the pile.
+What it sees is no longer a fresh draw at every look: the *window* stays until a unit is taken from
+it.  The hidden part of the pile is a uniformly random arrangement of the units not in the window
+(nothing the robot did depended on it), so the state is (installed, buffered, window) and
+
+    V(s, W) = c_look + min( m(s, W),  c_shake + S(s) ),      S(s) = Σ_W p(W) V(s, W)
+
+where ``m`` is the best move (taking a window unit brings a uniformly drawn hidden unit into the
+window; installing from the buffer keeps the window) and ``S`` the value of a freshly shaken pile,
+solved exactly like the uniform bin's shake loop (see :mod:`.optimal`).  A policy's value is the
+same recursion with its own action in place of the minimum.
+
+Example (the gearbox, 2 visible, unlimited buffer):
+
+>>> from opportune import load_plan                                # doctest: +SKIP
+>>> PileSolver(OrderEngine(load_plan("example:gearbox"))).value()  # doctest: +SKIP
+14.74...
+"""
+
+from __future__ import annotations
+
+import sys
+
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+
+__all__ = ["PileSolver"]
+
+
+class PileSolver(OptimalSolver):
+    """Exact least expected cost in the pile bin, and (with ``policy``) the exact cost of a policy.
+
+    Same settings as :class:`OptimalSolver` (the weights do not apply: a pile has none);
+    ``max_states`` bounds the (state, window) pairs.  Complexity: O(states × windows × moves).
+    """
+
+    def __init__(self, engine, policy=None, **settings):
+        settings.pop("weights", None)
+        super().__init__(engine, **settings)
+        if policy is not None and getattr(policy, "choose_at", None) is None:
+            raise ValueError(f"'{getattr(policy, 'name', policy)}' cannot be evaluated exactly: it does not "
+                             "decide on the state alone (no choose_at)")
+        if policy is not None and getattr(policy, "deterministic", True) is False:
+            raise ValueError(f"'{getattr(policy, 'name', policy)}' chooses at random: estimate it with "
+                             "`opportune simulate --bin pile`")
+        self.policy = policy
+        # one memo (OptimalSolver._values, which a study hands from its parent to its workers): window
+        # values under (key, window), values of a freshly shaken pile under ("shaken", key)
+        self._window_values = self._values
+        self._shaken = _Prefixed(self._values)
+
+    # ------------------------------------------------------------ public
+
+    def value(self, key: tuple | None = None) -> float:
+        """Expected cost from a freshly shaken pile at ``key`` (default: the start): the optimum, or
+        the policy's if one was given."""
+        key = self.start_key() if key is None else key
+        limit = sys.getrecursionlimit()
+        sys.setrecursionlimit(max(limit, 10_000))
+        try:
+            return self._shake_value(key)
+        finally:
+            sys.setrecursionlimit(limit)
+
+    @property
+    def states(self) -> int:
+        return len(self._values)
+
+    def best_action(self, key: tuple, look: tuple[int, ...]):
+        """The optimal action at a window (ties: install, then buffer, then declaration order)."""
+        from opportune.policies.base import SHAKE
+
+        s = self._shake_value(key)
+        best, best_cost = None, float("inf")
+        kind_rank = {"install": 0, "buffer": 1}
+        for cost, nxt, action in self._moves(key, look):
+            total = cost + self._after(key, look, action, nxt)
+            rank = (total, kind_rank[action.kind], self.plan.index(action.part), action.source != "bin")
+            if best is None or rank < best[0]:
+                best, best_cost = (rank, action), total
+        shake_cost = self.costs.shake + s
+        if best is None or best_cost > shake_cost + 1e-12:
+            return SHAKE, shake_cost
+        return best[1], best_cost
+
+    # ------------------------------------------------------------ the recursion
+
+    def _shake_value(self, key: tuple) -> float:
+        """S(key): the value of a freshly drawn window (the start, or after a shake)."""
+        cached = self._shaken.get(key)
+        if cached is not None:
+            return cached
+        if key[0] == self.engine.full:
+            self._shaken[key] = 0.0
+            return 0.0
+        c_look, c_shake = self.costs.look, self.costs.shake
+        moves = []        # (m(W), p(W)): the move's value, or None where the policy shakes
+        for window, p in self._looks(self._bin_counts(key)):
+            moves.append((self._move_value(key, window), p))
+        if self.policy is None:
+            s = self._solve_shake_loop([(float("inf") if m is None else m, p) for m, p in moves])
+        else:
+            acted = sum(p for m, p in moves if m is not None)
+            if acted <= 1e-15:
+                raise RuntimeError("the policy shakes at every window of a state it reaches: it never finishes")
+            s = (c_look + sum(p * m for m, p in moves if m is not None) + (1 - acted) * c_shake) / acted
+        self._shaken[key] = s
+        # the windows' own values, now that S is known
+        for (window, _), (m, _) in zip(self._looks(self._bin_counts(key)), moves):
+            shake = c_shake + s
+            self._window_values[(key, window)] = c_look + (shake if m is None else min(m, shake) if
+                                                           self.policy is None else m)
+        return s
+
+    def _window_value(self, key: tuple, window: tuple[int, ...]) -> float:
+        """V(key, W): a look at window W (the cost of the look included)."""
+        cached = self._window_values.get((key, window))
+        if cached is not None:
+            return cached
+        if key[0] == self.engine.full:
+            return 0.0
+        if len(self._values) >= self.max_states:
+            raise OptimalTooLarge(f"the pile bin needs more than {self.max_states:,} states for this plan; raise the "
+                                  "state limit, or estimate with `opportune simulate --bin pile`")
+        m = self._move_value(key, window)
+        shake = self.costs.shake + self._shake_value(key)
+        if self.policy is None:
+            v = self.costs.look + (shake if m is None else min(m, shake))
+        else:
+            v = self.costs.look + (shake if m is None else m)
+        self._window_values[(key, window)] = v
+        return v
+
+    def _move_value(self, key: tuple, window: tuple[int, ...]) -> float | None:
+        """The best move's cost to go (or the policy's move's; None: no move, or the policy shakes)."""
+        if self.policy is not None:
+            action = self._policy_action(key, window)
+            if action.kind == "shake":
+                return None
+            for cost, nxt, move in self._moves(key, window):
+                if move.kind == action.kind and move.part == action.part and (
+                        action.kind != "install" or (move.source or "bin") == (action.source or "bin")):
+                    return cost + self._after(key, window, move, nxt)
+            raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
+        best = None
+        for cost, nxt, move in self._moves(key, window):
+            v = cost + self._after(key, window, move, nxt)
+            if best is None or v < best:
+                best = v
+        return best
+
+    def _after(self, key: tuple, window: tuple[int, ...], move, nxt: tuple) -> float:
+        """Expected value after a move: a unit taken from the window is replaced by a hidden one."""
+        if move.kind == "install" and move.source == "buffer":
+            return self._window_value(nxt, window)
+        i = self.plan.index(move.part)
+        rest = list(window)
+        rest.remove(i)
+        # the units of the bin before the move that are not in the window
+        hidden = [c - window.count(j) for j, c in enumerate(self._bin_counts(key))]
+        total = sum(hidden)
+        if total == 0:
+            return self._window_value(nxt, tuple(sorted(rest)))
+        return sum(c / total * self._window_value(nxt, tuple(sorted(rest + [j])))
+                   for j, c in enumerate(hidden) if c)
+
+    def _policy_action(self, key: tuple, window: tuple[int, ...]):
+        mask, cons, buf = key
+        ids = self.ids
+        buffer = tuple(ids[i] for i, c in enumerate(buf) for _ in range(c))
+        free = float("inf") if self.capacity is None else self.capacity - sum(buf)
+        return self.policy.choose_at(self.engine, mask, cons, buffer, free, tuple(ids[i] for i in window))
+
+
+class _Prefixed:
+    """A view of a dict under keys ``("shaken", key)``."""
+
+    __slots__ = ("_d",)
+
+    def __init__(self, d: dict):
+        self._d = d
+
+    def get(self, key):
+        return self._d.get(("shaken", key))
+
+    def __setitem__(self, key, value) -> None:
+        self._d[("shaken", key)] = value
