@@ -55,3 +55,25 @@ def test_no_policy_beats_the_pile_optimum(plan):
         best = PileSolver(engine, capacity=capacity).value()
         for policy in (Opportunistic(), Slack()):
             assert PileSolver(engine, policy, capacity=capacity).value() >= best - 1e-9
+
+
+def test_lookahead_on_the_piles_own_programme():
+    from opportune.policies.variants import Lookahead
+
+    engine = OrderEngine(GEAR)
+    best = PileSolver(engine).value()
+    ahead = PileSolver(engine, Lookahead(visible=2, bin="pile")).value()
+    assert best - 1e-9 <= ahead <= best * 1.005        # issue 13: within 0.5% of the pile optimum
+    assert ahead < PileSolver(engine, Slack()).value()  # and better than its base
+
+
+@settings(max_examples=10, deadline=None)
+@given(plan=random_plans(max_parts=5, max_units=6, max_strategies=1))
+def test_pile_lookahead_is_never_worse_than_its_base(plan):
+    from opportune.policies.variants import Lookahead
+
+    engine = OrderEngine(plan)
+    for capacity in (None, 1):
+        base = PileSolver(engine, Slack(), capacity=capacity).value()
+        ahead = PileSolver(engine, Lookahead(visible=2, bin="pile", capacity=capacity), capacity=capacity).value()
+        assert ahead <= base + 1e-9

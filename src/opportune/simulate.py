@@ -241,7 +241,7 @@ def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepare
         if strategy == "slack":
             return variants.Slack(budget=config.decision_budget, seed=config.seed)
         return variants.Lookahead(budget=config.decision_budget, visible=config.visible,
-                                  capacity=capacity_for(strategy, config), costs=config.costs,
+                                  capacity=capacity_for(strategy, config), costs=config.costs, bin=config.bin,
                                   weights=config.weights if config.bin == "weighted" else None)
     if strategy == "random":
         return RandomChoice()

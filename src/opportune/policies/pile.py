@@ -23,6 +23,7 @@ Example (the gearbox, 2 visible, unlimited buffer):
 from __future__ import annotations
 
 import sys
+import time
 
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 
@@ -46,6 +47,9 @@ class PileSolver(OptimalSolver):
             raise ValueError(f"'{getattr(policy, 'name', policy)}' chooses at random: estimate it with "
                              "`opportune simulate --bin pile`")
         self.policy = policy
+        #: A ``time.perf_counter()`` value past which the recursion raises
+        #: :class:`~opportune.policies.evaluate.OutOfTime` (None: none); what it finished stays.
+        self.deadline: float | None = None
         # one memo (OptimalSolver._values, which a study hands from its parent to its workers): window
         # values under (key, window), values of a freshly shaken pile under ("shaken", key)
         self._window_values = self._values
@@ -121,6 +125,10 @@ class PileSolver(OptimalSolver):
             return cached
         if key[0] == self.engine.full:
             return 0.0
+        if self.deadline is not None and not len(self._values) & 63 and time.perf_counter() > self.deadline:
+            from opportune.policies.evaluate import OutOfTime
+
+            raise OutOfTime("the pile's programme passed its deadline")
         if len(self._values) >= self.max_states:
             raise OptimalTooLarge(f"the pile bin needs more than {self.max_states:,} states for this plan; raise the "
                                   "state limit, or estimate with `opportune simulate --bin pile`")

@@ -133,6 +133,10 @@ class Lookahead(BinFirst):
         self.base = base if base is not None else Slack()      # exact: the programme evaluates it
         self.fallback = self.base if budget is None else Slack(budget=budget / 4)
         self.max_states = max_states
+        # the pile bin has its own programme (policies/pile.py): the window is part of the state
+        self.pile = solver_settings.pop("bin", "uniform") == "pile"
+        if self.pile:
+            solver_settings.pop("weights", None)
         self.settings = solver_settings
         self._evaluator = None
         self._too_large = False
@@ -141,7 +145,12 @@ class Lookahead(BinFirst):
     def _values(self, engine):
 
         if self._evaluator is None or self._evaluator.engine is not engine:
-            self._evaluator = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
+            if self.pile:
+                from opportune.policies.pile import PileSolver
+
+                self._evaluator = PileSolver(engine, self.base, max_states=self.max_states, **self.settings)
+            else:
+                self._evaluator = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
             self._too_large = False
         return self._evaluator
 
@@ -179,12 +188,13 @@ class Lookahead(BinFirst):
         # the base's own action first, so that ties keep it (the improvement is then never worse)
         base = self.base.choose_at(engine, mask, consistent, buffer,
                                    float("inf") if ev.capacity is None else ev.capacity - len(buffer), visible)
-        here = ev.value(key)
+        here = ev.value(key)        # the base's expected cost from here after a shake (a fresh look or pile)
         best, best_cost = base, None
         kind_rank = {"install": 0, "buffer": 1}
         ranked = []
         for cost, nxt, action in ev._moves(key, look):
-            ranked.append((cost + ev.value(nxt), kind_rank[action.kind], plan.index(action.part), action))
+            after = ev._after(key, look, action, nxt) if self.pile else ev.value(nxt)
+            ranked.append((cost + after, kind_rank[action.kind], plan.index(action.part), action))
         ranked.append((ev.costs.shake + here, 2, 0, SHAKE))
         for total, _, _, action in ranked:
             if _same(action, base):
