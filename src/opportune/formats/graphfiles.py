@@ -79,6 +79,30 @@ def _number(text: str, what: str, line: int):
     return int(value) if value.is_integer() and what.endswith("quantity") else value
 
 
+def _node_data(part) -> list[tuple[str, str]]:
+    """A part's data as a file writes it: its name (if it has one besides its id), a quantity other
+    than 1, costs other than the defaults."""
+    out = []
+    if part.name and part.name != part.id:
+        out.append(("name", part.name))
+    if part.quantity != 1:
+        out.append(("quantity", str(part.quantity)))
+    for key in ("install", "acquire"):
+        value = _given(part, key)
+        if value is not None:
+            out.append((key, f"{value:g}"))
+    return out
+
+
+def _covers(plan, k: int) -> list[tuple[str, str]]:
+    """The cover relations of strategy ``k`` as part-id pairs: the fewest edges that give its order."""
+    from opportune.engine.poset import Poset
+
+    ids = plan.part_ids
+    pairs = [(ids.index(a), ids.index(b)) for b, before in plan.strategies[k].requires.items() for a in before]
+    return [(ids[a], ids[b]) for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs()]
+
+
 def _given(part, key: str):
     """A part's cost as the plan gives it (None when it is the default, so files stay short)."""
     value = getattr(part, key)
@@ -172,32 +196,20 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
 
 def to_graphml(plan) -> str:
     """The plan as GraphML: one directed ``<graph>`` per strategy, its cover relations as edges."""
-    from opportune.engine.poset import Poset
-
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            '<graphml xmlns="http://graphml.graphdrawing.org/xmlns">',
            '  <key id="name" for="node" attr.name="name" attr.type="string"/>',
            '  <key id="quantity" for="node" attr.name="quantity" attr.type="int"/>',
            '  <key id="install" for="node" attr.name="install" attr.type="double"/>',
            '  <key id="acquire" for="node" attr.name="acquire" attr.type="double"/>']
-    ids = plan.part_ids
-    for strategy in plan.strategies:
+    for k, strategy in enumerate(plan.strategies):
         out.append(f"  <graph id={quoteattr(strategy.name)} edgedefault=\"directed\">")
         for part in plan.parts:
-            data = []
-            if part.name and part.name != part.id:
-                data.append(f'<data key="name">{escape(part.name)}</data>')
-            if part.quantity != 1:
-                data.append(f'<data key="quantity">{part.quantity}</data>')
-            for key in ("install", "acquire"):
-                value = _given(part, key)
-                if value is not None:
-                    data.append(f'<data key="{key}">{value:g}</data>')
-            out.append(f"    <node id={quoteattr(part.id)}>{''.join(data)}</node>" if data
+            data = "".join(f'<data key="{key}">{escape(value)}</data>' for key, value in _node_data(part))
+            out.append(f"    <node id={quoteattr(part.id)}>{data}</node>" if data
                        else f"    <node id={quoteattr(part.id)}/>")
-        pairs = [(ids.index(a), ids.index(b)) for b, before in strategy.requires.items() for a in before]
-        for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs():
-            out.append(f"    <edge source={quoteattr(ids[a])} target={quoteattr(ids[b])}/>")
+        for a, b in _covers(plan, k):
+            out.append(f"    <edge source={quoteattr(a)} target={quoteattr(b)}/>")
         out.append("  </graph>")
     out.append("</graphml>")
     return "\n".join(out) + "\n"
@@ -360,25 +372,13 @@ def _dot_id(s: str) -> str:
 def to_dot_precedence(plan, strategy: int = 0) -> str:
     """One strategy of the plan as a DOT digraph: its cover relations, names as labels, the rest as
     node attributes — the format :func:`check_dot_bytes` reads (a drawing is ``opportune graph``)."""
-    from opportune.engine.poset import Poset
-
-    s = plan.strategies[strategy]
-    ids = plan.part_ids
     lines = [f"digraph {_dot_id(plan.name)} {{"]
     for part in plan.parts:
-        attrs = []
-        if part.name and part.name != part.id:
-            attrs.append(f"label={_dot_id(part.name)}")
-        if part.quantity != 1:
-            attrs.append(f"quantity={part.quantity}")
-        for key in ("install", "acquire"):
-            value = _given(part, key)
-            if value is not None:
-                attrs.append(f"{key}={value:g}")
+        attrs = [f"{'label' if key == 'name' else key}={_dot_id(value) if key == 'name' else value}"
+                 for key, value in _node_data(part)]
         lines.append(f"  {_dot_id(part.id)}" + (f" [{', '.join(attrs)}]" if attrs else "") + ";")
-    pairs = [(ids.index(a), ids.index(b)) for b, before in s.requires.items() for a in before]
-    for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs():
-        lines.append(f"  {_dot_id(ids[a])} -> {_dot_id(ids[b])};")
+    for a, b in _covers(plan, strategy):
+        lines.append(f"  {_dot_id(a)} -> {_dot_id(b)};")
     lines.append("}")
     return "\n".join(lines) + "\n"
 
@@ -392,16 +392,11 @@ def plan_to_networkx(plan, strategy: int = 0):
         import networkx as nx
     except ImportError:
         raise ImportError("Plan.to_networkx needs networkx: pip install networkx") from None
-    from opportune.engine.poset import Poset
-
     g = nx.DiGraph(name=plan.name)
     for part in plan.parts:
         data = {k: getattr(part, k) for k in ("name", "quantity", "install", "acquire") if getattr(part, k) is not None}
         g.add_node(part.id, **data)
-    ids = plan.part_ids
-    s = plan.strategies[strategy]
-    pairs = [(ids.index(a), ids.index(b)) for b, before in s.requires.items() for a in before]
-    g.add_edges_from((ids[a], ids[b]) for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs())
+    g.add_edges_from(_covers(plan, strategy))
     return g
 
 
