@@ -482,3 +482,29 @@ def test_a_revoked_token_is_refused(svc, plan_id):
         error_of(c.post("/runs", {"plan": plan_id}), 401)
     finally:
         c.close()
+
+
+def test_the_event_stream_says_when_the_run_completes_and_ends(svc, a, plan_id):
+    """Issue 12: when a run completes (the look after its last part answers `done`), the stream sends a
+    `complete` event and ends; a stream opened on a complete run gets its snapshot and `complete` at once."""
+    run_id = new_run(a, plan_id)
+    got: list = []
+
+    def listen():
+        with httpx.Client(base_url=svc.url, headers=a.http.headers, timeout=30) as h:
+            with h.stream("GET", f"/runs/{run_id}/events") as r:
+                got.extend(read_events(r, 100, timeout=25))    # returns when the server ends the stream
+
+    t = threading.Thread(target=listen)
+    t.start()
+    time.sleep(0.5)
+    drive_table1(a, run_id)
+    t.join(30)
+    assert not t.is_alive()
+    assert got[-1][0] == "complete" and got[-2][0] == "look" and got[-2][2]["row"]["action"]["kind"] == "done"
+    done = got[-1][2]
+    assert done["run"] == run_id and done["installed"] == ["ca", "ba", "rl", "dr", "sm", "ml", "ra", "co", "st", "cl"]
+    with httpx.Client(base_url=svc.url, headers=a.http.headers, timeout=10) as h:
+        with h.stream("GET", f"/runs/{run_id}/events") as r:
+            again = read_events(r, 100, timeout=8)
+    assert [e for e, _, _ in again] == ["snapshot", "complete"]

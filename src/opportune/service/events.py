@@ -66,6 +66,17 @@ class Broker:
                 return
 
 
+def _complete(run) -> bool:
+    return isinstance(run, dict) and run.get("status") == "complete"
+
+
+def _completion(run: dict) -> dict:
+    """The ``complete`` event: the run's id, its final sequence, and what was installed in what order."""
+    state = run.get("state") or {}
+    return {"run": run.get("id"), "seq": run.get("seq"), "installed": state.get("installed"),
+            "progress": run.get("progress")}
+
+
 def event_payload(kind: str, answer: dict) -> dict:
     """What a stream sends for a committed event: the row it added or completed and the run's state."""
     out = {"seq": answer.get("seq"), "kind": kind, "run": answer.get("run")}
@@ -91,6 +102,9 @@ async def stream(run_id: int, snapshot: dict, broker: Broker,
     try:
         yield "retry: 2000\n\n"
         yield sse("snapshot", snapshot, id=last)
+        if _complete(snapshot.get("run")):
+            yield sse("complete", _completion(snapshot["run"]), id=last)
+            return
         next_check = clock() + recheck
         next_keepalive = clock() + keepalive
         while True:
@@ -102,8 +116,13 @@ async def stream(run_id: int, snapshot: dict, broker: Broker,
             sub.clear()
             batch = await run_in_threadpool(events_after, run_id, last)
             for seq, kind, answer in batch:
-                yield sse(kind, event_payload(kind, answer), id=seq)
+                payload = event_payload(kind, answer)
+                yield sse(kind, payload, id=seq)
                 last = seq
+                if _complete(payload.get("run")):
+                    # the last part is in: say so, and end the stream (nothing can happen to the run now)
+                    yield sse("complete", _completion(payload["run"]), id=seq)
+                    return
             if batch:
                 next_keepalive = clock() + keepalive
                 continue

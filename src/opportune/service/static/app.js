@@ -170,6 +170,8 @@ function initRun() {
       });
     }
     es.addEventListener("closed", () => { es.close(); relogin("The token is no longer valid."); });
+    // the run is complete: nothing more will happen to it, so stop listening (no reconnecting)
+    es.addEventListener("complete", () => { es.close(); view.es = null; setLive(false, "complete"); });
     es.onerror = () => {  // tickets are short-lived: reconnect with a new one
       es.close();
       setLive(false, "reconnecting");
