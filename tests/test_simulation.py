@@ -493,3 +493,21 @@ def test_figures_are_paper_ready_and_byte_identical_for_the_same_study(tmp_path)
     width = struct.unpack(">I", png[16:20])[0]
     assert width >= 2000                                      # 9 inches at 300 dpi
     assert "5th-95th percentile" in (a / "time_distribution.svg").read_text()
+
+
+def test_paired_differences_use_the_same_bins_and_are_tighter():
+    """Trial i of every strategy draws the same bin: the difference of two strategies is measured on
+    pairs, with an interval much narrower than the two means' (and that contains their difference)."""
+    from opportune.report import paired_difference
+
+    r = study(strategies=("opportunistic", "random"), trials=1500)
+    doc = summary(r)["strategies"]
+    paired = doc["random"]["paired_with_opportunistic"]
+    diff = doc["random"]["time"]["mean"] - doc["opportunistic"]["time"]["mean"]
+    assert abs(paired["mean_difference"] - diff) < 1e-9 and paired["n"] == 1500
+    lo, hi = paired["ci95"]
+    assert lo <= diff <= hi
+    unpaired = doc["random"]["time"]["ci95"][1] - doc["random"]["time"]["ci95"][0]
+    assert hi - lo < unpaired / 2
+    assert paired_difference(r.trials["random"][:1], r.trials["opportunistic"]) is None
+    assert "paired_with_opportunistic" not in doc["opportunistic"]
