@@ -279,10 +279,10 @@ class Counter {
     }
 
     // Returns (status, value bytes or None, new entries): status 0 done, 1 entry limit, 2 time limit.
-    py::tuple count(const std::string& mask, int direction, long long max_new, double seconds,
-                    long long max_total) {
+    // (The caller resets the memo when it is over its cap, between top-level counts: never here,
+    // within one, where the recursions above the core rely on what it has stored.)
+    py::tuple count(const std::string& mask, int direction, long long max_new, double seconds) {
         B s = unpack(mask);
-        if ((long long)size_ > max_total) reset();
         start_budget(max_new, seconds, direction);
         int status = 0;
         Val v{0, 1};
@@ -324,9 +324,6 @@ class Counter {
         tails_.push_back(std::make_unique<Tails>());
         tails_.back()->marks = unpack(marks);
         return int(tails_.size()) - 1;
-    }
-    size_t tails_size(int handle) const {
-        return handle >= 0 && handle < (int)tails_.size() && tails_[handle] ? tails_[handle]->memo.size() : 0;
     }
     void tails_drop(int handle) {
         if (handle >= 0 && handle < (int)tails_.size()) tails_[handle].reset();
@@ -758,14 +755,13 @@ void bind(py::module_& m, const char* name) {
         .def(py::init<int, const std::vector<std::string>&, const std::vector<std::string>&>(),
              py::arg("n"), py::arg("below"), py::arg("above"))
         .def("count", &Counter<W>::count, py::arg("mask"), py::arg("direction"), py::arg("max_new"),
-             py::arg("seconds"), py::arg("max_total"),
+             py::arg("seconds"),
              "(status, little-endian value bytes or None, new entries); status 0 done, 1 entry limit, "
              "2 time limit")
         .def("lookup", &Counter<W>::lookup, py::arg("mask"))
         .def("put", &Counter<W>::put, py::arg("mask"), py::arg("value"))
         .def("tails_new", &Counter<W>::tails_new, py::arg("marks"))
         .def("tails_drop", &Counter<W>::tails_drop, py::arg("handle"))
-        .def("tails_size", &Counter<W>::tails_size, py::arg("handle"))
         .def("tail", &Counter<W>::tail, py::arg("handle"), py::arg("mask"), py::arg("max_new"),
              py::arg("seconds"))
         .def("size", &Counter<W>::size)

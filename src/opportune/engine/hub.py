@@ -73,7 +73,7 @@ class TailCounter:
         self.deadline = deadline
         self._memo: dict[int, list[int]] = {}
         n = self.poset.n
-        self._binom = [[comb(i, k) for k in range(i + 1)] for i in range(n + 2)]
+        self._binom: list[list[int]] = []     # Pascal's triangle, built with the Python recursion
         self._rec = None
         # the compiled core runs this recursion too (its counts from the counter's compiled memo)
         self._core = counter._native if counter.compiled and counter._direction == 0 and n <= NATIVE_TAILS else None
@@ -126,6 +126,8 @@ class TailCounter:
         marks = self.marks
         count = self.counter.count
         scan = self.counter.scan
+        if not self._binom:     # the compiled core keeps its own: only the Python recursion needs it
+            self._binom = [[comb(i, k) for k in range(i + 1)] for i in range(self.poset.n + 2)]
         binom = self._binom
         merge, merge_plain = self._merge, self._merge_plain
         perf = time.perf_counter

@@ -74,8 +74,7 @@ class NativeCounter:
         self.max_total = max_total
 
     def count(self, mask: int, direction: int, max_new: int, seconds: float) -> tuple[int, int | None, int]:
-        big = 1 << 62     # the core's "no limit" (a memo never holds that many)
-        status, value, added = self._core.count(mask.to_bytes(self._nbytes, "little"), direction, max_new, seconds, big)
+        status, value, added = self._core.count(mask.to_bytes(self._nbytes, "little"), direction, max_new, seconds)
         return status, (int.from_bytes(value, "little") if value is not None else None), added
 
     def over(self, max_total: int | None = None) -> bool:
