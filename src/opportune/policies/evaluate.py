@@ -25,10 +25,9 @@ Example
 
 from __future__ import annotations
 
-import sys
 import time
 
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
 
 __all__ = ["OutOfTime", "PolicyEvaluator", "PolicyStuck"]
 
@@ -42,7 +41,7 @@ class OutOfTime(RuntimeError):
 
 
 class PolicyEvaluator(OptimalSolver):
-    """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at`` or ``decide``).
+    """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at``).
 
     Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
     shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it).
@@ -51,32 +50,26 @@ class PolicyEvaluator(OptimalSolver):
 
     def __init__(self, engine, policy, **settings):
         super().__init__(engine, **settings)
-        if getattr(policy, "deterministic", True) is False:
-            raise ValueError(f"'{getattr(policy, 'name', policy)}' chooses at random: its expected cost is "
-                             "not defined by one decision rule; estimate it with `opportune simulate`")
+        check_evaluable(policy)
         self.policy = policy
         #: A ``time.perf_counter()`` value past which :meth:`value` raises :class:`OutOfTime` (None: none);
         #: what it finished before stays, so a later call goes on from there.
         self.deadline: float | None = None
-        self._choose = getattr(policy, "choose_at", None)
-        if self._choose is None:
-            raise ValueError(f"'{getattr(policy, 'name', policy)}' cannot be evaluated exactly: it does not "
-                             "decide on the state alone (no choose_at)")
         self._policy_values: dict[tuple, float] = {}
 
     def value(self, key: tuple | None = None) -> float:
         """Expected remaining cost of the policy from a state (default: the start)."""
-        key = self.start_key() if key is None else key
-        limit = sys.getrecursionlimit()
-        sys.setrecursionlimit(max(limit, 10_000))
-        try:
-            return self._policy_value(key)
-        finally:
-            sys.setrecursionlimit(limit)
+        return self._deep(self._policy_value, key)
 
     def optimal(self) -> float:
         """The optimum from the start, for comparison (see :class:`OptimalSolver`)."""
         return OptimalSolver.value(self)
+
+    def _after(self, key, look, action, nxt) -> float:
+        return self._policy_value(nxt)
+
+    def _after_shake(self, key) -> float:
+        return self._policy_value(key)
 
     @property
     def policy_states(self) -> int:
@@ -84,14 +77,6 @@ class PolicyEvaluator(OptimalSolver):
         return len(self._policy_values)
 
     # ------------------------------------------------------------ internals
-
-    def _act(self, key: tuple, look: tuple[int, ...]):
-        mask, cons, buf = key
-        ids = self.ids
-        visible = tuple(ids[i] for i in look)
-        buffer = tuple(ids[i] for i, c in enumerate(buf) for _ in range(c))
-        free = float("inf") if self.capacity is None else self.capacity - sum(buf)
-        return self._choose(self.engine, mask, cons, buffer, free, visible)
 
     def _policy_value(self, key: tuple) -> float:
         cached = self._policy_values.get(key)
@@ -108,17 +93,11 @@ class PolicyEvaluator(OptimalSolver):
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
         p_shake = 0.0
         for look, p in self._looks(self._bin_counts(key)):
-            action = self._act(key, look)
-            if action.kind == "shake":
+            move = self._policy_move(self.policy, key, look)
+            if move is None:
                 p_shake += p
-                continue
-            for cost, nxt, move in self._moves(key, look):
-                if move.kind == action.kind and move.part == action.part and (
-                        action.kind != "install" or (move.source or "bin") == (action.source or "bin")):
-                    moved += p * (cost + self._policy_value(nxt))
-                    break
             else:
-                raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
+                moved += p * (move[0] + self._policy_value(move[1]))
         if p_shake >= 1.0 - 1e-15:
             raise PolicyStuck(f"'{getattr(self.policy, 'name', 'the policy')}' shakes at every look of a state "
                               "it reaches: it never finishes there")

@@ -153,12 +153,22 @@ class Opportunistic(DecidesOnMasks):
         self._starts = 0
         self._share = {"install": EXACT_SHARE[1], "buffer": EXACT_SHARE[1]}
 
+    #: The rules in words, as the decisions give them (variants say theirs).
+    rule_install = "install the candidate that keeps the most options"
+    rule_buffer = "nothing can be installed: buffer the visible part needed earliest"
+
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
         """The action on the machine form of a state: :func:`choose_exact`, or within the budget."""
+        return self._how(engine, mask, consistent, buffer, free, visible)[0]
+
+    def _how(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+             visible: tuple[str, ...]) -> tuple[Action, "_How"]:
+        """The action and how it was reached: the one place a variant changes the rule (see
+        :mod:`~opportune.policies.variants`), for ``choose_at`` and ``decide`` alike."""
         if self.budget is None:
-            return choose_exact(engine, mask, consistent, buffer, free, visible)
-        return self._budgeted(engine, mask, consistent, buffer, free, visible)[0]
+            return choose_exact(engine, mask, consistent, buffer, free, visible), _EXACT
+        return self._budgeted(engine, mask, consistent, buffer, free, visible)
 
     # ------------------------------------------------------------ within a budget
 
@@ -252,21 +262,16 @@ class Opportunistic(DecidesOnMasks):
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
         start = time.perf_counter()
-        if self.budget is None:
-            action, how = self.choose(state, visible), _EXACT
-        else:
-            sched = state.schedule
-            action, how = self._budgeted(sched.engine, sched.mask, sched.consistent, state.buffer,
-                                         state.buffer_free, visible)
+        sched = state.schedule
+        action, how = self._how(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         if not how.exact:
-            rule = ("install the candidate that keeps the most options" if action.kind == "install"
-                    else "nothing can be installed: buffer the visible part needed earliest")
+            rule = self.rule_install if action.kind == "install" else self.rule_buffer
             return Decision(action, rule, note=how.note, exact=False, method=how.method, estimates=how.estimates,
                             confidence=how.confidence, seconds=time.perf_counter() - start)
         if action.kind == "install":
-            rule = "install the candidate that keeps the most options"
+            rule = self.rule_install
             try:   # the options of a lone candidate were not needed to decide: count them if they fit
                 with state.schedule.engine.deadline(None if self.budget is None
                                                     else start + self.budget * (1 - MARGIN)):
@@ -278,7 +283,7 @@ class Opportunistic(DecidesOnMasks):
             candidates = tuple(Candidate(part, source, -key[0], total, key[2], pos) for key, part, source, pos in ranked)
             return Decision(action, rule, candidates, seconds=time.perf_counter() - start)
         if action.kind == "buffer":
-            rule = "nothing can be installed: buffer the visible part needed earliest"
+            rule = self.rule_buffer
             try:
                 with state.schedule.engine.deadline(None if self.budget is None
                                                     else start + self.budget * (1 - MARGIN)):

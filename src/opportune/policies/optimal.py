@@ -61,10 +61,14 @@ class OptimalSolver:
 
     def key_of(self, state) -> tuple:
         """The solver's key for a sequencer :class:`~opportune.sequencer.State`."""
+        return (state.schedule.mask, state.schedule.consistent, self.buffer_counts(state.buffer))
+
+    def buffer_counts(self, buffer) -> tuple[int, ...]:
+        """The buffer as the solver keeps it: units buffered per part, in declaration order."""
         buf = [0] * len(self.ids)
-        for p in state.buffer:
+        for p in buffer:
             buf[self.plan.index(p)] += 1
-        return (state.schedule.mask, state.schedule.consistent, tuple(buf))
+        return tuple(buf)
 
     def _installed_counts(self, mask: int) -> list[int]:
         counts = [0] * len(self.ids)
@@ -130,6 +134,40 @@ class OptimalSolver:
                     nb[i] -= 1
                     yield self.move[i], (mask | 1 << u, after, tuple(nb)), Action("install", self.ids[i], "buffer")
 
+    def _policy_move(self, policy, key: tuple, look: tuple[int, ...]):
+        """The move ``policy`` makes at ``key`` on ``look``, as ``(cost, next key, action)`` of
+        :meth:`_moves`, or None when it shakes; a move that is not legal there is a ``ValueError``.
+        The policy decides on the machine form of the state (``choose_at``)."""
+        mask, cons, buf = key
+        ids = self.ids
+        buffer = tuple(ids[i] for i, c in enumerate(buf) for _ in range(c))
+        free = float("inf") if self.capacity is None else self.capacity - sum(buf)
+        action = policy.choose_at(self.engine, mask, cons, buffer, free, tuple(ids[i] for i in look))
+        if action.kind == "shake":
+            return None
+        for move in self._moves(key, look):
+            if same_action(move[2], action):
+                return move
+        raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
+
+    def _after(self, key: tuple, look: tuple[int, ...], action: Action, nxt: tuple) -> float:
+        """Expected cost to go after ``action`` (a fresh look follows every move in a Markov bin)."""
+        return self._value(nxt)
+
+    def _after_shake(self, key: tuple) -> float:
+        """Expected cost to go after a shake at ``key`` (plus the shake's own cost)."""
+        return self._value(key)
+
+    def _deep(self, solve, key: tuple | None) -> float:
+        """``solve(key)`` (default: the start) with room for the recursion: one level per part moved."""
+        key = self.start_key() if key is None else key
+        limit = sys.getrecursionlimit()
+        sys.setrecursionlimit(max(limit, 10_000))
+        try:
+            return solve(key)
+        finally:
+            sys.setrecursionlimit(limit)
+
     def _bin_counts(self, key: tuple) -> tuple[int, ...]:
         mask, _, buf = key
         inst = self._installed_counts(mask)
@@ -139,13 +177,7 @@ class OptimalSolver:
 
     def value(self, key: tuple | None = None) -> float:
         """Minimum expected remaining cost from a state (default: the start)."""
-        key = self.start_key() if key is None else key
-        limit = sys.getrecursionlimit()
-        sys.setrecursionlimit(max(limit, 10_000))
-        try:
-            return self._value(key)
-        finally:
-            sys.setrecursionlimit(limit)
+        return self._deep(self._value, key)
 
     def _value(self, key: tuple) -> float:
         cached = self._values.get(key)
@@ -186,11 +218,11 @@ class OptimalSolver:
 
     def best_action(self, key: tuple, look: tuple[int, ...]) -> tuple[Action, float]:
         """The optimal action for a state and look (ties: install, then buffer, then declaration order)."""
-        v = self._value(key)
+        v = self._after_shake(key)
         best, best_cost = None, float("inf")
         kind_rank = {"install": 0, "buffer": 1}
         for c, nxt, action in self._moves(key, look):
-            total = c + self._value(nxt)
+            total = c + self._after(key, look, action, nxt)
             rank = (total, kind_rank[action.kind], self.plan.index(action.part), action.source != "bin")
             if best is None or rank < best[0]:
                 best, best_cost = (rank, action), total
@@ -198,6 +230,22 @@ class OptimalSolver:
         if best is None or best_cost > shake_cost + 1e-12:
             return SHAKE, shake_cost
         return best[1], best_cost
+
+
+def same_action(a: Action, b: Action) -> bool:
+    """The same move: kind and part, and for an installation the same source (bin by default)."""
+    return a.kind == b.kind and a.part == b.part and (a.kind != "install" or (a.source or "bin") == (b.source or "bin"))
+
+
+def check_evaluable(policy, bin_name: str = "") -> None:
+    """Refuse, with a ``ValueError`` that says why, a policy whose exact value is not defined or not
+    computable: one that chooses at random, or one that does not decide on the state alone."""
+    name = getattr(policy, "name", policy)
+    if getattr(policy, "deterministic", True) is False:
+        raise ValueError(f"'{name}' chooses at random: its expected cost is not defined by one decision rule; "
+                         f"estimate it with `opportune simulate{' --bin ' + bin_name if bin_name else ''}`")
+    if getattr(policy, "choose_at", None) is None:
+        raise ValueError(f"'{name}' cannot be evaluated exactly: it does not decide on the state alone (no choose_at)")
 
 
 class Optimal:

@@ -22,10 +22,9 @@ Example (the gearbox, 2 visible, unlimited buffer):
 
 from __future__ import annotations
 
-import sys
 import time
 
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
 
 __all__ = ["PileSolver"]
 
@@ -40,12 +39,8 @@ class PileSolver(OptimalSolver):
     def __init__(self, engine, policy=None, **settings):
         settings.pop("weights", None)
         super().__init__(engine, **settings)
-        if policy is not None and getattr(policy, "choose_at", None) is None:
-            raise ValueError(f"'{getattr(policy, 'name', policy)}' cannot be evaluated exactly: it does not "
-                             "decide on the state alone (no choose_at)")
-        if policy is not None and getattr(policy, "deterministic", True) is False:
-            raise ValueError(f"'{getattr(policy, 'name', policy)}' chooses at random: estimate it with "
-                             "`opportune simulate --bin pile`")
+        if policy is not None:
+            check_evaluable(policy, "pile")
         self.policy = policy
         #: A ``time.perf_counter()`` value past which the recursion raises
         #: :class:`~opportune.policies.evaluate.OutOfTime` (None: none); what it finished stays.
@@ -60,34 +55,14 @@ class PileSolver(OptimalSolver):
     def value(self, key: tuple | None = None) -> float:
         """Expected cost from a freshly shaken pile at ``key`` (default: the start): the optimum, or
         the policy's if one was given."""
-        key = self.start_key() if key is None else key
-        limit = sys.getrecursionlimit()
-        sys.setrecursionlimit(max(limit, 10_000))
-        try:
-            return self._shake_value(key)
-        finally:
-            sys.setrecursionlimit(limit)
+        return self._deep(self._shake_value, key)
 
     @property
     def states(self) -> int:
         return len(self._values)
 
-    def best_action(self, key: tuple, look: tuple[int, ...]):
-        """The optimal action at a window (ties: install, then buffer, then declaration order)."""
-        from opportune.policies.base import SHAKE
-
-        s = self._shake_value(key)
-        best, best_cost = None, float("inf")
-        kind_rank = {"install": 0, "buffer": 1}
-        for cost, nxt, action in self._moves(key, look):
-            total = cost + self._after(key, look, action, nxt)
-            rank = (total, kind_rank[action.kind], self.plan.index(action.part), action.source != "bin")
-            if best is None or rank < best[0]:
-                best, best_cost = (rank, action), total
-        shake_cost = self.costs.shake + s
-        if best is None or best_cost > shake_cost + 1e-12:
-            return SHAKE, shake_cost
-        return best[1], best_cost
+    def _after_shake(self, key: tuple) -> float:
+        return self._shake_value(key)      # a shake restacks the pile: a fresh window
 
     # ------------------------------------------------------------ the recursion
 
@@ -144,14 +119,8 @@ class PileSolver(OptimalSolver):
     def _move_value(self, key: tuple, window: tuple[int, ...]) -> float | None:
         """The best move's cost to go (or the policy's move's; None: no move, or the policy shakes)."""
         if self.policy is not None:
-            action = self._policy_action(key, window)
-            if action.kind == "shake":
-                return None
-            for cost, nxt, move in self._moves(key, window):
-                if move.kind == action.kind and move.part == action.part and (
-                        action.kind != "install" or (move.source or "bin") == (action.source or "bin")):
-                    return cost + self._after(key, window, move, nxt)
-            raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
+            chosen = self._policy_move(self.policy, key, window)
+            return None if chosen is None else chosen[0] + self._after(key, window, chosen[2], chosen[1])
         best = None
         for cost, nxt, move in self._moves(key, window):
             v = cost + self._after(key, window, move, nxt)
@@ -173,13 +142,6 @@ class PileSolver(OptimalSolver):
             return self._window_value(nxt, tuple(sorted(rest)))
         return sum(c / total * self._window_value(nxt, tuple(sorted(rest + [j])))
                    for j, c in enumerate(hidden) if c)
-
-    def _policy_action(self, key: tuple, window: tuple[int, ...]):
-        mask, cons, buf = key
-        ids = self.ids
-        buffer = tuple(ids[i] for i, c in enumerate(buf) for _ in range(c))
-        free = float("inf") if self.capacity is None else self.capacity - sum(buf)
-        return self.policy.choose_at(self.engine, mask, cons, buffer, free, tuple(ids[i] for i in window))
 
 
 class _Prefixed:

@@ -26,9 +26,10 @@ from __future__ import annotations
 import time
 
 from opportune.engine.count import BudgetExceeded
-from opportune.policies.base import DONE, SHAKE, Action, Decision, shared_action
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.opportunistic import Opportunistic
+from opportune.policies.optimal import OptimalTooLarge, same_action
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
 
@@ -45,17 +46,10 @@ class BinFirst(Opportunistic):
     name = "bin-first"
     rule_install = "install a visible candidate before a buffered one, the one that keeps the most options"
 
-    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
-                  visible: tuple[str, ...]) -> Action:
+    def _how(self, engine, mask, consistent, buffer, free, visible):
         if buffer and visible and engine.installable_among(mask, consistent, visible):
             buffer = ()     # the bin's candidates only: the buffered ones keep for a later look
-        return super().choose_at(engine, mask, consistent, buffer, free, visible)
-
-    def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        action = self.choose(state, visible)
-        if action.kind == "install" and action.source == "bin" and state.buffer:
-            return Decision(action, self.rule_install)
-        return super().decide(state, visible)
+        return super()._how(engine, mask, consistent, buffer, free, visible)
 
 
 class Slack(BinFirst):
@@ -66,24 +60,27 @@ class Slack(BinFirst):
     """
 
     name = "slack"
-    rule_buffer = "nothing can be installed: buffer the visible part with the least slack"
 
     def __init__(self, weight: float = 0.1, **kwargs):
         super().__init__(**kwargs)
         self.weight = weight
 
-    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
-                  visible: tuple[str, ...]) -> Action:
-        action = super().choose_at(engine, mask, consistent, buffer, free, visible)
+    @property
+    def rule_buffer(self) -> str:
+        return (f"nothing can be installed: buffer the visible part with the least slack (expected position, "
+                f"minus the installs it waits for, minus {self.weight:g} per step waiting on it)")
+
+    def _how(self, engine, mask, consistent, buffer, free, visible):
+        action, how = super()._how(engine, mask, consistent, buffer, free, visible)
         if action.kind != "buffer" or len(set(visible)) == 1:
-            return action
+            return action, how
         if self.budget is None:
-            return shared_action("buffer", self.least_slack(engine, mask, consistent, visible))
+            return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
         try:    # within a budget: the slack if its positions fit half a budget more, else the paper's choice
             with engine.deadline(time.perf_counter() + self.budget / 2):
-                return shared_action("buffer", self.least_slack(engine, mask, consistent, visible))
+                return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
         except BudgetExceeded:
-            return action
+            return action, how
 
     def least_slack(self, engine, mask: int, consistent: int, visible: tuple[str, ...]) -> str:
         """The visible part with the least slack (ties: declaration order)."""
@@ -102,14 +99,8 @@ class Slack(BinFirst):
                 best = key
         return best[2]
 
-    def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        action = self.choose(state, visible)
-        if action.kind == "buffer":
-            return Decision(action, self.rule_buffer, note=f"slack weight {self.weight:g} per step waiting on it")
-        return super().decide(state, visible)
 
-
-class Lookahead(BinFirst):
+class Lookahead(DecidesOnMasks):
     """One step of policy improvement over ``base`` (default :class:`Slack`), exact on small plans.
 
     ``solver_settings`` are the bin and costs of the world it acts in (``visible``, ``capacity``,
@@ -125,7 +116,6 @@ class Lookahead(BinFirst):
     MAX_UNITS = 16
 
     def __init__(self, base=None, *, budget: float | None = None, max_states: int = 200_000, **solver_settings):
-        super().__init__()
         # With a budget, the programme gets most of it at each decision, resuming where it stopped; a
         # decision it does not finish in time is the base's (itself within the rest of the budget).
         self.lookahead_budget = budget
@@ -143,7 +133,6 @@ class Lookahead(BinFirst):
         self.last_cost: float | None = None
 
     def _values(self, engine):
-
         if self._evaluator is None or self._evaluator.engine is not engine:
             if self.pile:
                 from opportune.policies.pile import PileSolver
@@ -156,8 +145,6 @@ class Lookahead(BinFirst):
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        from opportune.policies.optimal import OptimalTooLarge
-
         if mask == engine.full:
             return DONE
         self.last_cost = None
@@ -168,7 +155,8 @@ class Lookahead(BinFirst):
             if self.lookahead_budget is not None:
                 ev.deadline = time.perf_counter() + 0.7 * self.lookahead_budget
             try:
-                action, self.last_cost = self._best(ev, engine, mask, consistent, buffer, visible)
+                action, self.last_cost = ev._deep(
+                    lambda key: self._best(ev, engine, key, buffer, visible), (mask, consistent, ev.buffer_counts(buffer)))
                 return action
             except OutOfTime:
                 pass                        # this decision is the base's; the next one goes on from here
@@ -178,31 +166,25 @@ class Lookahead(BinFirst):
                 ev.deadline = None
         return self.fallback.choose_at(engine, mask, consistent, buffer, free, visible)
 
-    def _best(self, ev, engine, mask, consistent, buffer, visible) -> Action:
+    def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):
+        """``(action, its expected cost)``: the least of cost plus the base's cost to go after it."""
+        mask, consistent, _ = key
         plan = engine.plan
-        counts = [0] * len(plan.parts)
-        for p in buffer:
-            counts[plan.index(p)] += 1
-        key = (mask, consistent, tuple(counts))
         look = tuple(sorted(plan.index(p) for p in visible))
         # the base's own action first, so that ties keep it (the improvement is then never worse)
         base = self.base.choose_at(engine, mask, consistent, buffer,
                                    float("inf") if ev.capacity is None else ev.capacity - len(buffer), visible)
-        here = ev.value(key)        # the base's expected cost from here after a shake (a fresh look or pile)
         best, best_cost = base, None
         kind_rank = {"install": 0, "buffer": 1}
-        ranked = []
-        for cost, nxt, action in ev._moves(key, look):
-            after = ev._after(key, look, action, nxt) if self.pile else ev.value(nxt)
-            ranked.append((cost + after, kind_rank[action.kind], plan.index(action.part), action))
-        ranked.append((ev.costs.shake + here, 2, 0, SHAKE))
+        ranked = [(cost + ev._after(key, look, action, nxt), kind_rank[action.kind], plan.index(action.part), action)
+                  for cost, nxt, action in ev._moves(key, look)]
+        ranked.append((ev.costs.shake + ev._after_shake(key), 2, 0, SHAKE))
         for total, _, _, action in ranked:
-            if _same(action, base):
+            if same_action(action, base):
                 best_cost = total
-        for total, _, _, action in sorted(ranked, key=lambda r: r[:3]):
-            if best_cost is None or total < best_cost - 1e-12:
-                best, best_cost = action, total
-            break
+        total, _, _, action = min(ranked, key=lambda r: r[:3])
+        if best_cost is None or total < best_cost - 1e-12:
+            best, best_cost = action, total
         return best, best_cost
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
@@ -218,8 +200,3 @@ class Lookahead(BinFirst):
                             exact=False, method=self.base.name)
         return Decision(action, self.rule, note=f"expected remaining cost {self.last_cost:.4f} "
                                                 f"(base: {self.base.name})")
-
-
-def _same(a: Action, b: Action) -> bool:
-    return a.kind == b.kind and a.part == b.part and (a.kind != "install" or (a.source or "bin") == (b.source or "bin"))
-
