@@ -502,7 +502,8 @@ def test_paired_differences_use_the_same_bins_and_are_tighter():
 
     r = study(strategies=("opportunistic", "random"), trials=1500)
     doc = summary(r)["strategies"]
-    paired = doc["random"]["paired_with_opportunistic"]
+    paired = doc["random"]["paired"]
+    assert paired["with"] == "opportunistic"
     diff = doc["random"]["time"]["mean"] - doc["opportunistic"]["time"]["mean"]
     assert abs(paired["mean_difference"] - diff) < 1e-9 and paired["n"] == 1500
     lo, hi = paired["ci95"]
@@ -510,4 +511,4 @@ def test_paired_differences_use_the_same_bins_and_are_tighter():
     unpaired = doc["random"]["time"]["ci95"][1] - doc["random"]["time"]["ci95"][0]
     assert hi - lo < unpaired / 2
     assert paired_difference(r.trials["random"][:1], r.trials["opportunistic"]) is None
-    assert "paired_with_opportunistic" not in doc["opportunistic"]
+    assert "paired" not in doc["opportunistic"]

@@ -475,11 +475,9 @@ def simulate(
         if result.prepared.optimal_start is not None:
             _out().print(f"optimal expected time (exact): {result.prepared.optimal_start:.4f} "
                          f"({result.prepared.optimal_states:,} states, {result.prepared.optimal_seconds:.1f} s)")
-        paired = [(name, s[key]) for name, s in doc["strategies"].items()
-                  for key in s if key.startswith("paired_with_") and s[key]]
+        paired = [(name, s["paired"]) for name, s in doc["strategies"].items() if "paired" in s]
         if paired:
-            reference = next(k for k in doc["strategies"][paired[0][0]] if k.startswith("paired_with_"))[12:]
-            _out().print(f"paired with {reference} on the same bins (mean difference of time, 95% interval): "
+            _out().print(f"paired with {paired[0][1]['with']} on the same bins (mean difference of time, 95% interval): "
                          + "; ".join(f"{name} {p['mean_difference']:+.3f} ({p['ci95'][0]:+.3f} .. {p['ci95'][1]:+.3f})"
                                      for name, p in paired))
         for note in doc["notes"]:

@@ -76,8 +76,9 @@ def summary(result: StudyResult) -> dict:
     reference = next((r for r in ("opportunistic", "paper") if result.trials.get(r)), None)
     if reference is not None:
         for name, trials in result.trials.items():
-            if name != reference and trials:
-                strategies[name]["paired_with_" + reference] = paired_difference(trials, result.trials[reference])
+            paired = paired_difference(trials, result.trials[reference]) if name != reference and trials else None
+            if paired is not None:
+                strategies[name]["paired"] = {"with": reference, **paired}
     return {
         "plan": cfg.plan.name,
         "bin": cfg.bin,
@@ -132,15 +133,10 @@ def paired_difference(trials, reference) -> dict | None:
     """
     mine = {t.trial: t.time for t in trials}
     pairs = [mine[t.trial] - t.time for t in reference if t.trial in mine]
-    n = len(pairs)
-    if n < 2:
+    if len(pairs) < 2:
         return None
-    mean = sum(pairs) / n
-    sd = math.sqrt(sum((d - mean) ** 2 for d in pairs) / (n - 1))
-    from opportune.engine.sampling import t_quantile
-
-    half = t_quantile(0.975, n - 1) * sd / math.sqrt(n)
-    return {"n": n, "mean_difference": mean, "ci95": [mean - half, mean + half]}
+    low, high = _t_interval(pairs)
+    return {"n": len(pairs), "mean_difference": sum(pairs) / len(pairs), "ci95": [low, high]}
 
 
 def notes(result: StudyResult) -> list[str]:
