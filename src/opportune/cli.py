@@ -54,7 +54,7 @@ app = typer.Typer(
     # rich.traceback, pygments and attrs (~0.1 s, most of `opportune count --help`).  Help uses the
     # terminal's width, up to 120 columns, as the rich panels did.
     rich_markup_mode=None,
-    context_settings={"max_content_width": 120},
+    context_settings={"max_content_width": 120, "help_option_names": ["-h", "--help"]},
 )
 _consoles: dict[str, Console] = {}
 
@@ -88,8 +88,20 @@ def __getattr__(name: str):  # ``cli.out`` and ``cli.err``, as before, without m
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+def _complete_plan(incomplete: str) -> list[str]:
+    """Shell completion of a plan argument: the shipped plans by name (``salbp:``, ``example:``); nothing
+    otherwise, so that the shell completes file names (the scripts fall back to them)."""
+    from opportune.datasets import EXAMPLE_PREFIX, PREFIX, examples, salbp_names
+
+    if ":" in incomplete or PREFIX.startswith(incomplete) or EXAMPLE_PREFIX.startswith(incomplete):
+        names = [PREFIX + n for n in salbp_names()] + [EXAMPLE_PREFIX + n for n, _, _ in examples()]
+        return [n for n in names if n.startswith(incomplete)] if incomplete else []
+    return []
+
+
 PLAN_ARG = typer.Argument(..., help="Plan file: .yaml, .json, SALBP .IN2 or .alb; - for standard input; salbp:NAME, example:NAME "
-                                     "(shipped: see `opportune examples`)", show_default=False)
+                                     "(shipped: see `opportune examples`)", show_default=False,
+                          autocompletion=_complete_plan)
 
 
 def _version(value: bool) -> None:
@@ -104,13 +116,34 @@ def _version(value: bool) -> None:
 def _options(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
                                           help="Print the version and exit")) -> None:
     """Least-commitment planning, scheduling and opportunistic execution (Fox & Kempf)."""
+    global _json_errors
+    _json_errors = False   # a new command (the tests run many in one process); its --json sets it again
 
 
-def fail(message: str, code: int = 1, *, as_json: bool = False) -> None:
-    """Print ``error: message`` (the one prefix; the message is text, never markup) and exit; with
-    ``as_json``, ``{"error": {"message": ...}}`` on standard output instead, for a caller reading JSON."""
-    if as_json:
-        print(json.dumps({"error": {"message": message, "exit_code": code}}, indent=2))
+# Set by a command's --json (eagerly, before its other parameters): every error it reports is JSON too.
+_json_errors = False
+
+
+def _json_mode(value: bool) -> bool:
+    global _json_errors
+    _json_errors = _json_errors or bool(value)
+    return value
+
+
+def json_option(help: str = "Machine-readable output (errors too: {\"error\": {...}} on standard output)"):
+    """The ``--json`` option of a command: its output and its errors as JSON."""
+    return typer.Option(False, "--json", help=help, callback=_json_mode, is_eager=True)
+
+
+def _print_error(error: dict, code: int) -> None:
+    print(json.dumps({"error": {**error, "exit_code": code}}, indent=2))
+
+
+def fail(message: str, code: int = 1, *, as_json: bool | None = None) -> None:
+    """Print ``error: message`` (the one prefix; the message is text, never markup) and exit; under
+    ``--json``, ``{"error": {"message": ...}}`` on standard output instead, for a caller reading JSON."""
+    if _json_errors if as_json is None else as_json:
+        _print_error({"message": message}, code)
     else:
         _err().print(f"[bold red]error:[/] {_escape(message)}", markup=True)
     raise typer.Exit(code)
@@ -120,7 +153,10 @@ def fail_problem(problem) -> None:
     """Print one :class:`~opportune.formats.problems.Problem` as ``check`` does (``where: error: ...``) and exit 1."""
     from opportune.formats.loader import CheckResult
 
-    _print_problems(CheckResult(None, [problem]), _err())
+    if _json_errors:
+        _print_error({"message": problem.message, **problem.to_dict()}, 1)
+    else:
+        _print_problems(CheckResult(None, [problem]), _err())
     raise typer.Exit(1)
 
 
@@ -146,9 +182,9 @@ def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
 
     result = read_plan(path)
     if not result.ok:
-        if json_errors:
-            print(json.dumps({"file": str(path), "valid": False,
-                              "problems": [p.to_dict() for p in result.problems]}, indent=2))
+        if json_errors or _json_errors:
+            _print_error({"message": f"{path}: not a valid plan ({len(result.errors)} error(s))", "file": str(path),
+                          "problems": [p.to_dict() for p in result.problems]}, 1)
         else:
             _print_problems(CheckResult(None, result.errors), _err())
             _err().print(f"{path}: {len(result.errors)} error(s); run `opportune check {path}` for details")
@@ -160,26 +196,46 @@ def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
 
 
 @app.command()
-def check(plan_file: Path = PLAN_ARG, as_json: bool = typer.Option(False, "--json", help="Machine-readable output")):
-    """Validate a plan: exit 0 with a summary, or 1 with every problem found."""
+def check(plan_files: list[Path] = typer.Argument(..., help="Plan files (any format `count` reads; - for standard "
+                                                              "input; salbp:NAME, example:NAME)", show_default=False,
+                                                  autocompletion=_complete_plan),
+          as_json: bool = json_option("Machine-readable output: one file's document, or "
+                                      "{\"valid\", \"files\": [...]} for several")):
+    """Validate plans: exit 0 with a summary of each, or 1 with every problem of every file."""
     from opportune.formats.loader import read_plan
     from opportune.formats.summary import summarize
 
-    result = read_plan(plan_file)
-    summary = summarize(result.plan) if result.ok else None
+    docs, ok = [], True
+    for i, plan_file in enumerate(plan_files):
+        result = read_plan(plan_file)
+        ok &= result.ok
+        if as_json:
+            doc = {"file": str(plan_file), "valid": result.ok, "problems": [p.to_dict() for p in result.problems]}
+            if result.ok:
+                doc.update(summarize(result.plan))
+            docs.append(doc)
+            continue
+        if i:
+            _out().print()
+        _print_check(plan_file, result)
     if as_json:
-        doc = {"file": str(plan_file), "valid": result.ok, "problems": [p.to_dict() for p in result.problems]}
-        if summary:
-            doc.update(summary)
-        print(json.dumps(doc, indent=2))
-        raise typer.Exit(0 if result.ok else 1)
+        print(json.dumps(docs[0] if len(docs) == 1 else {"valid": ok, "files": docs}, indent=2))
+    elif len(plan_files) > 1:
+        _out().print(f"\n{len(plan_files)} files: " + ("all valid" if ok else "some invalid (above)"))
+    raise typer.Exit(0 if ok else 1)
+
+
+def _print_check(plan_file: Path, result) -> None:
+    """``check``'s report of one file: its problems, or its summary (and warnings)."""
+    from opportune.formats.summary import summarize
+
     if not result.ok:
         _print_problems(result, _out())
         n = len(result.errors)
-        _out().print(f"[red]{plan_file}: invalid[/] — {n} error{'s' if n != 1 else ''}"
+        _out().print(f"[red]{_escape(str(plan_file))}: invalid[/] — {n} error{'s' if n != 1 else ''}"
                      + (f", {len(result.warnings)} warning(s)" if result.warnings else ""))
-        raise typer.Exit(1)
-    s = summary
+        return
+    s = summarize(result.plan)
     _out().print(f"[bold]{_escape(s['plan'])}[/] ({_escape(str(plan_file))}): [green]valid[/]")
     units = f" ({s['units']} units)" if s["units"] != s["parts"] else ""
     _out().print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
@@ -203,7 +259,7 @@ def check(plan_file: Path = PLAN_ARG, as_json: bool = typer.Option(False, "--jso
 def count(
     plan_file: Path = PLAN_ARG,
     after: Optional[str] = typer.Option(None, "--after", help='Parts installed first, in order: "ca ba" or "ca,ba"'),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable output"),
+    as_json: bool = json_option(),
     time_limit: float = typer.Option(10.0, "--time-limit", min=0.1,
                                      help="Seconds in all: a tenth for the plain exact count, then exact "
                                           "counting through a hub, then (only if still needed) an estimate"),
@@ -300,7 +356,7 @@ def graph(
 def replay(
     plan_file: Path = PLAN_ARG,
     looks_file: Path = typer.Argument(..., help="Looks file: one look per line ('-' for none), or JSON list of lists"),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable output"),
+    as_json: bool = json_option(),
     explain: bool = typer.Option(False, "--explain", help="Print the reasons of every decision"),
     buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,
                                                   help="Buffer locations (default: unlimited)"),
@@ -376,12 +432,52 @@ def replay(
 
 # ---------------------------------------------------------------- simulate
 
+RESULTS_MAX_BYTES = 64 * 2**20   # a results.json read by --from (its plan included)
+
+
+def _recorded_study(path: Path, as_json: bool) -> tuple[dict, Plan]:
+    """The settings and the plan a ``results.json`` records, or exit with what is wrong with the file."""
+    from opportune.formats.loader import plan_from_dict
+    from opportune.plan import PlanError
+
+    try:
+        if path.stat().st_size > RESULTS_MAX_BYTES:
+            fail(f"{path}: larger than {RESULTS_MAX_BYTES // 2**20} MiB: not a results.json", as_json=as_json)
+        doc = json.loads(path.read_bytes())
+    except OSError as exc:
+        fail(f"cannot read {path}: {exc.strerror or exc}", as_json=as_json)
+    except (ValueError, RecursionError) as exc:
+        fail(f"{path}: not JSON ({str(exc)[:200]}): give the results.json that `simulate --out` wrote",
+             as_json=as_json)
+    prov = doc.get("provenance") if isinstance(doc, dict) else None
+    if not isinstance(prov, dict) or not isinstance(prov.get("study"), dict) or "plan" not in prov:
+        fail(f"{path}: records no study to run again (no provenance.study and provenance.plan; "
+             "a results.json written by an earlier opportune does not): rerun from the plan file", as_json=as_json)
+    try:
+        plan = plan_from_dict(prov["plan"], file=f"{path}: provenance.plan")
+    except PlanError as exc:
+        fail(f"{path}: the recorded plan is not valid: {exc}", as_json=as_json)
+    import hashlib
+
+    digest = hashlib.sha256(json.dumps(plan.to_dict(), sort_keys=True, default=str).encode()).hexdigest()
+    if prov.get("plan_sha256") not in (None, digest):
+        fail(f"{path}: the recorded plan does not match its recorded hash (plan_sha256): the file was edited; "
+             "rerun from the plan file instead", as_json=as_json)
+    return prov["study"], plan
+
+
 OPTIMAL_DEFAULT_UNITS = 14  # above this, the optimum is only attempted when asked for
 
 
 @app.command()
 def simulate(
-    plan_file: Path = PLAN_ARG,
+    ctx: typer.Context,
+    plan_file: Optional[Path] = typer.Argument(None, help=PLAN_ARG.help + " (not with --from)", show_default=False,
+                                               autocompletion=_complete_plan),
+    from_results: Optional[Path] = typer.Option(
+        None, "--from", show_default=False,
+        help="Run the study recorded in a results.json again (its plan and settings; options given here override "
+             "theirs): the same seed gives the same numbers"),
     strategies: Optional[str] = typer.Option(None, "--strategies", help="Comma-separated; default: all that apply"),
     trials: int = typer.Option(10_000, "--trials", min=1, help="Trials per strategy"),
     seed: int = typer.Option(0, "--seed", help="Seed: the same seed gives the same numbers on any number of workers"),
@@ -391,16 +487,19 @@ def simulate(
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)"),
     dask: Optional[str] = typer.Option(None, "--dask", help="Address of a Dask distributed scheduler"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Write results.json, trials.csv and plots here"),
-    as_json: bool = typer.Option(False, "--json", help="Print the results as JSON"),
+    as_json: bool = json_option("Print the results as JSON (errors too)"),
     training_runs: int = typer.Option(200, "--training-runs", min=1, help="Training runs of the quantify strategy"),
     optimal_states: int = typer.Option(500_000, "--optimal-states", min=1, help="State limit of the optimum"),
     count_time_limit: Optional[float] = typer.Option(
         None, "--count-time-limit", min=0.1, show_default=False,
         help="Seconds the opportunistic policy's first exact counts may take (default: 10 when it is asked for "
              "with --strategies, else 2: a plan that slow to count takes minutes per trial)"),
-    motion_cost: Optional[float] = typer.Option(None, "--motion-cost", min=0),
-    shake_cost: Optional[float] = typer.Option(None, "--shake-cost", min=0),
-    look_cost: Optional[float] = typer.Option(None, "--look-cost", min=0),
+    motion_cost: Optional[float] = typer.Option(None, "--motion-cost", min=0, show_default=False,
+                                                help="Time of one robot motion (default: the plan's, else 1)"),
+    shake_cost: Optional[float] = typer.Option(None, "--shake-cost", min=0, show_default=False,
+                                               help="Time of one shake (default: the plan's, else 1)"),
+    look_cost: Optional[float] = typer.Option(None, "--look-cost", min=0, show_default=False,
+                                              help="Time of one look (default: the plan's, else 0)"),
     decision_budget: Optional[float] = typer.Option(
         None, "--decision-budget", min=1e-6, show_default=False,
         help="Seconds per opportunistic decision: exact when the counts fit, else estimated (the numbers then "
@@ -417,7 +516,14 @@ def simulate(
                                     StudyError, prepare, run_study)
     from opportune.worlds import TimeModel
 
-    plan = load_or_exit(plan_file, json_errors=as_json)
+    if (plan_file is None) == (from_results is None):
+        fail("give a plan file, or --from results.json to run a recorded study again (not both)", 2, as_json=as_json)
+    if from_results is not None:
+        recorded, plan = _recorded_study(from_results, as_json)
+        # by name: typer carries its own copy of click, whose enum is not the click package's
+        given = {name for name in ctx.params if getattr(ctx.get_parameter_source(name), "name", "") == "COMMANDLINE"}
+    else:
+        plan = load_or_exit(plan_file, json_errors=as_json)
     sim = plan.simulation
     chosen_bin = bin_model or sim.get("bin", "uniform")
     explicit = strategies is not None
@@ -429,15 +535,31 @@ def simulate(
     if explicit and not names:
         fail("--strategies is empty: name at least one of " + ", ".join(STRATEGIES), 2)
     try:
-        costs = TimeModel.from_plan(plan, motion=motion_cost, shake=shake_cost, look=look_cost)
-        config = StudyConfig(
-            plan=plan, strategies=tuple(dict.fromkeys(names)), trials=trials, seed=seed, bin=chosen_bin,
-            visible=visible or sim.get("visible", 2),
-            buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
-            costs=costs, training_runs=training_runs, optimal_states=optimal_states,
-            count_time_limit=count_time_limit if count_time_limit is not None else (10.0 if explicit else 2.0),
-            decision_budget=decision_budget,
-        ).validate()
+        if from_results is not None:
+            # The recorded study, with what this command line says instead where it says something.
+            explicit = True   # the recorded strategies, all of them: none is quietly left out this time
+            config = StudyConfig.from_settings(plan, recorded)
+            overrides = {key: value for key, value in (
+                ("strategies", tuple(dict.fromkeys(names))), ("trials", trials), ("seed", seed),
+                ("bin", bin_model), ("visible", visible), ("buffer_capacity", buffer_capacity),
+                ("training_runs", training_runs), ("optimal_states", optimal_states),
+                ("count_time_limit", count_time_limit), ("decision_budget", decision_budget))
+                if {"bin": "bin_model"}.get(key, key) in given}
+            cost = {k: v for k, v in (("motion", motion_cost), ("shake", shake_cost), ("look", look_cost))
+                    if f"{k}_cost" in given}
+            if cost:
+                overrides["costs"] = replace(config.costs, **cost)
+            config = replace(config, **overrides).validate()
+        else:
+            costs = TimeModel.from_plan(plan, motion=motion_cost, shake=shake_cost, look=look_cost)
+            config = StudyConfig(
+                plan=plan, strategies=tuple(dict.fromkeys(names)), trials=trials, seed=seed, bin=chosen_bin,
+                visible=visible or sim.get("visible", 2),
+                buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
+                costs=costs, training_runs=training_runs, optimal_states=optimal_states,
+                count_time_limit=count_time_limit if count_time_limit is not None else (10.0 if explicit else 2.0),
+                decision_budget=decision_budget,
+            ).validate()
         while True:
             try:
                 prepared = prepare(config)
@@ -466,7 +588,7 @@ def simulate(
     else:
         cap = "unlimited" if config.buffer_capacity is None else config.buffer_capacity
         table = Table(title=f"{plan.name}: {config.bin} bin, {config.visible} visible, buffer {cap}, "
-                            f"{doc['trials']:,} trials, seed {seed}")
+                            f"{doc['trials']:,} trials, seed {config.seed}")
         for i, col in enumerate(TABLE_HEADER):
             table.add_column(col, justify="left" if i == 0 else "right")
         for row in table_rows(doc):
@@ -506,13 +628,14 @@ def evaluate(
                                                   help="Buffer locations (default: plan, else unlimited)"),
     max_states: int = typer.Option(500_000, "--max-states", min=1,
                                    help="Most states of the dynamic programme (refused above it)"),
-    as_json: bool = typer.Option(False, "--json", help="Machine-readable output"),
+    as_json: bool = json_option(),
 ):
     """Exact expected cost of a policy and of the optimum (a dynamic programme, no Monte Carlo error)."""
     from opportune.engine import OrderEngine
     from opportune.policies.evaluate import PolicyEvaluator, PolicyStuck
     from opportune.policies.optimal import OptimalTooLarge
-    from opportune.simulate import ALL_STRATEGIES, OPTIMAL_BINS, StudyConfig, StudyError, make_policy, prepare
+    from opportune.simulate import (ALL_STRATEGIES, OPTIMAL_BINS, StrategyUnavailable, StudyConfig, StudyError,
+                                    make_policy, prepare)
     from opportune.worlds import TimeModel
 
     plan = load_or_exit(plan_file, json_errors=as_json)
@@ -549,6 +672,11 @@ def evaluate(
     except OptimalTooLarge:
         fail(f"the exact evaluation of {plan.name} needs more than {max_states:,} states: raise --max-states, "
              "or estimate with `opportune simulate`")
+    except StrategyUnavailable:
+        fail(f"the exact evaluation of {plan.name} ({plan.n_units} parts) is out of reach: the policy's first "
+             "decision alone does not finish in 10 s, and the states to evaluate grow exponentially with the parts "
+             "(up to --max-states); estimate it with `opportune simulate --strategies "
+             f"{policy} --decision-budget 0.05`")
     except (PolicyStuck, StudyError, ValueError) as exc:
         fail(str(exc))
     doc = {"plan": plan.name, "policy": policy, "bin": chosen_bin, "visible": config.visible,
@@ -567,7 +695,7 @@ def evaluate(
 
 
 @app.command()
-def examples(as_json: bool = typer.Option(False, "--json", help="Machine-readable output")):
+def examples(as_json: bool = json_option()):
     """List the examples and data sets shipped with the package (use them as example:NAME, salbp:NAME)."""
     from opportune import datasets
 
@@ -632,8 +760,45 @@ from opportune.service.commands import register as _register_service
 _register_service(app)
 
 
+@app.command()
+def completion(shell: str = typer.Argument(..., help="bash, zsh, fish or powershell", show_default=False)):
+    """Print the shell's completion script: add `eval "$(opportune completion bash)"` to ~/.bashrc (zsh: the
+    same in ~/.zshrc; fish: `opportune completion fish > ~/.config/fish/completions/opportune.fish`)."""
+    from typer.completion import get_completion_script
+
+    shells = ("bash", "zsh", "fish", "powershell", "pwsh")
+    if shell not in shells:
+        fail(f"no completion for the shell '{shell}': choose {', '.join(shells[:-1])}", 2)
+    print(get_completion_script(prog_name="opportune", complete_var=COMPLETE_VAR, shell=shell))
+
+
+# The shell asks for completions by running the command with this variable set.  typer's completion classes
+# are registered only then, so a normal run never pays for them (add_completion=True doubled the start-up).
+COMPLETE_VAR = "_OPPORTUNE_COMPLETE"
+
+
 def main() -> None:  # console script entry point
-    app()
+    import os
+
+    if COMPLETE_VAR in os.environ:
+        from typer.completion import completion_init
+
+        completion_init()
+    if "--json" not in sys.argv[1:]:
+        app(prog_name="opportune", complete_var=COMPLETE_VAR)
+        return
+    # Under --json a usage error (a bad option value, a missing argument) is JSON too, with click's exit code.
+    # (typer carries its own copy of click: its exceptions are recognised by what they have, not their class)
+    try:
+        code = app(prog_name="opportune", complete_var=COMPLETE_VAR, standalone_mode=False)
+    except Exception as exc:
+        if type(exc).__name__ == "Abort":   # Ctrl-C at a prompt
+            raise SystemExit(130) from None
+        if not (hasattr(exc, "format_message") and isinstance(getattr(exc, "exit_code", None), int)):
+            raise
+        _print_error({"message": exc.format_message()}, exc.exit_code)
+        raise SystemExit(exc.exit_code) from None
+    raise SystemExit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -1,9 +1,10 @@
 """Tables, files and plots of a simulation study.
 
-``results.json`` (the ``--json`` document), ``trials.csv`` (one row per
-trial), and plots as PNG and SVG: the distribution of total time per
-strategy, and the mean time with its 95% confidence interval against the
-optimum.
+``results.json`` (the ``--json`` document, with what made it under
+``provenance`` and the run's timings apart under ``timing``), ``trials.csv``
+(one row per trial), and plots as PNG, SVG and PDF: the distribution of total
+time per strategy, the mean time with its 95% confidence interval against the
+optimum, and, when the optimum is known, each mean's ratio to it.
 """
 
 from __future__ import annotations
@@ -65,11 +66,9 @@ def summary(result: StudyResult) -> dict:
         doc["incomplete"] = sum(not t.complete for t in trials)
         mean_time = doc["time"]["mean"]
         doc["ratio_to_optimal"] = (mean_time / optimum) if optimum and mean_time is not None else None
-        doc["seconds"] = result.seconds.get(name)
         if name == "optimal":
             doc["expected_time"] = optimum
             doc["states"] = result.prepared.optimal_states
-            doc["solve_seconds"] = result.prepared.optimal_seconds
         if name == "quantify":
             doc["training_runs"] = cfg.training_runs
         strategies[name] = doc
@@ -92,6 +91,9 @@ def summary(result: StudyResult) -> dict:
         "notes": notes(result),
         "strategies": strategies,
         "provenance": provenance(result),
+        # Kept apart: the only fields that differ between two runs of the same study.
+        "timing": {"seconds": {name: result.seconds.get(name) for name in result.trials},
+                   "optimal_solve_seconds": result.prepared.optimal_seconds if optimum is not None else None},
     }
 
 
@@ -112,7 +114,8 @@ def provenance(result: StudyResult) -> dict:
     from opportune.simulate import hash_config
 
     cfg = result.config
-    plan_doc = json.dumps(cfg.plan.to_dict(), sort_keys=True, default=str)
+    plan = cfg.plan.to_dict()
+    plan_doc = json.dumps(plan, sort_keys=True, default=str)
     return {
         "schema_version": SCHEMA_VERSION,
         "opportune": __version__,
@@ -122,6 +125,9 @@ def provenance(result: StudyResult) -> dict:
         "study_sha256": hash_config(cfg),
         "strategies": list(cfg.strategies),
         "decision_budget": cfg.decision_budget,
+        # Enough to run the study again (`opportune simulate --from results.json`): its settings and the plan.
+        "study": cfg.settings(),
+        "plan": plan,
     }
 
 
@@ -177,11 +183,13 @@ def write_outputs(result: StudyResult, out_dir: str | Path) -> list[Path]:
 
 
 def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
-    """Two figures, each as PNG (300 dpi), SVG (text as text) and PDF, byte-identical for the same study.
+    """Two figures (three with the exact optimum), each as PNG (300 dpi), SVG (text as text) and PDF,
+    byte-identical for the same study.
 
     Strategies appear in one order in both, best mean first.  The distribution's whiskers are the 5th
     and 95th percentiles (the legend says so); the means are dots with their 95% intervals (Student's t
-    for few trials) on an axis around the data, not bars from zero that make close means look alike.
+    for few trials) on an axis around the data, not bars from zero that make close means look alike;
+    with the optimum, each mean's ratio to it with the same interval (``ratio_to_optimal``).
     """
     import matplotlib
 
@@ -236,6 +244,28 @@ def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
         ax.set_title(f"Mean cost against the optimum\n{title}", fontsize=10)
         ax.grid(axis="x", alpha=0.3)
         written += _save(fig, out, "mean_time")
+
+        # 3. Ratio to the optimum, when it is known: the exact optimum has no error, so each interval is
+        #    the mean's interval divided by it.
+        if optimum:
+            fig, ax = plt.subplots(figsize=(7, 0.45 * len(names) + 1.8))
+            ratios = [m / optimum for m in means]
+            rerr = [[(m - c[0]) / optimum for m, c in zip(means, cis)], [(c[1] - m) / optimum for m, c in zip(means, cis)]]
+            ax.errorbar(ratios, ys, xerr=rerr, fmt="o", color="#4C72B0", capsize=3, label="mean / optimum, 95% interval")
+            ax.axvline(1.0, color="#C44E52", linestyle="--", label="optimum")
+            for y, r, c in zip(ys, ratios, cis):
+                ax.text(c[1] / optimum, y, f"  {100 * (r - 1):+.2f}%", va="center", fontsize=8)
+            ax.set_yticks(ys, labels)
+            ax.invert_yaxis()
+            low = min(1.0, min(c[0] for c in cis) / optimum)
+            high = max(c[1] for c in cis) / optimum
+            span = max(high - low, 1e-9)
+            ax.set_xlim(low - 0.05 * span, high + 0.3 * span)
+            ax.set_xlabel(f"mean total time / exact optimum ({optimum:.4f})")
+            ax.set_title(f"Ratio to the optimum\n{title}", fontsize=10)
+            ax.grid(axis="x", alpha=0.3)
+            ax.legend(loc="upper right", fontsize=8)   # best first, at the top: the top right is free
+            written += _save(fig, out, "ratio_to_optimal")
     return written
 
 

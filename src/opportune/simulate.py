@@ -21,7 +21,7 @@ import math
 import random
 import time as _time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Callable
 
 from opportune.engine import OrderEngine
@@ -94,6 +94,42 @@ class StudyConfig:
         if self.buffer_capacity == 0 and "buffer" in self.strategies:
             pass  # allowed: the buffer strategy then shakes like `shake`
         return self
+
+    def settings(self) -> dict:
+        """The settings, the plan aside, as plain JSON values (``results.json``'s ``provenance.study``)."""
+        return {"strategies": list(self.strategies), "trials": self.trials, "seed": self.seed, "bin": self.bin,
+                "visible": self.visible, "buffer_capacity": self.buffer_capacity, "costs": self.costs.to_dict(),
+                "training_runs": self.training_runs, "optimal_states": self.optimal_states,
+                "count_time_limit": self.count_time_limit, "max_steps": self.max_steps,
+                "decision_budget": self.decision_budget}
+
+    @classmethod
+    def from_settings(cls, plan: Plan, settings: dict) -> "StudyConfig":
+        """The study :meth:`settings` describe, on ``plan``; a missing or malformed setting is a StudyError."""
+        try:
+            values = dict(settings)
+            costs = dict(values.pop("costs"))
+            values["costs"] = TimeModel(motion=float(costs["motion"]), shake=float(costs["shake"]),
+                                        look=float(costs["look"]),
+                                        parts={str(k): float(v) for k, v in dict(costs.get("parts") or {}).items()})
+            values["strategies"] = tuple(str(s) for s in values["strategies"])
+            unknown = set(values) - {f.name for f in fields(cls)}
+            if unknown:
+                raise StudyError(f"unknown study setting(s): {', '.join(sorted(unknown))}")
+            for name, kind in (("trials", int), ("seed", int), ("visible", int), ("training_runs", int),
+                               ("optimal_states", int), ("count_time_limit", float)):
+                if name in values and (isinstance(values[name], bool) or not isinstance(values[name], (int, float))):
+                    raise StudyError(f"study setting '{name}' must be a number, not {values[name]!r}")
+                if name in values:
+                    values[name] = kind(values[name])
+            return cls(plan=plan, **values).validate()
+        except StudyError:
+            raise
+        except KeyError as exc:
+            raise StudyError(f"the recorded study settings lack {exc}") from None
+        except (TypeError, ValueError, AttributeError) as exc:
+            raise StudyError(f"the recorded study settings are incomplete or malformed ({type(exc).__name__}: {exc})") \
+                from None
 
     @property
     def weights(self) -> dict[str, float]:
@@ -506,6 +542,31 @@ class StudyResult:
     trials: dict[str, list[TrialResult]]
     seconds: dict[str, float]
     interrupted: bool = False
+
+    def to_frame(self):
+        """The trials as a pandas DataFrame, one row per trial of each strategy (the rows of ``trials.csv``).
+
+        Columns: ``strategy``, ``trial``, the costs (``motions``, ``buffer_moves``, ``shakes``, ``looks``,
+        ``buffer_peak``, ``time``) and ``complete``; trial ``i`` of every strategy saw the same bin, so
+        ``df.pivot(index="trial", columns="strategy", values="time")`` pairs them.  Needs pandas
+        (``pip install pandas``).
+
+        >>> from opportune.datasets import example_path
+        >>> from opportune.formats import load_plan
+        >>> config = StudyConfig(load_plan(example_path("gearbox")), strategies=("opportunistic", "random"), trials=100)
+        >>> df = run_study(config, workers=1).to_frame()
+        >>> len(df), sorted(df["strategy"].unique())
+        (200, ['opportunistic', 'random'])
+        """
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("StudyResult.to_frame needs pandas: pip install pandas") from None
+        columns = ["strategy", "trial", *METRICS, "complete"]
+        rows = [(name, t.trial, *(getattr(t, m) for m in METRICS), t.complete)
+                for name, trials in self.trials.items() for t in trials]
+        frame = pd.DataFrame(rows, columns=columns)
+        return frame.astype({"strategy": "category"}) if rows else frame
 
 
 def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: str | None = None,

@@ -1,0 +1,5 @@
+"""``python -m opportune``: the command line, as the ``opportune`` script runs it."""
+
+from opportune.cli import main
+
+main()
