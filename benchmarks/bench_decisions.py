@@ -66,20 +66,27 @@ def pct(xs, q):
 
 def run_plan(spec: str, args) -> dict:
     plan, offline_ok = plan_of(spec)
-    config = StudyConfig(plan, strategies=("opportunistic",), trials=args.trials, seed=args.seed,
+    config = StudyConfig(plan, strategies=(args.policy,), trials=args.trials, seed=args.seed,
                          visible=args.visible, decision_budget=args.budget, count_time_limit=args.warm_up)
     engine = OrderEngine(plan)
     t0 = time.perf_counter()
     prepared = prepare(config, engine)          # the warm-up: count the first state
     warm = time.perf_counter() - t0
-    runner = TrialRunner("opportunistic", engine, config, prepared)
+    runner = TrialRunner(args.policy, engine, config, prepared)
     policy = runner.policy
     records: list[tuple] = []
+    paper = args.policy in ("opportunistic", "paper")
+    choose_at = runner._choose_at
 
     def timed(engine_, mask, cons, buffer, free, look):
         s = time.perf_counter()
-        action, how = policy._budgeted(engine_, mask, cons, buffer, free, look)
-        records.append((time.perf_counter() - s, how.exact, how.confidence, (mask, cons, buffer, free, look), action))
+        if paper:       # the paper's rule says how it decided: exact, or estimated with a confidence
+            action, how = policy._budgeted(engine_, mask, cons, buffer, free, look)
+            exact, confidence = how.exact, how.confidence
+        else:           # another policy: its latency (and, for the look-ahead, whether its programme decided)
+            action = choose_at(engine_, mask, cons, buffer, free, look)
+            exact, confidence = getattr(policy, "last_cost", None) is not None, 1.0
+        records.append((time.perf_counter() - s, exact, confidence, (mask, cons, buffer, free, look), action))
         return action
 
     runner._choose_at = timed
@@ -93,7 +100,7 @@ def run_plan(spec: str, args) -> dict:
            "p50": pct(lat, 0.5), "p95": pct(lat, 0.95), "max": max(lat), "exact": sum(r[1] for r in records),
            "conf": statistics.mean([r[2] for r in records if not r[1]] or [1.0]),
            "budget_cost": statistics.mean(budget_costs), "trials": args.trials, "run_s": run_seconds}
-    if not offline_ok:
+    if not offline_ok or not paper:     # the offline checks compare with the paper's exact rule
         return out
     # Offline: the exact rule on the same states and looks (its own engine, no budget).  A decision
     # marked exact is the exact rule's (tests/test_decision_budget.py); the estimated ones are checked
@@ -137,6 +144,9 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--plans", default=",".join(DEFAULT_PLANS), help="comma-separated plan specs")
     ap.add_argument("--trials", type=int, default=3)
+    ap.add_argument("--policy", default="opportunistic",
+                    help="the policy timed: opportunistic (the paper's rule, with the offline checks), bin-first, "
+                         "slack or lookahead (latency only)")
     ap.add_argument("--budget", type=float, default=0.05, help="seconds per decision")
     ap.add_argument("--visible", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
@@ -145,7 +155,7 @@ def main(argv=None) -> None:
     ap.add_argument("--exact-trials", type=int, default=3, help="trials of the exact policy, for the mean cost")
     args = ap.parse_args(argv)
     console = Console(width=160)
-    table = Table(title=f"budgeted opportunistic decisions (budget {1000 * args.budget:g} ms, uniform bin, "
+    table = Table(title=f"budgeted {args.policy} decisions (budget {1000 * args.budget:g} ms, uniform bin, "
                         f"{args.visible} visible; {platform.machine()}, {os.cpu_count()} cores, "
                         f"Python {platform.python_version()})")
     for col in ("plan", "tasks", "warm-up s", "decisions", "p50 ms", "p95 ms", "max ms", "exact",

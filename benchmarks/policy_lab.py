@@ -7,8 +7,14 @@ look) is divided by the optimum's; the table gives the mean, median and largest 
 over all plans and over those with two strategies.  Then the gearbox with buffer capacity 1, 2
 and unlimited, and with 1, 2 and 3 parts visible.  No Monte Carlo: every number is exact.
 
-    python benchmarks/policy_lab.py                    # 30 plans of 8-12 parts
+Plans too large for exact evaluation (``--paired``, default KILBRID and TONGE70) are compared by
+paired Monte Carlo instead: every policy runs on the same ``--paired-trials`` random bins (trial
+``i`` of each sees the same bin), and the table gives each policy's mean time and its mean
+difference from the paper's rule with the 95% interval of that difference (Student's t).
+
+    python benchmarks/policy_lab.py                    # 30 plans of 8-12 parts, then KILBRID and TONGE70
     python benchmarks/policy_lab.py --plans 10 --max-parts 10 --plot docs/img/policy-gaps.png
+    python benchmarks/policy_lab.py --plans 0 --paired salbp:KILBRID --paired-trials 400
 """
 
 from __future__ import annotations
@@ -80,6 +86,33 @@ def print_summary(title: str, rows: list[dict[str, float]]) -> None:
         print(f"  {name:<10} {100 * mean:+8.3f}% {100 * median:+8.3f}% {100 * top:+8.3f}%")
 
 
+PAIRED = ("paper", "bin-first", "slack", "lookahead", "rollout")
+
+
+def paired(spec: str, args) -> None:
+    """Every policy on the same random bins of a plan too large for exact evaluation: the mean time, and
+    the mean difference from the paper's rule with its 95% interval."""
+    from opportune.report import summary
+    from opportune.simulate import StudyConfig, run_study
+
+    plan = load_plan(spec)
+    start = time.perf_counter()
+    result = run_study(StudyConfig(plan, strategies=PAIRED, trials=args.paired_trials, seed=args.seed,
+                                   visible=args.visible), workers=args.workers)
+    doc = summary(result)["strategies"]
+    print(f"\n{plan.name} ({plan.n_units} units): paired Monte Carlo, {args.paired_trials} trials per policy "
+          f"on the same bins, uniform bin, {args.visible} visible, unlimited buffer "
+          f"({time.perf_counter() - start:.0f} s)")
+    print(f"  {'policy':<10} {'mean time':>10}  {'against paper (95% interval)':>32}  {'s/trial':>8}")
+    for name in PAIRED:
+        s = doc[name]
+        against = s.get("paired")
+        text = "—" if against is None else \
+            f"{against['mean_difference']:+.3f} ({against['ci95'][0]:+.3f} .. {against['ci95'][1]:+.3f})"
+        per = result.seconds.get(name, 0.0) / max(1, s["trials"])
+        print(f"  {name:<10} {s['time']['mean']:>10.3f}  {text:>32}  {per:>8.3f}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--plans", type=int, default=30)
@@ -88,6 +121,10 @@ def main(argv=None) -> int:
     ap.add_argument("--visible", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--plot", type=Path, help="write a dot plot of each policy's gap per plan here (PNG or PDF)")
+    ap.add_argument("--paired", default="salbp:KILBRID,salbp:TONGE70",
+                    help="plans compared by paired Monte Carlo (comma-separated; empty: none)")
+    ap.add_argument("--paired-trials", type=int, default=200)
+    ap.add_argument("--workers", type=int, default=None, help="worker processes of the paired studies")
     args = ap.parse_args(argv)
 
     rng = random.Random(args.seed)
@@ -106,20 +143,25 @@ def main(argv=None) -> int:
         print(f"plan {i:2d}: {n} parts, {k} strateg{'y' if k == 1 else 'ies'}, density {density}: optimum "
               f"{best:.4f} ({states:,} states); " + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in g.items()),
               flush=True)
-    print_summary("random plans", rows)
+    if rows:
+        print_summary("random plans", rows)
     if multi:
         print_summary("random plans with two strategies", multi)
 
     gear = load_plan(GEARBOX)
-    print("\ngearbox: gap to the optimum per setting")
-    for visible, capacity in ((2, None), (2, 1), (2, 2), (1, None), (3, None)):
+    if args.plans:
+        print("\ngearbox: gap to the optimum per setting")
+    for visible, capacity in ((2, None), (2, 1), (2, 2), (1, None), (3, None)) if args.plans else ():
         g, best, _ = gaps(gear, visible, capacity)
         cap = "unlimited" if capacity is None else capacity
         print(f"  visible {visible}, buffer {cap:<9}: optimum {best:.4f}; "
               + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in g.items()))
-    print(f"\n{time.perf_counter() - t0:.0f} s")
+    if args.plans:
+        print(f"\n{time.perf_counter() - t0:.0f} s")
+    for spec in filter(None, args.paired.split(",")):
+        paired(spec, args)
 
-    if args.plot:
+    if args.plot and rows:
         import matplotlib
 
         matplotlib.use("Agg")

@@ -74,10 +74,14 @@ def test_evaluate_command_prints_both_values_and_refuses_what_it_cannot_do():
     from opportune.cli import app
 
     runner = CliRunner()
-    out = runner.invoke(app, ["evaluate", str(GEARBOX)])
+    out = runner.invoke(app, ["evaluate", str(GEARBOX), "--policy", "paper"])
     assert out.exit_code == 0, out.output
     assert "13.7057" in out.output and "13.5711" in out.output
-    out = runner.invoke(app, ["evaluate", str(GEARBOX), "--buffer-capacity", "1", "--json"])
+    # without --policy: the default policy, the look-ahead, at the optimum on the gearbox
+    out = runner.invoke(app, ["evaluate", str(GEARBOX), "--json"])
+    doc = json.loads(out.output)
+    assert doc["policy"] == "lookahead" and doc["ratio"] < 1.0005
+    out = runner.invoke(app, ["evaluate", str(GEARBOX), "--buffer-capacity", "1", "--json", "--policy", "paper"])
     doc = json.loads(out.output)
     assert {"plan", "policy", "expected_time", "optimal", "ratio", "states"} <= set(doc)
     assert round(doc["expected_time"], 4) == 16.1236 and round(doc["optimal"], 4) == 15.8398

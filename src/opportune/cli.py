@@ -365,7 +365,7 @@ def replay(
         help="Seconds per decision, as a cell would give: exact when the counts fit, else estimated and marked so "
              "(default: every decision exact)"),
     policy: str = typer.Option("paper", "--policy",
-                               help="paper (the paper's rule, also 'opportunistic'), bin-first, slack or lookahead"),
+                               help="paper (the paper's rule, also 'opportunistic'), bin-first, slack, lookahead or rollout"),
 ):
     """Run a policy (the paper's opportunistic rule by default) over a file of looks and print the trace
     like the paper's Table 1."""
@@ -379,18 +379,13 @@ def replay(
         looks = read_looks(looks_file)
     except LooksError as exc:
         fail_problem(exc.problem)
-    from opportune.policies import variants
-    from opportune.policies.opportunistic import Opportunistic
+    from opportune.policies.named import UnknownPolicy, make_policy
 
-    makers = {"paper": Opportunistic, "opportunistic": Opportunistic, "bin-first": variants.BinFirst,
-              "slack": variants.Slack}
-    if policy == "lookahead":
-        chosen = variants.Lookahead(budget=decision_budget, visible=plan.simulation.get("visible", 2),
-                                    capacity=buffer_capacity)
-    elif policy in makers:
-        chosen = makers[policy](budget=decision_budget)
-    else:
-        fail(f"unknown policy '{policy}': choose from paper, bin-first, slack or lookahead", 2)
+    try:
+        chosen = make_policy(policy, budget=decision_budget, visible=plan.simulation.get("visible", 2),
+                             capacity=buffer_capacity)
+    except UnknownPolicy as exc:
+        fail(str(exc), 2)
     seq = Sequencer(plan, chosen, buffer_capacity=buffer_capacity, budget=decision_budget)
     for i, look in enumerate(looks, start=1):
         try:
@@ -619,9 +614,9 @@ def simulate(
 @app.command()
 def evaluate(
     plan_file: Path = PLAN_ARG,
-    policy: str = typer.Option("opportunistic", "--policy",
-                               help="The policy to evaluate: opportunistic or paper (the paper's rule), "
-                                    "bin-first, slack, lookahead, buffer, shake or quantify"),
+    policy: str = typer.Option("lookahead", "--policy",
+                               help="The policy to evaluate: lookahead (the default policy), opportunistic or paper "
+                                    "(the paper's rule), bin-first, slack, rollout, buffer, shake or quantify"),
     bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform or weighted (default: plan, else uniform)"),
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
     buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,

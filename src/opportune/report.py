@@ -31,6 +31,7 @@ LABELS = {
     "bin-first": "bin-first",
     "slack": "slack",
     "lookahead": "lookahead",
+    "rollout": "rollout",
 }
 
 

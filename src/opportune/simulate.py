@@ -29,13 +29,17 @@ from opportune.engine.count import BudgetExceeded
 from opportune.engine.schedule import Schedule
 from opportune.plan import Plan
 from opportune.policies.base import Action
+from opportune.policies.named import DEFAULT_POLICY, POLICIES
+from opportune.policies.named import make_policy as make_named_policy
 from opportune.sequencer import State
 from opportune.worlds import PalletWorld, TimeModel, World, make_world
 
-STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", "random", "optimal")
-#: Policies beyond the paper's (policies/variants.py), run when asked for by name; "paper" is the
-#: paper's rule under the name issue 13 gives it (the same as "opportunistic").
-MORE_STRATEGIES = ("paper", "bin-first", "slack", "lookahead")
+#: The study's default strategies: the paper's comparison, and the default policy beside the paper's rule.
+STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", DEFAULT_POLICY, "random",
+              "optimal")
+#: Policies beyond the paper's (policies/variants.py, rollout.py), run when asked for by name; "paper" is
+#: the paper's rule under the name issue 13 gives it (the same as "opportunistic").
+MORE_STRATEGIES = ("paper", "bin-first", "slack", "rollout")
 ALL_STRATEGIES = STRATEGIES + MORE_STRATEGIES
 MARKOV_BINS = ("uniform", "weighted")
 OPTIMAL_BINS = MARKOV_BINS + ("pile",)   # bins whose exact optimum is computed (policies/optimal.py, pile.py)
@@ -254,7 +258,6 @@ def _world(config: StudyConfig, prepared: Prepared, strategy: str = "") -> World
 def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepared: Prepared):
     """The policy object for a strategy name (all implement the sequencer's Policy interface)."""
     from opportune.policies import fixed
-    from opportune.policies.opportunistic import Opportunistic
     from opportune.policies.random_policy import RandomChoice
 
     if strategy == "pallet":
@@ -267,18 +270,10 @@ def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepare
         return fixed.BufferFixed(prepared.sequence)
     if strategy == "quantify":
         return fixed.Quantify(engine, prepared.quantify_rank or {}, config.training_runs)
-    if strategy in ("opportunistic", "paper"):
-        return Opportunistic(budget=config.decision_budget, seed=config.seed)
-    if strategy in MORE_STRATEGIES:
-        from opportune.policies import variants
-
-        if strategy == "bin-first":
-            return variants.BinFirst(budget=config.decision_budget, seed=config.seed)
-        if strategy == "slack":
-            return variants.Slack(budget=config.decision_budget, seed=config.seed)
-        return variants.Lookahead(budget=config.decision_budget, visible=config.visible,
-                                  capacity=capacity_for(strategy, config), costs=config.costs, bin=config.bin,
-                                  weights=config.weights if config.bin == "weighted" else None)
+    if strategy in POLICIES:
+        return make_named_policy(strategy, budget=config.decision_budget, seed=config.seed, visible=config.visible,
+                                 capacity=capacity_for(strategy, config), costs=config.costs, bin=config.bin,
+                                 weights=config.weights if config.bin == "weighted" else None)
     if strategy == "random":
         return RandomChoice()
     if strategy == "optimal":

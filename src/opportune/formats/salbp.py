@@ -132,7 +132,7 @@ def parse_in2(raw: bytes, file: str | None = None) -> tuple[In2 | None, list[Pro
 def read_in2(path: str | Path) -> In2:
     """Read an ``.IN2`` file; raise :class:`In2Error` with every problem.
 
-    >>> g = read_in2("../shared/data/salbp/MERTENS.IN2")  # doctest: +SKIP
+    >>> g = read_in2(salbp_path("MERTENS"))  # doctest: +SKIP
     >>> g.n, len(g.pairs)                                  # doctest: +SKIP
     (7, 6)
     """
