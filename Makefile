@@ -5,14 +5,14 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test setup system-deps pg-deps bench bench-service clean
+.PHONY: demo test docs setup system-deps pg-deps bench bench-service clean
 
 setup: $(STAMP) system-deps
 
 $(STAMP): pyproject.toml CMakeLists.txt src/native/counter.cpp
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[service,postgres,scale,dev]'
+	$(BIN)/python -m pip install --quiet -e '.[service,postgres,scale,dev,docs]'
 	@touch $(STAMP)
 
 # System tools from Debian's packages, installed only where missing: $(call apt,COMMAND,PACKAGE,WHAT FOR)
@@ -46,13 +46,17 @@ demo: setup
 test: setup
 	$(BIN)/python -m pytest -q
 
+# The documentation site into site/ (MkDocs, offline; warnings are errors).
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 bench: setup
 	$(BIN)/python benchmarks/bench_count.py
 	$(BIN)/python benchmarks/bench_options.py
 	$(BIN)/python benchmarks/bench_simulate.py
 
 bench-service: setup
-	$(BIN)/python benchmarks/load_service.py --cells 20 --duration 20
+	$(BIN)/python benchmarks/load_service.py --cells 20 --duration 20 --table
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis demo-output

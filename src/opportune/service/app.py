@@ -20,6 +20,12 @@ GET      /runs/{id}/events           server-sent events (bearer header, or ``?ti
 
 State-changing run requests need an ``Idempotency-Key`` header
 (:mod:`opportune.service.idempotency`).  The dashboard is served at ``/``.
+
+The OpenAPI document is exact: every route has a camelCase operation id (``uploadPlan``,
+``startRun``, ``postLook``, ``postOutcome``, ...), documents its answer with a model of
+:mod:`opportune.service.schemas` and the error model on each error status it can answer with
+(naming the codes), and says where ``Idempotency-Key`` is required.  The models document; the
+routes do not serialise through them, so answers (and replayed answers) keep their exact bytes.
 """
 
 from __future__ import annotations
@@ -45,11 +51,14 @@ from opportune import __version__
 from opportune.service import idempotency as idem
 from opportune.service.auth import Authenticator, Principal
 from opportune.service.config import Settings
-from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, new_reference,
-                                      unauthorized)
+from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, is_json,
+                                      new_reference, unauthorized, unsupported_media_type)
 from opportune.service.events import Broker, stream
 from opportune.service.plans import PlanBook, check_upload, list_plans, store_plan
 from opportune.service.runs import RunManager
+from opportune.service.schemas import (CancelAnswer, CellList, Graph, Health, LookAnswer, OutcomeAnswer,
+                                       PlanDetail, PlanList, PlanUploaded, Run, RunList, Ticket, Trace,
+                                       complete_openapi, errors)
 from opportune.service.storage import Store
 
 log = logging.getLogger("opportune.service")
@@ -57,6 +66,25 @@ STATIC = Path(__file__).parent / "static"
 RUN_ID = PathParam(..., ge=1, le=2**62, description="The run's id")
 MAX_OFFSET = 1_000_000_000  # GET /runs?offset=: far beyond any store, and within every database's integers
 _SURROGATE = re.compile("[\ud800-\udfff]")
+
+# The Idempotency-Key header as the OpenAPI states it: required.  The route itself reads it as optional, so
+# that a request without it gets the service's own 428 (which says what to send), not a validation error.
+IDEMPOTENCY_KEY = {"parameters": [{
+    "name": idem.HEADER, "in": "header", "required": True,
+    "description": "A fresh random string (e.g. a UUID) for every new request, reused when retrying it: a retry "
+                   "gets the stored answer, byte for byte, and changes nothing",
+    "schema": {"type": "string", "minLength": 1, "maxLength": idem.MAX_KEY}}]}
+
+
+def links(run_id: str, *op_ids: str) -> dict:
+    """OpenAPI links: the run an answer names (``run_id``, a runtime expression) to the operations on it."""
+    return {op: {"operationId": op, "parameters": {"run_id": run_id}} for op in op_ids}
+
+
+PLAN_LINKS = {"startRun": {"operationId": "startRun", "requestBody": {"plan": "$response.body#/id"}},
+              "getPlan": {"operationId": "getPlan", "parameters": {"plan_id": "$response.body#/id"}}}
+REPLAYED = {"Idempotent-Replayed": {"description": "`true` when this is the stored answer of an earlier request "
+                                                   "with the same key", "schema": {"type": "string", "enum": ["true"]}}}
 
 
 def _unicode(text: str) -> str:
@@ -245,8 +273,14 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         return error_response(exc.body(), exc.status, exc.headers)
 
     @app.exception_handler(RequestValidationError)
-    async def _validation(_request, exc: RequestValidationError):
-        err = from_validation(list(exc.errors()))
+    async def _validation(request: Request, exc: RequestValidationError):
+        errs = list(exc.errors())
+        ctype = request.headers.get("content-type")
+        sent = request.headers.get("content-length", "0") != "0" or "transfer-encoding" in request.headers
+        if sent and not is_json(ctype) and any(tuple(e.get("loc") or ())[:1] == ("body",) for e in errs):
+            err = unsupported_media_type((ctype or "").split(";")[0].strip())  # FastAPI read no JSON from it
+        else:
+            err = from_validation(errs)
         return error_response(err.body(), err.status)
 
     def allowed_methods(request: Request) -> list[str]:
@@ -318,22 +352,29 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
 
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
 
-    @app.get("/healthz", tags=["service"], summary="Liveness: the service answers and its database is reachable")
+    @app.get("/healthz", tags=["service"], operation_id="health",
+             summary="Liveness: the service answers and its database is reachable",
+             responses={200: {"model": Health, "description": "The service and its database answer"},
+                        **errors({500: ["internal_error"]})})
     def healthz():
         return {"ok": True, "version": __version__, "journal_mode": store.journal_mode()}
 
     # ------------------------------------------------------------ plans
 
-    @app.post("/plans", tags=["plans"], status_code=201, summary="Upload a plan, validated as `opportune check` does",
-              responses={200: {"description": "The plan was already stored (same content hash)"},
-                         422: {"description": "The plan has errors: `error.problems` lists each with its line"}},
+    @app.post("/plans", tags=["plans"], status_code=201, operation_id="uploadPlan",
+              summary="Upload a plan, validated as `opportune check` does",
+              responses={201: {"model": PlanUploaded, "description": "The plan was stored", "links": PLAN_LINKS},
+                         200: {"model": PlanUploaded, "description": "The plan was already stored (same content hash)",
+                               "links": PLAN_LINKS},
+                         **errors({400: ["malformed_json", "malformed_body"], 401: ["unauthorized"],
+                                   403: ["forbidden"], 413: ["body_too_large"],
+                                   422: ["invalid_plan", "invalid_request"],
+                                   500: ["internal_error"]})},
               openapi_extra={"requestBody": {"required": True, "content": {
-                  "application/json": {"schema": {"oneOf": [
-                      {"type": "object", "description": "A plan in the JSON file schema (`opportune schema`)"},
-                      {"type": "object", "required": ["text"], "properties": {
-                          "text": {"type": "string"}, "format": {"enum": ["yaml", "json", "in2"]},
-                          "filename": {"type": "string"}}}]}},
-                  "application/yaml": {"schema": {"type": "string"}},
+                  "application/json": {"schema": {"anyOf": [
+                      {"$ref": "#/components/schemas/PlanDocument"},
+                      {"$ref": "#/components/schemas/PlanUploadWrapper"}]}},
+                  "application/yaml": {"schema": {"type": "string", "description": "A plan file in YAML"}},
                   "text/plain": {"schema": {"type": "string", "description": "YAML, JSON or SALBP .IN2, detected"}}}}})
     async def upload_plan(request: Request, p: Principal = Depends(principal),
                           format: Optional[Literal["yaml", "json", "in2"]] = Query(None, description="Format of a raw body"),
@@ -366,77 +407,144 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         status, body = await run_in_threadpool(work)
         return JSONResponse(body, status_code=status)
 
-    @app.get("/plans", tags=["plans"], summary="Every stored plan (operator)")
+    @app.get("/plans", tags=["plans"], operation_id="listPlans",
+             summary="Every stored plan (operator)",
+             responses={200: {"model": PlanList}, **errors({401: ["unauthorized"], 403: ["forbidden"],
+                                                             500: ["internal_error"]})})
     def get_plans(_p: Principal = Depends(operator)):
         return {"plans": list_plans(store)}
 
-    @app.get("/plans/{plan_id}", tags=["plans"], summary="A plan: its document (file schema), summary and graph layout")
-    def get_plan(plan_id: str, _p: Principal = Depends(principal)):
+    @app.get("/plans/{plan_id}", tags=["plans"], operation_id="getPlan",
+             summary="A plan: its document (file schema), summary and graph layout",
+             responses={200: {"model": PlanDetail},
+                        **errors({401: ["unauthorized"], 404: ["plan_not_found"],
+                                  422: ["plan_refused", "invalid_request"], 500: ["internal_error"]})})
+    def get_plan(plan_id: str = PathParam(..., description="A plan id returned by POST /plans"),
+                 _p: Principal = Depends(principal)):
         loaded = book.get(plan_id)
         return {"id": loaded.id, "name": loaded.plan.name, "plan": loaded.plan.to_dict(), "summary": loaded.summary,
                 "graph": loaded.layouts}
 
     # ------------------------------------------------------------ cells and runs
 
-    @app.get("/cells", tags=["runs"], summary="Cells with their numbers of runs (a cell token sees itself)")
+    @app.get("/cells", tags=["runs"], operation_id="listCells",
+             summary="Cells with their numbers of runs (a cell token sees itself)",
+             responses={200: {"model": CellList}, **errors({401: ["unauthorized"], 500: ["internal_error"]})})
     def list_cells(p: Principal = Depends(principal)):
         return {"cells": manager.cells(p)}
 
-    @app.post("/runs", tags=["runs"], status_code=201, summary="Start a run of a stored plan in the token's cell")
+    # The errors every request that changes a run can meet, and those of one on a run that exists.
+    write_errors = {400: ["malformed_json", "malformed_body", "bad_idempotency_key"], 401: ["unauthorized"],
+                    403: ["forbidden"], 413: ["body_too_large"], 415: ["unsupported_media_type"],
+                    428: ["idempotency_key_required"]}
+    run_errors = {**write_errors, 404: ["run_not_found"], 500: ["internal_error", "run_replay_mismatch"],
+                  503: ["counting_budget_exceeded"]}
+
+    @app.post("/runs", tags=["runs"], status_code=201, operation_id="startRun",
+              summary="Start a run of a stored plan in the token's cell", openapi_extra=IDEMPOTENCY_KEY,
+              responses={201: {"model": Run, "description": "The new run", "headers": REPLAYED,
+                               "links": links("$response.body#/id", "postLook", "getRun", "getTrace", "getGraph",
+                                              "createTicket")},
+                         **errors({**write_errors,
+                                   422: ["invalid_request", "unknown_plan", "plan_too_large", "plan_refused",
+                                         "idempotency_key_reused"],
+                                   500: ["internal_error"], 503: ["plan_too_large"]})})
     def create_run(body: RunIn, request: Request, p: Principal = Depends(principal),
-                   idempotency_key: Optional[str] = Header(None, alias=idem.HEADER)):
+                   idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
         key = idem.check_key(idempotency_key)
         return replayable(*manager.create(p, body.model_dump(), key, request.url.path))
 
-    @app.get("/runs", tags=["runs"], summary="Runs this token may see, newest first")
+    @app.get("/runs", tags=["runs"], operation_id="listRuns",
+             summary="Runs this token may see, newest first",
+             responses={200: {"model": RunList},
+                        **errors({401: ["unauthorized"], 422: ["invalid_request"], 500: ["internal_error"]})})
     def list_runs(p: Principal = Depends(principal), cell: Optional[str] = Query(None, max_length=100),
                   status: Optional[Literal["active", "complete"]] = None,
                   limit: int = Query(200, ge=1, le=1000, description="At most this many runs (1–1,000)"),
                   offset: int = Query(0, ge=0, le=MAX_OFFSET, description="Skip this many runs (0–1,000,000,000)")):
         return {"runs": manager.list(p, cell=cell, status=status, limit=limit, offset=offset)}
 
-    @app.get("/runs/{run_id}", tags=["runs"], summary="A run's state: installed, buffered, in the bin, pending action, completions left")
+    read_errors = errors({401: ["unauthorized"], 404: ["run_not_found"], 422: ["invalid_request", "plan_refused"],
+                          500: ["internal_error", "run_replay_mismatch"]})
+
+    @app.get("/runs/{run_id}", tags=["runs"], operation_id="getRun",
+             summary="A run's state: installed, buffered, in the bin, pending action, completions left",
+             responses={200: {"model": Run}, **read_errors})
     def get_run(run_id: int = RUN_ID, p: Principal = Depends(principal)):
         return manager.view(p, run_id)
 
-    @app.get("/runs/{run_id}/trace", tags=["runs"], summary="The trace: Visible | Buffered | Installed | Action | Outcome (Table 1)")
+    @app.get("/runs/{run_id}/trace", tags=["runs"], operation_id="getTrace",
+             summary="The trace: Visible | Buffered | Installed | Action | Outcome (Table 1)",
+             responses={200: {"model": Trace}, **read_errors})
     def get_trace(run_id: int = RUN_ID, p: Principal = Depends(principal)):
         return manager.trace(p, run_id)
 
-    @app.get("/runs/{run_id}/graph", tags=["runs"], summary="Layout of the plan's precedence graph, per strategy")
+    @app.get("/runs/{run_id}/graph", tags=["runs"], operation_id="getGraph",
+             summary="Layout of the plan's precedence graph, per strategy",
+             responses={200: {"model": Graph}, **read_errors})
     def get_graph(run_id: int = RUN_ID, p: Principal = Depends(principal)):
         return {"run_id": run_id, "strategies": manager.graph(p, run_id)}
 
-    @app.post("/runs/{run_id}/looks", tags=["runs"], summary="A look: the parts seen in the bin → the action to do, with its reasons")
+    @app.post("/runs/{run_id}/looks", tags=["runs"], operation_id="postLook",
+              summary="A look: the parts seen in the bin → the action to do, with its reasons",
+              openapi_extra=IDEMPOTENCY_KEY,
+              responses={200: {"model": LookAnswer, "description": "The action to do", "headers": REPLAYED,
+                               "links": links("$response.body#/run_id", "postOutcome", "cancelAction", "getRun")},
+                         **errors({**run_errors,
+                                   409: ["look_contradicts_state", "action_pending", "run_complete", "run_busy"],
+                                   422: ["invalid_request", "unknown_part", "idempotency_key_reused",
+                                         "plan_refused"]})})
     def post_look(body: LookIn, request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
-                  idempotency_key: Optional[str] = Header(None, alias=idem.HEADER)):
+                  idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
         key = idem.check_key(idempotency_key)
         return replayable(*manager.command(p, run_id, "look", body.model_dump(), key, request.url.path))
 
-    @app.post("/runs/{run_id}/outcomes", tags=["runs"], summary="The outcome of the pending action")
+    @app.post("/runs/{run_id}/outcomes", tags=["runs"], operation_id="postOutcome",
+              summary="The outcome of the pending action", openapi_extra=IDEMPOTENCY_KEY,
+              responses={200: {"model": OutcomeAnswer, "description": "The completed row and the run",
+                               "headers": REPLAYED, "links": links("$response.body#/run_id", "postLook", "getTrace")},
+                         **errors({**run_errors, 409: ["no_pending_action", "outcome_refused", "run_busy"],
+                                   422: ["invalid_request", "idempotency_key_reused", "plan_refused"]})})
     def post_outcome(body: OutcomeIn, request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
-                     idempotency_key: Optional[str] = Header(None, alias=idem.HEADER)):
+                     idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
         key = idem.check_key(idempotency_key)
         return replayable(*manager.command(p, run_id, "outcome", body.model_dump(), key, request.url.path))
 
-    @app.post("/runs/{run_id}/cancel", tags=["runs"], summary="Drop the pending action (the robot did not carry it out)")
+    @app.post("/runs/{run_id}/cancel", tags=["runs"], operation_id="cancelAction",
+              summary="Drop the pending action (the robot did not carry it out)", openapi_extra=IDEMPOTENCY_KEY,
+              responses={200: {"model": CancelAnswer, "description": "The dropped row and the run",
+                               "headers": REPLAYED, "links": links("$response.body#/run_id", "postLook")},
+                         **errors({**run_errors, 409: ["no_pending_action", "run_busy"],
+                                   422: ["invalid_request", "idempotency_key_reused", "plan_refused"]})})
     def post_cancel(request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
-                    idempotency_key: Optional[str] = Header(None, alias=idem.HEADER), body: Optional[CancelIn] = None):
+                    idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False),
+                    body: Optional[CancelIn] = None):
         key = idem.check_key(idempotency_key)
         return replayable(*manager.command(p, run_id, "cancel", {}, key, request.url.path))
 
     # ------------------------------------------------------------ live updates
 
-    @app.post("/runs/{run_id}/ticket", tags=["events"], summary="A short-lived ticket to open this run's event stream from a browser")
+    @app.post("/runs/{run_id}/ticket", tags=["events"], operation_id="createTicket",
+              summary="A short-lived ticket to open this run's event stream from a browser",
+              responses={200: {"model": Ticket},
+                         **errors({401: ["unauthorized"], 404: ["run_not_found"], 413: ["body_too_large"],
+                                   422: ["invalid_request"], 500: ["internal_error"]})})
     def post_ticket(run_id: int = RUN_ID, p: Principal = Depends(principal)):
         manager.row(p, run_id)
         ticket = auth.ticket(p, run_id)
         return {"ticket": ticket, "expires_in": int(settings.ticket_seconds),
                 "url": f"/runs/{run_id}/events?ticket={ticket}"}
 
-    @app.get("/runs/{run_id}/events", tags=["events"], summary="Server-sent events: a snapshot, then every committed change",
+    @app.get("/runs/{run_id}/events", tags=["events"], operation_id="streamEvents",
+             summary="Server-sent events: a snapshot, then every committed change",
              response_class=StreamingResponse,
-             responses={200: {"content": {"text/event-stream": {}}, "description": "`snapshot`, then `look`, `outcome`, `cancel` events"}})
+             responses={200: {"content": {"text/event-stream": {}},
+                              "description": "`snapshot`, then `look`, `outcome`, `cancel` events (each event's "
+                                             "`data` is JSON, as described per event), and `complete` when the run "
+                                             "completes or `closed` when the token is revoked"},
+                        **errors({401: ["unauthorized"], 404: ["run_not_found"],
+                                  422: ["invalid_request", "plan_refused"],
+                                  500: ["internal_error", "run_replay_mismatch"]})})
     async def get_events(run_id: int = RUN_ID, creds: Optional[HTTPAuthorizationCredentials] = Depends(bearer),
                          ticket: Optional[str] = Query(None, max_length=200, description="From POST /runs/{id}/ticket")):
         def who() -> Principal:
@@ -461,6 +569,15 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
             media_type="text/event-stream",
             headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
 
+    generated_openapi = app.openapi
+
+    def openapi() -> dict:
+        """FastAPI's document, completed (:func:`opportune.service.schemas.complete_openapi`)."""
+        if app.openapi_schema is None:
+            app.openapi_schema = complete_openapi(generated_openapi())
+        return app.openapi_schema
+
+    app.openapi = openapi
     app.add_middleware(BodyLimit, limit=settings.max_body)
     app.add_middleware(SecurityHeaders)
     app.add_middleware(CatchAll)  # outermost of ours: covers the other two as well

@@ -56,15 +56,27 @@ def serve(
     port: int = typer.Option(8700, "--port", min=0, max=65535, help="TCP port"),
     max_body: int = typer.Option(1 << 20, "--max-body", min=1024, help="Largest request body accepted, in bytes"),
     access_log: bool = typer.Option(True, "--access-log/--no-access-log", help="Log every request (credentials redacted)"),
+    workers: int = typer.Option(1, "--workers", min=1, max=64,
+                                help="Server processes sharing the port and the database (more than 1: PostgreSQL only)"),
 ):
     """Serve the sequencer over HTTP for robot cells, with the live dashboard at /."""
     _require("sqlalchemy", "fastapi", "uvicorn")
-    store = _store(db)  # fail early, with a clear message, on a bad database
+    if workers > 1:
+        from opportune.service.config import database_url
+
+        url = database_url(db)
+        if not url.startswith("postgresql"):
+            _fail(f"--workers {workers} needs PostgreSQL (--db postgresql+psycopg://user@host/db): several "
+                  "processes share one database, and a SQLite file takes one writer at a time (they would only "
+                  "queue behind each other). Serve SQLite with one process (--workers 1).")
+    store = _store(db)  # fail early, with a clear message, on a bad database (and create the schema once)
     store.dispose()
     from opportune.service.server import safe_url, serve as run
 
-    typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)})", err=True)
-    run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log)
+    procs = f"; {workers} processes" if workers > 1 else ""
+    typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)}{procs})",
+               err=True)
+    run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers)
 
 
 def token_create(

@@ -79,6 +79,19 @@ def plan_not_found(plan_id: Any) -> ApiError:
     return ApiError(404, "plan_not_found", f"no plan {plan_id}", "upload the plan with POST /plans; its id is the returned `id`")
 
 
+def unsupported_media_type(content_type: str) -> ApiError:
+    """A body that is not JSON sent to a route that reads JSON (e.g. ``curl -d``, which sends a form)."""
+    sent = f"`{content_type}`" if content_type else "no Content-Type"
+    return ApiError(415, "unsupported_media_type", f"this request takes a JSON body, and was sent {sent}",
+                    "send the body as JSON with `Content-Type: application/json`", where="header Content-Type")
+
+
+def is_json(content_type: str | None) -> bool:
+    """Whether FastAPI reads a body of this media type as JSON (``application/json``, ``*/*+json``)."""
+    media = (content_type or "").split(";")[0].strip().lower()
+    return media == "application/json" or (media.startswith("application/") and media.endswith("+json"))
+
+
 def internal(ref: str) -> dict:
     return {"error": {"status": 500, "code": "internal_error",
                       "message": f"the service failed on this request (reference {ref}); nothing was changed",

@@ -5,10 +5,19 @@ layout of its precedence graph), then sends one event per committed change
 — ``look``, ``outcome`` or ``cancel`` — carrying the answer that was sent to
 the cell (the new or completed trace row and the run's new state), with the
 run's event number as the SSE ``id``.  Events are read from the database, so
-a stream only ever shows what is committed, and it sees changes made by other
-server processes too (it polls every few seconds besides being woken at once
-by this process's commits).  A client that reconnects gets a fresh snapshot.
-Comment lines keep idle connections open through proxies.
+a stream only ever shows what is committed.  A client that reconnects gets a
+fresh snapshot.  Comment lines keep idle connections open through proxies.
+
+Changes made by other server processes (``opportune serve --workers N``, or
+several servers on one database) reach a stream too:
+
+* on PostgreSQL at once: once a change is committed its process sends a
+  ``pg_notify`` (:meth:`~opportune.service.storage.Store.announce`), and each
+  process's :class:`~opportune.service.storage.ChangeListener` wakes the
+  :class:`Broker`'s streams of that run — milliseconds, as for a change made
+  in the same process;
+* always, by polling the log every ``Settings.sse_poll_seconds`` (2 s): the only
+  way on SQLite, and the fallback on PostgreSQL while the listener reconnects.
 """
 
 from __future__ import annotations
@@ -29,7 +38,8 @@ def sse(event: str, data: dict, id: int | None = None) -> str:
 
 
 class Broker:
-    """Wakes the streams of a run when this process commits a change to it (thread-safe ``notify``)."""
+    """Wakes the streams of a run when it changes (thread-safe ``notify``: called after this process's
+    commits, and by the database listener for other processes' commits)."""
 
     def __init__(self):
         self._subs: dict[int, set[asyncio.Event]] = {}

@@ -83,8 +83,8 @@ def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt
             fmt = _text_field(data, "format", 10) or fmt
             filename = _text_field(data, "filename", MAX_FILENAME) or filename
             raw = text.encode("utf-8")
-        else:
-            fmt = fmt or "json"
+        else:  # a plan in JSON: ?format= names the format of a raw body, and this one is JSON
+            fmt = "json"
     if fmt is not None and fmt not in FORMATS:
         raise ApiError(422, "invalid_request", f"unknown plan format {fmt!r}", "use yaml, json or in2", where="format")
     if filename is not None and (_SURROGATE.search(filename) or not filename.isprintable()):

@@ -14,20 +14,37 @@ A command (look, outcome, cancel) on a run:
 1. takes the run's lock (requests on one run are serialised; different runs
    proceed in parallel, sharing only the plan's engine lock while counting);
 2. answers a retried ``Idempotency-Key`` from the stored answer;
-3. applies the command to the live sequencer — a refused command raises
+3. brings the live sequencer up to the run's committed event count, replaying
+   the tail of the log that other server processes wrote since this one last
+   saw the run;
+4. applies the command to the live sequencer — a refused command raises
    before anything changes;
-4. commits, in one transaction: the event with its answer, the run's summary
+5. commits, in one transaction: the event with its answer, the run's summary
    (guarded by the run's event count: another process that wrote first makes
    this one rebuild and retry), and the idempotency record;
-5. only then answers, and wakes the run's event streams.
+6. only then answers, and wakes the run's event streams (on PostgreSQL, those
+   of the other processes too).
 
 If the commit fails the live sequencer is dropped and rebuilt from the log
 next time, so memory never runs ahead of the database.
+
+Several processes (``opportune serve --workers N`` on PostgreSQL).  Each has
+its own live sequencers; the database is the only shared state.  Step 3 makes
+a request correct whichever process the previous one landed on, reads replay
+the tail the same way, and step 5's guard serialises commands on one run
+across processes optimistically: nothing is locked while deciding, and of two
+processes deciding on the same run at once, the second to commit finds the
+count moved, rebuilds from the log and tries again (up to ``ATTEMPTS`` times,
+then 409 ``run_busy``, which a retry with the same key settles).  A process
+that replays a decision another process took exactly, but can only estimate it
+within its own decision budget (its counting memo is colder), decides it again
+exactly rather than calling an estimate that differs a mismatch.
 """
 
 from __future__ import annotations
 
 import json
+import random
 import threading
 import time
 from collections import OrderedDict
@@ -38,7 +55,7 @@ from sqlalchemy import bindparam, case, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 
 from opportune.engine.count import BudgetExceeded
-from opportune.policies.base import Decision
+from opportune.policies.base import Action, Decision
 from opportune.sequencer import LookError, OutcomeError, Sequencer
 from opportune.service import idempotency as idem
 from opportune.service.auth import Principal
@@ -49,6 +66,7 @@ from opportune.service.views import count_view, decision_view, row_view, run_sum
 
 # Statements of the hot path, built once (each request only binds values).
 FORGET_EVERY = 60.0  # seconds between clean-ups of stored idempotent answers past their time
+ATTEMPTS = 5         # tries of a command that another process's commit on the same run overtook
 
 _RUN_ROW = (select(runs, plans.c.name.label("plan_name")).join(plans, plans.c.id == runs.c.plan_id)
             .where(runs.c.id == bindparam("run_id")))
@@ -117,6 +135,8 @@ class RunManager:
         self._next_forget = 0.0           # monotonic time of the next clean-up of old answers
         self._live: OrderedDict[int, LiveRun] = OrderedDict()
         self._mutex = threading.Lock()
+        # PostgreSQL: wake this process's streams when another process commits (None on SQLite).
+        self.listener = store.listen(notify)
 
     def _remember(self, c, scope: str, key: str, h: str, status: int, text: str) -> None:
         """Store an answer; at most once a minute, in the same transaction, forget those past their time."""
@@ -188,14 +208,38 @@ class RunManager:
                     if ev.kind == "look":
                         recorded = json.loads(ev.response)["action"]
                         if result.action.to_dict() != recorded:
-                            raise ReplayMismatch(f"event {ev.seq}: this version decides {result.action}, "
-                                                 f"the run recorded {recorded}")
+                            if result.exact or live.sequencer.pending is None:
+                                raise ReplayMismatch(f"event {ev.seq}: this version decides {result.action}, "
+                                                     f"the run recorded {recorded}")
+                            # Out of budget here, where the recording process counted exactly.
+                            live.sequencer.cancel()
+                            self._decide_exactly(live.sequencer, request["visible"], recorded, ev.seq)
                     live.applied = ev.seq
             except (ReplayMismatch, LookError, OutcomeError) as exc:
                 live.sequencer, live.applied = None, 0
                 raise ApiError(500, "run_replay_mismatch",
                                f"run {live.id} cannot be resumed by this version of opportune: {exc}",
                                "finish the run with the version that started it, or start a new run") from None
+
+    def _decide_exactly(self, sequencer: Sequencer, visible: list, recorded: dict, seq: int) -> None:
+        """Replay a decision recorded as exact that this process could only estimate within its budget.
+
+        Decided again with exact counts and no time limit but the engine's own (so the trace row
+        has the same reasons as in the process that took it), and compared; if even the engine's
+        limit is not enough, the recorded action is taken as it was (the log is the truth).
+        """
+        from opportune.policies.opportunistic import Opportunistic
+
+        budgeted, sequencer.policy = sequencer.policy, Opportunistic(budget=None)
+        try:
+            decision = sequencer.decide(visible)
+        except BudgetExceeded:
+            sequencer.replay(visible, Action.from_dict(recorded))
+            return
+        finally:
+            sequencer.policy = budgeted
+        if decision.action.to_dict() != recorded:
+            raise ReplayMismatch(f"event {seq}: this version decides {decision.action}, the run recorded {recorded}")
 
     def _sequencer(self, loaded: LoadedPlan, capacity: int | None) -> Sequencer:
         """A new sequencer of the service's policy (its first state counted within the warm-up time)."""
@@ -277,7 +321,9 @@ class RunManager:
             raise forbidden("an operator token reads runs; only the run's cell drives it",
                             "use the token of the cell the run belongs to")
         h = idem.request_hash("POST", path, request)
-        for _attempt in range(3):
+        for attempt in range(ATTEMPTS):
+            if attempt:  # another process committed on this run meanwhile: let it finish, then rebuild
+                time.sleep(random.uniform(0, 0.005 * 2 ** attempt))
             r, stored = self.row(principal, run_id, key=(principal.scope, key, h))
             if stored:
                 return stored.status, stored.text, True
@@ -343,7 +389,8 @@ class RunManager:
             self._forget(live)
             raise
         live.applied = expected + 1
-        self.notify(live.id)
+        self.store.announce(live.id)  # the other processes' streams (PostgreSQL)
+        self.notify(live.id)          # this process's
         return 200, text, False
 
     def _apply_checked(self, live: LiveRun, loaded: LoadedPlan, kind: str, request: dict) -> dict:

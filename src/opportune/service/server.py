@@ -7,12 +7,25 @@ or under any other name.  So no query string reaches the logs: every value of
 a URL's query is replaced by ``REDACTED`` (``/runs?limit=5&bearer=REDACTED``
 becomes ``/runs?limit=REDACTED&bearer=REDACTED``), whatever its name, and
 ``ticket=``, ``token=`` and the like are redacted in any other log text too.
+
+Several processes (:func:`serve` with ``workers`` > 1, PostgreSQL only) run
+under uvicorn's multiprocess supervisor: the parent binds the one listening
+socket and starts ``workers`` processes that accept connections on it (the
+kernel spreads the connections); it checks each worker every half second and
+replaces one that died or hangs (``kill -9`` included), and a SIGTERM to the
+parent stops them all.  Each worker builds its own application with
+:func:`app_from_environment` from settings the parent leaves in the
+environment (``OPPORTUNE_SERVE_SETTINGS``), and closes a keep-alive
+connection now and then (:class:`Recycle`) so that connections spread over
+the workers.
 """
 
 from __future__ import annotations
 
 import copy
+import json
 import logging
+import os
 import re
 
 CREDENTIAL_IN_QUERY = re.compile(
@@ -83,15 +96,68 @@ def safe_url(url: str) -> str:
         return url
 
 
-def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool = True) -> None:
-    """Open the store, build the app and serve until interrupted."""
+SETTINGS_ENV = "OPPORTUNE_SERVE_SETTINGS"
+RECYCLE_EVERY = 100   # with several workers: a keep-alive connection is closed after about this many requests
+
+
+class Recycle:
+    """Closes a keep-alive connection after about ``every`` requests (``Connection: close`` on one answer
+    in ``every``, at random), so that clients reconnect from time to time and the workers sharing the
+    port even out.
+
+    Workers accept new connections from one socket; a client keeps its connection, and so its worker,
+    for as long as it likes, and connections made in a burst (every cell at start-up) can all land on
+    one worker.  Reconnecting once in a hundred requests costs a TCP handshake on loopback or a LAN;
+    HTTP clients reconnect on their own.  Event streams are left alone.  (Pure ASGI.)
+    """
+
+    def __init__(self, app, every: int = RECYCLE_EVERY):
+        import random
+
+        self.app = app
+        self.every = every
+        self._random = random.Random()
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http" or scope["path"].endswith("/events") or self._random.random() * self.every >= 1:
+            return await self.app(scope, receive, send)
+
+        async def closing(message):
+            if message["type"] == "http.response.start":
+                message = {**message, "headers": [*message.get("headers", ()), (b"connection", b"close")]}
+            await send(message)
+
+        await self.app(scope, receive, closing)
+
+
+def app_from_environment():
+    """The application of one worker process, from the settings :func:`serve` put in the environment."""
+    from opportune.service.app import create_app
+    from opportune.service.config import Settings
+
+    settings = Settings(**json.loads(os.environ[SETTINGS_ENV]))
+    logging.getLogger("opportune.service").info("worker %d: database %s", os.getpid(), safe_url(settings.db_url))
+    app = create_app(settings)
+    app.add_middleware(Recycle)
+    return app
+
+
+def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool = True, workers: int = 1) -> None:
+    """Open the store, build the app and serve until interrupted; with ``workers`` > 1, that many processes
+    sharing the port and the database (PostgreSQL: :func:`opportune.service.commands.serve` refuses SQLite)."""
     import uvicorn
+
+    common = dict(host=host, port=port, log_config=log_config(), access_log=access_log, timeout_graceful_shutdown=3,
+                  server_header=False, proxy_headers=False)
+    if workers > 1:
+        # Spawned workers import the application by name; the settings travel in the environment.
+        os.environ[SETTINGS_ENV] = json.dumps({"db_url": db_url, "max_body": max_body})
+        uvicorn.run("opportune.service.server:app_from_environment", factory=True, workers=workers, **common)
+        return
 
     from opportune.service.app import create_app
     from opportune.service.config import Settings
 
     app = create_app(Settings(db_url=db_url, max_body=max_body))
     logging.getLogger("opportune.service").info("database %s", safe_url(db_url))
-    config = uvicorn.Config(app, host=host, port=port, log_config=log_config(), access_log=access_log,
-                            timeout_graceful_shutdown=3, server_header=False, proxy_headers=False)
-    uvicorn.Server(config).run()
+    uvicorn.Server(uvicorn.Config(app, **common)).run()

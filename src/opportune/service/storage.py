@@ -15,16 +15,24 @@ Writes go through :meth:`Store.write`: one transaction, committed before the
 answer is sent.  On SQLite a write transaction starts with ``BEGIN IMMEDIATE``,
 so that two writers never race between a read and a write; readers use a
 separate pool and are never blocked by a writer (WAL).
+
+Several server processes can share one PostgreSQL database (``opportune serve
+--workers N``).  The schema is created under an advisory lock, so processes
+starting together on a fresh database do not race.  Once a change to a run
+is committed, the process announces it (:meth:`Store.announce`: a ``pg_notify``
+of its own), and each process listens (:class:`ChangeListener`, one connection
+per process) to wake its event streams at once for changes committed elsewhere.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import secrets
 import threading
 import time
 from contextlib import contextmanager
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 from sqlalchemy import (
     Column,
@@ -40,11 +48,20 @@ from sqlalchemy import (
     event,
     insert,
     select,
+    text,
 )
 from sqlalchemy.engine import Connection, Engine
 from sqlalchemy.exc import IntegrityError
 
 SCHEMA_VERSION = "1"
+CHANGES_CHANNEL = "opportune_runs"   # PostgreSQL NOTIFY channel: "<run id> <origin>" for every committed change
+SCHEMA_LOCK = 0x6F70706F             # PostgreSQL advisory lock key held while creating the schema ("oppo")
+# A notice is its own one-statement transaction that does not wait for the WAL to reach the disk:
+# PostgreSQL serialises the commits of transactions that notify (a database-wide lock held until the
+# commit is flushed), so a notice inside each write would make every write wait for the previous
+# one's flush.  The change itself was committed durably before.
+_NOTIFY = text("SELECT set_config('synchronous_commit', 'off', true), pg_notify(:channel, :payload)")
+log = logging.getLogger("opportune.service")
 
 metadata = MetaData()
 
@@ -138,14 +155,22 @@ class Store:
         self.url = url
         self.is_sqlite = url.startswith("sqlite")
         self._write_lock = threading.Lock()
+        self.origin = secrets.token_hex(6)   # names this store's own announcements (see ``listen``)
+        self._listeners: list[ChangeListener] = []
         if self.is_sqlite:
             self.writer = self._sqlite_engine(url, immediate=True)
             self.reader = self._sqlite_engine(url, immediate=False)
         else:
             self.writer = self.reader = create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=20)
-        metadata.create_all(self.writer)
-        for index in idempotency.indexes:  # a database made by an older version has the table, not the index
-            index.create(self.writer, checkfirst=True)
+        self.is_postgres = self.writer.dialect.name == "postgresql"
+        self._autocommit = self.writer.execution_options(isolation_level="AUTOCOMMIT")
+        self._announce_failed = False
+        with self.writer.begin() as c:
+            if self.is_postgres:  # processes starting together on a fresh database: one creates, the others wait
+                c.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": SCHEMA_LOCK})
+            metadata.create_all(c)
+            for index in idempotency.indexes:  # a database made by an older version has the table, not the index
+                index.create(c, checkfirst=True)
         self._init_meta()
 
     @staticmethod
@@ -203,6 +228,46 @@ class Store:
             with conn.begin():
                 yield conn
 
+    def announce(self, run_id: int) -> None:
+        """After a run's change is committed: tell the other server processes (PostgreSQL; else nothing).
+
+        Never fails: a notice that cannot be sent only means the other processes' event streams
+        see the change at their next poll.  (A process killed between its commit and this notice
+        leaves the same.)
+        """
+        if not self.is_postgres:
+            return
+        try:
+            with self._autocommit.connect() as c:
+                c.execute(_NOTIFY, {"channel": CHANGES_CHANNEL, "payload": f"{run_id} {self.origin}"})
+            self._announce_failed = False
+        except Exception as exc:
+            if not self._announce_failed:  # once per outage, not once per request
+                log.warning("could not notify the other server processes of a change (%s); their event streams "
+                            "will see it at their next poll", type(exc).__name__)
+            self._announce_failed = True
+
+    def listen(self, on_change: Callable[[int], None]) -> "ChangeListener | None":
+        """Call ``on_change(run_id)`` for each run another process changes (PostgreSQL with psycopg 3).
+
+        Returns the listener (stopped by :meth:`dispose`), or None where the database cannot
+        notify (SQLite: the event streams' poll is then how other processes' changes are seen).
+        """
+        if not self.is_postgres or self.writer.dialect.driver != "psycopg":
+            return None
+        cargs, cparams = self.writer.dialect.create_connect_args(self.writer.url)
+        cparams = {k: v for k, v in cparams.items() if k != "context"}
+        cparams.setdefault("connect_timeout", 10)
+
+        def connect():
+            import psycopg
+
+            return psycopg.connect(*cargs, autocommit=True, **cparams)
+
+        listener = ChangeListener(connect, on_change, ignore_origin=self.origin)
+        self._listeners.append(listener)
+        return listener
+
     def journal_mode(self) -> str | None:
         """SQLite's journal mode (``wal``), or None for other databases."""
         if not self.is_sqlite:
@@ -211,6 +276,9 @@ class Store:
             return conn.exec_driver_sql("PRAGMA journal_mode").scalar()
 
     def dispose(self) -> None:
+        for listener in self._listeners:
+            listener.stop()
+        self._listeners.clear()
         self.writer.dispose()
         if self.reader is not self.writer:
             self.reader.dispose()
@@ -218,3 +286,66 @@ class Store:
 
 def now() -> float:
     return time.time()
+
+
+class ChangeListener:
+    """A thread that LISTENs on PostgreSQL for runs changed by other server processes.
+
+    One connection per process, outside the pools.  Each notice ``"<run id> <origin>"`` whose origin
+    is not this process's store calls ``on_change(run_id)`` (the event broker's ``notify``: it only
+    wakes streams open on that run).  If the connection fails, it reconnects with a growing pause
+    (0.5 s to 10 s); changes in between are seen by the streams' own poll.
+    """
+
+    def __init__(self, connect: Callable[[], Any], on_change: Callable[[int], None], *, ignore_origin: str = "",
+                 channel: str = CHANGES_CHANNEL):
+        self._connect = connect
+        self._on_change = on_change
+        self._ignore = ignore_origin
+        self._channel = channel
+        self._stop = threading.Event()
+        self.listening = threading.Event()   # set while LISTEN is in place
+        self._thread = threading.Thread(target=self._run, name="opportune-listen", daemon=True)
+        self._thread.start()
+
+    def _dispatch(self, payload: str) -> None:
+        run, _, origin = payload.partition(" ")
+        if origin == self._ignore or not run.isdigit():
+            return
+        try:
+            self._on_change(int(run))
+        except Exception:  # a broken callback must not end the listening
+            log.exception("waking the event streams of run %s failed", run)
+
+    def _run(self) -> None:
+        pause = 0.5
+        while not self._stop.is_set():
+            try:
+                with self._connect() as conn:
+                    conn.execute(f"LISTEN {self._channel}")
+                    self.listening.set()
+                    pause = 0.5
+                    check = time.monotonic() + 30.0
+                    while not self._stop.is_set():
+                        for notice in conn.notifies(timeout=1.0):
+                            self._dispatch(notice.payload)
+                            if self._stop.is_set():
+                                break
+                        if time.monotonic() >= check:  # a server gone silently: find out, and reconnect
+                            conn.execute("SELECT 1")
+                            check = time.monotonic() + 30.0
+            except Exception as exc:
+                if self._stop.is_set():
+                    break
+                log.warning("listening for changes made by other server processes failed (%s: %s); "
+                            "event streams poll meanwhile; retrying in %.1f s", type(exc).__name__,
+                            str(exc).splitlines()[0] if str(exc) else "", pause)
+                self._stop.wait(pause)
+                pause = min(10.0, pause * 2)
+            finally:
+                self.listening.clear()
+
+    def stop(self, timeout: float = 3.0) -> None:
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout)

@@ -8,6 +8,12 @@ or with ``kill -9`` to test recovery.  It needs only the ``service`` extra
 that sends the bearer token and a fresh ``Idempotency-Key`` on every POST
 unless told which key to use.
 
+With ``workers=N`` (PostgreSQL) it runs ``opportune serve --workers N``: a
+supervisor and N worker processes on one port; :meth:`ServiceProcess.worker_pids`
+names the workers, :meth:`ServiceProcess.kill_worker` kills one with
+``kill -9`` (the supervisor replaces it), and :meth:`ServiceProcess.kill` kills
+the supervisor and every worker at once.
+
 >>> with ServiceProcess(tmp_path / "t.db") as svc:                  # doctest: +SKIP
 ...     cell = Client(svc.url, svc.token(cell="cell-1"))
 ...     plan = cell.post("/plans", content=open("examples/gearbox.yaml").read(),
@@ -51,8 +57,9 @@ class ServiceProcess:
     always stops it.  With a URL, give ``log`` (where the server's output goes)."""
 
     def __init__(self, db: str | Path, *, max_body: int | None = None, log: str | Path | None = None,
-                 extra_args: tuple[str, ...] = ()):
+                 extra_args: tuple[str, ...] = (), workers: int = 1):
         self.db = str(db)
+        self.workers = workers
         if log is None and "://" in self.db:
             raise ValueError("with a database URL, say where the server's log goes: log=PATH")
         self.max_body = max_body
@@ -70,24 +77,27 @@ class ServiceProcess:
             self.port = free_port()
             args = [sys.executable, "-m", "opportune.cli", "serve", "--db", self.db,
                     "--host", "127.0.0.1", "--port", str(self.port), *self.extra_args]
+            if self.workers != 1:
+                args += ["--workers", str(self.workers)]
             if self.max_body:
                 args += ["--max-body", str(self.max_body)]
             log = open(self.log_path, "ab")
+            # Its own process group: kill() reaches the workers of --workers N too.
             self.proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                         env={**os.environ, "PYTHONUNBUFFERED": "1"}, start_new_session=True)
             log.close()
             deadline = time.monotonic() + timeout
             while time.monotonic() < deadline:
                 if self.proc.poll() is not None:
                     break
-                if _healthy(self.url + "/healthz"):
+                if _healthy(self.url + "/healthz") and (self.workers == 1 or len(self.worker_pids()) == self.workers):
                     return self
                 time.sleep(0.05)
             self.stop()
         raise RuntimeError(f"the service did not start; its log:\n{self.log_text()[-3000:]}")
 
     def stop(self, timeout: float = 10.0) -> None:
-        """SIGTERM, then SIGKILL if it has not stopped within ``timeout``."""
+        """SIGTERM (the supervisor of ``workers`` stops its workers), then SIGKILL if it has not stopped within ``timeout``."""
         if self.proc is None or self.proc.poll() is not None:
             return
         self.proc.send_signal(signal.SIGTERM)
@@ -97,10 +107,44 @@ class ServiceProcess:
             self.kill()
 
     def kill(self) -> None:
-        """``kill -9``: no chance to flush or clean up."""
+        """``kill -9`` the server's process group (with ``workers``: the supervisor and every worker at once):
+        no chance to flush or clean up."""
         if self.proc is not None and self.proc.poll() is None:
-            self.proc.kill()
+            # Not reaped yet, so the group's id is still this server's: nothing else can be hit.
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
             self.proc.wait(10)
+
+    def worker_pids(self) -> list[int]:
+        """The worker processes of ``--workers N`` (children of the server process), from /proc (Linux)."""
+        if self.workers == 1 or self.proc is None or self.proc.poll() is not None:
+            return []
+        children = []
+        for entry in Path("/proc").iterdir():
+            if not entry.name.isdigit():
+                continue
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            # pid (comm) state ppid ...: the command name may hold spaces or parentheses
+            fields = stat[stat.rindex(")") + 2:].split()
+            if int(fields[1]) == self.proc.pid and fields[0] != "Z":
+                cmdline = (entry / "cmdline").read_bytes() if (entry / "cmdline").exists() else b""
+                if b"multiprocessing" in cmdline and b"resource_tracker" not in cmdline:
+                    children.append(int(entry.name))
+        return sorted(children)
+
+    def kill_worker(self, pid: int | None = None) -> int:
+        """``kill -9`` one worker (the first, or ``pid``); the supervisor starts another. Its pid."""
+        pids = self.worker_pids()
+        if not pids:
+            raise RuntimeError("no worker processes: start the service with workers=N > 1")
+        pid = pid if pid in pids else pids[0]
+        os.kill(pid, signal.SIGKILL)
+        return pid
 
     def log_text(self) -> str:
         try:
@@ -158,7 +202,8 @@ class PostgresServer:
     """A throwaway PostgreSQL server in a temporary directory, on 127.0.0.1 and a free port, for tests.
 
     Needs the server programs (Debian: ``apt-get install postgresql``); as root it runs them as the
-    ``postgres`` user, as PostgreSQL requires.  :meth:`database` makes a fresh database and returns
+    ``postgres`` user, as PostgreSQL requires.  It runs with ``fsync=off`` (tests need no durability
+    against power loss; ``kill -9`` of a client loses nothing either way) unless ``durable=True``.  :meth:`database` makes a fresh database and returns
     its SQLAlchemy URL (driver psycopg 3).
 
     The server lives in a fresh directory under the system's temporary directory (the ``postgres``
@@ -168,7 +213,8 @@ class PostgresServer:
     ...     url = pg.database("runs")
     """
 
-    def __init__(self):
+    def __init__(self, *, durable: bool = False):
+        self.durable = durable  # False: fsync=off (fast tests); True: PostgreSQL's defaults (benchmarks)
         self.root: Path | None = None
         self.data: Path | None = None
         self.port: int | None = None
@@ -205,7 +251,8 @@ class PostgresServer:
         self._run(str(self.bindir / "initdb"), "-D", str(self.data), "-A", "trust", "-U", "postgres", "-E", "UTF8")
         self.port = free_port()
         self._run(str(self.bindir / "pg_ctl"), "-D", str(self.data), "-w", "-l", str(self.root / "server.log"),
-                  "-o", f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off", "start")
+                  "-o", f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1"
+                  + ("" if self.durable else " -c fsync=off"), "start")
         return self
 
     def database(self, name: str) -> str:

@@ -1,0 +1,361 @@
+"""A small typed client for a cell controller: :class:`Cell` drives runs of an ``opportune serve`` service.
+
+>>> from opportune.client import Cell, LookContradictsState       # doctest: +SKIP
+>>> with Cell("http://127.0.0.1:8700", token) as cell:
+...     plan = cell.upload_plan(Path("examples/gearbox.yaml"))
+...     run = cell.start_run(plan.id, label="SN 1042")
+...     answer = cell.look(run.id, ["rl", "ra"])                     # what the camera sees
+...     answer.action.kind, answer.action.part                      # ('buffer', 'rl')
+...     cell.outcome(run.id, "success")                             # the robot did it
+
+Every answer is a Pydantic model of :mod:`opportune.service.schemas` (the same models the
+service's OpenAPI document is built from), so fields are typed and checked.
+
+**Retries.**  A request that changes a run (start, look, outcome, cancel) is sent with a fresh
+``Idempotency-Key``; when the connection fails or times out, or the service answers 5xx (or 409
+``run_busy``), it is sent again with the *same* key, up to ``retries`` more times with a growing
+pause.  The service answers a retry from its store of answers, so an action is never decided
+twice even when the first answer was lost on the way back.  Reads and plan uploads (a plan's id
+is its content hash) are retried the same way.
+
+**Errors.**  A refusal raises a :class:`CellError` subclass carrying the service's ``status``,
+``code``, ``message``, ``hint`` and ``where``: by code (e.g. :class:`LookContradictsState`,
+:class:`NoPendingAction`, :class:`UnknownPart`), else by status (:class:`NotFound`,
+:class:`Conflict`, :class:`InvalidRequest`, ...).  :class:`ServiceUnreachable` is raised when no
+answer came back at all.
+
+Needs ``httpx`` and ``pydantic``: ``pip install 'opportune[service]'``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import uuid
+from typing import Any, Literal, TypeVar
+
+try:
+    import httpx
+    from pydantic import BaseModel, ValidationError
+
+    from opportune.service.schemas import (CancelAnswer, Health, LookAnswer, OutcomeAnswer, PlanDetail, PlanUploaded,
+                                           Run, RunList, RunSummary, Trace)
+except ImportError as exc:  # pragma: no cover - depends on the installation
+    raise ImportError(f"opportune.client needs httpx and pydantic ({exc.name} is missing): "
+                      "pip install 'opportune[service]'", name=exc.name) from None
+
+__all__ = [
+    "Cell", "CellError", "BadRequest", "Unauthorized", "Forbidden", "NotFound", "Conflict", "LookContradictsState",
+    "ActionPending", "RunComplete", "NoPendingAction", "OutcomeRefused", "RunBusy", "PayloadTooLarge",
+    "UnsupportedMediaType", "InvalidRequest", "InvalidPlan", "UnknownPlan", "UnknownPart", "IdempotencyKeyReused", "KeyRequired",
+    "ServerError", "Unavailable", "ServiceUnreachable", "UnexpectedAnswer",
+]
+
+M = TypeVar("M", bound=BaseModel)
+
+
+# ---------------------------------------------------------------- errors
+
+class CellError(Exception):
+    """A request the service refused (or could not answer): its status, code, message, hint and where."""
+
+    status: int | None
+    code: str
+
+    def __init__(self, status: int | None, code: str, message: str, hint: str = "", *, where: str | None = None,
+                 problems: list[dict] | None = None, body: dict | None = None):
+        super().__init__(message)
+        self.status = status
+        self.code = code
+        self.message = message
+        self.hint = hint
+        self.where = where
+        self.problems = problems or []
+        self.body = body
+
+    def __str__(self) -> str:
+        head = f"{self.status} {self.code}" if self.status else self.code
+        where = f" at {self.where}" if self.where else ""
+        hint = f" (hint: {self.hint})" if self.hint else ""
+        return f"{head}: {self.message}{where}{hint}"
+
+
+class BadRequest(CellError):
+    """400: the request could not be read (malformed JSON, a bad Idempotency-Key)."""
+
+
+class Unauthorized(CellError):
+    """401: no valid bearer token."""
+
+
+class Forbidden(CellError):
+    """403: the token may not do this (e.g. an operator token writing)."""
+
+
+class NotFound(CellError):
+    """404: no such run or plan for this token (another cell's run is not found either)."""
+
+
+class Conflict(CellError):
+    """409: refused in the run's present state; nothing changed."""
+
+
+class LookContradictsState(Conflict):
+    """409 ``look_contradicts_state``: the look shows a part that cannot be in the bin."""
+
+
+class ActionPending(Conflict):
+    """409 ``action_pending``: report the pending action's outcome (or cancel it) before the next look."""
+
+
+class RunComplete(Conflict):
+    """409 ``run_complete``: the assembly is done."""
+
+
+class NoPendingAction(Conflict):
+    """409 ``no_pending_action``: an outcome or cancel with no action pending."""
+
+
+class OutcomeRefused(Conflict):
+    """409 ``outcome_refused``: this outcome is not possible for the pending action."""
+
+
+class RunBusy(Conflict):
+    """409 ``run_busy``: another server process is changing the run (retried by the client)."""
+
+
+class PayloadTooLarge(CellError):
+    """413: the body is larger than the service's limit."""
+
+
+class UnsupportedMediaType(CellError):
+    """415: the body is not JSON."""
+
+
+class InvalidRequest(CellError):
+    """422: an invalid request; nothing changed."""
+
+
+class InvalidPlan(InvalidRequest):
+    """422 ``invalid_plan``: ``problems`` lists every finding of ``opportune check``."""
+
+
+class UnknownPlan(InvalidRequest):
+    """422 ``unknown_plan``: upload the plan first."""
+
+
+class UnknownPart(InvalidRequest):
+    """422 ``unknown_part``: a look names a part the plan does not have."""
+
+
+class IdempotencyKeyReused(InvalidRequest):
+    """422 ``idempotency_key_reused``: the key was used for another request."""
+
+
+class KeyRequired(CellError):
+    """428: the request needs an Idempotency-Key (the client always sends one)."""
+
+
+class ServerError(CellError):
+    """5xx: the service failed on the request; nothing was changed (retried by the client)."""
+
+
+class Unavailable(ServerError):
+    """503: over the counting budget for now (retried by the client)."""
+
+
+class ServiceUnreachable(CellError):
+    """No answer: the connection failed or timed out on every attempt (``status`` is None)."""
+
+
+class UnexpectedAnswer(CellError):
+    """An answer that is not what the service's OpenAPI document says (a proxy's page, another server)."""
+
+
+BY_CODE: dict[str, type[CellError]] = {
+    "look_contradicts_state": LookContradictsState, "action_pending": ActionPending, "run_complete": RunComplete,
+    "no_pending_action": NoPendingAction, "outcome_refused": OutcomeRefused, "run_busy": RunBusy,
+    "invalid_plan": InvalidPlan, "unknown_plan": UnknownPlan, "unknown_part": UnknownPart,
+    "idempotency_key_reused": IdempotencyKeyReused,
+}
+BY_STATUS: dict[int, type[CellError]] = {
+    400: BadRequest, 401: Unauthorized, 403: Forbidden, 404: NotFound, 409: Conflict, 413: PayloadTooLarge,
+    415: UnsupportedMediaType, 422: InvalidRequest, 428: KeyRequired, 503: Unavailable,
+}
+
+
+def error_from(response: httpx.Response) -> CellError:
+    """The typed error of a refusal (``{"error": {status, code, message, hint, where}}``)."""
+    status = response.status_code
+    try:
+        err = response.json()["error"]
+        code, message = str(err["code"]), str(err["message"])
+    except (ValueError, KeyError, TypeError):
+        kind = ServerError if status >= 500 else BY_STATUS.get(status, CellError)
+        return kind(status, "http_error", f"HTTP {status} without the service's error body: {response.text[:200]!r}")
+    kind = BY_CODE.get(code) or BY_STATUS.get(status) or (ServerError if status >= 500 else CellError)
+    return kind(status, code, message, str(err.get("hint") or ""), where=err.get("where"),
+                problems=err.get("problems"), body=err)
+
+
+def _retryable(error: CellError) -> bool:
+    return isinstance(error, (ServerError, RunBusy))
+
+
+def _run_id(run) -> int:
+    if isinstance(run, bool):
+        raise TypeError("a run is its id (an int) or a run answer")
+    if isinstance(run, int):
+        return run
+    if isinstance(run, Run):
+        return run.id
+    rid = getattr(run, "run_id", None)
+    if isinstance(rid, int):
+        return rid
+    raise TypeError(f"a run is its id (an int) or a run answer, not {type(run).__name__}")
+
+
+# ---------------------------------------------------------------- the client
+
+class Cell:
+    """One cell's connection to the service: ``Cell(base_url, token)``.
+
+    ``timeout`` is the seconds one attempt may take; ``retries`` how many times a request is sent
+    again after a connection failure, a timeout, a 5xx or a 409 ``run_busy`` (with the same
+    Idempotency-Key), pausing ``backoff`` seconds, doubled each time.  ``transport`` is an
+    ``httpx`` transport (tests, proxies); ``headers`` more headers for every request.
+    """
+
+    def __init__(self, base_url: str, token: str, *, timeout: float = 30.0, retries: int = 3, backoff: float = 0.2,
+                 transport: httpx.BaseTransport | None = None, headers: dict[str, str] | None = None):
+        if retries < 0:
+            raise ValueError("retries must be 0 or more")
+        self.retries = retries
+        self.backoff = backoff
+        self.replayed = False  # whether the last answer was the service's stored answer of an earlier attempt
+        self.attempts = 0      # how many attempts the last request took
+        self.http = httpx.Client(base_url=base_url.rstrip("/"), timeout=timeout, transport=transport,
+                                 headers={**(headers or {}), "Authorization": f"Bearer {token}",
+                                          "Accept": "application/json"})
+
+    # ------------------------------------------------------------ plans
+
+    def upload_plan(self, plan: str | bytes | os.PathLike | dict, *, format: Literal["yaml", "json", "in2"] | None = None,
+                    filename: str | None = None) -> PlanUploaded:
+        """Upload a plan, validated as ``opportune check`` does; its ``id`` starts runs.
+
+        ``plan`` is a file (a path), the file's text (``str`` or ``bytes``: YAML, JSON or SALBP .IN2,
+        detected, or ``format``), or a plan in the JSON file schema (a ``dict``).  An invalid plan
+        raises :class:`InvalidPlan`, whose ``problems`` say what and where.
+        """
+        params: dict[str, str] = {}
+        if isinstance(plan, dict):
+            kw: dict[str, Any] = {"json": plan}
+        else:
+            if isinstance(plan, os.PathLike):
+                filename = filename or os.path.basename(os.fspath(plan))
+                with open(plan, "rb") as f:
+                    plan = f.read()
+            kw = {"content": plan.encode("utf-8") if isinstance(plan, str) else plan,
+                  "headers": {"Content-Type": "text/plain; charset=utf-8"}}
+        if format:
+            params["format"] = format
+        if filename:
+            params["filename"] = filename
+        return self._send("POST", "/plans", PlanUploaded, params=params, **kw)
+
+    def plan(self, plan_id: str) -> PlanDetail:
+        """A stored plan: its document, summary and graph layout."""
+        return self._send("GET", f"/plans/{plan_id}", PlanDetail)
+
+    # ------------------------------------------------------------ runs
+
+    def start_run(self, plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "") -> Run:
+        """Start a run of a stored plan in this token's cell (``buffer_capacity`` None: unlimited)."""
+        plan_id = plan.id if isinstance(plan, PlanUploaded) else plan
+        return self._send("POST", "/runs", Run, write=True,
+                          json={"plan": plan_id, "buffer_capacity": buffer_capacity, "label": label})
+
+    def look(self, run: int | Run, visible: list[str] | tuple[str, ...]) -> LookAnswer:
+        """The parts seen in the bin now (repeated for several units; ``[]`` for none) → the action to do.
+
+        The answer's ``action`` (``kind``, ``part``, ``source``) is what the robot does next; its
+        ``decision`` says why.  Raises :class:`LookContradictsState`, :class:`ActionPending`,
+        :class:`RunComplete` or :class:`UnknownPart` when the look is refused.
+        """
+        if isinstance(visible, str):
+            raise TypeError("visible is a list of part ids, not one string")
+        return self._send("POST", f"/runs/{_run_id(run)}/looks", LookAnswer, write=True, json={"visible": list(visible)})
+
+    def outcome(self, run: int | Run, outcome: Literal["success", "failed", "defective"] = "success", *,
+                keep: Literal["bin", "buffer"] = "bin") -> OutcomeAnswer:
+        """The outcome of the pending action (``keep``: after a failed install, the part back in the bin or
+        kept in a buffer location)."""
+        return self._send("POST", f"/runs/{_run_id(run)}/outcomes", OutcomeAnswer, write=True,
+                          json={"outcome": outcome, "keep": keep})
+
+    def cancel(self, run: int | Run) -> CancelAnswer:
+        """Drop the pending action (the robot did not carry it out)."""
+        return self._send("POST", f"/runs/{_run_id(run)}/cancel", CancelAnswer, write=True, json={})
+
+    def state(self, run: int | Run) -> Run:
+        """The run's state: installed, buffered, in the bin, the pending action, the completions left."""
+        return self._send("GET", f"/runs/{_run_id(run)}", Run)
+
+    def trace(self, run: int | Run) -> Trace:
+        """The trace in the layout of the paper's Table 1 (the pending row last)."""
+        return self._send("GET", f"/runs/{_run_id(run)}/trace", Trace)
+
+    def runs(self, *, status: Literal["active", "complete"] | None = None, limit: int = 200,
+             offset: int = 0) -> list[RunSummary]:
+        """This cell's runs, newest first."""
+        params: dict[str, Any] = {"limit": limit, "offset": offset}
+        if status:
+            params["status"] = status
+        return self._send("GET", "/runs", RunList, params=params).runs
+
+    def health(self) -> Health:
+        return self._send("GET", "/healthz", Health)
+
+    # ------------------------------------------------------------ transport
+
+    def _send(self, method: str, path: str, model: type[M], *, write: bool = False, **kw) -> M:
+        """Send a request (retrying as the class says) and read its answer as ``model``."""
+        headers = dict(kw.pop("headers", None) or {})
+        if write:
+            headers["Idempotency-Key"] = uuid.uuid4().hex  # one key for every attempt of this request
+        self.replayed = False
+        attempt = 0
+        while True:
+            attempt += 1
+            self.attempts = attempt
+            try:
+                response = self.http.request(method, path, headers=headers, **kw)
+            except (httpx.TimeoutException, httpx.NetworkError, httpx.RemoteProtocolError) as exc:
+                if attempt > self.retries:
+                    raise ServiceUnreachable(None, "unreachable", f"{method} {path}: no answer after {attempt} "
+                                             f"attempt(s): {type(exc).__name__}: {exc}",
+                                             "check that the service runs and the URL is right") from exc
+            else:
+                if response.status_code < 400:
+                    self.replayed = response.headers.get("Idempotent-Replayed") == "true"
+                    try:
+                        return model.model_validate_json(response.content)
+                    except ValidationError as exc:
+                        raise UnexpectedAnswer(response.status_code, "unexpected_answer",
+                                               f"{method} {path}: the answer is not a {model.__name__}: "
+                                               f"{exc.errors()[0]['msg'] if exc.errors() else exc}",
+                                               "is the URL that of an opportune service?") from None
+                error = error_from(response)
+                if not _retryable(error) or attempt > self.retries:
+                    raise error
+            time.sleep(self.backoff * 2 ** (attempt - 1))
+
+    def close(self) -> None:
+        self.http.close()
+
+    def __enter__(self) -> "Cell":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
