@@ -255,8 +255,8 @@ def test_real_answers_match_the_document(env, spec):
 
     # a run: Table 1, every action succeeding
     key = uuid.uuid4().hex
-    first = call("startRun", a, json={"plan": plan, "label": "table 1"}, key=key, expect=201)
-    again = call("startRun", a, json={"plan": plan, "label": "table 1"}, key=key, expect=201)
+    first = call("startRun", a, json={"plan": plan, "label": "table 1", "policy": "paper"}, key=key, expect=201)
+    again = call("startRun", a, json={"plan": plan, "label": "table 1", "policy": "paper"}, key=key, expect=201)
     assert again.content == first.content and again.headers["idempotent-replayed"] == "true"
     run = first.json()["id"]
     call("startRun", a, json={"plan": plan, "label": "other"}, key=key, expect=422)  # the key, reused
@@ -376,7 +376,7 @@ def test_a_generated_client_drives_a_gearbox_run(spec, tmp_path):
         from opportune_api.api.plans import get_plan, upload_plan
         from opportune_api.api.runs import get_run, get_trace, post_look, post_outcome, start_run
         from opportune_api.models import (ErrorBody, LookAnswer, LookIn, OutcomeIn, OutcomeInOutcome,
-                                          PlanUploadWrapper, Run, RunIn)
+                                          PlanUploadWrapper, Run, RunIn, RunInPolicyType0)
 
         with ServiceProcess(tmp_path / "gen.db") as svc:
             client = api.AuthenticatedClient(base_url=svc.url, token=svc.token(cell="cell-g"),
@@ -388,7 +388,9 @@ def test_a_generated_client_drives_a_gearbox_run(spec, tmp_path):
                 plan = up.parsed
                 assert plan.name == "gearbox" and plan.units == 10
                 assert get_plan.sync(plan.id, client=client).plan.name == "gearbox"
-                run = start_run.sync(client=client, body=RunIn(plan=plan.id, label="generated"),
+                # the paper's rule (an enumerated choice in the document): Table 1's looks follow it
+                run = start_run.sync(client=client, body=RunIn(plan=plan.id, label="generated",
+                                                               policy=RunInPolicyType0("paper")),
                                      idempotency_key=uuid.uuid4().hex)
                 assert isinstance(run, Run) and run.count.value == "336"
                 for visible, _buffered, _installed, action in TABLE1:

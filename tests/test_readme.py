@@ -24,7 +24,7 @@ NOT_RUN = {
                                        "benchmarks/bench_decisions.py measures it",
 }
 # Inline mentions that are parts of commands, not commands (placeholders, alternatives, bare names).
-FRAGMENT = re.compile(r"\.\.\.|\||\b[A-Z]{3,}\b(?!:)|^opportune (check|evaluate)$|^opportune count --time-limit")
+FRAGMENT = re.compile(r"\.\.\.|\||\b[A-Z]{3,}\b(?!:)|^opportune [a-z]+$|^opportune count --time-limit")
 
 
 def readme_commands() -> list[str]:

@@ -73,7 +73,8 @@ def plan_id(a):
 
 
 def new_run(client, plan_id, **extra) -> int:
-    r = client.post("/runs", {"plan": plan_id, **extra})
+    # the paper's rule: Table 1's looks were recorded under it (a run's default policy is the look-ahead)
+    r = client.post("/runs", {"plan": plan_id, "policy": "paper", **extra})
     assert r.status_code == 201, r.text
     return r.json()["id"]
 
@@ -508,3 +509,26 @@ def test_the_event_stream_says_when_the_run_completes_and_ends(svc, a, plan_id):
         with h.stream("GET", f"/runs/{run_id}/events") as r:
             again = read_events(r, 100, timeout=8)
     assert [e for e, _, _ in again] == ["snapshot", "complete"]
+
+
+def test_a_run_takes_its_policy_by_name_and_the_default_is_the_lookahead(svc, a, plan_id):
+    """Without `policy` a run decides by the look-ahead, as the library's Lookahead would; a named policy is
+    kept with the run; an unknown one is refused and starts nothing."""
+    from opportune.policies.named import DEFAULT_POLICY
+
+    r = a.post("/runs", {"plan": plan_id})
+    assert r.status_code == 201, r.text
+    run = r.json()
+    assert run["policy"] == DEFAULT_POLICY == "lookahead"
+    answer = a.post(f"/runs/{run['id']}/looks", {"visible": ["ca", "rl"]}).json()
+    assert answer["action"] == {"kind": "install", "part": "ca", "source": "bin"}
+    assert "base rule" in answer["decision"]["rule"] or "least expected cost" in answer["decision"]["rule"]
+    assert a.get(f"/runs/{run['id']}").json()["policy"] == "lookahead"
+    listed = {x["id"]: x["policy"] for x in a.get("/runs").json()["runs"]}
+    assert listed[run["id"]] == "lookahead"
+    slack = new_run(a, plan_id, policy="slack")
+    assert a.get(f"/runs/{slack}").json()["policy"] == "slack"
+    before = len(a.get("/runs").json()["runs"])
+    err = error_of(a.post("/runs", {"plan": plan_id, "policy": "teleport"}), 422)
+    assert "policy" in json.dumps(err)
+    assert len(a.get("/runs").json()["runs"]) == before

@@ -44,7 +44,7 @@ def test_dashboard_watches_a_run_advance(tmp_path, browser_context):
         cell = Client(svc.url, svc.token(cell="cell-7"))
         operator = svc.token(operator="ops")
         plan = cell.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}).json()["id"]
-        run_id = cell.post("/runs", {"plan": plan, "label": "SN-0042"}).json()["id"]
+        run_id = cell.post("/runs", {"plan": plan, "label": "SN-0042", "policy": "paper"}).json()["id"]
         assert cell.post(f"/runs/{run_id}/looks", {"visible": ["rl", "ra"]}).status_code == 200
 
         page = browser_context.new_page()

@@ -44,7 +44,7 @@ def test_kill_9_mid_run_then_restart_and_finish(tmp_path):
         svc.start()
         token = svc.token(cell="cell-1")
         c = Client(svc.url, token)
-        run_id = c.post("/runs", {"plan": upload(c)}).json()["id"]
+        run_id = c.post("/runs", {"plan": upload(c), "policy": "paper"}).json()["id"]   # Table 1's rule
         for look in LOOKS[:7]:
             assert c.post(f"/runs/{run_id}/looks", {"visible": list(look)}).status_code == 200
             assert c.post(f"/runs/{run_id}/outcomes", {"outcome": "success"}).status_code == 200
@@ -108,7 +108,7 @@ def test_kill_9_under_load_loses_no_acknowledged_answer(tmp_path, request, store
         svc.start()
         clients = [Client(svc.url, svc.token(cell=f"cell-{i}"), timeout=5) for i in range(n)]
         plan = upload(clients[0])
-        runs = [c.post("/runs", {"plan": plan}).json()["id"] for c in clients]
+        runs = [c.post("/runs", {"plan": plan, "policy": "paper"}).json()["id"] for c in clients]
         acked: list[list[int]] = [[] for _ in range(n)]
         stop = threading.Event()
         threads = [threading.Thread(target=drive, args=(clients[i], runs[i], random.Random(i), acked[i], stop))

@@ -193,7 +193,8 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
         cells = [Cell(procs, t) for t in tokens]
         run_ids = []
         for i, cell in enumerate(cells):  # created on either process
-            _, r = cell.request("AB"[i % 2], "POST", "/runs", {"plan": plan}, key=uuid.uuid4().hex)
+            # the paper's rule, as library_rows replays the looks with the library's default Sequencer
+            _, r = cell.request("AB"[i % 2], "POST", "/runs", {"plan": plan, "policy": "paper"}, key=uuid.uuid4().hex)
             assert r.status_code == 201, r.text
             run_ids.append(r.json()["id"])
 
@@ -334,7 +335,7 @@ def test_serve_workers_2_replaces_a_killed_worker(tmp_path, postgres):
         token = svc.token(cell="cell-w")
         plan = post_plan(svc.url, token)
         cell = Cell({"W": svc}, token)
-        _, r = cell.request("W", "POST", "/runs", {"plan": plan}, key="run-1")
+        _, r = cell.request("W", "POST", "/runs", {"plan": plan, "policy": "paper"}, key="run-1")
         rid = r.json()["id"]
         rng = random.Random(7)
         killed = None
@@ -453,7 +454,7 @@ def test_a_process_out_of_budget_replays_another_process_exact_decision_exactly(
         create_token(store, cell="c1")
         me = Principal("t", "cell", "c1")
         first = RunManager(store, PlanBook(store), budget=0.05)   # the process that decides
-        run = json.loads(first.create(me, {"plan": pid}, "k1", "/runs")[1])["id"]
+        run = json.loads(first.create(me, {"plan": pid, "policy": "paper"}, "k1", "/runs")[1])["id"]
         answer = json.loads(first.command(me, run, "look", {"visible": ["rl", "ra"]}, "k2", "/l")[1])
         assert answer["decision"]["exact"] and answer["action"]["part"] == "rl"
         expected = first.view(me, run)
@@ -462,8 +463,8 @@ def test_a_process_out_of_budget_replays_another_process_exact_decision_exactly(
             m = RunManager(store, PlanBook(store), budget=0.05)
             real = m._sequencer
 
-            def sequencer(loaded, capacity):
-                s = real(loaded, capacity)
+            def sequencer(loaded, capacity, policy):
+                s = real(loaded, capacity, policy)
                 monkeypatch.setattr(s.policy, "decide", lambda state, look: Decision(
                     Action("buffer", "ra"), "estimated", exact=exact, method="exact" if exact else "mcmc"))
                 return s

@@ -270,11 +270,15 @@ class Cell:
 
     # ------------------------------------------------------------ runs
 
-    def start_run(self, plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "") -> Run:
-        """Start a run of a stored plan in this token's cell (``buffer_capacity`` None: unlimited)."""
+    def start_run(self, plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "",
+                  policy: str | None = None) -> Run:
+        """Start a run of a stored plan in this token's cell (``buffer_capacity`` None: unlimited; ``policy``
+        None: the service's default, the exact look-ahead; ``"paper"``: the paper's rule)."""
         plan_id = plan.id if isinstance(plan, PlanUploaded) else plan
-        return self._send("POST", "/runs", Run, write=True,
-                          json={"plan": plan_id, "buffer_capacity": buffer_capacity, "label": label})
+        body = {"plan": plan_id, "buffer_capacity": buffer_capacity, "label": label}
+        if policy is not None:
+            body["policy"] = policy
+        return self._send("POST", "/runs", Run, write=True, json=body)
 
     def look(self, run: int | Run, visible: list[str] | tuple[str, ...]) -> LookAnswer:
         """The parts seen in the bin now (repeated for several units; ``[]`` for none) → the action to do.

@@ -286,12 +286,11 @@ class Rollout(DecidesOnMasks):
         return t
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        if state.schedule.engine.n_units <= self.exact_below:
+            return self._exact_policy().decide(state, visible)
         action = self.choose(state, visible)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
-        sched = state.schedule
-        if sched.engine.n_units <= self.exact_below:
-            return self._exact_policy().decide(state, visible)
         last = self.last
         if last is None:
             return Decision(action, "the only candidate action")

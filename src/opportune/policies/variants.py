@@ -24,6 +24,8 @@ exact evaluation use them as they use the paper's rule.
 from __future__ import annotations
 
 import time
+import weakref
+from dataclasses import replace
 
 from opportune.engine.count import BudgetExceeded
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
@@ -32,6 +34,9 @@ from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.optimal import OptimalTooLarge, same_action
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
+
+# The look-ahead's programmes, per engine (dropped with it) and settings: see Lookahead._values.
+_EVALUATORS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class BinFirst(Opportunistic):
@@ -134,19 +139,41 @@ class Lookahead(DecidesOnMasks):
 
     def _values(self, engine):
         if self._evaluator is None or self._evaluator.engine is not engine:
-            if self.pile:
-                from opportune.policies.pile import PileSolver
+            # One programme per plan and world, shared by every look-ahead of the same settings (the service
+            # starts a policy per run: each would otherwise redo the whole programme).  Callers that share
+            # an engine already serialise its use, which covers its evaluator too.
+            key = self._share_key()
+            shared = _EVALUATORS.setdefault(engine, {}) if key is not None else {}
+            ev = shared.get(key)
+            if ev is None:
+                if self.pile:
+                    from opportune.policies.pile import PileSolver
 
-                self._evaluator = PileSolver(engine, self.base, max_states=self.max_states, **self.settings)
-            else:
-                self._evaluator = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
+                    ev = PileSolver(engine, self.base, max_states=self.max_states, **self.settings)
+                else:
+                    ev = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
+                if key is not None:
+                    shared[key] = ev
+            self._evaluator = ev
             self._too_large = False
         return self._evaluator
+
+    def _share_key(self):
+        """What the programme's values depend on, when that is known (the default base rule); else None."""
+        if type(self.base) is not Slack or self.base.budget is not None:
+            return None
+        settings = tuple(sorted((k, repr(v)) for k, v in self.settings.items()))
+        return (self.base.weight, self.max_states, self.pile, settings)
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
         if mask == engine.full:
             return DONE
+        action = self._programme(engine, mask, consistent, buffer, visible)
+        return action if action is not None else self.fallback.choose_at(engine, mask, consistent, buffer, free, visible)
+
+    def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
+        """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
         self.last_cost = None
         if engine.n_units > self.MAX_UNITS:
             self._too_large = True
@@ -164,7 +191,7 @@ class Lookahead(DecidesOnMasks):
                 self._too_large = True      # a large plan: decide as the base does from now on
             finally:
                 ev.deadline = None
-        return self.fallback.choose_at(engine, mask, consistent, buffer, free, visible)
+        return None
 
     def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):
         """``(action, its expected cost)``: the least of cost plus the base's cost to go after it."""
@@ -188,15 +215,19 @@ class Lookahead(DecidesOnMasks):
         return best, best_cost
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        action = self.choose(state, visible)
-        if action.kind == "done":
+        sched = state.schedule
+        if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
-        if self.last_cost is None and self._too_large:
-            return Decision(action, f"as the base rule ({self.base.name}): the plan is too large for the "
-                                    f"look-ahead's exact programme (more than {self.max_states:,} states)")
-        if self.last_cost is None:
-            return Decision(action, f"as the base rule ({self.base.name}): the look-ahead's programme did not "
-                                    "finish within the decision budget (it goes on at the next look)",
-                            exact=False, method=self.base.name)
+        action = self._programme(sched.engine, sched.mask, sched.consistent, state.buffer, visible)
+        if action is None:
+            # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
+            # its exactness and any estimates, and why the look-ahead did not decide
+            base = self.fallback.decide(state, visible)
+            why = (f"the plan is too large for the look-ahead's exact programme (more than {self.MAX_UNITS} units "
+                   f"or {self.max_states:,} states)" if self._too_large else
+                   "the look-ahead's programme did not finish within the decision budget (it goes on at the next look)")
+            exact = base.exact and self._too_large
+            return replace(base, rule=f"as the base rule ({self.base.name}), because {why}: {base.rule}",
+                           exact=exact, method=base.method if base.method != "exact" or exact else self.base.name)
         return Decision(action, self.rule, note=f"expected remaining cost {self.last_cost:.4f} "
                                                 f"(base: {self.base.name})")

@@ -48,6 +48,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from opportune import __version__
+from opportune.policies.named import DEFAULT_POLICY, POLICIES
 from opportune.service import idempotency as idem
 from opportune.service.auth import Authenticator, Principal
 from opportune.service.config import Settings
@@ -110,6 +111,9 @@ class RunIn(BaseModel):
     cell: Optional[Text] = Field(None, max_length=100, description="The cell; defaults to (and must be) the token's cell")
     buffer_capacity: Optional[int] = Field(None, ge=0, le=1_000_000, description="Buffer locations; null: unlimited")
     label: Text = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
+    policy: Optional[Literal[POLICIES]] = Field(
+        None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper' or "
+                          "'opportunistic': the paper's rule)")
 
 
 class LookIn(BaseModel):

@@ -56,6 +56,7 @@ from sqlalchemy.exc import IntegrityError
 
 from opportune.engine.count import BudgetExceeded
 from opportune.policies.base import Action, Decision
+from opportune.policies.named import DEFAULT_POLICY, make_policy
 from opportune.sequencer import LookError, OutcomeError, Sequencer
 from opportune.service import idempotency as idem
 from opportune.service.auth import Principal
@@ -101,6 +102,7 @@ class LiveRun:
     label: str
     capacity: int | None
     created_at: float
+    policy: str = "opportunistic"     # its name (policies/named.py); runs from before policies were chosen: the paper's
     lock: threading.RLock = field(default_factory=threading.RLock)
     sequencer: Sequencer | None = None
     applied: int = 0
@@ -165,7 +167,8 @@ class RunManager:
         with self._mutex:
             live = self._live.get(r["id"])
             if live is None:
-                live = LiveRun(r["id"], r["cell"], r["plan_id"], r["label"], r["buffer_capacity"], r["created_at"])
+                live = LiveRun(r["id"], r["cell"], r["plan_id"], r["label"], r["buffer_capacity"], r["created_at"],
+                               r["policy"])
                 self._live[r["id"]] = live
             self._live.move_to_end(r["id"])
             if len(self._live) > self.size:
@@ -193,7 +196,7 @@ class RunManager:
     def _replay(self, live: LiveRun, loaded: LoadedPlan, rows) -> None:
         with loaded.lock:
             if live.sequencer is None:
-                live.sequencer = self._sequencer(loaded, live.capacity)
+                live.sequencer = self._sequencer(loaded, live.capacity, live.policy)
                 live.applied = 0
             try:
                 for ev in rows:
@@ -213,7 +216,7 @@ class RunManager:
                                                      f"the run recorded {recorded}")
                             # Out of budget here, where the recording process counted exactly.
                             live.sequencer.cancel()
-                            self._decide_exactly(live.sequencer, request["visible"], recorded, ev.seq)
+                            self._decide_exactly(live, loaded, request["visible"], recorded, ev.seq)
                     live.applied = ev.seq
             except (ReplayMismatch, LookError, OutcomeError) as exc:
                 live.sequencer, live.applied = None, 0
@@ -221,16 +224,15 @@ class RunManager:
                                f"run {live.id} cannot be resumed by this version of opportune: {exc}",
                                "finish the run with the version that started it, or start a new run") from None
 
-    def _decide_exactly(self, sequencer: Sequencer, visible: list, recorded: dict, seq: int) -> None:
+    def _decide_exactly(self, live: LiveRun, loaded: LoadedPlan, visible: list, recorded: dict, seq: int) -> None:
         """Replay a decision recorded as exact that this process could only estimate within its budget.
 
         Decided again with exact counts and no time limit but the engine's own (so the trace row
         has the same reasons as in the process that took it), and compared; if even the engine's
         limit is not enough, the recorded action is taken as it was (the log is the truth).
         """
-        from opportune.policies.opportunistic import Opportunistic
-
-        budgeted, sequencer.policy = sequencer.policy, Opportunistic(budget=None)
+        sequencer = live.sequencer
+        budgeted, sequencer.policy = sequencer.policy, self._policy(loaded, live.capacity, live.policy, budget=None)
         try:
             decision = sequencer.decide(visible)
         except BudgetExceeded:
@@ -241,10 +243,17 @@ class RunManager:
         if decision.action.to_dict() != recorded:
             raise ReplayMismatch(f"event {seq}: this version decides {decision.action}, the run recorded {recorded}")
 
-    def _sequencer(self, loaded: LoadedPlan, capacity: int | None) -> Sequencer:
-        """A new sequencer of the service's policy (its first state counted within the warm-up time)."""
-        return Sequencer(loaded.engine, buffer_capacity=capacity, budget=self.budget,
+    def _sequencer(self, loaded: LoadedPlan, capacity: int | None, policy: str) -> Sequencer:
+        """A new sequencer of the run's policy (its first state counted within the warm-up time)."""
+        return Sequencer(loaded.engine, self._policy(loaded, capacity, policy, budget=self.budget),
+                         buffer_capacity=capacity, budget=self.budget,
                          warm_up=self.warm_up if self.budget is not None else 0)
+
+    @staticmethod
+    def _policy(loaded: LoadedPlan, capacity: int | None, name: str, *, budget: float | None):
+        """The run's policy object: the look-ahead scores its actions in the plan's own bin model."""
+        sim = loaded.plan.simulation
+        return make_policy(name, budget=budget, visible=sim.get("visible", 2), capacity=capacity)
 
     def _loaded(self, live: LiveRun) -> LoadedPlan:
         return self.book.get(live.plan_id)
@@ -274,7 +283,8 @@ class RunManager:
         if loaded.too_large:
             raise plan_too_large(loaded.too_large)
         with loaded.lock:
-            sequencer = self._sequencer(loaded, body.get("buffer_capacity"))
+            policy = body.get("policy") or DEFAULT_POLICY
+            sequencer = self._sequencer(loaded, body.get("buffer_capacity"), policy)
             if self.budget is None:
                 try:  # the policy needs exact counts: find out now, not at the robot's first look
                     sequencer.state.schedule.options()
@@ -290,12 +300,12 @@ class RunManager:
                 if stored:
                     return stored.status, stored.text, True
                 run_id = c.execute(insert(runs).values(
-                    cell=cell, plan_id=loaded.id, policy=sequencer.policy.name,
+                    cell=cell, plan_id=loaded.id, policy=policy,
                     buffer_capacity=body.get("buffer_capacity"), label=body.get("label") or "", status="active", seq=0,
                     installed=0, units=loaded.plan.n_units, count=count["value"] if count else None, pending=None,
                     created_at=t, updated_at=t)).inserted_primary_key[0]
                 live = LiveRun(run_id, cell, loaded.id, body.get("label") or "", body.get("buffer_capacity"), t,
-                               sequencer=sequencer)
+                               policy, sequencer=sequencer)
                 with loaded.lock:
                     answer = run_view(live, loaded, t)
                 text = dumps(answer)

@@ -81,7 +81,7 @@ def run_view(live, loaded, updated_at: float) -> dict:
         "id": live.id, "cell": live.cell, "label": live.label,
         "plan": {"id": loaded.id, "name": loaded.plan.name},
         "status": "complete" if seq.finished else "active",
-        "policy": seq.policy.name, "buffer_capacity": state.capacity,
+        "policy": live.policy, "buffer_capacity": state.capacity,
         "seq": live.applied,
         "state": state.to_dict(),
         "installable": installable(state.schedule),
