@@ -11,7 +11,7 @@ floor.
 
     .venv/bin/python benchmarks/load_service.py --cells 20 --duration 20
     .venv/bin/python benchmarks/load_service.py --db postgresql --workers 2
-    .venv/bin/python benchmarks/load_service.py --table      # SQLite 1, PostgreSQL 1 and 2 processes: a Markdown table
+    .venv/bin/python benchmarks/load_service.py --table      # SQLite 1, PostgreSQL 1, 2 and 4 processes: a Markdown table
 
 ``--db postgresql`` starts a throwaway PostgreSQL server (Debian's server
 programs, as the tests do); ``--db postgresql+psycopg://...`` uses yours (a
@@ -180,12 +180,12 @@ def main(argv=None) -> int:
                     help="sqlite (a fresh file), postgresql (a throwaway server) or a postgresql+psycopg:// URL")
     ap.add_argument("--workers", type=int, default=1, help="server processes (more than 1: PostgreSQL only)")
     ap.add_argument("--table", action="store_true",
-                    help="measure SQLite with 1 process and PostgreSQL with 1 and 2; print a Markdown table")
+                    help="measure SQLite with 1 process and PostgreSQL with 1, 2 and 4; print a Markdown table")
     ap.add_argument("--json", action="store_true", help="print the results as JSON")
     args = ap.parse_args(argv)
     common = dict(cells=args.cells, duration=args.duration, plan=args.plan, seed=args.seed)
     if args.table:
-        configs = [("sqlite", 1), ("postgresql", 1), ("postgresql", 2)]
+        configs = [("sqlite", 1), ("postgresql", 1), ("postgresql", 2), ("postgresql", 4)]
     else:
         if args.workers > 1 and not args.db.startswith("postgresql"):
             ap.error("--workers above 1 needs --db postgresql (or a PostgreSQL URL)")

@@ -121,3 +121,11 @@ def test_networkx_round_trip_and_errors():
         Plan.from_networkx(cyc)
     with pytest.raises(PlanError, match="undirected"):
         Plan.from_networkx(nx.Graph([("a", "b")]))
+
+
+@settings(max_examples=40, deadline=None)
+@given(plan=random_plans(max_parts=7, max_units=9, max_strategies=1))
+def test_networkx_round_trip(plan):
+    """A plan of one strategy through a NetworkX DiGraph and back: the same parts and the same order."""
+    pytest.importorskip("networkx", reason="networkx is in the dev extra that make test installs")
+    same(plan, Plan.from_networkx(plan.to_networkx(), name=plan.name))

@@ -181,7 +181,7 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
     url = postgres.database("scaleout")
     procs = {name: ServiceProcess(url, log=tmp_path / f"{name}.log", extra_args=("--no-access-log",))
              for name in ("A", "B")}
-    n = 4
+    n = 20       # runs, one per cell, each driven by its own thread
     threads: list[threading.Thread] = []
     stop = threading.Event()
     try:
@@ -235,43 +235,53 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
                 arrived = next(ev[0] for ev in seen if ev[1] != "snapshot" and ev[2].get("seq") == r.json()["seq"])
                 assert arrived - t0 < 1.0, f"B's stream showed A's {what[:-1]} after {arrived - t0:.2f} s"
 
-            # The load: four cells, alternating between A and B.
-            phase = [0]   # 0: both processes, 1: B alone (A killed), 2: both again (A restarted)
+            # The load: twenty cells, each request on the other process than the one before. Runs 0-9 start
+            # now; A is killed under their load and restarted; runs 10-19 start then, and B is killed under
+            # their load once run 0 (whose stream B serves) is complete, and restarted.
+            phase = [0]   # 0: both, 1: B alone (A killed), 2: both (A back), 3: A alone (B killed), 4: both
             errors: list = []
             go = threading.Event()
             go.set()
             threads = [threading.Thread(target=drive, args=(cells[i], run_ids[i], random.Random(i), acked[i], phase,
                                                             errors, go)) for i in range(n)]
-            for t in threads:
+            for t in threads[:10]:
                 t.start()
 
-            def total():
-                return sum(len(x) for x in acked)
+            def total(among=range(n)):
+                return sum(len(acked[i]) for i in among)
 
-            def wait_for(count, what):
-                deadline = time.monotonic() + 30
-                while total() < count and any(t.is_alive() for t in threads[:n]):
+            def wait_for(count, what, among=range(n)):
+                deadline = time.monotonic() + 60
+                while total(among) < count and any(threads[i].is_alive() for i in among):
                     assert not errors, errors[0]
                     assert time.monotonic() < deadline, f"the load stalled {what}"
                     time.sleep(0.01)
 
-            wait_for(28, "with both processes")
-            a.kill()      # kill -9 in the middle of the load
-            phase[0] = 1
-            at_kill = total()
-            wait_for(at_kill + 20, "on the survivor")
-            go.clear()    # (so that the runs are not over before A is back)
-            a.start()     # the same database, a new process (and port)
-            phase[0] = 2
-            go.set()
-            for t in threads[:n]:
-                t.join(60)
-            assert not errors, errors[0]
-            assert not any(t.is_alive() for t in threads[:n]), "a run did not finish"
-            streamer.join(15)
+            def kill_and_restart(victim, at: int, survivor: str):
+                wait_for(at, f"before {survivor}'s peer was killed")
+                victim.kill()      # kill -9 in the middle of the load
+                phase[0] += 1
+                wait_for(total() + 30, f"on {survivor} alone")
+                go.clear()         # (so that the runs are not over before the victim is back)
+                victim.start()     # the same database, a new process (and port)
+                phase[0] += 1
+                go.set()
 
-            by_epoch = {e: {x["by"] for xs in acked for x in xs if x["epoch"] == e} for e in (0, 1, 2)}
-            assert by_epoch[0] == {"A", "B"} and by_epoch[1] == {"B"} and "A" in by_epoch[2], by_epoch
+            kill_and_restart(a, 60, "B")
+            for t in threads[10:]:
+                t.start()
+            streamer.join(60)      # run 0 complete: B may go now
+            assert not streamer.is_alive(), "run 0 did not complete"
+            wait_for(40, "in the second wave", among=range(10, n))
+            kill_and_restart(b, 0, "A")
+            for t in threads:
+                t.join(90)
+            assert not errors, errors[0]
+            assert not any(t.is_alive() for t in threads), "a run did not finish"
+
+            by_epoch = {e: {x["by"] for xs in acked for x in xs if x["epoch"] == e} for e in range(5)}
+            assert by_epoch[0] == {"A", "B"} and by_epoch[1] == {"B"} and by_epoch[3] == {"A"}, by_epoch
+            assert "A" in by_epoch[2] and "B" in by_epoch[4], by_epoch
 
             # Every acknowledged answer is in the log, byte for byte; every event was acknowledged once.
             with store.read() as c:
@@ -316,7 +326,7 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
         assert refused["B"] <= TOKEN_CACHE_SECONDS + 1.5, refused
         for svc in procs.values():
             assert "internal error" not in svc.log_text() and "Traceback" not in svc.log_text()
-        assert time.monotonic() - started < 90
+        assert time.monotonic() - started < 150
     finally:
         stop.set()
         for svc in procs.values():
