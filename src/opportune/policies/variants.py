@@ -126,7 +126,10 @@ class Lookahead(DecidesOnMasks):
         self.lookahead_budget = budget
         self.deterministic = budget is None
         self.base = base if base is not None else Slack()      # exact: the programme evaluates it
+        # the base within what the programme leaves of the budget; on a plan too large for the programme,
+        # within the whole budget (nothing else runs then)
         self.fallback = self.base if budget is None else Slack(budget=budget / 4)
+        self.fallback_alone = self.base if budget is None else Slack(budget=budget)
         self.max_states = max_states
         # the pile bin has its own programme (policies/pile.py): the window is part of the state
         self.pile = solver_settings.pop("bin", "uniform") == "pile"
@@ -170,7 +173,12 @@ class Lookahead(DecidesOnMasks):
         if mask == engine.full:
             return DONE
         action = self._programme(engine, mask, consistent, buffer, visible)
-        return action if action is not None else self.fallback.choose_at(engine, mask, consistent, buffer, free, visible)
+        if action is not None:
+            return action
+        return self._fallback().choose_at(engine, mask, consistent, buffer, free, visible)
+
+    def _fallback(self):
+        return self.fallback_alone if self._too_large else self.fallback
 
     def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
@@ -222,7 +230,7 @@ class Lookahead(DecidesOnMasks):
         if action is None:
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
             # its exactness and any estimates, and why the look-ahead did not decide
-            base = self.fallback.decide(state, visible)
+            base = self._fallback().decide(state, visible)
             why = (f"the plan is too large for the look-ahead's exact programme (more than {self.MAX_UNITS} units "
                    f"or {self.max_states:,} states)" if self._too_large else
                    "the look-ahead's programme did not finish within the decision budget (it goes on at the next look)")
