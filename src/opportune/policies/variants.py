@@ -30,7 +30,7 @@ from dataclasses import replace
 from opportune.engine.count import BudgetExceeded
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.opportunistic import Opportunistic
+from opportune.policies.opportunistic import MARGIN, Opportunistic
 from opportune.policies.optimal import OptimalTooLarge, same_action
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
@@ -65,9 +65,13 @@ class Slack(BinFirst):
     """
 
     name = "slack"
+    #: With a budget, the share the count-based rule gets; the expected positions of the slack get what is
+    #: left of the whole budget (so that the decision keeps the budget, not one and a half of it).
+    RULE_SHARE = 0.6
 
-    def __init__(self, weight: float = 0.1, **kwargs):
-        super().__init__(**kwargs)
+    def __init__(self, weight: float = 0.1, *, budget: float | None = None, **kwargs):
+        super().__init__(budget=None if budget is None else budget * self.RULE_SHARE, **kwargs)
+        self.total_budget = budget
         self.weight = weight
 
     @property
@@ -76,13 +80,14 @@ class Slack(BinFirst):
                 f"minus the installs it waits for, minus {self.weight:g} per step waiting on it)")
 
     def _how(self, engine, mask, consistent, buffer, free, visible):
+        start = time.perf_counter()
         action, how = super()._how(engine, mask, consistent, buffer, free, visible)
         if action.kind != "buffer" or len(set(visible)) == 1:
             return action, how
-        if self.budget is None:
+        if self.total_budget is None:
             return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
-        try:    # within a budget: the slack if its positions fit half a budget more, else the paper's choice
-            with engine.deadline(time.perf_counter() + self.budget / 2):
+        try:    # within a budget: the slack if its positions fit what is left of it, else the paper's choice
+            with engine.deadline(start + self.total_budget * (1 - MARGIN)):
                 return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
         except BudgetExceeded:
             return action, how
