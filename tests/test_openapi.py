@@ -11,9 +11,13 @@
 
 from __future__ import annotations
 
+import collections
+import copy
 import importlib
 import json
 import os
+import re
+import shutil
 import subprocess
 import sys
 import uuid
@@ -348,6 +352,79 @@ def test_an_estimated_decision_matches_the_document(spec):
     Contract(spec, None).validate({"$ref": "urn:openapi#/components/schemas/Decision"}, replayed, "replayed decision")
 
 
+# ---------------------------------------------------------------- examples
+
+
+def examples(spec: dict):
+    """Every example in the document: ``(place, media type, schema, value)``; the place is a component
+    (``RunIn``, with no media type) or an operation id (``uploadPlan``), the schema the example's own."""
+    for name, schema in spec["components"]["schemas"].items():
+        for value in schema.get("examples", []):
+            yield name, None, {"$ref": f"urn:openapi#/components/schemas/{name}"}, value
+    for path, item in spec["paths"].items():
+        for method, op in item.items():
+            for where, body in [("requestBody", op.get("requestBody", {}))] + [
+                    (f"responses/{status}", answer) for status, answer in op["responses"].items()]:
+                for media, content in body.get("content", {}).items():
+                    schema = {"$ref": f"urn:openapi#/paths/{_pointer(path)}/{method}/{where}/content/{_pointer(media)}/schema"}
+                    for example in content.get("examples", {}).values():
+                        yield op["operationId"], media, schema, example["value"]
+
+
+def examples_by_place(spec: dict) -> dict[str, list]:
+    """The examples' values by place (those of an operation as ``(media type, value)``)."""
+    found: dict[str, list] = {}
+    for place, media, _schema, value in examples(spec):
+        found.setdefault(place, []).append((media, value) if media else copy.deepcopy(value))
+    return found
+
+
+def test_every_example_validates_against_its_schema(spec):
+    places = examples_by_place(spec)
+    assert {"RunIn", "LookIn", "OutcomeIn", "CancelIn", "uploadPlan", "LookAnswer", "Run"} <= set(places)
+    assert {media for media, _value in places["uploadPlan"]} == {"application/json", "application/yaml", "text/plain"}
+    check = Contract(spec, None)
+    for place, media, schema, value in examples(spec):
+        check.validate(schema, value, (place, media))
+    with pytest.raises(AssertionError):  # the validation has teeth
+        check.validate({"$ref": "urn:openapi#/components/schemas/LookIn"}, {"visible": "rl"}, "LookIn broken")
+
+
+def test_the_request_examples_are_accepted_and_the_answer_examples_are_real(env, spec):
+    """Sent as they are, the request examples are accepted; the run they start, driven through Table 1 to
+    row 6, answers the document's LookAnswer and Run examples (but for its id, cell and times)."""
+    _app, client, t = env
+    call = Contract(spec, client)
+    a = t["a"]
+    found = examples_by_place(spec)
+    runs, looks, outcomes, cancels = (found[k] for k in ("RunIn", "LookIn", "OutcomeIn", "CancelIn"))
+    plans = {call("uploadPlan", a, headers={"Content-Type": media},
+                  **({"json": value} if media == "application/json" else {"content": value.encode()})).json()["id"]
+             for media, value in found["uploadPlan"]}
+    assert runs[0]["plan"] in plans and len(plans) == 2  # the gearbox, and a SALBP file
+    assert {call("startRun", a, json=body, expect=201).json()["plan"]["id"] for body in runs} == {runs[0]["plan"]}
+    run = call("startRun", a, json=runs[0], expect=201).json()["id"]  # the paper's rule, 4 buffer locations
+
+    def normal(answer):  # what differs from run to run, but the id: its cell and times
+        return json.loads(re.sub(r'"(created_at|updated_at|cell)": "[^"]*"', r'"\1": ""', json.dumps(answer)))
+
+    assert split(TABLE1[0][0]) == looks[0]["visible"]
+    for visible, *_ in TABLE1[:5]:
+        call("postLook", a, run_id=run, json={"visible": split(visible)}, expect=200)
+        call("postOutcome", a, run_id=run, json=outcomes[0], expect=200)
+    look = call("postLook", a, run_id=run, json={"visible": split(TABLE1[5][0])}, expect=200).json()
+    [look_example], [run_example] = found["LookAnswer"], found["Run"]
+    run_example["id"] = look_example["run_id"] = look_example["run"]["id"] = run
+    assert normal(look) == normal(look_example)
+    assert normal(call("getRun", a, run_id=run, expect=200).json()) == normal(run_example)
+    call("postOutcome", a, run_id=run, json=outcomes[0], expect=200)
+    # the other examples, each where the run allows it: nothing visible (a buffered part is installed), an
+    # install that failed (the part kept in the buffer), cancelled, and a defective part
+    for body in [*outcomes[1:], *cancels]:
+        call("postLook", a, run_id=run, json=looks[1], expect=200)
+        call("cancelAction" if body in cancels else "postOutcome", a, run_id=run, json=body, expect=200)
+
+
 # ---------------------------------------------------------------- a generated client
 
 
@@ -439,6 +516,9 @@ except ImportError:  # the dev extra installs it (make test does)
 if schemathesis is None:
     def test_schemathesis_finds_answers_as_documented():
         pytest.skip("schemathesis is not installed: pip install -e '.[dev]'")
+
+    def test_schemathesis_follows_the_links_from_a_run_to_its_looks_and_outcomes():
+        pytest.skip("schemathesis is not installed: pip install -e '.[dev]'")
 else:
     # Every check but positive_data_acceptance, which takes the refusal of a request the schema allows for
     # a bug: here most are the point (an unknown plan or part, a look that contradicts the run, no pending
@@ -446,6 +526,8 @@ else:
     CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_headers_conformance,
               response_schema_conformance, missing_required_header, negative_data_rejection, unsupported_method,
               ignored_auth]
+    CHECK_SETTINGS = {"missing_required_header": {"expected-statuses": [428]},
+                      "negative_data_rejection": {"expected-statuses": [400, 401, 403, 404, 409, 413, 415, 422, 428]}}
 
     @pytest.fixture(scope="module")
     def fuzz_env(env):
@@ -459,8 +541,7 @@ else:
             "seed": 12,
             "auth": {"openapi": {"HTTPBearer": {"bearer": t["a"]}}},
             "generation": {"max-examples": 25, "deterministic": True},
-            "checks": {"missing_required_header": {"expected-statuses": [428]},
-                       "negative_data_rejection": {"expected-statuses": [400, 401, 403, 404, 409, 413, 415, 422, 428]}},
+            "checks": CHECK_SETTINGS,
             # path parameters of a plan and a run that exist, so that looks and outcomes reach the sequencer
             "parameters": {"path.plan_id": plan, "path.run_id": run},
         })
@@ -480,3 +561,89 @@ else:
     @settings(deadline=None, suppress_health_check=list(HealthCheck))
     def test_schemathesis_finds_answers_as_documented(case):
         case.call_and_validate(checks=CHECKS)
+
+
+    # ------------------------------------------------------------ stateful: runs driven through the links
+
+    class FreshApp:
+        """The application over a fresh copy of a template database (a cell's token, the gearbox plan) for
+        each scenario: the same requests get the same answers (run ids from 1), which Hypothesis needs to
+        generate, replay and shrink scenarios ("inconsistent data generation" otherwise).  Decisions are
+        exact whatever the machine's load (``decision_budget=None``: over a budget a decision is estimated)."""
+
+        def __init__(self, template: Path):
+            self.template, self.scenarios, self.store, self.app = template, 0, None, None
+
+        def reset(self) -> None:
+            if self.store is not None:
+                self.store.dispose()
+            self.scenarios += 1
+            db = self.template.with_name(f"scenario-{self.scenarios}.db")
+            shutil.copy(self.template, db)
+            url = f"sqlite:///{db}"
+            self.store = Store(url)
+            self.app = create_app(Settings(db_url=url, max_body=MAX_BODY, decision_budget=None), self.store)
+
+        async def __call__(self, scope, receive, send):
+            if self.app is None:
+                self.reset()
+            await self.app(scope, receive, send)
+
+    def test_schemathesis_follows_the_links_from_a_run_to_its_looks_and_outcomes(tmp_path):
+        """Scenarios of up to 10 requests that start a run (from an uploaded plan, or the gearbox's id) and
+        follow the document's links: startRun → postLook → postOutcome or cancelAction → postLook ...  Every
+        answer as documented, and no server error.  Looks see the gearbox's parts, so that runs proceed."""
+        template = tmp_path / "template.db"
+        store = Store(f"sqlite:///{template}")
+        token = create_token(store, cell="cell-a")[1]
+        with TestClient(create_app(Settings(db_url=f"sqlite:///{template}"), store)) as client:
+            plan = client.post("/plans", content=GEARBOX.read_text(), headers={
+                "Authorization": f"Bearer {token}", "Content-Type": "application/yaml"}).json()["id"]
+        store.dispose()
+        fresh = FreshApp(template)
+        parts = ["ca", "ba", "rl", "dr", "sm", "ml", "ra", "co", "st", "cl"]
+        config = schemathesis.Config.from_dict({
+            "seed": 12,
+            "auth": {"openapi": {"HTTPBearer": {"bearer": token}}},
+            "generation": {"deterministic": True},
+            # not the constants schemathesis would collect from the modules loaded so far: other tests change them
+            "analysis": {"constants": {"enabled": False}},
+            # the links the document declares (not those schemathesis would infer: reads, mostly)
+            "phases": {"stateful": {"inference": {"algorithms": []}}},
+            # as in the stateless test, a refusal of what the schema allows is not taken for a bug
+            "checks": {**CHECK_SETTINGS, "positive_data_acceptance": {"enabled": False}},
+            "dictionaries": {"parts": {"values": parts}, "plans": {"values": [plan]}, "cells": {"values": ["cell-a"]}},
+            "parameters": {"body.visible[*]": {"dictionary": "parts", "probability": 0.95},
+                           "body.plan": {"dictionary": "plans", "probability": 0.9},
+                           "body.cell": {"dictionary": "cells", "probability": 0.9}},
+        })
+        schema = schemathesis.openapi.from_asgi("/openapi.json", fresh, config=config).include(
+            operation_id=["uploadPlan", "startRun", "postLook", "postOutcome", "cancelAction"])
+        machine = schema.as_state_machine()
+        # Scenarios start with a plan or a run: a look, outcome or cancel on a random run id is a 404 that leads
+        # nowhere.  The other starting rules are hidden, and the transition controller told which remain (else
+        # it keeps budget for them, and the scenarios are no longer replayed alike).
+        starts = frozenset(name for name in machine.root_rules if name.endswith(("_POST_plans", "_POST_runs")))
+        assert len(starts) == 2, machine.root_rules
+        seen: collections.Counter = collections.Counter()
+
+        class Workflow(machine):
+            root_rules = starts
+            _root_labels = frozenset({"POST /plans", "POST /runs"})
+
+            def setup(self):
+                fresh.reset()
+
+            def after_call(self, response, case):
+                super().after_call(response, case)
+                seen[case.operation.definition.raw["operationId"], response.status_code] += 1
+
+        for name in machine.root_rules - starts:
+            setattr(Workflow, name, None)
+        Workflow.run(settings=settings(derandomize=True, database=None, max_examples=40, stateful_step_count=10,
+                                       deadline=None, suppress_health_check=list(HealthCheck)))
+        fresh.store.dispose()
+        # the runs were driven (70 runs started, 43 looks decided, 18 outcomes, 13 cancels, the same on every run
+        # of the test, alone or after others): far fewer would mean the links no longer lead there
+        assert seen["startRun", 201] >= 40 and seen["postLook", 200] >= 25, seen
+        assert seen["postOutcome", 200] >= 8 and seen["cancelAction", 200] >= 6, seen

@@ -1,4 +1,5 @@
-"""A small typed client for a cell controller: :class:`Cell` drives runs of an ``opportune serve`` service.
+"""A small typed client for a cell controller: :class:`Cell` drives runs of an ``opportune serve`` service,
+and :class:`AsyncCell` is the same client for asyncio.
 
 >>> from opportune.client import Cell, LookContradictsState       # doctest: +SKIP
 >>> with Cell("http://127.0.0.1:8700", token) as cell:
@@ -7,6 +8,9 @@
 ...     answer = cell.look(run.id, ["rl", "ra"])                     # what the camera sees
 ...     answer.action.kind, answer.action.part                      # ('buffer', 'rl')
 ...     cell.outcome(run.id, "success")                             # the robot did it
+
+With asyncio, ``async with AsyncCell(url, token) as cell:`` and ``answer = await cell.look(run.id, ["rl", "ra"])``:
+the same methods as coroutines, with the same answers, retries and errors.
 
 Every answer is a Pydantic model of :mod:`opportune.service.schemas` (the same models the
 service's OpenAPI document is built from), so fields are typed and checked.
@@ -29,10 +33,15 @@ Needs ``httpx`` and ``pydantic``: ``pip install 'opportune[service]'``.
 
 from __future__ import annotations
 
+import asyncio
+import functools
+import inspect
 import os
 import time
 import uuid
-from typing import Any, Literal, TypeVar
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, field
+from typing import Any, Generic, Literal, ParamSpec, TypeVar, overload
 
 try:
     import httpx
@@ -45,13 +54,14 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
                       "pip install 'opportune[service]'", name=exc.name) from None
 
 __all__ = [
-    "Cell", "CellError", "BadRequest", "Unauthorized", "Forbidden", "NotFound", "Conflict", "LookContradictsState",
+    "Cell", "AsyncCell", "CellError", "BadRequest", "Unauthorized", "Forbidden", "NotFound", "Conflict", "LookContradictsState",
     "ActionPending", "RunComplete", "NoPendingAction", "OutcomeRefused", "RunBusy", "PayloadTooLarge",
     "UnsupportedMediaType", "InvalidRequest", "InvalidPlan", "UnknownPlan", "UnknownPart", "IdempotencyKeyReused", "KeyRequired",
     "ServerError", "Unavailable", "ServiceUnreachable", "UnexpectedAnswer",
 ]
 
-M = TypeVar("M", bound=BaseModel)
+R = TypeVar("R")
+P = ParamSpec("P")
 
 
 # ---------------------------------------------------------------- errors
@@ -215,72 +225,166 @@ def _run_id(run) -> int:
     raise TypeError(f"a run is its id (an int) or a run answer, not {type(run).__name__}")
 
 
-# ---------------------------------------------------------------- the client
+# ---------------------------------------------------------------- what both clients share
 
-class Cell:
-    """One cell's connection to the service: ``Cell(base_url, token)``.
+#: The failures of an attempt that got no answer at all (retried; :class:`ServiceUnreachable` at the end).
+NO_ANSWER = (httpx.TimeoutException, httpx.NetworkError, httpx.RemoteProtocolError)
 
-    ``timeout`` is the seconds one attempt may take; ``retries`` how many times a request is sent
-    again after a connection failure, a timeout, a 5xx or a 409 ``run_busy`` (with the same
-    Idempotency-Key), pausing ``backoff`` seconds, doubled each time.  ``transport`` is an
-    ``httpx`` transport (tests, proxies); ``headers`` more headers for every request.
+
+@dataclass
+class _Call(Generic[R]):
+    """One request of a client method: what to send, and how its answer is read.
+
+    A request that changes a run (``write``) gets a fresh ``Idempotency-Key`` here, once: every
+    attempt of this call sends the same key.  ``pick`` takes the part of the answer the method
+    returns (the whole model when None).
     """
 
+    method: str
+    path: str
+    model: type[BaseModel]
+    write: bool = False
+    params: dict[str, Any] | None = None
+    json: Any = None
+    content: bytes | None = None
+    headers: dict[str, str] = field(default_factory=dict)
+    pick: Callable[[Any], R] | None = None
+
+    def __post_init__(self):
+        if self.write:
+            self.headers = {**self.headers, "Idempotency-Key": uuid.uuid4().hex}
+
+    @property
+    def request(self) -> dict[str, Any]:
+        """The arguments of ``httpx.Client.request`` (and of ``httpx.AsyncClient.request``)."""
+        return {"method": self.method, "url": self.path, "params": self.params, "json": self.json,
+                "content": self.content, "headers": self.headers}
+
+    def read(self, response: httpx.Response) -> R:
+        """A success's body as the model (:class:`UnexpectedAnswer` when it is not one)."""
+        try:
+            answer = self.model.model_validate_json(response.content)
+        except ValidationError as exc:
+            raise UnexpectedAnswer(response.status_code, "unexpected_answer",
+                                   f"{self.method} {self.path}: the answer is not a {self.model.__name__}: "
+                                   f"{exc.errors()[0]['msg'] if exc.errors() else exc}",
+                                   "is the URL that of an opportune service?") from None
+        return self.pick(answer) if self.pick else answer
+
+    def unreachable(self, attempts: int, exc: Exception) -> ServiceUnreachable:
+        return ServiceUnreachable(None, "unreachable", f"{self.method} {self.path}: no answer after {attempts} "
+                                  f"attempt(s): {type(exc).__name__}: {exc}",
+                                  "check that the service runs and the URL is right")
+
+
+class _Method(Generic[P, R]):
+    """A method of both clients, written once: the function builds the :class:`_Call`, and the client it is
+    called on sends it (:class:`Cell` returns the answer, :class:`AsyncCell` a coroutine of it)."""
+
+    def __init__(self, build: Callable[P, _Call[R]]):
+        self.build = build
+        functools.update_wrapper(self, build)
+        # as the methods show themselves (help, inspect): returning the answer, not the call
+        answer = str(build.__annotations__["return"]).removeprefix("_Call[").removesuffix("]")
+        self.__annotations__ = {**build.__annotations__, "return": answer}
+        self.__signature__ = inspect.signature(build).replace(return_annotation=answer)
+
+    @overload
+    def __get__(self, client: None, owner: type) -> _Method[P, R]: ...
+    @overload
+    def __get__(self, client: AsyncCell, owner: type) -> Callable[P, Coroutine[Any, Any, R]]: ...
+    @overload
+    def __get__(self, client: Cell, owner: type) -> Callable[P, R]: ...
+
+    def __get__(self, client, owner=None):
+        if client is None:
+            return self
+
+        if inspect.iscoroutinefunction(client._send):
+            async def method(*args, **kwargs):
+                return await client._send(self.build(*args, **kwargs))
+        else:
+            def method(*args, **kwargs):
+                return client._send(self.build(*args, **kwargs))
+        return functools.update_wrapper(method, self)
+
+    def __call__(self, client: _Client, /, *args, **kwargs):
+        """Called on the class, as a method is: ``Cell.look(cell, run, visible)``."""
+        return self.__get__(client, type(client))(*args, **kwargs)
+
+
+def _run_to_end(coroutine: Coroutine[Any, Any, R]) -> R:
+    """The result of a coroutine that never suspends (:class:`Cell`'s transport blocks), with no event loop."""
+    try:
+        coroutine.send(None)
+    except StopIteration as done:
+        return done.value
+    coroutine.close()
+    raise RuntimeError("a blocking client's request suspended")  # pragma: no cover - a transport that awaits
+
+
+class _Client:
+    """Both clients' methods and their retry loop; a subclass is the transport: it sends one attempt and
+    pauses between attempts (blocking in :class:`Cell`, awaiting in :class:`AsyncCell`)."""
+
+    _http_class: type[httpx.Client | httpx.AsyncClient]
+
     def __init__(self, base_url: str, token: str, *, timeout: float = 30.0, retries: int = 3, backoff: float = 0.2,
-                 transport: httpx.BaseTransport | None = None, headers: dict[str, str] | None = None):
+                 transport: httpx.BaseTransport | httpx.AsyncBaseTransport | None = None,
+                 headers: dict[str, str] | None = None):
         if retries < 0:
             raise ValueError("retries must be 0 or more")
         self.retries = retries
         self.backoff = backoff
         self.replayed = False  # whether the last answer was the service's stored answer of an earlier attempt
         self.attempts = 0      # how many attempts the last request took
-        self.http = httpx.Client(base_url=base_url.rstrip("/"), timeout=timeout, transport=transport,
-                                 headers={**(headers or {}), "Authorization": f"Bearer {token}",
-                                          "Accept": "application/json"})
+        self.http = self._http_class(base_url=base_url.rstrip("/"), timeout=timeout, transport=transport,
+                                     headers={**(headers or {}), "Authorization": f"Bearer {token}",
+                                              "Accept": "application/json"})
 
     # ------------------------------------------------------------ plans
 
-    def upload_plan(self, plan: str | bytes | os.PathLike | dict, *, format: Literal["yaml", "json", "in2"] | None = None,
-                    filename: str | None = None) -> PlanUploaded:
+    @_Method
+    def upload_plan(plan: str | bytes | os.PathLike | dict, *, format: Literal["yaml", "json", "in2"] | None = None,
+                    filename: str | None = None) -> _Call[PlanUploaded]:
         """Upload a plan, validated as ``opportune check`` does; its ``id`` starts runs.
 
         ``plan`` is a file (a path), the file's text (``str`` or ``bytes``: YAML, JSON or SALBP .IN2,
         detected, or ``format``), or a plan in the JSON file schema (a ``dict``).  An invalid plan
         raises :class:`InvalidPlan`, whose ``problems`` say what and where.
         """
-        params: dict[str, str] = {}
         if isinstance(plan, dict):
-            kw: dict[str, Any] = {"json": plan}
+            body: dict[str, Any] = {"json": plan}
         else:
             if isinstance(plan, os.PathLike):
                 filename = filename or os.path.basename(os.fspath(plan))
                 with open(plan, "rb") as f:
                     plan = f.read()
-            kw = {"content": plan.encode("utf-8") if isinstance(plan, str) else plan,
-                  "headers": {"Content-Type": "text/plain; charset=utf-8"}}
-        if format:
-            params["format"] = format
-        if filename:
-            params["filename"] = filename
-        return self._send("POST", "/plans", PlanUploaded, params=params, **kw)
+            body = {"content": plan.encode("utf-8") if isinstance(plan, str) else plan,
+                    "headers": {"Content-Type": "text/plain; charset=utf-8"}}
+        params = {k: v for k, v in (("format", format), ("filename", filename)) if v}
+        return _Call("POST", "/plans", PlanUploaded, params=params, **body)
 
-    def plan(self, plan_id: str) -> PlanDetail:
+    @_Method
+    def plan(plan_id: str) -> _Call[PlanDetail]:
         """A stored plan: its document, summary and graph layout."""
-        return self._send("GET", f"/plans/{plan_id}", PlanDetail)
+        return _Call("GET", f"/plans/{plan_id}", PlanDetail)
 
     # ------------------------------------------------------------ runs
 
-    def start_run(self, plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "",
-                  policy: str | None = None) -> Run:
+    @_Method
+    def start_run(plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "",
+                  policy: str | None = None) -> _Call[Run]:
         """Start a run of a stored plan in this token's cell (``buffer_capacity`` None: unlimited; ``policy``
         None: the service's default, the exact look-ahead; ``"paper"``: the paper's rule)."""
         plan_id = plan.id if isinstance(plan, PlanUploaded) else plan
         body = {"plan": plan_id, "buffer_capacity": buffer_capacity, "label": label}
         if policy is not None:
             body["policy"] = policy
-        return self._send("POST", "/runs", Run, write=True, json=body)
+        return _Call("POST", "/runs", Run, write=True, json=body)
 
-    def look(self, run: int | Run, visible: list[str] | tuple[str, ...]) -> LookAnswer:
+    @_Method
+    def look(run: int | Run, visible: list[str] | tuple[str, ...]) -> _Call[LookAnswer]:
         """The parts seen in the bin now (repeated for several units; ``[]`` for none) → the action to do.
 
         The answer's ``action`` (``kind``, ``part``, ``source``) is what the robot does next; its
@@ -289,77 +393,140 @@ class Cell:
         """
         if isinstance(visible, str):
             raise TypeError("visible is a list of part ids, not one string")
-        return self._send("POST", f"/runs/{_run_id(run)}/looks", LookAnswer, write=True, json={"visible": list(visible)})
+        return _Call("POST", f"/runs/{_run_id(run)}/looks", LookAnswer, write=True, json={"visible": list(visible)})
 
-    def outcome(self, run: int | Run, outcome: Literal["success", "failed", "defective"] = "success", *,
-                keep: Literal["bin", "buffer"] = "bin") -> OutcomeAnswer:
+    @_Method
+    def outcome(run: int | Run, outcome: Literal["success", "failed", "defective"] = "success", *,
+                keep: Literal["bin", "buffer"] = "bin") -> _Call[OutcomeAnswer]:
         """The outcome of the pending action (``keep``: after a failed install, the part back in the bin or
         kept in a buffer location)."""
-        return self._send("POST", f"/runs/{_run_id(run)}/outcomes", OutcomeAnswer, write=True,
-                          json={"outcome": outcome, "keep": keep})
+        return _Call("POST", f"/runs/{_run_id(run)}/outcomes", OutcomeAnswer, write=True,
+                     json={"outcome": outcome, "keep": keep})
 
-    def cancel(self, run: int | Run) -> CancelAnswer:
+    @_Method
+    def cancel(run: int | Run) -> _Call[CancelAnswer]:
         """Drop the pending action (the robot did not carry it out)."""
-        return self._send("POST", f"/runs/{_run_id(run)}/cancel", CancelAnswer, write=True, json={})
+        return _Call("POST", f"/runs/{_run_id(run)}/cancel", CancelAnswer, write=True, json={})
 
-    def state(self, run: int | Run) -> Run:
+    @_Method
+    def state(run: int | Run) -> _Call[Run]:
         """The run's state: installed, buffered, in the bin, the pending action, the completions left."""
-        return self._send("GET", f"/runs/{_run_id(run)}", Run)
+        return _Call("GET", f"/runs/{_run_id(run)}", Run)
 
-    def trace(self, run: int | Run) -> Trace:
+    @_Method
+    def trace(run: int | Run) -> _Call[Trace]:
         """The trace in the layout of the paper's Table 1 (the pending row last)."""
-        return self._send("GET", f"/runs/{_run_id(run)}/trace", Trace)
+        return _Call("GET", f"/runs/{_run_id(run)}/trace", Trace)
 
-    def runs(self, *, status: Literal["active", "complete"] | None = None, limit: int = 200,
-             offset: int = 0) -> list[RunSummary]:
+    @_Method
+    def runs(*, status: Literal["active", "complete"] | None = None, limit: int = 200,
+             offset: int = 0) -> _Call[list[RunSummary]]:
         """This cell's runs, newest first."""
         params: dict[str, Any] = {"limit": limit, "offset": offset}
         if status:
             params["status"] = status
-        return self._send("GET", "/runs", RunList, params=params).runs
+        return _Call("GET", "/runs", RunList, params=params, pick=lambda answer: answer.runs)
 
-    def health(self) -> Health:
-        return self._send("GET", "/healthz", Health)
+    @_Method
+    def health() -> _Call[Health]:
+        """Whether the service and its database answer, and the service's version."""
+        return _Call("GET", "/healthz", Health)
 
-    # ------------------------------------------------------------ transport
+    # ------------------------------------------------------------ the retry loop
 
-    def _send(self, method: str, path: str, model: type[M], *, write: bool = False, **kw) -> M:
-        """Send a request (retrying as the class says) and read its answer as ``model``."""
-        headers = dict(kw.pop("headers", None) or {})
-        if write:
-            headers["Idempotency-Key"] = uuid.uuid4().hex  # one key for every attempt of this request
+    async def _exchange(self, call: _Call[R]) -> R:
+        """Send ``call`` (retrying as the class says, with the same key) and read its answer."""
         self.replayed = False
         attempt = 0
         while True:
             attempt += 1
             self.attempts = attempt
             try:
-                response = self.http.request(method, path, headers=headers, **kw)
-            except (httpx.TimeoutException, httpx.NetworkError, httpx.RemoteProtocolError) as exc:
+                response = await self._attempt(call)
+            except NO_ANSWER as exc:
                 if attempt > self.retries:
-                    raise ServiceUnreachable(None, "unreachable", f"{method} {path}: no answer after {attempt} "
-                                             f"attempt(s): {type(exc).__name__}: {exc}",
-                                             "check that the service runs and the URL is right") from exc
+                    raise call.unreachable(attempt, exc) from exc
             else:
                 if response.status_code < 400:
                     self.replayed = response.headers.get("Idempotent-Replayed") == "true"
-                    try:
-                        return model.model_validate_json(response.content)
-                    except ValidationError as exc:
-                        raise UnexpectedAnswer(response.status_code, "unexpected_answer",
-                                               f"{method} {path}: the answer is not a {model.__name__}: "
-                                               f"{exc.errors()[0]['msg'] if exc.errors() else exc}",
-                                               "is the URL that of an opportune service?") from None
+                    return call.read(response)
                 error = error_from(response)
                 if not _retryable(error) or attempt > self.retries:
                     raise error
-            time.sleep(self.backoff * 2 ** (attempt - 1))
+            await self._pause(self.backoff * 2 ** (attempt - 1))
+
+    # ------------------------------------------------------------ the transport (a subclass's)
+
+    def _send(self, call: _Call[R]):
+        """The answer of ``call`` (:class:`Cell`), or a coroutine of it (:class:`AsyncCell`)."""
+        raise NotImplementedError
+
+    async def _attempt(self, call: _Call) -> httpx.Response:
+        raise NotImplementedError
+
+    async def _pause(self, seconds: float) -> None:
+        raise NotImplementedError
+
+
+# ---------------------------------------------------------------- the clients
+
+class Cell(_Client):
+    """One cell's connection to the service: ``Cell(base_url, token)``; each method blocks until its answer.
+
+    ``timeout`` is the seconds one attempt may take; ``retries`` how many times a request is sent
+    again after a connection failure, a timeout, a 5xx or a 409 ``run_busy`` (with the same
+    Idempotency-Key), pausing ``backoff`` seconds, doubled each time.  ``transport`` is an
+    ``httpx`` transport (tests, proxies); ``headers`` more headers for every request.
+    """
+
+    _http_class = httpx.Client
+    http: httpx.Client
+
+    def _send(self, call: _Call[R]) -> R:
+        return _run_to_end(self._exchange(call))
+
+    async def _attempt(self, call: _Call) -> httpx.Response:
+        return self.http.request(**call.request)  # blocks: the exchange never suspends
+
+    async def _pause(self, seconds: float) -> None:
+        time.sleep(seconds)  # noqa: ASYNC251 - blocks, as the whole exchange does
 
     def close(self) -> None:
         self.http.close()
 
-    def __enter__(self) -> "Cell":
+    def __enter__(self) -> Cell:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class AsyncCell(_Client):
+    """:class:`Cell` for asyncio: ``async with AsyncCell(base_url, token) as cell``, then
+    ``await cell.look(run, [...])``; the same methods as coroutines, with the same arguments, retries
+    (with the same Idempotency-Key), answers and errors.  ``transport`` is an ``httpx`` async transport.
+
+    ``replayed`` and ``attempts`` are those of the request that finished last: with requests running
+    at once on one client, read them from a client of each task's own.
+    """
+
+    _http_class = httpx.AsyncClient
+    http: httpx.AsyncClient
+
+    async def _send(self, call: _Call[R]) -> R:
+        return await self._exchange(call)
+
+    async def _attempt(self, call: _Call) -> httpx.Response:
+        return await self.http.request(**call.request)
+
+    async def _pause(self, seconds: float) -> None:
+        await asyncio.sleep(seconds)
+
+    async def aclose(self) -> None:
+        await self.http.aclose()
+
+    async def __aenter__(self) -> AsyncCell:
+        return self
+
+    async def __aexit__(self, *exc) -> None:
+        await self.aclose()

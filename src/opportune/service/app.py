@@ -42,7 +42,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from fastapi.staticfiles import StaticFiles
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic_core import PydanticCustomError
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
@@ -57,9 +58,9 @@ from opportune.service.errors import (ApiError, error_response, forbidden, from_
 from opportune.service.events import Broker, stream
 from opportune.service.plans import PlanBook, check_upload, list_plans, store_plan
 from opportune.service.runs import RunManager
-from opportune.service.schemas import (CancelAnswer, CellList, Graph, Health, LookAnswer, OutcomeAnswer,
-                                       PlanDetail, PlanList, PlanUploaded, Run, RunList, Ticket, Trace,
-                                       complete_openapi, errors)
+from opportune.service.schemas import (BOWMAN8_IN2, GEARBOX_PLAN, GEARBOX_PLAN_ID, GEARBOX_YAML, CancelAnswer, CellList,
+                                       Graph, Health, LookAnswer, OutcomeAnswer, PlanDetail, PlanList, PlanUploaded,
+                                       Run, RunList, Ticket, Trace, complete_openapi, errors)
 from opportune.service.storage import Store
 
 log = logging.getLogger("opportune.service")
@@ -98,6 +99,15 @@ def _unicode(text: str) -> str:
 
 Text = Annotated[str, AfterValidator(_unicode)]
 
+
+def _json_integer(value):
+    """An integer as JSON Schema has it (``4``, ``4.0``): Pydantic alone would also read ``false`` as 0 and ``"4"``
+    as 4 (schemathesis found a run started with ``"buffer_capacity": false``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise PydanticCustomError("int_type", "Input should be a valid integer")
+    return value
+
+
 # Pages and scripts come only from this server; nothing from the internet.
 CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
        "frame-ancestors 'none'; base-uri 'none'; form-action 'self'")
@@ -106,10 +116,13 @@ CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' 
 # ---------------------------------------------------------------- request bodies
 
 class RunIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
+        {"plan": GEARBOX_PLAN_ID, "label": "SN 1042", "buffer_capacity": 4, "policy": "paper"},
+        {"plan": GEARBOX_PLAN_ID}]})
     plan: Text = Field(..., min_length=1, max_length=64, description="A plan id returned by POST /plans")
     cell: Optional[Text] = Field(None, max_length=100, description="The cell; defaults to (and must be) the token's cell")
-    buffer_capacity: Optional[int] = Field(None, ge=0, le=1_000_000, description="Buffer locations; null: unlimited")
+    buffer_capacity: Optional[Annotated[int, Field(ge=0, le=1_000_000), BeforeValidator(_json_integer)]] = Field(
+        None, description="Buffer locations; null: unlimited")
     label: Text = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
     policy: Optional[Literal[POLICIES]] = Field(
         None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper' or "
@@ -117,19 +130,21 @@ class RunIn(BaseModel):
 
 
 class LookIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
+        {"visible": ["rl", "ra"]}, {"visible": []}]})
     visible: list[Annotated[Text, Field(max_length=200)]] = Field(
         ..., max_length=100_000, description="Part ids seen in the bin now, repeated for several units; [] for nothing")
 
 
 class OutcomeIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
+        {"outcome": "success"}, {"outcome": "failed", "keep": "buffer"}, {"outcome": "defective"}]})
     outcome: Literal["success", "failed", "defective"] = Field(..., description="What happened to the pending action")
     keep: Literal["bin", "buffer"] = Field("bin", description="After a failed install: part back in the bin, or kept in a buffer location")
 
 
 class CancelIn(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{}]})
 
 
 # ---------------------------------------------------------------- middleware
@@ -377,9 +392,16 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/json": {"schema": {"anyOf": [
                       {"$ref": "#/components/schemas/PlanDocument"},
-                      {"$ref": "#/components/schemas/PlanUploadWrapper"}]}},
-                  "application/yaml": {"schema": {"type": "string", "description": "A plan file in YAML"}},
-                  "text/plain": {"schema": {"type": "string", "description": "YAML, JSON or SALBP .IN2, detected"}}}}})
+                      {"$ref": "#/components/schemas/PlanUploadWrapper"}]}, "examples": {
+                      "document": {"summary": "The gearbox as a plan document", "value": GEARBOX_PLAN},
+                      "wrapped": {"summary": "The gearbox's plan file, wrapped",
+                                  "value": {"text": GEARBOX_YAML, "format": "yaml", "filename": "gearbox.yaml"}}}},
+                  "application/yaml": {"schema": {"type": "string", "description": "A plan file in YAML"},
+                                       "examples": {"gearbox": {"summary": "The gearbox", "value": GEARBOX_YAML}}},
+                  "text/plain": {"schema": {"type": "string", "description": "YAML, JSON or SALBP .IN2, detected"},
+                                 "examples": {"gearbox": {"summary": "The gearbox, in YAML", "value": GEARBOX_YAML},
+                                              "in2": {"summary": "A SALBP .IN2 file (BOWMAN8)",
+                                                      "value": BOWMAN8_IN2}}}}}})
     async def upload_plan(request: Request, p: Principal = Depends(principal),
                           format: Optional[Literal["yaml", "json", "in2"]] = Query(None, description="Format of a raw body"),
                           filename: Optional[str] = Query(None, max_length=200, description="Name used in problems")):

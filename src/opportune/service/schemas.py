@@ -208,6 +208,68 @@ class Row(Model):
     reasons: Decision
 
 
+# ---------------------------------------------------------------- examples in the OpenAPI document
+
+#: The gearbox (``examples/gearbox.yaml``) as a plan document and as a file, and its id: the upload examples
+#: of :mod:`opportune.service.app` send it, and the run examples are its Table 1 run (``policy: paper``) at
+#: row 6, as the service answers them (tests/test_openapi.py checks both).
+GEARBOX_PLAN = {
+    "name": "gearbox", "description": "Ten-part gearbox of Fox & Kempf (reconstructed Figure 2)",
+    "parts": ["ca", "ba", "rl", "dr", "sm", "ml", "ra", {"id": "co", "name": "cover"}, "st", "cl"],
+    "requires": {"ba": ["ca"], "rl": ["ba"], "dr": ["ba"], "sm": ["ca"], "ml": ["sm"], "ra": ["ba"],
+                 "co": ["rl", "dr", "ml", "ra"], "st": ["co"], "cl": ["rl", "sm", "ra"]},
+}
+GEARBOX_PLAN_ID = "8b871313b178f38819308677759c6fe510f3aeaec250cb00b07de0c214c36760"
+GEARBOX_YAML = """\
+name: gearbox
+description: Ten-part gearbox of Fox & Kempf (reconstructed Figure 2)
+parts: [ca, ba, rl, dr, sm, ml, ra, {id: co, name: cover}, st, cl]
+requires:            # X: parts that must be installed before X
+  ba: [ca]
+  rl: [ba]
+  dr: [ba]
+  sm: [ca]
+  ml: [sm]
+  ra: [ba]
+  co: [rl, dr, ml, ra]
+  st: [co]
+  cl: [rl, sm, ra]
+"""
+#: A SALBP file (BOWMAN8, shipped in ``opportune/datasets/salbp``): tasks, their times, precedences, ``-1,-1``.
+BOWMAN8_IN2 = "8\n11\n17\n9\n5\n8\n12\n10\n3\n1,2\n2,3\n2,4\n3,5\n3,6\n4,6\n5,7\n6,8\n-1,-1\n"
+
+_INSTALL_RL = {"kind": "install", "part": "rl", "source": "buffer"}
+_DECISION = {
+    "action": _INSTALL_RL, "rule": "install the candidate that keeps the most options", "note": "",
+    "candidates": [
+        {"part": "rl", "source": "buffer", "options": "49", "total": "228", "cost": 2.0, "buffered_at": 0},
+        {"part": "dr", "source": "buffer", "options": "42", "total": "228", "cost": 2.0, "buffered_at": 2}],
+    "positions": [], "exact": True, "method": "exact",
+    "explain": "install rl (from buffer): install the candidate that keeps the most options\n"
+               "  candidate rl from buffer #1: keeps 49 of 228 completions, cost 2\n"
+               "  candidate dr from buffer #3: keeps 42 of 228 completions, cost 2",
+}
+_ROW = {"n": 6, "visible": ["cl", "co"], "buffered": ["rl", "ml", "dr"], "installed": ["ca", "ba"],
+        "action": _INSTALL_RL, "action_text": "install rl (from buffer)", "outcome": None,
+        "count": {"value": "228", "log10": 2.357935}, "reasons": _DECISION}
+RUN_EXAMPLE = {
+    "id": 17, "cell": "cell-1", "label": "SN 1042",
+    "plan": {"id": GEARBOX_PLAN_ID, "name": "gearbox"}, "status": "active", "policy": "paper", "buffer_capacity": 4,
+    "seq": 11,
+    "state": {"installed": ["ca", "ba"], "buffered": ["rl", "ml", "dr"],
+              "in_bin": {"sm": 1, "ra": 1, "co": 1, "st": 1, "cl": 1}, "capacity": 4, "strategies": ["default"],
+              "complete": False, "defects": 0},
+    "installable": ["rl", "dr", "sm", "ra"], "progress": {"installed": 2, "units": 10},
+    "count": {"value": "228", "log10": 2.357935}, "pending": _ROW, "last_look": ["cl", "co"], "rows": 6,
+    "finished": False, "created_at": "2025-03-14T09:41:07.215+00:00", "updated_at": "2025-03-14T09:43:52.604+00:00",
+}
+LOOK_EXAMPLE = {"run_id": 17, "seq": 11, "action": _INSTALL_RL, "decision": _DECISION, "row": _ROW,
+                "run": RUN_EXAMPLE}
+#: The answers' examples, by component: set by :func:`complete_openapi`, since FastAPI writes its document
+#: without ``null`` values (they would be lost from the examples).
+ANSWER_EXAMPLES = {"Run": [RUN_EXAMPLE], "LookAnswer": [LOOK_EXAMPLE]}
+
+
 # ---------------------------------------------------------------- runs
 
 class PlanRef(Model):
@@ -485,7 +547,7 @@ class PlanUploadWrapper(BaseModel):
 
 def complete_openapi(doc: dict) -> dict:
     """Add to FastAPI's document what its routes cannot say: the plan file's schema (the upload's request
-    body and every plan document point at it) and the events of the event stream."""
+    body and every plan document point at it), the events of the event stream, and the answers' examples."""
     from pydantic.json_schema import models_json_schema
 
     schemas = doc.setdefault("components", {}).setdefault("schemas", {})
@@ -494,6 +556,8 @@ def complete_openapi(doc: dict) -> dict:
                                  ref_template="#/components/schemas/{model}")
     for name, schema in defs.get("$defs", {}).items():
         schemas.setdefault(name, schema)
+    for name, examples in ANSWER_EXAMPLES.items():
+        schemas[name]["examples"] = json.loads(json.dumps(examples))
     stream = doc["paths"]["/runs/{run_id}/events"]["get"]["responses"]["200"]["content"]["text/event-stream"]
     stream["schema"] = event_schema()
 
