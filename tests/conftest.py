@@ -131,3 +131,16 @@ def random_plans(draw, max_parts=6, max_units=8, max_strategies=3, quantities=Tr
         if not result.ok:  # same order declared differently (e.g. redundant arcs): keep one strategy
             doc["strategies"] = unique[:1]
     return plan_from_dict(doc)
+
+
+def run_cli(*args):
+    """Run ``opportune ARGS`` in process (typer's runner) and return the result, after checking what every
+    command line test needs: no traceback, and no exception other than the exit."""
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert "Traceback" not in result.output, result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+    return result

@@ -10,17 +10,11 @@ import sys
 import pytest
 from typer.testing import CliRunner
 
-from conftest import GEARBOX
+from conftest import GEARBOX, run_cli
 from opportune.cli import app
 
 runner = CliRunner()
-
-
-def run(*args):
-    result = runner.invoke(app, [str(a) for a in args])
-    assert "Traceback" not in result.output, result.output
-    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
-    return result
+run = run_cli
 
 
 def test_check_gearbox_summary():

@@ -11,22 +11,14 @@ import sys
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-from conftest import GEARBOX
+from conftest import GEARBOX, run_cli
 from opportune.cli import app
 from opportune.simulate import METRICS, StudyConfig, StudyError, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 OPPORTUNE = [sys.executable, "-m", "opportune"]
-runner = CliRunner()
-
-
-def run(*args):
-    result = runner.invoke(app, [str(a) for a in args])
-    assert "Traceback" not in result.output, result.output
-    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
-    return result
+run = run_cli
 
 
 def without_timing(doc: dict) -> dict:

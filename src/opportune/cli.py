@@ -452,10 +452,9 @@ def _recorded_study(path: Path, as_json: bool) -> tuple[dict, Plan]:
         plan = plan_from_dict(prov["plan"], file=f"{path}: provenance.plan")
     except PlanError as exc:
         fail(f"{path}: the recorded plan is not valid: {exc}", as_json=as_json)
-    import hashlib
+    from opportune.simulate import plan_sha256
 
-    digest = hashlib.sha256(json.dumps(plan.to_dict(), sort_keys=True, default=str).encode()).hexdigest()
-    if prov.get("plan_sha256") not in (None, digest):
+    if prov.get("plan_sha256") not in (None, plan_sha256(plan)):
         fail(f"{path}: the recorded plan does not match its recorded hash (plan_sha256): the file was edited; "
              "rerun from the plan file instead", as_json=as_json)
     return prov["study"], plan

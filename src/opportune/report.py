@@ -107,28 +107,25 @@ def provenance(result: StudyResult) -> dict:
     The same study (same plan, settings and seed) gives the same document on any machine and any
     number of workers, so nothing here depends on the machine or the time.
     """
-    import hashlib
     import platform
 
     from opportune import __version__
     from opportune.engine import native
-    from opportune.simulate import hash_config
+    from opportune.simulate import hash_config, plan_sha256
 
     cfg = result.config
-    plan = cfg.plan.to_dict()
-    plan_doc = json.dumps(plan, sort_keys=True, default=str)
     return {
         "schema_version": SCHEMA_VERSION,
         "opportune": __version__,
         "python": platform.python_version(),
         "compiled_core": native.available(),
-        "plan_sha256": hashlib.sha256(plan_doc.encode()).hexdigest(),
+        "plan_sha256": plan_sha256(cfg.plan),
         "study_sha256": hash_config(cfg),
         "strategies": list(cfg.strategies),
         "decision_budget": cfg.decision_budget,
         # Enough to run the study again (`opportune simulate --from results.json`): its settings and the plan.
         "study": cfg.settings(),
-        "plan": plan,
+        "plan": cfg.plan.to_dict(),
     }
 
 

@@ -514,6 +514,15 @@ def run_chunk(config: StudyConfig, prepared: Prepared, strategy: str, start: int
             gc.enable()
 
 
+def plan_sha256(plan: Plan) -> str:
+    """The SHA-256 of a plan's content (its file-schema document, keys sorted): ``results.json``'s
+    ``provenance.plan_sha256``, checked by ``simulate --from``."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps(plan.to_dict(), sort_keys=True, default=str).encode()).hexdigest()
+
+
 def hash_config(config: StudyConfig) -> str:
     import hashlib
     import json
