@@ -268,10 +268,12 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
                 go.set()
 
             kill_and_restart(a, 60, "B")
-            for t in threads[10:]:
-                t.start()
             streamer.join(60)      # run 0 complete: B may go now
             assert not streamer.is_alive(), "run 0 did not complete"
+            # B must stay up while the revoked token's refusal is timed on it, so the second wave starts after
+            revocation.join(TOKEN_CACHE_SECONDS + 10)
+            for t in threads[10:]:
+                t.start()
             wait_for(40, "in the second wave", among=range(10, n))
             kill_and_restart(b, 0, "A")
             for t in threads:
@@ -321,7 +323,6 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
         assert {ev for ev, _d in events_seen[1:-1]} == {"look", "outcome"}
 
         # The revoked token: refused by both processes within the token cache time.
-        revocation.join(TOKEN_CACHE_SECONDS + 10)
         assert set(refused) == {"A", "B"}, refused
         assert refused["B"] <= TOKEN_CACHE_SECONDS + 1.5, refused
         for svc in procs.values():
