@@ -754,6 +754,22 @@ from opportune.service.commands import register as _register_service
 _register_service(app)
 
 
+# >>> issue 15: and-or (command lives here)
+# <<< issue 15: and-or
+
+
+# >>> issue 15: products (command lives here)
+# <<< issue 15: products
+
+
+# >>> issue 15: relax (command lives here)
+# <<< issue 15: relax
+
+
+# >>> issue 15: learn (command lives here)
+# <<< issue 15: learn
+
+
 @app.command()
 def completion(shell: str = typer.Argument(..., help="bash, zsh, fish or powershell", show_default=False)):
     """Print the shell's completion script: add `eval "$(opportune completion bash)"` to ~/.bashrc (zsh: the
