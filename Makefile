@@ -9,7 +9,7 @@ STAMP := $(VENV)/.installed
 
 setup: $(STAMP) system-deps
 
-$(STAMP): pyproject.toml CMakeLists.txt src/native/counter.cpp
+$(STAMP): pyproject.toml CMakeLists.txt src/native/counter.cpp src/native/chains.cpp
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[service,postgres,scale,dev,docs]'

@@ -772,6 +772,8 @@ void bind(py::module_& m, const char* name) {
 
 }  // namespace
 
+void bind_chains(py::module_& m);  // chains.cpp
+
 PYBIND11_MODULE(_native, m) {
     m.doc() = "Compiled core of opportune's order engine (see opportune.engine.native)";
     bind<1>(m, "Counter1");
@@ -779,4 +781,5 @@ PYBIND11_MODULE(_native, m) {
     bind<4>(m, "Counter4");
     bind<8>(m, "Counter8");
     bind<16>(m, "Counter16");
+    bind_chains(m);
 }

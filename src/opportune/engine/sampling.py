@@ -52,7 +52,11 @@ import random
 from dataclasses import dataclass
 from statistics import NormalDist
 
+from opportune.engine import native
 from opportune.engine.poset import Poset, bits
+
+_M64 = (1 << 64) - 1
+_TO_UNIT = 1.0 / (1 << 53)
 
 __all__ = ["ChainEstimate", "CompletionChains", "t_quantile"]
 
@@ -106,8 +110,23 @@ class CompletionChains:
         self.above = poset.above
         self.rng = random.Random(seed)
         self.remaining = remaining
-        self.orders = [self._random_topological(remaining) for _ in range(chains)]
+        self.chains = chains
+        orders = [self._random_topological(remaining) for _ in range(chains)]
+        # The moves draw from splitmix64 (one stream for the population), so the compiled chains and
+        # the pure-Python ones make the same moves from the same seed.
+        self._state = self.rng.getrandbits(64)
+        self._core = None
+        if native._native is not None:
+            preds, succs = self._neighbours()
+            self._core = native._native.Chains(len(self.below), preds, succs, orders, self._state)
+        else:
+            self._orders = orders
         self.steps = 0          # steps per chain since the population was started
+
+    @property
+    def orders(self) -> list[list[int]]:
+        """The chains' current sequences (a copy when they run compiled)."""
+        return self._core.orders() if self._core is not None else self._orders
 
     def _random_topological(self, remaining: int) -> list[int]:
         """A random admissible sequence of ``remaining`` (an up-set: what is left after installing a
@@ -141,7 +160,10 @@ class CompletionChains:
         if remaining & ~self.remaining:
             raise ValueError("the chains can only move forward (install steps, not undo them)")
         if gone:
-            self.orders = [[u for u in order if not gone >> u & 1] for order in self.orders]
+            if self._core is not None:
+                self._core.drop(list(bits(gone)))
+            else:
+                self._orders = [[u for u in order if not gone >> u & 1] for order in self._orders]
             self.remaining = remaining
 
     def run(self, steps: int) -> None:
@@ -153,9 +175,22 @@ class CompletionChains:
         and Khachiyan move it one place: on ARC111 the chains mix in far fewer moves.  Each move
         costs a few C-level list scans (``list.index`` for its cover neighbours).
         """
+        if self._core is not None:
+            self._core.run(steps)
+            self.steps += steps
+            return
         preds, succs = self._neighbours()
-        rem, rnd = self.remaining, self.rng.random
-        for order in self.orders:
+        rem = self.remaining
+        state = self._state
+
+        def rnd():      # splitmix64, as the compiled chains draw
+            nonlocal state
+            state = (state + 0x9E3779B97F4A7C15) & _M64
+            z = ((state ^ (state >> 30)) * 0xBF58476D1CE4E5B9) & _M64
+            z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _M64
+            return ((z ^ (z >> 31)) >> 11) * _TO_UNIT
+
+        for order in self._orders:
             n = len(order)
             if n < 2:
                 continue
@@ -176,6 +211,7 @@ class CompletionChains:
                 if q - p > 2:       # more than one slot: take it out, put it back at random
                     del order[i]
                     order.insert(p + 1 + int(rnd() * (q - 1 - p)), u)
+        self._state = state
         self.steps += steps
 
     def _neighbours(self) -> tuple[list[list[int]], list[list[int]]]:
@@ -191,30 +227,32 @@ class CompletionChains:
         return self._covers
 
     def estimate(self, first=(), positions=(), *, steps: int = 0, samples: int = 32,
-                 deadline: float | None = None, clock=None) -> ChainEstimate:
+                 deadline: float | None = None, clock=None, settled=None,
+                 min_rounds: int = 8) -> ChainEstimate:
         """Run the chains and estimate, for each unit in ``first`` (minimal now), the probability
         that it comes next, and for each unit in ``positions``, its expected position.
 
         Either ``steps`` per chain in total, taken as ``samples`` rounds, or rounds until
         ``deadline`` (by ``clock``, e.g. ``time.perf_counter``), at least two.  Each round
-        runs the chains, then reads one sample from each.
+        runs the chains, then reads one sample from each.  With a deadline, ``settled`` (a
+        function of the estimate so far) may end the rounds early, once ``min_rounds`` are
+        done: a decision that is already sure need not spend the rest of its budget.
         """
         first, positions = list(first), list(positions)
         for u in first:
             if self.below[u] & self.remaining:
                 raise ValueError(f"unit {u} is not minimal: it cannot come next")
-        k = len(self.orders)
+        k = self.chains
         acc_first = {u: [0.0] * k for u in first}
         acc_pos = {u: [0.0] * k for u in positions}
         n_samples = 0
         # Rounds short enough to stop near a deadline (a millisecond or two of moves over all chains).
-        per_round = max(1, steps // max(1, samples)) if steps else max(1, min(len(self.orders[0]), 100))
+        per_round = max(1, steps // max(1, samples)) if steps else max(1, min(self.remaining.bit_count(), 100))
         rounds = 0
         while True:
             self.run(per_round)
-            for c, order in enumerate(self.orders):
-                if first or positions:
-                    self._read(order, first, positions, acc_first, acc_pos, c)
+            if first or positions:
+                self._read_all(first, positions, acc_first, acc_pos)
             n_samples += 1
             rounds += 1
             if steps:
@@ -222,6 +260,12 @@ class CompletionChains:
                     break
             elif rounds >= 2 and (deadline is None or clock() >= deadline):
                 break
+            elif settled is not None and rounds >= min_rounds and rounds % 4 == 0 and settled(
+                    self._summary(acc_first, acc_pos, n_samples, k)):
+                break
+        return self._summary(acc_first, acc_pos, n_samples, k)
+
+    def _summary(self, acc_first, acc_pos, n_samples: int, k: int) -> ChainEstimate:
         means_first = {u: [x / n_samples for x in xs] for u, xs in acc_first.items()}
         means_pos = {u: [x / n_samples for x in xs] for u, xs in acc_pos.items()}
         return ChainEstimate(
@@ -229,6 +273,19 @@ class CompletionChains:
             positions={u: _mean_se(xs) for u, xs in means_pos.items()},
             per_chain={"first": means_first, "positions": means_pos},
             samples=n_samples * k, steps=self.steps)
+
+    def _read_all(self, first, positions, acc_first, acc_pos) -> None:
+        """Add every chain's statistics for its current sequence."""
+        if self._core is None:
+            for c, order in enumerate(self._orders):
+                self._read(order, first, positions, acc_first, acc_pos, c)
+            return
+        f, e = self._core.read(first, positions)
+        for c, (fs, es) in enumerate(zip(f, e)):
+            for u, x in zip(first, fs):
+                acc_first[u][c] += x
+            for u, x in zip(positions, es):
+                acc_pos[u][c] += x
 
     def _read(self, order, first, positions, acc_first, acc_pos, c) -> None:
         """Add one chain's Rao–Blackwellised statistics for the current sequence."""

@@ -31,11 +31,18 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 from opportune.engine.count import BudgetExceeded
+from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.sampling import CompletionChains
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Candidate, Decision, Estimate, shared_action
 
 MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
 EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
+SURE = 0.999           # an estimate this sure of its choice stops early, keeping the rest of the budget
+MIXED_STEPS = 20       # moves per chain, per step remaining, before an early stop is trusted
+EXACT_FIRST = 0.2      # exact attempts first while they have taken under this share of the budget
+PROBE_SHARE = 0.3      # else a first estimate gets this share (and ends the decision if it is sure)
+SLOW_WEIGHT = 0.3      # weight of the last exact attempt in the moving average of their time
+SLOW_DECAY = 0.9       # that average shrinks after each sure estimate, so exact counts are tried again
 
 
 def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
@@ -92,13 +99,54 @@ class _How:
 _EXACT = _How()
 
 
+def _settled(engine, mask: int, consistent: int, parts: list[str], rule) -> list[str] | None:
+    """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
+    or None: only with one consistent strategy (a union's counts do not follow one order)."""
+    if consistent & (consistent - 1):
+        return None
+    plan = engine.plan
+    unit_of = {engine.next_unit(mask, plan.index(p)): p for p in parts}
+    best = rule(engine.posets[consistent.bit_length() - 1], engine.full & ~mask, list(unit_of))
+    return None if best is None else [unit_of[u] for u in best]
+
+
+def choose_by_order(engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...],
+                    can: list[str]) -> Action | None:
+    """The rule's action when the partial order alone settles it (:mod:`opportune.engine.dominance`),
+    else None.  ``can``: the installable parts among the visible and buffered ones (at least two, or
+    none with two visible parts to choose from and a free location)."""
+    if can:
+        settled = _settled(engine, mask, consistent, can, most_options_by_order)
+        return None if settled is None else _best_install(engine.plan, dict.fromkeys(settled, 0), visible, buffer)
+    settled = _settled(engine, mask, consistent, list(dict.fromkeys(visible)), earliest_by_order)
+    return None if settled is None else shared_action("buffer", min(settled, key=engine.plan.index))
+
+
+def _best_install(plan, options: dict[str, int], visible, buffer) -> Action:
+    """The candidate with the least sort key of :func:`ranked_candidates`, found without sorting."""
+    best = None
+    for part, n in options.items():
+        cost, index = plan.part(part).cost, plan.index(part)
+        if part in visible:
+            key = (-n, 0, cost, -1, index, part, "bin")
+            if best is None or key < best:
+                best = key
+        if part in buffer:
+            key = (-n, 1, cost, buffer.index(part), index, part, "buffer")
+            if best is None or key < best:
+                best = key
+    return shared_action("install", best[5], best[6])
+
+
 def choose_exact(engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
-                 visible: tuple[str, ...]) -> Action:
+                 visible: tuple[str, ...], *, order_first: bool = True) -> Action:
     """The paper's rule on exact counts, on the machine form of a state (see
     :class:`~opportune.policies.base.DecidesOnMasks`).
 
     The best candidate is the least sort key of :func:`ranked_candidates` (keys are distinct:
-    a part's bin and buffer candidates differ in the source), found without sorting.
+    a part's bin and buffer candidates differ in the source), found without sorting.  With
+    ``order_first`` (the default), comparisons that the partial order alone settles
+    (:mod:`opportune.engine.dominance`) are made without counting: the action is the same.
     """
     if mask == engine.full:
         return DONE
@@ -108,26 +156,20 @@ def choose_exact(engine, mask: int, consistent: int, buffer: tuple[str, ...], fr
         part = can[0]
         return shared_action("install", part, "bin" if part in visible else "buffer")
     if can:
-        options = engine.options_for(mask, consistent, can)
-        plan = engine.plan
-        best = None
-        for part, n in options.items():
-            cost, index = plan.part(part).cost, plan.index(part)
-            if part in visible:
-                key = (-n, 0, cost, -1, index, part, "bin")
-                if best is None or key < best:
-                    best = key
-            if part in buffer:
-                key = (-n, 1, cost, buffer.index(part), index, part, "buffer")
-                if best is None or key < best:
-                    best = key
-        return shared_action("install", best[5], best[6])
+        settled = _settled(engine, mask, consistent, can, most_options_by_order) if order_first else None
+        # the order alone may settle the comparison (equal options within the group): no counting
+        options = (dict.fromkeys(settled, 0) if settled is not None
+                   else engine.options_for(mask, consistent, can))
+        return _best_install(engine.plan, options, visible, buffer)
     if visible and free > 0:
         parts = set(visible)
         if len(parts) == 1:  # one part to buffer: nothing to compare
             return shared_action("buffer", visible[0])
-        _, sums = engine.position_sums_for(mask, consistent, parts)
         plan = engine.plan
+        settled = _settled(engine, mask, consistent, list(parts), earliest_by_order) if order_first else None
+        if settled is not None:
+            return shared_action("buffer", min(settled, key=plan.index))
+        _, sums = engine.position_sums_for(mask, consistent, parts)
         return shared_action("buffer", min((s, plan.index(p), p) for p, s in sums.items())[2])
     return SHAKE
 
@@ -152,6 +194,7 @@ class Opportunistic(DecidesOnMasks):
         self._population: tuple | None = None   # (engine, strategy, CompletionChains)
         self._starts = 0
         self._share = {"install": EXACT_SHARE[1], "buffer": EXACT_SHARE[1]}
+        self._slow = {"install": 0.0, "buffer": 0.0}   # recent seconds of an exact attempt (moving average)
 
     #: The rules in words, as the decisions give them (variants say theirs).
     rule_install = "install the candidate that keeps the most options"
@@ -173,6 +216,10 @@ class Opportunistic(DecidesOnMasks):
     # ------------------------------------------------------------ within a budget
 
     def _budgeted(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
+        """The rule within the budget.  Exact counts first while they have been quick; where they have
+        been slow (a large plan's early states), a short estimate first, which ends the decision if it is
+        already sure (probability >= SURE of being the exact rule's choice), then the exact attempt, then
+        the estimate again with what is left of the budget."""
         start = time.perf_counter()
         end = start + self.budget * (1 - MARGIN)
         if mask == engine.full:
@@ -182,21 +229,52 @@ class Opportunistic(DecidesOnMasks):
         if len(can) == 1 or (not can and len(set(visible)) == 1) or not can and not (visible and free > 0):
             # one candidate, one part to buffer, or a shake: nothing to count
             return choose_exact(engine, mask, consistent, buffer, free, visible), _EXACT
+        settled = choose_by_order(engine, mask, consistent, buffer, visible, can)
+        if settled is not None:
+            return settled, _EXACT
         kind = "install" if can else "buffer"
+        probe = None
+        if self._slow[kind] > EXACT_FIRST * self.budget:
+            probe = self._estimate(engine, mask, consistent, buffer, visible, can,
+                                   start + self.budget * PROBE_SHARE, stop_when_sure=True)
+            if probe[1].confidence >= SURE:
+                self._slow[kind] *= SLOW_DECAY   # try the exact counts again some day
+                return probe
+        began = time.perf_counter()
         try:
-            with engine.deadline(start + self.budget * self._share[kind]):
-                action = choose_exact(engine, mask, consistent, buffer, free, visible)
+            with engine.deadline(began + self.budget * self._share[kind]):
+                action = choose_exact(engine, mask, consistent, buffer, free, visible, order_first=False)
             self._share[kind] = EXACT_SHARE[1]
+            self._slow[kind] = (1 - SLOW_WEIGHT) * self._slow[kind] + SLOW_WEIGHT * (time.perf_counter() - began)
             return action, _EXACT
         except BudgetExceeded:
             self._share[kind] = EXACT_SHARE[0]
-        chains, note = self._chains(engine, mask, consistent)
-        remaining = engine.full & ~mask
+            self._slow[kind] = (1 - SLOW_WEIGHT) * self._slow[kind] + SLOW_WEIGHT * 2 * self.budget
+        if time.perf_counter() >= end and probe is not None:
+            return probe
+        return self._estimate(engine, mask, consistent, buffer, visible, can, end, stop_when_sure=True)
+
+    def _estimate(self, engine, mask, consistent, buffer, visible, can, end: float, *,
+                  stop_when_sure: bool) -> tuple[Action, _How]:
+        """The rule applied to estimates from the population of chains, run until ``end`` (or until sure)."""
         plan = engine.plan
+        remaining = engine.full & ~mask
+        clock = time.perf_counter
         if can:
-            first = {p: engine.next_unit(mask, plan.index(p)) for p in can}
-            est = chains.estimate(first=set(first.values()), deadline=end, clock=time.perf_counter)
-            value = _tied_means(chains, remaining, first, est.first)
+            units = {p: engine.next_unit(mask, plan.index(p)) for p in can}
+            chains, note = self._chains(engine, mask, consistent, tuple(units.values()))
+            # a candidate that cannot come next in the chains' strategy has no share there
+            first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
+
+            def sure(e):   # the best so far is the exact rule's choice with probability >= SURE
+                v = _tied_means(chains, remaining, first, e.first)
+                top = max(first, key=v.__getitem__)
+                return (_mixed(chains) and
+                        _confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE)
+
+            est = chains.estimate(first=set(first.values()), deadline=end, clock=clock,
+                                  settled=sure if stop_when_sure else None)
+            value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
             keys = []
             for part in can:
                 cost, index = plan.part(part).cost, plan.index(part)
@@ -207,13 +285,22 @@ class Opportunistic(DecidesOnMasks):
             keys.sort()
             best = keys[0][1]
             conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
-            estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1], source)
+            estimates = tuple(Estimate(part, "share", value[part],
+                                       est.first[first[part]][1] if part in first else 0.0, source)
                               for _, part, source in keys)
             return (shared_action("install", best, keys[0][2]),
                     _How(False, "mcmc", estimates, conf, note))
+        chains, note = self._chains(engine, mask, consistent)
         parts = list(dict.fromkeys(visible))
         at = {p: engine.next_unit(mask, plan.index(p)) for p in parts}
-        est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter)
+
+        def sure(e):
+            v = _tied_means(chains, remaining, at, e.positions)
+            top = min(parts, key=v.__getitem__)
+            return _mixed(chains) and _confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE
+
+        est = chains.estimate(positions=set(at.values()), deadline=end, clock=clock,
+                              settled=sure if stop_when_sure else None)
         value = _tied_means(chains, remaining, at, est.positions)
         ranked = sorted((value[p], plan.index(p), p) for p in parts)
         best = ranked[0][2]
@@ -221,11 +308,17 @@ class Opportunistic(DecidesOnMasks):
         estimates = tuple(Estimate(p, "position", v, est.positions[at[p]][1]) for v, _, p in ranked)
         return shared_action("buffer", best), _How(False, "mcmc", estimates, conf, note)
 
-    def _chains(self, engine, mask: int, consistent: int) -> tuple[CompletionChains, str]:
+    def _chains(self, engine, mask: int, consistent: int, candidates=()) -> tuple[CompletionChains, str]:
         """The population of chains for this state: carried on from the last look if the state
-        only moved forward, else started afresh."""
+        only moved forward, else started afresh.  With several consistent strategies the chains follow
+        the one in which most ``candidates`` (units) can come next (the current one on a tie)."""
         strategies = [s for s in range(engine.k) if consistent >> s & 1]
         strategy = strategies[0]
+        if len(strategies) > 1 and candidates:
+            remaining = engine.full & ~mask
+            current = self._population[1] if self._population and self._population[0] is engine else None
+            strategy = max(strategies, key=lambda s: (
+                sum(not engine.posets[s].below[u] & remaining for u in candidates), s == current, -s))
         note = ""
         if len(strategies) > 1:   # the chains follow one order: say which
             note = f"estimated on strategy '{engine.plan.strategies[strategy].name}' alone"
@@ -306,6 +399,12 @@ class Opportunistic(DecidesOnMasks):
                 return state.schedule.count()
         except BudgetExceeded:
             return None
+
+
+def _mixed(chains: CompletionChains) -> bool:
+    """Whether the population has run long enough for its errors to be trusted when stopping early
+    (a population just started from spread-out, not uniform, sequences has not)."""
+    return chains.steps >= MIXED_STEPS * max(1, chains.remaining.bit_count())
 
 
 def _signature(chains: CompletionChains, remaining: int, unit: int) -> tuple[int, int]:
