@@ -127,3 +127,29 @@ def test_lookahead_within_a_budget_goes_on_from_where_it_stopped():
             continue
         assert action == exact.choose_at(engine, 0, engine.all_strategies, (), math.inf, look)
     assert marked > 0 and ahead.last_cost is not None     # it did not fit at first, and then it did
+
+
+def test_slack_estimates_its_positions_when_they_do_not_fit_and_says_so(monkeypatch):
+    """Within a budget the slack's expected positions may be estimated: the decision is then marked
+    estimated, with each visible part's slack and an error, and it mostly agrees with the exact slack."""
+    monkeypatch.setattr(Slack, "EXACT_SLACK_SHARE", 0.0)   # no time for exact positions: always estimate
+    plan = load_plan("salbp:TONGE70")
+    engine = OrderEngine(plan)
+    exact = Slack()
+    rng = random.Random(4)
+    seq = Sequencer(engine, Slack(budget=0.05, seed=1), warm_up=0)
+    estimated = agree = 0
+    while not seq.state.is_complete and estimated < 12:
+        state = seq.state
+        left = [p for p, n in state.in_bin.items() for _ in range(n)]
+        look = rng.sample(left, min(2, len(left)))
+        d = seq.decide(look)
+        if d.action.kind == "buffer" and not d.exact and d.estimates and d.estimates[0].kind == "slack":
+            estimated += 1
+            assert {e.part for e in d.estimates} == set(look) and all(e.se >= 0 for e in d.estimates)
+            assert 0.0 <= d.confidence <= 1.0 and "slack ~" in d.explain()
+            sched = state.schedule
+            agree += d.action.part == exact.least_slack(engine, sched.mask, sched.consistent, tuple(look))
+        seq.report("success")
+    assert estimated >= 5
+    assert agree >= 0.7 * estimated, (agree, estimated)

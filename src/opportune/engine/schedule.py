@@ -258,6 +258,7 @@ class OrderEngine:
         if r is not None:
             return r
         if self._until is not None:
+            self._check_until()
             counter.deadline = self._until if counter.deadline is None else min(counter.deadline, self._until)
         if counter in self._hubs:
             hub = self._hubs[counter]
@@ -293,6 +294,13 @@ class OrderEngine:
             return v
         self._hubs[counter] = None
         return counter.count(s)             # plainly, continuing from the probe's memo
+
+    def _check_until(self) -> None:
+        """Raise BudgetExceeded once the deadline of :meth:`deadline` has passed: a decision that asks
+        for many counts, each quick (memo hits in the compiled core), must still stop on time."""
+        now = time.perf_counter()
+        if now > self._until:
+            raise BudgetExceeded("the deadline has passed", reason="time", elapsed=0.0)
 
     @contextmanager
     def deadline(self, until: float | None):
@@ -342,6 +350,7 @@ class OrderEngine:
         """Position sums of ``units`` (default: all of ``s``) over the orders of ``s`` under one counter."""
         self._term_count(counter, s)            # chooses the way (and finds the hub) if not done yet
         if self._until is not None:
+            self._check_until()
             counter.deadline = self._until if counter.deadline is None else min(counter.deadline, self._until)
         hub = self._hub_for(counter, s)
         if hub is None:

@@ -83,11 +83,12 @@ class Estimate:
     """An estimated quantity of one part that decided an action, with its standard error.
 
     ``kind`` is ``"share"`` (the share of admissible completions that keep the part next:
-    its options over all completions) or ``"position"`` (its expected position, 1 = next).
+    its options over all completions), ``"position"`` (its expected position, 1 = next) or
+    ``"slack"`` (the slack rule's value: expected position less what the order alone gives).
     """
 
     part: str
-    kind: Literal["share", "position"]
+    kind: Literal["share", "position", "slack"]
     value: float
     se: float
     source: Source | None = None
@@ -136,6 +137,8 @@ class Decision:
             if e.kind == "share":
                 lines.append(f"  candidate {e.part}" + (f" from {e.source}" if e.source else "")
                              + f": keeps ~{100 * e.value:.2f}% ± {100 * e.se:.2f}% of completions (estimated)")
+            elif e.kind == "slack":
+                lines.append(f"  visible {e.part}: slack ~{e.value:.2f} ± {e.se:.2f} (expected position estimated)")
             else:
                 lines.append(f"  visible {e.part}: expected position ~{e.value:.2f} ± {e.se:.2f} (estimated)")
         if not self.exact:

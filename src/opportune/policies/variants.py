@@ -86,11 +86,62 @@ class Slack(BinFirst):
             return action, how
         if self.total_budget is None:
             return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
-        try:    # within a budget: the slack if its positions fit what is left of it, else the paper's choice
-            with engine.deadline(start + self.total_budget * (1 - MARGIN)):
+        end = start + self.total_budget * (1 - MARGIN)
+        try:    # within a budget: the exact slack if its positions fit a share of it, else estimated
+            with engine.deadline(min(end, time.perf_counter() + self.total_budget * self.EXACT_SLACK_SHARE)):
                 return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
         except BudgetExceeded:
-            return action, how
+            pass
+        if time.perf_counter() >= end:
+            return action, how      # no time left to estimate: the paper's choice, as decided above
+        return self._estimated_slack(engine, mask, consistent, visible, end)
+
+    #: With a budget, the share of it the exact expected positions of the slack may take before the
+    #: slack is estimated from the chains instead.
+    EXACT_SLACK_SHARE = 0.3
+
+    def _slack_offsets(self, engine, mask: int, consistent: int, parts) -> dict[str, float]:
+        """``slack - expected position`` of each part: what the order alone gives (see :meth:`least_slack`)."""
+        posets = [engine.posets[i] for i in range(engine.k) if consistent >> i & 1]
+        remaining = engine.full & ~mask
+        out = {}
+        for part in parts:
+            u = engine.next_unit(mask, engine.plan.index(part))
+            needed = min((p.below[u] & remaining).bit_count() for p in posets)
+            after = min((p.above[u] & remaining).bit_count() for p in posets)
+            out[part] = -needed - self.weight * after
+        return out
+
+    def _estimated_slack(self, engine, mask: int, consistent: int, visible, end: float):
+        """The least slack with the expected positions estimated by the population of chains, until
+        ``end`` or until sure; the decision says it was estimated and how sure it is."""
+        from opportune.policies.base import Estimate
+        from opportune.policies.opportunistic import SURE, _How, _mixed
+
+        chains, note = self._chains(engine, mask, consistent)
+        plan = engine.plan
+        parts = list(dict.fromkeys(visible))
+        at = {p: engine.next_unit(mask, plan.index(p)) for p in parts}
+        offset = self._slack_offsets(engine, mask, consistent, parts)
+
+        def ranked(e):
+            return sorted((e.positions[at[p]][0] + offset[p], plan.index(p), p) for p in parts)
+
+        def confidence(e):
+            best = ranked(e)[0][2]
+            miss = 0.0
+            for p in parts:
+                if p != best:   # P(slack of p > slack of best), paired over the chains
+                    diffs = [x - y + offset[p] - offset[best] for x, y in
+                             zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
+                    miss += 1 - _prob_positive(diffs)
+            return max(0.0, 1 - miss)
+
+        est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter,
+                              settled=lambda e: _mixed(chains) and confidence(e) >= SURE)
+        order = ranked(est)
+        estimates = tuple(Estimate(p, "slack", v, est.positions[at[p]][1]) for v, _, p in order)
+        return shared_action("buffer", order[0][2]), _How(False, "mcmc", estimates, confidence(est), note)
 
     def least_slack(self, engine, mask: int, consistent: int, visible: tuple[str, ...]) -> str:
         """The visible part with the least slack (ties: declaration order)."""
@@ -108,6 +159,22 @@ class Slack(BinFirst):
             if best is None or key < best:
                 best = key
         return best[2]
+
+
+def _prob_positive(diffs: list[float]) -> float:
+    """Estimated probability that the mean of ``diffs`` (one per chain) is truly positive (Student's t)."""
+    import math
+
+    from opportune.engine.sampling import _t_cdf
+
+    k = len(diffs)
+    if k < 2:
+        return 0.5
+    mean = sum(diffs) / k
+    se = math.sqrt(sum((d - mean) ** 2 for d in diffs) / (k - 1) / k)
+    if se == 0:
+        return 1.0 if mean > 0 else 0.0 if mean < 0 else 0.5
+    return _t_cdf(mean / se, k - 1)
 
 
 class Lookahead(DecidesOnMasks):
