@@ -209,7 +209,11 @@ def test_a_run_of_2000_unconstrained_parts_answers_within_its_budget(cell):
     assert len(r.json()["count"]["value"]) == 5736  # 2000!: more digits than str() writes
     r = post(cell, f"/runs/{r.json()['id']}/looks", {"visible": ["p5", "p7"]})
     assert r.status_code == 200, r.text
-    assert len(r.json()["decision"]["candidates"][0]["options"]) == 5733
+    decision = r.json()["decision"]
+    # Interchangeable parts keep equal options: the order settles it (declaration order breaks the tie)
+    # without counting 1999! twice; those counts do not fit the 50 ms budget, and the answer says so.
+    assert decision["action"]["part"] == "p5" and decision["exact"] is True
+    assert "partial order" in decision["note"] and "not counted" in decision["note"]
     assert time.monotonic() - start < 20
 
 

@@ -474,8 +474,8 @@ def test_a_process_out_of_budget_replays_another_process_exact_decision_exactly(
             m = RunManager(store, PlanBook(store), budget=0.05)
             real = m._sequencer
 
-            def sequencer(loaded, capacity, policy):
-                s = real(loaded, capacity, policy)
+            def sequencer(loaded, capacity, policy, products=1):
+                s = real(loaded, capacity, policy, products)
                 monkeypatch.setattr(s.policy, "decide", lambda state, look: Decision(
                     Action("buffer", "ra"), "estimated", exact=exact, method="exact" if exact else "mcmc"))
                 return s

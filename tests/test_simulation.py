@@ -376,7 +376,8 @@ def test_simulate_cli_errors():
 def test_a_plan_too_large_for_exact_counts_runs_the_strategies_that_need_none():
     """ARC111 (111 tasks): the first look's exact counts take seconds, so with a short limit the
     opportunistic policy is refused up front, with a message; the fixed-sequence strategies still run
-    (their sequence needs no count), and on the command line the default set leaves it out with a note."""
+    (their sequence needs no count), and on the command line, where no --decision-budget is given, the
+    counting policies decide within the sequencer's 50 ms budget instead, and the output says so."""
     from typer.testing import CliRunner
 
     from opportune.cli import app
@@ -392,15 +393,18 @@ def test_a_plan_too_large_for_exact_counts_runs_the_strategies_that_need_none():
     assert all(t.complete for t in r.trials["buffer"])
 
     args = ["simulate", str(arc), "--trials", "2", "--workers", "1", "--count-time-limit", "0.3"]
-    out = CliRunner().invoke(app, [*args, "--strategies", "opportunistic,kitting"])
-    assert out.exit_code == 1 and "count-time-limit" in out.output and "Traceback" not in out.output
+    out = CliRunner().invoke(app, [*args, "--strategies", "opportunistic,kitting", "--json"])
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.stdout)
+    assert {"opportunistic", "kitting"} <= set(doc["strategies"])
+    assert "decide within 50 ms per decision" in out.stderr and doc["provenance"]["study"]["decision_budget"] == 0.05
     out = CliRunner().invoke(app, [*args, "--strategies", "kitting,pallet"])
     assert out.exit_code == 0 and "kitting" in out.output
     out = CliRunner().invoke(app, [*args, "--json"])
     assert out.exit_code == 0, out.output
     doc = json.loads(out.stdout)
-    assert "opportunistic" not in doc["strategies"] and {"kitting", "buffer", "shake"} <= set(doc["strategies"])
-    assert "leaving 'opportunistic' out" in out.stderr
+    assert {"opportunistic", "kitting", "buffer", "shake"} <= set(doc["strategies"])
+    assert "leaving 'opportunistic' out" not in out.stderr and "decide within 50 ms" in out.stderr
 
 
 def test_time_limited_counts_give_up_and_restore_the_limits():

@@ -322,16 +322,20 @@ def graph(
     fmt: Optional[str] = typer.Option(None, "--format", help="svg, png, pdf or dot (default: from the -o suffix)"),
     names: bool = typer.Option(False, "--names", help="Write each part's name under its id"),
     dpi: int = typer.Option(300, "--dpi", min=36, max=1200, help="Resolution of PNG output"),
+    orders: bool = typer.Option(False, "--orders", help="For an AND/OR plan (`assemblies`), draw the partial "
+                                "orders of its strategies instead of its AND/OR graph"),
 ):
-    """Draw each strategy as a layered precedence diagram (like the paper's Figure 2)."""
+    """Draw each strategy as a layered precedence diagram (like the paper's Figure 2); an AND/OR plan
+    as its AND/OR graph (assemblies, their alternative ways and what each way joins)."""
     from opportune.formats.draw import DotMissing, render, to_dot
 
     plan = load_or_exit(plan_file)
+    andor = plan.andor is not None and not orders
     fmt = (fmt or (output.suffix.lstrip(".") if output else "dot")).lower()
     if fmt not in {"svg", "png", "pdf", "dot"}:
         fail(f"unknown format '{fmt}': use svg, png, pdf or dot", 2)
     if fmt == "dot":
-        source = to_dot(plan, names=names)
+        source = to_dot(plan, names=names, andor=andor)
         if output:
             output.write_text(source)
             _out().print(f"wrote {output}")
@@ -341,7 +345,7 @@ def graph(
     if output is None:
         fail(f"give an output file with -o FILE.{fmt}", 2)
     try:
-        render(plan, output, fmt, names=names, dpi=dpi if fmt == "png" else None)
+        render(plan, output, fmt, names=names, dpi=dpi if fmt == "png" else None, andor=andor)
     except DotMissing as exc:
         fail(str(exc))
     except OSError as exc:
@@ -498,8 +502,18 @@ def simulate(
         None, "--decision-budget", min=1e-6, show_default=False,
         help="Seconds per opportunistic decision: exact when the counts fit, else estimated (the numbers then "
              "depend on the machine's speed; default: every decision exact, the same numbers everywhere)"),
+    products: Optional[int] = typer.Option(
+        None, "--products", show_default=False,
+        help="Build this many copies of the plan (1-16) on as many fixtures from one bin, and compare with "
+             "as many separate cells and with one product after another (policies: --strategies, default "
+             "paper,lookahead)"),
 ):
     """Run the paper's comparison by simulation: every strategy, a bin model, Monte Carlo trials."""
+    if products is not None:   # several products at once (issue 15): its own study, below
+        return _simulate_products(ctx, plan_file, products, strategies=strategies, trials=trials, seed=seed,
+                                  bin_model=bin_model, visible=visible, buffer_capacity=buffer_capacity,
+                                  as_json=as_json, motion_cost=motion_cost, shake_cost=shake_cost,
+                                  look_cost=look_cost, decision_budget=decision_budget)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
@@ -559,6 +573,19 @@ def simulate(
                 prepared = prepare(config)
                 break
             except StrategyUnavailable as exc:
+                if (exc.strategy in COUNTING_STRATEGIES and config.decision_budget is None
+                        and decision_budget is None and from_results is None):
+                    # A plan too large to count every look exactly in reasonable time (ARC111): the counting
+                    # policies decide within the sequencer's budget instead of being left out, and say so.
+                    from opportune.sequencer import DEFAULT_BUDGET
+
+                    config = replace(config, decision_budget=DEFAULT_BUDGET)
+                    decision_budget = DEFAULT_BUDGET
+                    _err().print(f"note: the exact counts of {plan.name}'s first look take longer than "
+                                 f"{config.count_time_limit:g} s: the counting policies decide within "
+                                 f"{1000 * DEFAULT_BUDGET:g} ms per decision, exact where the counts fit and "
+                                 "estimated elsewhere (set --decision-budget to choose)")
+                    continue
                 if explicit or len(config.strategies) == 1:
                     raise
                 _err().print(f"note: {exc} — leaving '{exc.strategy}' out")
@@ -701,7 +728,7 @@ def examples(as_json: bool = json_option()):
         return
     width = max(len(r["name"]) for r in rows)
     for r in rows:
-        _out().print(f"{_escape(r['name']):<{width}}  {r['kind']:<5}  {_escape(r['about'])}")
+        _out().print(f"{_escape(r['name']):<{width}}  {r['kind']:<9}  {_escape(r['about'])}")
     _out().print("e.g. opportune replay example:gearbox example:gearbox-table1; opportune count salbp:KILBRID")
 
 
@@ -759,14 +786,261 @@ _register_service(app)
 
 
 # >>> issue 15: products (command lives here)
+_NOT_WITH_PRODUCTS = ("from_results", "workers", "dask", "out_dir", "training_runs", "optimal_states",
+                      "count_time_limit")
+
+
+def _simulate_products(ctx: typer.Context, plan_file: Optional[Path], products: int, *, strategies, trials, seed,
+                       bin_model, visible, buffer_capacity, as_json, motion_cost, shake_cost, look_cost,
+                       decision_budget) -> None:
+    """``simulate PLAN --products N``: N fixtures from one bin, against N cells and one product after another."""
+    given = [name for name in _NOT_WITH_PRODUCTS
+             if getattr(ctx.get_parameter_source(name), "name", "") == "COMMANDLINE"]
+    if given:
+        flag = {"from_results": "--from", "out_dir": "--out"}.get(given[0], "--" + given[0].replace("_", "-"))
+        fail(f"{flag} does not apply with --products (the multi-product study runs in this process and prints "
+             "its table, or --json)", 2, as_json=as_json)
+    if plan_file is None:
+        fail("give a plan file to build several products of", 2, as_json=as_json)
+    from rich.table import Table
+
+    from opportune.products import ProductsError
+    from opportune.simulate_products import MODE_LABELS, ProductsConfig, copies, run_products
+    from opportune.worlds import TimeModel
+
+    plan = load_or_exit(plan_file, json_errors=as_json)
+    sim = plan.simulation
+    policies = tuple(dict.fromkeys(s.strip() for s in (strategies or "paper,lookahead").split(",") if s.strip()))
+    if not policies:
+        fail("--strategies is empty: name at least one policy, e.g. paper,lookahead", 2, as_json=as_json)
+    try:
+        config = ProductsConfig(
+            copies(plan, products), policies=policies, trials=trials, seed=seed,
+            bin=bin_model or sim.get("bin", "uniform"), visible=visible or sim.get("visible", 2),
+            buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
+            costs=TimeModel.from_plan(plan, motion=motion_cost, shake=shake_cost, look=look_cost),
+            decision_budget=decision_budget).validate()
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                            TimeRemainingColumn(), console=_err(), disable=not _err().is_terminal, transient=True)
+        with progress:
+            task = progress.add_task("simulating", total=trials * len(config.modes) * len(policies))
+            result = run_products(config, progress=lambda _mode, _policy, n: progress.advance(task, n))
+    except (ProductsError, ValueError) as exc:
+        fail(str(exc), as_json=as_json)
+    doc = result.summary()
+    if as_json:
+        print(json.dumps(doc, indent=2))
+        return
+    cap = "unlimited" if config.buffer_capacity is None else config.buffer_capacity
+    table = Table(title=f"{plan.name} ×{products}: {config.bin} bin, {config.visible} visible, buffer {cap}, "
+                        f"{trials:,} trials, seed {seed}; time, buffer moves and shakes per product")
+    for i, col in enumerate(("cell", "policy", "time ± 95%", "buffer moves", "shakes", "buffer peak (mean, max)",
+                             "buffer mean", "complete")):
+        table.add_column(col, justify="left" if i < 2 else "right")
+    for row in doc["rows"]:
+        t = row["time"]
+        table.add_row(MODE_LABELS[row["mode"]].replace("N ", f"{products} "), row["policy"],
+                      f"{t['mean']:.2f} ± {t['mean'] - t['ci95'][0]:.2f}",
+                      f"{row['buffer_moves']['mean']:.2f}", f"{row['shakes']['mean']:.2f}",
+                      f"{row['buffer_peak']['mean']:.2f}, {row['buffer_max']}", f"{row['buffer_mean']['mean']:.2f}",
+                      f"{row['complete']}/{row['trials']}")
+    _out().print(table)
+    modelled = [p for p in policies if p in ("lookahead", "rollout")]
+    if products > 1 and modelled:
+        _out().print(f"note: with a part kind needed on several fixtures, {' and '.join(modelled)} decide"
+                     f"{'s' if len(modelled) == 1 else ''} by the base rule (slack): its model of the bin is "
+                     "one product's parts")
 # <<< issue 15: products
 
 
 # >>> issue 15: relax (command lives here)
+@app.command()
+def relax(
+    plan_file: Path = PLAN_ARG,
+    output: Optional[Path] = typer.Option(None, "-o", "--output",
+                                          help="Write the relaxed plan (YAML) here instead of standard output"),
+    installed: Optional[str] = typer.Option(None, "--installed",
+                                            help='Parts already installed, in order ("ca ba" or "ca,ba"): the '
+                                                 "relaxed plan admits this prefix"),
+    time_limit: float = typer.Option(10.0, "--time-limit", min=0.1, max=3600,
+                                     help="Seconds for the search; past it, the best relaxation found is "
+                                          "written, marked as not proven minimal"),
+    as_json: bool = json_option("Machine-readable output: {\"plan\", \"dropped\", \"weight\", \"minimal\"} on "
+                                "standard output"),
+):
+    """Drop the cheapest set of constraints (by weight) that makes an over-constrained plan admissible.
+
+    Reads a plan whose strategies have cycles (YAML or JSON), or that contradicts --installed; writes
+    the relaxed plan as YAML and lists the constraints dropped on standard error.
+    """
+    from opportune.engine.relax import RelaxRefused, constraint_lines
+    from opportune.engine.relax import relax as relax_plan
+    from opportune.formats.loader import CheckResult, read_plan
+
+    result = read_plan(plan_file, allow_cycles=True)
+    if not result.ok:
+        if as_json:
+            _print_error({"message": f"{plan_file}: not a valid plan ({len(result.errors)} error(s))",
+                          "file": str(plan_file), "problems": [p.to_dict() for p in result.problems]}, 1)
+        else:
+            _print_problems(CheckResult(None, result.errors), _err())
+            if all(p.code == "cycle" for p in result.errors):  # cycles in a format read only when acyclic
+                _err().print(f"{_escape(str(plan_file))}: `opportune relax` reads plans with cycles from YAML and "
+                             "JSON files only: write this one as a YAML plan (parts, requires), then relax it")
+            else:
+                _err().print(f"{_escape(str(plan_file))}: {len(result.errors)} error(s); `opportune relax` drops "
+                             "constraints that form cycles but cannot mend these")
+        raise typer.Exit(1)
+    plan = result.plan
+    prefix = [p for p in (installed or "").replace(",", " ").split() if p]
+    try:
+        relaxation = relax_plan(plan, prefix, time_limit=time_limit, lines=constraint_lines(plan_file))
+    except RelaxRefused as exc:
+        fail(f"{plan_file}: {exc}; split the plan, or break the largest knot of constraints by hand")
+    except ValueError as exc:
+        fail(str(exc))
+    text = _plan_yaml(relaxation.plan.to_dict())
+    if output is not None:
+        try:
+            output.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            fail(f"cannot write {output}: {exc.strerror or exc}")
+    if as_json:
+        print(json.dumps(relaxation.to_dict(), indent=2))
+    elif output is None:
+        sys.stdout.write(text)
+    err = _err()
+    if not relaxation.changed:
+        state = f" after {' '.join(prefix)}" if prefix else ""
+        if not as_json:
+            err.print(f"{_escape(plan.name)}: the plan is already admissible{_escape(state)}: nothing to drop; "
+                      "the plan is written unchanged")
+        return
+    if as_json:
+        return
+    n = len(relaxation.dropped)
+    proof = "minimal" if relaxation.minimal else "NOT PROVEN MINIMAL: the search ran out of --time-limit"
+    err.print(f"{_escape(plan.name)}: dropped {n} constraint{'s' if n != 1 else ''} of total weight "
+              f"{relaxation.weight:g} ({proof}):")
+    for d in relaxation.dropped:
+        where = f", {plan_file}:{d.line}" if d.line else ""
+        why = ", violated by --installed" if d.forced else ""
+        err.print(f"  {_escape(d.before)} -> {_escape(d.after)}  (strategy '{_escape(d.strategy)}', weight "
+                  f"{d.weight:g}{_escape(where)}{why})")
+    if relaxation.repaired is not None and len(plan.strategies) > 1:
+        err.print(f"strategy '{_escape(relaxation.repaired)}' was relaxed to admit the installed parts (the cheapest "
+                  "to repair); the other strategies are as written")
+    for name, same in relaxation.removed:
+        err.print(f"strategy '{_escape(name)}' removed: relaxed, it admits exactly the sequences of '{_escape(same)}'")
+    if output is not None:
+        err.print(f"wrote {_escape(str(output))}")
+
+
+def _plan_yaml(doc: dict) -> str:
+    """A plan document as YAML that reads like a hand-written plan: short lists (parts, requirements)
+    and weighted entries on one line each, ``co: [rl, dr, {part: ml, weight: 5}]``."""
+    import yaml
+
+    class Dumper(yaml.SafeDumper):
+        pass
+
+    def flat(value) -> bool:
+        return not isinstance(value, (list, dict)) or (isinstance(value, dict) and
+                                                        all(not isinstance(v, (list, dict)) for v in value.values()))
+
+    def represent_list(dumper, data):
+        return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=all(flat(v) for v in data))
+
+    Dumper.add_representer(list, represent_list)
+    return yaml.dump(doc, Dumper=Dumper, sort_keys=False, allow_unicode=True, width=100)
 # <<< issue 15: relax
 
 
 # >>> issue 15: learn (command lives here)
+@app.command()
+def learn(
+    sequences: str = typer.Argument(..., help="Successful sequences: one per line, part ids separated by spaces or "
+                                              "commas, # comments; - for standard input; example:NAME for a shipped "
+                                              "one (example:gearbox-observed)", show_default=False),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Write the plan (YAML) to this file instead "
+                                                                       "of standard output"),
+    failed: Optional[str] = typer.Option(None, "--failed", help="Failed sequences (same format and parts): report "
+                                                                "the constraints each breaks, and those none can "
+                                                                "exclude"),
+    name: Optional[str] = typer.Option(None, "--name", help="The plan's name (default: the file's stem)"),
+    max_accident: float = typer.Option(0.05, "--max-accident", min=0.0, max=1.0,
+                                       help="Flag (in the comments, the JSON and on standard error) the constraints "
+                                            "whose accident probability is above this; they stay in the plan"),
+    split: bool = typer.Option(False, "--split", help="When failed sequences cannot be excluded by one partial "
+                                                      "order, write the two-strategy repair (if found) instead"),
+    time_limit: float = typer.Option(20.0, "--time-limit", min=0.1, max=3600.0,
+                                     help="Seconds for all the exact counts behind the accident probabilities "
+                                          "(those over it are reported as not computed)"),
+    as_json: bool = json_option("Machine-readable output: {\"plan\", \"constraints\", \"sequences\", \"failed\", "
+                                "\"unexcluded\", \"repair\", ...} on standard output (errors too)"),
+):
+    """Learn a plan from observed successful sequences: the constraints every sequence satisfies (minimal set),
+    each with its support and the probability that it is an accident of too few observations."""
+    from opportune.formats.sequences import SequenceError, read_sequences
+    from opportune.learn import learn_plan
+    from opportune.plan import PlanError
+
+    if name is not None and not name.strip():
+        fail("--name: give a non-empty name", 2)
+    if failed == "-" and sequences == "-":
+        fail("only one of SEQUENCES and --failed can be standard input (-)", 2)
+    try:
+        good = read_sequences(sequences)
+        bad = read_sequences(failed, like=good, what="failed sequences") if failed else ()
+        stem = sequences.split(":", 1)[1] if sequences.lower().startswith("example:") else Path(sequences).stem
+        learned = learn_plan(good, bad, name=name or (stem if sequences != "-" and stem else "learned"),
+                             max_accident=max_accident, time_limit=time_limit)
+    except SequenceError as exc:
+        fail_problem(exc.problem)
+    except PlanError as exc:    # the learned plan is built through the plan checker: say what it found
+        fail(f"the learned plan is not valid: {exc}")
+    text = learned.to_yaml(repaired=split)
+    if output is not None:
+        try:
+            output.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            fail(f"cannot write {output}: {exc.strerror or exc}")
+    if as_json:
+        doc = learned.to_json()
+        if split and learned.repair is not None:
+            doc["written"] = "repair"
+        print(json.dumps(doc, indent=2, ensure_ascii=False))
+    elif output is None:
+        sys.stdout.write(text)
+    err = _err()
+    n = len(learned.constraints)
+    err.print(f"learned {n} constraint{'s' if n != 1 else ''} from {learned.sequences} sequence"
+              f"{'s' if learned.sequences != 1 else ''} ({learned.distinct} different)"
+              + (f"; wrote {_escape(str(output))}" if output is not None else ""))
+    if learned.flagged:
+        shown = ", ".join(f"{c.before} -> {c.after} ({c.accident_probability:.2g})" for c in learned.flagged[:20])
+        more = f", … ({len(learned.flagged) - 20} more)" if len(learned.flagged) > 20 else ""
+        err.print(f"[yellow]warning[/]: {len(learned.flagged)} constraint(s) may be accidents of too few observations "
+                  f"(accident probability above {max_accident:g}): {_escape(shown + more)} — kept in the plan; more "
+                  "observations would settle them", markup=True)
+    if not learned.complete:
+        err.print("[yellow]warning[/]: some accident probabilities were not computed within --time-limit "
+                  f"{time_limit:g} s (marked 'not computed')", markup=True)
+    for f in learned.failed:
+        if f.excluded:
+            broken = ", ".join(f"{b} -> {a}" for b, a in f.violates)
+            err.print(f"{_escape(f.where)}: failed sequence breaks {_escape(broken)} (confirmed)")
+    for f in learned.unexcluded:
+        why = ("the same sequence is also among the successes" if f.succeeded else
+               "it satisfies every learned constraint, so no single partial order that admits all the successes "
+               "excludes it")
+        err.print(f"[yellow]warning[/]: {_escape(f.where)}: failed sequence cannot be excluded: {_escape(why)}",
+                  markup=True)
+    if learned.unexcluded:
+        hint = "" if split or learned.repair is None else " (--split writes it)"
+        err.print(f"  repair: {_escape(learned.repair_note)}{hint}")
 # <<< issue 15: learn
 
 

@@ -374,13 +374,16 @@ class _Client:
 
     @_Method
     def start_run(plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "",
-                  policy: str | None = None) -> _Call[Run]:
+                  policy: str | None = None, products: int | None = None) -> _Call[Run]:
         """Start a run of a stored plan in this token's cell (``buffer_capacity`` None: unlimited; ``policy``
-        None: the service's default, the exact look-ahead; ``"paper"``: the paper's rule)."""
+        None: the service's default, the exact look-ahead; ``"paper"``: the paper's rule; ``products``: build
+        that many copies at once on as many fixtures fed from one bin, 1–16)."""
         plan_id = plan.id if isinstance(plan, PlanUploaded) else plan
         body = {"plan": plan_id, "buffer_capacity": buffer_capacity, "label": label}
         if policy is not None:
             body["policy"] = policy
+        if products is not None:
+            body["products"] = products
         return _Call("POST", "/runs", Run, write=True, json=body)
 
     @_Method

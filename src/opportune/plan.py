@@ -27,6 +27,7 @@ MAX_QUANTITY = 10_000       # identical units of one part
 MAX_UNITS = 10_000          # install operations in all (the sum of the quantities)
 MAX_STRATEGIES = 64         # alternative strategies (checking compares every pair of them)
 MAX_CONSTRAINTS = 1_000_000  # declared constraints, over all strategies
+MAX_WEIGHT = 1_000_000      # a constraint's weight (the price of dropping it; > 0, default 1)
 
 
 class PlanError(ValueError):
@@ -72,31 +73,42 @@ class Strategy:
     """One partial order over the parts: ``requires[x]`` must precede ``x``.
 
     The mapping holds the constraints as declared (direct, possibly redundant);
-    parts with no requirements may be absent from it.
+    parts with no requirements may be absent from it.  ``weights`` maps a
+    constraint ``(before, after)`` to the price of dropping it when the plan is
+    over-constrained (:mod:`opportune.engine.relax`); constraints absent from it
+    weigh 1, and only weights other than 1 are kept.
     """
 
     name: str
     requires: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+    weights: Mapping[tuple[str, str], float] = field(default_factory=dict)
 
     def __post_init__(self):
         frozen = {k: tuple(v) for k, v in self.requires.items()}
         object.__setattr__(self, "requires", MappingProxyType(frozen))
+        weights = {(str(b), str(a)): float(w) for (b, a), w in dict(self.weights).items() if w != 1}
+        object.__setattr__(self, "weights", MappingProxyType(weights))
 
     def __reduce__(self):  # read-only mappings do not pickle; rebuild from plain values
-        return (Strategy, (self.name, dict(self.requires)))
+        return (Strategy, (self.name, dict(self.requires), dict(self.weights)))
 
     def pairs(self) -> list[tuple[str, str]]:
         """Declared constraints as ``(before, after)`` pairs, in declaration order."""
         return [(b, a) for a, bs in self.requires.items() for b in bs]
 
+    def weight(self, before: str, after: str) -> float:
+        """The weight of the constraint ``before -> after`` (1 unless the plan gives another)."""
+        return self.weights.get((before, after), 1.0)
+
     def __hash__(self):
-        return hash((self.name, tuple(sorted(self.requires.items()))))
+        return hash((self.name, tuple(sorted(self.requires.items())), tuple(sorted(self.weights.items()))))
 
     def __eq__(self, other):
         return (
             isinstance(other, Strategy)
             and self.name == other.name
             and dict(self.requires) == dict(other.requires)
+            and dict(self.weights) == dict(other.weights)
         )
 
 
@@ -122,6 +134,9 @@ class Plan:
     source: str | None = None
     description: str | None = None
     simulation: Mapping = field(default_factory=dict, compare=False)
+    # The AND/OR graph the strategies were expanded from (:mod:`opportune.formats.andor`), if any:
+    # kept for drawing; every question about sequences uses the strategies, and to_dict writes them.
+    andor: object | None = field(default=None, compare=False)
 
     def __post_init__(self):
         object.__setattr__(self, "simulation", MappingProxyType(dict(self.simulation)))
@@ -131,7 +146,7 @@ class Plan:
 
     def __reduce__(self):
         return (Plan, (self.name, self.parts, self.strategies, self.source, self.description,
-                       _plain(self.simulation)))
+                       _plain(self.simulation), self.andor))
 
     @property
     def part_ids(self) -> tuple[str, ...]:
@@ -188,7 +203,9 @@ class Plan:
         if self.simulation:
             doc["simulation"] = _plain(self.simulation)
         doc["strategies"] = [
-            {"name": s.name, "requires": {k: list(v) for k, v in s.requires.items()}} for s in self.strategies
+            {"name": s.name, "requires": {k: [b if s.weight(b, k) == 1 else {"part": b, "weight": _number(s.weight(b, k))}
+                                              for b in v] for k, v in s.requires.items()}}
+            for s in self.strategies
         ]
         return doc
 
@@ -219,6 +236,11 @@ def _part_dict(p: Part) -> dict:
     d = {"id": p.id, "name": p.name, "quantity": p.quantity, "acquire": p.acquire, "install": p.install,
          "visibility": p.visibility}
     return {k: v for k, v in d.items() if v is not None}
+
+
+def _number(value: float) -> int | float:
+    """A weight as written in a file: 5, not 5.0."""
+    return int(value) if float(value).is_integer() and abs(value) < 2**53 else value
 
 
 def _plain(value):

@@ -122,18 +122,25 @@ class Row:
                 "action": self.action.to_dict(), "outcome": self.outcome}
 
 
-def check_look(state: State, visible: Iterable[str]) -> tuple[str, ...]:
-    """Validate a look against the state; return it as a tuple or raise :class:`LookError`."""
+def look_ids(visible: Iterable[str]) -> tuple[str, ...]:
+    """A look as a tuple of part ids, or :class:`LookError` if it is not a list of strings."""
     if isinstance(visible, str):
         raise LookError("a look is a list of part ids, not a single string")
     try:
         visible = tuple(visible)
     except TypeError:
         raise LookError("a look is a list of part ids") from None
-    plan = state.plan
     for part in visible:
         if not isinstance(part, str):
             raise LookError(f"part ids are strings, got {part!r}")
+    return visible
+
+
+def check_look(state: State, visible: Iterable[str]) -> tuple[str, ...]:
+    """Validate a look against the state; return it as a tuple or raise :class:`LookError`."""
+    visible = look_ids(visible)
+    plan = state.plan
+    for part in visible:
         if part not in plan:
             raise LookError(f"unknown part '{part}' in the look: the plan has {', '.join(plan.part_ids)}")
     if state.is_complete and visible:
@@ -199,9 +206,23 @@ class Sequencer:
         ``done``; any look after that is refused.
         """
         look = self._check_ready(visible)
-        decision = self.policy.decide(self.state, look)
+        decision = self._ask(look)
         self._check_decision(decision, look)
         return self._pend(look, decision)
+
+    #: How a finished run is described when a look comes after ``done``.
+    COMPLETE = "the assembly is complete"
+
+    def _ask(self, look: tuple[str, ...]) -> Decision:
+        """The policy's decision for a checked look (a cell of several fixtures translates it)."""
+        return self.policy.decide(self.state, look)
+
+    def _check_look(self, visible: Iterable[str]) -> tuple[str, ...]:
+        return check_look(self.state, visible)
+
+    def _held(self, part: str) -> str:
+        """What a buffer location holds for a part taken by an action (the part itself here)."""
+        return part
 
     def replay(self, visible: Iterable[str], action: Action | Decision) -> Decision:
         """Take a recorded action (or the whole recorded decision) for a look without asking the
@@ -221,8 +242,8 @@ class Sequencer:
         if self.pending is not None:
             raise LookError(f"'{self.pending.action}' is pending: report its outcome (or cancel it) before the next look")
         if self.finished:
-            raise LookError("the assembly is complete and was reported done: start a new run")
-        return check_look(self.state, visible)
+            raise LookError(f"{self.COMPLETE} and was reported done: start a new run")
+        return self._check_look(visible)
 
     def _pend(self, look: tuple[str, ...], decision: Decision) -> Decision:
         row = Row(look, self.state.buffer, self.state.installed, decision)
@@ -282,7 +303,8 @@ class Sequencer:
                 state = replace(state, defects=state.defects + 1)
         elif action.kind == "install":
             from_buffer = action.source == "buffer"
-            buffer = _without(state.buffer, action.part) if from_buffer else state.buffer
+            held = self._held(action.part)
+            buffer = _without(state.buffer, held) if from_buffer else state.buffer
             if outcome == "success":
                 state = replace(state, schedule=state.schedule.install(action.part), buffer=buffer)
             elif outcome == "defective":
@@ -291,7 +313,7 @@ class Sequencer:
                 if not from_buffer:
                     if state.buffer_free <= 0:
                         raise OutcomeError("the buffer is full: report keep='bin' for this failed install")
-                    state = replace(state, buffer=state.buffer + (action.part,))
+                    state = replace(state, buffer=state.buffer + (held,))
             else:
                 state = replace(state, buffer=buffer)
         self.state = state

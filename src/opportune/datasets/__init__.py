@@ -54,13 +54,14 @@ def salbp(name: str):
 
 
 def examples() -> list[tuple[str, str, str]]:
-    """The shipped examples as ``(name, kind, description)``: kind ``plan`` or ``looks``; the
-    description is the plan's ``description`` or the looks file's first comment line."""
+    """The shipped examples as ``(name, kind, description)``: kind ``plan``, ``looks`` or ``sequences``
+    (observed assemblies, for ``opportune learn``); the description is the plan's ``description`` or
+    the file's first comment line."""
     folder = resources.files(__name__).joinpath("examples")
     out = []
     for entry in sorted(folder.iterdir(), key=lambda e: e.name.rpartition(".")[0]):
         name, _, suffix = entry.name.rpartition(".")
-        if suffix not in ("yaml", "looks"):
+        if suffix not in ("yaml", "looks", "seq"):
             continue
         text = entry.read_text(encoding="utf-8")
         if suffix == "yaml":
@@ -70,7 +71,7 @@ def examples() -> list[tuple[str, str, str]]:
             about = str(doc.get("description", "")) if isinstance(doc, dict) else ""
         else:
             about = next((line.lstrip("# ").strip() for line in text.splitlines() if line.startswith("#")), "")
-        out.append((name, "plan" if suffix == "yaml" else "looks", about))
+        out.append((name, {"yaml": "plan", "looks": "looks", "seq": "sequences"}[suffix], about))
     return out
 
 
@@ -79,9 +80,9 @@ def example_path(name: str) -> Path:
 
     Raises ``KeyError`` naming the examples there are.
     """
-    stem = name.removesuffix(".yaml").removesuffix(".looks")
+    stem = name.removesuffix(".yaml").removesuffix(".looks").removesuffix(".seq")
     folder = resources.files(__name__).joinpath("examples")
-    for suffix in ("yaml", "looks"):
+    for suffix in ("yaml", "looks", "seq"):
         entry = folder.joinpath(f"{stem}.{suffix}")
         if entry.is_file():
             return Path(str(entry))

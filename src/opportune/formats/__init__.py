@@ -1,4 +1,4 @@
-"""Plan files: YAML and JSON (one schema), SALBP ``.IN2`` graphs, checking and drawing."""
+"""Plan files: YAML and JSON (one schema: partial orders or AND/OR graphs), SALBP ``.IN2``, checking, drawing."""
 
 from __future__ import annotations
 
@@ -6,15 +6,26 @@ from typing import TYPE_CHECKING
 
 from opportune._lazy import attach
 
-__all__ = ["CheckResult", "Problem", "check_text", "load_plan", "plan_from_dict", "read_plan"]
+__all__ = [
+    "AndOrGraph",
+    "CheckResult",
+    "Problem",
+    "check_text",
+    "load_plan",
+    "plan_from_andor",
+    "plan_from_dict",
+    "read_plan",
+]
 
 # Loaded on first use (PEP 562): importing a submodule (``opportune.formats.summary``, ``.salbp``)
 # does not load the others.
 _LAZY = {"CheckResult": "opportune.formats.loader", "check_text": "opportune.formats.loader",
          "load_plan": "opportune.formats.loader", "plan_from_dict": "opportune.formats.loader",
-         "read_plan": "opportune.formats.loader", "Problem": "opportune.formats.problems"}
+         "read_plan": "opportune.formats.loader", "Problem": "opportune.formats.problems",
+         "AndOrGraph": "opportune.formats.andor", "plan_from_andor": "opportune.formats.andor"}
 
 if TYPE_CHECKING:
+    from opportune.formats.andor import AndOrGraph, plan_from_andor
     from opportune.formats.loader import CheckResult, check_text, load_plan, plan_from_dict, read_plan
     from opportune.formats.problems import Problem
 

@@ -50,18 +50,64 @@ def to_graph(plan: Plan, *, names: bool = False, dpi: int | None = None) -> grap
     return g
 
 
-def to_dot(plan: Plan, *, names: bool = False) -> str:
-    """The diagram as Graphviz ``dot`` source."""
-    return to_graph(plan, names=names).source
+def to_andor_graph(plan: Plan, *, names: bool = False, dpi: int | None = None) -> graphviz.Digraph:
+    """The AND/OR graph of a plan read from ``assemblies`` (:mod:`opportune.formats.andor`), top down.
+
+    Assemblies are boxes, parts circles; each way is a small grey node under its assembly (the OR:
+    one of them is chosen), with solid arcs to the components it joins (the AND), dashed arcs to
+    its ``then`` steps, and its ``before`` pairs written in its label.  O(size of the graph).
+    Raises ``ValueError`` if the plan has no AND/OR graph.
+    """
+    graph = plan.andor
+    if graph is None:
+        raise ValueError(f"plan '{plan.name}' has no AND/OR graph (no `assemblies`)")
+    graph_attr = {"rankdir": "TB", "label": plan.name, "labelloc": "t", "fontname": "Helvetica",
+                  "nodesep": "0.25", "ranksep": "0.4"}
+    if dpi is not None:
+        graph_attr["dpi"] = str(dpi)
+    g = graphviz.Digraph(plan.name, graph_attr=graph_attr,
+                         node_attr={"fontname": "Helvetica", "fontsize": "11", "margin": "0.04"},
+                         edge_attr={"arrowsize": "0.6"})
+    node: dict[str, str] = {}
+    for i, part in enumerate(plan.parts):
+        node[part.id] = f"p{i}"
+        label = part.id + (f"\n{part.name}" if names and part.name and part.name != part.id else "") \
+            + (f"\n×{part.quantity}" if part.quantity > 1 else "")
+        g.node(f"p{i}", label=label, shape="circle", tooltip=part.name or part.id)
+    for i, (name, _) in enumerate(graph.assemblies):
+        node[name] = f"a{i}"
+        g.node(f"a{i}", label=name, shape="box", style="bold" if name == graph.product else "",
+               tooltip=("product" if name == graph.product else "subassembly"))
+    for i, (name, ways) in enumerate(graph.assemblies):
+        for j, way in enumerate(ways):
+            w = f"w{i}_{j}"
+            label = way.name + "".join(f"\n{x} → {y}" for x, y in way.before)
+            g.node(w, label=label, shape="box", style="rounded,filled", fillcolor="#e8e8e8", fontsize="9",
+                   height="0.2", tooltip=f"way '{way.name}' of {name}")
+            g.edge(node[name], w, arrowhead="none" if len(ways) == 1 else "normal")
+            for c in way.join:
+                g.edge(w, node[c])
+            for t in way.then:
+                g.edge(w, node[t], style="dashed")
+    return g
+
+
+def _drawing(plan: Plan, names: bool, dpi: int | None, andor: bool) -> graphviz.Digraph:
+    return to_andor_graph(plan, names=names, dpi=dpi) if andor else to_graph(plan, names=names, dpi=dpi)
+
+
+def to_dot(plan: Plan, *, names: bool = False, andor: bool = False) -> str:
+    """The diagram as Graphviz ``dot`` source (``andor``: the AND/OR graph, :func:`to_andor_graph`)."""
+    return _drawing(plan, names, None, andor).source
 
 
 def render(plan: Plan, path: str | Path, fmt: str | None = None, *, names: bool = False,
-           dpi: int | None = None) -> Path:
+           dpi: int | None = None, andor: bool = False) -> Path:
     """Render the diagram to ``path`` (svg, png or pdf); raises :class:`DotMissing` without Graphviz."""
     path = Path(path)
     fmt = fmt or path.suffix.lstrip(".").lower()
     try:
-        data = to_graph(plan, names=names, dpi=dpi).pipe(format=fmt)
+        data = _drawing(plan, names, dpi, andor).pipe(format=fmt)
     except graphviz.ExecutableNotFound:
         raise DotMissing("Graphviz's `dot` program is missing: install it (apt-get install graphviz, "
                          "or run `make setup`), or write dot source with --format dot") from None

@@ -96,11 +96,12 @@ def detect_format(path: str | Path, text: str | None = None) -> str:
     return "yaml"
 
 
-def read_plan(path: str | Path) -> CheckResult:
+def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
     """Read and check a plan file of any supported format; never raises for bad content.
 
     ``salbp:NAME`` reads a SALBP graph shipped with the package, ``example:NAME`` an example
-    (:mod:`opportune.datasets`), and ``-`` standard input.
+    (:mod:`opportune.datasets`), and ``-`` standard input.  ``allow_cycles`` keeps the cyclic
+    strategies of a YAML or JSON plan instead of refusing it (for ``opportune relax`` only).
     """
     if str(path).lower().startswith(("salbp:", "example:")):
         from opportune import datasets
@@ -155,7 +156,7 @@ def read_plan(path: str | Path) -> CheckResult:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         return CheckResult(None, [not_utf8(raw, exc, name)])
-    return check_text(text, fmt=fmt, file=name)
+    return check_text(text, fmt=fmt, file=name, allow_cycles=allow_cycles)
 
 
 def not_utf8(raw: bytes, exc: UnicodeDecodeError, file: str | None) -> Problem:
@@ -180,14 +181,14 @@ def load_plan(path: str | Path) -> Plan:
     return result.plan
 
 
-def check_text(text: str, *, fmt: str = "yaml", file: str | None = None) -> CheckResult:
-    """Parse and check plan text in ``fmt`` (``"yaml"`` or ``"json"``)."""
+def check_text(text: str, *, fmt: str = "yaml", file: str | None = None, allow_cycles: bool = False) -> CheckResult:
+    """Parse and check plan text in ``fmt`` (``"yaml"`` or ``"json"``); ``allow_cycles`` as in :func:`read_plan`."""
     doc = parse_json(text, file) if fmt == "json" else parse_yaml(text, file)
     if doc.problems:
         return CheckResult(None, doc.problems)
     from opportune.formats.validate import check_document
 
-    return check_document(doc)
+    return check_document(doc, allow_cycles=allow_cycles)
 
 
 def plan_from_dict(data: Any, *, file: str | None = None) -> Plan:

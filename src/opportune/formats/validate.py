@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 from opportune.formats.loader import CheckResult, Document
 from opportune.formats.problems import Problem
-from opportune.plan import MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS, Part, Plan, Strategy
+from opportune.plan import (MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS, MAX_WEIGHT, Part, Plan,
+                            Strategy)
 
 if TYPE_CHECKING:
     import jsonschema
@@ -36,11 +37,13 @@ def plan_schema() -> dict:
     return json.loads(resources.files("opportune.formats").joinpath("plan.schema.json").read_text("utf-8"))
 
 
-def check_document(doc: Document) -> CheckResult:
+def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
     """Check a parsed document against the schema and the rules of a plan.
 
     Returns the plan (``None`` if there is any error) and all problems,
-    errors and warnings, in file order where lines are known.
+    errors and warnings, in file order where lines are known.  ``allow_cycles``
+    (for :mod:`opportune.engine.relax` only) leaves cyclic strategies in the plan
+    instead of refusing it: such a plan has no admissible sequence.
     """
     problems: list[Problem] = []
     data = doc.data
@@ -76,17 +79,23 @@ def check_document(doc: Document) -> CheckResult:
         return CheckResult(None, _capped(_sorted(problems)))
     ids = [p.id for p in parts]
     known = set(ids)
-    strategies, strat_problems = _read_strategies(data, doc, known)
+    andor = None
+    if "assemblies" in data:  # an AND/OR graph (issue 15): expanded into strategies, checked there
+        from opportune.formats.andor import check_assemblies
+
+        strategies, andor, strat_problems = check_assemblies(data, doc, ids)
+    else:
+        strategies, strat_problems = _read_strategies(data, doc, known)
     problems += strat_problems
     # Entries with unknown ids were left out above, so cycles can still be found and reported.
-    problems += _order_problems(ids, strategies, doc)
+    problems += _order_problems(ids, strategies, doc, allow_cycles=allow_cycles)
     errors = [p for p in problems if p.severity == "error"]
     plan = None
     if not errors:
         name = data.get("name") or (_stem(doc.file) if doc.file else "plan")
         plan = Plan(name=str(name), parts=tuple(parts), strategies=tuple(strategies),
                     source=doc.file, description=data.get("description") or data.get("source"),
-                    simulation=data.get("simulation") or {})
+                    simulation=data.get("simulation") or {}, andor=andor)
     return CheckResult(plan, _capped(_sorted(problems)))
 
 
@@ -196,6 +205,8 @@ FIELD_HINTS = {
     "visibility": "a relative chance of being seen, a number > 0",
     "name": "a string",
     "id": "a part id: a string without spaces or commas",
+    "part": "a part id: a string without spaces or commas",
+    "weight": "the price of dropping the constraint (opportune relax): a number > 0 and at most 1,000,000",
 }
 
 
@@ -328,6 +339,13 @@ def _for_schema(data: dict) -> tuple[dict, dict[tuple, list[int]]]:
         data["strategies"] = [{**st, "requires": requires(st["requires"], ("strategies", i, "requires"))}
                               if isinstance(st, dict) and "requires" in st else st
                               for i, st in enumerate(data["strategies"])]
+    if isinstance(data.get("assemblies"), dict):  # AND/OR graphs: the assemblies that certainly fit are left out
+        from opportune.formats.andor import fits_schema
+
+        fits = [k for k, ways in data["assemblies"].items() if fits_schema(k, ways, _is_part_id)]
+        if fits:
+            drop = set(fits[1:]) if len(fits) == len(data["assemblies"]) else set(fits)  # the schema wants one
+            data["assemblies"] = {k: v for k, v in data["assemblies"].items() if k not in drop}
     return data, where
 
 
@@ -418,7 +436,8 @@ def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict 
                             "write a part id (no spaces or commas) or a mapping {id, name, quantity, acquire, install}", "type")]
         if "requires" in path:
             return [problem(f"{where}: {_describe(error.instance)} is not a part id or a list of part ids",
-                            "write `part: [before1, before2]` with part ids (no spaces or commas)", "type")]
+                            "write `part: [before1, before2]` with part ids (no spaces or commas), or "
+                            "`{part: before1, weight: 5}` for a weighted constraint", "type")]
         return [problem(f"{where}: {_describe(error.instance)} is not allowed here", "see the plan schema", "type")]
     if v == "required":
         missing = error.message.split("'")[1] if "'" in error.message else error.message
@@ -446,6 +465,9 @@ def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict 
     if v == "maximum" and field == "quantity":
         return [problem(f"{where}: quantity must be at most {error.validator_value:,}, got {_describe(error.instance)}",
                         f"a plan holds at most {MAX_UNITS:,} units in all: split the plan", "limit")]
+    if field == "weight" and v in ("exclusiveMinimum", "maximum"):
+        return [problem(f"{where}: a constraint's weight must be > 0 and at most {MAX_WEIGHT:,}, got "
+                        f"{_describe(error.instance)}", FIELD_HINTS["weight"], "weight")]
     if v == "maxItems":
         what = "parts" if path == ("parts",) else "strategies" if path == ("strategies",) else "entries"
         return [problem(f"{where}: {len(error.instance):,} {what}; at most {error.validator_value:,} are accepted",
@@ -509,6 +531,7 @@ def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[S
                                     file=doc.file, line=doc.line(path + ("name",)), code="duplicate-strategy"))
         names[name] = path
         req: dict[str, tuple[str, ...]] = {}
+        weights: dict[tuple[str, str], float] = {}
         for key, before in (requires or {}).items():
             kpath = path + ("requires", key)
             key = str(key)
@@ -517,7 +540,11 @@ def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[S
                 before = []
             elif not isinstance(before, list):
                 before = [before]
-            before = [str(b) for b in before]
+            for b in before:  # a weighted entry {part: ID, weight: W}: the schema has checked its fields
+                if isinstance(b, dict) and b.get("weight", 1) != 1:
+                    weights[(str(b["part"]), str(key))] = max(float(b["weight"]),
+                                                              weights.get((str(b["part"]), str(key)), 0.0))
+            before = [str(b["part"]) if isinstance(b, dict) else str(b) for b in before]
             # Every problem of the entry is reported, and what is left of it (its known parts) still
             # takes part in the search for cycles: an unknown id does not hide a cycle.
             unknown = set()
@@ -542,12 +569,14 @@ def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[S
                                         parts=(key, d), severity="warning", code="repeated"))
             if key in known:
                 req[key] = tuple(b for b in counts if b in known and b != key)
-        strategies.append(Strategy(name=str(name), requires=req))
+        strategies.append(Strategy(name=str(name), requires=req,
+                                   weights={k: w for k, w in weights.items() if k[1] in req and k[0] in req[k[1]]}))
     return strategies, problems
 
 
-def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document) -> list[Problem]:
-    """Cycles, duplicate or subsumed strategies, redundant constraints."""
+def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document, *,
+                    allow_cycles: bool = False) -> list[Problem]:
+    """Cycles (unless ``allow_cycles``), duplicate or subsumed strategies, redundant constraints."""
     from opportune.engine.poset import Poset
 
     index = {pid: i for i, pid in enumerate(ids)}
@@ -558,11 +587,12 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document) -
     for si, s in enumerate(strategies):
         base = spath + (si,) if spath else ()
         cycles = find_cycles(ids, s.requires)
-        for cycle in cycles:
+        for cycle in cycles if not allow_cycles else ():
             arrow = " -> ".join(cycle)
             problems.append(Problem(
                 f"strategy '{s.name}' has a cycle: {arrow}; an over-constrained plan has no admissible sequence",
-                f"remove one of these constraints (each '{cycle[0]} -> {cycle[1]}' means '{cycle[0]}' must come before '{cycle[1]}')",
+                f"remove one of these constraints (each '{cycle[0]} -> {cycle[1]}' means '{cycle[0]}' must come before "
+                f"'{cycle[1]}'), or let `opportune relax` drop the cheapest set of them",
                 file=doc.file, line=doc.line(base + ("requires", cycle[1])), parts=tuple(cycle[:-1]), code="cycle"))
         if cycles:
             posets.append(None)

@@ -365,12 +365,17 @@ class Opportunistic(DecidesOnMasks):
                             confidence=how.confidence, seconds=time.perf_counter() - start)
         if action.kind == "install":
             rule = self.rule_install
-            try:   # the options of a lone candidate were not needed to decide: count them if they fit
+            try:   # options not needed to decide (a lone candidate, or settled by the order): count them if they fit
                 with state.schedule.engine.deadline(None if self.budget is None
                                                     else start + self.budget * (1 - MARGIN)):
                     ranked = ranked_candidates(state, visible)
             except BudgetExceeded:
-                return Decision(action, rule, note="the only candidate; its options were not counted within the budget",
+                sched = state.schedule
+                lone = len(sched.engine.installable_among(sched.mask, sched.consistent, (*visible, *state.buffer))) == 1
+                why = ("the only candidate" if lone else
+                       "settled by the partial order alone: no other candidate is followed by every step that must "
+                       "follow it")
+                return Decision(action, rule, note=f"{why}; the options were not counted within the budget",
                                 seconds=time.perf_counter() - start)
             total = self._total(state, start)
             candidates = tuple(Candidate(part, source, -key[0], total, key[2], pos) for key, part, source, pos in ranked)

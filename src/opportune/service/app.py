@@ -127,6 +127,9 @@ class RunIn(BaseModel):
     policy: Optional[Literal[POLICIES]] = Field(
         None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper' or "
                           "'opportunistic': the paper's rule)")
+    products: Optional[Annotated[int, Field(ge=1, le=16), BeforeValidator(_json_integer)]] = Field(
+        None, description="Build this many copies of the plan at once on as many fixtures fed from one bin (1–16; "
+                          "default 1): looks then name part kinds, and each install says its fixture")
 
 
 class LookIn(BaseModel):
@@ -478,7 +481,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     def create_run(body: RunIn, request: Request, p: Principal = Depends(principal),
                    idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
         key = idem.check_key(idempotency_key)
-        return replayable(*manager.create(p, body.model_dump(), key, request.url.path))
+        # without `products` when not given: a retried request hashes as it did before runs had products
+        fields = body.model_dump(exclude={"products"} if body.products is None else None)
+        return replayable(*manager.create(p, fields, key, request.url.path))
 
     @app.get("/runs", tags=["runs"], operation_id="listRuns",
              summary="Runs this token may see, newest first",

@@ -103,6 +103,7 @@ class LiveRun:
     capacity: int | None
     created_at: float
     policy: str = "opportunistic"     # its name (policies/named.py); runs from before policies were chosen: the paper's
+    products: int = 1                 # fixtures fed from one bin (its plan is then the joint plan: opportune.products)
     lock: threading.RLock = field(default_factory=threading.RLock)
     sequencer: Sequencer | None = None
     applied: int = 0
@@ -168,7 +169,7 @@ class RunManager:
             live = self._live.get(r["id"])
             if live is None:
                 live = LiveRun(r["id"], r["cell"], r["plan_id"], r["label"], r["buffer_capacity"], r["created_at"],
-                               r["policy"])
+                               r["policy"], r.get("products") or 1)
                 self._live[r["id"]] = live
             self._live.move_to_end(r["id"])
             if len(self._live) > self.size:
@@ -196,7 +197,7 @@ class RunManager:
     def _replay(self, live: LiveRun, loaded: LoadedPlan, rows) -> None:
         with loaded.lock:
             if live.sequencer is None:
-                live.sequencer = self._sequencer(loaded, live.capacity, live.policy)
+                live.sequencer = self._sequencer(loaded, live.capacity, live.policy, live.products)
                 live.applied = 0
             try:
                 for ev in rows:
@@ -243,11 +244,34 @@ class RunManager:
         if decision.action.to_dict() != recorded:
             raise ReplayMismatch(f"event {seq}: this version decides {decision.action}, the run recorded {recorded}")
 
-    def _sequencer(self, loaded: LoadedPlan, capacity: int | None, policy: str) -> Sequencer:
-        """A new sequencer of the run's policy (its first state counted within the warm-up time)."""
-        return Sequencer(loaded.engine, self._policy(loaded, capacity, policy, budget=self.budget),
-                         buffer_capacity=capacity, budget=self.budget,
-                         warm_up=self.warm_up if self.budget is not None else 0)
+    def _sequencer(self, loaded: LoadedPlan, capacity: int | None, policy: str, products: int = 1) -> Sequencer:
+        """A new sequencer of the run's policy (its first state counted within the warm-up time); for several
+        products, a :class:`~opportune.multi.MultiSequencer` on the joint plan (looks of part kinds)."""
+        make = Sequencer
+        if products > 1:
+            from opportune.multi import MultiSequencer as make
+        return make(loaded.engine, self._policy(loaded, capacity, policy, budget=self.budget),
+                    buffer_capacity=capacity, budget=self.budget,
+                    warm_up=self.warm_up if self.budget is not None else 0)
+
+    def _joint_plan(self, base: LoadedPlan, products: int) -> LoadedPlan:
+        """The stored joint plan of ``products`` copies of a stored plan (stored now if new)."""
+        from types import SimpleNamespace
+
+        from opportune.engine.schedule import MAX_STRATEGIES_EXACT
+        from opportune.products import ProductsError, several_products
+        from opportune.service.plans import store_plan
+
+        try:
+            joint = several_products(base.plan, products)
+            if self.budget is None and len(joint.strategies) > MAX_STRATEGIES_EXACT:
+                raise ProductsError(f"{products} products give {len(joint.strategies)} combinations of the plan's "
+                                    f"strategies, and exact decisions count a union of at most "
+                                    f"{MAX_STRATEGIES_EXACT} strategies")
+        except ProductsError as exc:
+            raise ApiError(422, "invalid_request", str(exc), "use fewer products", where="body.products") from None
+        pid, _ = store_plan(self.store, SimpleNamespace(plan=joint), "json", dumps(joint.to_dict()))
+        return self.book.get(pid)
 
     @staticmethod
     def _policy(loaded: LoadedPlan, capacity: int | None, name: str, *, budget: float | None):
@@ -280,11 +304,14 @@ class RunManager:
             raise ApiError(422, "unknown_plan", f"no plan {body['plan']!r}",
                            "upload it first with POST /plans and use the `id` it returns", where="body.plan")
         loaded = self.book.get(body["plan"])
+        products = body.get("products") or 1
+        if products > 1:   # several products at once: a run of the joint plan, fed from one bin
+            loaded = self._joint_plan(loaded, products)
         if loaded.too_large:
             raise plan_too_large(loaded.too_large)
         with loaded.lock:
             policy = body.get("policy") or DEFAULT_POLICY
-            sequencer = self._sequencer(loaded, body.get("buffer_capacity"), policy)
+            sequencer = self._sequencer(loaded, body.get("buffer_capacity"), policy, products)
             if self.budget is None:
                 try:  # the policy needs exact counts: find out now, not at the robot's first look
                     sequencer.state.schedule.options()
@@ -300,12 +327,12 @@ class RunManager:
                 if stored:
                     return stored.status, stored.text, True
                 run_id = c.execute(insert(runs).values(
-                    cell=cell, plan_id=loaded.id, policy=policy,
+                    cell=cell, plan_id=loaded.id, policy=policy, products=products if products > 1 else None,
                     buffer_capacity=body.get("buffer_capacity"), label=body.get("label") or "", status="active", seq=0,
                     installed=0, units=loaded.plan.n_units, count=count["value"] if count else None, pending=None,
                     created_at=t, updated_at=t)).inserted_primary_key[0]
                 live = LiveRun(run_id, cell, loaded.id, body.get("label") or "", body.get("buffer_capacity"), t,
-                               policy, sequencer=sequencer)
+                               policy, products, sequencer=sequencer)
                 with loaded.lock:
                     answer = run_view(live, loaded, t)
                 text = dumps(answer)
@@ -409,14 +436,16 @@ class RunManager:
         n_next = live.applied + 1
         if kind == "look":
             plan = loaded.plan
+            # several products: the bin holds part kinds (x), not the fixtures' units (x@2)
+            known = list(seq.layout.units) if live.products > 1 else plan.part_ids
             for i, part in enumerate(request["visible"]):
-                if part not in plan:
+                if part not in (seq.layout.units if live.products > 1 else plan):
                     from difflib import get_close_matches
 
-                    close = get_close_matches(part, plan.part_ids, n=1)
+                    close = get_close_matches(part, known, n=1)
                     raise ApiError(422, "unknown_part", f"unknown part {part!r} in the look",
                                    (f"did you mean {close[0]!r}? " if close else "")
-                                   + f"the plan's parts are {', '.join(plan.part_ids)}", where=f"body.visible[{i}]")
+                                   + f"the plan's parts are {', '.join(known)}", where=f"body.visible[{i}]")
             code = ("action_pending" if seq.pending is not None else "run_complete" if seq.finished
                     else "look_contradicts_state")
             hint = {"action_pending": "report the pending action's outcome (POST /runs/{id}/outcomes) or cancel it first",
@@ -431,8 +460,13 @@ class RunManager:
             n_row = len(seq.trace) + (1 if seq.pending else 0)
             run = run_view(live, loaded, now())
             run["seq"] = n_next
-            return {"run_id": live.id, "seq": n_next, "action": decision.action.to_dict(),
-                    "decision": decision_view(decision), "row": row_view(row, n_row, loaded.engine), "run": run}
+            answer = {"run_id": live.id, "seq": n_next, "action": decision.action.to_dict(),
+                      "decision": decision_view(decision), "row": row_view(row, n_row, loaded.engine), "run": run}
+            if live.products > 1:   # which fixture an install goes to (the action's part is KIND@FIXTURE)
+                from opportune.multi import split_action
+
+                answer["part_kind"], answer["fixture"] = split_action(decision.action)
+            return answer
         if kind == "outcome":
             pending = seq.pending
             try:

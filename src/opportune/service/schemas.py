@@ -158,7 +158,7 @@ class Estimate(Model):
     """An estimated share of completions or expected position, with its standard error."""
 
     part: Part
-    kind: Literal["share", "position"]
+    kind: Literal["share", "position", "slack"]
     value: float
     se: float
     source: Literal["bin", "buffer"] | None
@@ -255,6 +255,7 @@ _ROW = {"n": 6, "visible": ["cl", "co"], "buffered": ["rl", "ml", "dr"], "instal
 RUN_EXAMPLE = {
     "id": 17, "cell": "cell-1", "label": "SN 1042",
     "plan": {"id": GEARBOX_PLAN_ID, "name": "gearbox"}, "status": "active", "policy": "paper", "buffer_capacity": 4,
+    "products": 1,
     "seq": 11,
     "state": {"installed": ["ca", "ba"], "buffered": ["rl", "ml", "dr"],
               "in_bin": {"sm": 1, "ra": 1, "co": 1, "st": 1, "cl": 1}, "capacity": 4, "strategies": ["default"],
@@ -282,6 +283,14 @@ class Progress(Model):
     units: int
 
 
+class Fixture(Model):
+    """One fixture of a run building several products at once."""
+
+    fixture: int = Field(..., description="1, 2, …")
+    installed: list[Part] = Field(..., description="Part kinds installed on it, in order")
+    complete: bool
+
+
 class RunState(Model):
     """Where the assembly stands."""
 
@@ -292,6 +301,8 @@ class RunState(Model):
     strategies: list[str] = Field(..., description="Strategies still consistent with what was installed")
     complete: bool
     defects: int
+    fixtures: list[Fixture] | None = Field(None, description="Several products at once: each fixture's installed "
+                                                             "part kinds and whether its product is complete")
 
 
 class Run(Model):
@@ -304,6 +315,9 @@ class Run(Model):
     status: Literal["active", "complete"]
     policy: str
     buffer_capacity: int | None
+    products: int = Field(1, description="Products built at once on as many fixtures from one bin; with more than "
+                                         "one, looks and buffered parts are part kinds and an install's part is "
+                                         "KIND@FIXTURE")
     seq: int = Field(..., description="Events applied so far")
     state: RunState
     installable: list[Part] | None = Field(..., description="Parts that can go in now; null when over the "
@@ -328,6 +342,7 @@ class RunSummary(Model):
     status: Literal["active", "complete"]
     policy: str
     buffer_capacity: int | None
+    products: int = Field(1, description="Products built at once (fixtures fed from one bin)")
     progress: Progress
     count: str | None = Field(..., description="Admissible completions left (decimal text)")
     pending: str | None = Field(..., description="The pending action, as text")
@@ -349,6 +364,10 @@ class LookAnswer(Model):
     decision: Decision
     row: Row
     run: Run
+    part_kind: Part | None = Field(None, description="Several products at once: the part kind to pick (null for a "
+                                                     "shake or done)")
+    fixture: int | None = Field(None, description="Several products at once: the fixture an install goes to "
+                                                  "(null for a buffer move, a shake or done)")
 
 
 class OutcomeAnswer(Model):

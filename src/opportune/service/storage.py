@@ -47,6 +47,7 @@ from sqlalchemy import (
     create_engine,
     event,
     insert,
+    inspect,
     select,
     text,
 )
@@ -99,6 +100,7 @@ runs = Table(
     Column("plan_id", String(64), ForeignKey("plans.id"), nullable=False),
     Column("policy", String(40), nullable=False, default="opportunistic"),
     Column("buffer_capacity", Integer, nullable=True),
+    Column("products", Integer, nullable=True),                       # fixtures fed from one bin (null: one)
     Column("label", String(200), nullable=False, default=""),
     Column("status", String(16), nullable=False, default="active"),   # active | complete
     Column("seq", Integer, nullable=False, default=0),                # events in the log
@@ -171,6 +173,9 @@ class Store:
             metadata.create_all(c)
             for index in idempotency.indexes:  # a database made by an older version has the table, not the index
                 index.create(c, checkfirst=True)
+            # a database made before several products at once (issue 15) has runs without `products`
+            if "products" not in {col["name"] for col in inspect(c).get_columns("runs")}:
+                c.execute(text("ALTER TABLE runs ADD COLUMN products INTEGER"))
         self._init_meta()
 
     @staticmethod
