@@ -14,6 +14,8 @@
 #include <pybind11/stl.h>
 
 #include <memory>
+#include <memory>
+#include <thread>
 #include <unordered_map>
 
 #include <algorithm>
@@ -323,6 +325,7 @@ class Counter {
         if (binom_.empty()) make_binomials();
         tails_.push_back(std::make_unique<Tails>());
         tails_.back()->marks = unpack(marks);
+        fresh_memo(*tails_.back());
         return int(tails_.size()) - 1;
     }
     void tails_drop(int handle) {
@@ -336,6 +339,7 @@ class Counter {
         B s = unpack(mask);
         Tails& tm = *tails_[handle];
         if ((s & tm.marks).none()) throw std::invalid_argument("the set holds no marked element");
+        if (tm.bytes > TAIL_MAX_BYTES || tm.memo.size() > TAIL_BUCKETS) fresh_memo(tm);
         start_budget(max_new, seconds, 0);
         int status = 0;
         const Vec* r = nullptr;
@@ -355,6 +359,7 @@ class Counter {
     }
 
     size_t size() const { return size_; }
+    size_t tails_size(int handle) const { return tails_[handle] ? tails_[handle]->memo.size() : 0; }
     size_t memory() const {
         return table_.bytes() + arena_cap_ * sizeof(u64);
     }
@@ -387,7 +392,33 @@ class Counter {
     struct Tails {
         B marks;
         std::unordered_map<B, Vec, Hash> memo;
+        size_t bytes = 0;   // limbs held, roughly (the distributions dominate)
     };
+    // A tail memo holds at most this many bytes of distributions (a simulation of ARC111 adds about
+    // 2 KB an entry, 1.4 GB over ten trials unbounded).  Its buckets are reserved once it grows, so that
+    // it never rehashes a large table inside a decision (rehashing 700,000 entries took 140 ms, past a 15 ms deadline);
+    // a full memo is replaced, at the start of a call, by an empty one, and the old one is freed on a
+    // thread of its own, for the same reason.
+    static constexpr size_t TAIL_MAX_BYTES = size_t(256) << 20;
+    static constexpr size_t TAIL_BUCKETS = size_t(1) << 18;
+
+    static void fresh_memo(Tails& tm) {
+        if (!tm.memo.empty()) {
+            auto old = std::make_shared<std::unordered_map<B, Vec, Hash>>(std::move(tm.memo));
+            std::thread([old]() mutable { old.reset(); }).detach();
+        }
+        tm.memo = std::unordered_map<B, Vec, Hash>();
+        tm.bytes = 0;
+    }
+
+    const Vec& remember(Tails& tm, const B& s, Vec&& r) {
+        size_t b = 64;
+        for (const Limbs& v : r) b += 8 * v.size() + sizeof(Limbs);
+        tm.bytes += b;
+        // most tail memos stay small (hub searches make and drop many): reserve only for one that grows
+        if (tm.memo.size() == 4096) tm.memo.reserve(TAIL_BUCKETS);
+        return tm.memo.emplace(s, std::move(r)).first->second;
+    }
     std::vector<std::unique_ptr<Tails>> tails_;
     std::vector<std::vector<Limbs>> binom_;  // Pascal's triangle up to n + 1
     long long calls_ = 0;
@@ -427,6 +458,9 @@ class Counter {
         if ((int)out.size() < N) out.resize(N, Limbs{0});
         Limbs term, tmp;
         for (size_t i = 0; i < a.size(); ++i) {
+            // |a| x |b| products of big counts: one call can take a tenth of a second, so look at the clock
+            // between rows (out is the caller's scratch: a stop leaves nothing half-stored)
+            if (timed_ && Clock::now() > deadline_) throw Stop{2};
             if (a[i].size() == 1 && a[i][0] == 0) continue;
             for (size_t j = 0; j < b.size(); ++j) {
                 if (b[j].size() == 1 && b[j][0] == 0) continue;
@@ -506,7 +540,7 @@ class Counter {
                     r.swap(out);
                 }
                 pop_zeros(r);
-                return tm.memo.emplace(s, std::move(r)).first->second;
+                return remember(tm, s, std::move(r));
             }
         }
         if (!cuts.none() && n > 1) {
@@ -534,6 +568,7 @@ class Counter {
         } else {
             Limbs last{0};
             mins.each([&](int x) {
+                if (timed_ && Clock::now() > deadline_) throw Stop{2};
                 B rest = s;
                 rest.flip(x);
                 if (!(rest & marks).none()) {
@@ -551,7 +586,7 @@ class Counter {
             }
         }
         pop_zeros(r);
-        return tm.memo.emplace(s, std::move(r)).first->second;
+        return remember(tm, s, std::move(r));
     }
 
     // the connected components of the comparability graph on s (breadth-first, O(|s| W))
@@ -766,6 +801,7 @@ void bind(py::module_& m, const char* name) {
         .def("tail", &Counter<W>::tail, py::arg("handle"), py::arg("mask"), py::arg("max_new"),
              py::arg("seconds"))
         .def("size", &Counter<W>::size)
+        .def("tails_size", &Counter<W>::tails_size, py::arg("handle"))
         .def("memory", &Counter<W>::memory)
         .def("reset", &Counter<W>::reset)
         .def_property_readonly_static("words", [](py::object) { return W; });
