@@ -399,8 +399,8 @@ class Counter {
     // it never rehashes a large table inside a decision (rehashing 700,000 entries took 140 ms, past a 15 ms deadline);
     // a full memo is replaced, at the start of a call, by an empty one, and the old one is freed on a
     // thread of its own, for the same reason.
-    static constexpr size_t TAIL_MAX_BYTES = size_t(256) << 20;
-    static constexpr size_t TAIL_BUCKETS = size_t(1) << 18;
+    static constexpr size_t TAIL_MAX_BYTES = size_t(512) << 20;
+    static constexpr size_t TAIL_BUCKETS = size_t(1) << 20;
 
     static void fresh_memo(Tails& tm) {
         if (!tm.memo.empty()) {

@@ -360,7 +360,11 @@ class OrderEngine:
         deadline = self._deadline(counter)
         for u in (_bits(s) if units is None else units):
             v = hub.position_sum(s, u, deadline=deadline)
-            if v is None:       # not of the hub form after all: the plain vectors (may exceed the budget)
+            if v is None and self._until is not None:
+                # the plain vectors have no deadline (a 1,000-task plan took a minute): within a decision's
+                # budget, give up instead
+                raise BudgetExceeded("the expected positions need the plain vectors", reason="time")
+            if v is None:       # not of the hub form after all: the plain vectors (may exceed a time limit)
                 sums = counter.position_sums(s)
                 return sums if units is None else {u: sums[u] for u in (_bits(s) if units is None else units)}
             out[u] = v
