@@ -359,7 +359,6 @@ class Counter {
     }
 
     size_t size() const { return size_; }
-    size_t tails_size(int handle) const { return tails_[handle] ? tails_[handle]->memo.size() : 0; }
     size_t memory() const {
         return table_.bytes() + arena_cap_ * sizeof(u64);
     }
@@ -801,7 +800,6 @@ void bind(py::module_& m, const char* name) {
         .def("tail", &Counter<W>::tail, py::arg("handle"), py::arg("mask"), py::arg("max_new"),
              py::arg("seconds"))
         .def("size", &Counter<W>::size)
-        .def("tails_size", &Counter<W>::tails_size, py::arg("handle"))
         .def("memory", &Counter<W>::memory)
         .def("reset", &Counter<W>::reset)
         .def_property_readonly_static("words", [](py::object) { return W; });

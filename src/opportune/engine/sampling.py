@@ -58,7 +58,7 @@ from opportune.engine.poset import Poset, bits
 _M64 = (1 << 64) - 1
 _TO_UNIT = 1.0 / (1 << 53)
 
-__all__ = ["ChainEstimate", "CompletionChains", "t_quantile"]
+__all__ = ["ChainEstimate", "CompletionChains", "prob_positive", "t_quantile"]
 
 
 @dataclass(frozen=True)
@@ -81,16 +81,20 @@ class ChainEstimate:
     def prob_greater(self, kind: str, a: int, b: int) -> float:
         """Estimated probability that the true value of ``a`` exceeds that of ``b`` (paired over chains)."""
         xs, ys = self.per_chain[kind][a], self.per_chain[kind][b]
-        diffs = [x - y for x, y in zip(xs, ys)]
-        k = len(diffs)
-        mean = sum(diffs) / k
-        if k < 2:
-            return 0.5
-        var = sum((d - mean) ** 2 for d in diffs) / (k - 1)
-        se = math.sqrt(var / k)
-        if se == 0:
-            return 1.0 if mean > 0 else 0.0 if mean < 0 else 0.5
-        return _t_cdf(mean / se, k - 1)
+        return prob_positive([x - y for x, y in zip(xs, ys)])
+
+
+def prob_positive(diffs: list[float]) -> float:
+    """Estimated probability that the true mean of ``diffs`` (one value per chain) is positive
+    (Student's t over the chains; 0.5 with fewer than two)."""
+    k = len(diffs)
+    if k < 2:
+        return 0.5
+    mean = sum(diffs) / k
+    se = math.sqrt(sum((d - mean) ** 2 for d in diffs) / (k - 1) / k)
+    if se == 0:
+        return 1.0 if mean > 0 else 0.0 if mean < 0 else 0.5
+    return _t_cdf(mean / se, k - 1)
 
 
 class CompletionChains:

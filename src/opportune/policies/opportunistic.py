@@ -155,20 +155,17 @@ def choose_exact(engine, mask: int, consistent: int, buffer: tuple[str, ...], fr
     if len(can) == 1:  # one candidate part: nothing to compare, so nothing to count
         part = can[0]
         return shared_action("install", part, "bin" if part in visible else "buffer")
+    if order_first and (can or (visible and free > 0 and len(set(visible)) > 1)):
+        settled = choose_by_order(engine, mask, consistent, buffer, visible, can)
+        if settled is not None:     # the order alone settles it: the same action, without counting
+            return settled
     if can:
-        settled = _settled(engine, mask, consistent, can, most_options_by_order) if order_first else None
-        # the order alone may settle the comparison (equal options within the group): no counting
-        options = (dict.fromkeys(settled, 0) if settled is not None
-                   else engine.options_for(mask, consistent, can))
-        return _best_install(engine.plan, options, visible, buffer)
+        return _best_install(engine.plan, engine.options_for(mask, consistent, can), visible, buffer)
     if visible and free > 0:
         parts = set(visible)
         if len(parts) == 1:  # one part to buffer: nothing to compare
             return shared_action("buffer", visible[0])
         plan = engine.plan
-        settled = _settled(engine, mask, consistent, list(parts), earliest_by_order) if order_first else None
-        if settled is not None:
-            return shared_action("buffer", min(settled, key=plan.index))
         _, sums = engine.position_sums_for(mask, consistent, parts)
         return shared_action("buffer", min((s, plan.index(p), p) for p, s in sums.items())[2])
     return SHAKE

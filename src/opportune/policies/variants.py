@@ -28,9 +28,10 @@ import weakref
 from dataclasses import replace
 
 from opportune.engine.count import BudgetExceeded
-from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
+from opportune.engine.sampling import prob_positive
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, Estimate, shared_action
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.opportunistic import MARGIN, Opportunistic
+from opportune.policies.opportunistic import MARGIN, SURE, Opportunistic, _How, _mixed
 from opportune.policies.optimal import OptimalTooLarge, same_action
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
@@ -115,9 +116,6 @@ class Slack(BinFirst):
     def _estimated_slack(self, engine, mask: int, consistent: int, visible, end: float):
         """The least slack with the expected positions estimated by the population of chains, until
         ``end`` or until sure; the decision says it was estimated and how sure it is."""
-        from opportune.policies.base import Estimate
-        from opportune.policies.opportunistic import SURE, _How, _mixed
-
         chains, note = self._chains(engine, mask, consistent)
         plan = engine.plan
         parts = list(dict.fromkeys(visible))
@@ -134,7 +132,7 @@ class Slack(BinFirst):
                 if p != best:   # P(slack of p > slack of best), paired over the chains
                     diffs = [x - y + offset[p] - offset[best] for x, y in
                              zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
-                    miss += 1 - _prob_positive(diffs)
+                    miss += 1 - prob_positive(diffs)
             return max(0.0, 1 - miss)
 
         est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter,
@@ -159,22 +157,6 @@ class Slack(BinFirst):
             if best is None or key < best:
                 best = key
         return best[2]
-
-
-def _prob_positive(diffs: list[float]) -> float:
-    """Estimated probability that the mean of ``diffs`` (one per chain) is truly positive (Student's t)."""
-    import math
-
-    from opportune.engine.sampling import _t_cdf
-
-    k = len(diffs)
-    if k < 2:
-        return 0.5
-    mean = sum(diffs) / k
-    se = math.sqrt(sum((d - mean) ** 2 for d in diffs) / (k - 1) / k)
-    if se == 0:
-        return 1.0 if mean > 0 else 0.0 if mean < 0 else 0.5
-    return _t_cdf(mean / se, k - 1)
 
 
 class Lookahead(DecidesOnMasks):
