@@ -117,6 +117,21 @@ def test_salbp_decomposition_agrees_with_downsets(name):
         assert c.count(p.full ^ 1 << x) == count_by_downsets(p, p.full ^ 1 << x)
 
 
+def test_repack_past_the_deadline_changes_nothing():
+    """Wider fields repack the stored vectors; past the deadline the repack stops and the vectors stay valid."""
+    p = Poset.from_pairs(7, [(0, 1), (2, 3), (4, 5)])
+    small, large = 0b0000011, p.full
+    c = Counter(p)
+    assert c.position_sums(small) == brute(p, small)[1]      # stored at a narrow width
+    c.count(large)                                             # a larger count: the next call needs wider fields
+    c.deadline = time.perf_counter() - 1
+    with pytest.raises(BudgetExceeded, match="repacking"):
+        c.position_sums(large)
+    c.deadline = None
+    assert c.position_sums(small) == brute(p, small)[1]
+    assert c.position_sums(large) == brute(p, large)[1]
+
+
 def test_kilbrid_facts():
     p = salbp("KILBRID")
     assert p.n == 45
