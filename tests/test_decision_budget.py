@@ -48,6 +48,53 @@ def test_chain_estimates_cover_the_exact_values_as_stated():
     assert hits / total >= 0.85, (hits, total)
 
 
+def test_kept_readings_build_on_each_other_and_still_cover_the_exact_values():
+    """With ``keep``, looks at one state continue each other's readings (a unit asked again has more
+    rounds behind it), the stated intervals still hold the exact values, and an installation clears
+    the readings."""
+    rng = random.Random(11)
+    hits = total = 0
+    for trial in range(8):
+        n = rng.randint(8, 14)
+        poset = random_poset(rng, n, 0.2)
+        counter = Counter(poset)
+        e, sums = counter.count(poset.full), counter.position_sums(poset.full)
+        chains = CompletionChains(poset, poset.full, chains=8, seed=trial)
+        chains.run(2_000)
+        units = list(range(n))
+        first = chains.estimate(positions=units[: n // 2 + 2], steps=2_000, samples=20, keep=True)
+        second = chains.estimate(positions=units[n // 2:], steps=2_000, samples=20, keep=True)
+        assert second.samples == 2 * first.samples          # the shared units have both calls' rounds
+        q = t_quantile(0.975, 7)
+        for est, asked in ((first, units[: n // 2 + 2]), (second, units[n // 2:])):
+            for u in asked:
+                value, se = est.positions[u]
+                hits += abs(value - sums[u] / e) <= q * se + 1e-12
+                total += 1
+        u = next(u for u in units if not poset.below[u])
+        chains.advance(poset.full & ~(1 << u))
+        after = chains.estimate(positions=[v for v in units[n // 2:] if v != u], steps=200, samples=5, keep=True)
+        assert after.samples == 5 * 8                          # the readings of the earlier state are gone
+    assert hits / total >= 0.85, (hits, total)
+
+
+def test_an_estimate_stops_early_when_no_candidate_is_better_by_more_than_the_margin():
+    """Two parts with equal expected positions that are not interchangeable (mirror images: x < a,
+    y < b): no number of samples makes one surely first, but both are surely within 1%, so the
+    estimate ends long before its deadline and says why."""
+    plan = make_plan([{"id": p} for p in ("x", "a", "y", "b", "z")], {"a": ["x"], "b": ["y"]})
+    engine = OrderEngine(plan)
+    policy = Opportunistic(budget=10.0, seed=3)
+    t = time.perf_counter()
+    action, how = policy._estimate(engine, 0, engine.all_strategies, (), ("a", "b"), [], t + 5.0,
+                                   stop_when_sure=True)
+    assert time.perf_counter() - t < 2.0
+    assert action.kind == "buffer" and not how.exact
+    assert how.close and how.confidence < 0.999 and "stopped early" in how.note
+    exact = Counter(engine.posets[0]).position_sums()
+    assert exact[engine.next_unit(0, plan.index("a"))] == exact[engine.next_unit(0, plan.index("b"))]
+
+
 def test_chains_carry_on_after_an_installation():
     """After an installed step is dropped, every chain is still an admissible completion of what is left."""
     rng = random.Random(3)
@@ -74,7 +121,9 @@ def test_student_t_helpers_agree_with_scipy():
 
     for df in (3, 7, 15, 40):
         assert t_quantile(0.975, df) == pytest.approx(stats.t.ppf(0.975, df), rel=0.01)
-        for t in (-2.5, -0.3, 0.0, 1.1, 3.0):
+    # the finite series (whole df up to 100), and the incomplete beta beyond
+    for df in (1, 2, 3, 4, 7, 8, 15, 40, 99, 100, 101, 250, 7.5):
+        for t in (-40.0, -2.5, -0.3, 0.0, 1.1, 3.0, 12.0):
             assert _t_cdf(t, df) == pytest.approx(stats.t.cdf(t, df), abs=1e-9)
 
 

@@ -37,9 +37,17 @@ import time
 from contextlib import contextmanager
 from itertools import combinations
 from math import comb
+from operator import mul
 
 from opportune.engine.count import BudgetExceeded, Counter
-from opportune.engine.poset import CycleError, Poset, bits, components, cut_blocks
+from opportune.engine.poset import (
+    CycleError,
+    Poset,
+    bits,
+    byte_unions,
+    components,
+    cut_blocks,
+)
 
 __all__ = ["HubPath", "TailCounter", "hub_count", "hub_candidates", "hub_split"]
 
@@ -363,12 +371,20 @@ def _over_couplings(poset: Poset, s: int, coupling: list[tuple[int, int]], term)
     inclusion–exclusion); None as soon as a term is None (still coupled: not of the hub form).
 
     Twins (same elements below and above within ``s``) are interchangeable, so flipping the
-    relation of one twin or of the other gives the same term: it is computed once.
+    relation of one twin or of the other gives the same term: it is computed once.  Only twins
+    among the coupled elements matter, so only they are compared (O(k^2), not a pass over ``s``).
     """
     below, above = poset.below, poset.above
     twin = {}
     for b, _ in coupling:
-        twin[b] = min(x for x in bits(s) if (below[x] ^ below[b]) & s == 0 and (above[x] ^ above[b]) & s == 0)
+        if b not in twin:
+            sig = (below[b] & s, above[b] & s)
+            for x in twin:
+                if twin[x] == x and (below[x] & s, above[x] & s) == sig:
+                    twin[b] = x
+                    break
+            else:
+                twin[b] = b
     seen: dict[tuple, int] = {}
     total = 0
     for k in range(len(coupling) + 1):
@@ -451,6 +467,8 @@ class HubPath:
             self._cover_below[b] |= 1 << a
         self._q: dict[tuple, Poset | None] = {}
         self._up: dict[tuple, int] = {}
+        self._up_tables = byte_unions(poset.above, n)
+        self._weights: dict[int, list[int]] = {}    # |A| -> the binomials of the hub formula
 
     # ------------------------------------------------------------ public
     def applies(self, s: int) -> bool:
@@ -549,12 +567,14 @@ class HubPath:
 
     # ------------------------------------------------------------ internals
     def _is_upset(self, s: int) -> bool:
-        above = self.base.above
+        """Whether the original elements of ``s`` hold everything above them: the union of their
+        successors, by one table look-up per byte of the set (see :func:`~opportune.engine.poset.byte_unions`)."""
         core = s & ((1 << self.n) - 1)
-        for x in bits(core):
-            if above[x] & ~core:
-                return False
-        return True
+        union = 0
+        for table, byte in zip(self._up_tables, core.to_bytes(len(self._up_tables), "little")):
+            if byte:
+                union |= table[byte]
+        return not union & ~core
 
     def _hard_pieces(self, s: int) -> list[int]:
         """The pieces of ``s`` the plain counter cannot split (connected, no cut element) and has not counted."""
@@ -657,9 +677,11 @@ class HubPath:
             return 0
         up = q.above[h] & s
         rest = s & ~up & ~(1 << h)
-        qa = q.above
-        for b in bits(rest & ~down):
-            if qa[b] & up:
+        # still coupled if an unrelated step lies below a step of A (A is the smaller side to scan)
+        qb = q.below
+        loose = rest & ~down
+        for a in bits(up):
+            if qb[a] & loose:
                 return None
         size_a = up.bit_count()
         ukey = (qkey, up)
@@ -670,4 +692,7 @@ class HubPath:
             e_a = self._up[ukey] = (Counter(q, max_memo=None, time_limit=max(0.0, left) if left is not None else None)
                                     .count(up) if up else 1)
         d = tails.tail(rest)
-        return e_a * sum(v * comb(b + 1 + size_a, 1 + size_a) for b, v in enumerate(d))
+        weights = self._weights.get(size_a)
+        if weights is None or len(weights) < len(d):
+            weights = self._weights[size_a] = [comb(b + 1 + size_a, 1 + size_a) for b in range(self.n + 1)]
+        return e_a * sum(map(mul, d, weights))

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Iterable, Iterator, Sequence
 
-__all__ = ["CycleError", "Poset", "bits", "components", "cut_blocks", "cut_chain", "elements"]
+__all__ = ["CycleError", "Poset", "bits", "byte_unions", "components", "cut_blocks", "cut_chain", "elements"]
 
 
 def bits(mask: int) -> Iterator[int]:
@@ -43,6 +43,25 @@ def elements(mask: int) -> list[int]:
     [0, 3]
     """
     return list(bits(mask))
+
+
+def byte_unions(sets: Sequence[int], n: int) -> list[list[int]]:
+    """For each byte ``j`` of an ``n``-bit set: the union of ``sets[8 j + i]`` over the bits ``i`` of
+    every byte value (index 0..255).  With them, the union of ``sets[x]`` over the elements ``x`` of a
+    set takes one look-up per byte of the set instead of one step per element.  O(n / 8 · 256) to build.
+
+    >>> byte_unions([0b10, 0b100], 2)[0][0b11]     # elements 0 and 1: sets[0] | sets[1]
+    6
+    """
+    out = []
+    for j in range((n + 7) // 8 or 1):
+        table = [0] * 256
+        for v in range(1, 256):
+            low = v & -v
+            i = 8 * j + low.bit_length() - 1
+            table[v] = table[v ^ low] | (sets[i] if i < n else 0)
+        out.append(table)
+    return out
 
 
 def components(above: Sequence[int], s: int, mins: int) -> list[int]:

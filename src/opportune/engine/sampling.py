@@ -78,10 +78,11 @@ class ChainEstimate:
     samples: int
     steps: int
 
-    def prob_greater(self, kind: str, a: int, b: int) -> float:
-        """Estimated probability that the true value of ``a`` exceeds that of ``b`` (paired over chains)."""
+    def prob_greater(self, kind: str, a: int, b: int, margin: float = 0.0) -> float:
+        """Estimated probability that the true value of ``a`` exceeds that of ``b`` by more than
+        ``margin`` (paired over chains)."""
         xs, ys = self.per_chain[kind][a], self.per_chain[kind][b]
-        return prob_positive([x - y for x, y in zip(xs, ys)])
+        return prob_positive([x - y - margin for x, y in zip(xs, ys)])
 
 
 def prob_positive(diffs: list[float]) -> float:
@@ -126,6 +127,7 @@ class CompletionChains:
         else:
             self._orders = orders
         self.steps = 0          # steps per chain since the population was started
+        self._kept: tuple[dict, dict] = ({}, {})   # readings kept at this state (estimate(keep=True))
 
     @property
     def orders(self) -> list[list[int]]:
@@ -164,6 +166,7 @@ class CompletionChains:
         if remaining & ~self.remaining:
             raise ValueError("the chains can only move forward (install steps, not undo them)")
         if gone:
+            self._kept = ({}, {})       # readings of the earlier state: they do not carry over
             if self._core is not None:
                 self._core.drop(list(bits(gone)))
             else:
@@ -232,64 +235,86 @@ class CompletionChains:
 
     def estimate(self, first=(), positions=(), *, steps: int = 0, samples: int = 32,
                  deadline: float | None = None, clock=None, settled=None,
-                 min_rounds: int = 8) -> ChainEstimate:
+                 min_rounds: int = 8, keep: bool = False) -> ChainEstimate:
         """Run the chains and estimate, for each unit in ``first`` (minimal now), the probability
         that it comes next, and for each unit in ``positions``, its expected position.
 
         Either ``steps`` per chain in total, taken as ``samples`` rounds, or rounds until
         ``deadline`` (by ``clock``, e.g. ``time.perf_counter``), at least two.  Each round
         runs the chains, then reads one sample from each.  With a deadline, ``settled`` (a
-        function of the estimate so far) may end the rounds early, once ``min_rounds`` are
-        done: a decision that is already sure need not spend the rest of its budget.
+        function of the estimate so far) may end the rounds early, once every unit has
+        ``min_rounds`` rounds: a decision that is already sure need not spend the rest of its budget.
+
+        ``keep``: the readings are kept with the population until it advances, and a later call
+        with ``keep`` continues them for the units it asks about again.  Looks at one state (a run of
+        looks where nothing can be installed: one buffer choice after another) then build on each
+        other instead of starting again, so a part's expected position seen twice is known better the
+        second time.  A unit's rounds may differ from another's; each chain's means are still means
+        of its own readings, so the comparisons over chains stay valid.
         """
         first, positions = list(first), list(positions)
         for u in first:
             if self.below[u] & self.remaining:
                 raise ValueError(f"unit {u} is not minimal: it cannot come next")
         k = self.chains
-        acc_first = {u: [0.0] * k for u in first}
-        acc_pos = {u: [0.0] * k for u in positions}
-        n_samples = 0
+        kept = self._kept if keep else ({}, {})
+        acc_first = {u: kept[0].get(u) or [[0.0] * k, 0] for u in first}
+        acc_pos = {u: kept[1].get(u) or [[0.0] * k, 0] for u in positions}
+        if keep:
+            kept[0].update(acc_first)
+            kept[1].update(acc_pos)
         # Rounds short enough to stop near a deadline (a millisecond or two of moves over all chains).
         per_round = max(1, steps // max(1, samples)) if steps else max(1, min(self.remaining.bit_count(), 100))
         rounds = 0
+        least = min((a[1] for a in (*acc_first.values(), *acc_pos.values())), default=0)
+        if settled is not None and not steps and least >= min_rounds:
+            summary = self._summary(acc_first, acc_pos)
+            if settled(summary):        # what was kept already settles it: no moves at all
+                return summary
         while True:
             self.run(per_round)
             if first or positions:
                 self._read_all(first, positions, acc_first, acc_pos)
-            n_samples += 1
             rounds += 1
+            least += 1
             if steps:
                 if rounds >= samples:
                     break
-            elif rounds >= 2 and (deadline is None or clock() >= deadline):
+            elif least >= 2 and (deadline is None or clock() >= deadline):
                 break
-            elif settled is not None and rounds >= min_rounds and rounds % 4 == 0 and settled(
-                    self._summary(acc_first, acc_pos, n_samples, k)):
+            elif settled is not None and least >= min_rounds and rounds % 4 == 0 and settled(
+                    self._summary(acc_first, acc_pos)):
                 break
-        return self._summary(acc_first, acc_pos, n_samples, k)
+        return self._summary(acc_first, acc_pos)
 
-    def _summary(self, acc_first, acc_pos, n_samples: int, k: int) -> ChainEstimate:
-        means_first = {u: [x / n_samples for x in xs] for u, xs in acc_first.items()}
-        means_pos = {u: [x / n_samples for x in xs] for u, xs in acc_pos.items()}
+    def _summary(self, acc_first, acc_pos) -> ChainEstimate:
+        means_first = {u: [x / n for x in xs] for u, (xs, n) in acc_first.items()}
+        means_pos = {u: [x / n for x in xs] for u, (xs, n) in acc_pos.items()}
+        rounds = max((n for _, n in (*acc_first.values(), *acc_pos.values())), default=0)
         return ChainEstimate(
             first={u: _mean_se(xs) for u, xs in means_first.items()},
             positions={u: _mean_se(xs) for u, xs in means_pos.items()},
             per_chain={"first": means_first, "positions": means_pos},
-            samples=n_samples * k, steps=self.steps)
+            samples=rounds * self.chains, steps=self.steps)
 
     def _read_all(self, first, positions, acc_first, acc_pos) -> None:
-        """Add every chain's statistics for its current sequence."""
+        """Add every chain's statistics for its current sequence (``acc[u]``: ``[sums per chain, rounds]``)."""
+        sums_first = {u: acc_first[u][0] for u in first}
+        sums_pos = {u: acc_pos[u][0] for u in positions}
         if self._core is None:
             for c, order in enumerate(self._orders):
-                self._read(order, first, positions, acc_first, acc_pos, c)
-            return
-        f, e = self._core.read(first, positions)
-        for c, (fs, es) in enumerate(zip(f, e)):
-            for u, x in zip(first, fs):
-                acc_first[u][c] += x
-            for u, x in zip(positions, es):
-                acc_pos[u][c] += x
+                self._read(order, first, positions, sums_first, sums_pos, c)
+        else:
+            f, e = self._core.read(first, positions)
+            for c, (fs, es) in enumerate(zip(f, e)):
+                for u, x in zip(first, fs):
+                    sums_first[u][c] += x
+                for u, x in zip(positions, es):
+                    sums_pos[u][c] += x
+        for u in first:
+            acc_first[u][1] += 1
+        for u in positions:
+            acc_pos[u][1] += 1
 
     def _read(self, order, first, positions, acc_first, acc_pos, c) -> None:
         """Add one chain's Rao–Blackwellised statistics for the current sequence."""
@@ -340,6 +365,26 @@ def t_quantile(q: float, df: int) -> float:
 
 
 def _t_cdf(t: float, df: int) -> float:
+    """Student's t distribution function: a finite series for whole ``df`` up to 100 (Abramowitz and
+    Stegun 26.7.3-4; the chains give df = chains - 1), else the regularised incomplete beta."""
+    if isinstance(df, int) and 1 <= df <= 100:
+        theta = math.atan(t / math.sqrt(df))
+        c2 = math.cos(theta) ** 2
+        if df % 2:      # odd: 1/2 + (theta + sin cos (1 + 2/3 c^2 + 2·4/(3·5) c^4 + ...)) / pi
+            term, total = 1.0, 1.0 if df > 1 else 0.0
+            for k in range(1, (df - 1) // 2):
+                term *= c2 * (2 * k) / (2 * k + 1)
+                total += term
+            return 0.5 + (theta + math.sin(theta) * math.cos(theta) * total) / math.pi
+        term = total = 1.0  # even: 1/2 + sin/2 (1 + 1/2 c^2 + 1·3/(2·4) c^4 + ...)
+        for k in range(1, df // 2):
+            term *= c2 * (2 * k - 1) / (2 * k)
+            total += term
+        return 0.5 + 0.5 * math.sin(theta) * total
+    return _t_cdf_beta(t, df)
+
+
+def _t_cdf_beta(t: float, df: float) -> float:
     """Student's t distribution function (regularised incomplete beta by continued fraction)."""
     x = df / (df + t * t)
     tail = 0.5 * _betainc(df / 2, 0.5, x)

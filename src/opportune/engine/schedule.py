@@ -35,7 +35,7 @@ from typing import Collection, Iterable, Sequence
 
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.hub import HubPath
-from opportune.engine.poset import CycleError, Poset
+from opportune.engine.poset import CycleError, Poset, byte_unions
 from opportune.plan import Plan
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
@@ -519,7 +519,7 @@ class OrderEngine:
         over the units ``u`` that the byte value ``v`` holds (built on first use)."""
         tables = self._above
         if tables is None:
-            tables = self._above = [_byte_unions(poset.above, self.n_units) for poset in self.posets]
+            tables = self._above = [byte_unions(poset.above, self.n_units) for poset in self.posets]
         return tables
 
     def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
@@ -860,20 +860,6 @@ class Schedule:
 
     def __hash__(self) -> int:
         return hash((id(self.engine), self.installed))
-
-
-def _byte_unions(sets: Sequence[int], n: int) -> list[list[int]]:
-    """For each byte ``j`` of an ``n``-bit set: the union of ``sets[8 j + i]`` over the bits ``i`` of
-    every byte value (index 0..255)."""
-    out = []
-    for j in range((n + 7) // 8 or 1):
-        table = [0] * 256
-        for v in range(1, 256):
-            low = v & -v
-            i = 8 * j + low.bit_length() - 1
-            table[v] = table[v ^ low] | (sets[i] if i < n else 0)
-        out.append(table)
-    return out
 
 
 def _bits(mask: int):

@@ -18,7 +18,12 @@ is applied to exact counts when they fit a share of the budget, and otherwise to
 estimates from random completions (:mod:`opportune.engine.sampling`) that fill the rest
 of it.  The decision then says so: ``exact=False``, the method, each candidate's
 estimated share of completions or expected position with its standard error, and the
-estimated probability that the action is the exact rule's.  Steps that are
+estimated probability that the action is the exact rule's.  An estimate ends early, keeping the
+rest of the budget, once it is sure (that probability at least 0.999) or once, as surely, no other
+candidate is better by more than 1% (of the best share of options, or of the steps remaining for an
+expected position): candidates that close are a toss-up the samples would take the whole budget to
+settle, for no measurable difference in the outcome.  The chains' readings at a state are kept from
+look to look while nothing is installed, so a run of buffer choices builds on itself.  Steps that are
 interchangeable in the state (the same predecessors and successors among what
 remains) have equal exact values, so estimates treat them as tied and the exact
 tie-breaks decide between them.
@@ -42,7 +47,18 @@ MIXED_STEPS = 20       # moves per chain, per step remaining, before an early st
 EXACT_FIRST = 0.2      # exact attempts first while they have taken under this share of the budget
 PROBE_SHARE = 0.3      # else a first estimate gets this share (and ends the decision if it is sure)
 SLOW_WEIGHT = 0.3      # weight of the last exact attempt in the moving average of their time
-SLOW_DECAY = 0.9       # that average shrinks after each sure estimate, so exact counts are tried again
+SLOW_DECAY = 0.97      # that average shrinks after each sure estimate, so exact counts are tried again
+SIZE_BAND = 5          # ... kept per band of this many steps remaining (see _budgeted)
+INDIFFERENT = 0.01     # estimates stop once no other candidate is better by more than this (see _CLOSE)
+FAILING = 0.4          # an average above this share of the budget: exact attempts have been failing there
+
+
+_CLOSE = (f"stopped early: with probability >= {SURE} no other candidate is better than this one by more than "
+          f"{100 * INDIFFERENT:g}% (of its share of options, or of the steps remaining for positions)")
+
+
+def _join(*notes: str) -> str:
+    return "; ".join(n for n in notes if n)
 
 
 def ranked_candidates(state, visible: tuple[str, ...]) -> list[tuple]:
@@ -94,6 +110,12 @@ class _How:
     estimates: tuple[Estimate, ...] = ()
     confidence: float = 1.0
     note: str = ""
+    close: bool = False     # estimated: no other candidate better by more than INDIFFERENT (see _CLOSE)
+
+    @property
+    def settled(self) -> bool:
+        """Exact, or an estimate sure enough to end the decision."""
+        return self.exact or self.confidence >= SURE or self.close
 
 
 _EXACT = _How()
@@ -191,7 +213,9 @@ class Opportunistic(DecidesOnMasks):
         self._population: tuple | None = None   # (engine, strategy, CompletionChains)
         self._starts = 0
         self._share = {"install": EXACT_SHARE[1], "buffer": EXACT_SHARE[1]}
-        self._slow = {"install": 0.0, "buffer": 0.0}   # recent seconds of an exact attempt (moving average)
+        # recent seconds of an exact attempt (moving average), per kind of decision and steps remaining
+        self._slow: dict[tuple[str, int], float] = {}
+        self._probe_ok: dict[tuple[str, int], float] = {}   # share of recent probes that settled, likewise
 
     #: The rules in words, as the decisions give them (variants say theirs).
     rule_install = "install the candidate that keeps the most options"
@@ -216,7 +240,14 @@ class Opportunistic(DecidesOnMasks):
         """The rule within the budget.  Exact counts first while they have been quick; where they have
         been slow (a large plan's early states), a short estimate first, which ends the decision if it is
         already sure (probability >= SURE of being the exact rule's choice), then the exact attempt, then
-        the estimate again with what is left of the budget."""
+        the estimate again with what is left of the budget.  Where exact attempts have been failing, the
+        estimate goes on instead of trying them.
+
+        How slow exact attempts have been is kept per kind of decision and per band of steps remaining:
+        on an assembly the cost of exact counts follows how far it has come (ARC111's expected positions
+        never fit 50 ms with 100 or more steps to go, and fit easily with 50), so each trial's early
+        states learn from the last trial's early states rather than from its late ones.
+        """
         start = time.perf_counter()
         end = start + self.budget * (1 - MARGIN)
         if mask == engine.full:
@@ -230,30 +261,41 @@ class Opportunistic(DecidesOnMasks):
         if settled is not None:
             return settled, _EXACT
         kind = "install" if can else "buffer"
+        key = (kind, (engine.full & ~mask).bit_count() // SIZE_BAND)
+        slow = self._slow.get(key, 0.0)
         probe = None
-        if self._slow[kind] > EXACT_FIRST * self.budget:
+        failing = slow > FAILING * self.budget
+        if slow > EXACT_FIRST * self.budget and (failing or self._probe_ok.get(key, 1.0) >= 0.5):
+            # a probe where exact counts are slow, unless probes have mostly been unsure here (many
+            # close candidates) while the exact counts still fit
             probe = self._estimate(engine, mask, consistent, buffer, visible, can,
                                    start + self.budget * PROBE_SHARE, stop_when_sure=True)
-            if probe[1].confidence >= SURE:
-                self._slow[kind] *= SLOW_DECAY   # try the exact counts again some day
+            ok = probe[1].settled
+            self._probe_ok[key] = (1 - SLOW_WEIGHT) * self._probe_ok.get(key, 1.0) + SLOW_WEIGHT * ok
+            if ok:
+                self._slow[key] = slow * SLOW_DECAY   # try the exact counts again some day
                 return probe
+            if failing:   # exact attempts here have been failing: estimate on instead
+                return self._estimate(engine, mask, consistent, buffer, visible, can, end, stop_when_sure=True)
         began = time.perf_counter()
         try:
             with engine.deadline(began + self.budget * self._share[kind]):
                 action = choose_exact(engine, mask, consistent, buffer, free, visible, order_first=False)
             self._share[kind] = EXACT_SHARE[1]
-            self._slow[kind] = (1 - SLOW_WEIGHT) * self._slow[kind] + SLOW_WEIGHT * (time.perf_counter() - began)
+            self._slow[key] = (1 - SLOW_WEIGHT) * slow + SLOW_WEIGHT * (time.perf_counter() - began)
             return action, _EXACT
         except BudgetExceeded:
             self._share[kind] = EXACT_SHARE[0]
-            self._slow[kind] = (1 - SLOW_WEIGHT) * self._slow[kind] + SLOW_WEIGHT * 2 * self.budget
+            self._slow[key] = (1 - SLOW_WEIGHT) * slow + SLOW_WEIGHT * 2 * self.budget
         if time.perf_counter() >= end and probe is not None:
             return probe
         return self._estimate(engine, mask, consistent, buffer, visible, can, end, stop_when_sure=True)
 
     def _estimate(self, engine, mask, consistent, buffer, visible, can, end: float, *,
                   stop_when_sure: bool) -> tuple[Action, _How]:
-        """The rule applied to estimates from the population of chains, run until ``end`` (or until sure)."""
+        """The rule applied to estimates from the population of chains, run until ``end`` (or until sure).
+        The readings are kept while the state stays (``keep``): a decision's second estimate, and the
+        next look's at the same state, continue them."""
         plan = engine.plan
         remaining = engine.full & ~mask
         clock = time.perf_counter
@@ -263,14 +305,17 @@ class Opportunistic(DecidesOnMasks):
             # a candidate that cannot come next in the chains' strategy has no share there
             first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
 
-            def sure(e):   # the best so far is the exact rule's choice with probability >= SURE
+            def sure(e):   # the best so far is the exact rule's choice, or none other is better by the margin
+                if not _mixed(chains):
+                    return False
                 v = _tied_means(chains, remaining, first, e.first)
                 top = max(first, key=v.__getitem__)
-                return (_mixed(chains) and
-                        _confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE)
+                return (_confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE or
+                        _confidence(e, "first", first, top, chains, remaining, higher=True,
+                                    margin=INDIFFERENT * v[top]) >= SURE)
 
             est = chains.estimate(first=set(first.values()), deadline=end, clock=clock,
-                                  settled=sure if stop_when_sure else None)
+                                  settled=sure if stop_when_sure else None, keep=True)
             value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
             keys = []
             for part in can:
@@ -282,28 +327,38 @@ class Opportunistic(DecidesOnMasks):
             keys.sort()
             best = keys[0][1]
             conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
+            close = conf < SURE and best in first and _confidence(
+                est, "first", first, best, chains, remaining, higher=True, margin=INDIFFERENT * value[best]) >= SURE
             estimates = tuple(Estimate(part, "share", value[part],
                                        est.first[first[part]][1] if part in first else 0.0, source)
                               for _, part, source in keys)
             return (shared_action("install", best, keys[0][2]),
-                    _How(False, "mcmc", estimates, conf, note))
+                    _How(False, "mcmc", estimates, conf, _join(note, _CLOSE if close else ""), close))
         chains, note = self._chains(engine, mask, consistent)
         parts = list(dict.fromkeys(visible))
         at = {p: engine.next_unit(mask, plan.index(p)) for p in parts}
 
+        margin = INDIFFERENT * remaining.bit_count()
+
         def sure(e):
+            if not _mixed(chains):
+                return False
             v = _tied_means(chains, remaining, at, e.positions)
             top = min(parts, key=v.__getitem__)
-            return _mixed(chains) and _confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE
+            return (_confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE or
+                    _confidence(e, "positions", at, top, chains, remaining, higher=False, margin=margin) >= SURE)
 
         est = chains.estimate(positions=set(at.values()), deadline=end, clock=clock,
-                              settled=sure if stop_when_sure else None)
+                              settled=sure if stop_when_sure else None, keep=True)
         value = _tied_means(chains, remaining, at, est.positions)
         ranked = sorted((value[p], plan.index(p), p) for p in parts)
         best = ranked[0][2]
         conf = _confidence(est, "positions", at, best, chains, remaining, higher=False)
+        close = conf < SURE and _confidence(est, "positions", at, best, chains, remaining, higher=False,
+                                            margin=margin) >= SURE
         estimates = tuple(Estimate(p, "position", v, est.positions[at[p]][1]) for v, _, p in ranked)
-        return shared_action("buffer", best), _How(False, "mcmc", estimates, conf, note)
+        return shared_action("buffer", best), _How(False, "mcmc", estimates, conf,
+                                                   _join(note, _CLOSE if close else ""), close)
 
     def _chains(self, engine, mask: int, consistent: int, candidates=()) -> tuple[CompletionChains, str]:
         """The population of chains for this state: carried on from the last look if the state
@@ -427,9 +482,11 @@ def _tied_means(chains, remaining: int, unit_of: dict, estimates: dict) -> dict:
     return out
 
 
-def _confidence(est, kind: str, unit_of: dict, best: str, chains, remaining: int, *, higher: bool) -> float:
+def _confidence(est, kind: str, unit_of: dict, best: str, chains, remaining: int, *, higher: bool,
+                margin: float = 0.0) -> float:
     """Estimated probability that ``best`` is the exact rule's choice: every other part (not
-    interchangeable with it) is truly worse; a union bound over them (paired over the chains)."""
+    interchangeable with it) is truly worse; a union bound over them (paired over the chains).
+    With ``margin``: that no other part is better than ``best`` by more than ``margin``."""
     ub = unit_of[best]
     sig = _signature(chains, remaining, ub)
     miss = 0.0
@@ -438,6 +495,8 @@ def _confidence(est, kind: str, unit_of: dict, best: str, chains, remaining: int
         if u == ub or u in seen or _signature(chains, remaining, u) == sig:
             continue
         seen.add(u)
-        p = est.prob_greater(kind, ub, u) if higher else est.prob_greater(kind, u, ub)
-        miss += 1 - p
+        if margin:
+            miss += est.prob_greater(kind, u, ub, margin) if higher else est.prob_greater(kind, ub, u, margin)
+        else:
+            miss += 1 - (est.prob_greater(kind, ub, u) if higher else est.prob_greater(kind, u, ub))
     return max(0.0, 1 - miss)

@@ -136,7 +136,7 @@ class Slack(BinFirst):
             return max(0.0, 1 - miss)
 
         est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter,
-                              settled=lambda e: _mixed(chains) and confidence(e) >= SURE)
+                              settled=lambda e: _mixed(chains) and confidence(e) >= SURE, keep=True)
         order = ranked(est)
         estimates = tuple(Estimate(p, "slack", v, est.positions[at[p]][1]) for v, _, p in order)
         return shared_action("buffer", order[0][2]), _How(False, "mcmc", estimates, confidence(est), note)
