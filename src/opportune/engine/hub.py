@@ -81,7 +81,7 @@ class TailCounter:
         self.deadline = deadline
         self._memo: dict[int, list[int]] = {}
         n = self.poset.n
-        self._binom: list[list[int]] = []     # Pascal's triangle, built with the Python recursion
+        self._binom = _BinomialRows()          # rows of Pascal's triangle, as the Python recursion asks
         self._rec = None
         # the compiled core runs this recursion too (its counts from the counter's compiled memo)
         self._core = counter._native if counter.compiled and counter._direction == 0 and n <= NATIVE_TAILS else None
@@ -134,8 +134,6 @@ class TailCounter:
         marks = self.marks
         count = self.counter.count
         scan = self.counter.scan
-        if not self._binom:     # the compiled core keeps its own: only the Python recursion needs it
-            self._binom = [[comb(i, k) for k in range(i + 1)] for i in range(self.poset.n + 2)]
         binom = self._binom
         merge, merge_plain = self._merge, self._merge_plain
         perf = time.perf_counter
@@ -239,6 +237,32 @@ class TailCounter:
         k = row[nb]
         total = na + nb
         return [w[c] * k // row[c] for c in range(min(len(w), total))]
+
+
+class _BinomialRows:
+    """Rows of Pascal's triangle, each computed when first asked for: ``rows[i][k] == comb(i, k)``.
+
+    The whole triangle of a hub path's order (twice the plan's steps: 2,000 on a 1,000-step plan)
+    is two million big integers: building it took about a minute, with no deadline, inside one
+    decision.  A recursion asks only for the rows of the sizes it merges; each costs O(i) products of
+    a big integer by a small one.
+    """
+
+    __slots__ = ("_rows",)
+
+    def __init__(self):
+        self._rows: dict[int, list[int]] = {}
+
+    def __getitem__(self, i: int) -> list[int]:
+        row = self._rows.get(i)
+        if row is None:
+            row = [1] * (i + 1)
+            c = 1
+            for k in range(1, i // 2 + 1):
+                c = c * (i - k + 1) // k
+                row[k] = row[i - k] = c
+            self._rows[i] = row
+        return row
 
 
 def _add(u: list[int], w: list[int]) -> list[int]:

@@ -31,7 +31,8 @@ from opportune.engine.count import BudgetExceeded
 from opportune.engine.sampling import prob_positive
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, Estimate, shared_action
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.opportunistic import MARGIN, SURE, Opportunistic, _How, _mixed
+from opportune.policies.opportunistic import (_CLOSE, INDIFFERENT, MARGIN, SURE, Opportunistic, _How, _join,
+                                              _mixed)
 from opportune.policies.optimal import OptimalTooLarge, same_action
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
@@ -88,11 +89,12 @@ class Slack(BinFirst):
         if self.total_budget is None:
             return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
         end = start + self.total_budget * (1 - MARGIN)
-        try:    # within a budget: the exact slack if its positions fit a share of it, else estimated
-            with engine.deadline(min(end, time.perf_counter() + self.total_budget * self.EXACT_SLACK_SHARE)):
-                return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
-        except BudgetExceeded:
-            pass
+        if how.exact:   # else the rule's expected positions did not fit just now: the slack's will not either
+            try:    # within a budget: the exact slack if its positions fit a share of it, else estimated
+                with engine.deadline(min(end, time.perf_counter() + self.total_budget * self.EXACT_SLACK_SHARE)):
+                    return shared_action("buffer", self.least_slack(engine, mask, consistent, visible)), how
+            except BudgetExceeded:
+                pass
         if time.perf_counter() >= end:
             return action, how      # no time left to estimate: the paper's choice, as decided above
         return self._estimated_slack(engine, mask, consistent, visible, end)
@@ -125,21 +127,29 @@ class Slack(BinFirst):
         def ranked(e):
             return sorted((e.positions[at[p]][0] + offset[p], plan.index(p), p) for p in parts)
 
-        def confidence(e):
+        margin = INDIFFERENT * (engine.full & ~mask).bit_count()
+
+        def confidence(e, margin=0.0):
+            """P(the best so far has the least slack), or with ``margin``: P(no other part's slack is less
+            by more than ``margin``); paired over the chains, a union bound over the parts."""
             best = ranked(e)[0][2]
             miss = 0.0
             for p in parts:
-                if p != best:   # P(slack of p > slack of best), paired over the chains
+                if p != best:   # slack of p - slack of best, per chain
                     diffs = [x - y + offset[p] - offset[best] for x, y in
                              zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
-                    miss += 1 - prob_positive(diffs)
+                    miss += prob_positive([-d - margin for d in diffs]) if margin else 1 - prob_positive(diffs)
             return max(0.0, 1 - miss)
 
-        est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter,
-                              settled=lambda e: _mixed(chains) and confidence(e) >= SURE, keep=True)
+        est = chains.estimate(positions=set(at.values()), deadline=end, clock=time.perf_counter, keep=True,
+                              settled=lambda e: _mixed(chains) and (confidence(e) >= SURE or
+                                                                    confidence(e, margin) >= SURE))
         order = ranked(est)
         estimates = tuple(Estimate(p, "slack", v, est.positions[at[p]][1]) for v, _, p in order)
-        return shared_action("buffer", order[0][2]), _How(False, "mcmc", estimates, confidence(est), note)
+        conf = confidence(est)
+        close = conf < SURE and confidence(est, margin) >= SURE
+        return shared_action("buffer", order[0][2]), _How(False, "mcmc", estimates, conf,
+                                                          _join(note, _CLOSE if close else ""), close)
 
     def least_slack(self, engine, mask: int, consistent: int, visible: tuple[str, ...]) -> str:
         """The visible part with the least slack (ties: declaration order)."""
