@@ -7,9 +7,10 @@ import random
 import time
 from itertools import permutations
 
+import pytest
 from hypothesis import given, settings, strategies as st
 
-from opportune.engine.count import Counter
+from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.estimate import estimate_count
 from opportune.engine.hub import TailCounter, hub_candidates, hub_count, hub_split
 from opportune.engine.poset import Poset, bits
@@ -50,6 +51,22 @@ def test_tail_distribution_equals_enumeration(case):
     tail = TailCounter(Counter(poset), marks).tail(s)
     assert tail == brute_tail(poset, s, marks)
     assert sum(tail) == Counter(poset).count(s)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(3, 22), st.sampled_from([0.1, 0.2, 0.4]), st.sampled_from([0, 2, 4]), st.integers(1, 5),
+       st.randoms(use_true_random=False))
+def test_the_first_hub_candidates_are_the_head_of_the_whole_list(n, density, max_coupling, limit, rng):
+    """Asking for the first few candidates (as a decision does, to stop early) gives the head of the list."""
+    poset = Poset.from_pairs(n, [(i, j) for i in range(n) for j in range(i + 1, n) if rng.random() < density])
+    whole = hub_candidates(poset, poset.full, max_coupling=max_coupling)
+    assert hub_candidates(poset, poset.full, max_coupling=max_coupling, limit=limit) == whole[:limit]
+
+
+def test_a_hub_search_past_its_deadline_stops():
+    poset = salbp_poset("ARC111")
+    with pytest.raises(BudgetExceeded):
+        hub_candidates(poset, poset.full, deadline=time.perf_counter() - 1)
 
 
 def test_tails_on_a_large_order_start_at_once():
