@@ -208,6 +208,40 @@ def test_an_engine_deadline_stops_every_count_and_the_work_is_kept():
     assert engine.count(0, engine.all_strategies) == fresh.count(0, fresh.all_strategies)
 
 
+def test_a_budgeted_decision_pauses_the_collector_and_gives_it_back():
+    """Garbage collection waits for the end of a budgeted decision (nested and overlapping pauses
+    included) and is left as it was found, enabled or not."""
+    import gc
+
+    from opportune.policies.base import collector_paused
+
+    plan = load_plan("example:gearbox")
+    engine = OrderEngine(plan)
+    seen = []
+    policy = Opportunistic(budget=0.05)
+    inner = policy._within_budget
+
+    def spy(*args):
+        seen.append(gc.isenabled())
+        return inner(*args)
+
+    policy._within_budget = spy
+    was = gc.isenabled()
+    try:
+        for enabled in (True, False):
+            (gc.enable if enabled else gc.disable)()
+            policy.choose_at(engine, 0, engine.all_strategies, (), 1, tuple(plan.part_ids[:2]))
+            assert seen.pop() is False
+            assert gc.isenabled() is enabled
+            with collector_paused():
+                with collector_paused():
+                    assert not gc.isenabled()
+                assert not gc.isenabled()        # the outer pause still holds
+            assert gc.isenabled() is enabled
+    finally:
+        (gc.enable if was else gc.disable)()
+
+
 def test_a_budget_must_be_positive():
     with pytest.raises(ValueError):
         Opportunistic(budget=0)

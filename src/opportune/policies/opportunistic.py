@@ -38,7 +38,8 @@ from fractions import Fraction
 from opportune.engine.count import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.sampling import CompletionChains
-from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Candidate, Decision, Estimate, shared_action
+from opportune.policies.base import (DONE, SHAKE, Action, Candidate, Decision, DecidesOnMasks, Estimate, collector_paused,
+                                     shared_action)
 
 MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
 EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
@@ -237,6 +238,12 @@ class Opportunistic(DecidesOnMasks):
     # ------------------------------------------------------------ within a budget
 
     def _budgeted(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
+        """The rule within the budget (:meth:`_within_budget`), with the garbage collector paused: a
+        collection waits for the next look (see :func:`~opportune.policies.base.collector_paused`)."""
+        with collector_paused():
+            return self._within_budget(engine, mask, consistent, buffer, free, visible)
+
+    def _within_budget(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
         """The rule within the budget.  Exact counts first while they have been quick; where they have
         been slow (a large plan's early states), a short estimate first, which ends the decision if it is
         already sure (probability >= SURE of being the exact rule's choice), then the exact attempt, then

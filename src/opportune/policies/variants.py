@@ -29,7 +29,8 @@ from dataclasses import replace
 
 from opportune.engine.count import BudgetExceeded
 from opportune.engine.sampling import prob_positive
-from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, Estimate, shared_action
+from opportune.policies.base import (DONE, SHAKE, Action, DecidesOnMasks, Decision, Estimate, collector_paused,
+                                     shared_action)
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.opportunistic import (_CLOSE, INDIFFERENT, MARGIN, SURE, Opportunistic, _How, _join,
                                               _mixed)
@@ -82,6 +83,12 @@ class Slack(BinFirst):
                 f"minus the installs it waits for, minus {self.weight:g} per step waiting on it)")
 
     def _how(self, engine, mask, consistent, buffer, free, visible):
+        if self.total_budget is None:
+            return self._slack_how(engine, mask, consistent, buffer, free, visible)
+        with collector_paused():    # the whole budgeted decision, the rule's part and the slack's
+            return self._slack_how(engine, mask, consistent, buffer, free, visible)
+
+    def _slack_how(self, engine, mask, consistent, buffer, free, visible):
         start = time.perf_counter()
         action, how = super()._how(engine, mask, consistent, buffer, free, visible)
         if action.kind != "buffer" or len(set(visible)) == 1:
