@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import subprocess
 import sys
@@ -197,6 +198,28 @@ def test_count_states_a_wide_estimate_as_an_order_of_magnitude(monkeypatch, rel_
     result = runner.invoke(app, ["count", str(GEARBOX)])
     assert result.exit_code == 0, result.output
     assert words in result.output and absent not in result.output
+
+
+@pytest.mark.parametrize("log10,rel_error,words", [
+    (403.2017, 0.2, "about 1.5911e+403 admissible sequences (log10 403.202)"),
+    (403.2017, 5.6, "at most 1.1e+404"),
+    (396.5, math.inf, "its runs disagree too much to bound it"),
+    (float("nan"), math.inf, "not counted"),
+])
+def test_count_states_an_estimate_past_a_float_by_its_logarithm(monkeypatch, log10, rel_error, words):
+    """A plan of a few hundred steps has more than 1.8e308 sequences: the estimate is stated from its
+    logarithm (never "inf" or "nan"), in the text and in the JSON."""
+    from opportune.engine.schedule import CountResult, Schedule
+
+    monkeypatch.setattr(Schedule, "count_result", lambda self, **kw: CountResult(
+        math.inf, exact=False, rel_error=rel_error, confidence=0.95, method="smc", log10_value=log10))
+    result = runner.invoke(app, ["count", str(GEARBOX)])
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert words in text and "inf" not in text.replace("information", "")
+    doc = json.loads(runner.invoke(app, ["count", str(GEARBOX), "--json"]).stdout)
+    assert doc["rel_error"] == (None if math.isinf(rel_error) else rel_error)
+    assert doc["log10"] == (None if math.isnan(log10) else round(log10, 6))
 
 
 def test_count_after_an_unknown_part_answers_in_json_when_asked():

@@ -6,6 +6,7 @@ down-set DP and the plain recursion; budgets stop a count instead of letting it 
 
 from __future__ import annotations
 
+import math
 import random
 import time
 from unittest.mock import patch
@@ -193,6 +194,26 @@ def test_tiny_time_limit_on_a_hard_order_returns():
     result = Schedule(engine).count_result(time_limit=0.5)
     assert time.perf_counter() - t < 10.0
     assert not result.exact and result.method != "exact"
+
+
+def test_an_estimate_past_a_float_keeps_its_logarithm():
+    """Past 1.8e308 sequences (here about 10^360) the estimate's float is inf, but its log10 is kept
+    (it used to be inf too, and the command said "about inf admissible sequences")."""
+    from opportune import make_plan
+    from opportune.engine import OrderEngine, Schedule
+
+    p = sparse_order(240, 3, 5)
+    ids = [f"t{i}" for i in range(p.n)]
+    requires: dict[str, list[str]] = {}
+    for a, b in p.cover_pairs():
+        requires.setdefault(ids[b], []).append(ids[a])
+    plan = make_plan(ids, requires)
+    result = Schedule(OrderEngine(plan, time_limit=0.05)).count_result(time_limit=4.0)
+    assert not result.exact
+    assert math.isfinite(result.log10) and result.log10 > 308
+    assert result.value == math.inf
+    # and below the 240! sequences of 240 unrelated steps
+    assert result.log10 < math.lgamma(241) / math.log(10)
 
 
 def test_an_estimate_over_several_strategies_states_the_joint_confidence(monkeypatch):

@@ -9,6 +9,7 @@ never with a traceback.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
@@ -287,29 +288,46 @@ def count(
             "parts": len(plan.parts),
             "strategies": len(plan.strategies),
             "after": prefix,
-            "sequences": decimal(result.value) if result.exact else f"{result.value:.6e}",
-            "log10": round(result.log10, 6),
+            "sequences": decimal(result.value) if result.exact else
+            (_sci(result.log10, 6) if math.isfinite(result.log10) else None),
+            "log10": round(result.log10, 6) if math.isfinite(result.log10) else None,
             "exact": result.exact,
         }
-        if not result.exact:
-            doc.update(rel_error=result.rel_error, confidence=result.confidence, method=result.method)
+        if not result.exact:    # null, not a non-standard Infinity, where the runs gave no bound
+            doc.update(rel_error=result.rel_error if math.isfinite(result.rel_error) else None,
+                       confidence=result.confidence, method=result.method)
         print(json.dumps(doc, indent=2))
         return
     state = f" after {' '.join(prefix)}" if prefix else ""
     if result.exact:
         _out().print(f"{_escape(plan.name)}{state}: {decimal(result.value)} admissible sequences "
                      f"(log10 {result.log10:.3f})")
+    elif math.isnan(result.log10):
+        _out().print(f"{_escape(plan.name)}{state}: not counted — the exact count exceeded the budget and the "
+                     f"estimate ({result.method}) did not finish a run within it: allow more time with --time-limit")
     elif result.rel_error < 1:
-        _out().print(f"{_escape(plan.name)}{state}: about {result.value:.4e} admissible sequences "
+        _out().print(f"{_escape(plan.name)}{state}: about {_sci(result.log10, 4)} admissible sequences "
                      f"(log10 {result.log10:.3f}) — ESTIMATE, ±{100 * result.rel_error:.2f}% at "
                      f"{100 * result.confidence:.0f}% confidence ({result.method}); the exact count exceeded the budget")
     else:
         # an interval of ±100% or more bounds nothing from below: say what is known, not a percentage
-        high = result.value * (1 + result.rel_error)
-        _out().print(f"{_escape(plan.name)}{state}: about {result.value:.1e} admissible sequences "
-                     f"(log10 {result.log10:.1f}) — ESTIMATE, only the order of magnitude is known: at most "
-                     f"{high:.1e} at {100 * result.confidence:.0f}% confidence ({result.method}); the exact count "
-                     f"exceeded the budget (a longer --time-limit narrows it)")
+        bound = (f"at most {_sci(result.log10 + math.log10(1 + result.rel_error), 1)} at "
+                 f"{100 * result.confidence:.0f}% confidence" if math.isfinite(result.rel_error) else
+                 "its runs disagree too much to bound it")
+        _out().print(f"{_escape(plan.name)}{state}: about {_sci(result.log10, 1)} admissible sequences "
+                     f"(log10 {result.log10:.1f}) — ESTIMATE, only the order of magnitude is known: {bound} "
+                     f"({result.method}); the exact count exceeded the budget (a longer --time-limit narrows it)")
+
+
+def _sci(log10: float, digits: int) -> str:
+    """A positive number given by its log10, in scientific notation, however large (``1.2346e+403``)."""
+    if not math.isfinite(log10):
+        return "nan" if math.isnan(log10) else ("0" if log10 < 0 else "inf")
+    exponent = math.floor(log10)
+    mantissa = 10 ** (log10 - exponent)
+    if round(mantissa, digits) >= 10:       # 9.99995 rounds up to the next power of ten
+        mantissa, exponent = mantissa / 10, exponent + 1
+    return f"{mantissa:.{digits}f}e{exponent:+03d}"
 
 
 # ---------------------------------------------------------------- graph

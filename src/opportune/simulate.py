@@ -590,7 +590,9 @@ def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: 
     engine = OrderEngine(config.plan)
     prepared = prepared or prepare(config, engine)
     workers = workers if workers is not None else _default_workers()
-    size = chunk_size or max(50, min(2000, config.trials // max(1, 4 * workers)))
+    # about four chunks per worker, so that the last ones end together (but not so small that handing them
+    # out costs more than they take)
+    size = chunk_size or max(10, min(2000, config.trials // max(1, 4 * workers)))
     results: dict[str, list[TrialResult]] = {s: [] for s in config.strategies}
     seconds: dict[str, float] = {}
     interrupted = False

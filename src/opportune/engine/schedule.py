@@ -65,11 +65,38 @@ class CountResult:
     rel_error: float = 0.0
     confidence: float = 1.0
     method: str = "exact"
+    #: ``log10`` of an estimate, kept beside ``value``: an estimate past 1.8e308 (a plan of a few
+    #: hundred steps) is ``inf`` as a float
+    log10_value: float | None = None
 
     @property
     def log10(self) -> float:
+        if self.log10_value is not None:
+            return self.log10_value
         return log10_int(self.value) if isinstance(self.value, int) else (
             math.log10(self.value) if self.value > 0 else float("-inf"))
+
+
+def _signed_sum_log10(parts: list[tuple[int, float, float]]) -> tuple[float, float]:
+    """``(log10 of the sum, its relative error)`` of terms given as ``(sign, log10 of the value,
+    relative error)``, the errors adding up; in log space, since the values may be far past a float
+    (nan, with an infinite error, if the sum is not positive or a term is unknown).
+
+    >>> log10, rel = _signed_sum_log10([(1, 400.0, 0.1), (-1, 399.0, 0.1)])
+    >>> round(log10, 6), round(rel, 6)      # 10^400 - 10^399 = 9 × 10^399, errors 10^399 + 10^398
+    (399.954243, 0.122222)
+    """
+    if not parts or any(math.isnan(lg) for _, lg, _ in parts):
+        return float("nan"), math.inf
+    top = max(lg for _, lg, _ in parts)
+    if top == -math.inf:
+        return float("nan"), math.inf
+    total = sum(sign * 10.0 ** (lg - top) for sign, lg, _ in parts)
+    # an unbounded error stays unbounded however small its term looks (its size is what is unknown)
+    err = sum(rel if math.isinf(rel) else rel * 10.0 ** (lg - top) for _, lg, rel in parts if rel)
+    if not total > 0:
+        return float("nan"), math.inf
+    return top + math.log10(total), err / total
 
 
 def decimal(n: int) -> str:
@@ -760,7 +787,7 @@ class Schedule:
         from opportune.engine.estimate import estimate_count
 
         remaining = self.engine.full & ~self.mask
-        value, abs_err, missed, methods = 0.0, 0.0, 0.0, set()
+        missed, methods, parts = 0.0, set(), []
         exact: int | None = 0
         terms = list(self.engine._terms(self.consistent))
         for i, (sign, counter) in enumerate(terms):
@@ -779,17 +806,16 @@ class Schedule:
                                  time_limit=share / 2, overrun=share / 2, seed=seed, counter=counter,
                                  exact_memo=0, particles=particles, confidence=1 - 0.05 / len(terms), **hub)
             exact = None if exact is None or est.exact is None else exact + sign * est.exact
-            value += sign * est.value
-            abs_err += est.rel_error * est.value
+            parts.append((sign, est.log10_value, est.rel_error))
             if est.exact is None:
                 missed += 1 - est.confidence
             methods.add(est.method)
         if exact is not None:           # every term was counted exactly after all (through a hub)
             return CountResult(exact)
-        rel = abs_err / value if value > 0 else float("inf")
         # the intervals of the terms add up; they all hold at once with probability >= 1 - sum(misses)
-        return CountResult(value, exact=False, rel_error=rel, confidence=max(0.0, 1 - missed),
-                           method="+".join(sorted(methods)))
+        log10, rel = _signed_sum_log10(parts)
+        return CountResult(10.0 ** log10 if log10 < 308 else math.inf, exact=False, rel_error=rel,
+                           confidence=max(0.0, 1 - missed), method="+".join(sorted(methods)), log10_value=log10)
 
     def options(self) -> dict[str, int]:
         """For each installable part, how many admissible completions remain after installing it.
