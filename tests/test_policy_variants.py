@@ -129,6 +129,21 @@ def test_lookahead_within_a_budget_goes_on_from_where_it_stopped():
     assert marked > 0 and ahead.last_cost is not None     # it did not fit at first, and then it did
 
 
+def test_lookahead_past_the_engines_deadline_decides_as_its_base():
+    """A service look bounds every count of the engine by one deadline; when the programme's counts run
+    past it (a loaded machine), the decision is the base's within what is left, not an error (it was a
+    503 'counting_budget_exceeded' on the gearbox, once in a full test run)."""
+    import time
+
+    seq = Sequencer(load_plan(GEARBOX), policy=Lookahead(budget=0.05, visible=2))
+    engine = seq.state.schedule.engine
+    look = tuple(seq.plan.part_ids[:2])
+    with engine.deadline(time.perf_counter() - 1):
+        decision = seq.policy.decide(seq.state, look)
+    assert decision.action.kind in ("install", "buffer", "shake")
+    assert "base rule" in decision.rule and "did not finish" in decision.rule
+
+
 def test_slack_estimates_its_positions_when_they_do_not_fit_and_says_so(monkeypatch):
     """Within a budget the slack's expected positions may be estimated: the decision is then marked
     estimated, with each visible part's slack and an error, and it mostly agrees with the exact slack."""

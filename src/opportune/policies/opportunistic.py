@@ -245,10 +245,11 @@ class Opportunistic(DecidesOnMasks):
 
     def _within_budget(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
         """The rule within the budget.  Exact counts first while they have been quick; where they have
-        been slow (a large plan's early states), a short estimate first, which ends the decision if it is
-        already sure (probability >= SURE of being the exact rule's choice), then the exact attempt, then
-        the estimate again with what is left of the budget.  Where exact attempts have been failing, the
-        estimate goes on instead of trying them.
+        been slow (a large plan's early states), a short estimate first, which ends the decision if it
+        settles it (:attr:`_How.settled`: sure, or no other candidate better by more than INDIFFERENT),
+        then the exact attempt, then the estimate again with what is left of the budget.  Where exact
+        attempts have been failing, the estimate goes on instead of trying them; where short estimates
+        have mostly not settled and exact attempts still fit, they are skipped.
 
         How slow exact attempts have been is kept per kind of decision and per band of steps remaining:
         on an assembly the cost of exact counts follows how far it has come (ARC111's expected positions

@@ -266,6 +266,9 @@ class Lookahead(DecidesOnMasks):
                 return action
             except OutOfTime:
                 pass                        # this decision is the base's; the next one goes on from here
+            except BudgetExceeded as exc:   # a count of the programme past the engine's deadline (a service
+                if exc.reason != "time":    # look's): likewise; past a memory budget, the plan is too large
+                    self._too_large = True
             except OptimalTooLarge:
                 self._too_large = True      # a large plan: decide as the base does from now on
             finally:
