@@ -495,10 +495,11 @@ _WORKER_CACHE: dict = {}
 
 def run_chunk(config: StudyConfig, prepared: Prepared, strategy: str, start: int, stop: int) -> list[tuple]:
     """Trials ``start .. stop-1`` of one strategy (a unit of work for a process or a Dask worker)."""
-    key = (hash_config(config), strategy)
+    study = hash_config(config)
+    key = (study, strategy)
     runner = _WORKER_CACHE.get(key)
     if runner is None:
-        engine_key = (hash_config(config), "engine")
+        engine_key = (study, "engine")
         engine = _WORKER_CACHE.get(engine_key)
         if engine is None:
             engine = _WORKER_CACHE[engine_key] = OrderEngine(config.plan)
@@ -587,7 +588,10 @@ def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: 
     the result holds the trials that finished, with ``interrupted`` set.
     """
     config.validate()
-    engine = OrderEngine(config.plan)
+    # The engine the trials use here and in forked workers (run_chunk finds it in the cache): what
+    # prepare() counts with it, they need not count again.
+    engine_key = (hash_config(config), "engine")
+    engine = _WORKER_CACHE.get(engine_key) or _WORKER_CACHE.setdefault(engine_key, OrderEngine(config.plan))
     prepared = prepared or prepare(config, engine)
     workers = workers if workers is not None else _default_workers()
     # about four chunks per worker, so that the last ones end together (but not so small that handing them
