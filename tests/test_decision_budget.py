@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import random_plans
+from conftest import CpuTime, random_plans
 from test_engine_count_scans import random_poset
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
@@ -85,10 +85,10 @@ def test_an_estimate_stops_early_when_no_candidate_is_better_by_more_than_the_ma
     plan = make_plan([{"id": p} for p in ("x", "a", "y", "b", "z")], {"a": ["x"], "b": ["y"]})
     engine = OrderEngine(plan)
     policy = Opportunistic(budget=10.0, seed=3)
-    t = time.perf_counter()
-    action, how = policy._estimate(engine, 0, engine.all_strategies, (), ("a", "b"), [], t + 5.0,
-                                   stop_when_sure=True)
-    assert time.perf_counter() - t < 2.0
+    with CpuTime() as cpu:
+        action, how = policy._estimate(engine, 0, engine.all_strategies, (), ("a", "b"), [],
+                                       time.perf_counter() + 60.0, stop_when_sure=True)
+    assert cpu.seconds < 2.0                     # long before its deadline, however busy the machine
     assert action.kind == "buffer" and not how.exact
     assert how.close and how.confidence < 0.999 and "stopped early" in how.note
     exact = Counter(engine.posets[0]).position_sums()

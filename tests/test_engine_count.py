@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 from opportune.engine.count import BudgetExceeded, Counter, count_linear_extensions
 from opportune.engine.downsets import count_by_downsets, count_downsets, position_sums_by_downsets
 from opportune.engine.poset import Poset, bits
-from conftest import salbp_dir, salbp_poset
+from conftest import CpuTime, salbp_dir, salbp_poset
 
 MAX_N = 8
 SMALL_FILES = ["MERTENS", "BOWMAN8", "JAESCHKE", "JACKSON", "MANSOOR", "MITCHELL", "HESKIA", "KILBRID"]
@@ -104,11 +104,10 @@ def test_data_folder_present():
 def test_salbp_decomposition_agrees_with_downsets(name):
     p = salbp(name)
     c = Counter(p)
-    t = time.perf_counter()
-    count = c.count()
-    cold = time.perf_counter() - t
+    with CpuTime() as cold:
+        count = c.count()
     assert count == count_by_downsets(p)
-    assert cold < 5.0            # target is < 1 s; generous for slow CI machines
+    assert cold.seconds < 5.0    # target is < 1 s; generous for slow CI machines
     if p.n <= 28:
         assert c.position_sums() == position_sums_by_downsets(p)
     # up-sets one step from the top: a simulation's first questions
@@ -250,11 +249,11 @@ def test_memo_hot_path_is_a_lookup():
         s ^= 1 << rng.choice(mins)
     grown = c.memo_size
     assert grown >= size
-    t = time.perf_counter()
-    for _ in range(20):
-        for m in seen:
-            c.count(m)
-    per_call = (time.perf_counter() - t) / (20 * len(seen))
+    with CpuTime() as cpu:
+        for _ in range(20):
+            for m in seen:
+                c.count(m)
+    per_call = cpu.seconds / (20 * len(seen))
     assert c.memo_size == grown      # no new entries: all answered from the memo
     assert per_call < 5e-6           # a dictionary lookup (a few hundred ns on the dev machine)
 
@@ -270,9 +269,9 @@ def test_position_sums_reuse_seen_vectors():
     while s:
         s ^= 1 << rng.choice(list(bits(p.minimal(s))))
         before = c.memo_size
-        t = time.perf_counter()
-        sums = c.position_sums(s)
-        worst = max(worst, time.perf_counter() - t)
+        with CpuTime() as cpu:
+            sums = c.position_sums(s)
+        worst = max(worst, cpu.seconds)
         added.append(c.memo_size - before)
         assert sum(sums.values()) == c.count(s) * s.bit_count() * (s.bit_count() + 1) // 2
     assert max(added) <= 20                 # counts plus vectors of the changed component only

@@ -53,26 +53,32 @@ def test_reuses_a_counter_memo():
 
 @pytest.mark.parametrize("name, particles, tail", [("KILBRID", 64, 10), ("TONGE70", 128, 15)])
 def test_salbp_truth_within_stated_error(name, particles, tail):
-    """Few particles and a short exact tail force real sampling (and resampling) on graphs with a known count."""
+    """Few particles and a short exact tail force real sampling (and resampling) on graphs with a known count.
+
+    It stops on accuracy (±50% after at least 12 runs), not on the clock: the same runs on a loaded
+    machine (12 and 16 runs here, 0.4 s and 1.6 s of CPU); the time limit only stops a broken estimator."""
     p = salbp(name)
     exact = Counter(p).count()
-    e = estimate_count(p, exact_memo=0, hub=0, particles=particles, tail=tail, rel_error=0.05, time_limit=4.0, seed=1)
-    assert e.method == "smc" and e.samples >= 2
+    e = estimate_count(p, exact_memo=0, hub=0, particles=particles, tail=tail, rel_error=0.5, min_runs=12,
+                       time_limit=120, seed=1)
+    assert e.method == "smc" and e.samples >= 12
     assert e.confidence == 0.95
-    assert e.rel_error < 1.0                 # ~0.15-0.6 with 10-40 runs, by machine load; it is what it is
+    assert e.rel_error <= 0.5
     assert within(e, exact), (e, exact)
     assert abs(e.log10_value - math.log10(exact)) < 0.1
 
 
 def test_random_posets_coverage():
-    """The stated 95% interval covers the truth in (nearly) every case; deterministic seeds."""
+    """The stated 95% interval covers the truth in (nearly) every case; deterministic seeds, and stops
+    on accuracy (after 20 runs at least), not on the clock, so the same runs under any load."""
     rng = random.Random(5)
     hits = 0
     cases = 12
     for k in range(cases):
         p = random_poset(rng.randint(10, 22), rng.choice([0.1, 0.2, 0.3]), rng)
         exact = Counter(p).count()
-        e = estimate_count(p, exact_memo=0, hub=0, particles=8, tail=2, rel_error=0.03, time_limit=1.0, seed=k)
+        e = estimate_count(p, exact_memo=0, hub=0, particles=8, tail=2, rel_error=0.3, min_runs=20, time_limit=60,
+                           seed=k)
         assert e.method in ("smc", "exact")
         hits += within(e, exact)
     assert hits >= cases - 2

@@ -61,7 +61,7 @@ def test_an_alias_bomb_is_refused_at_once_with_its_limit():
 
 def test_a_smaller_alias_bomb_is_refused_by_the_values_aliases_may_add():
     start = time.process_time()
-    (p,) = errors(check_text(billion_laughs(6), fmt="yaml", file="b.yaml"))
+    (p,) = errors(check_text(billion_laughs(5), fmt="yaml", file="b.yaml"))  # 9**5 values
     assert time.process_time() - start < 1.0
     assert p.code == "limit" and f"at most {loader.MAX_ALIAS_VALUES:,}" in p.message
 

@@ -20,7 +20,7 @@ import time
 import httpx
 import pytest
 
-from conftest import GEARBOX
+from conftest import GEARBOX, CpuTime
 from opportune.service.app import create_app
 from opportune.service.auth import create_token, revoke_token
 from opportune.service.config import Settings
@@ -34,6 +34,7 @@ class ThreadServer:
     def __init__(self, settings: Settings):
         import uvicorn
 
+        self.settings = settings
         self.store = Store(settings.db_url)
         self.app = create_app(settings, store=self.store)
         self.port = free_port()
@@ -155,9 +156,9 @@ HOSTILE_PLANS = [
 @pytest.mark.parametrize("name, text", HOSTILE_PLANS, ids=[h[0].replace(" ", "-") for h in HOSTILE_PLANS])
 def test_hostile_plans_are_refused_with_a_422_that_says_where(cell, name, text):
     ctype = "application/json" if text.startswith("{") else "application/yaml"
-    start = time.monotonic()
-    r = cell.post("/plans", content=text.encode(), headers={"Content-Type": ctype})
-    assert time.monotonic() - start < 5, name
+    with CpuTime() as cpu:      # the server runs in a thread of this process: its work is counted
+        r = cell.post("/plans", content=text.encode(), headers={"Content-Type": ctype})
+    assert cpu.seconds < 5, name
     err = error_of(r, 422)
     assert err["code"] == "invalid_plan" and err["problems"] and err["where"].startswith("upload"), (name, err)
     # The same through the wrapper.
@@ -203,7 +204,7 @@ def test_a_run_of_2000_unconstrained_parts_answers_within_its_budget(cell):
     r = cell.post("/plans", content=json.dumps({"parts": [f"p{i}" for i in range(2000)]}),
                   headers={"Content-Type": "application/json"})
     assert r.status_code in (200, 201), r.text
-    start = time.monotonic()
+    cpu = CpuTime.begin()
     r = post(cell, "/runs", {"plan": r.json()["id"], "policy": "paper"})   # its candidates are checked
     assert r.status_code == 201, r.text
     assert len(r.json()["count"]["value"]) == 5736  # 2000!: more digits than str() writes
@@ -211,10 +212,15 @@ def test_a_run_of_2000_unconstrained_parts_answers_within_its_budget(cell):
     assert r.status_code == 200, r.text
     decision = r.json()["decision"]
     # Interchangeable parts keep equal options: the order settles it (declaration order breaks the tie)
-    # without counting 1999! twice; those counts do not fit the 50 ms budget, and the answer says so.
+    # without counting 1999! twice.  Whether those counts fit the 50 ms budget depends on the machine and
+    # its load: they are in the answer, or the answer says they were not counted.
     assert decision["action"]["part"] == "p5" and decision["exact"] is True
-    assert "partial order" in decision["note"] and "not counted" in decision["note"]
-    assert time.monotonic() - start < 20
+    if decision["candidates"]:      # counted: equal options, the first declared first
+        first, second = decision["candidates"]
+        assert (first["part"], second["part"]) == ("p5", "p7") and first["options"] == second["options"]
+    else:
+        assert "partial order" in decision["note"] and "not counted" in decision["note"]
+    assert cpu.seconds < 20     # the server's CPU time (a thread of this process), not the machine's load
 
 
 # ---------------------------------------------------------------- the last line of defence
@@ -271,8 +277,9 @@ def test_operators_write_nothing(operator, cell, plan_id):
     assert operator.post(f"/runs/{run}/ticket").status_code == 200  # reading the dashboard stays allowed
 
 
-def read_sse(lines, until: float):
-    """(event, data) pairs from an SSE response's lines until it ends or ``until`` (monotonic) passes."""
+def read_sse(lines, until: float, count: int | None = None):
+    """(event, data) pairs from an SSE response's lines until it ends, ``count`` events have come, or
+    ``until`` (real monotonic time: only to stop a hung test) passes."""
     events, kind, data = [], None, None
     for line in lines:
         if line.startswith("event: "):
@@ -282,12 +289,32 @@ def read_sse(lines, until: float):
         elif line == "" and kind:
             events.append((kind, data))
             kind = None
+            if len(events) == count:
+                break
         if time.monotonic() > until:
             break
     return events
 
 
-def test_a_revoked_tokens_event_stream_closes_within_the_token_cache_time(server, plan_id):
+class SteppedClock:
+    """A monotonic clock that moves only when the test moves it (for the event streams' token rechecks)."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+
+def test_a_revoked_tokens_event_stream_closes_within_the_token_cache_time(server, plan_id, monkeypatch):
+    """A stream rechecks its token every token cache time (0.5 s here) on its own clock, whether events
+    flow or not.  The clock is injected, so the bound is checked however busy the machine is: revoked, a
+    busy stream goes on while its clock has not moved by the cache time, and ends with a last ``closed``
+    event at its next wake-up once it has."""
+    from opportune.service import events as event_streams
+
+    clock = SteppedClock()
+    monkeypatch.setattr(event_streams, "time", clock)    # streams opened from now on read this clock
     token_id, token = server.token(cell="cell-rev")
     _other_id, other = server.token(cell="cell-rev")  # the cell's other token drives the run on
     headers = {"Authorization": f"Bearer {token}"}
@@ -312,14 +339,16 @@ def test_a_revoked_tokens_event_stream_closes_within_the_token_cache_time(server
                     while next(lines) != "event: look":  # the stream is delivering
                         pass
                     revoke_token(server.store, token_id)
-                    revoked_at = time.monotonic()
-                    rest = read_sse(lines, until=revoked_at + 10)
-                    closed_after = time.monotonic() - revoked_at
+                    # within the cache time the stream goes on (the waits below only stop a hung test)
+                    within = read_sse(lines, until=time.monotonic() + 30, count=6)
+                    clock.now += server.settings.token_cache_seconds
+                    rest = read_sse(lines, until=time.monotonic() + 30)
                 finally:
                     stop.set()
                     driver.join(10)
+    assert len(within) == 6 and "closed" not in {kind for kind, _ in within}, within
     assert rest and rest[-1][0] == "closed", rest[-3:]
-    assert closed_after < 0.5 + 2.0, closed_after  # token_cache_seconds = 0.5, plus a poll and slack for a busy machine
+    assert [kind for kind, _ in rest].count("closed") == 1
 
 
 # ---------------------------------------------------------------- a real `opportune serve`

@@ -11,13 +11,12 @@ from __future__ import annotations
 import itertools
 import json
 import pickle
-import time
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import run_cli
+from conftest import CpuTime, run_cli
 from opportune.engine.relax import (MAX_COMPONENT_ARCS, RelaxRefused, RelaxTimeout, min_feedback_arc_set,
                                     prefix_violations, relax)
 from opportune.formats.loader import check_text, read_plan
@@ -333,9 +332,9 @@ def test_a_dense_200_part_cyclic_plan_is_refused_quickly(tmp_path):
         lines.append(f"  p{v}: [{', '.join(f'p{u}' for u in range(n) if u != v)}]")
     path = tmp_path / "dense.yaml"
     path.write_text("\n".join(lines) + "\n")
-    start = time.monotonic()
-    result = run_cli("relax", path)
-    assert time.monotonic() - start < 20
+    with CpuTime() as cpu:
+        result = run_cli("relax", path)
+    assert cpu.seconds < 20
     assert result.exit_code == 1 and "over the relaxation's limits" in result.stderr
     assert not result.stdout
 
@@ -349,13 +348,13 @@ def test_a_large_sparse_knot_is_answered_within_the_time_limit():
     while len(arcs) < MAX_COMPONENT_ARCS // 2:          # ... with random chords, heavier
         u, v = rng.sample(range(n), 2)
         arcs.setdefault((u, v), rng.randint(1, 5))
-    start = time.monotonic()
     message = ""
-    try:
-        weight, cut = min_feedback_arc_set(range(n), arcs, time_limit=1.0)
-    except RelaxTimeout as exc:
-        weight, cut, message = exc.weight, exc.arcs, str(exc)
-    assert time.monotonic() - start < 5
+    with CpuTime() as cpu:
+        try:
+            weight, cut = min_feedback_arc_set(range(n), arcs, time_limit=1.0)
+        except RelaxTimeout as exc:
+            weight, cut, message = exc.weight, exc.arcs, str(exc)
+    assert cpu.seconds < 5
     assert acyclic(range(n), [a for a in arcs if a not in set(cut)])       # feasible either way
     assert weight == sum(arcs[a] for a in cut)
     assert not message or "not proven minimal" in message

@@ -13,8 +13,8 @@ alternate again until every run is complete.  Then:
 * each run's log is 1, 2, ... N with the run's count at N, and replays, in
   both processes and in a fresh one, to the trace the library itself decides;
 * an event stream held open on B saw every change of its run — those posted
-  to A included — in order, the first ones within a second (PostgreSQL
-  LISTEN/NOTIFY; the streams' own poll takes 2 s);
+  to A included — in order, the first ones pushed by PostgreSQL's
+  LISTEN/NOTIFY (the streams' own poll is set to an hour);
 * a token both processes had checked, revoked as the load starts, is refused by
   both within the token cache time (10 s).
 
@@ -161,25 +161,37 @@ def drive(cell: Cell, run_id: int, rng: random.Random, acked: list, phase: list,
         errors.append(exc)
 
 
-def watch_revocation(procs, token: str, revoked_at: float, refused: dict, patience: float):
-    """Ask both processes with a revoked token until each refuses it (or ``patience`` is over); note when."""
-    while len(refused) < len(procs) and time.monotonic() - revoked_at < patience:
+def watch_revocation(procs, token: str, revoked_at: float, answers: list, patience: float):
+    """Ask both processes with a revoked token, noting ``(process, seconds after the revocation the request
+    was sent, status)``, until each has answered a request sent after the token cache time (or ``patience``
+    is over: that only stops a hung test).
+
+    A process's cache entry for the token was made before the revocation, so a request *sent* after the
+    cache time reaches a process whose entry has expired, however long the machine takes to deliver and
+    answer it: "refused within the cache time" is checked on the order of events, not on how busy the
+    machine is."""
+    late = set()
+    while len(late) < len(procs) and time.monotonic() - revoked_at < patience:
         for name, svc in procs.items():
-            if name in refused:
+            if name in late:
                 continue
+            sent = time.monotonic() - revoked_at
             try:
-                r = httpx.get(svc.url + "/cells", headers={"Authorization": f"Bearer {token}"}, timeout=5)
+                r = httpx.get(svc.url + "/cells", headers={"Authorization": f"Bearer {token}"}, timeout=30)
             except httpx.TransportError:
                 continue
-            if r.status_code == 401:
-                refused[name] = time.monotonic() - revoked_at
+            answers.append((name, sent, r.status_code))
+            if sent > TOKEN_CACHE_SECONDS:
+                late.add(name)
         time.sleep(0.2)
 
 
 def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
-    started = time.monotonic()
     url = postgres.database("scaleout")
-    procs = {name: ServiceProcess(url, log=tmp_path / f"{name}.log", extra_args=("--no-access-log",))
+    # The streams' own poll is an hour: whatever reaches B's stream from A came by NOTIFY, however loaded
+    # the machine is (no wall-clock bound needed to tell a push from a poll).
+    procs = {name: ServiceProcess(url, log=tmp_path / f"{name}.log",
+                                  extra_args=("--no-access-log", "--poll-seconds", "3600"))
              for name in ("A", "B")}
     n = 20       # runs, one per cell, each driven by its own thread
     threads: list[threading.Thread] = []
@@ -208,9 +220,9 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
             for svc in procs.values():
                 assert httpx.get(svc.url + "/cells", headers={"Authorization": f"Bearer {watcher}"}).status_code == 200
             revoke_token(store, watcher_id)  # both processes have it in their token caches
-            refused: dict = {}
+            refusals: list = []
             revocation = threading.Thread(target=watch_revocation, daemon=True,
-                                          args=(procs, watcher, time.monotonic(), refused, TOKEN_CACHE_SECONDS + 5))
+                                          args=(procs, watcher, time.monotonic(), refusals, TOKEN_CACHE_SECONDS + 60))
             revocation.start()
 
             # An event stream on B, open from the first event of run 0 to its completion.
@@ -220,7 +232,7 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
                                         daemon=True)
             streamer.start()
             assert opened.wait(15)
-            # Changes posted to A reach B's stream at once (NOTIFY), not at B's next poll (2 s).
+            # Changes posted to A reach B's stream by NOTIFY: B's next poll is an hour away.
             acked: list[list[dict]] = [[] for _ in range(n)]
             for what, body in (("looks", {"visible": ["rl", "ra"]}), ("outcomes", {"outcome": "success"})):
                 key = uuid.uuid4().hex
@@ -230,10 +242,9 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
                 acked[0].append({"key": key, "seq": r.json()["seq"], "text": r.text, "by": "A", "epoch": 0,
                                  "replayed": False})
                 while not any(ev[2].get("seq") == r.json()["seq"] for ev in seen if ev[1] != "snapshot"):
-                    assert time.monotonic() - t0 < 10, "B's stream never showed the change committed by A"
+                    # a stop-gap for a hung test, not the bound tested (that is the hour-long poll above)
+                    assert time.monotonic() - t0 < 120, f"B's stream never showed A's {what[:-1]} (no NOTIFY)"
                     time.sleep(0.005)
-                arrived = next(ev[0] for ev in seen if ev[1] != "snapshot" and ev[2].get("seq") == r.json()["seq"])
-                assert arrived - t0 < 1.0, f"B's stream showed A's {what[:-1]} after {arrived - t0:.2f} s"
 
             # The load: twenty cells, each request on the other process than the one before. Runs 0-9 start
             # now; A is killed under their load and restarted; runs 10-19 start then, and B is killed under
@@ -271,7 +282,7 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
             streamer.join(60)      # run 0 complete: B may go now
             assert not streamer.is_alive(), "run 0 did not complete"
             # B must stay up while the revoked token's refusal is timed on it, so the second wave starts after
-            revocation.join(TOKEN_CACHE_SECONDS + 10)
+            revocation.join(TOKEN_CACHE_SECONDS + 65)
             for t in threads[10:]:
                 t.start()
             wait_for(40, "in the second wave", among=range(10, n))
@@ -322,12 +333,13 @@ def test_two_processes_kill_9_under_load_lose_nothing(tmp_path, postgres):
         assert changes == list(range(1, len(acked[0]) + 1))
         assert {ev for ev, _d in events_seen[1:-1]} == {"look", "outcome"}
 
-        # The revoked token: refused by both processes within the token cache time.
-        assert set(refused) == {"A", "B"}, refused
-        assert refused["B"] <= TOKEN_CACHE_SECONDS + 1.5, refused
+        # The revoked token: refused by both processes within the token cache time (every request sent
+        # after it is a 401; each process answered at least one such request).
+        late = [(name, status) for name, sent, status in refusals if sent > TOKEN_CACHE_SECONDS]
+        assert {name for name, _ in late} == {"A", "B"}, refusals
+        assert all(status == 401 for _, status in late), refusals
         for svc in procs.values():
             assert "internal error" not in svc.log_text() and "Traceback" not in svc.log_text()
-        assert time.monotonic() - started < 150
     finally:
         stop.set()
         for svc in procs.values():

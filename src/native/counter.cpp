@@ -10,6 +10,9 @@
 // integers kept as 64-bit limbs in one arena; the memo is an open-addressing hash table.  A call
 // stops with a status (no exception crosses into Python) when it would add more than `max_new`
 // entries or outlive its time limit; what it stored stays, like the Python counter's memo.
+// The clock is read by work done, not by entries: every loop whose length depends on the input
+// (scans, components, big-integer products and sums, table and arena growth) adds its word
+// operations to a tally, and the clock is read each CHECK_WORK of them (a few microseconds).
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -300,6 +303,9 @@ class Counter {
         return py::make_tuple(0, to_bytes(v), added_);
     }
 
+    // Word operations done by the last call (a test measures how often the clock is read with it).
+    long long work() const { return work_; }
+
     py::object lookup(const std::string& mask) const {
         B s = unpack(mask);
         if (s.at_most_one()) return to_bytes(Val{0, 1});
@@ -316,7 +322,15 @@ class Counter {
         Limbs v(value.size() / 8);
         std::memcpy(v.data(), value.data(), value.size());
         trim(v);
+        timed_ = false;     // not the last call's deadline: a Stop must never leave put()
         store(s, v);
+    }
+
+    // Between decisions: grow the table now if `more` new entries would make it grow, so that a
+    // decision never pays for the copy (a table of millions of slots takes tens of milliseconds).
+    void reserve(long long more) {
+        timed_ = false;
+        while (2 * (size_ + size_t(std::max(0LL, more))) > table_.size()) grow();
     }
 
     // ------------------------------------------------------------ tail distributions (hub.py)
@@ -360,9 +374,13 @@ class Counter {
 
     size_t size() const { return size_; }
     size_t memory() const {
-        return table_.bytes() + arena_cap_ * sizeof(u64);
+        return table_.bytes() + arena_cap_ * sizeof(u64) + next_.bytes() + arena_next_.bytes();
     }
     void reset() {
+        next_ = Buffer<Slot>();
+        next_at_ = 0;
+        arena_next_ = Buffer<u64>();
+        arena_next_at_ = 0;
         table_ = Buffer<Slot>(1024);
         size_ = 0;
         arena_ = Buffer<u64>(1 << 16);  // arena[0] = 1: the value of every set of at most one element and of chains
@@ -372,9 +390,24 @@ class Counter {
     }
 
    private:
+    // Word operations between two readings of the clock: a few microseconds of work.
+    static constexpr long long CHECK_WORK = 1024;
+
+    // Count `units` word operations of work; past the deadline, stop (status 2).  Callers only call
+    // it where a stop leaves the memo whole (before storing, or between stored entries).
+    void tick(long long units) {
+        work_ += units;
+        if (work_ >= next_check_) {
+            next_check_ = work_ + CHECK_WORK;
+            if (timed_ && Clock::now() > deadline_) throw Stop{2};
+        }
+    }
+
     void start_budget(long long max_new, double seconds, int direction) {
         added_ = 0;
         calls_ = 0;
+        work_ = 0;
+        next_check_ = CHECK_WORK;
         max_new_ = max_new < 0 ? std::numeric_limits<long long>::max() : max_new;
         timed_ = seconds >= 0 && seconds < 1e9;
         if (timed_) {
@@ -470,6 +503,7 @@ class Counter {
                 const Limbs& k = C(N - 1 - c, na - 1 - int(i));
                 mul_into(tmp, k.data(), k.size(), term);
                 add_into(out[c], term.data(), term.size());
+                tick((long long)(a[i].size() + C(c, int(i)).size() + k.size()) * (b[j].size() + 4));
             }
         }
     }
@@ -485,6 +519,7 @@ class Counter {
         if (timed_ && Clock::now() > deadline_) throw Stop{2};
         const B& marks = tm.marks;
         int n = s.count();
+        tick(3LL * n * W);
         B mins = B::zero(), cuts = B::zero();
         int top_cut = -1;
         s.each([&](int x) {
@@ -589,7 +624,7 @@ class Counter {
     }
 
     // the connected components of the comparability graph on s (breadth-first, O(|s| W))
-    void components(const B& s, std::vector<B>& comps) const {
+    void components(const B& s, std::vector<B>& comps) {
         comps.clear();
         B rest = s;
         while (!rest.none()) {
@@ -602,10 +637,12 @@ class Counter {
                 frontier.each([&](int y) { grow = grow | (nbr_[y] & rest); });
                 frontier = grow.without(comp);
                 comp = comp | grow;
+                tick(4 * W);
             }
             rest = rest.without(comp);
             comps.push_back(comp);
         }
+        tick((long long)s.count() * W);     // every element was in one frontier
     }
 
     static B single(int i) {
@@ -630,10 +667,15 @@ class Counter {
     std::vector<Limbs> acc_, tmp_;  // scratch per recursion depth
     std::vector<std::vector<B>> comps_;
     Buffer<Slot> table_;
+    Buffer<Slot> next_;          // the doubled table while grow() fills it (empty otherwise)
+    size_t next_at_ = 0;         // slots of table_ copied into next_ so far
+    Buffer<u64> arena_next_;     // the larger arena while it is being filled
+    size_t arena_next_at_ = 0;
     size_t size_ = 0;
     Buffer<u64> arena_;
     size_t arena_size_ = 0, arena_cap_ = 0;
     long long added_ = 0, max_new_ = 0;
+    long long work_ = 0, next_check_ = 0;
     bool timed_ = false;
     Clock::time_point deadline_;
     int dir_ = 0;
@@ -656,34 +698,60 @@ class Counter {
     }
     Slot* find(const B& s) { return const_cast<Slot*>(static_cast<const Counter*>(this)->find(s)); }
 
+    // Double the table.  A table of millions of slots takes tens of milliseconds to copy: the copy
+    // reads the clock as it goes and, past the deadline, stops the call with the old table whole
+    // and still in use.  The copy made so far is kept and the next call that must grow goes on from
+    // there (nothing is stored in between: every store grows first), so short calls in a row still
+    // make progress, and growing never takes a timed call past its deadline.
     void grow() {
-        Buffer<Slot> old(table_.size() * 2);
-        old.swap(table_);
-        size_t m = table_.size() - 1;
-        for (size_t j = 0; j < old.size(); ++j) {
-            const Slot& sl = old[j];
+        if (next_.size() != table_.size() * 2) {
+            next_ = Buffer<Slot>(table_.size() * 2);
+            next_at_ = 0;
+        }
+        size_t m = next_.size() - 1;
+        for (; next_at_ < table_.size(); ++next_at_) {
+            size_t j = next_at_;
+            if (!(j & 1023)) tick(1024 * (W + 2));     // before slot j is copied: a stop resumes at j
+            const Slot& sl = table_[j];
             if (!sl.len) continue;
             size_t i = sl.key.hash() & m;
-            while (table_[i].len) i = (i + 1) & m;
-            table_[i] = sl;
+            while (next_[i].len) i = (i + 1) & m;
+            next_[i] = sl;
         }
+        table_.swap(next_);
+        next_ = Buffer<Slot>();
+        next_at_ = 0;
     }
 
     Val store(const B& s, const Limbs& value) {
+        // grow first (either may stop the call, and then nothing of this entry is stored)
+        if (2 * (size_ + 1) > table_.size()) grow();
         Val v{arena_size_, (std::uint32_t)value.size()};
         if (value.size() == 1 && value[0] == 1) {
             v = Val{0, 1};
         } else {
             if (arena_size_ + value.size() > arena_cap_) {
-                Buffer<u64> more(2 * (arena_size_ + value.size()));
-                std::memcpy(more.data(), arena_.data(), arena_size_ * sizeof(u64));
-                arena_.swap(more);
+                // copied in pieces with the clock read between them, and resumed by the next call
+                // after a stop, like grow() (the arena does not change until the copy is done)
+                if (arena_next_.size() < arena_size_ + value.size() || arena_next_at_ > arena_size_) {
+                    arena_next_ = Buffer<u64>(2 * (arena_size_ + value.size()));
+                    arena_next_at_ = 0;
+                }
+                const size_t piece = size_t(1) << 15;
+                while (arena_next_at_ < arena_size_) {
+                    tick((long long)piece / 4);
+                    size_t k = std::min(piece, arena_size_ - arena_next_at_);
+                    std::memcpy(arena_next_.data() + arena_next_at_, arena_.data() + arena_next_at_, k * sizeof(u64));
+                    arena_next_at_ += k;
+                }
+                arena_.swap(arena_next_);
                 arena_cap_ = arena_.size();
+                arena_next_ = Buffer<u64>();
+                arena_next_at_ = 0;
             }
             std::memcpy(arena_.data() + arena_size_, value.data(), value.size() * sizeof(u64));
             arena_size_ += value.size();
         }
-        if (2 * (size_ + 1) > table_.size()) grow();
         Slot* slot = find(s);
         slot->key = s;
         slot->off = v.off;
@@ -700,7 +768,6 @@ class Counter {
         }
         // budget: counted when a set is entered (every entered set is stored once finished)
         if (++added_ > max_new_) throw Stop{1};
-        if (timed_ && !(added_ & 63) && Clock::now() > deadline_) throw Stop{2};
 
         B mins = B::zero(), maxs = B::zero();
         B cuts = B::zero();  // elements comparable to every other element of s
@@ -711,6 +778,7 @@ class Counter {
             if ((above_[x] & s).none()) maxs.set(x), ++nmax;
             if (s.without(nbr_[x]).is_single(x)) cuts.set(x);
         });
+        tick(4LL + 4LL * k * W);
         // direction 2: per set, the side with fewer extremal elements
         const B& ext = dir_ == 0 ? mins : dir_ == 1 ? maxs : (nmax < nmin ? maxs : mins);
         Limbs& acc = acc_[depth];
@@ -728,6 +796,7 @@ class Counter {
                 Val v = rec(block, depth + 1);
                 mul_into(acc, arena_.data() + v.off, v.len, tmp);
                 acc.swap(tmp);
+                tick((long long)acc.size() * v.len);
             };
             for (auto& [_, z] : chain) {
                 B block = rest & below_[z];
@@ -750,6 +819,7 @@ class Counter {
                 for (int d = 2; d <= ck; ++d) {
                     if (batch * (u64)d >> 32) {
                         div_small(acc, (std::uint32_t)batch);
+                        tick(2LL * acc.size());
                         batch = 1;
                     }
                     batch *= (u64)d;
@@ -761,6 +831,7 @@ class Counter {
                 Val v = rec(c, depth + 1);
                 mul_into(acc, arena_.data() + v.off, v.len, tmp);
                 acc.swap(tmp);
+                tick((long long)acc.size() * v.len);
             }
             return store(s, acc);
         }
@@ -779,6 +850,7 @@ class Counter {
             t.flip(x);
             Val v = rec(t, depth + 1);
             add_into(acc, arena_.data() + v.off, v.len);
+            tick(4LL + v.len);
         });
         return store(s, acc);
     }
@@ -799,9 +871,11 @@ void bind(py::module_& m, const char* name) {
         .def("tails_drop", &Counter<W>::tails_drop, py::arg("handle"))
         .def("tail", &Counter<W>::tail, py::arg("handle"), py::arg("mask"), py::arg("max_new"),
              py::arg("seconds"))
+        .def("work", &Counter<W>::work, "word operations done by the last count or tail")
         .def("size", &Counter<W>::size)
         .def("memory", &Counter<W>::memory)
         .def("reset", &Counter<W>::reset)
+        .def("reserve", &Counter<W>::reserve, "grow the table now for this many more entries")
         .def_property_readonly_static("words", [](py::object) { return W; });
 }
 

@@ -196,6 +196,7 @@ class Sequencer:
         self.trace: list[Row] = []
         self.finished = False
         self.warmed = warm_up == 0 or self.engine.warm_up(warm_up)
+        self.engine.maintain()
 
     # ------------------------------------------------------------ deciding
 
@@ -206,7 +207,10 @@ class Sequencer:
         ``done``; any look after that is refused.
         """
         look = self._check_ready(visible)
-        decision = self._ask(look)
+        # The engine (shared by every assembly of the plan) trims and evicts its memos only between
+        # decisions: after each outcome (see OrderEngine.deciding and OrderEngine.maintain).
+        with self.engine.deciding():
+            decision = self._ask(look)
         self._check_decision(decision, look)
         return self._pend(look, decision)
 
@@ -273,6 +277,7 @@ class Sequencer:
         if self.pending is None:
             raise OutcomeError("no action is pending")
         self.pending = None
+        self.engine.maintain()
 
     # ------------------------------------------------------------ outcomes
 
@@ -320,6 +325,8 @@ class Sequencer:
         self.trace.append(replace(self.pending, outcome=outcome if keep == "bin" or outcome != "failed"
                                   else "failed, buffered"))
         self.pending = None
+        # between looks: the memo upkeep held back during the decision (the robot is moving now)
+        self.engine.maintain()
         return state
 
     def step(self, visible: Iterable[str] = ()) -> Decision:

@@ -71,6 +71,7 @@ from itertools import islice
 from math import factorial
 from typing import Callable
 
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline  # noqa: F401 (BudgetExceeded: its documented import)
 from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
@@ -104,23 +105,6 @@ class _Factorials(dict):
 
 
 
-class BudgetExceeded(Exception):
-    """An exact count would need more new memo entries or more time than one call may use.
-
-    The counter's memo stays valid (only finished values are stored): call
-    again with a larger budget to continue where it stopped, or fall back to
-    :func:`opportune.engine.estimate.estimate_count`.
-
-    Attributes: ``reason`` (``"memo"`` or ``"time"``), ``memo_size``, ``elapsed``.
-    """
-
-    def __init__(self, message: str, *, reason: str = "memo", memo_size: int = 0, elapsed: float = 0.0):
-        self.reason = reason
-        self.memo_size = memo_size
-        self.elapsed = elapsed
-        super().__init__(message)
-
-
 class Counter:
     """Linear-extension counter for one Poset; keeps its memo for its whole life.
 
@@ -136,8 +120,11 @@ class Counter:
     time_limit : float or None
         Most seconds one call of :meth:`count` / :meth:`position_sums` may
         spend computing (None: unlimited).  The attribute ``deadline`` (a
-        ``time.perf_counter()`` value, default None) stops every call at that
-        moment as well.
+        :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()``
+        value, default None) stops every call at that moment as well, and each
+        call takes the caller's own ``deadline=``: the soonest of the three
+        wins.  Everything a call builds or calls (the reversed view, the
+        down-set programme, hub terms) runs under that same moment.
     max_total : int or None
         Memory cap on the memo as a whole (counts plus vectors; None:
         unlimited).  It never makes a call fail: when a call that has to
@@ -209,17 +196,26 @@ class Counter:
         #: recursion on the reversed order), ``downsets`` (the dynamic programme over down-sets).
         self.methods: dict[str, int] = {}
         self._rev: Counter | None = None
+        #: While True (an engine sets it for the span of a decision), a call never evicts or restarts
+        #: the memo, however large: :meth:`maintain`, between decisions, does (a call's growth is
+        #: bounded by its budget, so the memo overshoots ``max_total`` by at most one decision's work).
+        self.hold_upkeep = False
         self._shares: dict[int, int] = {}       # hard piece -> its methods' share of new entries next time
         self._ideals: dict[int, int | None] = {}    # hard piece -> its number of down-sets (None: very many)
 
     # ------------------------------------------------------------------ public API
-    def count(self, mask: int | None = None) -> int:
+    def count(self, mask: int | None = None, *, deadline: Deadline | float | None = None) -> int:
         """Exact number of linear extensions of the subposet induced on ``mask`` (default: all).
 
         ``mask`` may be any subset; in practice it is usually an up-set (what
         remains to be done).  A mask seen before is answered by one dictionary
         lookup.  Raises :class:`BudgetExceeded` if this call would add more
-        than ``max_memo`` memo entries or take more than ``time_limit`` seconds.
+        than ``max_memo`` memo entries, take more than ``time_limit`` seconds,
+        or pass ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`, or a
+        ``time.perf_counter()`` moment; the soonest of it, ``time_limit`` and the
+        attribute ``deadline`` stops the call).  Every loop of a call whose
+        length depends on the order reads the clock, so a call ends within a
+        few milliseconds of its deadline on orders of up to 10,000 elements.
 
         >>> Counter(Poset.antichain(3)).count()
         6
@@ -229,11 +225,11 @@ class Counter:
         r = self._memo.get(mask)
         if r is not None:
             return r
-        return self._count_miss(mask)
+        return self._count_miss(mask, deadline)
 
     __call__ = count
 
-    def position_sums(self, mask: int | None = None) -> dict[int, int]:
+    def position_sums(self, mask: int | None = None, *, deadline: Deadline | float | None = None) -> dict[int, int]:
         """For every element ``x`` of ``mask``: the sum over all linear extensions of the 1-based position of ``x``.
 
         ``position_sums(mask)[x] / count(mask)`` is the expected position of
@@ -254,7 +250,7 @@ class Counter:
         Each new set costs O(children) big-int operations on packed vectors;
         sets seen by earlier calls cost nothing.  Raises
         :class:`BudgetExceeded` like :meth:`count` (vectors count as memo
-        entries).
+        entries; ``deadline`` as there).
 
         >>> Counter(Poset.from_pairs(3, [(0, 1)])).position_sums()
         {0: 4, 1: 8, 2: 6}
@@ -267,7 +263,7 @@ class Counter:
         width = self._width
         v = self._vec.get(mask)
         if v is None:
-            self._start_budget()
+            self._start_budget(deadline)
             es = self._memo.get(mask)
             if es is None:
                 es = self._f(mask) if mask & (mask - 1) else 1
@@ -275,10 +271,14 @@ class Counter:
                 self._set_width(self._need_width(es))
                 width = self._width
             v = self._g(mask)
-        fmask = (1 << width) - 1
-        return {i: v >> i * width & fmask for i in bits(mask)}
+        # fields cut from the bytes once (fields are whole bytes): a shift of the whole vector per
+        # element is quadratic, a large share of a second on an order of 1,000 elements
+        wb = width // 8
+        raw = v.to_bytes(max(1, mask.bit_length()) * wb, "little")
+        return {i: int.from_bytes(raw[i * wb:(i + 1) * wb], "little") for i in bits(mask)}
 
-    def expected_positions(self, mask: int | None = None) -> dict[int, float]:
+    def expected_positions(self, mask: int | None = None, *,
+                           deadline: Deadline | float | None = None) -> dict[int, float]:
         """Expected 1-based position of each element of ``mask`` in a uniformly random linear extension.
 
         >>> Counter(Poset.from_pairs(3, [(0, 1)])).expected_positions()
@@ -286,14 +286,15 @@ class Counter:
         """
         if mask is None:
             mask = self.poset.full
-        total = self.count(mask)
-        return {x: _ratio(s, total) for x, s in self.position_sums(mask).items()}
+        total = self.count(mask, deadline=deadline)
+        return {x: _ratio(s, total) for x, s in self.position_sums(mask, deadline=deadline).items()}
 
-    def sample(self, rng, mask: int | None = None) -> list[int]:
+    def sample(self, rng, mask: int | None = None, *, deadline: Deadline | float | None = None) -> list[int]:
         """A uniformly random linear extension of ``mask`` (exact; ``rng`` is a :class:`random.Random`).
 
         Chooses the first element ``x`` with probability ``e(S - x) / e(S)``,
-        then recurses.  O(|mask| × width) memo lookups, after :meth:`count`.
+        then recurses.  O(|mask| × width) memo lookups, after :meth:`count`;
+        ``deadline`` bounds the counts it needs and is read at every step.
 
         >>> import random
         >>> Counter(Poset.chain(3)).sample(random.Random(1))
@@ -304,8 +305,10 @@ class Counter:
         below = self.poset.below
         out = []
         s = mask
+        dl = as_deadline(deadline)
         while s:
-            total = self.count(s)
+            dl.check("sampling a linear extension")
+            total = self.count(s, deadline=dl)
             r = rng.randrange(total)
             m = s
             while m:
@@ -314,7 +317,7 @@ class Counter:
                 i = b.bit_length() - 1
                 if below[i] & s:
                     continue
-                v = self.count(s ^ b)
+                v = self.count(s ^ b, deadline=dl)
                 if r < v:
                     break
                 r -= v
@@ -372,6 +375,51 @@ class Counter:
         """Number of entries in the memo (counts plus position-sum vectors)."""
         return len(self._memo) + len(self._vec) + (self._native.size() if self._native is not None else 0)
 
+    def nbytes(self) -> int:
+        """Estimated bytes this counter holds: memo, vectors, compiled memo, scan tables, its order and
+        the reversed view's (see :mod:`opportune.engine.memory`; O(1) in the memo's size).
+
+        >>> c = Counter(Poset.from_pairs(3, [(0, 1)])); c.count() == 3 and c.nbytes() > 0
+        True
+        """
+        from opportune.engine.memory import nbytes, poset_nbytes
+
+        total = nbytes(self._memo) + nbytes(self._vec) + poset_nbytes(self.poset)
+        if self._native is not None:
+            total += self._native.memory()
+        for tables in (getattr(self, "_tabs", None), getattr(self, "_ntabs", None)):
+            if tables is not None:
+                total += nbytes(tables, depth=4)
+        if self._rev is not None:           # shares this memo: its own order and tables only
+            total += poset_nbytes(self._rev.poset) + nbytes(getattr(self._rev, "_tabs", None), depth=4)
+        return total
+
+    def maintain(self) -> bool:
+        """Keep the memo within ``max_total``: evict the oldest half if it is over, restart the compiled
+        memo if it is over (entries or bytes).  True if anything was dropped.
+
+        Every call does it at its start unless ``hold_upkeep`` is set; an engine that holds it during
+        decisions calls this between them.  Complexity: O(1) when under the caps, else O(entries
+        dropped).
+
+        >>> c = Counter(Poset.antichain(3), max_total=1, native=False); _ = c.count(0b011), c.count(0b101)
+        >>> c.maintain(), c.memo_size
+        (True, 1)
+        """
+        limit = self.max_total
+        dropped = False
+        if limit is not None and len(self._memo) + len(self._vec) > limit:
+            self._evict(limit // 2)
+            dropped = True
+        if self._native is not None and self._native.over(limit):
+            self._native.reset()        # the compiled memo starts again (Python's keeps what it holds)
+            dropped = True
+        elif self._native is not None and self.hold_upkeep is False:
+            reserve = getattr(self._native._core, "reserve", None)
+            if reserve is not None:     # a table over 40% full doubles now, not at 50% within a decision
+                reserve(self._native.size() // 4)
+        return dropped
+
     def clear(self) -> None:
         """Forget every memoised value (frees memory; later calls recompute)."""
         if self._native is not None:
@@ -389,22 +437,25 @@ class Counter:
         if not isinstance(mask, int) or mask < 0 or mask & ~self.poset.full:
             raise ValueError(f"mask {mask!r} is not a subset of 0..{self.poset.n - 1}")
 
-    def _start_budget(self) -> None:
+    def _start_budget(self, deadline: Deadline | float | None = None) -> None:
         """Start the budget of one top-level call (evict if the memo is over ``max_total``;
-        switch to chunk-table scans once the memo shows they pay)."""
+        switch to chunk-table scans once the memo shows they pay).
+
+        The call stops at the soonest of ``deadline`` (the caller's), ``time_limit`` from now and
+        the attribute ``deadline``."""
         b = self._budget
         limit = self.max_memo
         b[0] = limit if limit is not None else sys.maxsize
         limit = self.time_limit
         b[1] = time.perf_counter() + limit if limit is not None else _INF
-        if self.deadline is not None and self.deadline < b[1]:
-            b[1] = self.deadline
+        for d in (self.deadline, deadline):
+            if d is not None:
+                at = d.at if d.__class__ is Deadline else as_deadline(d).at
+                if at < b[1]:
+                    b[1] = at
         b[2] = 0
-        limit = self.max_total
-        if limit is not None and len(self._memo) + len(self._vec) > limit:
-            self._evict(limit // 2)
-        if self._native is not None and self._native.over(limit):
-            self._native.reset()        # the compiled memo starts again (Python's keeps what it holds)
+        if not self.hold_upkeep:
+            self.maintain()
         self._maybe_narrow()
         if sys.getrecursionlimit() < self._depth:   # Python 3.11 frames do not use the C stack
             sys.setrecursionlimit(self._depth)
@@ -419,24 +470,35 @@ class Counter:
                 self._g = self._make_vectors()
 
     def _evict(self, keep: int) -> None:
-        """Drop the oldest entries (insertion order) until at most ``keep`` remain in all."""
+        """Drop the oldest entries (insertion order) until at most ``keep`` remain in all.
+
+        Dropping a million entries takes a large share of a second: it reads the current call's
+        clock every 4,096 of them and, past it, raises :class:`BudgetExceeded` (what is left is
+        valid; the next call goes on evicting)."""
         memo, vec = self._memo, self._vec
         total = len(memo) + len(vec)
         if total <= keep:
             return
         drop = total - keep
+        deadline, perf = self._budget[1], time.perf_counter
         # Vectors are the larger entries: drop them first, then the oldest counts.
         k = min(drop, len(vec))
-        for key in list(islice(vec, k)):
+        for i, key in enumerate(list(islice(vec, k))):
             del vec[key]
+            if not i & 4095 and perf() > deadline:
+                raise BudgetExceeded("evicting old entries exceeded the time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
         drop -= k
         if drop:
-            for key in list(islice(memo, drop + 1)):
+            for i, key in enumerate(list(islice(memo, drop + 1))):
                 if key:
                     del memo[key]
+                if not i & 4095 and perf() > deadline:
+                    raise BudgetExceeded("evicting old entries exceeded the time limit", reason="time",
+                                         memo_size=len(memo) + len(vec))
             memo[0] = 1
 
-    def _count_miss(self, mask: int | None) -> int:
+    def _count_miss(self, mask: int | None, deadline: Deadline | float | None = None) -> int:
         if mask is None:
             mask = self.poset.full
             r = self._memo.get(mask)
@@ -446,7 +508,7 @@ class Counter:
             self._check_mask(mask)
         if mask & (mask - 1) == 0:
             return 1
-        self._start_budget()
+        self._start_budget(deadline)
         b = self._budget
         limit = b[0]
         if limit - b[2] <= self.probe:
@@ -465,6 +527,11 @@ class Counter:
             self._count_piece(piece)
         return self._f(mask)
 
+    def _late(self, what: str = "exact count") -> None:
+        """Raise :class:`BudgetExceeded` (reason ``"time"``) once the current call's deadline has passed."""
+        if time.perf_counter() > self._budget[1]:
+            raise BudgetExceeded(f"{what} exceeded its time limit", reason="time", memo_size=self.memo_size)
+
     # ------------------------------------------------------------------ choosing a method per piece
     def _hard_pieces(self, mask: int) -> list[int]:
         """The connected pieces without cut elements that ``mask`` splits into by rules 1-2 and that
@@ -478,6 +545,7 @@ class Counter:
             s = stack.pop()
             if s & (s - 1) == 0 or known(s):
                 continue
+            self._late()            # each split scans the set: O(n) on a large order
             chain, comps, iso, _ = split(s)
             if chain is not None:
                 rest = s
@@ -611,7 +679,7 @@ class Counter:
         """
         old = self._width
         if width > old:
-            width = -(-max(width, old + old // 2) // 8) * 8     # whole bytes: see ones() in _make_vectors
+            width = -(-max(width, old + old // 2) // 8) * 8     # whole bytes: see fill() in _make_vectors
             if self._vec:
                 ob, pad = old // 8, bytes((width - old) // 8)
                 deadline, perf = self._budget[1], time.perf_counter
@@ -841,15 +909,22 @@ class Counter:
                     elif len(comps) > 2:
                         comps.sort(key=mins.__and__)
                 else:
-                    # the overlap classes of the up-sets of the minimal elements (poset.components)
+                    # the overlap classes of the up-sets of the minimal elements (poset.components);
+                    # a minimal element with nothing above it is a component by itself (iso), which
+                    # keeps a wide antichain linear, not quadratic
                     mins = s & ~up
                     iso = 0
                     comps = []
                     m = mins
+                    work = 0
                     while m:
                         b = m & -m
                         m ^= b
-                        u = (above[b.bit_length() - 1] & s) | b
+                        u = above[b.bit_length() - 1] & s
+                        if not u:
+                            iso |= b
+                            continue
+                        u |= b
                         keep = []
                         for comp in comps:
                             if comp & u:
@@ -858,22 +933,41 @@ class Counter:
                                 keep.append(comp)
                         keep.append(u)
                         comps = keep
+                        # O(width^2) mask operations in all: a wide set of a large order can take
+                        # seconds here, inside one entry
+                        work += len(keep)
+                        if work > 2048:
+                            work = 0
+                            if perf() > budget[1]:
+                                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                                     memo_size=len(memo) + len(vec))
                 if iso or len(comps) > 1:
                     # s!/(|C1|!...|Ck|!) e(C1)...e(Ck); every partial quotient is exact
                     r = fact[s.bit_count()]
+                    k = 0
                     for comp in comps:
                         if comp & (comp - 1):
                             v = get(comp)
                             r = r // fact[comp.bit_count()] * (v if v is not None else f(comp))
+                            # each step is a division of a number of up to n log n bits
+                            k += 1
+                            if not k & 15 and perf() > budget[1]:
+                                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                                     memo_size=len(memo) + len(vec))
                 else:
                     r = 0
                     m = mins
+                    k = 0
                     while m:
                         b = m & -m
                         m ^= b
                         t = s ^ b
                         v = get(t)
                         r += v if v is not None else f(t)
+                        k += 1
+                        if not k & 63 and perf() > budget[1]:   # a wide set of known children: big sums
+                            raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                                 memo_size=len(memo) + len(vec))
             memo[s] = r
             return r
 
@@ -945,11 +1039,23 @@ class Counter:
                 comps.sort(key=mins.__and__)
                 return None, comps, iso, mins
         else:
+            budget = self._budget
+
             def split(s: int) -> tuple:
                 mins, cuts = self.scan(s)
                 if cuts:
                     return cut_chain(below, cuts), None, 0, 0
-                return None, components(above, s, mins), 0, mins
+                comps = components(above, s, mins, deadline=budget[1])
+                iso = 0
+                if comps[-1] & (comps[-1] - 1) == 0:      # one-element pieces (listed last): as iso
+                    keep = []
+                    for c in comps:
+                        if c & (c - 1):
+                            keep.append(c)
+                        else:
+                            iso |= c
+                    comps = keep
+                return None, comps, iso, mins
 
         return split
 
@@ -966,15 +1072,24 @@ class Counter:
         vget = vec.get
         f = self._f
         perf = time.perf_counter
-        # ones(s): 1 in the field of every element of s, joined from the little-endian bytes of the
-        # fields of each byte of s (fields are whole bytes: see _set_width)
+        # fill(s, t): t in the field of every element of s, joined from little-endian bytes (fields
+        # are whole bytes: see _set_width)
         nbytes = max(1, (self.poset.n + 7) // 8)
-        spread = [b"".join((b"\1" if v >> j & 1 else b"\0") + bytes(width // 8 - 1) for j in range(8))
-                  for v in range(256)]
-        spread_at = spread.__getitem__
+        wbytes = width // 8
+        zero = bytes(wbytes)
+        zero8 = bytes(8 * wbytes)
 
-        def ones(s: int) -> int:
-            return int.from_bytes(b"".join(map(spread_at, s.to_bytes(nbytes, "little"))), "little")
+        def fill(s: int, t: int) -> int:
+            """``t * ones(s)`` (``0 <= t < 2^width``: no carries), by joining bytes: the product of a
+            vector of a large order by a count of thousands of bits takes a large share of a second."""
+            tb = t.to_bytes(wbytes, "little")
+            parts = []
+            for byte in s.to_bytes(nbytes, "little"):
+                if not byte:
+                    parts.append(zero8)
+                else:
+                    parts += [tb if byte >> j & 1 else zero for j in range(8)]
+            return int.from_bytes(b"".join(parts), "little")
 
         def cnt(s: int) -> int:
             if s & (s - 1) == 0:
@@ -994,6 +1109,12 @@ class Counter:
                                      memo_size=len(memo) + len(vec))
             return v
 
+        def late() -> None:
+            # each step of the loops below is O(n) big-int work on packed vectors of a large order
+            if perf() > budget[1]:
+                raise BudgetExceeded("position sums exceeded their time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
+
         def g(s: int) -> int:
             v = vget(s)
             if v is not None:
@@ -1001,41 +1122,45 @@ class Counter:
             if s & (s - 1) == 0:
                 return 1 << ((s.bit_length() - 1) * width)
             es = cnt(s)
+            late()
             chain, comps, iso, mins = split(s)
             if chain is not None:
                 v = 0
                 off = 0                 # elements before the current block
                 rest = s
                 for zi in chain:
+                    late()
                     block = rest & below[zi]
                     rest &= above[zi]
                     if block:
                         v += (es // cnt(block)) * g(block)
                         if off:
-                            v += off * es * ones(block)
+                            v += fill(block, off * es)
                         off += block.bit_count()
                     v += ((off + 1) * es) << (zi * width)
                     off += 1
                 if rest:
-                    v += (es // cnt(rest)) * g(rest) + off * es * ones(rest)
+                    v += (es // cnt(rest)) * g(rest) + fill(rest, off * es)
                 return vstore(s, v)
             if iso or len(comps) > 1:
                 n1 = s.bit_count() + 1
                 v = 0
                 for comp in comps:
+                    late()
                     v += (es // cnt(comp)) * n1 * g(comp) // (comp.bit_count() + 1)
                 if iso:
-                    # a one-element component is at (n + 1) / 2 on average; es (n + 1) is even
-                    t = es * n1 >> 1
-                    for i in bits(iso):
-                        v += t << (i * width)
+                    # a one-element component is at (n + 1) / 2 on average; es (n + 1) is even.  It
+                    # fits a field, so it is written into the field of every element of iso at once,
+                    # not shifted and added to the whole vector once per element
+                    v += fill(iso, es * n1 >> 1)
                 return vstore(s, v)
-            v = es * ones(s)
+            v = fill(s, es)
             m = mins
             while m:
                 b = m & -m
                 m ^= b
                 v += g(s ^ b)
+                late()
             return vstore(s, v)
 
         return g
@@ -1148,12 +1273,12 @@ def _ratio(a: int, b: int) -> float:
 
 
 def count_linear_extensions(poset: Poset, mask: int | None = None, *, max_memo: int | None = None,
-                            time_limit: float | None = None) -> int:
+                            time_limit: float | None = None, deadline: Deadline | float | None = None) -> int:
     """Number of linear extensions of ``poset`` (or of the subposet induced on ``mask``).
 
-    A one-shot convenience around :class:`Counter`.
+    A one-shot convenience around :class:`Counter`; ``deadline`` as in :meth:`Counter.count`.
 
     >>> count_linear_extensions(Poset.from_pairs(3, [(0, 2), (1, 2)]))
     2
     """
-    return Counter(poset, max_memo=max_memo, time_limit=time_limit).count(mask)
+    return Counter(poset, max_memo=max_memo, time_limit=time_limit).count(mask, deadline=deadline)

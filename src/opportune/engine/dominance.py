@@ -35,18 +35,21 @@ from __future__ import annotations
 
 from typing import Sequence
 
+from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset
 
 __all__ = ["most_options_by_order", "earliest_by_order"]
 
 
-def most_options_by_order(poset: Poset, remaining: int, units: Sequence[int]) -> list[int] | None:
+def most_options_by_order(poset: Poset, remaining: int, units: Sequence[int], *,
+                          deadline: Deadline | float | None = None) -> list[int] | None:
     """The minimal ``units`` that provably keep the most completions, or None if the order does not settle it.
 
     Returns the units whose successors among ``remaining`` include every other
     candidate's (they all keep the same, largest number of completions; every other
     candidate keeps strictly fewer).  None when no candidate's successors include all the
-    others'.  O(k) set operations on bitmasks for k candidates.
+    others'.  O(k) set operations on bitmasks for k candidates; past ``deadline`` (read
+    every 256 candidates), :class:`~opportune.engine.deadline.BudgetExceeded`.
 
     >>> from opportune.engine.poset import Poset
     >>> most_options_by_order(Poset.from_pairs(3, [(0, 2)]), 0b111, [0, 1])
@@ -54,16 +57,21 @@ def most_options_by_order(poset: Poset, remaining: int, units: Sequence[int]) ->
     >>> most_options_by_order(Poset.from_pairs(4, [(0, 2), (1, 3)]), 0b1111, [0, 1]) is None
     True
     """
+    dl = as_deadline(deadline)
     above = poset.above
     ups = [above[u] & remaining for u in units]
+    dl.check("comparing options by the order")
     union = 0
-    for up in ups:
+    for k, up in enumerate(ups):
         union |= up
+        if not k & 255:
+            dl.check("comparing options by the order")
     best = [u for u, up in zip(units, ups) if up == union]
     return best or None
 
 
-def earliest_by_order(poset: Poset, remaining: int, units: Sequence[int]) -> list[int] | None:
+def earliest_by_order(poset: Poset, remaining: int, units: Sequence[int], *,
+                      deadline: Deadline | float | None = None) -> list[int] | None:
     """The ``units`` provably needed earliest (least expected position in a uniformly random completion
     of ``remaining``), or None if the order does not settle it.
 
@@ -71,20 +79,25 @@ def earliest_by_order(poset: Poset, remaining: int, units: Sequence[int]) -> lis
     successors (equal expected positions), or dominates it (fewer predecessors and more
     successors, by inclusion), or its latest possible position comes before the other's
     earliest.  Returns the winner with every candidate interchangeable with it.  O(k²)
-    bitmask operations for k candidates.
+    bitmask operations for k candidates; past ``deadline`` (read for every candidate),
+    :class:`~opportune.engine.deadline.BudgetExceeded`.
 
     >>> from opportune.engine.poset import Poset
     >>> earliest_by_order(Poset.from_pairs(3, [(0, 1)]), 0b111, [1, 0])
     [0]
-    >>> earliest_by_order(Poset.from_pairs(4, [(0, 1), (2, 3)]), 0b1111, [1, 2]) is None
+    >>> earliest_by_order(Poset.from_pairs(4, [(0, 1), (2, 3)]), 0b1111, [1, 3]) is None   # symmetric: not settled
     True
     """
+    dl = as_deadline(deadline)
     below, above = poset.below, poset.above
     n = remaining.bit_count()
     sig = [(below[u] & remaining, above[u] & remaining) for u in units]
     for i, (down_a, up_a) in enumerate(sig):
+        dl.check("comparing expected positions by the order")
         latest = n - up_a.bit_count()
         for j, (down_b, up_b) in enumerate(sig):
+            if not j & 1023:
+                dl.check("comparing expected positions by the order")
             if i == j or (down_a == down_b and up_a == up_b):
                 continue
             if down_a & ~down_b == 0 and up_b & ~up_a == 0:

@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import time
 
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
 
 __all__ = ["count_by_downsets", "position_sums_by_downsets", "count_downsets"]
 
+_TABLES_UP_TO = 448     # pieces up to this size get 14-bit chunk tables in upset_counts (32 of them at most)
 
-def _setup(poset: Poset, mask: int | None):
+
+def _setup(poset: Poset, mask: int | None, dl: Deadline = Deadline.NEVER):
     if mask is None:
         mask = poset.full
     if mask < 0 or mask & ~poset.full:
@@ -27,6 +30,7 @@ def _setup(poset: Poset, mask: int | None):
     # become available when an element is added to a down-set.
     ucov = [0] * poset.n
     for x in bits(mask):
+        dl.check("the covers of an order")     # O(elements above x) each
         up = poset.above[x] & mask
         cov = up
         for y in bits(up):
@@ -35,41 +39,56 @@ def _setup(poset: Poset, mask: int | None):
     return mask, below, ucov
 
 
-def _levels(poset: Poset, mask: int | None):
-    """Yield the levels of the down-set lattice as dicts ``D -> (paths to D, available elements)``."""
-    mask, below, ucov = _setup(poset, mask)
+def _levels(poset: Poset, mask: int | None, deadline: Deadline | float | None = None):
+    """Yield the levels of the down-set lattice as ``(mask, paths, avail)``: dicts from each down-set
+    ``D`` of the level to the number of paths to ``D`` and to its available elements.
+
+    Two dicts of ints, not one of pairs: millions of small containers would make the garbage
+    collector walk them all, uninterruptibly.  Past ``deadline``,
+    :class:`~opportune.engine.deadline.BudgetExceeded` (read every 256 steps to a new down-set)."""
+    dl = as_deadline(deadline)
+    mask, below, ucov = _setup(poset, mask, dl)
     avail0 = 0
     for x in bits(mask):
         if not below[x]:
             avail0 |= 1 << x
-    level = {0: [1, avail0]}
-    yield mask, level
+    paths, avail = {0: 1}, {0: avail0}
+    yield mask, paths, avail
     for _ in range(mask.bit_count()):
-        nxt: dict[int, list] = {}
-        for d, (cnt, av) in level.items():
+        npaths: dict[int, int] = {}
+        navail: dict[int, int] = {}
+        get = npaths.get
+        work = 0
+        for d, cnt in paths.items():
+            av = avail[d]
             m = av
             while m:
+                work += 1
+                if not work & 255:      # by new down-sets, not old ones: a wide order has hundreds each
+                    dl.check("the dynamic programme over down-sets")
                 b = m & -m
                 m ^= b
                 e = d | b
-                slot = nxt.get(e)
-                if slot is None:
+                old = get(e)
+                if old is None:
                     x = b.bit_length() - 1
                     nav = av ^ b
                     for y in bits(ucov[x]):
                         if not below[y] & ~e:
                             nav |= 1 << y
-                    nxt[e] = [cnt, nav]
+                    npaths[e] = cnt
+                    navail[e] = nav
                 else:
-                    slot[0] += cnt
-        level = nxt
-        yield mask, level
+                    npaths[e] = old + cnt
+        paths, avail = npaths, navail
+        yield mask, paths, avail
 
 
-def count_by_downsets(poset: Poset, mask: int | None = None) -> int:
+def count_by_downsets(poset: Poset, mask: int | None = None, *, deadline: Deadline | float | None = None) -> int:
     """Number of linear extensions of the subposet induced on ``mask``, by DP over its down-sets.
 
-    O(number of down-sets × width) big-int additions, O(largest level) memory.
+    O(number of down-sets × width) big-int additions, O(largest level) memory; past ``deadline``,
+    :class:`~opportune.engine.deadline.BudgetExceeded`.
 
     >>> count_by_downsets(Poset.from_pairs(4, [(0, 1), (2, 3)]))
     6
@@ -77,48 +96,56 @@ def count_by_downsets(poset: Poset, mask: int | None = None) -> int:
     1
     """
     last = None
-    for _, level in _levels(poset, mask):
-        last = level
+    for _, paths, _ in _levels(poset, mask, deadline):
+        last = paths
     assert last is not None and len(last) == 1
-    (cnt, _), = last.values()
+    (cnt,) = last.values()
     return cnt
 
 
-def count_downsets(poset: Poset, mask: int | None = None) -> int:
+def count_downsets(poset: Poset, mask: int | None = None, *, deadline: Deadline | float | None = None) -> int:
     """Number of down-sets (order ideals, including ∅ and ``mask``) of the subposet induced on ``mask``.
 
-    Same cost as :func:`count_by_downsets`.
+    Same cost and ``deadline`` as :func:`count_by_downsets`.
 
     >>> count_downsets(Poset.antichain(3))
     8
     """
-    return sum(len(level) for _, level in _levels(poset, mask))
+    return sum(len(paths) for _, paths, _ in _levels(poset, mask, deadline))
 
 
-def position_sums_by_downsets(poset: Poset, mask: int | None = None) -> dict[int, int]:
+def position_sums_by_downsets(poset: Poset, mask: int | None = None, *,
+                              deadline: Deadline | float | None = None) -> dict[int, int]:
     """For every ``x`` in ``mask``: the sum over all linear extensions of ``mask`` of the 1-based position of ``x``.
 
     ``x`` is at position ``|D| + 1`` in exactly ``F(D) * B(D ∪ {x})`` extensions,
     where ``F(D)`` counts the ways to reach the down-set ``D`` and ``B(E)`` the
     ways to finish from ``E``.  O(number of down-sets × width) big-int
-    operations and memory for the whole lattice.
+    operations and memory for the whole lattice; past ``deadline``,
+    :class:`~opportune.engine.deadline.BudgetExceeded`.
 
     >>> position_sums_by_downsets(Poset.from_pairs(3, [(0, 1)]))
     {0: 4, 1: 8, 2: 6}
     """
+    dl = as_deadline(deadline)
     levels = []
     m = None
-    for m, level in _levels(poset, mask):
-        levels.append(level)
+    for m, paths, avail in _levels(poset, mask, dl):
+        levels.append((paths, avail))
     assert m is not None
     back: dict[int, int] = {m: 1}
     sums = {x: 0 for x in bits(m)}
     for size in range(len(levels) - 2, -1, -1):
         nb: dict[int, int] = {}
-        for d, (cnt, av) in levels[size].items():
+        paths, avail = levels[size]
+        work = 0
+        for d, cnt in paths.items():
             total = 0
-            a = av
+            a = avail[d]
             while a:
+                work += 1
+                if not work & 255:
+                    dl.check("position sums over down-sets")
                 b = a & -a
                 a ^= b
                 v = back[d | b]
@@ -133,10 +160,11 @@ def position_sums_by_downsets(poset: Poset, mask: int | None = None) -> dict[int
 
 
 def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int = 20_000,
-                           deadline: float | None = None) -> int | None:
+                           deadline: Deadline | float | None = None) -> int | None:
     """Number of down-sets of the subposet induced on ``mask``, or None if finding it would take
     more than ``limit`` memoised sets (then there are usually very many), or would end after
-    ``deadline`` (a ``time.perf_counter()`` value; the caller tells the two apart by the clock).
+    ``deadline`` (a :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()``
+    value; the caller tells the two apart by the clock).
 
     Much cheaper than listing them: branch on the element ``x`` with the most
     comparable elements — a down-set either holds ``x`` (and everything below
@@ -155,6 +183,9 @@ def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int 
     nbr = [b | a for b, a in zip(below, above)]
     memo: dict[int, int] = {0: 1}
     calls = [0]
+    at = as_deadline(deadline).at
+    deadline = at if at != float("inf") else None
+    every = 7 if mask.bit_count() <= 256 else 0     # a call on a large set is O(n) big-int operations
 
     def f(s: int) -> int | None:
         r = memo.get(s)
@@ -163,7 +194,7 @@ def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int 
         calls[0] += 1
         if calls[0] > limit:
             return None
-        if deadline is not None and not calls[0] & 63 and time.perf_counter() > deadline:
+        if deadline is not None and not calls[0] & every and time.perf_counter() > deadline:
             return None
         # elements comparable to nothing else in s double the count; then one connected piece
         # (closure under comparability from the lowest element)
@@ -207,7 +238,8 @@ def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int 
     return f(mask)
 
 
-def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1, deadline: float = float("inf"),
+def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
+                 deadline: Deadline | float | None = float("inf"),
                  max_sets: int | None = None) -> tuple[int, dict[int, int]] | None:
     """``(e(mask), top)`` by the dynamic programme over the up-sets of ``mask``, smallest first.
 
@@ -218,7 +250,8 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1, deadli
     forgotten as it goes.  ``top`` holds ``e(U)`` of the up-sets with at
     least ``|mask| - keep`` elements (``mask`` itself and what remains after
     removing up to ``keep`` first elements: the questions a simulation asks
-    next).  None if ``time.perf_counter()`` passes ``deadline`` or the sets
+    next).  None if ``time.perf_counter()`` passes ``deadline`` (a
+    :class:`~opportune.engine.deadline.Deadline` or a ``perf_counter`` moment) or the sets
     visited exceed ``max_sets``.
 
     Elements are renumbered to the piece, and "minimal in what is left" is a
@@ -231,22 +264,43 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1, deadli
 
     if mask is None:
         mask = poset.full
-    sub, old = poset.restrict(mask)
+    dl = as_deadline(deadline)
+    deadline = dl.at
+    if mask == poset.full:
+        sub, old = poset, list(range(poset.n))
+    else:
+        try:
+            sub, old = poset.restrict(mask, deadline=dl)
+        except BudgetExceeded:
+            return None
     k = sub.n
     if k <= 1:
         return 1, {mask: 1}
     below = sub.below
-    nch = -(-k // 14)
-    c = -(-k // nch)
+    if k <= _TABLES_UP_TO:
+        nch = -(-k // 14)
+        c = -(-k // nch)
+        tables = []
+        for j in range(nch):
+            vals = below[j * c:(j + 1) * c]
+            t = [0] * (1 << len(vals))
+            for v in range(1, len(t)):
+                low = v & -v
+                t[v] = t[v ^ low] | vals[low.bit_length() - 1]
+            tables.append(t)
+            if dl.expired():
+                return None
+    else:
+        # 2^14 entries of k bits per 14 elements would take gigabytes on a large order: byte
+        # tables filled on demand (none of this finishes in time there, but it stops in time)
+        from opportune.engine.count import _LazyUnion
+
+        c = 8
+        nch = -(-k // c)
+        tables = [_LazyUnion(below[j * c:(j + 1) * c]) for j in range(nch)]
     cm = (1 << c) - 1
-    tables = []
-    for j in range(nch):
-        vals = below[j * c:(j + 1) * c]
-        t = [0] * (1 << len(vals))
-        for v in range(1, len(t)):
-            low = v & -v
-            t[v] = t[v ^ low] | vals[low.bit_length() - 1]
-        tables.append(t)
+    # sets between two readings of the clock: each costs a look-up per chunk
+    every = 1023 if nch <= 4 else 63 if nch <= 32 else 0
     unrolled = nch <= 4
     T0, T1, T2, T3 = (tables + [[0], [0], [0]])[:4]
     c2, c3 = 2 * c, 3 * c
@@ -271,13 +325,24 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1, deadli
                     d |= t[x & cm]
                     x >>= c
             m = r & ~d
-            while m:
-                b = m & -m
-                m ^= b
-                w = u | b
-                nxt[w] = get(w, 0) + v
             done += 1
-            if not done & 4095 and perf() > deadline:
+            if m & (m - 1) and k > 64:
+                # many elements may join one set of a wide order: read the clock as they do
+                while m:
+                    b = m & -m
+                    m ^= b
+                    w = u | b
+                    nxt[w] = get(w, 0) + v
+                    done += 1
+                    if not done & 255 and perf() > deadline:
+                        return None
+            else:
+                while m:
+                    b = m & -m
+                    m ^= b
+                    w = u | b
+                    nxt[w] = get(w, 0) + v
+            if not done & every and perf() > deadline:
                 return None
         level = nxt
         seen += len(level)

@@ -40,6 +40,7 @@ from math import comb
 from operator import mul
 
 from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import (
     CycleError,
     Poset,
@@ -69,12 +70,16 @@ class TailCounter:
     present.  A merge of two pieces of sizes ``n1``, ``n2`` costs
     ``O(n1 · n2)`` big-int products.
 
+    ``deadline`` (a :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()``
+    moment) stops every :meth:`tail` with :class:`BudgetExceeded`; the attribute may be changed
+    between calls, and :meth:`tail` takes a sooner one per call.
+
     >>> p = Poset.from_pairs(3, [(0, 1)])          # 0 < 1, 2 free
     >>> TailCounter(Counter(p), marks=0b001).tail(0b111)   # 012, 021: two after 0; 201: one
     [0, 1, 2]
     """
 
-    def __init__(self, counter: Counter, marks: int, *, deadline: float = float("inf")):
+    def __init__(self, counter: Counter, marks: int, *, deadline: Deadline | float | None = float("inf")):
         self.counter = counter
         self.poset = counter.poset
         self.marks = marks
@@ -87,15 +92,32 @@ class TailCounter:
         self._core = counter._native if counter.compiled and counter._direction == 0 and n <= NATIVE_TAILS else None
         self._handle = self._core.tails_new(marks) if self._core is not None else -1
 
+    @property
+    def deadline(self) -> float:
+        """The ``time.perf_counter()`` moment past which :meth:`tail` stops (``inf``: never)."""
+        return self._deadline
+
+    @deadline.setter
+    def deadline(self, value: Deadline | float | None) -> None:
+        self._deadline = as_deadline(value).at
+
     def __del__(self):
         core = getattr(self, "_core", None)
         if core is not None:
             core.tails_drop(self._handle)
 
-    def tail(self, s: int) -> list[int]:
+    def tail(self, s: int, *, deadline: Deadline | float | None = None) -> list[int]:
         if not s & self.marks:
             raise ValueError("the set holds no marked element")
-        d = self._tail(s)
+        if deadline is None:
+            d = self._tail(s)
+        else:
+            saved = self._deadline
+            self._deadline = min(saved, as_deadline(deadline).at)
+            try:
+                d = self._tail(s)
+            finally:
+                self._deadline = saved
         return d + [0] * (s.bit_count() - len(d))
 
     # -------------------------------------------------------------- recursion
@@ -112,9 +134,9 @@ class TailCounter:
     def _compiled(self, s: int) -> list[int]:
         """The recursion in the compiled core, under this counter's deadline and the counter's budget."""
         c = self.counter
-        c._start_budget()
+        c._start_budget(self._deadline)
         b = c._budget
-        deadline = min(self.deadline, b[1])
+        deadline = b[1]
         seconds = -1.0 if deadline == float("inf") else max(0.0, deadline - time.perf_counter())
         room = b[0] - b[2]
         status, r, added = self._core.tail(self._handle, s, room if room < 1 << 62 else -1, seconds)
@@ -132,20 +154,23 @@ class TailCounter:
         get = memo.get
         below, above = self.poset.below, self.poset.above
         marks = self.marks
-        count = self.counter.count
+        counter = self.counter
+
+        def count(t: int) -> int:       # the plain counts of unmarked pieces, under this call's deadline
+            return counter.count(t, deadline=self._deadline)
+
         scan = self.counter.scan
         binom = self._binom
         merge, merge_plain = self._merge, self._merge_plain
         perf = time.perf_counter
-        calls = [0]
 
         def f(s: int) -> list[int]:
-            calls[0] += 1
-            if not calls[0] & 63 and perf() > self.deadline:  # a call may convolve long vectors: look often
+            # every call: one may convolve long vectors of big counts (far more than the clock costs)
+            if perf() > self._deadline:
                 raise BudgetExceeded("hub count exceeded its time limit", reason="time", memo_size=len(memo))
             n = s.bit_count()
             mins, cuts = scan(s)
-            comps = components(above, s, mins) if not cuts else ()
+            comps = components(above, s, mins, deadline=self._deadline) if not cuts else ()
             if len(comps) > 1:
                 # marked pieces merge pairwise; the unmarked ones form one block (multinomial × counts)
                 r = None
@@ -295,7 +320,7 @@ def _convolve(u: list[int], w: list[int]) -> list[int]:
 
 
 def hub_candidates(poset: Poset, s: int, *, max_coupling: int = 4, limit: int | None = None,
-                   deadline: float = float("inf")) -> list[tuple[int, list[tuple[int, int]]]]:
+                   deadline: Deadline | float | None = None) -> list[tuple[int, list[tuple[int, int]]]]:
     """Elements of ``s`` worth splitting at, best first, with their coupling relations.
 
     A candidate ``h`` has elements both below and above it in ``s``; its
@@ -309,15 +334,18 @@ def hub_candidates(poset: Poset, s: int, *, max_coupling: int = 4, limit: int | 
     ``limit``: only the first ``limit`` candidates are wanted, so the coupling relations are
     found in that order and only until they are known (the same first ``limit`` as the whole
     list).  O(covers) per element looked at: on an order of 2,000 elements every element takes
-    about 0.3 s, past a decision's budget.  Past ``deadline`` (a ``time.perf_counter()`` value) it
-    raises :class:`BudgetExceeded`.
+    about 0.3 s, past a decision's budget.  Past ``deadline`` (a
+    :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()`` value) it raises
+    :class:`BudgetExceeded`.
 
     >>> p = Poset.from_pairs(5, [(0, 2), (1, 2), (2, 3), (2, 4)])
     >>> hub_candidates(p, p.full)
     [(2, [])]
     """
     below, above = poset.below, poset.above
-    covers = [(a, b) for a, b in poset.cover_pairs() if s >> a & 1 and s >> b & 1]
+    dl = as_deadline(deadline)
+    covers = [(a, b) for a, b in poset.cover_pairs(deadline=dl) if s >> a & 1 and s >> b & 1]
+    dl.check("the search for a hub")
     indegree = [0] * poset.n
     for _, b in covers:
         indegree[b] += 1
@@ -327,7 +355,7 @@ def hub_candidates(poset: Poset, s: int, *, max_coupling: int = 4, limit: int | 
     for i, (deg, down, h) in enumerate(ranked):
         if limit is not None and len(out) >= limit and (deg, down) != ranked[i - 1][:2]:
             break       # the first `limit` are known: later elements rank below them whatever their coupling
-        if time.perf_counter() > deadline:
+        if dl.expired():
             raise BudgetExceeded("the search for a hub exceeded its time limit", reason="time")
         up = above[h] & s
         related = up | below[h] & s | 1 << h
@@ -338,8 +366,10 @@ def hub_candidates(poset: Poset, s: int, *, max_coupling: int = 4, limit: int | 
     return [(h, coupling) for *_, h, coupling in out[:limit]]
 
 
-def hub_split(counter: Counter, s: int, *, time_limit: float, tries: int = 3, probe_memo: int = 100_000) -> int | None:
-    """Exact count of ``s`` by the first hub split that works within ``time_limit`` seconds, else None.
+def hub_split(counter: Counter, s: int, *, time_limit: float | None = None, tries: int = 3, probe_memo: int = 100_000,
+              deadline: Deadline | float | None = None) -> int | None:
+    """Exact count of ``s`` by the first hub split that works within ``time_limit`` seconds and before
+    ``deadline`` (the sooner of the two; neither: no limit), else None.
 
     Takes up to ``tries`` candidates of :func:`hub_candidates`; a candidate is
     used only if the part left without the hub and what follows it is cheap
@@ -351,22 +381,25 @@ def hub_split(counter: Counter, s: int, *, time_limit: float, tries: int = 3, pr
     >>> hub_split(Counter(p), p.full, time_limit=5) == Counter(p).count()
     True
     """
-    deadline = time.perf_counter() + time_limit
+    dl = as_deadline(deadline).within(time_limit)
     above = counter.poset.above
     saved = counter.max_memo, counter.time_limit
     try:
-        for h, coupling in hub_candidates(counter.poset, s, limit=tries):
-            left = deadline - time.perf_counter()
-            if left <= 0:
+        try:
+            candidates = hub_candidates(counter.poset, s, limit=tries, deadline=dl)
+        except BudgetExceeded:
+            return None
+        for h, coupling in candidates:
+            if dl.expired():
                 return None
-            counter.max_memo, counter.time_limit = probe_memo, left
+            counter.max_memo, counter.time_limit = probe_memo, None
             try:
-                counter.count(s & ~above[h] & ~(1 << h))
+                counter.count(s & ~above[h] & ~(1 << h), deadline=dl)
             except BudgetExceeded:
                 continue
             counter.max_memo, counter.time_limit = None, None
             try:
-                value = hub_count(counter, s, h, coupling, time_limit=deadline - time.perf_counter())
+                value = hub_count(counter, s, h, coupling, deadline=dl)
             except BudgetExceeded:
                 return None
             if value is not None:
@@ -378,13 +411,13 @@ def hub_split(counter: Counter, s: int, *, time_limit: float, tries: int = 3, pr
 
 
 def hub_count(counter: Counter, s: int, h: int, coupling: list[tuple[int, int]], *,
-              time_limit: float | None = None) -> int | None:
+              time_limit: float | None = None, deadline: Deadline | float | None = None) -> int | None:
     """Exact number of linear extensions of ``s`` by splitting at hub ``h`` (see the module doc).
 
     ``coupling`` is the list from :func:`hub_candidates`.  Returns None when a
     term of the inclusion–exclusion does not have the hub form (a reversed
     relation brings new coupling); raises :class:`BudgetExceeded` after
-    ``time_limit`` seconds.  Cost: ``2^len(coupling)`` tail distributions
+    ``time_limit`` seconds or past ``deadline``, whichever comes first.  Cost: ``2^len(coupling)`` tail distributions
     (sharing one memo) plus small counts of the parts above ``h``.
 
     >>> p = Poset.from_pairs(6, [(0, 2), (1, 2), (2, 3), (4, 3), (2, 5)])
@@ -392,16 +425,19 @@ def hub_count(counter: Counter, s: int, h: int, coupling: list[tuple[int, int]],
     True
     """
     poset = counter.poset
-    deadline = time.perf_counter() + time_limit if time_limit is not None else float("inf")
+    dl = as_deadline(deadline).within(time_limit)
     below = poset.below
     down = below[h] & s
-    tails = TailCounter(counter, down, deadline=deadline)
+    tails = TailCounter(counter, down, deadline=dl)
     dropped = set(coupling)
-    base = [pair for pair in poset.cover_pairs() if pair not in dropped and s >> pair[0] & 1 and s >> pair[1] & 1]
-    return _over_couplings(poset, s, coupling, lambda flipped: _hub_term(counter, tails, s, h, down, base, flipped))
+    base = [pair for pair in poset.cover_pairs(deadline=dl)
+            if pair not in dropped and s >> pair[0] & 1 and s >> pair[1] & 1]
+    return _over_couplings(poset, s, coupling,
+                           lambda flipped: _hub_term(counter, tails, s, h, down, base, flipped, dl), deadline=dl)
 
 
-def _over_couplings(poset: Poset, s: int, coupling: list[tuple[int, int]], term) -> int | None:
+def _over_couplings(poset: Poset, s: int, coupling: list[tuple[int, int]], term,
+                    deadline: Deadline = Deadline.NEVER) -> int | None:
     """``Σ_F (-1)^|F| term(F)`` over the subsets ``F`` of the coupling relations (the module doc's
     inclusion–exclusion); None as soon as a term is None (still coupled: not of the hub form).
 
@@ -424,6 +460,7 @@ def _over_couplings(poset: Poset, s: int, coupling: list[tuple[int, int]], term)
     total = 0
     for k in range(len(coupling) + 1):
         for flipped in combinations(coupling, k):
+            deadline.check("a hub count")
             key = tuple(sorted((twin[b], a) for b, a in flipped))
             value = seen.get(key)
             if value is None:
@@ -434,11 +471,12 @@ def _over_couplings(poset: Poset, s: int, coupling: list[tuple[int, int]], term)
     return total
 
 
-def _hub_term(counter, tails, s, h, down, base, flipped) -> int | None:
-    """e(Q + reversed ``flipped``) on ``s`` by the hub formula (0 if the reversals form a cycle)."""
+def _hub_term(counter, tails, s, h, down, base, flipped, deadline: Deadline = Deadline.NEVER) -> int | None:
+    """e(Q + reversed ``flipped``) on ``s`` by the hub formula (0 if the reversals form a cycle),
+    every part of it under the caller's ``deadline``."""
     poset = counter.poset
     try:
-        q = Poset.from_pairs(poset.n, base + [(a, b) for b, a in flipped])
+        q = Poset.from_pairs(poset.n, base + [(a, b) for b, a in flipped], deadline=deadline)
     except CycleError:
         return 0                                # the reversed relations contradict each other: no orders
     up = q.above[h] & s
@@ -447,8 +485,8 @@ def _hub_term(counter, tails, s, h, down, base, flipped) -> int | None:
         return None
     # relations inside `rest` are those of the original order (only relations into A changed)
     size_a = up.bit_count()
-    e_a = Counter(q, max_memo=None).count(up) if up else 1
-    d = tails.tail(rest)
+    e_a = Counter(q, max_memo=None).count(up, deadline=deadline) if up else 1
+    d = tails.tail(rest, deadline=deadline)
     return e_a * sum(v * comb(b + 1 + size_a, 1 + size_a) for b, v in enumerate(d))
 
 
@@ -487,10 +525,13 @@ class HubPath:
     """
 
     def __init__(self, poset: Poset, *, max_coupling: int = 4, min_down: int = 2, probe_memo: int = 100_000,
-                 max_memo: int | None = 2_000_000):
+                 max_memo: int | None = 2_000_000, deadline: Deadline | float | None = None):
+        # ``deadline`` bounds building the extended order (O(n + covers) big-int operations on 2n
+        # elements); every count takes its own
         n = self.n = poset.n
         self.base = poset
-        self.poset = Poset.from_pairs(2 * n, poset.cover_pairs() + [(x, n + x) for x in range(n)])
+        self.poset = Poset.from_pairs(2 * n, poset.cover_pairs(deadline=deadline) + [(x, n + x) for x in range(n)],
+                                      deadline=deadline)
         self.counter = Counter(self.poset, max_memo=max_memo, max_total=None)
         self.max_coupling = max_coupling
         self.min_down = min_down
@@ -505,18 +546,31 @@ class HubPath:
         self._up_tables = byte_unions(poset.above, n)
         self._weights: dict[int, list[int]] = {}    # |A| -> the binomials of the hub formula
 
+    def nbytes(self) -> int:
+        """Estimated bytes of this path's memos and tables: its counter, every tail memo, the terms'
+        orders (O(number of hubs + sampled entries), see :mod:`opportune.engine.memory`)."""
+        from opportune.engine.memory import nbytes
+
+        total = self.counter.nbytes() + nbytes(self._q, depth=2) + nbytes(self._up) + nbytes(self._weights)
+        total += nbytes(self._up_tables, depth=4) + nbytes(self._covers)
+        for tails in list(self.tails.values()):
+            total += nbytes(tails._memo) + nbytes(getattr(tails._binom, "_rows", {}))
+        return total
+
     # ------------------------------------------------------------ public
     def applies(self, s: int) -> bool:
         """Whether ``s`` (a set of the original poset) holds a known hub with at least ``min_down`` below it."""
         below = self.base.below
         return any(s >> h & 1 and (below[h] & s).bit_count() >= self.min_down for h in self.tails)
 
-    def count(self, s: int, *, deadline: float = float("inf"), discover: bool = False) -> int | None:
+    def count(self, s: int, *, deadline: Deadline | float | None = float("inf"), discover: bool = False) -> int | None:
         """Exact count of ``s``: hard pieces through their hub, the rest by the plain counter.
 
         With ``discover``, a hard piece without a known hub is tried at the
         candidates of :func:`hub_candidates` (as :func:`hub_split` does);
         without, such a piece makes the answer None (the caller counts plainly).
+        ``deadline`` (a :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()``
+        moment) reaches every count, tail and search of the call: past it, :class:`BudgetExceeded`.
         """
         c = self.counter
         v = c.cached(s)
@@ -524,6 +578,7 @@ class HubPath:
             return v
         if not self._is_upset(s):
             return None
+        deadline = as_deadline(deadline).at
         with self._until(deadline):
             return self._count(s, deadline, discover)
 
@@ -532,13 +587,14 @@ class HubPath:
         """Every count of this path's counter (the tails' included) stops at ``deadline``."""
         c = self.counter
         saved = c.deadline
-        c.deadline = deadline if deadline != float("inf") else None
+        at = min(deadline, as_deadline(saved).at)       # never later than one the caller set on the counter
+        c.deadline = at if at != float("inf") else None
         try:
             yield
         finally:
             c.deadline = saved
 
-    def position_sum(self, s: int, x: int, *, deadline: float = float("inf")) -> int | None:
+    def position_sum(self, s: int, x: int, *, deadline: Deadline | float | None = float("inf")) -> int | None:
         """Sum over the orders of ``s`` of the 1-based position of ``x`` (None when :meth:`count` cannot help).
 
         Splits ``s`` as the counter does (cut elements, components) down to the
@@ -546,6 +602,7 @@ class HubPath:
         """
         if not self._is_upset(s) or not s >> x & 1:
             return None
+        deadline = as_deadline(deadline).at
         try:
             with self._until(deadline):
                 return self._pos(s, x, deadline)
@@ -615,17 +672,20 @@ class HubPath:
         """The pieces of ``s`` the plain counter cannot split (connected, no cut element) and has not counted."""
         c = self.counter
         below, above = self.poset.below, self.poset.above
+        deadline = as_deadline(c.deadline).at       # set by _until for the whole call
         out = []
         stack = [s]
         while stack:
             t = stack.pop()
             if t & (t - 1) == 0 or c.cached(t) is not None:
                 continue
+            if time.perf_counter() > deadline:     # each split is O(n) or more
+                raise BudgetExceeded("hub count exceeded its time limit", reason="time", memo_size=c.memo_size)
             mins, cuts = c.scan(t)
             if cuts:
                 stack.extend(cut_blocks(below, above, t, cuts))
                 continue
-            comps = components(above, t, mins)
+            comps = components(above, t, mins, deadline=deadline)
             if len(comps) > 1:
                 stack.extend(comps)
                 continue
@@ -663,7 +723,7 @@ class HubPath:
                 continue
             finally:
                 c.max_memo, c.time_limit = saved
-            self.tails[h] = TailCounter(c, below[h])
+            self.tails[h] = TailCounter(c, below[h], deadline=deadline)
             v = self._hub_count(s, h, deadline)
             if v is not None:
                 return v
@@ -694,7 +754,8 @@ class HubPath:
         tails.deadline = deadline
         ckey = tuple(sorted(coupling))
         return _over_couplings(self.poset, s, coupling,
-                               lambda flipped: self._term(s, h, down, ckey, tuple(flipped), tails))
+                               lambda flipped: self._term(s, h, down, ckey, tuple(flipped), tails),
+                               deadline=as_deadline(deadline))
 
     def _term(self, s, h, down, ckey, flipped, tails) -> int | None:
         qkey = (h, ckey, flipped)
@@ -704,7 +765,7 @@ class HubPath:
             dropped = set(ckey)
             try:
                 q = Poset.from_pairs(self.poset.n, [p for p in self._covers if p not in dropped]
-                                     + [(a, b) for b, a in flipped])
+                                     + [(a, b) for b, a in flipped], deadline=tails.deadline)
             except CycleError:
                 q = None
             self._q[qkey] = q
@@ -722,10 +783,8 @@ class HubPath:
         ukey = (qkey, up)
         e_a = self._up.get(ukey)
         if e_a is None:
-            left = tails.deadline - time.perf_counter() if tails.deadline != float("inf") else None
             # what follows the hub can be large too (a big plan): bounded by the same deadline
-            e_a = self._up[ukey] = (Counter(q, max_memo=None, time_limit=max(0.0, left) if left is not None else None)
-                                    .count(up) if up else 1)
+            e_a = self._up[ukey] = (Counter(q, max_memo=None).count(up, deadline=tails.deadline) if up else 1)
         d = tails.tail(rest)
         weights = self._weights.get(size_a)
         if weights is None or len(weights) < len(d):

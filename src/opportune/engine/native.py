@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 
+from opportune.engine.deadline import Deadline
 from opportune.engine.poset import Poset
 
 #: Largest order the counter hands to the compiled core.  The core takes up to 1,024 elements (16
@@ -54,8 +55,11 @@ class NativeCounter:
 
     ``count(mask, direction, max_new, seconds)`` returns ``(status, value, added)``: status 0 with
     the exact count of the set ``mask``, 1 when it would add more than ``max_new`` entries (-1: no
-    limit), 2 when it ran out of its ``seconds`` (negative: no limit); ``added`` entries were stored
-    either way and stay.  ``direction`` 0 removes minimal elements, 1 maximal ones.
+    limit), 2 when it ran out of its ``seconds`` (negative: no limit; or the caller's
+    :class:`~opportune.engine.deadline.Deadline`); ``added`` entries were stored either way and
+    stay, and a stop never leaves a half-stored entry.  ``direction`` 0 removes minimal elements,
+    1 maximal ones.  The core reads its clock every 1,024 word operations of work (a few
+    microseconds), table and arena growth included.
     """
 
     __slots__ = ("_core", "_nbytes", "max_total")
@@ -73,7 +77,10 @@ class NativeCounter:
                          [m.to_bytes(nb, "little") for m in poset.above])
         self.max_total = max_total
 
-    def count(self, mask: int, direction: int, max_new: int, seconds: float) -> tuple[int, int | None, int]:
+    def count(self, mask: int, direction: int, max_new: int,
+              seconds: float | Deadline) -> tuple[int, int | None, int]:
+        if isinstance(seconds, Deadline):
+            seconds = seconds.seconds()
         status, value, added = self._core.count(mask.to_bytes(self._nbytes, "little"), direction, max_new, seconds)
         return status, (int.from_bytes(value, "little") if value is not None else None), added
 
@@ -100,12 +107,20 @@ class NativeCounter:
     def tails_drop(self, handle: int) -> None:
         self._core.tails_drop(handle)
 
-    def tail(self, handle: int, mask: int, max_new: int, seconds: float) -> tuple[int, list[int] | None, int]:
+    def tail(self, handle: int, mask: int, max_new: int,
+             seconds: float | Deadline) -> tuple[int, list[int] | None, int]:
         """``(status, tail distribution or None, new count entries)``, statuses as for :meth:`count`."""
+        if isinstance(seconds, Deadline):
+            seconds = seconds.seconds()
         status, values, added = self._core.tail(handle, mask.to_bytes(self._nbytes, "little"), max_new, seconds)
         if values is None:
             return status, None, added
         return status, [int.from_bytes(v, "little") for v in values], added
+
+    def work(self) -> int:
+        """Word operations of work done by the last :meth:`count` or :meth:`tail` (the core reads its
+        clock every 1,024 of them)."""
+        return self._core.work()
 
     def size(self) -> int:
         """Entries in the compiled memo."""

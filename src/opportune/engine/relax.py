@@ -51,6 +51,8 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Hashable, Iterable, Mapping, Sequence
 
+from opportune.engine.deadline import Deadline, as_deadline
+
 if TYPE_CHECKING:
     from opportune.plan import Plan
 
@@ -435,7 +437,7 @@ def _branch_and_bound(k: int, arcs: list[tuple[int, int, float]], deadline: floa
 
 
 def min_feedback_arc_set(nodes: Iterable[Hashable], weighted_arcs, *, time_limit: float | None = DEFAULT_TIME_LIMIT,
-                         method: str = "auto") -> tuple[float, list[tuple]]:
+                         method: str = "auto", deadline: Deadline | float | None = None) -> tuple[float, list[tuple]]:
     """The cheapest set of arcs whose removal leaves no cycle: ``(total weight, arcs)``.
 
     ``weighted_arcs`` is a mapping ``{(u, v): weight}`` or an iterable of ``(u, v, weight)`` (parallel
@@ -449,7 +451,9 @@ def min_feedback_arc_set(nodes: Iterable[Hashable], weighted_arcs, *, time_limit
 
     Raises :class:`RelaxRefused` for a component over :data:`MAX_COMPONENT_PARTS` vertices or
     :data:`MAX_COMPONENT_ARCS` arcs, and :class:`RelaxTimeout` (carrying the best set found, which is
-    a feedback arc set but not proven minimal) when ``time_limit`` seconds pass first.
+    a feedback arc set but not proven minimal) when ``time_limit`` seconds pass first, or the
+    caller's ``deadline`` (a :class:`~opportune.engine.deadline.Deadline` or a
+    ``time.perf_counter()`` moment), whichever is sooner.
 
     >>> min_feedback_arc_set("abc", {("a", "b"): 1, ("b", "c"): 1, ("c", "a"): 3, ("b", "a"): 1})
     (1.0, [('a', 'b')])
@@ -458,6 +462,7 @@ def min_feedback_arc_set(nodes: Iterable[Hashable], weighted_arcs, *, time_limit
     """
     if method not in ("auto", "dp", "bb"):
         raise ValueError(f"unknown method {method!r}: auto, dp or bb")
+    time_limit = _sooner(time_limit, deadline)
     deadline = time.monotonic() + (time_limit if time_limit is not None else math.inf)
     ids: dict[Hashable, int] = {}
     for v in nodes:
@@ -519,6 +524,16 @@ def min_feedback_arc_set(nodes: Iterable[Hashable], weighted_arcs, *, time_limit
         raise RelaxTimeout(f"the search for the cheapest relaxation ran out of its {time_limit:g} s; the best "
                            "relaxation found is not proven minimal", weight, dropped)
     return weight, dropped
+
+
+def _sooner(time_limit: float | None, deadline: Deadline | float | None) -> float | None:
+    """Seconds from now to the sooner of ``time_limit`` and ``deadline`` (None: neither); the search
+    keeps its own ``time.monotonic()`` clock."""
+    d = as_deadline(deadline)
+    if not d.finite:
+        return time_limit
+    left = max(0.0, d.remaining())
+    return left if time_limit is None else min(time_limit, left)
 
 
 # ---------------------------------------------------------------- relaxing a plan
@@ -605,7 +620,8 @@ def check_installed(plan: Plan, installed: Sequence[str]) -> None:
 
 
 def relax(plan: Plan, installed: Sequence[str] = (), *, time_limit: float | None = DEFAULT_TIME_LIMIT,
-          lines: Mapping[tuple[str, str, str], int] | None = None) -> Relaxation:
+          lines: Mapping[tuple[str, str, str], int] | None = None,
+          deadline: Deadline | float | None = None) -> Relaxation:
     """The cheapest rational relaxation of ``plan`` (see the module's docstring for the rule).
 
     ``plan`` may hold cyclic strategies (read it with ``read_plan(path, allow_cycles=True)``);
@@ -613,7 +629,8 @@ def relax(plan: Plan, installed: Sequence[str] = (), *, time_limit: float | None
     ``(strategy, before, after)`` to the line of the constraint in its file
     (:func:`constraint_lines`).  Returns a :class:`Relaxation` whose plan is valid (``opportune check``
     passes) and admits ``installed``.  Cost: one :func:`min_feedback_arc_set` per cyclic strategy (two
-    for a strategy that contradicts the prefix), within ``time_limit`` seconds in all.  Raises
+    for a strategy that contradicts the prefix), within ``time_limit`` seconds in all (and before
+    ``deadline``, as in :func:`min_feedback_arc_set`).  Raises
     ``ValueError`` for a bad prefix and :class:`RelaxRefused` over the limits.
 
     >>> from opportune.formats.loader import check_text
@@ -627,6 +644,7 @@ def relax(plan: Plan, installed: Sequence[str] = (), *, time_limit: float | None
 
     installed = list(installed)
     check_installed(plan, installed)
+    time_limit = _sooner(time_limit, deadline)
     deadline = time.monotonic() + (time_limit if time_limit is not None else math.inf)
     lines = lines or {}
     proven = True
@@ -702,7 +720,8 @@ def constraint_lines(path) -> dict[tuple[str, str, str], int]:
         path = datasets.resolve(path)
         if str(path) == "-":
             return {}
-        raw = Path(path).read_bytes()[:MAX_FILE_BYTES + 1]
+        with Path(path).open("rb") as f:  # at most the bound: /dev/zero is a file too
+            raw = f.read(MAX_FILE_BYTES + 1)
         if len(raw) > MAX_FILE_BYTES:
             return {}
         text = raw.decode("utf-8-sig")

@@ -49,10 +49,12 @@ from __future__ import annotations
 
 import math
 import random
+import time
 from dataclasses import dataclass
 from statistics import NormalDist
 
 from opportune.engine import native
+from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
 
 _M64 = (1 << 64) - 1
@@ -103,10 +105,13 @@ class CompletionChains:
 
     ``poset`` gives the order (bitmask ``below``/``above`` per element); ``remaining``
     the steps still to do.  Call :meth:`advance` when steps are installed and
-    :meth:`estimate` to run the chains and read the statistics.
+    :meth:`estimate` to run the chains and read the statistics.  Starting the population costs
+    O(n + covers) per chain; past ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`, read
+    every 256 steps) it raises :class:`~opportune.engine.deadline.BudgetExceeded`.
     """
 
-    def __init__(self, poset: Poset, remaining: int, *, chains: int = 8, seed: int = 0):
+    def __init__(self, poset: Poset, remaining: int, *, chains: int = 8, seed: int = 0,
+                 deadline: Deadline | float | None = None):
         if chains < 2:
             raise ValueError("at least 2 chains are needed to state an error")
         self._poset = poset
@@ -116,7 +121,9 @@ class CompletionChains:
         self.rng = random.Random(seed)
         self.remaining = remaining
         self.chains = chains
-        orders = [self._random_topological(remaining) for _ in range(chains)]
+        dl = as_deadline(deadline)
+        self._neighbours(dl)
+        orders = [self._random_topological(remaining, dl) for _ in range(chains)]
         # The moves draw from splitmix64 (one stream for the population), so the compiled chains and
         # the pure-Python ones make the same moves from the same seed.
         self._state = self.rng.getrandbits(64)
@@ -134,10 +141,10 @@ class CompletionChains:
         """The chains' current sequences (a copy when they run compiled)."""
         return self._core.orders() if self._core is not None else self._orders
 
-    def _random_topological(self, remaining: int) -> list[int]:
+    def _random_topological(self, remaining: int, deadline: Deadline = Deadline.NEVER) -> list[int]:
         """A random admissible sequence of ``remaining`` (an up-set: what is left after installing a
         down-set), by Kahn's algorithm on the cover relations with a random minimal step each time:
-        not uniform, just spread.  O(n + covers)."""
+        not uniform, just spread.  O(n + covers); the deadline read every 256 steps."""
         up, rng = self._neighbours()[1], self.rng
         waiting = {u: 0 for u in bits(remaining)}
         for u in waiting:
@@ -147,6 +154,8 @@ class CompletionChains:
         minimal = [u for u, k in waiting.items() if k == 0]
         out: list[int] = []
         while minimal:
+            if not len(out) & 255:
+                deadline.check("starting the chains")
             i = rng.randrange(len(minimal))
             u = minimal[i]
             minimal[i] = minimal[-1]
@@ -173,15 +182,24 @@ class CompletionChains:
                 self._orders = [[u for u in order if not gone >> u & 1] for order in self._orders]
             self.remaining = remaining
 
-    def run(self, steps: int) -> None:
+    def run(self, steps: int, deadline: Deadline | float | None = None) -> None:
         """``steps`` moves on every chain: a step of the sequence drawn uniformly is taken out and put
         back in a uniformly random slot between its last predecessor and its first successor (a
         random-scan Gibbs sampler: given the others, its slot is uniform among the valid ones).
 
         One move can carry a step across the whole sequence, where the adjacent swaps of Karzanov
         and Khachiyan move it one place: on ARC111 the chains mix in far fewer moves.  Each move
-        costs a few C-level list scans (``list.index`` for its cover neighbours).
+        costs a few C-level list scans (``list.index`` for its cover neighbours).  With a ``deadline``,
+        stops once it has passed (read every 64 moves of a chain), with fewer moves made (counted
+        in ``steps``).
         """
+        dl = as_deadline(deadline)
+        if dl.finite and steps > 64:        # in pieces, so that the clock is read between them
+            done = 0
+            while done < steps and not dl.expired():
+                self.run(min(64, steps - done))
+                done += 64
+            return
         if self._core is not None:
             self._core.run(steps)
             self.steps += steps
@@ -221,13 +239,13 @@ class CompletionChains:
         self._state = state
         self.steps += steps
 
-    def _neighbours(self) -> tuple[list[list[int]], list[list[int]]]:
+    def _neighbours(self, deadline: Deadline | None = None) -> tuple[list[list[int]], list[list[int]]]:
         """Cover predecessors and successors of every element (built once): the last predecessor and
         first successor of a step in a sequence are among them."""
         if self._covers is None:
             preds: list[list[int]] = [[] for _ in self.below]
             succs: list[list[int]] = [[] for _ in self.below]
-            for a, b in self._poset.cover_pairs():
+            for a, b in self._poset.cover_pairs(deadline=deadline):
                 succs[a].append(b)
                 preds[b].append(a)
             self._covers = (preds, succs)
@@ -240,7 +258,9 @@ class CompletionChains:
         that it comes next, and for each unit in ``positions``, its expected position.
 
         Either ``steps`` per chain in total, taken as ``samples`` rounds, or rounds until
-        ``deadline`` (by ``clock``, e.g. ``time.perf_counter``), at least two.  Each round
+        ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`, or a moment of ``clock``, e.g.
+        ``time.perf_counter``, or of an injected clock), at least two; with both, the rounds stop at
+        whichever comes first (at least two).  Each round
         runs the chains, then reads one sample from each.  With a deadline, ``settled`` (a
         function of the estimate so far) may end the rounds early, once every unit has
         ``min_rounds`` rounds: a decision that is already sure need not spend the rest of its budget.
@@ -252,6 +272,9 @@ class CompletionChains:
         second time.  A unit's rounds may differ from another's; each chain's means are still means
         of its own readings, so the comparisons over chains stay valid.
         """
+        moves_until = deadline if isinstance(deadline, Deadline) else None   # read inside the moves too
+        if moves_until is not None:
+            deadline, clock = (moves_until.at if moves_until.finite else None), time.perf_counter
         first, positions = list(first), list(positions)
         for u in first:
             if self.below[u] & self.remaining:
@@ -272,13 +295,14 @@ class CompletionChains:
             if settled(summary):        # what was kept already settles it: no moves at all
                 return summary
         while True:
-            self.run(per_round)
+            self.run(per_round, moves_until)
             if first or positions:
                 self._read_all(first, positions, acc_first, acc_pos)
             rounds += 1
             least += 1
             if steps:
-                if rounds >= samples:
+                if rounds >= samples or (deadline is not None and clock is not None and least >= 2
+                                         and clock() >= deadline):
                     break
             elif least >= 2 and (deadline is None or clock() >= deadline):
                 break

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import random
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -41,6 +42,9 @@ from opportune.plan import Plan
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
 STATE_CACHE_LIMIT = 300_000  # entries per per-state cache before it is cleared
 HUB_PROBE = 100_000  # new memo entries a plain count may add before counting through a hub is tried
+COUNT_MARGIN = 0.25  # seconds Schedule.count_result may take past its deadline (checks' granularity, the answer)
+ESTIMATE_RESERVE = 3e-5  # seconds per element an estimate needs for its bounds and first path (~0.25 s for 10,000)
+GRACE = 0.05  # seconds the exact count and the estimate each get in count_result when its deadline has passed
 
 
 class NotAdmissible(ValueError):
@@ -68,6 +72,11 @@ class CountResult:
     #: ``log10`` of an estimate, kept beside ``value``: an estimate past 1.8e308 (a plan of a few
     #: hundred steps) is ``inf`` as a float
     log10_value: float | None = None
+    #: ``log10`` of the ends of an interval holding the count: the stated one within the certain
+    #: bounds the orders give (so finite for every estimate :meth:`Schedule.count_result` makes;
+    #: None where nobody gave one)
+    log10_low: float | None = None
+    log10_high: float | None = None
 
     @property
     def log10(self) -> float:
@@ -75,6 +84,16 @@ class CountResult:
             return self.log10_value
         return log10_int(self.value) if isinstance(self.value, int) else (
             math.log10(self.value) if self.value > 0 else float("-inf"))
+
+    @property
+    def interval_log10(self) -> tuple[float, float] | None:
+        """``(log10 low, log10 high)``: the count itself when exact, else the interval given (None
+        if none was)."""
+        if self.exact:
+            return self.log10, self.log10
+        if self.log10_low is None or self.log10_high is None:
+            return None
+        return self.log10_low, self.log10_high
 
 
 def _signed_sum_log10(parts: list[tuple[int, float, float]]) -> tuple[float, float]:
@@ -180,6 +199,12 @@ class OrderEngine:
         self._hub_search: dict[Counter, HubPath] = {}   # a hub search cut short by a deadline, to resume
         self._probe_left: dict[Counter, int] = {}       # new memo entries the plain probe may still add
         self._until: float | None = None                # the deadline of :meth:`deadline`, if any
+        # Decisions under way (see :meth:`deciding`): while any is, caches and memos may grow but are
+        # never trimmed or evicted; :meth:`maintain` does that between decisions.
+        self._deciding = 0
+        self._upkeep_lock = threading.Lock()
+        self.upkeep_due = False     # a cache or memo went over its cap during a decision
+        self.maintained = 0         # maintain() calls that dropped something
 
     # ------------------------------------------------------------ posets per strategy set
 
@@ -195,10 +220,13 @@ class OrderEngine:
                 self._counters[strategies] = None
             else:
                 self._counters[strategies] = Counter(poset, max_memo=self.max_memo, time_limit=self.time_limit)
+                self._counters[strategies].hold_upkeep = self._deciding > 0
         return self._counters[strategies]
 
-    def _terms(self, consistent: int) -> list:
-        """Inclusion–exclusion terms ``(sign, counter)`` over the non-empty subsets of ``consistent`` (cached)."""
+    def _terms(self, consistent: int, deadline=None) -> list:
+        """Inclusion–exclusion terms ``(sign, counter)`` over the non-empty subsets of ``consistent`` (cached;
+        the single strategies first).  Past ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`,
+        read before each union of orders), :class:`BudgetExceeded`; the counters made so far are kept."""
         terms = self._terms_cache.get(consistent)
         if terms is not None:
             return terms
@@ -209,6 +237,8 @@ class OrderEngine:
         for size in range(1, len(members) + 1):
             sign = 1 if size % 2 else -1
             for subset in combinations(members, size):
+                if deadline is not None and size > 1:
+                    deadline.check("the orders of the strategies' intersections")
                 counter = self.counter(sum(1 << s for s in subset))
                 if counter is not None:
                     terms.append((sign, counter))
@@ -240,11 +270,46 @@ class OrderEngine:
 
     def _trim(self) -> None:
         """Bound the per-state caches (not the counters' memos): a long simulation of a large plan
-        visits millions of states that never recur; start afresh rather than grow without end."""
+        visits millions of states that never recur; start afresh rather than grow without end.
+        During a decision (:meth:`deciding`) only noted: :meth:`maintain` clears them after it."""
+        if self._deciding:
+            self.upkeep_due = True
+            return
         for cache in (self._count_cache, self._option_cache, self._options_cache, self._positions_cache,
                       self._installable_cache):
             if len(cache) > STATE_CACHE_LIMIT:
                 cache.clear()
+
+    def nbytes(self) -> int:
+        """Estimated bytes this engine holds: the strategies' orders, every counter's memos and tables,
+        hub paths and the per-state caches (sampled, so O(counters + caches), not O(entries); see
+        :mod:`opportune.engine.memory`).  What a service accounts per plan.
+
+        >>> from opportune import make_plan
+        >>> OrderEngine(make_plan(["a", "b"], {"b": ["a"]})).nbytes() > 0
+        True
+        """
+        from opportune.engine.memory import nbytes, poset_nbytes
+
+        total = sum(poset_nbytes(p) for p in self.posets)
+        for counter in list(self._counters.values()):
+            if counter is not None:
+                total += counter.nbytes() - (poset_nbytes(counter.poset) if counter.poset in self.posets else 0)
+        for hub in list(self._hubs.values()) + list(self._hub_search.values()):
+            if hub is not None:
+                total += hub.nbytes()
+        for cache in (self._count_cache, self._options_cache, self._positions_cache, self._option_cache,
+                      self._installable_cache):
+            total += nbytes(cache)
+        return total + nbytes(self._above, depth=3)
+
+    def clear_state_caches(self) -> None:
+        """Forget the per-state caches (options, positions, installable sets; not the counters' memos):
+        what a service does to a plan over its memory share between requests.  Later questions about
+        those states are counted again (from the memos).  O(1) per cache."""
+        for cache in (self._count_cache, self._option_cache, self._options_cache, self._positions_cache,
+                      self._installable_cache):
+            cache.clear()
 
     def count(self, mask: int, consistent: int) -> int:
         """Exact number of admissible completions after installing ``mask`` (raises BudgetExceeded)."""
@@ -312,7 +377,8 @@ class OrderEngine:
                         raise
             finally:
                 counter.max_memo = limit
-            hub = self._hub_search[counter] = HubPath(counter.poset, max_memo=limit)
+            hub = self._hub_search[counter] = HubPath(counter.poset, max_memo=limit, deadline=self._deadline(counter))
+            hub.counter.hold_upkeep = self._deciding > 0
         v = hub.count(s, deadline=self._deadline(counter), discover=True)   # a time limit raises: resumed later
         del self._hub_search[counter]
         if v is not None and hub.tails:
@@ -347,6 +413,64 @@ class OrderEngine:
             for key, c in self._counters.items():
                 if c is not None:
                     c.deadline = saved[1].get(key)
+
+    # ------------------------------------------------------------ upkeep between decisions
+
+    def _all_counters(self) -> list[Counter]:
+        out = [c for c in list(self._counters.values()) if c is not None]
+        for hub in list(self._hubs.values()) + list(self._hub_search.values()):
+            if hub is not None:
+                out.append(hub.counter)
+        return out
+
+    @contextmanager
+    def deciding(self):
+        """Within the block (a decision), memos and per-state caches may grow past their caps but are
+        never evicted, trimmed or restarted: dropping hundreds of thousands of entries took a decision
+        of a long-running cell past its budget (207 ms against 50).  :meth:`maintain`, called between
+        looks (the sequencer does it after each outcome), does that work.  What piles up meanwhile is
+        bounded by the decision's budget.  Blocks may nest and overlap (threads sharing the engine).
+
+        >>> from opportune import make_plan
+        >>> e = OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> with e.deciding():
+        ...     e.count(0, e.all_strategies)
+        1
+        >>> e.maintain()
+        False
+        """
+        with self._upkeep_lock:
+            self._deciding += 1
+            for c in self._all_counters():
+                c.hold_upkeep = True
+        try:
+            yield self
+        finally:
+            with self._upkeep_lock:
+                self._deciding -= 1
+                if not self._deciding:
+                    for c in self._all_counters():
+                        c.hold_upkeep = False
+
+    def maintain(self) -> bool:
+        """Between decisions: clear the per-state caches over their cap and evict or restart every
+        counter's memo over its own (:meth:`Counter.maintain`).  Does nothing while a decision is under
+        way (another thread's); True if anything was dropped.  Complexity: O(counters + caches) when
+        all are under their caps, else O(entries dropped)."""
+        with self._upkeep_lock:
+            if self._deciding:
+                return False
+            self.upkeep_due = False
+            dropped = False
+            for cache in (self._count_cache, self._option_cache, self._options_cache, self._positions_cache,
+                          self._installable_cache):
+                if len(cache) > STATE_CACHE_LIMIT:
+                    cache.clear()
+                    dropped = True
+            for c in self._all_counters():
+                dropped |= c.maintain()
+            self.maintained += dropped
+            return dropped
 
     def warm_up(self, time_limit: float | None = None) -> bool:
         """Count the first state exactly, within ``time_limit`` seconds: this chooses how the
@@ -724,42 +848,57 @@ class Schedule:
         return self.engine.count(self.mask, self.consistent)
 
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
-                     exact_share: float = 0.65) -> CountResult:
-        """Number of completions: exact within the engine's budget, else a clearly marked estimate.
+                     exact_share: float = 0.65, deadline=None) -> CountResult:
+        """Number of completions: exact within the engine's budget, else a clearly marked estimate
+        with an interval.
 
-        Three phases, each under one deadline for every count of the engine
-        (:meth:`OrderEngine.deadline`), so the call returns within
-        ``plain + time_limit`` seconds plus the granularity of the deadline
-        checks (milliseconds), where ``plain`` is the engine's own time limit,
-        or a tenth of ``time_limit`` if it has none:
+        Everything stops at one :class:`~opportune.engine.deadline.Deadline`: ``plain + time_limit``
+        seconds from the call, or ``deadline`` if sooner, where ``plain`` is the engine's own time
+        limit, or a tenth of ``time_limit`` if it has none.  The call returns within that plus
+        ``COUNT_MARGIN`` (0.25 s of CPU time, measured at most 0.1 s past it on orders of up to
+        10,000 elements: the granularity of the deadline checks and assembling the answer).  Phases:
 
-        1. the plain exact count, ``plain`` seconds: each counter by itself,
+        (The phases' times below are scaled down if ``deadline`` leaves less than ``plain +
+        time_limit``, and the exact phases end early enough to leave the estimate its pass over
+        each order, ``ESTIMATE_RESERVE`` seconds per element.  A deadline already passed still
+        gives the plain count and the estimate ``GRACE`` seconds each: a small plan is exact.)
+
+        1. the plain exact count, until ``plain`` seconds: each counter by itself,
            choosing a method per hard piece (see :class:`~opportune.engine.count.Counter`);
-           a plan too large for it costs seconds, not the minutes it takes to
-           fill the memo budget;
         2. if that did not finish, the engine's exact count (which also looks
            for a hub: :mod:`opportune.engine.hub`) continues for
            ``exact_share`` of ``time_limit`` from where it stopped (the memos
            and each piece's progress are kept);
         3. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
-           gets the rest (without its own hub split if the exact phases
-           looked for a hub already): it reuses the exact counter's memo, stops early once
-           its 95% interval is within ``rel_error``, and states the error it
-           achieved, with fewer particles per run (down to 64) when its time
-           is short for two runs.  It starts new runs during the first half of its time;
-           its first two runs may go on to the end (without two runs no error
-           can be stated), and then it returns what it has, with an infinite
-           stated error (or no value: nan) if that was too little.
+           gets the rest, shared between the inclusion–exclusion terms (without its own hub split
+           if the exact phases looked for a hub already): certain bounds from each order and
+           Knuth's estimator from its first path on, then sequential Monte Carlo runs where they
+           fit (fewer particles, down to 64, when time is short), stopping early once the 95%
+           interval is within ``rel_error``.
+
+        The answer always has a value, and an estimate always has a finite interval
+        (``log10_low``/``log10_high``: the stated interval within the order's certain bounds,
+        ``1 <= count <= n!`` at the very least); ``rel_error`` is infinite when no error could be
+        stated from the runs.  Building the inclusion–exclusion terms is inside the budget (a
+        deadline between unions); building the engine's orders is the caller's (O(units + pairs)
+        big-int operations, ~0.1 s for 10,000 units).
+
+        >>> from opportune import make_plan
+        >>> r = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).count_result(time_limit=1.0)
+        >>> r.value, r.exact, r.interval_log10 == (r.log10, r.log10)
+        (3, True, True)
         """
         import contextlib
 
+        from opportune.engine.deadline import Deadline, as_deadline
+
         start = time.perf_counter()
         plain = self.engine.time_limit if self.engine.time_limit is not None else time_limit / 10
-        end = start + plain + time_limit
+        end = as_deadline(deadline).within(plain + time_limit)
         try:
-            terms = list(self.engine._terms(self.consistent))
+            terms = list(self.engine._terms(self.consistent, end))
         except BudgetExceeded:
-            terms = []
+            terms = None
 
         def exact_by(until: float, plain_only: bool) -> CountResult:
             # every count of the engine stops at `until`: the engine's deadline sets each count's time
@@ -779,43 +918,89 @@ class Schedule:
                 for c, d in saved:
                     c.deadline = d
 
-        for until, plain_only in ((start + plain, True), (start + plain + exact_share * time_limit, False)):
-            try:
-                return exact_by(until, plain_only)
-            except BudgetExceeded:
-                pass
+        remaining = self.engine.full & ~self.mask
+        n = remaining.bit_count()
+        if terms is not None:
+            # the phases share what is left of the time (a caller's deadline may have taken some),
+            # and the exact ones leave the estimate at least its one pass over each order
+            # (ESTIMATE_RESERVE seconds per element: its bounds and first path)
+            avail = max(0.0, end.remaining())
+            scale = min(1.0, avail / (plain + time_limit)) if plain + time_limit > 0 else 0.0
+            last = end.at - min(avail / 2, ESTIMATE_RESERVE * n * len(terms))
+            for until, plain_only in ((start + plain * scale, True),
+                                      (start + (plain + exact_share * time_limit) * scale, False)):
+                # a deadline spent before the call (reading the plan) still leaves a small plan its
+                # exact count: GRACE seconds, within COUNT_MARGIN
+                until = min(until, last) if not plain_only else max(min(until, last), start + GRACE)
+                try:
+                    return exact_by(until, plain_only)
+                except BudgetExceeded:
+                    pass
         from opportune.engine.estimate import estimate_count
 
-        remaining = self.engine.full & ~self.mask
-        missed, methods, parts = 0.0, set(), []
+        if end.remaining() < GRACE:         # and the estimate its pass over the orders, if they are small
+            end = Deadline.after(GRACE)
+
+        if terms is None:
+            # too many strategies for inclusion–exclusion, or no time to build its terms: the union
+            # lies between its largest strategy and the sum of them
+            terms = [(1, self.engine.counter(1 << s)) for s in range(self.engine.k) if self.consistent >> s & 1]
+            union_only = True
+        else:
+            union_only = False
+        singles = self.consistent.bit_count()
+        missed, methods, parts, ests = 0.0, set(), [], []
         exact: int | None = 0
-        terms = list(self.engine._terms(self.consistent))
         for i, (sign, counter) in enumerate(terms):
-            share = max(0.0, end - time.perf_counter()) / (len(terms) - i)
+            share = end.share(1 / (len(terms) - i))
+            seconds = max(0.0, share.remaining())
             # the hub split again only if the exact phases did not already look for a hub
             hub = {"hub": 0.0} if counter in self.engine._hubs else {}
             # fewer particles when time is short, so that two runs fit (a run of p particles on n
             # elements took about 2e-7 p n^2 seconds here: ARC111 with 1,024 particles ~3 s)
-            n = remaining.bit_count()
             particles = 1024
-            while particles > 64 and 2e-7 * particles * n * n > share / 4:
+            while particles > 64 and 2e-7 * particles * n * n > seconds / 4:
                 particles //= 2
             # each of k terms at confidence 1 - 0.05/k, so that all k intervals hold together with
             # probability at least 95% (a union bound); one term keeps the plain 95%
             est = estimate_count(counter.poset, remaining, rel_error=rel_error / max(1, len(terms)),
-                                 time_limit=share / 2, overrun=share / 2, seed=seed, counter=counter,
-                                 exact_memo=0, particles=particles, confidence=1 - 0.05 / len(terms), **hub)
+                                 time_limit=seconds / 2, overrun=math.inf, deadline=share, seed=seed,
+                                 counter=counter, exact_memo=0, particles=particles,
+                                 confidence=1 - 0.05 / len(terms), **hub)
+            ests.append(est)
             exact = None if exact is None or est.exact is None else exact + sign * est.exact
             parts.append((sign, est.log10_value, est.rel_error))
-            if est.exact is None:
+            if est.rel_error > 0 and est.exact is None:
                 missed += 1 - est.confidence
             methods.add(est.method)
-        if exact is not None:           # every term was counted exactly after all (through a hub)
+        if exact is not None and not union_only:    # every term was counted exactly after all (through a hub)
             return CountResult(exact)
-        # the intervals of the terms add up; they all hold at once with probability >= 1 - sum(misses)
-        log10, rel = _signed_sum_log10(parts)
+        # certain bounds on the union: at least its largest strategy's count, at most the sum of them
+        # (and, with every term, the inclusion–exclusion sum of the terms' bounds)
+        low = max(e.log10_low for e in ests[:singles])
+        high = _signed_sum_log10([(1, e.log10_high, 0.0) for e in ests[:singles]])[0]
+        if union_only:
+            log10, rel = max(e.log10_value for e in ests[:singles]), math.inf
+        else:
+            both = _signed_sum_log10([(sign, e.log10_high if sign > 0 else e.log10_low, 0.0)
+                                      for (sign, _), e in zip(terms, ests)])[0]
+            if not math.isnan(both):
+                high = min(high, both)
+            # the intervals of the terms add up; they all hold at once with probability >= 1 - sum(misses)
+            log10, rel = _signed_sum_log10(parts)
+        high = max(low, min(high, math.lgamma(n + 1) / math.log(10)))     # and at most n! whatever the orders
+        if math.isnan(log10):
+            log10, rel = (low + high) / 2, math.inf
+        log10 = min(max(log10, low), high)
+        lo, hi = low, high
+        if rel < 1:
+            lo = max(low, min(high, log10 + math.log10(1 - rel)))
+        if math.isfinite(rel):
+            hi = min(high, max(low, log10 + math.log10(1 + rel)))
         return CountResult(10.0 ** log10 if log10 < 308 else math.inf, exact=False, rel_error=rel,
-                           confidence=max(0.0, 1 - missed), method="+".join(sorted(methods)), log10_value=log10)
+                           confidence=max(0.0, 1 - missed),
+                           method=("union:" if union_only else "") + "+".join(sorted(methods)), log10_value=log10,
+                           log10_low=lo, log10_high=hi)
 
     def options(self) -> dict[str, int]:
         """For each installable part, how many admissible completions remain after installing it.

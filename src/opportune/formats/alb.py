@@ -29,6 +29,11 @@ variants add e.g. ``<number of stations>``).  Text after ``<end>`` is ignored;
 a file without ``<end>`` is refused as truncated.  As with ``.IN2`` files,
 parts are named by task number and task times become per-part ``install``
 costs; every problem is reported with its file and line, never as a traceback.
+
+Bounds (:mod:`opportune.formats.graphs`), checked before anything large is
+built: :data:`~opportune.formats.graphs.MAX_LINES` lines (counted on the
+bytes), :data:`~opportune.formats.graphs.MAX_LINE_CHARS` characters a line,
+:data:`MAX_TASKS` tasks and :data:`MAX_PAIRS` precedence lines.
 """
 
 from __future__ import annotations
@@ -41,8 +46,10 @@ from pathlib import Path
 from typing import IO, Iterable
 
 from opportune.formats.graphs import (MAX_PAIRS, MAX_PER_KIND, MAX_TASKS, DECIMAL as _DECIMAL, Findings,
-                                      GraphFormatError, PAIR as _PAIR, check_graph, in_file_order as _in_file_order,
-                                      last_nonblank as _last_nonblank, show as _show, text_lines, to_int as _int)
+                                      GraphFormatError, PAIR as _PAIR, check_graph, file_bytes,
+                                      in_file_order as _in_file_order,
+                                      last_nonblank as _last_nonblank, show as _show, text_lines, to_int as _int,
+                                      too_long, too_many_lines)
 from opportune.formats.loader import CheckResult
 from opportune.formats.problems import Problem
 
@@ -85,6 +92,9 @@ def parse_alb(raw: bytes, file: str | None = None) -> tuple[Alb | None, list[Pro
     with a dictionary.
     """
     out = Findings(file, code="alb")
+    refused = too_many_lines(raw, file)  # before the lines are built
+    if refused:
+        return None, refused
     lines = text_lines(raw.removeprefix(codecs.BOM_UTF8))
     sections, end_line = _sections(lines, out)
     last_line = _last_nonblank(lines)
@@ -108,7 +118,7 @@ def parse_alb(raw: bytes, file: str | None = None) -> tuple[Alb | None, list[Pro
 
 def read_alb(path: str | Path) -> Alb:
     """Read an ``.alb`` file; raise :class:`AlbError` with every problem (warnings are dropped)."""
-    content, problems = parse_alb(Path(path).read_bytes(), file=str(path))
+    content, problems = parse_alb(file_bytes(path, AlbError), file=str(path))
     if content is None:
         raise AlbError([p for p in problems if p.severity == "error"])
     return content
@@ -150,7 +160,7 @@ def _sections(lines: list[str], out: Findings) -> tuple[dict[str, _Section], int
     skipping = False  # inside an unknown or repeated section: its lines are not ours to judge
     for no, text in enumerate(lines, 1):
         s = text.strip()
-        if not s:
+        if not s or too_long(s, no, out):  # a line of megabytes would be split into millions of strings
             continue
         if s.startswith("<") and s.endswith(">"):
             name = " ".join(s[1:-1].lower().split())

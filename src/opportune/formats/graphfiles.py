@@ -7,8 +7,13 @@ are several strategies over the same parts.  What is read goes through the same 
 file (:func:`~opportune.formats.validate.check_document`), with every problem placed on the line of
 the file that caused it.
 
-Bounds: the file size of :func:`~opportune.formats.loader.read_plan`; no DTD or entity in GraphML
-(refused: they are how XML bombs work); the plan limits of :mod:`opportune.plan`.
+Bounds, each checked while the file is read (streamed: tokens and XML events, nothing built ahead),
+each refusal with its line: the file size of :func:`~opportune.formats.loader.read_plan`; at most
+:data:`~opportune.formats.graphs.MAX_TASKS` nodes and :data:`~opportune.formats.graphs.MAX_PAIRS`
+edges; :data:`MAX_TOKENS` DOT tokens; :data:`MAX_ELEMENTS` GraphML elements nested at most
+:data:`~opportune.formats.loader.MAX_DEPTH` deep, :data:`~opportune.plan.MAX_STRATEGIES` graphs, and
+data of at most :data:`~opportune.formats.validate.MAX_TEXT` characters; no DTD or entity in GraphML
+(refused: they are how XML bombs work); then the plan limits of :mod:`opportune.plan`.
 
 >>> from opportune import make_plan
 >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
@@ -21,22 +26,31 @@ Bounds: the file size of :func:`~opportune.formats.loader.read_plan`; no DTD or 
 from __future__ import annotations
 
 import re
+from collections import deque
 from xml.parsers import expat
 from xml.sax.saxutils import escape, quoteattr
 
-from opportune.formats.loader import CheckResult, Document
+from opportune.formats.graphs import MAX_PAIRS, MAX_TASKS
+from opportune.formats.loader import MAX_DEPTH, CheckResult, Document
 from opportune.formats.problems import Problem
+from opportune.formats.validate import MAX_TEXT
+from opportune.plan import MAX_STRATEGIES
 
 __all__ = ["check_dot_bytes", "check_graphml_bytes", "plan_from_networkx", "plan_to_networkx",
            "to_dot_precedence", "to_graphml"]
 
 _NUMERIC = ("quantity", "install", "acquire")
+# Bounds besides the nodes (MAX_TASKS) and edges (MAX_PAIRS) of opportune.formats.graphs, each
+# keeping the largest file accepted read within a few seconds and a few times its size in memory.
+MAX_TOKENS = 16 * MAX_TASKS + 4 * MAX_PAIRS   # DOT tokens: a node with its attributes, an edge statement
+MAX_ELEMENTS = 1_000_000                      # GraphML elements (a node per strategy, their data, edges)
 
 
 class _Bad(Exception):
-    def __init__(self, message: str, hint: str, line: int | None):
+    def __init__(self, message: str, hint: str, line: int | None, code: str = "syntax"):
         super().__init__(message)
         self.problem = (message, hint, line)
+        self.code = code
 
 
 def _build(name: str, source: str, nodes: dict[str, dict], node_lines: dict[str, int],
@@ -126,20 +140,46 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         raise _Bad("the file declares a DTD or entities", "remove the <!DOCTYPE ...> and <!ENTITY ...> "
                    "declarations: GraphML needs none", parser.CurrentLineNumber)
 
+    counts = {"element": 0, "edge": 0}
+    collecting = []  # inside a <data> of a node: its text is kept (and only there)
+
+    def count(what, limit, line, hint="split the graph into smaller ones"):
+        counts[what] += 1
+        if counts[what] > limit:
+            kind = "elements" if what == "element" else f"<{what}> elements"
+            raise _Bad(f"more than {limit:,} {kind}; GraphML files of at most {limit:,} are read", hint, line, "limit")
+
+    ids: set[str] = set()  # every node id met, declared or named by an edge
+
+    def named(pid, line):
+        if pid not in ids:
+            if len(ids) >= MAX_TASKS:
+                raise _Bad(f"more than {MAX_TASKS:,} nodes; graph files of at most {MAX_TASKS:,} are read "
+                           "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line, "limit")
+            ids.add(pid)
+
     def start(tag, attrs):
         tag = tag.rpartition(":")[2]
         line = parser.CurrentLineNumber
+        count("element", MAX_ELEMENTS, line)
+        if len(stack) >= MAX_DEPTH:
+            raise _Bad(f"elements nested more than {MAX_DEPTH} levels deep", "GraphML nests 4 levels: "
+                       "graphml, graph, node, data", line, "limit")
         if tag == "key":
             keys[attrs.get("id", "")] = attrs.get("attr.name", attrs.get("id", ""))
         elif tag == "graph":
             if attrs.get("edgedefault", "directed") != "directed" and not stack_has("graph"):
                 raise _Bad("the graph is undirected", "a precedence graph is directed: edgedefault=\"directed\"",
                            line)
+            if len(graphs) >= MAX_STRATEGIES:
+                raise _Bad(f"more than {MAX_STRATEGIES} <graph> elements; a plan holds at most {MAX_STRATEGIES} "
+                           "strategies", "keep the strategies that add sequences", line, "limit")
             graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
         elif tag == "node":
             pid = attrs.get("id")
             if not pid:
                 raise _Bad("a node has no id", "give every <node> an id attribute", line)
+            named(pid, line)
             nodes.setdefault(pid, {})
             node_lines.setdefault(pid, line)
         elif tag == "edge":
@@ -148,9 +188,14 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                 raise _Bad("an edge lacks its source or target", "write <edge source=\"a\" target=\"b\"/>", line)
             if not graphs:
                 raise _Bad("an edge outside any <graph>", "put edges inside a <graph> element", line)
+            count("edge", MAX_PAIRS, line, "split the graph into smaller ones, or list only the covering edges "
+                  "(opportune convert writes those)")
+            for pid in (a, b):  # an edge may name a node declared nowhere: it is a node too (added at the end)
+                named(pid, line)
             graphs[-1][1].append((a, b, line))
         elif tag == "data":
             text.clear()
+            collecting[:] = [stack and stack[-1][0] == "node"]
         stack.append((tag, attrs))
 
     def stack_has(tag):
@@ -159,6 +204,8 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     def end(tag):
         tag = tag.rpartition(":")[2]
         _, attrs = stack.pop()
+        if tag == "data":
+            collecting[:] = []
         if tag == "data" and stack and stack[-1][0] == "node":
             key = keys.get(attrs.get("key", ""), attrs.get("key", ""))
             pid = stack[-1][1].get("id")
@@ -169,15 +216,25 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
             elif key in _NUMERIC:
                 nodes[pid][key] = _number(value, f"node {pid}'s {key}", line)
 
+    kept = [0]  # characters of the <data> being read
+
+    def characters(data):
+        if collecting and collecting[0]:
+            kept[0] = kept[0] + len(data) if text else len(data)
+            if kept[0] > MAX_TEXT:
+                raise _Bad(f"a <data> value of more than {MAX_TEXT:,} characters; at most {MAX_TEXT:,} are read",
+                           "shorten it: names and numbers are short", parser.CurrentLineNumber, "limit")
+            text.append(data)
+
     parser.StartElementHandler = start
     parser.EndElementHandler = end
-    parser.CharacterDataHandler = text.append
+    parser.CharacterDataHandler = characters
     parser.StartDoctypeDeclHandler = refuse_dtd
     parser.EntityDeclHandler = refuse_dtd
     try:
         parser.Parse(raw, True)
     except _Bad as exc:
-        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code="syntax")])
+        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code=exc.code)])
     except expat.ExpatError as exc:
         return CheckResult(None, [Problem(f"XML syntax error: {expat.ErrorString(exc.code)}",
                                           "fix the XML at this line", file=file, line=exc.lineno, code="syntax")])
@@ -220,15 +277,21 @@ def to_graphml(plan) -> str:
 _TOKEN = re.compile(r'''
     (?P<space>[ \t\r]+) | (?P<newline>\n) |
     (?P<comment>//[^\n]*|\#[^\n]*|/\*.*?\*/) |
-    (?P<string>"(?:\\.|[^"\\])*") |
+    (?P<string>"(?>[^"\\]++|\\.)*+") |
     (?P<arrow>->) | (?P<undirected>--) |
     (?P<punct>[{}\[\];,=:]) |
     (?P<id>[A-Za-z_\x80-\uffff][A-Za-z_0-9\x80-\uffff]*|-?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)) |
     (?P<other>.)''', re.VERBOSE | re.DOTALL)
 
 
-def _tokens(text: str) -> list[tuple[str, str, int]]:
-    out, line = [], 1
+def _tokens(text: str):
+    """The DOT tokens of ``text`` as ``(kind, value, line)``, one at a time, then ``("eof", "", last line)``.
+
+    A generator: the parser holds two tokens at most, so memory stays that of the text.  Raises
+    :class:`_Bad` past :data:`MAX_TOKENS` tokens (time is bounded too: a file of a million ``;`` adds
+    no node or edge, the bounds of which are checked by the parser).
+    """
+    line, count, last = 1, 0, 1
     for m in _TOKEN.finditer(text):
         kind, value = m.lastgroup, m.group()
         if kind in ("space",):
@@ -240,14 +303,23 @@ def _tokens(text: str) -> list[tuple[str, str, int]]:
             line += value.count("\n")
             continue
         if kind == "string":
+            if len(value) > MAX_TEXT + 2:
+                raise _Bad(f"a quoted string of {len(value) - 2:,} characters; at most {MAX_TEXT:,} are read",
+                           "shorten it: ids and labels are short", line, "limit")
             value = re.sub(r'\\(.)', lambda s: s.group(1) if s.group(1) in '"\\' else "\\" + s.group(1), value[1:-1])
             kind = "id"
         if kind == "other":
             raise _Bad(f"unexpected character {value!r}", "check the DOT syntax here", line)
         if kind == "undirected":
             raise _Bad("an undirected edge '--'", "a precedence graph is a digraph: write a -> b", line)
-        out.append((kind, value, line))
-    return out
+        count += 1
+        if count > MAX_TOKENS:
+            raise _Bad(f"more than {MAX_TOKENS:,} tokens (names, arrows, brackets, separators); DOT files of at most "
+                       f"{MAX_TOKENS:,} are read ({MAX_TASKS:,} nodes and {MAX_PAIRS:,} edges at most)",
+                       "split the graph into smaller ones", line, "limit")
+        last = line
+        yield kind, value, line
+    yield "eof", "", last  # placed on the last token's line, where the missing text belongs
 
 
 def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
@@ -268,20 +340,24 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     node_lines: dict[str, int] = {}
     edges: list[tuple[str, str, int]] = []
     try:
-        toks = _tokens(text)
-        i = 0
+        stream = _tokens(text)
+        ahead: deque = deque()  # the next tokens, read as the parser looks ahead (two at most)
+        end: list = []          # the eof token, once read
 
         def peek(k=0):
-            return toks[i + k] if i + k < len(toks) else ("eof", "", toks[-1][2] if toks else 1)
+            while len(ahead) <= k and not end:
+                tok = next(stream)
+                (end if tok[0] == "eof" else ahead).append(tok)
+            return ahead[k] if k < len(ahead) else end[0]
 
         def take(kind=None, value=None):
-            nonlocal i
             tok = peek()
             if (kind and tok[0] != kind) or (value is not None and tok[1] != value):
                 want = value or kind
                 raise _Bad(f"expected {want!r} but found {tok[1] or 'the end of the file'!r}",
                            "check the DOT syntax here", tok[2])
-            i += 1
+            if tok[0] != "eof":
+                ahead.popleft()
             return tok
 
         def attrs() -> dict[str, str]:
@@ -298,6 +374,9 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
             return out
 
         def node(pid: str, line: int, given: dict | None = None) -> None:
+            if pid not in nodes and len(nodes) >= MAX_TASKS:
+                raise _Bad(f"more than {MAX_TASKS:,} nodes; graph files of at most {MAX_TASKS:,} are read "
+                           "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line, "limit")
             entry = nodes.setdefault(pid, {})
             node_lines.setdefault(pid, line)
             for key, value in (given or {}).items():
@@ -307,8 +386,9 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                     entry[key] = _number(value, f"node {pid}'s {key}", line)
 
         def statements(depth: int) -> None:
-            if depth > 64:
-                raise _Bad("subgraphs nested more than 64 levels deep", "flatten the subgraphs", peek()[2])
+            if depth > MAX_DEPTH:
+                raise _Bad(f"subgraphs nested more than {MAX_DEPTH} levels deep", "flatten the subgraphs", peek()[2],
+                           "limit")
             while peek()[1] != "}":
                 if peek()[0] == "eof":
                     raise _Bad("the file ends before the closing '}'", "close the digraph with '}'", peek()[2])
@@ -339,6 +419,10 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                     for (_, a, la), (_, b, _) in zip(chain, chain[1:]):
                         node(a, la)
                         node(b, la)
+                        if len(edges) >= MAX_PAIRS:
+                            raise _Bad(f"more than {MAX_PAIRS:,} edges; graph files of at most {MAX_PAIRS:,} are read",
+                                       "split the graph into smaller ones, or list only the covering edges "
+                                       "(opportune convert writes those)", la, "limit")
                         edges.append((a, b, la))
                 else:
                     raise _Bad(f"unexpected {tok[1]!r}", "check the DOT syntax here", tok[2])
@@ -361,7 +445,7 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         if peek()[0] != "eof":
             raise _Bad("more after the digraph's closing '}'", "one digraph per file", peek()[2])
     except _Bad as exc:
-        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code="syntax")])
+        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code=exc.code)])
     return _build(name, "DOT precedence graph", nodes, node_lines, [(name, edges)], file)
 
 

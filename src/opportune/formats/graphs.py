@@ -18,10 +18,13 @@ from opportune.formats.loader import CheckResult
 from opportune.formats.problems import Problem
 from opportune.plan import MAX_UNITS
 
-# Limits of both readers, checked while reading (before anything is built from the file).  A graph
-# read is then a plan like any other, limited to MAX_UNITS tasks (opportune.plan).
-MAX_TASKS = 2 * MAX_UNITS   # tasks
-MAX_PAIRS = 1_000_000       # precedence lines
+# Limits of the graph readers (.IN2, .alb, DOT, GraphML), checked while reading, before anything
+# is built from the file; each keeps the largest file accepted loaded within 5 s of CPU time and
+# 500 MB.  A graph read is then a plan like any other, limited to MAX_UNITS tasks (opportune.plan).
+MAX_TASKS = 2 * MAX_UNITS   # tasks (nodes): past MAX_UNITS the plan's own check says what to do
+MAX_PAIRS = 120_000         # precedence lines (edges), repeats included
+MAX_LINES = 4 * (MAX_TASKS + MAX_PAIRS)  # lines of a line-based graph file, blank ones and comments included
+MAX_LINE_CHARS = 10_000     # characters of one line of an .IN2 or .alb file (a value or a pair is short)
 # A garbage file could give a problem per line; past this many of one kind, one line sums up the rest.
 MAX_PER_KIND = 50
 INT = re.compile(r"[+-]?[0-9]{1,18}")  # ASCII digits only: str.isdigit() would accept '²'
@@ -37,13 +40,52 @@ class GraphFormatError(ValueError):
         super().__init__("\n".join(map(str, problems)))
 
 
+def file_bytes(path: str | Path, error: type[GraphFormatError]) -> bytes:
+    """The bytes of a graph file, reading at most :data:`~opportune.formats.loader.MAX_FILE_BYTES`
+    (and one more, to know): a larger file raises ``error`` with the bound, unread."""
+    from opportune.formats.loader import MAX_FILE_BYTES
+
+    with Path(path).open("rb") as f:
+        raw = f.read(MAX_FILE_BYTES + 1)
+    if len(raw) > MAX_FILE_BYTES:
+        raise error([Problem(f"{path} is larger than {MAX_FILE_BYTES:,} bytes; graph files of at most "
+                             f"{MAX_FILE_BYTES:,} bytes are read", "split the graph into smaller ones",
+                             file=str(path), code="limit")])
+    return raw
+
+
 def text_lines(raw: bytes) -> list[str]:
     """The lines of a graph file, whichever of CRLF, CR or LF ends them.  O(len(raw)).
 
     Decoded as Latin-1, which accepts every byte: the data are ASCII, and free
-    text after the end marker of real files is often Latin-1.
+    text after the end marker of real files is often Latin-1.  Call
+    :func:`too_many_lines` first: the list costs about 60 bytes a line.
     """
     return raw.decode("latin-1").replace("\r\n", "\n").replace("\r", "\n").split("\n")
+
+
+def too_many_lines(raw: bytes, file: str | None) -> list[Problem]:
+    """The refusal of a line-based graph file of more than :data:`MAX_LINES` lines, or ``[]``.
+
+    Counted on the bytes (``bytes.count``: C speed, nothing built) before the file is split into
+    lines; a line break is LF, CR or CRLF, as for :func:`text_lines`.
+    """
+    lines = raw.count(b"\n") + raw.count(b"\r") - raw.count(b"\r\n")
+    if lines <= MAX_LINES:
+        return []
+    return [Problem(f"the file has {lines + 1:,} lines; graph files of at most {MAX_LINES:,} lines are read "
+                    f"({MAX_TASKS:,} tasks and {MAX_PAIRS:,} precedence lines at most)",
+                    "split the graph into smaller ones, or remove the blank lines", file=file, line=MAX_LINES + 1,
+                    code="limit")]
+
+
+def too_long(s: str, no: int, out: "Findings") -> bool:
+    """True (and the problem added to ``out``) if line ``no`` is longer than :data:`MAX_LINE_CHARS`."""
+    if len(s) <= MAX_LINE_CHARS:
+        return False
+    out.add(f"line of {len(s):,} characters; lines of at most {MAX_LINE_CHARS:,} are read here",
+            "one value or one pair per line", no, code="limit")
+    return True
 
 
 def show(s: str, width: int = 40) -> str:

@@ -6,23 +6,36 @@ its file, line and what to do.  YAML is read with PyYAML's safe loader only:
 no tag in a plan file can run code.
 
 Every size is bounded before it can cost time or memory, and each refusal
-states its limit: a file holds at most :data:`MAX_FILE_BYTES`; values nest at
-most :data:`MAX_DEPTH` deep; a document holds at most :data:`MAX_VALUES`
-values; a YAML file uses at most :data:`MAX_ALIASES` aliases, none of them
-inside the value it names, and its aliases add at most
+states its limit, the file and the line: a file holds at most
+:data:`MAX_FILE_BYTES` (checked before it is read: at most one byte more is
+read); a document holds at most :data:`MAX_VALUES` values (scalars, lists and
+mappings, keys included) — counted by a pre-scan that builds nothing (string
+literals removed and separators counted for JSON; for YAML a pass over
+libyaml's events that stops at the first bound passed), so a document of
+millions of values is refused in well under a second and a few times its size
+in memory; values nest at most :data:`MAX_DEPTH` deep (checked by the same
+pre-scans); a YAML file uses at most :data:`MAX_ALIASES` aliases,
+none of them inside the value it names, and its aliases add at most
 :data:`MAX_ALIAS_VALUES` values by repeating what they name (an "alias bomb"
-of a few hundred bytes would otherwise expand to billions).  The limits on
+of a few hundred bytes would otherwise expand to billions); a string holds at
+most :data:`~opportune.formats.validate.MAX_TEXT` characters.  The limits on
 plans themselves (parts, units, strategies, constraints) are in
-:mod:`opportune.plan`.
+:mod:`opportune.plan`; :data:`MAX_VALUES` keeps every document the loaders
+accept (10,000 parts and about 130,000 constraints at most) loaded within
+5 s of CPU time and 500 MB.
+
+>>> check_text('parts: [' + ', '.join(['a'] * (MAX_VALUES + 1)) + ']', file='big.yaml').errors[0].where
+'big.yaml:1'
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from opportune.formats.problems import Problem
 from opportune.plan import Plan, PlanError
@@ -30,8 +43,8 @@ from opportune.plan import Plan, PlanError
 MAX_FILE_BYTES = 32 << 20   # a plan file (32 MiB)
 MAX_DEPTH = 64              # nesting of values (a plan needs 6)
 MAX_ALIASES = 1_000         # YAML aliases (*name) in one file
-MAX_VALUES = 2_000_000      # values of a document, aliases expanded
-MAX_ALIAS_VALUES = 100_000  # values that aliases add to a YAML document by repeating what they name
+MAX_VALUES = 150_000        # values of a document (keys included), aliases expanded: 10,000 parts, ~130,000 constraints
+MAX_ALIAS_VALUES = 50_000   # values that aliases add to a YAML document by repeating what they name
 
 YAML_SUFFIXES = {".yaml", ".yml"}
 JSON_SUFFIXES = {".json"}
@@ -46,9 +59,15 @@ class Document:
     lines: dict[tuple, int] = field(default_factory=dict)
     file: str | None = None
     problems: list[Problem] = field(default_factory=list)
+    # Finds the lines when one is first asked for (a JSON plan's lines cost a second, YAML, pass:
+    # a plan without problems never needs them).
+    locate: Callable[[], dict[tuple, int]] | None = field(default=None, repr=False, compare=False)
 
     def line(self, path: tuple) -> int | None:
         """Line of ``path``, or of its nearest ancestor that has one."""
+        if self.locate is not None:
+            locate, self.locate = self.locate, None
+            self.lines.update(locate())
         while True:
             if path in self.lines:
                 return self.lines[path]
@@ -213,6 +232,108 @@ class _Refused(Exception):
 
 
 _DEPTH_HINT = "a plan nests at most 6 levels (strategies, requires, lists): remove the extra brackets or indentation"
+_STR_TAG = "tag:yaml.org,2002:str"
+
+
+def _too_many_values() -> tuple[str, str]:
+    """The message and hint of a document over :data:`MAX_VALUES` (the line is the caller's)."""
+    message = (f"the document has more than {MAX_VALUES:,} values (list items, mapping keys and values); "
+               f"at most {MAX_VALUES:,} are read")
+    return message, ("split the plan into smaller ones: a plan holds at most 10,000 parts, and a few "
+                     "constraints per part are usual")
+
+
+# YAML starts a value only at the start of a line or after one of these: their count bounds the
+# values of a document from above, in a few passes of str.count (C speed, nothing built).  Used
+# without libyaml, where an event pass costs ten times as much.
+_YAML_SEPARATORS = ("\n", "\r", "\x85", "\u2028", "\u2029", ",", "-", ":", "?", "[", "{")
+
+
+def _prescan_yaml(text: str) -> int | None:
+    """Refuse YAML text of more than :data:`MAX_VALUES` values, :data:`MAX_DEPTH` levels or
+    :data:`MAX_ALIASES` aliases before any node is composed; the number of aliases, or None if not scanned.
+
+    With libyaml, one pass over the parser's events (about 1 µs each, each dropped once counted, so
+    memory stays that of the text) that stops at the first bound passed; the text is then safe for
+    libyaml's own composer, twice as fast as PyYAML's (which has no bound of its own: a list nested
+    200,000 deep would overflow its C stack).  Without libyaml, only an upper bound from
+    :data:`_YAML_SEPARATORS` (O(len(text)), no allocation), the events counted only when it is over
+    the limit, and None: the composer in Python keeps the bounds itself.  Raises :class:`_Refused`
+    with the line of the first value past a bound; a syntax error met on the way is raised as
+    PyYAML's (the caller reports it with its line).
+    """
+    import yaml
+
+    libyaml = getattr(yaml, "__with_libyaml__", False)
+    if not libyaml and 1 + sum(text.count(c) for c in _YAML_SEPARATORS) <= MAX_VALUES:
+        return None
+    parser = (yaml.CSafeLoader if libyaml else yaml.SafeLoader)(text)
+    opening, closing = (yaml.SequenceStartEvent, yaml.MappingStartEvent), (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+    values = depth = aliases = 0
+    try:
+        while parser.check_event():
+            event = parser.get_event()
+            if isinstance(event, closing):
+                depth -= 1
+                continue
+            if isinstance(event, yaml.AliasEvent):
+                aliases += 1
+                if aliases > MAX_ALIASES:
+                    raise _Refused(f"more than {MAX_ALIASES:,} YAML aliases (*name)",
+                                   "write the values out instead of repeating them with aliases",
+                                   event.start_mark.line + 1)
+            elif not isinstance(event, (yaml.ScalarEvent, *opening)):
+                continue  # stream and document events
+            values += 1
+            if values > MAX_VALUES:
+                raise _Refused(*_too_many_values(), event.start_mark.line + 1)
+            if depth + 1 > MAX_DEPTH and not isinstance(event, yaml.AliasEvent):
+                raise _Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT,
+                               event.start_mark.line + 1)
+            if isinstance(event, opening):
+                depth += 1
+    finally:
+        parser.dispose()
+    return aliases if libyaml else None
+
+
+# A JSON string literal (no raw line break can stand in one), or an escape outside any: removed
+# before the separators are counted.  The escape alternative keeps the scan linear on a line of
+# unterminated quotes; the possessive repeats keep the matcher's memory constant (a plain repeat
+# of a group saves its state at every step: 1.2 GB for a string of ten million escapes).
+_JSON_STRING = re.compile(r'"(?>[^"\\\n]++|\\.)*+"|\\.')
+_JSON_SEPARATOR = re.compile(r"[,:\[{]")
+_SPACE = re.compile(r"\s*")
+
+
+def json_values_past(text: str, limit: int) -> int | None:
+    """The line of the first value past ``limit`` in JSON ``text``, or None if it has at most ``limit``.
+
+    A document's values are 1 + its commas + its colons (keys) + its non-empty lists and objects,
+    counted outside string literals: one regular-expression pass and four ``str.count`` (C speed,
+    O(len(text)), memory one copy of the text), before anything is parsed.  An empty list or
+    object counts one value more than it has: the count is an upper bound, exact for plans.
+
+    >>> json_values_past('[1, 2, "3,4"]', 4), json_values_past('[1,\\n 2, 3]', 3)
+    (None, 2)
+    """
+    if 1 + sum(text.count(c) for c in ",:[{") <= limit:
+        return None  # even with the separators inside strings counted
+    bare = _JSON_STRING.sub('""', text)
+    if 1 + sum(bare.count(c) for c in ",:[{") <= limit:
+        return None
+    past = next(itertools.islice(_JSON_SEPARATOR.finditer(bare), limit - 1, None), None)
+    if past is None:
+        return 1
+    start = _SPACE.match(bare, past.end()).end()  # where the value after the separator starts
+    return bare.count("\n", 0, start) + 1
+
+
+def _prescan_json(text: str) -> None:
+    """Refuse JSON text of more than :data:`MAX_VALUES` values before it is parsed (:func:`json_values_past`)."""
+    line = json_values_past(text, MAX_VALUES)
+    if line is not None:
+        raise _Refused(*_too_many_values(), line)
 _loader_class = None
 
 
@@ -236,6 +357,7 @@ def _bounded_loader():
                 super().__init__()
                 self._depth = 0
                 self._aliases = 0
+                self._values = 0  # nodes composed (a backstop: the pre-scan has counted them already)
 
             def compose_node(self, parent, index):
                 if self.check_event(yaml.AliasEvent):
@@ -246,7 +368,10 @@ def _bounded_loader():
                                        self.peek_event().start_mark.line + 1)
                     return super().compose_node(parent, index)
                 self._depth += 1
+                self._values += 1
                 try:
+                    if self._values > MAX_VALUES:
+                        raise _Refused(*_too_many_values(), self.peek_event().start_mark.line + 1)
                     if self._depth > MAX_DEPTH:
                         raise _Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT,
                                        self.peek_event().start_mark.line + 1)
@@ -296,11 +421,14 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
         return doc
 
     try:
-        loader = _bounded_loader()(text)
+        aliases = _prescan_yaml(text)
+        loader = (_bounded_loader() if aliases is None else yaml.CSafeLoader)(text)
         try:
             node = loader.get_single_node()
         finally:
             loader.dispose()
+        if aliases is None:
+            aliases = loader._aliases
     except _Refused as exc:
         return refused(exc)
     except yaml.MarkedYAMLError as exc:
@@ -326,18 +454,22 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
     if node is None:
         doc.problems.append(Problem("the file is empty", "write a plan with at least `parts:`", file=file, line=1, code="empty"))
         return doc
-    try:
-        _measure(node, yaml)  # before anything is built: aliases could make it huge, or endless
-    except _Refused as exc:
-        return refused(exc)
+    if aliases:  # without aliases the nodes form a tree, already bounded (values, depth) before it was built
+        try:
+            _measure(node, yaml)  # before anything is built: aliases could make it huge, or endless
+        except _Refused as exc:
+            return refused(exc)
     constructor = yaml.SafeLoader("")
+    mapping, sequence = yaml.MappingNode, yaml.SequenceNode
 
     def build(n, path):
         line = n.start_mark.line + 1
         doc.lines[path] = line
-        if isinstance(n, yaml.MappingNode):
+        if n.tag == _STR_TAG and n.__class__ is yaml.ScalarNode:
+            return n.value  # what the constructor would return, at a fraction of its cost
+        if isinstance(n, mapping):
             return build_mapping(n, path)
-        if isinstance(n, yaml.SequenceNode):
+        if isinstance(n, sequence):
             return [build(item, path + (i,)) for i, item in enumerate(n.value)]
         try:
             return constructor.construct_object(n, deep=True)
@@ -452,10 +584,29 @@ def _too_big(data: Any) -> str | None:
 
 
 def parse_json(text: str, file: str | None = None) -> Document:
-    """Parse JSON strictly (its own syntax errors, with line), then take lines from a YAML pass."""
+    """Parse JSON strictly (its own syntax errors, with line); lines come from a YAML pass when first asked for.
+
+    Bounded before parsing (:func:`_prescan_json`: at most :data:`MAX_VALUES` values), then by depth
+    (:data:`MAX_DEPTH`).  A plan without problems never pays for its lines: the YAML pass (about
+    10 µs a value) runs when :meth:`Document.line` is first called, or at once when a key repeats
+    (the JSON parser keeps the last; the YAML pass reports each with its line).
+    """
     doc = Document(None, {}, file)
     try:
-        doc.data = json.loads(text)
+        _prescan_json(text)
+    except _Refused as exc:
+        doc.problems.append(Problem(exc.message, exc.hint, file=file, line=exc.line, code="limit"))
+        return doc
+    repeated = []
+
+    def mapping(pairs):
+        out = dict(pairs)
+        if len(out) != len(pairs):
+            repeated.append(pairs)
+        return out
+
+    try:
+        doc.data = json.loads(text, object_pairs_hook=mapping)
     except json.JSONDecodeError as exc:
         doc.problems.append(
             Problem(f"JSON syntax error: {exc.msg} (column {exc.colno})",
@@ -473,18 +624,29 @@ def parse_json(text: str, file: str | None = None) -> Document:
         doc.problems.append(Problem(f"cannot read the JSON: {exc.args[0] if exc.args else exc}",
                                     "write numbers of ordinary size", file=file, code="type"))
         return doc
-    # JSON is (almost) YAML: reuse the YAML composer only for line numbers.  libyaml refuses the
-    # escapes of UTF-16 surrogates that JSON allows (\\ud83d\\ude00): for this pass they become '?'
-    # (the same length: every line and column stays where it was).
-    located = parse_yaml(_SURROGATE_ESCAPE.sub(r"\\u003f", text), file)
-    if not located.problems:
-        doc.lines = located.lines
-    else:
-        # The YAML pass may object where JSON does not (e.g. duplicate keys, or a limit): keep those findings.
-        doc.problems.extend(p for p in located.problems if p.code in ("duplicate-key", "limit"))
-    if not any(p.code == "limit" for p in doc.problems):
-        why = _too_big(doc.data)
-        if why:
+    why = _too_big(doc.data)
+    if why:
+        # where the depth is passed: the YAML pass refuses there (its pre-scan checks depth first)
+        located = parse_yaml(_SURROGATE_ESCAPE.sub(r"\\u003f", text), file)
+        doc.problems.extend(p for p in located.problems if p.code == "limit")
+        if not doc.problems:
             doc.problems.append(Problem(why, _DEPTH_HINT if "nested" in why else "split the plan into smaller ones",
                                         file=file, line=1, code="limit"))
+        return doc
+
+    def locate() -> dict[tuple, int]:
+        # JSON is (almost) YAML: the YAML composer gives the lines.  libyaml refuses the escapes of
+        # UTF-16 surrogates that JSON allows (\\ud83d\\ude00): for this pass they become '?' (the same
+        # length: every line and column stays where it was).
+        located = parse_yaml(_SURROGATE_ESCAPE.sub(r"\\u003f", text), file)
+        if not located.problems:
+            return located.lines
+        # The YAML pass may object where JSON does not (duplicate keys): keep those findings.
+        doc.problems.extend(p for p in located.problems if p.code == "duplicate-key")
+        return {}
+
+    if repeated:
+        doc.lines = locate()
+    else:
+        doc.locate = locate
     return doc

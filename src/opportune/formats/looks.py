@@ -2,6 +2,15 @@
 
 Text: part ids separated by spaces or commas, ``-`` for an empty look,
 ``#`` starts a comment, blank lines are skipped.  JSON: a list of lists of ids.
+
+Bounds, each checked before what it bounds is built and refused with the file and the line:
+:data:`MAX_LOOKS_BYTES` per file (read at most), :data:`MAX_LOOKS` looks, :data:`MAX_LOOK_PARTS`
+part ids in all, :data:`MAX_LOOK_LINES` lines and :data:`MAX_LOOK_LINE_CHARS` characters a line (a
+text file), or :data:`MAX_LOOKS` + :data:`MAX_LOOK_PARTS` values (a JSON file, counted before it is
+parsed).  A part id seen again is the same string: memory grows with the looks, not the bytes.
+
+>>> parse_looks("rl ra\\n-\\nco  # the cover\\n")
+[('rl', 'ra'), (), ('co',)]
 """
 
 from __future__ import annotations
@@ -13,7 +22,13 @@ from pathlib import Path
 from opportune.formats.problems import Problem
 
 
-MAX_LOOKS_BYTES = 32 << 20  # a looks file (32 MiB)
+MAX_LOOKS_BYTES = 32 << 20      # a looks file (32 MiB)
+MAX_LOOKS = 1_000_000           # looks in one file (a cell's week at one look a second)
+MAX_LOOK_PARTS = 2_000_000      # part ids in all the looks of one file
+MAX_LOOK_LINES = 2 * MAX_LOOKS  # lines of a text looks file, comments and blank lines included
+MAX_LOOK_LINE_CHARS = 200_000   # characters of one line (a look of 10,000 parts of 19 characters)
+# What str.splitlines splits on: counted before any line is built.
+_LINE_BREAKS = ("\n", "\r", "\x0b", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029")
 _SURROGATE = re.compile("[\ud800-\udfff]")
 
 
@@ -29,10 +44,24 @@ class LooksError(ValueError):
         super().__init__(str(problem))
 
 
+def _over(what: str, limit: int, hint: str, file: str | None, line: int | None) -> LooksError:
+    return LooksError(Problem(f"more than {limit:,} {what}; looks files of at most {limit:,} are read", hint,
+                              file=file, line=line, code="limit"))
+
+
 def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
-    """Parse a looks file's text (text or JSON form); raise :class:`LooksError` with the line."""
+    """Parse a looks file's text (text or JSON form); raise :class:`LooksError` with the line.
+
+    O(len(text)); bounded as the module says, before the looks are built.
+    """
     stripped = text.lstrip()
     if stripped.startswith("["):
+        from opportune.formats.loader import json_values_past
+
+        past = json_values_past(text, 1 + MAX_LOOKS + MAX_LOOK_PARTS)
+        if past is not None:
+            raise _over("values (looks and part ids)", 1 + MAX_LOOKS + MAX_LOOK_PARTS,
+                        "split the looks into several files", file, past)
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
@@ -54,19 +83,35 @@ def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
                     raise LooksError(Problem(f"look {i + 1}: {_shown(part)} is not valid Unicode text (half of a "
                                              "surrogate pair)", "write part ids as they are in the plan",
                                              file=file, code="text"))
-        return [tuple(str(p) for p in look) for look in data]
+        if len(data) > MAX_LOOKS:
+            raise _over("looks", MAX_LOOKS, "split the looks into several files", file, None)
+        same: dict[str, str] = {}
+        return [tuple(same.setdefault(p, p) for p in map(str, look)) for look in data]
+    lines = sum(text.count(c) for c in _LINE_BREAKS) - text.count("\r\n")
+    if lines > MAX_LOOK_LINES:
+        raise _over("lines", MAX_LOOK_LINES, "split the looks into several files", file, MAX_LOOK_LINES + 1)
     looks = []
+    same = {}  # each id once in memory, however often it is seen
+    total = 0
     for no, line in enumerate(text.splitlines(), start=1):
+        if len(line) > MAX_LOOK_LINE_CHARS:
+            raise LooksError(Problem(f"a line of {len(line):,} characters; lines of at most {MAX_LOOK_LINE_CHARS:,} "
+                                     "are read", "one look per line", file=file, line=no, code="limit"))
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
+        if len(looks) >= MAX_LOOKS:
+            raise _over("looks", MAX_LOOKS, "split the looks into several files", file, no)
         if line == "-":
             looks.append(())
             continue
-        parts = tuple(p for p in line.replace(",", " ").split() if p)
+        parts = tuple(same.setdefault(p, p) for p in line.replace(",", " ").split())
         if "-" in parts:
             raise LooksError(Problem("'-' (an empty look) must stand alone on its line",
                                      "write '-' alone, or list the visible parts", file=file, line=no, code="syntax"))
+        total += len(parts)
+        if total > MAX_LOOK_PARTS:
+            raise _over("part ids in all", MAX_LOOK_PARTS, "split the looks into several files", file, no)
         looks.append(parts)
     return looks
 

@@ -11,7 +11,10 @@ would otherwise be a valid graph with fewer constraints, and every count of
 it wrong), as ``.alb`` files without ``<end>`` are.  A repeated pair is one
 warning, however often it repeats: reading is O(size of the file).  At most
 :data:`~opportune.formats.graphs.MAX_TASKS` tasks and
-:data:`~opportune.formats.graphs.MAX_PAIRS` precedence lines are read.
+:data:`~opportune.formats.graphs.MAX_PAIRS` precedence lines are read, in a file
+of at most :data:`~opportune.formats.graphs.MAX_LINES` lines (counted on the
+bytes before any line is built; a long line costs nothing here: every value is
+matched by a pattern of bounded length).
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from opportune.formats.graphs import (DECIMAL, MAX_PAIRS, MAX_TASKS, PAIR, Findings, GraphFormatError, check_graph,
-                                      in_file_order, last_nonblank, show, text_lines, to_int)
+                                      file_bytes, in_file_order, last_nonblank, show, text_lines, to_int,
+                                      too_many_lines)
 from opportune.formats.loader import CheckResult
 from opportune.formats.problems import Problem
 
@@ -45,8 +49,11 @@ def parse_in2(raw: bytes, file: str | None = None) -> tuple[In2 | None, list[Pro
 
     Warnings (repeated pairs) come with a usable content.  O(size of the file).
     """
-    lines = text_lines(raw)  # ASCII up to the end marker; comments after it are Latin-1
     out = Findings(file, code="in2")
+    refused = too_many_lines(raw, file)  # before the lines are built
+    if refused:
+        return None, refused
+    lines = text_lines(raw)  # ASCII up to the end marker; comments after it are Latin-1
 
     def done():
         return None, in_file_order(out.finish())
@@ -136,7 +143,7 @@ def read_in2(path: str | Path) -> In2:
     >>> g.n, len(g.pairs)                                  # doctest: +SKIP
     (7, 6)
     """
-    content, problems = parse_in2(Path(path).read_bytes(), file=str(path))
+    content, problems = parse_in2(file_bytes(path, In2Error), file=str(path))
     if content is None:
         raise In2Error(problems)
     return content

@@ -5,10 +5,13 @@ comment; blank lines are skipped.  Every sequence must install the same parts as
 the same number of times: an id repeated ``k`` times stands for ``k`` identical units of one part
 (a part with ``quantity: k`` in the learned plan).
 
-Limits (each refused with a message naming the file, and the line where there is one):
-``MAX_SEQUENCE_BYTES`` (32 MiB) per file, ``MAX_SEQUENCES`` (100,000) sequences per file, and per
-sequence the plan limits of :mod:`opportune.plan` (``MAX_UNITS`` = 10,000 installations,
-``MAX_PARTS`` parts).
+Limits (each refused with a message naming the file, and the line where there is one, before what
+it bounds is built): ``MAX_SEQUENCE_BYTES`` (32 MiB) per file, ``MAX_SEQUENCES`` (100,000) sequences
+per file, ``MAX_SEQUENCE_ITEMS`` (2,000,000) installations in all, ``MAX_SEQUENCE_LINES``
+(1,000,000) lines, counted before any is built, and ``MAX_SEQUENCE_LINE_CHARS`` (1,000,000)
+characters a line; per sequence the plan limits of :mod:`opportune.plan` (``MAX_UNITS`` = 10,000
+installations, ``MAX_PARTS`` parts).  A part id seen again is the same string: memory grows with the
+installations (8 bytes each), not with the bytes of the file.
 
 >>> seqs = parse_sequences("# two runs\\nca ba rl\\nca, rl, ba\\n", file="runs.seq")
 >>> seqs.sequences, seqs.lines, seqs.quantities
@@ -27,11 +30,17 @@ from typing import Iterable
 from opportune.formats.problems import Problem
 from opportune.plan import MAX_PARTS, MAX_UNITS
 
-__all__ = ["MAX_SEQUENCE_BYTES", "MAX_SEQUENCES", "SequenceError", "Sequences", "parse_sequences",
+__all__ = ["MAX_SEQUENCE_BYTES", "MAX_SEQUENCE_ITEMS", "MAX_SEQUENCE_LINE_CHARS", "MAX_SEQUENCE_LINES", "MAX_SEQUENCES",
+           "SequenceError", "Sequences", "parse_sequences",
            "read_sequences", "sequences_from"]
 
 MAX_SEQUENCE_BYTES = 32 << 20   # one sequences file (32 MiB)
 MAX_SEQUENCES = 100_000         # sequences in one file
+MAX_SEQUENCE_ITEMS = 2_000_000  # installations in all the sequences of one file (about 2 s to read)
+MAX_SEQUENCE_LINES = 1_000_000  # lines of one file, comments and blank lines included
+MAX_SEQUENCE_LINE_CHARS = 1_000_000  # characters of one line (10,000 installations of ids up to 99 characters)
+# What str.splitlines splits on: counted before any line is built.
+_LINE_BREAKS = ("\n", "\r", "\x0b", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029")
 _SURROGATE = re.compile("[\ud800-\udfff]")
 _SPLIT = re.compile(r"[\s,]+")
 
@@ -155,10 +164,28 @@ def parse_sequences(text: str, *, file: str | None = None, like: Sequences | Non
     x.seq:2 part 'a' is missing (the first sequence, x.seq:1, installs it)
     """
 
+    lines = sum(text.count(c) for c in _LINE_BREAKS) - text.count("\r\n")
+    if lines > MAX_SEQUENCE_LINES:
+        raise SequenceError(Problem(f"more than {MAX_SEQUENCE_LINES:,} lines; sequences files of at most "
+                                    f"{MAX_SEQUENCE_LINES:,} lines are read", "learn from a sample of the sequences",
+                                    file=file, line=MAX_SEQUENCE_LINES + 1 if file else None, code="limit"))
+    same: dict[str, str] = {}  # each id once in memory, however often it is installed
+
     def items():
+        total = 0
         for no, line in enumerate(text.splitlines(), start=1):
-            tokens = tuple(t for t in _SPLIT.split(line.split("#", 1)[0]) if t)
+            if len(line) > MAX_SEQUENCE_LINE_CHARS:
+                raise SequenceError(Problem(f"a line of {len(line):,} characters; lines of at most "
+                                            f"{MAX_SEQUENCE_LINE_CHARS:,} are read", "one sequence per line",
+                                            file=file, line=no if file else None, code="limit"))
+            tokens = tuple(same.setdefault(t, t) for t in _SPLIT.split(line.split("#", 1)[0]) if t)
             if tokens:
+                total += len(tokens)
+                if total > MAX_SEQUENCE_ITEMS:
+                    raise SequenceError(Problem(f"more than {MAX_SEQUENCE_ITEMS:,} installations in all; sequences "
+                                                f"files of at most {MAX_SEQUENCE_ITEMS:,} are read",
+                                                "learn from a sample of the sequences", file=file,
+                                                line=no if file else None, code="limit"))
                 yield no, tokens
 
     return sequences_from(items(), file=file, like=like, what=what)

@@ -219,7 +219,10 @@ def collector_paused():
     A budgeted decision runs in one: a full collection walks every object of the process (the
     memos of a large plan are millions), and one landing inside a decision took 300 ms against a
     50 ms budget.  Paused, it runs between looks instead, where a cell has seconds to spare.  The
-    pause is as long as the decision, so what it lets pile up is bounded by the budget.
+    pause is as long as the decision, so what it lets pile up is bounded by the budget.  The order
+    engine holds back its own upkeep (memo eviction, cache trimming) the same way:
+    :meth:`opportune.engine.OrderEngine.deciding`, done by :meth:`~opportune.engine.OrderEngine.maintain`
+    after each outcome.
     """
     global _gc_pausers, _gc_was_enabled
     with _gc_lock:

@@ -25,9 +25,7 @@ Example
 
 from __future__ import annotations
 
-import time
-
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, OutOfTime, check_evaluable
 
 __all__ = ["OutOfTime", "PolicyEvaluator", "PolicyStuck"]
 
@@ -36,15 +34,13 @@ class PolicyStuck(RuntimeError):
     """The policy shakes at every look of some state it reaches: it never finishes."""
 
 
-class OutOfTime(RuntimeError):
-    """The programme passed its ``deadline``; the states it finished stay memoised."""
-
-
 class PolicyEvaluator(OptimalSolver):
     """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at``).
 
     Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
-    shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it).
+    shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it), ``deadline``
+    the time (:class:`OutOfTime`); :func:`~opportune.policies.states.estimate_states` says how many
+    states the optimum needs, and the policy reaches at most as many.
     Complexity: O(states × looks × one decision of the policy).
     """
 
@@ -52,9 +48,6 @@ class PolicyEvaluator(OptimalSolver):
         super().__init__(engine, **settings)
         check_evaluable(policy)
         self.policy = policy
-        #: A ``time.perf_counter()`` value past which :meth:`value` raises :class:`OutOfTime` (None: none);
-        #: what it finished before stays, so a later call goes on from there.
-        self.deadline: float | None = None
         self._policy_values: dict[tuple, float] = {}
 
     def value(self, key: tuple | None = None) -> float:
@@ -85,9 +78,10 @@ class PolicyEvaluator(OptimalSolver):
         if key[0] == self.engine.full:
             self._policy_values[key] = 0.0
             return 0.0
-        if self.deadline is not None and not len(self._policy_values) & 63 and time.perf_counter() > self.deadline:
-            raise OutOfTime("the policy's evaluation passed its deadline")
-        if len(self._policy_values) >= self.max_states:
+        stored = len(self._policy_values)
+        if not stored & 63:
+            self._tick("the policy's evaluation")
+        if stored >= self.max_states:
             raise OptimalTooLarge(f"evaluating the policy needs more than {self.max_states:,} states for this "
                                   "plan; raise the state limit, or estimate with `opportune simulate`")
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves

@@ -15,20 +15,38 @@ is the minimum over prefixes *A* of the looks sorted by *m(L)* of
 ``(c_look + Σ_A p m + (1 − P_A) c_shake) / P_A``.  Every non-shake action
 moves to a state with more parts installed or buffered, so the recursion
 over states terminates; it is memoised, and refuses above ``max_states``.
+
+Bounds: the states stored never exceed ``max_states`` (:class:`OptimalTooLarge`), and a
+``deadline`` (:class:`~opportune.engine.deadline.Deadline`) is read between states
+(:class:`OutOfTime`; what was finished stays memoised, so a later call goes on from there).  How
+many states a plan needs is known before the programme starts: :mod:`.states`.  Memory grows with
+the states only: at most about :data:`~opportune.policies.states.BYTES_PER_STATE` bytes per state,
+plus the look cache, which is bounded (:data:`LOOK_CACHE_LOOKS` looks in all; it used to keep every
+bin's looks, ~20 kB per state on KILBRID).
 """
 
 from __future__ import annotations
 
 import sys
 from functools import lru_cache
+from math import comb
 
 from opportune.engine import OrderEngine
+from opportune.engine.deadline import Deadline, as_deadline
 from opportune.policies.base import DONE, SHAKE, Action, Decision
 from opportune.worlds.costs import TimeModel
+
+#: Looks (with their probabilities) the look cache keeps, over all the bin contents it holds: about
+#: 150 bytes each, so at most about 30 MB whatever the plan (it used to grow with the states × looks).
+LOOK_CACHE_LOOKS = 200_000
 
 
 class OptimalTooLarge(RuntimeError):
     """The state space is over the limit: the optimum is not computed."""
+
+
+class OutOfTime(RuntimeError):
+    """The programme passed its ``deadline``; the states it finished stay memoised."""
 
 
 class OptimalSolver:
@@ -52,7 +70,34 @@ class OptimalSolver:
         self.ids = self.plan.part_ids
         self.move = [self.costs.move(p) for p in self.ids]
         self._values: dict[tuple, float] = {}
-        self._looks = lru_cache(maxsize=None)(self._look_distribution)
+        # the looks of a bin: cached for the states that share it (most do, nearby in the recursion),
+        # within a bound on the looks kept, not on the entries: a large plan has many looks per bin
+        looks_at_start = comb(len(self.ids) + visible - 1, visible) if self.ids else 1
+        self._looks = lru_cache(maxsize=max(16, LOOK_CACHE_LOOKS // max(1, looks_at_start)))(self._look_distribution)
+        self._until = Deadline.NEVER
+        #: Called as ``progress(self)`` every 64 new states (for a progress bar; None: not called).
+        self.progress = None
+
+    # ------------------------------------------------------------ bounds
+
+    @property
+    def deadline(self) -> Deadline | None:
+        """The :class:`~opportune.engine.deadline.Deadline` read between states (None: none).
+
+        Set it to a Deadline, a ``time.perf_counter()`` value or None; past it the programme raises
+        :class:`OutOfTime`, and what it finished before stays, so a later call goes on from there."""
+        return None if self._until is Deadline.NEVER else self._until
+
+    @deadline.setter
+    def deadline(self, value) -> None:
+        self._until = as_deadline(value)
+
+    def _tick(self, what: str) -> None:
+        """Between states (every 64 new ones): the deadline, then the progress report."""
+        if self._until.expired():
+            raise OutOfTime(f"{what} passed its deadline")
+        if self.progress is not None:
+            self.progress(self)
 
     # ------------------------------------------------------------ states
 
@@ -186,7 +231,10 @@ class OptimalSolver:
         if key[0] == self.engine.full:
             self._values[key] = 0.0
             return 0.0
-        if len(self._values) >= self.max_states:
+        stored = len(self._values)
+        if not stored & 63:
+            self._tick("the optimum's programme")
+        if stored >= self.max_states:
             raise OptimalTooLarge(
                 f"the optimum needs more than {self.max_states:,} states for this plan; "
                 "raise --optimal-states, or leave 'optimal' out of the strategies")

@@ -22,8 +22,6 @@ Example (the gearbox, 2 visible, unlimited buffer):
 
 from __future__ import annotations
 
-import time
-
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
 
 __all__ = ["PileSolver"]
@@ -42,13 +40,11 @@ class PileSolver(OptimalSolver):
         if policy is not None:
             check_evaluable(policy, "pile")
         self.policy = policy
-        #: A ``time.perf_counter()`` value past which the recursion raises
-        #: :class:`~opportune.policies.evaluate.OutOfTime` (None: none); what it finished stays.
-        self.deadline: float | None = None
         # one memo (OptimalSolver._values, which a study hands from its parent to its workers): window
         # values under (key, window), values of a freshly shaken pile under ("shaken", key)
         self._window_values = self._values
         self._shaken = _Prefixed(self._values)
+        self._next_tick = 0
 
     # ------------------------------------------------------------ public
 
@@ -100,11 +96,11 @@ class PileSolver(OptimalSolver):
             return cached
         if key[0] == self.engine.full:
             return 0.0
-        if self.deadline is not None and not len(self._values) & 63 and time.perf_counter() > self.deadline:
-            from opportune.policies.evaluate import OutOfTime
-
-            raise OutOfTime("the pile's programme passed its deadline")
-        if len(self._values) >= self.max_states:
+        stored = len(self._values)
+        if stored >= self._next_tick:       # a shake stores all the windows of a state at once: no "& 63"
+            self._next_tick = stored + 64
+            self._tick("the pile's programme")
+        if stored >= self.max_states:
             raise OptimalTooLarge(f"the pile bin needs more than {self.max_states:,} states for this plan; raise the "
                                   "state limit, or estimate with `opportune simulate --bin pile`")
         m = self._move_value(key, window)

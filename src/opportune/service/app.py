@@ -260,17 +260,19 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     """The service's ASGI application over a store (created from ``settings.db_url`` if not given)."""
     settings = settings or Settings()
     store = store or Store(settings.db_url)
-    book = PlanBook(store, count_seconds=settings.count_seconds)
+    book = PlanBook(store, count_seconds=settings.count_seconds, memory_cap=settings.memory_cap,
+                    plan_share=settings.plan_share)
     broker = Broker()
     auth = Authenticator(store, cache_seconds=settings.token_cache_seconds, ticket_seconds=settings.ticket_seconds)
     manager = RunManager(store, book, size=settings.live_runs, notify=broker.notify,
                          keep_answers=settings.idempotency_seconds, budget=settings.decision_budget,
-                         warm_up=settings.count_seconds)
+                         warm_up=settings.warm_up_seconds)
 
     @asynccontextmanager
     async def lifespan(_app):
         broker.bind(asyncio.get_running_loop())
         yield
+        book.close()
         store.dispose()
 
     app = FastAPI(
@@ -389,7 +391,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                          200: {"model": PlanUploaded, "description": "The plan was already stored (same content hash)",
                                "links": PLAN_LINKS},
                          **errors({400: ["malformed_json", "malformed_body"], 401: ["unauthorized"],
-                                   403: ["forbidden"], 413: ["body_too_large"],
+                                   403: ["forbidden"], 413: ["body_too_large", "plan_too_large_for_memory"],
                                    422: ["invalid_plan", "invalid_request"],
                                    500: ["internal_error"]})},
               openapi_extra={"requestBody": {"required": True, "content": {
@@ -425,6 +427,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                f"the plan has {len(result.errors)} error(s)" + (f"; first: {first}" if first else ""),
                                "fix every problem listed (each has its line), then upload again",
                                where=first.where if first else "body", extra={"problems": problems})
+            book.check_fits(result.plan)    # within its share of the server's memory, before it is stored
             pid, created = store_plan(store, result, fmt, source)
             from opportune.formats.summary import summarize
 
@@ -475,6 +478,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                "links": links("$response.body#/id", "postLook", "getRun", "getTrace", "getGraph",
                                               "createTicket")},
                          **errors({**write_errors,
+                                   413: ["body_too_large", "plan_too_large_for_memory"],
                                    422: ["invalid_request", "unknown_plan", "plan_too_large", "plan_refused",
                                          "idempotency_key_reused"],
                                    500: ["internal_error"], 503: ["plan_too_large"]})})

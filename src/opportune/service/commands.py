@@ -58,6 +58,17 @@ def serve(
     access_log: bool = typer.Option(True, "--access-log/--no-access-log", help="Log every request (credentials redacted)"),
     workers: int = typer.Option(1, "--workers", min=1, max=64,
                                 help="Server processes sharing the port and the database (more than 1: PostgreSQL only)"),
+    memory_cap: Optional[int] = typer.Option(None, "--memory-cap", min=16, max=1 << 22,
+                                             help="Megabytes the loaded plans' engines may hold in all (memos, "
+                                                  "caches, programmes; least recently used plans are evicted "
+                                                  "between requests); default a quarter of the machine's memory",
+                                             show_default=False),
+    warm_up_seconds: float = typer.Option(30.0, "--warm-up-seconds", min=0.0, max=3600.0,
+                                          help="Most seconds a plan's warm-up (counting its first state, once per "
+                                               "plan, in the background) may take"),
+    poll_seconds: float = typer.Option(2.0, "--poll-seconds", min=0.05, max=86400.0,
+                                       help="How often an event stream looks for changes made by other processes "
+                                            "(PostgreSQL also pushes them at once)"),
 ):
     """Serve the sequencer over HTTP for robot cells, with the live dashboard at /."""
     _require("sqlalchemy", "fastapi", "uvicorn")
@@ -76,7 +87,9 @@ def serve(
     procs = f"; {workers} processes" if workers > 1 else ""
     typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)}{procs})",
                err=True)
-    run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers)
+    run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers,
+        settings={"memory_cap": None if memory_cap is None else memory_cap << 20, "warm_up_seconds": warm_up_seconds,
+                  "sse_poll_seconds": poll_seconds})
 
 
 def token_create(

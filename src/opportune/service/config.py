@@ -37,8 +37,17 @@ class Settings:
     is how long the stored answer of an idempotent request is kept (a retry
     after that is judged afresh).  ``decision_budget`` is the seconds a look's decision
     may take (estimated, and marked so, when exact counts do not fit; the answer's
-    counts are bounded by as much again, a read's by 1 s; a count that misses its
+    counts get what the decision leaves of it (the decision's own counts stop by twice it at
+    most), a read's 0.25 s; a count that misses its
     time is null); None: every decision exact, each count bounded by ``count_seconds``.
+
+    Memory.  ``memory_cap`` bounds the bytes the loaded plans' engines hold (memos, vectors, tails,
+    programmes, per-state caches), over all plans; None: a quarter of the machine's memory
+    (``MemTotal``).  Least recently used plans are evicted between requests to keep under it (their
+    runs are rebuilt from their logs when next asked).  One plan may hold at most ``plan_share`` of
+    the cap: a plan whose minimum working set is over that is refused at upload (413).
+    ``warm_up_seconds`` is the most time the warm-up of one plan (counting its first state, once per
+    plan and process, in the background) may take.
     """
 
     db_url: str = DEFAULT_DB
@@ -51,3 +60,6 @@ class Settings:
     idempotency_seconds: float = 7 * 24 * 3600.0
     sse_poll_seconds: float = 2.0
     sse_keepalive_seconds: float = 15.0
+    memory_cap: int | None = None
+    plan_share: float = 0.5
+    warm_up_seconds: float = 30.0

@@ -12,9 +12,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 import threading
+import time
 from collections import OrderedDict
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from sqlalchemy import insert, select
@@ -128,6 +131,48 @@ def list_plans(store: Store) -> list[dict]:
     return [{"id": r["id"], "name": r["name"], "format": r["format"], "created_at": iso(r["created_at"])} for r in rows]
 
 
+def memory_total() -> int:
+    """Bytes of memory of this machine (``MemTotal``; 4 GiB where it cannot be read)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemTotal:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 4 << 30
+
+
+def _int_bytes(bits: int) -> int:
+    """Bytes of a Python int of ``bits`` bits (30-bit digits)."""
+    return 28 + 4 * (-(-bits // 30))
+
+
+def min_working_set(plan: Plan) -> int:
+    """Bytes a plan's engine needs before its first decision, from its size alone (nothing is built).
+
+    Per strategy, the unit order's ``below``/``above`` bitsets (2 n ints of n bits); per counter, the
+    byte tables of its scans (2 · ⌈n/8⌉ · 256 ints of n bits, filled lazily above 1,024 units: then an
+    eighth is counted); and the first state's memo, at least one count per unit.  O(strategies).
+
+    >>> from opportune import make_plan
+    >>> min_working_set(make_plan([f"p{i}" for i in range(1000)], {})) > 10 * 2**20
+    True
+    """
+    n = max(1, plan.n_units)
+    k = max(1, len(plan.strategies))
+    word = _int_bytes(n) + 8            # an n-bit int and its list slot
+    orders = k * 2 * n * word
+    tables = 2 * (-(-n // 8)) * 256 * word
+    if n > 1024:
+        tables //= 8
+    memo = n * (2 * word + 100)
+    return orders + tables + memo + 65_536
+
+
 @dataclass
 class LoadedPlan:
     """A stored plan ready for runs: the plan, its shared engine (and the lock guarding it), summary and layout.
@@ -136,6 +181,11 @@ class LoadedPlan:
     memory (each counter's per-call ``max_memo`` and its ``max_total`` cap, beyond which the
     oldest memo entries are evicted): the opportunistic policy needs exact
     counts, and a request must not hold a plan's lock for minutes.
+
+    Everything a plan needs before its first decision is built once per process and shared by every
+    run of the plan: the engine with its memos, the warm-up (counting the first state, in the
+    background, in slices of the lock: :meth:`PlanBook.warm`) and the look-ahead's programme (shared
+    per engine by the policy).  ``nbytes`` is what :class:`PlanBook` last accounted for it.
     """
 
     id: str
@@ -145,6 +195,12 @@ class LoadedPlan:
     created_at: float
     lock: threading.Lock = field(default_factory=threading.Lock)
     too_large: str | None = None    # why exact counting of this plan is over the engine's memory budget
+    nbytes: int = 0                 # accounted bytes (engine, programme), updated between requests
+    measured: float = float("-inf")  # time.monotonic() of the last measurement
+    warm: str = "not started"       # the warm-up: not started, running, done, stopped (time or memory)
+    warm_slices: int = 0            # slices of warm-up work done (each under the lock, within its deadline)
+    evicted: bool = False
+    _stop: threading.Event = field(default_factory=threading.Event)
     _layouts: list | None = None
 
     @property
@@ -155,16 +211,79 @@ class LoadedPlan:
             self._layouts = layouts(self.plan, self.summary)
         return self._layouts
 
+    def measure(self) -> int:
+        """Bytes held for this plan: its engine (memos, vectors, tails, per-state caches) and the
+        look-ahead programmes on it.  Caller holds ``lock`` (the memos must not change meanwhile)."""
+        total = self.engine.nbytes()
+        from opportune.engine.memory import nbytes
+        from opportune.policies.variants import _EVALUATORS
+
+        for ev in list(_EVALUATORS.get(self.engine, {}).values()):
+            total += nbytes(getattr(ev, "_values", {}))
+            looks = getattr(ev, "_looks", None)
+            if looks is not None and hasattr(looks, "cache_info"):
+                total += 400 * looks.cache_info().currsize     # a look distribution: a tuple of a few tuples
+        self.nbytes = total
+        self.measured = time.monotonic()
+        return total
+
+
+WARM_SLICE = 0.02   # seconds of warm-up work per hold of a plan's lock: a look waits at most this long
+WARM_GAP = 0.005    # seconds the warm-up lets go of the lock between slices, so that a waiting look gets it
+WARM_YIELD = 1.0    # longest a warm-up waits for requests in progress before its next slice
+WARM_IDLE = 0.05    # seconds without a request before a warm-up slice starts
+MEASURE_EVERY = 0.5  # seconds between measurements of a plan in use (one decision adds a bounded number of entries)
+
 
 class PlanBook:
-    """Stored plans, loaded on demand and kept (at most ``size``, least recently used dropped)."""
+    """Stored plans, loaded on demand and kept within a memory cap (least recently used evicted).
 
-    def __init__(self, store: Store, size: int = 64, *, count_seconds: float | None = None):
+    ``memory_cap`` bounds the bytes accounted over every loaded plan (None: a quarter of the
+    machine's memory); a plan may use at most ``plan_share`` of it, and one whose minimum working set
+    (:func:`min_working_set`) is over that share is refused (413) before anything is built.  The cap
+    is enforced by :meth:`settle`, between requests: whole plans are evicted, least recently used
+    first, never one whose lock is held (inside a decision; a plan over its share first loses its
+    per-state caches, see :meth:`settle`); an evicted plan's runs are rebuilt from
+    their logs on their next request (``on_evict`` tells the run manager).  ``size`` still bounds the
+    number of plans kept.
+    """
+
+    def __init__(self, store: Store, size: int = 64, *, count_seconds: float | None = None,
+                 memory_cap: int | None = None, plan_share: float = 0.5):
+        if memory_cap is not None and memory_cap <= 0:
+            raise ValueError("memory_cap must be a positive number of bytes (or None: a quarter of the memory)")
+        if not 0 < plan_share <= 1:
+            raise ValueError("plan_share must be in (0, 1]")
         self.store = store
         self.size = size
         self.count_seconds = count_seconds
+        self.memory_cap = memory_cap if memory_cap is not None else memory_total() // 4
+        self.plan_share = plan_share
+        self.on_evict: list = []        # callables(pid), told when a plan is evicted
+        self.loads = 0                  # engines built (a reloaded, evicted plan counts again)
+        self.evictions = 0
+        self.active = 0                 # requests in progress (see busy)
+        self.last_request = float("-inf")   # time.monotonic() when the last one ended
         self._plans: OrderedDict[str, LoadedPlan] = OrderedDict()
         self._lock = threading.Lock()
+
+    @property
+    def share(self) -> int:
+        """Most bytes one plan may hold."""
+        return int(self.memory_cap * self.plan_share)
+
+    def check_fits(self, plan: Plan) -> None:
+        """Refuse (413) a plan whose minimum working set is over its share of the memory cap. O(strategies)."""
+        need = min_working_set(plan)
+        if need > self.share:
+            mb = 2 ** 20
+            raise ApiError(413, "plan_too_large_for_memory",
+                           f"this plan needs at least {need / mb:,.0f} MB to be counted ({plan.n_units:,} units, "
+                           f"{len(plan.strategies)} strateg{'y' if len(plan.strategies) == 1 else 'ies'}), over its "
+                           f"share of the server's memory ({self.share / mb:,.0f} MB of a cap of "
+                           f"{self.memory_cap / mb:,.0f} MB)",
+                           "split the plan into smaller ones (fewer units or strategies), or start the server "
+                           "with a larger memory cap", where="body")
 
     def get(self, pid: str) -> LoadedPlan:
         with self._lock:
@@ -185,13 +304,147 @@ class PlanBook:
                            f"{exc.problems[0].message if exc.problems else exc}",
                            "upload a plan within the limits (opportune check says what they are)",
                            where="body.plan", extra={"problems": [p.to_dict() for p in exc.problems]}) from None
+        self.check_fits(plan)   # stored under a larger cap, or a joint plan of several products
+        self.settle(room=min_working_set(plan))
         loaded = LoadedPlan(pid, plan, OrderEngine(plan, time_limit=self.count_seconds), summarize(plan), row.created_at)
         with self._lock:
             hit = self._plans.setdefault(pid, loaded)
             self._plans.move_to_end(pid)
-            while len(self._plans) > self.size:
-                self._plans.popitem(last=False)
+            if hit is loaded:
+                self.loads += 1
+                loaded.nbytes = min_working_set(plan)
+        self.settle()
         return hit
+
+    # ------------------------------------------------------------ the warm-up, once per plan
+
+    def warm(self, loaded: LoadedPlan, seconds: float | None, *, foreground: float = 0.0, background: bool = True) -> None:
+        """Count the plan's first state, once per loaded plan, for at most ``seconds`` in all (None: no
+        limit): up to ``foreground`` seconds now (the caller must not hold the plan's lock), the rest in
+        a background thread, in slices of :data:`WARM_SLICE` seconds under the plan's lock, until done,
+        out of time, or the plan's memory share is reached.  A look between slices decides with what is
+        counted so far (within its own budget).  Later calls do nothing (counted: ``warm_slices``).
+
+        What it counts stays in the engine's memos, so each slice continues where the last stopped.
+        """
+        with self._lock:
+            if loaded.warm != "not started":
+                return
+            loaded.warm = "running"
+        from opportune.engine.deadline import Deadline
+
+        end = Deadline.after(seconds)
+        if foreground > 0 and self._warm_slice(loaded, end.within(foreground)):
+            return
+        if not background:
+            loaded.warm = "stopped"
+            return
+        threading.Thread(target=self._warm_loop, args=(loaded, end), name=f"warm-up {loaded.id[:8]}",
+                         daemon=True).start()
+
+    def _warm_slice(self, loaded: LoadedPlan, until) -> bool:
+        """One slice of the warm-up (until the Deadline ``until``); True when the warm-up is over."""
+        with loaded.lock:
+            if loaded.evicted or loaded._stop.is_set():
+                loaded.warm = "stopped"
+                return True
+            try:
+                done = loaded.engine.warm_up(max(0.0, until.remaining()))
+            except (MemoryError, RecursionError):   # beyond what this process can count: decisions will say so
+                done = None
+            loaded.warm_slices += 1
+            if done:
+                loaded.warm = "done"
+            elif done is None:
+                loaded.warm = "stopped"
+            elif time.monotonic() >= loaded.measured + MEASURE_EVERY and loaded.measure() > self.share:
+                loaded.warm = "stopped"     # the memos reached the plan's share: no more warming
+            return loaded.warm != "running"
+
+    @contextmanager
+    def busy(self):
+        """Marks a request in progress: the warm-ups pause meanwhile (a Python thread counting beside a
+        decision would take half of the interpreter's time from it)."""
+        with self._lock:
+            self.active += 1
+        try:
+            yield
+        finally:
+            with self._lock:
+                self.active -= 1
+                self.last_request = time.monotonic()
+
+    def _warm_loop(self, loaded: LoadedPlan, end) -> None:
+        while not end.expired():
+            waited = 0.0
+            # requests first (a cell's next look follows its last answer closely); still, a slice per WARM_YIELD
+            while (self.active or time.monotonic() - self.last_request < WARM_IDLE) and waited < WARM_YIELD:
+                time.sleep(WARM_GAP)
+                waited += WARM_GAP
+            if self._warm_slice(loaded, end.within(WARM_SLICE)):
+                break
+            self.settle()
+            time.sleep(WARM_GAP)
+        else:
+            loaded.warm = "stopped"
+        self.settle()
+
+    # ------------------------------------------------------------ memory
+
+    def nbytes(self) -> int:
+        """Bytes accounted over every loaded plan (as last measured)."""
+        with self._lock:
+            return sum(p.nbytes for p in self._plans.values())
+
+    def settle(self, used: LoadedPlan | None = None, *, room: int = 0) -> None:
+        """Between requests: measure ``used`` (if its lock is free), then evict least recently used plans
+        not in use until the accounted bytes plus ``room`` fit the cap.  A plan over its own share first
+        loses its per-state caches (its runs go on, nothing to rebuild), and is evicted if that is not
+        enough.  O(plans + sampled memos of the plans measured)."""
+        now = time.monotonic()
+        if used is not None and now >= used.measured + MEASURE_EVERY and used.lock.acquire(blocking=False):
+            try:
+                if not used.evicted:
+                    used.measure()
+            finally:
+                used.lock.release()
+        evicted = []
+        with self._lock:
+            total = sum(p.nbytes for p in self._plans.values()) + room
+            for pid, p in list(self._plans.items()):
+                over_share = p.nbytes > self.share
+                if total <= self.memory_cap and len(self._plans) <= self.size and not over_share:
+                    continue
+                if not p.lock.acquire(blocking=False):
+                    continue            # inside a decision (or a warm-up slice): next time
+                try:
+                    if over_share:      # first the per-state caches (its runs go on without a rebuild)
+                        before = p.nbytes
+                        p.engine.clear_state_caches()
+                        total += p.measure() - before
+                        if p.nbytes <= self.share and total <= self.memory_cap:
+                            continue
+                    del self._plans[pid]
+                    p.evicted = True
+                    p._stop.set()
+                finally:
+                    p.lock.release()
+                total -= p.nbytes
+                evicted.append(pid)
+            self.evictions += len(evicted)
+        for pid in evicted:
+            for tell in self.on_evict:
+                tell(pid)
+
+    def close(self) -> None:
+        """Stop every warm-up (the service is shutting down)."""
+        for p in self.loaded():
+            p._stop.set()
+
+    def loaded(self) -> list[LoadedPlan]:
+        """The plans loaded now, least recently used first."""
+        with self._lock:
+            return list(self._plans.values())
 
     def exists(self, pid: str) -> bool:
         with self.store.read() as c:

@@ -48,6 +48,7 @@ import random
 import threading
 import time
 from collections import OrderedDict
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -120,7 +121,9 @@ def apply(sequencer: Sequencer, kind: str, request: dict):
     raise ValueError(f"unknown event kind {kind!r}")
 
 
-READ_COUNT_SECONDS = 1.0   # with a decision budget: most time a read spends counting (counts that miss it are null)
+READ_COUNT_SECONDS = 0.25  # with a decision budget: most time a read spends counting (counts that miss it are null)
+START_WARM_UP = 1.0        # with a decision budget: seconds the first run of a plan spends warming it up at its start
+START_COUNT_SECONDS = 0.5  # with a decision budget: most time a run's start spends on its answer's counts
 
 
 class RunManager:
@@ -130,7 +133,7 @@ class RunManager:
                  keep_answers: float = idem.KEEP_SECONDS, budget: float | None = None, warm_up: float | None = 10.0):
         self.store = store
         self.budget = budget        # seconds per decision (None: exact decisions)
-        self.warm_up = warm_up      # seconds a run's first state may take to count
+        self.warm_up = warm_up      # seconds the warm-up of a plan (its first state's count) may take, once per plan
         self.book = book
         self.size = size
         self.notify = notify
@@ -138,8 +141,23 @@ class RunManager:
         self._next_forget = 0.0           # monotonic time of the next clean-up of old answers
         self._live: OrderedDict[int, LiveRun] = OrderedDict()
         self._mutex = threading.Lock()
+        self._last_used: dict[int, LoadedPlan] = {}   # per thread: the plan its current request used
         # PostgreSQL: wake this process's streams when another process commits (None on SQLite).
         self.listener = store.listen(notify)
+        book.on_evict.append(self._plan_evicted)
+
+    def _plan_evicted(self, pid: str) -> None:
+        """The book evicted a plan's engine: drop the live sequencers on it (those not in use now; the
+        others are rebuilt by :meth:`_sync`, which finds their engine is not the plan's any more), so
+        that its memory goes.  Each is rebuilt from its run's log on its next request."""
+        with self._mutex:
+            on_plan = [live for live in self._live.values() if live.plan_id == pid]
+        for live in on_plan:
+            if live.lock.acquire(blocking=False):
+                try:
+                    self._forget(live)
+                finally:
+                    live.lock.release()
 
     def _remember(self, c, scope: str, key: str, h: str, status: int, text: str) -> None:
         """Store an answer; at most once a minute, in the same transaction, forget those past their time."""
@@ -184,6 +202,8 @@ class RunManager:
 
     def _sync(self, live: LiveRun, loaded: LoadedPlan, seq_in_db: int) -> None:
         """Bring the live sequencer up to the database's event log (replaying what it lacks). Caller holds live.lock."""
+        if live.sequencer is not None and live.sequencer.engine is not loaded.engine:
+            self._forget(live)      # its plan was evicted and loaded again: rebuilt on the plan's new engine
         # ``applied`` only grows after a commit, so a live run ahead of ``seq_in_db`` is newer than that read.
         if live.sequencer is not None and live.applied >= seq_in_db:
             return
@@ -245,14 +265,15 @@ class RunManager:
             raise ReplayMismatch(f"event {seq}: this version decides {decision.action}, the run recorded {recorded}")
 
     def _sequencer(self, loaded: LoadedPlan, capacity: int | None, policy: str, products: int = 1) -> Sequencer:
-        """A new sequencer of the run's policy (its first state counted within the warm-up time); for several
-        products, a :class:`~opportune.multi.MultiSequencer` on the joint plan (looks of part kinds)."""
+        """A new sequencer of the run's policy on the plan's shared engine; for several products, a
+        :class:`~opportune.multi.MultiSequencer` on the joint plan (looks of part kinds).  Its first state
+        is counted by the plan's warm-up (:meth:`PlanBook.warm`, once per plan), not here: a run's start
+        does bounded work."""
         make = Sequencer
         if products > 1:
             from opportune.multi import MultiSequencer as make
         return make(loaded.engine, self._policy(loaded, capacity, policy, budget=self.budget),
-                    buffer_capacity=capacity, budget=self.budget,
-                    warm_up=self.warm_up if self.budget is not None else 0)
+                    buffer_capacity=capacity, budget=self.budget, warm_up=0)
 
     def _joint_plan(self, base: LoadedPlan, products: int) -> LoadedPlan:
         """The stored joint plan of ``products`` copies of a stored plan (stored now if new)."""
@@ -288,7 +309,15 @@ class RunManager:
     # ------------------------------------------------------------ creating runs
 
     def create(self, principal: Principal, body: dict, key: str, path: str) -> tuple[int, str, bool]:
-        """Start a run of a stored plan in the principal's cell; return ``(status, answer JSON text, replayed)``."""
+        """Start a run of a stored plan in the principal's cell; return ``(status, answer JSON text, replayed)``.
+
+        Bounded work: the plan's engine, memos and warm-up are the plan's, built once per process (the
+        first run warms the plan up for at most ``START_WARM_UP`` seconds, the rest goes on in the
+        background), and the answer's counts take at most ``START_COUNT_SECONDS``."""
+        with self.book.busy():
+            return self._create(principal, body, key, path)
+
+    def _create(self, principal: Principal, body: dict, key: str, path: str) -> tuple[int, str, bool]:
         if principal.is_operator:
             raise forbidden("an operator token reads runs; only a cell's token can start one",
                             "use the token of the cell that will assemble the plan")
@@ -309,7 +338,16 @@ class RunManager:
             loaded = self._joint_plan(loaded, products)
         if loaded.too_large:
             raise plan_too_large(loaded.too_large)
-        with loaded.lock:
+        if self.budget is not None:
+            # Once per plan: the first run counts its first state for up to START_WARM_UP seconds here (small
+            # plans finish), the rest goes on in the background; later runs find it done or under way.
+            self.book.warm(loaded, self.warm_up, foreground=START_WARM_UP)
+        # With a decision budget, the answer's counts: those the warm-up found (from the memos), or, once it has
+        # finished, at most START_COUNT_SECONDS of counting (a run of a plan whose first state is not counted yet
+        # starts at once, its count null).
+        until = (time.perf_counter() + (START_COUNT_SECONDS if loaded.warm == "done" else 0.0)
+                 if self.budget is not None else None)
+        with loaded.lock, loaded.engine.deadline(until):
             policy = body.get("policy") or DEFAULT_POLICY
             sequencer = self._sequencer(loaded, body.get("buffer_capacity"), policy, products)
             if self.budget is None:
@@ -333,7 +371,7 @@ class RunManager:
                     created_at=t, updated_at=t)).inserted_primary_key[0]
                 live = LiveRun(run_id, cell, loaded.id, body.get("label") or "", body.get("buffer_capacity"), t,
                                policy, products, sequencer=sequencer)
-                with loaded.lock:
+                with loaded.lock, loaded.engine.deadline(until):   # the same bound as the count above
                     answer = run_view(live, loaded, t)
                 text = dumps(answer)
                 self._remember(c, principal.scope, key, h, 201, text)
@@ -346,6 +384,7 @@ class RunManager:
         with self._mutex:
             self._live[run_id] = live
         self.notify(run_id)
+        self.book.settle(loaded)
         return 201, text, False
 
     # ------------------------------------------------------------ commands
@@ -358,6 +397,13 @@ class RunManager:
             raise forbidden("an operator token reads runs; only the run's cell drives it",
                             "use the token of the cell the run belongs to")
         h = idem.request_hash("POST", path, request)
+        try:
+            with self.book.busy():
+                return self._command(principal, run_id, kind, request, key, path, h)
+        finally:
+            self.book.settle(self._last_used.pop(threading.get_ident(), None))
+
+    def _command(self, principal, run_id, kind, request, key, path, h):
         for attempt in range(ATTEMPTS):
             if attempt:  # another process committed on this run meanwhile: let it finish, then rebuild
                 time.sleep(random.uniform(0, 0.005 * 2 ** attempt))
@@ -378,6 +424,8 @@ class RunManager:
                 except _Stale:
                     self._forget(live)
                     continue
+                finally:
+                    self._last_used[threading.get_ident()] = loaded
         raise ApiError(409, "run_busy", f"run {run_id} is being changed by another server process",
                        "retry the request with the same Idempotency-Key")
 
@@ -385,10 +433,14 @@ class RunManager:
         seq = live.sequencer
         expected = live.applied
         try:
-            # With a decision budget, the answer's counts get as much time again as the decision.
-            until = time.perf_counter() + 2 * self.budget if self.budget is not None else None
+            # With a decision budget: the decision's counts stop by twice the budget at most (the policy keeps
+            # to its budget; this is the safety net), the answer's counts get what the decision leaves of one
+            # budget (memo hits cost nothing; a count that misses it is null).
+            start = time.perf_counter()
+            until = start + 2 * self.budget if self.budget is not None else None
+            answer_until = start + self.budget if self.budget is not None else None
             with loaded.lock, loaded.engine.deadline(until):
-                answer = self._apply_checked(live, loaded, kind, request)  # a refusal changes nothing
+                answer = self._apply_checked(live, loaded, kind, request, answer_until)  # a refusal changes nothing
         except ApiError:
             raise
         except BudgetExceeded as exc:
@@ -430,8 +482,13 @@ class RunManager:
         self.notify(live.id)          # this process's
         return 200, text, False
 
-    def _apply_checked(self, live: LiveRun, loaded: LoadedPlan, kind: str, request: dict) -> dict:
-        """Apply the command to the live sequencer and build the answer; a refusal changes nothing."""
+    def _apply_checked(self, live: LiveRun, loaded: LoadedPlan, kind: str, request: dict,
+                       answer_until: float | None = None) -> dict:
+        """Apply the command to the live sequencer and build the answer (its counts by ``answer_until``, a
+        ``time.perf_counter()`` value, if given); a refusal changes nothing."""
+        if answer_until is not None and kind != "look":
+            with loaded.engine.deadline(answer_until):
+                return self._apply_checked(live, loaded, kind, request)
         seq = live.sequencer
         n_next = live.applied + 1
         if kind == "look":
@@ -458,10 +515,11 @@ class RunManager:
                 raise ApiError(409, code, str(exc), hint.replace("{id}", str(live.id)), where="body.visible") from None
             row = seq.pending or seq.trace[-1]
             n_row = len(seq.trace) + (1 if seq.pending else 0)
-            run = run_view(live, loaded, now())
-            run["seq"] = n_next
-            answer = {"run_id": live.id, "seq": n_next, "action": decision.action.to_dict(),
-                      "decision": decision_view(decision), "row": row_view(row, n_row, loaded.engine), "run": run}
+            with loaded.engine.deadline(answer_until) if answer_until is not None else nullcontext():
+                run = run_view(live, loaded, now())
+                run["seq"] = n_next
+                answer = {"run_id": live.id, "seq": n_next, "action": decision.action.to_dict(),
+                          "decision": decision_view(decision), "row": row_view(row, n_row, loaded.engine), "run": run}
             if live.products > 1:   # which fixture an install goes to (the action's part is KIND@FIXTURE)
                 from opportune.multi import split_action
 
@@ -496,6 +554,10 @@ class RunManager:
     # ------------------------------------------------------------ questions
 
     def view(self, principal: Principal, run_id: int, *, with_trace: bool = False) -> dict:
+        with self.book.busy():
+            return self._view(principal, run_id, with_trace)
+
+    def _view(self, principal: Principal, run_id: int, with_trace: bool) -> dict:
         r = self.row(principal, run_id)
         live = self._live_for(r)
         with live.lock:
@@ -507,6 +569,7 @@ class RunManager:
                 out = run_view(live, loaded, r["updated_at"])
                 if with_trace:
                     out = {"run": out, "trace": trace_view(live, loaded)}
+        self.book.settle(loaded)
         return out
 
     def trace(self, principal: Principal, run_id: int) -> dict:

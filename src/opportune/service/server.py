@@ -142,22 +142,25 @@ def app_from_environment():
     return app
 
 
-def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool = True, workers: int = 1) -> None:
+def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool = True, workers: int = 1,
+          settings: dict | None = None) -> None:
     """Open the store, build the app and serve until interrupted; with ``workers`` > 1, that many processes
-    sharing the port and the database (PostgreSQL: :func:`opportune.service.commands.serve` refuses SQLite)."""
+    sharing the port and the database (PostgreSQL: :func:`opportune.service.commands.serve` refuses SQLite).
+    ``settings``: further :class:`~opportune.service.config.Settings` fields by name."""
+    settings = {"db_url": db_url, "max_body": max_body, **(settings or {})}
     import uvicorn
 
     common = dict(host=host, port=port, log_config=log_config(), access_log=access_log, timeout_graceful_shutdown=3,
                   server_header=False, proxy_headers=False)
     if workers > 1:
         # Spawned workers import the application by name; the settings travel in the environment.
-        os.environ[SETTINGS_ENV] = json.dumps({"db_url": db_url, "max_body": max_body})
+        os.environ[SETTINGS_ENV] = json.dumps(settings)
         uvicorn.run("opportune.service.server:app_from_environment", factory=True, workers=workers, **common)
         return
 
     from opportune.service.app import create_app
     from opportune.service.config import Settings
 
-    app = create_app(Settings(db_url=db_url, max_body=max_body))
+    app = create_app(Settings(**settings))
     logging.getLogger("opportune.service").info("database %s", safe_url(db_url))
     uvicorn.Server(uvicorn.Config(app, **common)).run()

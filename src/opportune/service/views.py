@@ -10,6 +10,7 @@ now, progress.  Big integers are decimal strings (JSON numbers lose digits).
 from __future__ import annotations
 
 import datetime as dt
+from functools import lru_cache
 
 from opportune.engine import Schedule
 from opportune.engine.count import BudgetExceeded
@@ -28,8 +29,14 @@ def count_view(schedule: Schedule) -> dict | None:
         n = schedule.count()
     except BudgetExceeded:
         return None
-    log10 = round(log10_int(n), 6) if n > 0 else None
-    return {"value": decimal(n), "log10": log10}
+    return dict(_count_text(n))
+
+
+@lru_cache(maxsize=256)
+def _count_text(n: int) -> tuple:
+    """A count's decimal text and log10, computed once per value: a run's answers repeat the same few
+    counts, and the decimal text of a count of 10,000 free parts (35,660 digits) takes ~40 ms."""
+    return (("value", decimal(n)), ("log10", round(log10_int(n), 6) if n > 0 else None))
 
 
 def installable(schedule: Schedule) -> list[str] | None:

@@ -1,0 +1,152 @@
+"""One deadline for all the work of a caller: counts, hub terms, position sums, estimates, chains.
+
+A :class:`Deadline` is a moment on ``time.perf_counter()``'s clock after which work must stop.
+Every engine entry point takes one (``deadline=``), passes it down unchanged to everything it
+calls, and every loop whose length depends on the input reads it (:meth:`Deadline.check` raises
+:class:`BudgetExceeded`; :meth:`Deadline.expired` only tells).  The compiled core gets
+:meth:`Deadline.seconds` and reads its own steady clock.
+
+Why one object and not a time limit per call: work done before a count (a probe, a hub search,
+the first of several strategies' terms) must not push the end of a decision later.  A caller that
+wants to give part of its time to a sub-task makes a *sooner* deadline with :meth:`Deadline.share`
+or :meth:`Deadline.within`, never a later one.
+
+Examples
+--------
+>>> d = Deadline.after(60.0)
+>>> d.expired(), 0 < d.remaining() <= 60
+(False, True)
+>>> Deadline.NEVER.remaining()
+inf
+>>> Deadline.after(0.0).within(10.0).expired()      # a sub-task never outlives its caller
+True
+>>> try:
+...     Deadline.after(-1.0).check("counting")
+... except BudgetExceeded as exc:
+...     print(exc, exc.reason)
+the deadline has passed: counting time
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+__all__ = ["BudgetExceeded", "Deadline", "as_deadline"]
+
+_perf = time.perf_counter
+_INF = math.inf
+
+
+class BudgetExceeded(Exception):
+    """An exact count would need more new memo entries or more time than one call may use.
+
+    The counter's memo stays valid (only finished values are stored): call
+    again with a larger budget to continue where it stopped, or fall back to
+    :func:`opportune.engine.estimate.estimate_count`.
+
+    Attributes: ``reason`` (``"memo"`` or ``"time"``), ``memo_size``, ``elapsed``.
+    """
+
+    def __init__(self, message: str, *, reason: str = "memo", memo_size: int = 0, elapsed: float = 0.0):
+        self.reason = reason
+        self.memo_size = memo_size
+        self.elapsed = elapsed
+        super().__init__(message)
+
+
+class Deadline:
+    """A moment (``time.perf_counter()`` value, ``inf`` for none) after which work stops.
+
+    Immutable; cheap to make and to read (``at`` is a plain float, for hot loops that compare it
+    with ``time.perf_counter()`` themselves).  Complexity: every method is O(1).
+    """
+
+    __slots__ = ("at",)
+    NEVER: "Deadline"
+
+    def __init__(self, at: float = _INF):
+        if at != at:            # nan: no moment at all is a caller's mistake, not "never"
+            raise ValueError("a deadline must be a number of seconds on time.perf_counter()'s clock, not nan")
+        object.__setattr__(self, "at", float(at))
+
+    def __setattr__(self, name, value):
+        raise AttributeError("a Deadline is immutable: make a sooner one with within() or share()")
+
+    @classmethod
+    def after(cls, seconds: float | None) -> "Deadline":
+        """The deadline ``seconds`` from now (None: never)."""
+        return cls.NEVER if seconds is None else cls(_perf() + seconds)
+
+    # ---------------------------------------------------------------- reading it
+
+    def remaining(self) -> float:
+        """Seconds left (negative once passed; ``inf`` for never)."""
+        return self.at - _perf() if self.at != _INF else _INF
+
+    def expired(self) -> bool:
+        """True once the moment has passed."""
+        return self.at != _INF and _perf() > self.at
+
+    def check(self, what: str = "") -> None:
+        """Raise :class:`BudgetExceeded` (reason ``"time"``) once the moment has passed."""
+        if self.at != _INF and _perf() > self.at:
+            raise BudgetExceeded(f"the deadline has passed{': ' + what if what else ''}", reason="time")
+
+    def seconds(self) -> float:
+        """Seconds left for the compiled core: ``-1.0`` for never, else at least 0."""
+        return -1.0 if self.at == _INF else max(0.0, self.at - _perf())
+
+    @property
+    def finite(self) -> bool:
+        return self.at != _INF
+
+    # ---------------------------------------------------------------- sooner deadlines for sub-tasks
+
+    def within(self, seconds: float | None) -> "Deadline":
+        """The sooner of this deadline and ``seconds`` from now (None: this one)."""
+        if seconds is None:
+            return self
+        at = _perf() + seconds
+        return self if at >= self.at else Deadline(at)
+
+    def share(self, fraction: float) -> "Deadline":
+        """A deadline ``fraction`` of the remaining time from now (this one if it is never)."""
+        if self.at == _INF:
+            return self
+        now = _perf()
+        return Deadline(now + max(0.0, self.at - now) * fraction)
+
+    def sooner(self, other: "Deadline | float | None") -> "Deadline":
+        """The sooner of two deadlines (a float is a ``perf_counter`` moment, None never)."""
+        o = as_deadline(other)
+        return self if self.at <= o.at else o
+
+    # ---------------------------------------------------------------- plumbing
+
+    def __repr__(self) -> str:
+        return "Deadline.NEVER" if self.at == _INF else f"Deadline(in {self.remaining():.6f} s)"
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Deadline) and other.at == self.at
+
+    def __hash__(self) -> int:
+        return hash(self.at)
+
+    def __reduce__(self):
+        # a moment on one process's clock means nothing in another: a deadline sent to a worker
+        # process keeps its remaining time
+        return (Deadline.after, (None if self.at == _INF else self.remaining(),))
+
+
+Deadline.NEVER = Deadline()
+
+
+def as_deadline(value: "Deadline | float | None") -> Deadline:
+    """A :class:`Deadline` from what older callers pass: a Deadline, a ``perf_counter`` moment
+    (float), or None (never)."""
+    if value is None:
+        return Deadline.NEVER
+    if isinstance(value, Deadline):
+        return value
+    return Deadline(value)
