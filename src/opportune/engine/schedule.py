@@ -733,6 +733,16 @@ class OrderEngine:
         return sums
 
 
+#: Passes over every unit of a plan made to answer ``remaining`` or ``in_bin``, by name: a test
+#: reads them to check that a service look makes a bounded number of them, whatever the plan's size.
+PASSES: dict[str, int] = {}
+
+
+def count_pass(name: str) -> None:
+    """Count one pass over every unit (see :data:`PASSES`)."""
+    PASSES[name] = PASSES.get(name, 0) + 1
+
+
 class Schedule:
     """A schedule: the parts installed so far (in order) plus all admissible completions.
 
@@ -749,7 +759,7 @@ class Schedule:
     1
     """
 
-    __slots__ = ("engine", "plan", "installed", "mask", "consistent")
+    __slots__ = ("engine", "plan", "installed", "mask", "consistent", "_left")
 
     def __init__(self, plan_or_engine: Plan | OrderEngine, installed: Iterable[str] = ()):
         engine = plan_or_engine if isinstance(plan_or_engine, OrderEngine) else OrderEngine(plan_or_engine)
@@ -758,6 +768,7 @@ class Schedule:
         self.installed: tuple[str, ...] = ()
         self.mask = 0
         self.consistent = engine.all_strategies
+        self._left: dict[str, int] | None = None   # ``remaining``, once asked (see there)
         for part in installed:
             self._install_in_place(part)
 
@@ -765,6 +776,7 @@ class Schedule:
     def _make(cls, engine, installed, mask, consistent) -> "Schedule":
         s = object.__new__(cls)
         s.engine, s.plan, s.installed, s.mask, s.consistent = engine, engine.plan, installed, mask, consistent
+        s._left = None
         return s
 
     # ------------------------------------------------------------ state
@@ -791,11 +803,21 @@ class Schedule:
         self.installed += (part,)
         self.mask |= 1 << u
         self.consistent = after
+        self._left = None
 
     def install(self, part: str) -> "Schedule":
         """The schedule after installing one unit of ``part``; raises :class:`NotAdmissible`."""
         _, u, after = self._locate(part)
-        return Schedule._make(self.engine, self.installed + (part,), self.mask | 1 << u, after)
+        s = Schedule._make(self.engine, self.installed + (part,), self.mask | 1 << u, after)
+        left = self._left
+        if left is not None:   # one part fewer: a C-level copy, not another pass over the units
+            left = dict(left)
+            if left[part] == 1:
+                del left[part]
+            else:
+                left[part] -= 1
+            s._left = left
+        return s
 
     def can_install(self, part: str) -> bool:
         try:
@@ -821,12 +843,25 @@ class Schedule:
 
     @property
     def remaining(self) -> dict[str, int]:
-        """Units still to install, per part (declaration order; parts with none left omitted)."""
-        out: dict[str, int] = {}
-        for u in _bits(self.engine.full & ~self.mask):
-            pid = self.plan.parts[self.engine.unit_part[u]].id
-            out[pid] = out.get(pid, 0) + 1
-        return out
+        """Units still to install, per part (declaration order; parts with none left omitted).
+
+        Found once per schedule, by one pass over the units left (O(units)), and carried to the
+        schedules :meth:`install` makes (a dictionary copy): a service look asks for it several times.
+        A new dictionary each time (the caller may change it).
+
+        >>> from opportune import make_plan
+        >>> Schedule(make_plan(["a", "b"], {})).install("b").remaining
+        {'a': 1}
+        """
+        left = self._left
+        if left is None:
+            count_pass("remaining")
+            left = {}
+            for u in _bits(self.engine.full & ~self.mask):
+                pid = self.plan.parts[self.engine.unit_part[u]].id
+                left[pid] = left.get(pid, 0) + 1
+            self._left = left
+        return dict(left)
 
     @property
     def is_complete(self) -> bool:

@@ -52,16 +52,18 @@ def decision_view(decision) -> dict:
     return decision.to_dict() | {"explain": decision.explain()}
 
 
-def row_view(row: Row, n: int, engine) -> dict:
+def row_view(row: Row, n: int, engine, schedule: Schedule | None = None) -> dict:
     """Trace row ``n`` (1-based): Visible | Buffered | Installed | Action, the outcome, the reasons.
 
     ``count`` is the number of admissible completions *before* the action,
-    which the dashboard plots falling as the run proceeds.
+    which the dashboard plots falling as the run proceeds.  ``schedule``: the run's current
+    schedule, used when the row was made at it (the pending row: no rebuilding it part by part).
     """
     d = row.to_dict()
     d["n"] = n
     d["action_text"] = "" if row.action.kind == "done" else str(row.action)
-    d["count"] = count_view(Schedule(engine, row.installed))
+    at = schedule if schedule is not None and schedule.installed is row.installed else Schedule(engine, row.installed)
+    d["count"] = count_view(at)
     d["reasons"] = decision_view(row.decision)
     return d
 
@@ -95,7 +97,7 @@ def run_view(live, loaded, updated_at: float) -> dict:
         "installable": installable(state.schedule),
         "progress": {"installed": len(state.installed), "units": loaded.plan.n_units},
         "count": count_view(state.schedule),
-        "pending": row_view(pending, len(seq.trace) + 1, loaded.engine) if pending else None,
+        "pending": row_view(pending, len(seq.trace) + 1, loaded.engine, state.schedule) if pending else None,
         "last_look": list(last.visible) if last else [],
         "rows": len(seq.trace) + (1 if pending else 0),
         "finished": seq.finished,
