@@ -569,8 +569,8 @@ class OrderEngine:
             if part in parts:
                 value = known.get(part)
                 if value is None:
-                    after = self.consistent_after(mask, consistent, unit.bit_length() - 1)
-                    value = known[part] = self.count(mask | unit, after)
+                    after = self.consistent_after(mask, consistent, unit)
+                    value = known[part] = self.count(mask | 1 << unit, after)
                 out[part] = value
         return out
 
@@ -628,7 +628,7 @@ class OrderEngine:
         return [part for part in entry[0] if part in parts]
 
     def _option_entry(self, key: int, mask: int, consistent: int) -> tuple[dict[str, int], dict[str, int]]:
-        """The per-state table of :meth:`options_for`: installable parts (with their next unit's bit)
+        """The per-state table of :meth:`options_for`: installable parts (with their next unit's number)
         and the options counted so far."""
         if len(self._option_cache) > STATE_CACHE_LIMIT:
             self._trim()
@@ -636,15 +636,11 @@ class OrderEngine:
         return entry
 
     def _installable_parts(self, mask: int, consistent: int) -> dict[str, int]:
-        """The parts installable in a state, each with its next unit as a bit (declaration order)."""
+        """The parts installable in a state, each with its next unit's number (declaration order)."""
         can = self.installable_units(mask, consistent)
         ids = self._unit_ids
-        out = {}
-        while can:
-            low = can & -can
-            out[ids[low.bit_length() - 1]] = low
-            can ^= low
-        return out
+        # unit numbers, not bits: n bits of n bits each would be O(n²) time and memory (12 MB on 10,000 parts)
+        return {ids[u]: u for u in _bits(can)}
 
     def installable_units(self, mask: int, consistent: int) -> int:
         """Bitmask of the units that can be installed now: the minimal remaining units under some
@@ -1109,10 +1105,25 @@ class Schedule:
 
 
 def _bits(mask: int):
-    while mask:
-        low = mask & -mask
-        yield low.bit_length() - 1
-        mask ^= low
+    """The indices of the set bits of ``mask``, increasing.  O(n / 64 + popcount) for an n-bit mask:
+    above a few words, by searching its binary text from the low end (each step of the lowest-bit
+    loop below copies the whole integer: O(popcount × n / 64), 30 ms on 10,000 free parts).
+
+    >>> list(_bits(0b10110)), list(_bits(1 << 999 | 5))
+    ([1, 2, 4], [0, 2, 999])
+    """
+    if mask.bit_length() <= 256:
+        while mask:
+            low = mask & -mask
+            yield low.bit_length() - 1
+            mask ^= low
+        return
+    text = bin(mask)
+    top = len(text) - 1
+    at = text.rfind("1", 2)
+    while at != -1:
+        yield top - at
+        at = text.rfind("1", 2, at)
 
 
 def schedule(plan: Plan, installed: Sequence[str] = ()) -> Schedule:

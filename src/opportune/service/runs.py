@@ -56,7 +56,7 @@ from sqlalchemy import bindparam, case, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 
 from opportune.engine.count import BudgetExceeded
-from opportune.policies.base import Action, Decision
+from opportune.policies.base import Action, Decision, collector_paused
 from opportune.policies.named import DEFAULT_POLICY, make_policy
 from opportune.sequencer import LookError, OutcomeError, Sequencer
 from opportune.service import idempotency as idem
@@ -402,7 +402,10 @@ class RunManager:
         arrived = time.perf_counter()   # the look's one deadline starts here: its budget covers the whole request
         h = idem.request_hash("POST", path, request)
         try:
-            with self.book.busy():
+            # A look, answer and commit included, runs with the cyclic collector paused (not only its decision):
+            # a full collection walks a large plan's memos (100+ ms) and would otherwise land in the answer's
+            # serialisation; paused, it runs after the look, while the robot acts.
+            with self.book.busy(), collector_paused() if kind == "look" and self.budget is not None else nullcontext():
                 return self._command(principal, run_id, kind, request, key, path, h, arrived)
         finally:
             self.book.settle(self._last_used.pop(threading.get_ident(), None))
