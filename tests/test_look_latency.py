@@ -131,3 +131,27 @@ def test_a_decision_budget_is_shrunk_within_bounds_and_given_back():
     p.budget = None
     with decision_budget(p, 0.01):
         assert p.budget is None
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(3, 40), st.data())
+def test_chains_started_from_the_shared_place_are_the_chains_started_afresh(n, data):
+    from opportune.engine import sampling
+    from opportune.engine.poset import Poset
+
+    pairs = data.draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1))
+                               .filter(lambda p: p[0] < p[1]), max_size=2 * n))
+    poset = Poset.from_pairs(n, pairs)
+    remaining = (1 << n) - 1
+    seed = data.draw(st.integers(0, 5))
+    sampling._starts.clear()
+    fresh = sampling.CompletionChains(poset, remaining, chains=4, seed=seed)
+    assert len(sampling._starts) == 1
+    shared = sampling.CompletionChains(poset, remaining, chains=4, seed=seed)   # from the kept start
+    assert shared.orders == fresh.orders and shared._state == fresh._state
+    a = fresh.estimate(first=[0], positions=[n - 1], steps=200)
+    b = shared.estimate(first=[0], positions=[n - 1], steps=200)
+    assert a.first == b.first and a.positions == b.positions
+    for s in range(10, 10 + 2 * sampling.START_KEEP):                            # bounded: oldest forgotten
+        sampling.CompletionChains(poset, remaining, chains=2, seed=s)
+    assert len(sampling._starts) == sampling.START_KEEP
