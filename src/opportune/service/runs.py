@@ -65,7 +65,8 @@ from opportune.service.errors import ApiError, forbidden, run_not_found
 from opportune.service.latency import Reserves, decision_budget
 from opportune.service.plans import LoadedPlan, PlanBook
 from opportune.service.storage import Store, cells, dumps, events, now, plans, runs
-from opportune.service.views import count_view, decision_view, row_view, run_summary, run_view, trace_view
+from opportune.service.views import (count_view, counting_seconds, decision_view, row_view, run_summary, run_view,
+                                     trace_view)
 
 # Statements of the hot path, built once (each request only binds values).
 FORGET_EVERY = 60.0  # seconds between clean-ups of stored idempotent answers past their time
@@ -497,7 +498,8 @@ class RunManager:
         self.notify(live.id)          # this process's
         if self.reserves is not None and "decided" in marks:
             done = time.perf_counter()
-            self.reserves.measured(loaded.id, after_decision=done - marks["decided"],
+            # the answer's counts take what the decision leaves: not reserved for
+            self.reserves.measured(loaded.id, after_decision=done - marks["decided"] - marks["counting"],
                                    after_counts=done - marks["counted"])
         return 200, text, False
 
@@ -532,6 +534,7 @@ class RunManager:
             try:
                 decision = apply(seq, kind, request)
                 decided = time.perf_counter()
+                counting_seconds(reset=True)
             except LookError as exc:
                 raise ApiError(409, code, str(exc), hint.replace("{id}", str(live.id)), where="body.visible") from None
             row = seq.pending or seq.trace[-1]
@@ -543,7 +546,7 @@ class RunManager:
                           "decision": decision_view(decision),
                           "row": row_view(row, n_row, loaded.engine, seq.state.schedule), "run": run}
             if marks is not None:
-                marks["decided"], marks["counted"] = decided, time.perf_counter()
+                marks["decided"], marks["counted"], marks["counting"] = decided, time.perf_counter(), counting_seconds()
             if live.products > 1:   # which fixture an install goes to (the action's part is KIND@FIXTURE)
                 from opportune.multi import split_action
 
