@@ -57,11 +57,11 @@ def test_looks_make_a_bounded_number_of_passes_over_the_parts_and_learn_their_re
         live = manager._live[run["id"]]
         policy = live.sequencer.policy
         decide = policy.decide
-        nominal = (policy.lookahead_budget, policy.fallback.budget, policy.fallback_alone.budget)
+        nominal = (policy.lookahead_budget, policy.fallback.budget, policy.fallback_alone.total_budget)
         policy.decide = lambda state, visible: (budgets.append(policy.lookahead_budget), decide(state, visible))[1]
         answer = post(f"/runs/{run['id']}/looks", {"visible": rng.sample(in_bin, 3)})
         del policy.decide
-        assert (policy.lookahead_budget, policy.fallback.budget, policy.fallback_alone.budget) == nominal  # given back
+        assert (policy.lookahead_budget, policy.fallback.budget, policy.fallback_alone.total_budget) == nominal  # given back
         run = post(f"/runs/{run['id']}/outcomes", {"outcome": "success"})["run"]
         assert sum(run["state"]["in_bin"].values()) == n - len(run["state"]["installed"]) - len(run["state"]["buffered"])
     assert answer["decision"]

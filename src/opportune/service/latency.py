@@ -80,7 +80,7 @@ class Reserves:
 
 #: Where a policy keeps its seconds per decision: its own, and those of the rules it falls back on
 #: (a look-ahead's base within what its programme leaves).
-_BUDGETS = ("budget", "lookahead_budget")
+_BUDGETS = ("budget", "lookahead_budget", "total_budget")
 _PARTS = ("fallback", "fallback_alone", "base")
 
 
