@@ -7,6 +7,10 @@ the server's RSS growth and the bytes the plan book accounts.
 
     .venv/bin/python benchmarks/bench_service_plans.py gen-n1000-os0.6.alb free:10000 --looks 40
     .venv/bin/python benchmarks/bench_service_plans.py --memory 5 --cap-mb 600   # five 10,000-unit plans
+    .venv/bin/python benchmarks/bench_service_plans.py salbp:ARC111 --before 20   # looks after 20 whole runs
+
+``--before N`` drives N whole runs of each plan to completion first (one engine, as a long-running cell
+uses it) and times the looks of the run after them.
 
 Plans: files or shipped names as `opportune` reads them (``benchmarks/gen_precedence.py`` makes
 ``.alb`` graphs), or ``free:N`` for N unconstrained parts.  Wall times on whatever else the machine runs.
@@ -90,7 +94,7 @@ def ms(xs: list[float], q: float) -> str:
     return f"{1e3 * xs[min(len(xs) - 1, int(q * len(xs)))]:.0f}" if xs else "-"
 
 
-def bench_plans(names: list[str], looks: int) -> None:
+def bench_plans(names: list[str], looks: int, before: int = 0) -> None:
     app = App()
     print("| plan | upload s | first POST /runs s | second POST /runs s | looks | p50 ms | p95 ms | max ms "
           "| GET run s | trace s | RSS +MB | accounted MB |")
@@ -101,6 +105,8 @@ def bench_plans(names: list[str], looks: int) -> None:
         r, up = app.post("/plans", doc)
         pid = r.json()["id"]
         _, first = app.post("/runs", {"plan": pid})
+        for i in range(before):     # long use of the plan's engine first
+            drive(app, app.post("/runs", {"plan": pid})[0].json(), 10**9, 100 + i)
         r, second = app.post("/runs", {"plan": pid})
         run = r.json()
         times = drive(app, run, looks, 1)
@@ -130,6 +136,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("plans", nargs="*", help="plan files or names, or free:N")
     ap.add_argument("--looks", type=int, default=40, help="looks per run (default 40)")
+    ap.add_argument("--before", type=int, default=0, metavar="N",
+                    help="whole runs of each plan driven to completion before the timed one (default 0)")
     ap.add_argument("--memory", type=int, metavar="N", help="instead: N distinct 10,000-unit plans, one after another")
     ap.add_argument("--cap-mb", type=int, help="with --memory: the memory cap in MB (default: a quarter of the memory)")
     args = ap.parse_args(argv)
@@ -138,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.memory:
         bench_memory(args.memory, args.cap_mb)
     else:
-        bench_plans(args.plans or ["free:10000"], args.looks)
+        bench_plans(args.plans or ["free:10000"], args.looks, args.before)
     return 0
 
 

@@ -17,9 +17,11 @@ from __future__ import annotations
 import math
 from collections import Counter as Tally
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Iterable, Literal
 
 from opportune.engine import OrderEngine, Schedule
+from opportune.engine.schedule import count_pass
 from opportune.plan import Plan
 from opportune.policies.base import Action, Decision, Policy
 
@@ -82,10 +84,21 @@ class State:
 
     @property
     def in_bin(self) -> dict[str, int]:
-        """Units still expected in the bin, per part (needed, and neither installed nor buffered)."""
-        left = Tally(self.schedule.remaining)
-        left.subtract(Tally(self.buffer))
-        return {p: n for p, n in left.items() if n > 0}
+        """Units still expected in the bin, per part (needed, and neither installed nor buffered).
+
+        Found once per state (the state is immutable; a look reads it to check the look and again
+        to answer), from :attr:`Schedule.remaining` less the buffer: O(parts) the first time, a
+        dictionary copy after that.
+        """
+        return dict(self._in_bin)
+
+    @cached_property
+    def _in_bin(self) -> dict[str, int]:
+        count_pass("in_bin")
+        left = self.schedule.remaining
+        for p in self.buffer:
+            left[p] = left.get(p, 0) - 1
+        return {p: n for p, n in left.items() if n > 0} if self.buffer else left
 
     @property
     def consistent_strategies(self) -> tuple[str, ...]:

@@ -569,8 +569,8 @@ class OrderEngine:
             if part in parts:
                 value = known.get(part)
                 if value is None:
-                    after = self.consistent_after(mask, consistent, unit.bit_length() - 1)
-                    value = known[part] = self.count(mask | unit, after)
+                    after = self.consistent_after(mask, consistent, unit)
+                    value = known[part] = self.count(mask | 1 << unit, after)
                 out[part] = value
         return out
 
@@ -628,7 +628,7 @@ class OrderEngine:
         return [part for part in entry[0] if part in parts]
 
     def _option_entry(self, key: int, mask: int, consistent: int) -> tuple[dict[str, int], dict[str, int]]:
-        """The per-state table of :meth:`options_for`: installable parts (with their next unit's bit)
+        """The per-state table of :meth:`options_for`: installable parts (with their next unit's number)
         and the options counted so far."""
         if len(self._option_cache) > STATE_CACHE_LIMIT:
             self._trim()
@@ -636,15 +636,11 @@ class OrderEngine:
         return entry
 
     def _installable_parts(self, mask: int, consistent: int) -> dict[str, int]:
-        """The parts installable in a state, each with its next unit as a bit (declaration order)."""
+        """The parts installable in a state, each with its next unit's number (declaration order)."""
         can = self.installable_units(mask, consistent)
         ids = self._unit_ids
-        out = {}
-        while can:
-            low = can & -can
-            out[ids[low.bit_length() - 1]] = low
-            can ^= low
-        return out
+        # unit numbers, not bits: n bits of n bits each would be O(n²) time and memory (12 MB on 10,000 parts)
+        return {ids[u]: u for u in _bits(can)}
 
     def installable_units(self, mask: int, consistent: int) -> int:
         """Bitmask of the units that can be installed now: the minimal remaining units under some
@@ -733,6 +729,16 @@ class OrderEngine:
         return sums
 
 
+#: Passes over every unit of a plan made to answer ``remaining`` or ``in_bin``, by name: a test
+#: reads them to check that a service look makes a bounded number of them, whatever the plan's size.
+PASSES: dict[str, int] = {}
+
+
+def count_pass(name: str) -> None:
+    """Count one pass over every unit (see :data:`PASSES`)."""
+    PASSES[name] = PASSES.get(name, 0) + 1
+
+
 class Schedule:
     """A schedule: the parts installed so far (in order) plus all admissible completions.
 
@@ -749,7 +755,7 @@ class Schedule:
     1
     """
 
-    __slots__ = ("engine", "plan", "installed", "mask", "consistent")
+    __slots__ = ("engine", "plan", "installed", "mask", "consistent", "_left")
 
     def __init__(self, plan_or_engine: Plan | OrderEngine, installed: Iterable[str] = ()):
         engine = plan_or_engine if isinstance(plan_or_engine, OrderEngine) else OrderEngine(plan_or_engine)
@@ -758,6 +764,7 @@ class Schedule:
         self.installed: tuple[str, ...] = ()
         self.mask = 0
         self.consistent = engine.all_strategies
+        self._left: dict[str, int] | None = None   # ``remaining``, once asked (see there)
         for part in installed:
             self._install_in_place(part)
 
@@ -765,6 +772,7 @@ class Schedule:
     def _make(cls, engine, installed, mask, consistent) -> "Schedule":
         s = object.__new__(cls)
         s.engine, s.plan, s.installed, s.mask, s.consistent = engine, engine.plan, installed, mask, consistent
+        s._left = None
         return s
 
     # ------------------------------------------------------------ state
@@ -791,11 +799,21 @@ class Schedule:
         self.installed += (part,)
         self.mask |= 1 << u
         self.consistent = after
+        self._left = None
 
     def install(self, part: str) -> "Schedule":
         """The schedule after installing one unit of ``part``; raises :class:`NotAdmissible`."""
         _, u, after = self._locate(part)
-        return Schedule._make(self.engine, self.installed + (part,), self.mask | 1 << u, after)
+        s = Schedule._make(self.engine, self.installed + (part,), self.mask | 1 << u, after)
+        left = self._left
+        if left is not None:   # one part fewer: a C-level copy, not another pass over the units
+            left = dict(left)
+            if left[part] == 1:
+                del left[part]
+            else:
+                left[part] -= 1
+            s._left = left
+        return s
 
     def can_install(self, part: str) -> bool:
         try:
@@ -821,12 +839,25 @@ class Schedule:
 
     @property
     def remaining(self) -> dict[str, int]:
-        """Units still to install, per part (declaration order; parts with none left omitted)."""
-        out: dict[str, int] = {}
-        for u in _bits(self.engine.full & ~self.mask):
-            pid = self.plan.parts[self.engine.unit_part[u]].id
-            out[pid] = out.get(pid, 0) + 1
-        return out
+        """Units still to install, per part (declaration order; parts with none left omitted).
+
+        Found once per schedule, by one pass over the units left (O(units)), and carried to the
+        schedules :meth:`install` makes (a dictionary copy): a service look asks for it several times.
+        A new dictionary each time (the caller may change it).
+
+        >>> from opportune import make_plan
+        >>> Schedule(make_plan(["a", "b"], {})).install("b").remaining
+        {'a': 1}
+        """
+        left = self._left
+        if left is None:
+            count_pass("remaining")
+            left = {}
+            for u in _bits(self.engine.full & ~self.mask):
+                pid = self.plan.parts[self.engine.unit_part[u]].id
+                left[pid] = left.get(pid, 0) + 1
+            self._left = left
+        return dict(left)
 
     @property
     def is_complete(self) -> bool:
@@ -1074,10 +1105,25 @@ class Schedule:
 
 
 def _bits(mask: int):
-    while mask:
-        low = mask & -mask
-        yield low.bit_length() - 1
-        mask ^= low
+    """The indices of the set bits of ``mask``, increasing.  O(n / 64 + popcount) for an n-bit mask:
+    above a few words, by searching its binary text from the low end (each step of the lowest-bit
+    loop below copies the whole integer: O(popcount × n / 64), 30 ms on 10,000 free parts).
+
+    >>> list(_bits(0b10110)), list(_bits(1 << 999 | 5))
+    ([1, 2, 4], [0, 2, 999])
+    """
+    if mask.bit_length() <= 256:
+        while mask:
+            low = mask & -mask
+            yield low.bit_length() - 1
+            mask ^= low
+        return
+    text = bin(mask)
+    top = len(text) - 1
+    at = text.rfind("1", 2)
+    while at != -1:
+        yield top - at
+        at = text.rfind("1", 2, at)
 
 
 def schedule(plan: Plan, installed: Sequence[str] = ()) -> Schedule:

@@ -56,15 +56,17 @@ from sqlalchemy import bindparam, case, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 
 from opportune.engine.count import BudgetExceeded
-from opportune.policies.base import Action, Decision
+from opportune.policies.base import Action, Decision, collector_paused
 from opportune.policies.named import DEFAULT_POLICY, make_policy
 from opportune.sequencer import LookError, OutcomeError, Sequencer
 from opportune.service import idempotency as idem
 from opportune.service.auth import Principal
 from opportune.service.errors import ApiError, forbidden, run_not_found
+from opportune.service.latency import Reserves, decision_budget
 from opportune.service.plans import LoadedPlan, PlanBook
 from opportune.service.storage import Store, cells, dumps, events, now, plans, runs
-from opportune.service.views import count_view, decision_view, row_view, run_summary, run_view, trace_view
+from opportune.service.views import (count_view, counting_seconds, decision_view, row_view, run_summary, run_view,
+                                     trace_view)
 
 # Statements of the hot path, built once (each request only binds values).
 FORGET_EVERY = 60.0  # seconds between clean-ups of stored idempotent answers past their time
@@ -133,6 +135,8 @@ class RunManager:
                  keep_answers: float = idem.KEEP_SECONDS, budget: float | None = None, warm_up: float | None = 10.0):
         self.store = store
         self.budget = budget        # seconds per decision (None: exact decisions)
+        # what a look of each plan needs after its decision (learned): the decision gets the rest
+        self.reserves = Reserves(budget) if budget is not None else None
         self.warm_up = warm_up      # seconds the warm-up of a plan (its first state's count) may take, once per plan
         self.book = book
         self.size = size
@@ -396,14 +400,18 @@ class RunManager:
             self.row(principal, run_id)  # 404 first: an operator learns nothing new from a 403 on a real run
             raise forbidden("an operator token reads runs; only the run's cell drives it",
                             "use the token of the cell the run belongs to")
+        arrived = time.perf_counter()   # the look's one deadline starts here: its budget covers the whole request
         h = idem.request_hash("POST", path, request)
         try:
-            with self.book.busy():
-                return self._command(principal, run_id, kind, request, key, path, h)
+            # A look, answer and commit included, runs with the cyclic collector paused (not only its decision):
+            # a full collection walks a large plan's memos (100+ ms) and would otherwise land in the answer's
+            # serialisation; paused, it runs after the look, while the robot acts.
+            with self.book.busy(), collector_paused() if kind == "look" and self.budget is not None else nullcontext():
+                return self._command(principal, run_id, kind, request, key, path, h, arrived)
         finally:
             self.book.settle(self._last_used.pop(threading.get_ident(), None))
 
-    def _command(self, principal, run_id, kind, request, key, path, h):
+    def _command(self, principal, run_id, kind, request, key, path, h, arrived=None):
         for attempt in range(ATTEMPTS):
             if attempt:  # another process committed on this run meanwhile: let it finish, then rebuild
                 time.sleep(random.uniform(0, 0.005 * 2 ** attempt))
@@ -420,7 +428,7 @@ class RunManager:
                 loaded = self._loaded(live)
                 self._sync(live, loaded, r["seq"])
                 try:
-                    return self._command_locked(principal, live, loaded, kind, request, key, h)
+                    return self._command_locked(principal, live, loaded, kind, request, key, h, arrived)
                 except _Stale:
                     self._forget(live)
                     continue
@@ -429,18 +437,26 @@ class RunManager:
         raise ApiError(409, "run_busy", f"run {run_id} is being changed by another server process",
                        "retry the request with the same Idempotency-Key")
 
-    def _command_locked(self, principal, live: LiveRun, loaded: LoadedPlan, kind, request, key, h):
+    def _command_locked(self, principal, live: LiveRun, loaded: LoadedPlan, kind, request, key, h, arrived=None):
         seq = live.sequencer
         expected = live.applied
+        marks: dict[str, float] = {}
         try:
-            # With a decision budget: the decision's counts stop by twice the budget at most (the policy keeps
-            # to its budget; this is the safety net), the answer's counts get what the decision leaves of one
-            # budget (memo hits cost nothing; a count that misses it is null).
-            start = time.perf_counter()
+            # With a decision budget, one deadline for the request, one budget after it arrived: the decision
+            # gets what is left after the reserve the rest of a look of this plan has recently needed, the
+            # answer's counts what is left after the reserve for building, storing and sending the answer (memo
+            # hits cost nothing; a count that misses it is null).  The decision's counts stop by twice the
+            # budget at most (the policy keeps to its budget; this is the safety net).
+            start = time.perf_counter() if arrived is None else arrived
             until = start + 2 * self.budget if self.budget is not None else None
-            answer_until = start + self.budget if self.budget is not None else None
-            with loaded.lock, loaded.engine.deadline(until):
-                answer = self._apply_checked(live, loaded, kind, request, answer_until)  # a refusal changes nothing
+            answer_until = None
+            think = None
+            if self.budget is not None:
+                end = start + self.budget
+                answer_until = end - self.reserves.after_counts(loaded.id)
+                think = end - self.reserves.after_decision(loaded.id) - time.perf_counter()
+            with loaded.lock, loaded.engine.deadline(until), decision_budget(seq.policy, think):
+                answer = self._apply_checked(live, loaded, kind, request, answer_until, marks)  # a refusal changes nothing
         except ApiError:
             raise
         except BudgetExceeded as exc:
@@ -480,12 +496,18 @@ class RunManager:
         live.applied = expected + 1
         self.store.announce(live.id)  # the other processes' streams (PostgreSQL)
         self.notify(live.id)          # this process's
+        if self.reserves is not None and "decided" in marks:
+            done = time.perf_counter()
+            # the answer's counts take what the decision leaves: not reserved for
+            self.reserves.measured(loaded.id, after_decision=done - marks["decided"] - marks["counting"],
+                                   after_counts=done - marks["counted"])
         return 200, text, False
 
     def _apply_checked(self, live: LiveRun, loaded: LoadedPlan, kind: str, request: dict,
-                       answer_until: float | None = None) -> dict:
+                       answer_until: float | None = None, marks: dict | None = None) -> dict:
         """Apply the command to the live sequencer and build the answer (its counts by ``answer_until``, a
-        ``time.perf_counter()`` value, if given); a refusal changes nothing."""
+        ``time.perf_counter()`` value, if given); a refusal changes nothing.  For a look, ``marks`` gets
+        the moments its decision (``decided``) and its answer's counts (``counted``) ended."""
         if answer_until is not None and kind != "look":
             with loaded.engine.deadline(answer_until):
                 return self._apply_checked(live, loaded, kind, request)
@@ -511,6 +533,8 @@ class RunManager:
                     }[code]
             try:
                 decision = apply(seq, kind, request)
+                decided = time.perf_counter()
+                counting_seconds(reset=True)
             except LookError as exc:
                 raise ApiError(409, code, str(exc), hint.replace("{id}", str(live.id)), where="body.visible") from None
             row = seq.pending or seq.trace[-1]
@@ -519,7 +543,10 @@ class RunManager:
                 run = run_view(live, loaded, now())
                 run["seq"] = n_next
                 answer = {"run_id": live.id, "seq": n_next, "action": decision.action.to_dict(),
-                          "decision": decision_view(decision), "row": row_view(row, n_row, loaded.engine), "run": run}
+                          "decision": decision_view(decision),
+                          "row": row_view(row, n_row, loaded.engine, seq.state.schedule), "run": run}
+            if marks is not None:
+                marks["decided"], marks["counted"], marks["counting"] = decided, time.perf_counter(), counting_seconds()
             if live.products > 1:   # which fixture an install goes to (the action's part is KIND@FIXTURE)
                 from opportune.multi import split_action
 

@@ -10,6 +10,8 @@ now, progress.  Big integers are decimal strings (JSON numbers lose digits).
 from __future__ import annotations
 
 import datetime as dt
+import threading
+import time
 from functools import lru_cache
 
 from opportune.engine import Schedule
@@ -23,12 +25,32 @@ def iso(t: float | None) -> str | None:
     return None if t is None else dt.datetime.fromtimestamp(t, dt.timezone.utc).isoformat(timespec="milliseconds")
 
 
+_counting = threading.local()
+
+
+def counting_seconds(reset: bool = False) -> float:
+    """Seconds this thread has spent in the answers' counts (:func:`count_view`, :func:`installable`)
+    since the last reset: a look's counts take what its decision leaves, so the service leaves them
+    out of what it reserves after a decision."""
+    spent = getattr(_counting, "seconds", 0.0)
+    if reset:
+        _counting.seconds = 0.0
+    return spent
+
+
+def _counted(start: float) -> None:
+    _counting.seconds = getattr(_counting, "seconds", 0.0) + time.perf_counter() - start
+
+
 def count_view(schedule: Schedule) -> dict | None:
     """Admissible completions left: ``{"value": "336", "log10": 2.53}``, or None when over the counting budget."""
+    start = time.perf_counter()
     try:
         n = schedule.count()
     except BudgetExceeded:
         return None
+    finally:
+        _counted(start)
     return dict(_count_text(n))
 
 
@@ -41,10 +63,13 @@ def _count_text(n: int) -> tuple:
 
 def installable(schedule: Schedule) -> list[str] | None:
     """Parts that can go in now, or None when counting them is over budget."""
+    start = time.perf_counter()
     try:
         return list(schedule.installable())
     except BudgetExceeded:
         return None
+    finally:
+        _counted(start)
 
 
 def decision_view(decision) -> dict:
@@ -52,16 +77,18 @@ def decision_view(decision) -> dict:
     return decision.to_dict() | {"explain": decision.explain()}
 
 
-def row_view(row: Row, n: int, engine) -> dict:
+def row_view(row: Row, n: int, engine, schedule: Schedule | None = None) -> dict:
     """Trace row ``n`` (1-based): Visible | Buffered | Installed | Action, the outcome, the reasons.
 
     ``count`` is the number of admissible completions *before* the action,
-    which the dashboard plots falling as the run proceeds.
+    which the dashboard plots falling as the run proceeds.  ``schedule``: the run's current
+    schedule, used when the row was made at it (the pending row: no rebuilding it part by part).
     """
     d = row.to_dict()
     d["n"] = n
     d["action_text"] = "" if row.action.kind == "done" else str(row.action)
-    d["count"] = count_view(Schedule(engine, row.installed))
+    at = schedule if schedule is not None and schedule.installed is row.installed else Schedule(engine, row.installed)
+    d["count"] = count_view(at)
     d["reasons"] = decision_view(row.decision)
     return d
 
@@ -95,7 +122,7 @@ def run_view(live, loaded, updated_at: float) -> dict:
         "installable": installable(state.schedule),
         "progress": {"installed": len(state.installed), "units": loaded.plan.n_units},
         "count": count_view(state.schedule),
-        "pending": row_view(pending, len(seq.trace) + 1, loaded.engine) if pending else None,
+        "pending": row_view(pending, len(seq.trace) + 1, loaded.engine, state.schedule) if pending else None,
         "last_look": list(last.visible) if last else [],
         "rows": len(seq.trace) + (1 if pending else 0),
         "finished": seq.finished,
