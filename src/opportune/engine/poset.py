@@ -40,15 +40,25 @@ __all__ = ["CycleError", "Poset", "bits", "byte_unions", "components", "cut_bloc
 def bits(mask: int) -> Iterator[int]:
     """Yield the indices of the set bits of ``mask`` in increasing order.
 
-    O(popcount(mask)).
+    O(n / 64 + popcount) for an n-bit mask: above a few machine words, by searching its binary
+    text from the low end (each step of the lowest-bit loop copies the whole integer, which is
+    O(popcount × n / 64): 30 ms on a mask of 10,000 set bits).
 
-    >>> list(bits(0b10110))
-    [1, 2, 4]
+    >>> list(bits(0b10110)), list(bits(1 << 999 | 5))
+    ([1, 2, 4], [0, 2, 999])
     """
-    while mask:
-        low = mask & -mask
-        yield low.bit_length() - 1
-        mask ^= low
+    if mask.bit_length() <= 256:
+        while mask:
+            low = mask & -mask
+            yield low.bit_length() - 1
+            mask ^= low
+        return
+    text = bin(mask)
+    top = len(text) - 1
+    at = text.rfind("1", 2)
+    while at != -1:
+        yield top - at
+        at = text.rfind("1", 2, at)
 
 
 def elements(mask: int) -> list[int]:

@@ -36,7 +36,7 @@ from typing import Collection, Iterable, Sequence
 
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.hub import HubPath
-from opportune.engine.poset import CycleError, Poset, byte_unions
+from opportune.engine.poset import CycleError, Poset, bits, byte_unions
 from opportune.plan import Plan
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
@@ -1104,26 +1104,7 @@ class Schedule:
         return hash((id(self.engine), self.installed))
 
 
-def _bits(mask: int):
-    """The indices of the set bits of ``mask``, increasing.  O(n / 64 + popcount) for an n-bit mask:
-    above a few words, by searching its binary text from the low end (each step of the lowest-bit
-    loop below copies the whole integer: O(popcount × n / 64), 30 ms on 10,000 free parts).
-
-    >>> list(_bits(0b10110)), list(_bits(1 << 999 | 5))
-    ([1, 2, 4], [0, 2, 999])
-    """
-    if mask.bit_length() <= 256:
-        while mask:
-            low = mask & -mask
-            yield low.bit_length() - 1
-            mask ^= low
-        return
-    text = bin(mask)
-    top = len(text) - 1
-    at = text.rfind("1", 2)
-    while at != -1:
-        yield top - at
-        at = text.rfind("1", 2, at)
+_bits = bits   # (the name this module's callers and tests use)
 
 
 def schedule(plan: Plan, installed: Sequence[str] = ()) -> Schedule:
