@@ -84,7 +84,7 @@ def make_plans(tmp: Path, names: set[str] | None) -> list[tuple[str, str]]:
             spec = str(path)
         elif spec == "unit":
             path = tmp / "unit-10000.yaml"
-            path.write_text("name: unit-10000\nparts:\n  - base\n  - {id: bolt, quantity: 10000}\n  - cover\n"
+            path.write_text("name: unit-10000\nparts:\n  - base\n  - {id: bolt, quantity: 9998}\n  - cover\n"
                             "requires:\n  bolt: [base]\n  cover: [bolt]\n")
             spec = str(path)
         out.append((name, spec))
@@ -163,16 +163,9 @@ def measure_service(svc, client, name: str, spec: str, args, rng: random.Random)
 
     pid = svc.proc.pid
     rss0 = rss_mb(pid)
-    path = Path(spec) if not spec.split(":")[0] in ("example", "salbp") else None
-    if path is None:       # a shipped plan: upload its YAML form
-        import yaml
-
-        body = yaml.safe_dump(load_plan(spec).to_dict(), sort_keys=False).encode()
-        headers, params = {"Content-Type": "application/yaml"}, {"filename": f"{name}.yaml"}
-    else:
-        body = path.read_bytes()
-        headers = {"Content-Type": "application/yaml" if path.suffix in (".yaml", ".yml") else "text/plain"}
-        params = {"filename": path.name}
+    # every plan goes up as JSON, as the loader read it (the service takes YAML and JSON documents)
+    body = json.dumps(load_plan(spec).to_dict()).encode()
+    headers, params = {"Content-Type": "application/json"}, {"filename": f"{name}.json"}
     t0 = time.perf_counter()
     r = client.post("/plans", content=body, headers=headers, params=params)
     upload = time.perf_counter() - t0
