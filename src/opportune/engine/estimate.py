@@ -224,6 +224,29 @@ def _stated_error(runs: list[float], confidence: float) -> float:
 _LN10 = math.log(10)
 
 
+def _peel(succ: dict[int, list[int]], indeg: dict[int, int]) -> tuple[list[int], list[int]]:
+    """Layers of minimal elements peeled one after another (Kahn's algorithm by rounds): the size of
+    each layer and the elements in layer order.  O(elements + covers).
+
+    >>> _peel({0: [2], 1: [2], 2: []}, {0: 0, 1: 0, 2: 2})
+    ([2, 1], [0, 1, 2])
+    """
+    deg = dict(indeg)
+    sizes, order = [], []
+    frontier = [i for i, d in indeg.items() if d == 0]
+    while frontier:
+        sizes.append(len(frontier))
+        order.extend(frontier)
+        nxt = []
+        for x in frontier:
+            for y in succ[x]:
+                deg[y] -= 1
+                if not deg[y]:
+                    nxt.append(y)
+        frontier = nxt
+    return sizes, order
+
+
 class OrderSketch:
     """What a single pass over the order of a set ``s`` tells about its number of linear extensions
     ``e(s)``: certain bounds, and a cheap unbiased estimate from one random path.
@@ -288,19 +311,7 @@ class OrderSketch:
         self.minimal = [i for i, d in indeg.items() if d == 0]
         self.logs = [0.0] + [math.log(k) for k in range(1, n + 1)]
         # layers of minimal elements, peeled one after another (Kahn's algorithm by rounds)
-        deg = dict(indeg)
-        layers, order = [], []
-        frontier = list(self.minimal)
-        while frontier:
-            layers.append(len(frontier))
-            order.extend(frontier)
-            nxt = []
-            for x in frontier:
-                for y in up[x]:
-                    deg[y] -= 1
-                    if not deg[y]:
-                        nxt.append(y)
-            frontier = nxt
+        layers, order = _peel(up, indeg)
         dl.check("the bounds of an estimate")
         low_min = sum(math.lgamma(k + 1) for k in layers)
         # layers of maximal elements (the same on the dual order)
@@ -308,18 +319,7 @@ class OrderSketch:
         for i, js in up.items():
             for j in js:
                 down[j].append(i)
-        outdeg = {i: len(js) for i, js in up.items()}
-        frontier = [i for i, d in outdeg.items() if d == 0]
-        low_max = 0.0
-        while frontier:
-            low_max += math.lgamma(len(frontier) + 1)
-            nxt = []
-            for x in frontier:
-                for y in down[x]:
-                    outdeg[y] -= 1
-                    if not outdeg[y]:
-                        nxt.append(y)
-            frontier = nxt
+        low_max = sum(math.lgamma(k + 1) for k in _peel(down, {i: len(js) for i, js in up.items()})[0])
         self.low = max(low_min, low_max)
         # insertion bound along the layer order; the hooks for the proposal of sample()
         ins = 0.0
