@@ -4,15 +4,30 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+# The demo needs only the package itself (its compiled core and its dependencies, matplotlib
+# included): no extra, no system package.  `setup` builds on it, so the core is compiled once.
+CORE_STAMP := $(VENV)/.installed-core
+EXTRAS := service,postgres,scale,dev,docs
+SOURCES := pyproject.toml CMakeLists.txt src/native/counter.cpp src/native/chains.cpp
 
-.PHONY: demo test docs setup system-deps pg-deps bench bench-service clean
+.PHONY: demo test docs setup core system-deps pg-deps bench bench-service clean
 
 setup: $(STAMP) system-deps
 
-$(STAMP): pyproject.toml CMakeLists.txt src/native/counter.cpp src/native/chains.cpp
+core: $(CORE_STAMP)
+
+$(CORE_STAMP): $(SOURCES)
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet -e .
+	@touch $(CORE_STAMP)
+
+# The extras' requirements only, read from pyproject.toml: reinstalling the package itself
+# ('.[extras]') would compile the core a second time.
+$(STAMP): $(CORE_STAMP) $(SOURCES)
+	$(BIN)/python -c 'import tomllib; x = tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]; \
+	  print("\n".join(sorted({r for e in "$(EXTRAS)".split(",") for r in x[e]})))' > $(VENV)/extras.txt
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[service,postgres,scale,dev,docs]'
+	$(BIN)/python -m pip install --quiet -r $(VENV)/extras.txt
 	@touch $(STAMP)
 
 # System tools from Debian's packages, installed only where missing: $(call apt,COMMAND,PACKAGE,WHAT FOR)
@@ -37,14 +52,15 @@ system-deps:
 pg-deps:
 	$(call apt,initdb,postgresql,the service tests on PostgreSQL)
 
-demo: setup
+demo: $(CORE_STAMP)
 	$(BIN)/opportune check examples/gearbox.yaml
 	$(BIN)/opportune count examples/gearbox.yaml
 	$(BIN)/opportune replay examples/gearbox.yaml examples/gearbox-table1.looks
 	$(BIN)/opportune simulate examples/gearbox.yaml --out demo-output
 
+# On both cores (pytest-xdist); the longest tests start first (tests/conftest.py).
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist worksteal
 
 # The documentation site into site/ (MkDocs, offline; warnings are errors).
 docs: setup

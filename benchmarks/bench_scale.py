@@ -56,6 +56,24 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def server_memory(pid: int) -> str:
+    """The server's resident memory now and at its peak, against its memory cap (the default: a quarter
+    of the machine's memory, as the server computes it), as a sentence."""
+    from opportune.service.plans import memory_total
+
+    peak = float("nan")
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                peak = int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    cap = memory_total() // 4 / 2**20
+    return (f"Server memory after every row: {rss_mb(pid):,.0f} MB resident, {peak:,.0f} MB at its peak, under its "
+            f"memory cap of {cap:,.0f} MB (the default: a quarter of the machine's memory); the cap bounds the bytes "
+            f"the plans' engines account, enforced by evicting the least recently used plan.")
+
+
 def make_plans(tmp: Path, names: set[str] | None) -> list[tuple[str, str]]:
     """``(row name, plan path or spec)`` for every row asked for (all when ``names`` is None)."""
     rows: list[tuple[str, str]] = [("gearbox", "example:gearbox"), ("KILBRID", "salbp:KILBRID"),
@@ -268,11 +286,15 @@ def main(argv=None) -> int:
             rows.append(row)
             print(json.dumps({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()
                               if k not in ("fresh", "late")}), file=sys.stderr, flush=True)
+        if svc is not None:
+            server = server_memory(svc.proc.pid)
     finally:
         if svc is not None:
             client.close()
             svc.stop()
     table = markdown(rows, args)
+    if svc is not None:
+        table += "\n\n" + server
     machine = (f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
                f"load average {load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
     if args.json:

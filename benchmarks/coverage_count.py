@@ -17,7 +17,7 @@ Cases (``--cases``, comma-separated; ``--list`` shows them):
 
 * ``KILBRID``, ``TONGE70``, ``ARC111``: the SALBP graphs shipped with the package, with the
   estimator's defaults (1,024 particles, probed exact tail) as ``Schedule.count_result`` uses
-  them.  ARC111's exact value is the one in the README (counted through its hub).
+  them.  ARC111's exact value is the one in docs/counting.md (counted through its hub).
 * ``KILBRID-p64``, ``TONGE70-p128``: few particles and a short exact tail, as in the tests,
   so that the sampling error is large; ``ARC111-p128``: 128 particles (a run takes ~0.4 s
   instead of ~3 s, so more runs fit in the time).

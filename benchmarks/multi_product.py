@@ -13,7 +13,7 @@ motion and shake costs 1, a look 0), the buffer moves and shakes per product, th
 
     python benchmarks/multi_product.py                                   # 1000 trials each, a few minutes
     python benchmarks/multi_product.py --trials 200 --max-products 3     # quicker
-    python benchmarks/multi_product.py --plot docs/img/multi-product.png --compact   # the README's table
+    python benchmarks/multi_product.py --plot docs/img/multi-product.png --compact   # the table in docs/products.md
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def table(rows: list[dict], markdown: bool) -> str:
 
 
 def compact(rows: list[dict]) -> str:
-    """The README's table (Markdown): per buffer size, N and cell, the time per product of both policies and
+    """The table of docs/products.md (Markdown): per buffer size, N and cell, the time per product of both policies and
     the paper's rule's shakes and buffer use (N = 1 once: its three cells are the same run)."""
     head = ["buffer", "N", "cell", "time / product, paper (95% CI)", "time / product, lookahead",
             "shakes / product", "buffer max", "buffer mean"]
@@ -131,7 +131,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0, help="Seed of the bins")
     ap.add_argument("--plot", type=Path, default=None, help="Write the plot here (PNG)")
     ap.add_argument("--markdown", action="store_true", help="Print the table in Markdown")
-    ap.add_argument("--compact", action="store_true", help="Print the README's shorter table (Markdown)")
+    ap.add_argument("--compact", action="store_true", help="Print the shorter table of docs/products.md (Markdown)")
     args = ap.parse_args(argv)
     buffers = [None if b.strip() in ("none", "") else int(b) for b in args.buffers.split(",")]
     t0 = time.perf_counter()

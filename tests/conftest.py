@@ -202,3 +202,36 @@ def run_cli(*args):
     assert "Traceback" not in result.output, result.output
     assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
     return result
+
+
+# ---------------------------------------------------------------- order: the longest tests first
+#
+# `make test` runs on two workers (pytest-xdist): a long test that starts last keeps one worker busy
+# while the other idles.  These (tens of seconds each, measured with --durations) and tests marked
+# `slow` start first; everything else keeps its order.  Run serially, the order changes nothing else.
+LONGEST_FIRST = (
+    "tests/test_openapi.py::test_schemathesis_follows_the_links",
+    "tests/test_reproducible.py::test_two_runs_of_the_demo_write_the_same_files",
+    "tests/test_openapi.py::test_schemathesis_finds_answers_as_documented",
+    "tests/test_engine_hub.py::test_arc111_exact_through_its_hub",
+    "tests/test_engine_count.py::test_salbp_decomposition_agrees_with_downsets",
+    "tests/test_pile_bin.py::test_lookahead_on_the_piles_own_programme",
+    "tests/test_docs.py::test_the_examples_of_a_page_run",
+    "tests/test_service_restart.py::test_kill_9_under_load",
+    "tests/test_docs.py::test_the_site_builds_offline",
+    "tests/test_reproducible.py::test_a_recorded_study_runs_again",
+    "tests/test_schedule.py::test_schedule_matches_brute_force",
+)
+
+
+def _first_rank(item) -> int:
+    if item.get_closest_marker("slow"):
+        return 0
+    for rank, prefix in enumerate(LONGEST_FIRST, start=1):
+        if item.nodeid.startswith(prefix):
+            return rank
+    return len(LONGEST_FIRST) + 1
+
+
+def pytest_collection_modifyitems(config, items):
+    items.sort(key=_first_rank)      # stable: tests of equal rank keep their collected order

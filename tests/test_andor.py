@@ -319,13 +319,12 @@ def test_module_examples():
     assert doctest.testmod(andor).failed == 0
 
 
-def test_the_readme_shows_the_example_as_it_ships():
+def test_the_docs_show_the_example_as_it_ships():
     import re
     from pathlib import Path
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    region = readme.split("<!-- >>> issue 15: and-or -->")[1].split("<!-- <<< issue 15: and-or -->")[0]
-    shown = check_text(re.findall(r"```yaml\n(.*?)```", region, flags=re.S)[0], file="README.md")
+    page = (Path(__file__).resolve().parents[1] / "docs" / "andor.md").read_text(encoding="utf-8")
+    shown = check_text(re.findall(r"```yaml\n(.*?)```", page, flags=re.S)[0], file="docs/andor.md")
     assert shown.ok, [str(p) for p in shown.problems]
     shipped = load_plan("example:pump")
     assert [(s.name, dict(s.requires)) for s in shown.plan.strategies] == \

@@ -108,3 +108,29 @@ def test_compiled_and_pure_python_chains_make_the_same_moves(seed, monkeypatch):
 
     core = native._native
     assert follow(core) == follow(None)
+
+
+@pytest.mark.skipif(not native.available(), reason="the compiled core is not built")
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32))
+def test_chains_start_from_admissible_sequences_alike_compiled_and_not(seed):
+    """A population's starting sequences are admissible sequences of the steps left (each step after its
+    predecessors, every step once), and the compiled start draws exactly the pure-Python one's."""
+    from opportune.engine import sampling
+
+    core = native._native
+    for _, poset, remaining, units in _cases(seed, n_max=14):
+        starts = []
+        for use in (core, None):
+            with pytest.MonkeyPatch.context() as mp:
+                mp.setattr(native, "_native", use)
+                mp.setattr(sampling, "_starts", type(sampling._starts)())   # nothing kept: drawn afresh
+                chains = CompletionChains(poset, remaining, chains=3, seed=seed)
+                starts.append([list(o) for o in chains.orders])
+        assert starts[0] == starts[1]
+        for order in starts[0]:
+            assert sorted(order) == units
+            placed = 0
+            for u in order:
+                assert not poset.below[u] & remaining & ~placed, "a step before one of its predecessors"
+                placed |= 1 << u

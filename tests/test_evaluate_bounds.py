@@ -192,3 +192,28 @@ def app():
     from opportune.cli import app as the_app
 
     return the_app
+
+
+def test_the_look_aheads_own_programme_stops_at_the_evaluations_time_limit(tmp_path):
+    """The default policy (the look-ahead) runs a programme of its own at every decision; on a plan of
+    16 parts that programme alone takes minutes.  It stops with the evaluation (measured in the CPU
+    time of a child process: the machine may be busy), and says so rather than deciding otherwise."""
+    import random
+    import resource
+    import subprocess
+    import sys
+
+    import yaml
+
+    rng = random.Random(3)
+    requires = {f"p{i}": [f"p{j}" for j in range(i) if rng.random() < 0.12] for i in range(16)}
+    path = tmp_path / "p16.yaml"
+    path.write_text(yaml.safe_dump({"name": "p16", "parts": [f"p{i}" for i in range(16)],
+                                    "strategies": [{"name": "s", "requires": {k: v for k, v in requires.items() if v}}]}))
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    out = subprocess.run([sys.executable, "-m", "opportune.cli", "evaluate", str(path), "--time-limit", "1",
+                          "--max-states", "100000000"], capture_output=True, text=True, timeout=600)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    assert out.returncode == 1 and "passed --time-limit 1 s" in out.stderr, out.stderr
+    assert cpu < 20, cpu        # without the bound: more than 80 s of CPU

@@ -20,6 +20,8 @@ import sys
 import textwrap
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from opportune.formats import graphfiles, graphs, loader, looks, sequences, validate
 
@@ -27,7 +29,7 @@ MEMORY = 600 << 20   # address space of the child: the Python interpreter itself
 MAX_RSS = 500 << 20  # and at most this much resident
 CPU_LIMIT = 60       # seconds of CPU for the whole child (every case it reads)
 CPU_EACH = 5.0       # seconds of CPU for one read: refusals take well under one
-# Bounds that take a second or more of work to reach (a million GraphML elements, 800,000 DOT
+# Bounds that take a second or more of work to reach (800,000 GraphML elements, 800,000 DOT
 # tokens or 120,000 DOT edges, millions of ids in looks and sequences) are lowered to this in the
 # child: the test shows the mechanism and its message; reaching the real values costs 1-2 s each.
 LOW = 10_000
@@ -67,9 +69,19 @@ _CHILD = textwrap.dedent("""
     for kind, path in cases:
         peak_reset()
         start = time.process_time()
-        if kind == "plan":
+        if kind in ("plan", "check"):
             result = read_plan(path)
             problems = [p.to_dict() for p in result.errors]
+            if kind == "check" and result.ok:   # what `opportune check` does besides printing
+                from opportune.formats.summary import summarize
+                summarize(result.plan)
+        elif kind == "results":
+            from opportune.formats.results import ResultsError, read_recorded_study
+            try:
+                read_recorded_study(path)
+                problems = []
+            except ResultsError as exc:
+                problems = [{"code": "limit", "message": str(exc)}]
         else:
             problems = []
             try:
@@ -83,7 +95,8 @@ _CHILD = textwrap.dedent("""
 
 
 def read_bounded(cases, stdin=None, bounds=None):
-    """Read ``cases`` ((kind, path) pairs; kind ``plan``, ``looks`` or ``sequences``) in a bounded child.
+    """Read ``cases`` ((kind, path) pairs; kind ``plan``, ``check`` (a plan and its summary), ``results``
+    (a results.json for ``simulate --from``), ``looks`` or ``sequences``) in a bounded child.
 
     ``bounds`` (``{module: {NAME: value}}``) lowers bounds in the child, for those whose real value
     takes a second or more of work to reach (see :data:`LOW`).
@@ -314,3 +327,214 @@ def test_yaml_bounds_hold_with_and_without_libyaml(monkeypatch, libyaml):
     assert p.code == "limit" and f"{loader.MAX_DEPTH} levels" in p.message and p.line == 1
     (p,) = loader.parse_yaml("a: &a [x, x, x, x, x, x, x, x, x, x]\nparts: [*a, *a, *a, *a, *a]\n", "a.yaml").problems
     assert p.code == "limit" and "more than 50" in p.message
+
+
+# ---------------------------------------------------------------- the loaders' corners, accepted
+
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1] / "benchmarks"))
+
+
+@pytest.fixture(scope="module")
+def strategies_at_the_bound(tmp_path_factory):
+    """The plan of the most strategies (64) over the most parts (10,000) at the value bound, as JSON
+    (written once: benchmarks/bench_loaders.py sweeps every corner, in YAML too)."""
+    from bench_loaders import strategies_at_value_bound
+
+    doc = strategies_at_value_bound()
+    d = tmp_path_factory.mktemp("corner")
+    (d / "s64.json").write_text(json.dumps(doc))
+    return doc, d
+
+
+def test_most_strategies_over_most_parts_are_checked_within_the_promise(strategies_at_the_bound):
+    # 64 strategies of 10,000 parts at 150,000 values took 6.65 s of CPU to check (64 closures of
+    # 10,000-bit sets, then again for the summary): each strategy's order is now built once, on the
+    # parts it constrains, and compared with the others by its covers.  read_bounded holds each file
+    # (read, checked and summarised, as `opportune check` does) to 5 s of CPU and 500 MB.
+    doc, d = strategies_at_the_bound
+    assert loader.json_values_past(json.dumps(doc), loader.MAX_VALUES) is None
+    assert loader.json_values_past(json.dumps(doc), loader.MAX_VALUES - 1) is not None   # exactly at the bound
+    (result,) = read_bounded([("check", str(d / "s64.json"))])
+    assert result["problems"] == []
+
+
+def _closure_contains(stricter, looser) -> bool:
+    """The definition: every comparable pair of ``looser`` is one of ``stricter`` (full-size posets)."""
+    return all((looser.below[k] & ~stricter.below[k]) == 0 for k in range(stricter.n))
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(2, 9).flatmap(lambda n: st.tuples(
+    st.just(n), st.lists(st.lists(st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)), min_size=1, max_size=12),
+                         min_size=2, max_size=3))))
+def test_strategy_orders_agree_with_the_closure_on_the_whole_plan(case):
+    from opportune.engine.poset import CycleError, Poset
+    from opportune.formats.summary import StrategyOrder
+
+    n, strategies = case
+    orders, posets = [], []
+    for pairs in strategies:
+        pairs = [(a, b) for a, b in pairs if a != b] or [(0, 1)]
+        try:
+            poset = Poset.from_pairs(n, pairs)
+        except CycleError:
+            with pytest.raises(CycleError) as info:
+                StrategyOrder(pairs)
+            cycle = info.value.cycle       # a real cycle of the given pairs
+            assert cycle[0] == cycle[-1] and all((a, b) in pairs for a, b in zip(cycle, cycle[1:]))
+            continue
+        order = StrategyOrder(pairs)
+        assert order.cover_pairs() == sorted(poset.cover_pairs())
+        assert order.implied == sum(bin(m).count("1") for m in poset.below)
+        assert all(order.less(a, b) == poset.less(a, b) for a in range(n) for b in range(n))
+        orders.append(order)
+        posets.append(poset)
+    for i in range(len(orders)):
+        for j in range(len(orders)):
+            assert orders[i].contains(orders[j]) == _closure_contains(posets[i], posets[j])
+            assert (orders[i].covers() == orders[j].covers()) == (posets[i] == posets[j])
+
+
+# characters the YAML pass reads as JSON does: of the basic plane (it cannot read the escapes of
+# the others), printable, and no line breaks of YAML's own (U+0085, U+2028 and U+2029 are not in JSON)
+_PRINTABLE = st.characters(max_codepoint=0xFFFF, blacklist_categories=("Cs", "Cc", "Cf", "Cn", "Co", "Zl", "Zp"))
+_json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-10**6, 10**6) | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(_PRINTABLE, max_size=6),
+    lambda inner: st.lists(inner, max_size=4)
+    | st.dictionaries(st.text(_PRINTABLE, max_size=4),
+                      inner, max_size=4),
+    max_leaves=25)
+
+
+@settings(max_examples=80, deadline=None)
+@given(_json_values, st.sampled_from([None, 0, 1, 2]), st.booleans())
+def test_the_lines_of_json_are_those_of_the_yaml_pass(value, indent, ascii_only):
+    # JSON lines come from one pass over the tokens instead of the YAML pass (2.3 s at the value bound)
+    text = json.dumps(value, indent=indent, ensure_ascii=ascii_only)
+    yaml_lines = {k: v for k, v in loader.parse_yaml(text).lines.items() if "<key>" not in k}
+    assert loader.json_lines(text) == yaml_lines
+
+
+def _composed(text: str):
+    """parse_yaml by its composer's path (the pre-scan, the composer, the build), for comparison."""
+    original = loader._build_from_events
+
+    def fall_back(*_args):
+        raise loader._Fallback
+
+    loader._build_from_events = fall_back
+    try:
+        return loader.parse_yaml(text, "x.yaml")
+    finally:
+        loader._build_from_events = original
+
+
+def _same_reading(text: str) -> None:
+    a, b = loader.parse_yaml(text, "x.yaml"), _composed(text)
+    assert repr(a.data) == repr(b.data), text
+    assert {k: v for k, v in a.lines.items() if "<key>" not in k} == \
+        {k: v for k, v in b.lines.items() if "<key>" not in k}, text
+    assert [p.to_dict() for p in a.problems] == [p.to_dict() for p in b.problems], text
+
+
+@settings(max_examples=60, deadline=None)
+@given(_json_values, st.sampled_from([None, True, False]))
+def test_yaml_read_from_events_is_what_the_composer_reads(value, flow):
+    import yaml
+
+    if not getattr(yaml, "__with_libyaml__", False):
+        pytest.skip("PyYAML without libyaml: the composer's path is the only one")
+    _same_reading(yaml.safe_dump(value, default_flow_style=flow, allow_unicode=True))
+
+
+@pytest.mark.parametrize("text", [
+    "", "# only a comment\n", "---\n", "~\n", "a: 1\na: 2\n", "a: {b: 1, b: [1, 2]}\nc: 3\n",
+    "a: [1, 2.5, true, null, '3', 0x1f, 2020-01-01, .inf]\n", "---\na: 1\n---\nb: 2\n", "a: !!int x\n",
+    "? [a]\n: 1\n", "a: &x 1\nb: *x\n", "<<: {a: 1}\n", "a: !!set {x, y}\n", "12: [3]\n", "a: 1\n  b: 2\n",
+    "a: [\n", "a:\n  - b: 1\n    b: 2\n  - [x, {y: z}]\n", "a: 1\na: {b: [1, 2, {c: d}]}\nx: 1\n",
+    "x: " + "[" * 70 + "]" * 70 + "\n", "p: [" + ",".join(["1"] * 60) + "]\n", "p: " + "9" * 5000 + "\n",
+])
+@pytest.mark.parametrize("bounds", [(None, None), (50, 10)])
+def test_yaml_read_from_events_keeps_every_finding_and_bound(monkeypatch, text, bounds):
+    import yaml
+
+    if not getattr(yaml, "__with_libyaml__", False):
+        pytest.skip("PyYAML without libyaml: the composer's path is the only one")
+    if bounds[0]:
+        monkeypatch.setattr(loader, "MAX_VALUES", bounds[0])
+        monkeypatch.setattr(loader, "MAX_DEPTH", bounds[1])
+    _same_reading(text)
+
+
+def test_an_in2_file_with_the_most_pairs_is_read(monkeypatch, tmp_path):
+    # the end marker after MAX_PAIRS pairs was counted as one pair more, and such a file refused
+    from opportune.formats import salbp
+
+    monkeypatch.setattr(salbp, "MAX_PAIRS", 5)
+    head = "6\n" + "1\n" * 6
+    at = tmp_path / "at.IN2"
+    at.write_text(head + "".join(f"{i},{i + 1}\n" for i in range(1, 6)) + "-1,-1\n")
+    past = tmp_path / "past.IN2"
+    past.write_text(head + "".join(f"{i},{i + 1}\n" for i in range(1, 6)) + "1,6\n-1,-1\n")
+    assert loader.read_plan(at).ok
+    (p,) = loader.read_plan(past).errors
+    assert p.code == "limit" and "more than 5 precedence lines" in p.message and p.line == 13
+
+
+def test_unknown_ids_past_the_cap_are_counted_not_built():
+    k = 300
+    text = json.dumps({"parts": ["a"], "requires": {"a": [f"u{i}" for i in range(k)]}})
+    result = loader.check_text(text, fmt="json")
+    unknown = [p for p in result.errors if p.code == "unknown-part"]
+    assert len(unknown) == validate.MAX_PER_KIND + 1
+    assert f"and {k - validate.MAX_PER_KIND:,} more problems" in unknown[-1].message
+    assert "did you mean 'a'?" not in unknown[0].hint or unknown[0].parts == ("u0",)
+
+
+# ---------------------------------------------------------------- results files (simulate --from)
+
+
+def test_results_files_are_refused_by_size_and_shape_before_they_are_parsed(tmp_path):
+    from opportune.formats.results import MAX_RESULTS_BYTES, MAX_RESULTS_VALUES
+
+    files = {
+        "big.json": b"{" + b" " * MAX_RESULTS_BYTES + b"}",
+        "values.json": b"[" + b"1," * MAX_RESULTS_VALUES + b"1]",
+        "deep.json": b"[" * 100_000 + b"]" * 100_000,
+        "strategies.json": json.dumps({"provenance": {"study": {"strategies": ["random"] * 65},
+                                                      "plan": {}}}).encode(),
+        "latin1.json": b'{"a": "\xe9"}',
+    }
+    for name, raw in files.items():
+        (tmp_path / name).write_bytes(raw)
+    cases = [("results", str(tmp_path / name)) for name in files] + [("results", "/dev/zero")]
+    results = dict(zip([*files, "zero"], read_bounded(cases)))
+    for name, words in {"big.json": f"larger than {MAX_RESULTS_BYTES:,} bytes",
+                        "values.json": f"more than {MAX_RESULTS_VALUES:,} values",
+                        "deep.json": "nested more than", "strategies.json": "65 strategies",
+                        "latin1.json": "not UTF-8", "zero": "larger than"}.items():
+        (p,) = results[name]["problems"]
+        assert words in p["message"], (name, p)
+        assert ("big.json" if name == "zero" else name) in p["message"] or name == "zero", p
+        assert "give the results.json" in p["message"] or "rerun" in p["message"], p
+
+
+def test_a_results_file_of_a_plan_at_the_bounds_is_read_within_the_promise(strategies_at_the_bound, tmp_path):
+    from opportune.formats.results import MAX_RESULTS_VALUES, read_recorded_study
+
+    doc, _ = strategies_at_the_bound
+    # the plan at the loaders' value bound, and a summary that brings the file to its own bound
+    results = {"strategies": {"x": []}, "provenance": {"study": {"strategies": ["random"]}, "plan": doc}}
+    counted = 1 + sum(json.dumps(results).count(c) for c in ",:[{")   # as json_values_past counts
+    results["strategies"]["x"] = [1] * (MAX_RESULTS_VALUES - counted + 1)   # k items add k - 1 commas
+    text = json.dumps(results)
+    assert loader.json_values_past(text, MAX_RESULTS_VALUES) is None
+    assert loader.json_values_past(text, MAX_RESULTS_VALUES - 1) is not None
+    path = tmp_path / "results.json"
+    path.write_text(text)
+    (result,) = read_bounded([("results", str(path))])
+    assert result["problems"] == []   # (read in 0.8 s of CPU time and 75 MB when measured)
+    small = tmp_path / "small.json"
+    small.write_text(json.dumps({"provenance": {"study": {"strategies": ["random"]}, "plan": {"parts": ["a"]}}}))
+    assert read_recorded_study(small)["plan"] == {"parts": ["a"]}

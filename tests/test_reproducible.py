@@ -89,7 +89,7 @@ def test_a_results_file_that_cannot_be_rerun_is_refused_clearly(tmp_path):
             **doc["provenance"]["study"], "trials": "many"}}}), "'trials' must be a number"),
         "missing setting": (json.dumps({**doc, "provenance": {**doc["provenance"], "study": {
             k: v for k, v in doc["provenance"]["study"].items() if k != "costs"}}}), "lack 'costs'"),
-        "nested": ("[" * 100_000 + "]" * 100_000, "not JSON"),
+        "nested": ("[" * 100_000 + "]" * 100_000, "nested more than"),
     }
     for name, (text, words) in cases.items():
         path = tmp_path / f"{name}.json"

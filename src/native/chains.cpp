@@ -15,8 +15,62 @@ namespace py = pybind11;
 
 namespace {
 
+double next_uniform(uint64_t& state) {   // splitmix64, then the top 53 bits as a double in [0, 1)
+    uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    z ^= z >> 31;
+    return (double)(z >> 11) * (1.0 / 9007199254740992.0);
+}
+
+// `chains` spread-out admissible sequences of the steps `remaining` (an up-set), by Kahn's algorithm
+// with a uniformly drawn minimal step each time (CompletionChains._start_orders, the same draws).
+std::vector<std::vector<int>> start_orders(int n, const std::vector<std::vector<int>>& preds,
+                                           const std::vector<std::vector<int>>& succs,
+                                           const std::vector<int>& remaining, int chains, uint64_t& state) {
+    std::vector<uint8_t> in(n, 0);
+    for (int u : remaining) {
+        if (u < 0 || u >= n) throw std::invalid_argument("step out of range");
+        in[u] = 1;
+    }
+    std::vector<int> waiting0(n, 0);
+    for (int u : remaining)
+        for (int v : preds[u])
+            if (in[v]) ++waiting0[u];
+    std::vector<std::vector<int>> out(chains);
+    std::vector<int> waiting, minimal;
+    for (int c = 0; c < chains; ++c) {
+        waiting = waiting0;
+        minimal.clear();
+        for (int u : remaining)
+            if (!waiting[u]) minimal.push_back(u);
+        auto& order = out[c];
+        order.reserve(remaining.size());
+        while (!minimal.empty()) {
+            size_t i = (size_t)(next_uniform(state) * minimal.size());
+            int u = minimal[i];
+            minimal[i] = minimal.back();
+            minimal.pop_back();
+            order.push_back(u);
+            for (int v : succs[u])
+                if (in[v] && --waiting[v] == 0) minimal.push_back(v);
+        }
+    }
+    return out;
+}
+
 class Chains {
 public:
+    // a population started here from `remaining` (see start_orders); the stream goes on after its draws
+    static Chains start(int n, std::vector<std::vector<int>> preds, std::vector<std::vector<int>> succs,
+                        const std::vector<int>& remaining, int chains, uint64_t state) {
+        if (chains < 1) throw std::invalid_argument("at least one chain");
+        check(n, preds);
+        check(n, succs);
+        auto orders = start_orders(n, preds, succs, remaining, chains, state);
+        return Chains(n, std::move(preds), std::move(succs), std::move(orders), state);
+    }
+
     Chains(int n, std::vector<std::vector<int>> preds, std::vector<std::vector<int>> succs,
            std::vector<std::vector<int>> orders, uint64_t state)
         : n_(n), preds_(std::move(preds)), succs_(std::move(succs)), orders_(std::move(orders)),
@@ -102,12 +156,14 @@ public:
     uint64_t state() const { return state_; }
 
 private:
-    double uniform() {   // splitmix64, then the top 53 bits as a double in [0, 1)
-        uint64_t z = (state_ += 0x9E3779B97F4A7C15ULL);
-        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-        z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-        z ^= z >> 31;
-        return (double)(z >> 11) * (1.0 / 9007199254740992.0);
+    double uniform() { return next_uniform(state_); }
+
+    static const std::vector<std::vector<int>>& check(int n, const std::vector<std::vector<int>>& lists) {
+        if ((int)lists.size() != n) throw std::invalid_argument("neighbour lists of size n");
+        for (const auto& l : lists)
+            for (int v : l)
+                if (v < 0 || v >= n) throw std::invalid_argument("neighbour out of range");
+        return lists;
     }
 
     void reindex(size_t c, size_t from) {
@@ -130,6 +186,8 @@ void bind_chains(py::module_& m) {
         .def(py::init<int, std::vector<std::vector<int>>, std::vector<std::vector<int>>,
                       std::vector<std::vector<int>>, uint64_t>(),
              py::arg("n"), py::arg("preds"), py::arg("succs"), py::arg("orders"), py::arg("state"))
+        .def_static("start", &Chains::start, py::arg("n"), py::arg("preds"), py::arg("succs"),
+                    py::arg("remaining"), py::arg("chains"), py::arg("state"))
         .def("run", &Chains::run, py::arg("steps"))
         .def("drop", &Chains::drop, py::arg("gone"))
         .def("read", &Chains::read, py::arg("first"), py::arg("positions"))

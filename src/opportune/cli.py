@@ -279,20 +279,32 @@ def count(
     # one deadline for the whole command: loading the engine, reading the plan and building its orders count too
     deadline = Deadline.after(time_limit)
     from opportune.engine import NotAdmissible, OrderEngine, Schedule
-    from opportune.engine.schedule import decimal
+    from opportune.engine.deadline import BudgetExceeded
+    from opportune.engine.schedule import decimal, interval_unbuilt
 
     plan = load_or_exit(plan_file, json_errors=as_json)
     prefix = [p for p in (after or "").replace(",", " ").split() if p]
     # A tenth of the time for the plain exact count; the rest for the hub split and, if needed, the estimate.
-    engine = OrderEngine(plan, max_memo=max_memo, time_limit=time_limit / 10)
-    sched = Schedule(engine)
-    for i, part in enumerate(prefix):
-        try:
-            sched = sched.install(part)
-        except NotAdmissible as exc:
-            done = " ".join(prefix[:i]) or "nothing"
-            fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
-    result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline)
+    # Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
+    # take seconds); past it, the interval that holds without them.
+    try:
+        engine = OrderEngine(plan, max_memo=max_memo, time_limit=time_limit / 10, deadline=deadline.share(0.5))
+    except BudgetExceeded:
+        if prefix:
+            fail(f"the plan's {len(plan.strategies)} strategies could not be built within --time-limit "
+                 f"{time_limit:g} s to check --after: raise --time-limit", as_json=as_json)
+        engine = None
+    if engine is None:
+        result = interval_unbuilt(plan)
+    else:
+        sched = Schedule(engine)
+        for i, part in enumerate(prefix):
+            try:
+                sched = sched.install(part)
+            except NotAdmissible as exc:
+                done = " ".join(prefix[:i]) or "nothing"
+                fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
+        result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline)
     interval = result.interval_log10
     if as_json:
         doc = {
@@ -475,27 +487,17 @@ def replay(
 
 # ---------------------------------------------------------------- simulate
 
-RESULTS_MAX_BYTES = 64 * 2**20   # a results.json read by --from (its plan included)
-
-
 def _recorded_study(path: Path, as_json: bool) -> tuple[dict, Plan]:
-    """The settings and the plan a ``results.json`` records, or exit with what is wrong with the file."""
+    """The settings and the plan a ``results.json`` records, or exit with what is wrong with the file
+    (read within the bounds of :mod:`opportune.formats.results`)."""
     from opportune.formats.loader import plan_from_dict
+    from opportune.formats.results import ResultsError, read_recorded_study
     from opportune.plan import PlanError
 
     try:
-        if path.stat().st_size > RESULTS_MAX_BYTES:
-            fail(f"{path}: larger than {RESULTS_MAX_BYTES // 2**20} MiB: not a results.json", as_json=as_json)
-        doc = json.loads(path.read_bytes())
-    except OSError as exc:
-        fail(f"cannot read {path}: {exc.strerror or exc}", as_json=as_json)
-    except (ValueError, RecursionError) as exc:
-        fail(f"{path}: not JSON ({str(exc)[:200]}): give the results.json that `simulate --out` wrote",
-             as_json=as_json)
-    prov = doc.get("provenance") if isinstance(doc, dict) else None
-    if not isinstance(prov, dict) or not isinstance(prov.get("study"), dict) or "plan" not in prov:
-        fail(f"{path}: records no study to run again (no provenance.study and provenance.plan; "
-             "a results.json written by an earlier opportune does not): rerun from the plan file", as_json=as_json)
+        prov = read_recorded_study(path)
+    except ResultsError as exc:
+        fail(str(exc), as_json=as_json)
     try:
         plan = plan_from_dict(prov["plan"], file=f"{path}: provenance.plan")
     except PlanError as exc:
@@ -776,6 +778,8 @@ def evaluate(
             for solver in {id(ev): ev, id(optimum): optimum}.values():
                 if solver is not None:
                     solver.deadline, solver.progress = until, report
+            if hasattr(chosen, "deadline"):    # a policy with a programme of its own (the look-ahead) stops too
+                chosen.deadline = until
             if chosen_bin == "pile":
                 value = ev.value()
                 report(ev, done=True)

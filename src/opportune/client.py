@@ -1,13 +1,16 @@
 """A small typed client for a cell controller: :class:`Cell` drives runs of an ``opportune serve`` service,
 and :class:`AsyncCell` is the same client for asyncio.
 
->>> from opportune.client import Cell, LookContradictsState       # doctest: +SKIP
->>> with Cell("http://127.0.0.1:8700", token) as cell:
-...     plan = cell.upload_plan(Path("examples/gearbox.yaml"))
-...     run = cell.start_run(plan.id, label="SN 1042")
-...     answer = cell.look(run.id, ["rl", "ra"])                     # what the camera sees
-...     answer.action.kind, answer.action.part                      # ('buffer', 'rl')
-...     cell.outcome(run.id, "success")                             # the robot did it
+With a service running (``opportune serve``) and a cell's token::
+
+    from opportune.client import Cell, LookContradictsState
+
+    with Cell("http://127.0.0.1:8700", token) as cell:
+        plan = cell.upload_plan(Path("examples/gearbox.yaml"))
+        run = cell.start_run(plan.id, label="SN 1042")
+        answer = cell.look(run.id, ["rl", "ra"])                     # what the camera sees
+        answer.action.kind, answer.action.part                      # ('buffer', 'rl')
+        cell.outcome(run.id, "success")                             # the robot did it
 
 With asyncio, ``async with AsyncCell(url, token) as cell:`` and ``answer = await cell.look(run.id, ["rl", "ra"])``:
 the same methods as coroutines, with the same answers, retries and errors.

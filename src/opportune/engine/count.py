@@ -72,7 +72,7 @@ from math import factorial
 from typing import Callable
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline  # noqa: F401 (BudgetExceeded: its documented import)
-from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain
+from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain, split_components
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
 
@@ -801,6 +801,11 @@ class Counter:
         vec = self._vec
         check = _check_every(self.poset.n) - 1
 
+        def wide_check() -> None:   # the clock, inside a long split of one wide set
+            if perf() > budget[1]:
+                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
+                                     memo_size=len(memo) + len(vec))
+
         def f(s: int) -> int:
             r = get(s)
             if r is not None:
@@ -913,34 +918,13 @@ class Counter:
                     # a minimal element with nothing above it is a component by itself (iso), which
                     # keeps a wide antichain linear, not quadratic
                     mins = s & ~up
-                    iso = 0
                     comps = []
-                    m = mins
-                    work = 0
-                    while m:
-                        b = m & -m
-                        m ^= b
-                        u = above[b.bit_length() - 1] & s
-                        if not u:
-                            iso |= b
-                            continue
-                        u |= b
-                        keep = []
-                        for comp in comps:
-                            if comp & u:
-                                u |= comp
-                            else:
-                                keep.append(comp)
-                        keep.append(u)
-                        comps = keep
+                    if not up & s:
+                        iso = s   # an antichain (nothing above anything): every element a component by itself
+                    else:
                         # O(width^2) mask operations in all: a wide set of a large order can take
-                        # seconds here, inside one entry
-                        work += len(keep)
-                        if work > 2048:
-                            work = 0
-                            if perf() > budget[1]:
-                                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                                     memo_size=len(memo) + len(vec))
+                        # seconds here, inside one entry (hence the clock)
+                        comps, iso = split_components(above, s, mins, wide_check)
                 if iso or len(comps) > 1:
                     # s!/(|C1|!...|Ck|!) e(C1)...e(Ck); every partial quotient is exact
                     r = fact[s.bit_count()]

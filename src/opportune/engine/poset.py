@@ -34,15 +34,20 @@ def _clock(deadline):
     d = as_deadline(deadline)
     return d.check if d.finite else None
 
-__all__ = ["CycleError", "Poset", "bits", "byte_unions", "components", "cut_blocks", "cut_chain", "elements"]
+__all__ = ["CycleError", "Poset", "bits", "byte_unions", "components", "cut_blocks", "cut_chain", "elements",
+           "split_components"]
+
+
+#: The set bits of each byte value, for :func:`bits` on wide masks.
+_BYTE_BITS = tuple(tuple(k for k in range(8) if v >> k & 1) for v in range(256))
 
 
 def bits(mask: int) -> Iterator[int]:
     """Yield the indices of the set bits of ``mask`` in increasing order.
 
-    O(n / 64 + popcount) for an n-bit mask: above a few machine words, by searching its binary
-    text from the low end (each step of the lowest-bit loop copies the whole integer, which is
-    O(popcount × n / 64): 30 ms on a mask of 10,000 set bits).
+    O(n / 8 + popcount) for an n-bit mask: above a few machine words, a byte of its little-endian
+    bytes at a time, or by searching its binary text when few bits are set (each step of the lowest-bit loop copies the whole integer, which is
+    O(popcount × n / 64): 30 ms on a mask of 10,000 set bits; this takes about 1 ms).
 
     >>> list(bits(0b10110)), list(bits(1 << 999 | 5))
     ([1, 2, 4], [0, 2, 999])
@@ -53,12 +58,20 @@ def bits(mask: int) -> Iterator[int]:
             yield low.bit_length() - 1
             mask ^= low
         return
-    text = bin(mask)
-    top = len(text) - 1
-    at = text.rfind("1", 2)
-    while at != -1:
-        yield top - at
-        at = text.rfind("1", 2, at)
+    if mask.bit_count() * 32 < mask.bit_length():   # sparse: find the ones in its binary text
+        text = bin(mask)
+        top = len(text) - 1
+        at = text.rfind("1", 2)
+        while at != -1:
+            yield top - at
+            at = text.rfind("1", 2, at)
+        return
+    table = _BYTE_BITS
+    for j, byte in enumerate(mask.to_bytes((mask.bit_length() + 7) // 8, "little")):
+        if byte:
+            base = 8 * j
+            for k in table[byte]:
+                yield base + k
 
 
 def elements(mask: int) -> list[int]:
@@ -70,49 +83,56 @@ def elements(mask: int) -> list[int]:
     return list(bits(mask))
 
 
-def byte_unions(sets: Sequence[int], n: int) -> list[list[int]]:
+def byte_unions(sets: Sequence[int], n: int, width: int = 8) -> list[list[int]]:
     """For each byte ``j`` of an ``n``-bit set: the union of ``sets[8 j + i]`` over the bits ``i`` of
     every byte value (index 0..255).  With them, the union of ``sets[x]`` over the elements ``x`` of a
     set takes one look-up per byte of the set instead of one step per element.  O(n / 8 · 256) to build.
 
+    ``width=4``: tables of 16 entries per four bits instead (chunk ``j`` is bits ``4 j`` to ``4 j + 3``):
+    two look-ups per byte, an eighth of the memory and the time to build (on 10,000 elements with
+    large up-sets, 50 MB instead of 390 MB).
+
     >>> byte_unions([0b10, 0b100], 2)[0][0b11]     # elements 0 and 1: sets[0] | sets[1]
     6
+    >>> byte_unions([0b10, 0b100, 0, 0, 0b1], 5, width=4)[1][0b1]   # element 4
+    1
     """
+    size = 1 << width
     out = []
-    for j in range((n + 7) // 8 or 1):
-        table = [0] * 256
-        for v in range(1, 256):
+    for j in range((n + width - 1) // width or 1):
+        table = [0] * size
+        for v in range(1, size):
             low = v & -v
-            i = 8 * j + low.bit_length() - 1
+            i = width * j + low.bit_length() - 1
             table[v] = table[v ^ low] | (sets[i] if i < n else 0)
         out.append(table)
     return out
 
 
-def components(above: Sequence[int], s: int, mins: int, *, deadline: Deadline | float | None = None) -> list[int]:
-    """The connected pieces of ``s`` under comparability, given its minimal elements ``mins``.
+def split_components(above: Sequence[int], s: int, mins: int, check=None) -> tuple[list[int], int]:
+    """``(pieces, lone)``: the connected pieces of ``s`` under comparability that have two elements or
+    more, and the set of its elements comparable to nothing else in ``s``, given its minimal
+    elements ``mins``.
 
-    Every element lies above a minimal one, so the pieces are the overlap
-    classes of the sets ``{m} | above[m] & s``.  O(|mins| · pieces); past
-    ``deadline`` it raises :class:`~opportune.engine.deadline.BudgetExceeded`.
+    Every element lies above a minimal one, so the pieces are the overlap classes of the sets
+    ``{m} | above[m] & s``.  O(|mins| · pieces) mask operations, the lone elements gathered in
+    O(n / 8) (or-ing each into a mask would copy it every time: quadratic on a wide antichain);
+    ``check()``, if given, is called every 2,048 merges (it raises to stop).
 
-    >>> components([0b010, 0, 0], 0b111, 0b101)     # 0 < 1; 2 alone
-    [3, 4]
+    >>> split_components([0b010, 0, 0], 0b111, 0b101)     # 0 < 1; 2 alone
+    ([3], 4)
     """
-    check = _clock(deadline)
     comps: list[int] = []
-    singles: list[int] = []
+    lone: list[int] = []
     work = 0
-    while mins:
-        b = mins & -mins
-        mins ^= b
-        u = above[b.bit_length() - 1] & s
+    for i in bits(mins):
+        u = above[i] & s
         if not u:
-            # comparable to nothing in s (it is minimal): a piece of its own that no later up-set
-            # meets, so it skips the quadratic merge (a wide antichain stays linear)
-            singles.append(b)
+            # comparable to nothing in s (it is minimal): no later up-set meets it, so it skips the
+            # quadratic merge (a wide antichain stays linear)
+            lone.append(i)
             continue
-        u |= b
+        u |= 1 << i
         keep = []
         for c in comps:
             if c & u:
@@ -124,8 +144,27 @@ def components(above: Sequence[int], s: int, mins: int, *, deadline: Deadline | 
         work += len(keep)
         if check is not None and work > 2048:
             work = 0
-            check("splitting a set into components")
-    return comps + singles if singles else comps
+            check()
+    if not lone:
+        return comps, 0
+    buf = bytearray((max(lone) >> 3) + 1)
+    for i in lone:
+        buf[i >> 3] |= 1 << (i & 7)
+    return comps, int.from_bytes(buf, "little")
+
+
+def components(above: Sequence[int], s: int, mins: int, *, deadline: Deadline | float | None = None) -> list[int]:
+    """The connected pieces of ``s`` under comparability, given its minimal elements ``mins``
+    (:func:`split_components`, each lone element a piece of its own, last).  Past ``deadline`` it
+    raises :class:`~opportune.engine.deadline.BudgetExceeded`.
+
+    >>> components([0b010, 0, 0], 0b111, 0b101)     # 0 < 1; 2 alone
+    [3, 4]
+    """
+    check = _clock(deadline)
+    comps, lone = split_components(above, s, mins,
+                                   None if check is None else lambda: check("splitting a set into components"))
+    return comps + [1 << i for i in bits(lone)] if lone else comps
 
 
 def cut_chain(below: Sequence[int], cuts: int) -> list[int]:

@@ -66,8 +66,8 @@ _TO_UNIT = 1.0 / (1 << 53)
 __all__ = ["ChainEstimate", "CompletionChains", "prob_positive", "t_quantile"]
 
 #: Populations started alike (the same order, steps left, size and seed) start from the same place: the
-#: cover lists, the spread-out starting sequences and the random stream after them are kept for the
-#: last START_KEEP of them and reused, so the runs of one plan in a service (each starts its first
+#: cover lists (and, without the compiled core, the spread-out starting sequences and the random stream
+#: after them) are kept for the last START_KEEP of them and reused, so the runs of one plan in a service (each starts its first
 #: population at the plan's first state, with the same seed) build it once.  The chains are the same
 #: as if built afresh.  Memory: at most START_KEEP × (chains × steps × 4 bytes + the covers), and only
 #: populations of at most START_KEEP_UNITS steps are kept.
@@ -141,26 +141,34 @@ class CompletionChains:
             kept = _starts.get(key)
             if kept is not None and kept[0] is poset:
                 _starts.move_to_end(key)
-        if kept is not None and kept[0] is poset:
-            _, self._covers, packed, rng_state = kept
-            orders = [list(o) for o in packed]
-            self.rng.setstate(rng_state)
-        else:
-            self._neighbours(dl)
-            orders = [self._random_topological(remaining, dl) for _ in range(chains)]
-            if len(orders[0]) <= START_KEEP_UNITS:
-                with _starts_lock:
-                    _starts[key] = (poset, self._covers, [array("i", o) for o in orders], self.rng.getstate())
-                    while len(_starts) > START_KEEP:
-                        _starts.popitem(last=False)
-        # The moves draw from splitmix64 (one stream for the population), so the compiled chains and
-        # the pure-Python ones make the same moves from the same seed.
-        self._state = self.rng.getrandbits(64)
+        # The starting sequences and the moves draw from one splitmix64 stream, so the compiled chains
+        # and the pure-Python ones start alike and make the same moves from the same seed.
         self._core = None
+        self._state = self.rng.getrandbits(64)
+        orders = None
+        if kept is not None and kept[0] is poset:
+            _, self._covers, packed, state = kept
+            if packed is not None:      # pure Python: the sequences themselves, and the stream after them
+                orders, self._state = [list(o) for o in packed], state
+        preds, succs = self._neighbours(dl)
         if native._native is not None:
-            preds, succs = self._neighbours()
-            self._core = native._native.Chains(len(self.below), preds, succs, orders, self._state)
-        else:
+            if orders is None:          # O(chains × (n + covers)) compiled: no deadline needed
+                self._core = native._native.Chains.start(len(self.below), preds, succs, list(bits(remaining)),
+                                                         chains, self._state)
+                self._state = self._core.state()
+            else:
+                self._core = native._native.Chains(len(self.below), preds, succs, orders, self._state)
+        elif orders is None:
+            orders = self._start_orders(remaining, chains, dl)
+        if kept is None and remaining.bit_count() <= START_KEEP_UNITS:
+            # compiled, the start is quick to draw again: only the covers are kept
+            entry = (poset, self._covers, None, None) if orders is None else \
+                (poset, self._covers, [array("i", o) for o in orders], self._state)
+            with _starts_lock:
+                _starts[key] = entry
+                while len(_starts) > START_KEEP:
+                    _starts.popitem(last=False)
+        if self._core is None:
             self._orders = orders
         self.steps = 0          # steps per chain since the population was started
         self._kept: tuple[dict, dict] = ({}, {})   # readings kept at this state (estimate(keep=True))
@@ -170,33 +178,41 @@ class CompletionChains:
         """The chains' current sequences (a copy when they run compiled)."""
         return self._core.orders() if self._core is not None else self._orders
 
-    def _random_topological(self, remaining: int, deadline: Deadline = Deadline.NEVER) -> list[int]:
-        """A random admissible sequence of ``remaining`` (an up-set: what is left after installing a
-        down-set), by Kahn's algorithm on the cover relations with a random minimal step each time:
-        not uniform, just spread.  O(n + covers); the deadline read every 256 steps."""
-        up, rng = self._neighbours()[1], self.rng
-        waiting = {u: 0 for u in bits(remaining)}
-        for u in waiting:
-            for v in up[u]:
-                if v in waiting:
-                    waiting[v] += 1
-        minimal = [u for u, k in waiting.items() if k == 0]
-        out: list[int] = []
-        while minimal:
-            if not len(out) & 255:
-                deadline.check("starting the chains")
-            i = rng.randrange(len(minimal))
-            u = minimal[i]
-            minimal[i] = minimal[-1]
-            minimal.pop()
-            out.append(u)
-            for v in up[u]:
-                k = waiting.get(v)
-                if k is not None:
-                    waiting[v] = k - 1
-                    if k == 1:
-                        minimal.append(v)
-        return out
+    def _start_orders(self, remaining: int, chains: int, deadline: Deadline = Deadline.NEVER) -> list[list[int]]:
+        """``chains`` random admissible sequences of ``remaining`` (an up-set: what is left after
+        installing a down-set), by Kahn's algorithm on the cover relations with a uniformly drawn
+        minimal step each time: not uniform, just spread.  The draws are the compiled start's
+        (``Chains.start``), from the population's splitmix64 stream.  O(chains × (n + covers)); the
+        deadline read every 256 steps."""
+        preds, succs = self._neighbours()
+        state = self._state
+        units = list(bits(remaining))
+        waiting0 = {u: sum(1 for v in preds[u] if remaining >> v & 1) for u in units}
+        orders = []
+        for _ in range(chains):
+            waiting = dict(waiting0)
+            minimal = [u for u in units if not waiting[u]]
+            out: list[int] = []
+            while minimal:
+                if not len(out) & 255:
+                    deadline.check("starting the chains")
+                state = (state + 0x9E3779B97F4A7C15) & _M64
+                z = ((state ^ (state >> 30)) * 0xBF58476D1CE4E5B9) & _M64
+                z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _M64
+                i = int(((z ^ (z >> 31)) >> 11) * _TO_UNIT * len(minimal))
+                u = minimal[i]
+                minimal[i] = minimal[-1]
+                minimal.pop()
+                out.append(u)
+                for v in succs[u]:
+                    k = waiting.get(v)
+                    if k is not None:
+                        waiting[v] = k - 1
+                        if k == 1:
+                            minimal.append(v)
+            orders.append(out)
+        self._state = state
+        return orders
 
     def advance(self, remaining: int) -> None:
         """Move to a later state: drop the steps no longer remaining (they were installed)."""

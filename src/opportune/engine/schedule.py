@@ -30,11 +30,13 @@ import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import lru_cache
 from fractions import Fraction
 from itertools import combinations
 from typing import Collection, Iterable, Sequence
 
 from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.hub import HubPath
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
 from opportune.plan import Plan
@@ -96,6 +98,24 @@ class CountResult:
         return self.log10_low, self.log10_high
 
 
+def interval_unbuilt(plan: Plan) -> CountResult:
+    """What is certain of a plan's count without building its orders: at least 1 (a plan is checked to
+    have an admissible sequence) and at most the sequences of its units with each part's units in
+    order, ``n! / (q1! q2! ...)`` (from the log-gamma function, O(parts)).  An estimate, marked so, at
+    the middle of that interval (in logarithms).
+
+    >>> from opportune import make_plan
+    >>> r = interval_unbuilt(make_plan(["a", "b", "c"], {}))
+    >>> r.exact, round(r.log10_high, 6) == round(math.log10(6), 6), r.log10_low
+    (False, True, 0.0)
+    """
+    q = [p.quantity for p in plan.parts]
+    high = max(0.0, (math.lgamma(sum(q) + 1) - sum(math.lgamma(k + 1) for k in q)) / math.log(10))
+    mid = high / 2
+    return CountResult(10.0 ** mid if mid < 308 else math.inf, exact=False, rel_error=math.inf, confidence=1.0,
+                       method="bounds", log10_value=mid, log10_low=0.0, log10_high=high)
+
+
 def _signed_sum_log10(parts: list[tuple[int, float, float]]) -> tuple[float, float]:
     """``(log10 of the sum, its relative error)`` of terms given as ``(sign, log10 of the value,
     relative error)``, the errors adding up; in log space, since the values may be far past a float
@@ -135,6 +155,48 @@ def decimal(n: int) -> str:
     return decimal(high) + decimal(low).zfill(half)
 
 
+#: Plans of more units than this find their installable units with tables of four bits, not eight.
+WIDE_TABLES = 2048
+
+#: Counts of more digits than this are written rounded by :func:`count_text`: the same bound as Python's
+#: own guard on int-to-text conversion, and for the same reason (exact text is quadratic in the digits:
+#: 20 ms for the 35,660 digits of 10,000!, more than a look's budget when an answer holds several).
+EXACT_DIGITS = 4_300
+
+
+def count_text(n: int, exact_digits: int = EXACT_DIGITS) -> str:
+    """A count as text: exact decimal when it has at most ``exact_digits`` digits, otherwise its first 17
+    significant digits (truncated, not rounded) in scientific notation.  O(d) in the digits d beyond
+    the bound (one power of ten and one division), O(d²) within it.
+
+    >>> count_text(336)
+    '336'
+    >>> count_text(10 ** 5000 + 123, exact_digits=100)
+    '1.0000000000000000e+5000'
+    >>> count_text(2 ** 20000, exact_digits=100)
+    '3.9802768403379665e+6020'
+    """
+    if n < 0:
+        return "-" + count_text(-n, exact_digits)
+    if n.bit_length() * 0.30103 < exact_digits - 1:     # surely within the bound
+        return decimal(n)
+    return _count_text(n, exact_digits)
+
+
+@lru_cache(maxsize=64)   # an answer repeats its counts (a decision's, its row's, the run's): written once
+def _count_text(n: int, exact_digits: int) -> str:
+    e = int(log10_int(n))              # the exponent, up to the float's last-place error: checked
+    p = 10 ** e
+    if n < p:
+        e, p = e - 1, p // 10
+    elif n >= 10 * p:
+        e, p = e + 1, 10 * p
+    if e < exact_digits:
+        return decimal(n)
+    head = str(n // (p // 10 ** 16))   # the first 17 digits
+    return f"{head[0]}.{head[1:]}e+{e}"
+
+
 def log10_int(n: int) -> float:
     """``log10(n)`` for an int of any size, without its decimal digits (Python refuses to write ints of
     more than 4,300 digits as text by default, and writing them is quadratic).
@@ -159,7 +221,12 @@ class OrderEngine:
     :meth:`Schedule.count_result` falls back to an estimate and says so.
     """
 
-    def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None):
+    def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
+                 deadline: Deadline | float | None = None):
+        """``deadline``: building the strategies' orders (a closure per strategy: O(units × covers)
+        big-integer operations each, seconds for 64 strategies over 10,000 parts) stops past it with
+        ``BudgetExceeded``."""
+        dl = as_deadline(deadline)
         self.plan = plan
         self.max_memo = max_memo
         self.time_limit = time_limit
@@ -178,7 +245,7 @@ class OrderEngine:
             for b, a in plan.index_pairs(strategy):
                 # Every constraint applies to every unit: last unit of b before first unit of a.
                 pairs.append((self.first[b] + plan.parts[b].quantity - 1, self.first[a]))
-            self.posets.append(Poset.from_pairs(self.n_units, pairs))
+            self.posets.append(Poset.from_pairs(self.n_units, pairs, deadline=dl))
         self.k = len(self.posets)
         self.all_strategies = (1 << self.k) - 1
         self._counters: dict[int, Counter | None] = {}
@@ -473,17 +540,35 @@ class OrderEngine:
             return dropped
 
     def warm_up(self, time_limit: float | None = None) -> bool:
-        """Count the first state exactly, within ``time_limit`` seconds: this chooses how the
-        plan is counted (finding a hub if it has one) and fills the memos every later
-        question uses.  True if it finished; if not, what it counted is kept.
+        """Build what every decision uses (:meth:`prepare`), then count the first state exactly, within
+        ``time_limit`` seconds in all: this chooses how the plan is counted (finding a hub if it has
+        one) and fills the memos every later question uses.  True if it finished; if not, what it
+        built and counted is kept.
         """
         until = time.perf_counter() + time_limit if time_limit is not None else None
         try:
+            self.prepare(until)
             with self.deadline(until):
                 self.count(0, self.all_strategies)
         except BudgetExceeded:
             return False
         return True
+
+    def prepare(self, deadline: Deadline | float | None = None) -> None:
+        """Build the plan's tables that any decision needs, so that none is built inside one: the tables
+        that find installable units, and each strategy's cover pairs (where the chains of an estimate
+        move).  O(n / 4 · 16 + covers) big-integer operations per strategy, once per engine; each
+        table is kept when finished, the rest raises ``BudgetExceeded`` past ``deadline``.
+
+        >>> from opportune import make_plan
+        >>> OrderEngine(make_plan(["a", "b"], {"b": ["a"]})).prepare()
+        """
+        dl = as_deadline(deadline)
+        dl.check("preparing the plan's tables")
+        self._above_tables()
+        for poset in self.posets:
+            dl.check("preparing the plan's tables")
+            poset.cover_pairs(deadline=dl)
 
     def _deadline(self, counter: Counter) -> float:
         """When the work on one count must stop: the deadline of :meth:`deadline` if one is set (it
@@ -551,10 +636,10 @@ class OrderEngine:
         """:meth:`options` restricted to ``parts`` (those installable), counting only what is asked.
 
         On large plans a decision needs the options of the few visible or buffered
-        parts, not of every installable part.  Per state, the installable parts are
-        found once and each count is cached; a decision then walks the installable
-        parts (usually fewer than the parts asked about: a buffer can be long).
-        Declaration order, like :meth:`options`.
+        parts, not of every installable part.  Per state, the installable units are
+        found once and each count is cached; the parts asked about are then looked up
+        one by one (O(k) big-integer operations for k parts asked about, not O(n) for the
+        n installable parts).  Declaration order, like :meth:`options`.
         """
         key = mask | consistent << self.n_units
         entry = self._option_cache.get(key)
@@ -563,15 +648,14 @@ class OrderEngine:
             if full is not None:
                 return {p: n for p, n in full.items() if p in parts}
             entry = self._option_entry(key, mask, consistent)
-        can, known = entry
+        known = entry[2]
         out: dict[str, int] = {}
-        for part, unit in can.items():
-            if part in parts:
-                value = known.get(part)
-                if value is None:
-                    after = self.consistent_after(mask, consistent, unit)
-                    value = known[part] = self.count(mask | 1 << unit, after)
-                out[part] = value
+        for part, unit in self._next_units(entry, mask, parts):
+            value = known.get(part)
+            if value is None:
+                after = self.consistent_after(mask, consistent, unit)
+                value = known[part] = self.count(mask | 1 << unit, after)
+            out[part] = value
         return out
 
     def installable(self, mask: int, consistent: int) -> tuple[str, ...]:
@@ -586,7 +670,7 @@ class OrderEngine:
         entry = self._option_cache.get(key)
         if entry is None:
             entry = self._option_entry(key, mask, consistent)
-        return tuple(entry[0])
+        return tuple(self._entry_parts(entry))
 
     @contextmanager
     def time_limited(self, seconds: float | None):
@@ -625,22 +709,45 @@ class OrderEngine:
         entry = self._option_cache.get(key)
         if entry is None:
             entry = self._option_entry(key, mask, consistent)
-        return [part for part in entry[0] if part in parts]
+        return [part for part, _ in self._next_units(entry, mask, parts)]
 
-    def _option_entry(self, key: int, mask: int, consistent: int) -> tuple[dict[str, int], dict[str, int]]:
-        """The per-state table of :meth:`options_for`: installable parts (with their next unit's number)
-        and the options counted so far."""
+    def _option_entry(self, key: int, mask: int, consistent: int) -> list:
+        """The per-state entry of :meth:`options_for`: ``[installable units (a bitmask), the installable
+        parts with their next unit's number (built when first asked for all of them), the options
+        counted so far]``."""
         if len(self._option_cache) > STATE_CACHE_LIMIT:
             self._trim()
-        entry = self._option_cache[key] = (self._installable_parts(mask, consistent), {})
+        entry = self._option_cache[key] = [self.installable_units(mask, consistent), None, {}]
         return entry
 
-    def _installable_parts(self, mask: int, consistent: int) -> dict[str, int]:
-        """The parts installable in a state, each with its next unit's number (declaration order)."""
-        can = self.installable_units(mask, consistent)
-        ids = self._unit_ids
-        # unit numbers, not bits: n bits of n bits each would be O(n²) time and memory (12 MB on 10,000 parts)
-        return {ids[u]: u for u in _bits(can)}
+    def _entry_parts(self, entry: list) -> dict[str, int]:
+        """Every installable part of a state's entry with its next unit's number (declaration order)."""
+        if entry[1] is None:
+            ids = self._unit_ids
+            # unit numbers, not bits: n bits of n bits each would be O(n²) time and memory (12 MB on 10,000 parts)
+            entry[1] = {ids[u]: u for u in _bits(entry[0])}
+        return entry[1]
+
+    def _next_units(self, entry: list, mask: int, parts: Collection[str]) -> list[tuple[str, int]]:
+        """``(part, its next unit)`` for those of ``parts`` installable in the entry's state (declaration
+        order).  O(k log k) big-integer operations for k parts (each O(n / 64) on n units), unless the
+        entry already holds every installable part."""
+        asked = parts if isinstance(parts, (set, frozenset)) else set(parts)   # a look may name a part twice
+        if entry[1] is not None:
+            can = entry[1]
+            if len(asked) >= len(can):
+                return [(p, u) for p, u in can.items() if p in asked]
+            return sorted(((p, can[p]) for p in asked if p in can), key=lambda pu: pu[1])
+        out = []
+        units, installable = self._part_units, entry[0]
+        for part in asked:
+            left = units.get(part, 0) & ~mask
+            if left:
+                unit = (left & -left).bit_length() - 1   # a part's units go in in order: the lowest left
+                if installable >> unit & 1:
+                    out.append((part, unit))
+        out.sort(key=lambda pu: pu[1])
+        return out
 
     def installable_units(self, mask: int, consistent: int) -> int:
         """Bitmask of the units that can be installed now: the minimal remaining units under some
@@ -655,9 +762,14 @@ class OrderEngine:
         for s, tables in enumerate(self._above_tables()):
             if consistent >> s & 1:
                 up = 0
-                for table, byte in zip(tables, data):
-                    if byte:
-                        up |= table[byte]
+                if self.n_units <= WIDE_TABLES:
+                    for table, byte in zip(tables, data):
+                        if byte:
+                            up |= table[byte]
+                else:   # tables of four bits (see _above_tables)
+                    for low, high, byte in zip(tables[0::2], tables[1::2], data):
+                        if byte:
+                            up |= low[byte & 15] | high[byte >> 4]
                 out |= remaining & ~up
         return out
 
@@ -666,7 +778,10 @@ class OrderEngine:
         over the units ``u`` that the byte value ``v`` holds (built on first use)."""
         tables = self._above
         if tables is None:
-            tables = self._above = [byte_unions(poset.above, self.n_units) for poset in self.posets]
+            # past WIDE_TABLES units, tables of four bits: byte tables hold 32 n sets of up to n bits
+            # (390 MB and 0.6 s to build on a 10,000-unit assembly graph), these 4 n
+            width = 8 if self.n_units <= WIDE_TABLES else 4
+            tables = self._above = [byte_unions(poset.above, self.n_units, width) for poset in self.posets]
         return tables
 
     def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:

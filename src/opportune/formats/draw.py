@@ -10,7 +10,7 @@ from pathlib import Path
 
 import graphviz
 
-from opportune.formats.summary import strategy_poset
+from opportune.formats.summary import strategy_summaries
 from opportune.plan import Plan
 
 
@@ -34,7 +34,6 @@ def to_graph(plan: Plan, *, names: bool = False, dpi: int | None = None) -> grap
                          edge_attr={"arrowsize": "0.6"})
     several = len(plan.strategies) > 1
     for k, strategy in enumerate(plan.strategies):
-        poset = strategy_poset(plan, k)
         prefix = f"s{k}_" if several else ""
         target = graphviz.Digraph(name=f"cluster_{k}", graph_attr={"label": strategy.name, "style": "rounded"}) \
             if several else g
@@ -43,7 +42,7 @@ def to_graph(plan: Plan, *, names: bool = False, dpi: int | None = None) -> grap
                 + (f"\n×{part.quantity}" if part.quantity > 1 else "")
             tooltip = part.name or part.id
             target.node(prefix + part.id, label=label, tooltip=tooltip)
-        for a, b in poset.cover_pairs():
+        for a, b in strategy_summaries(plan)[k][0]:  # the cover relations, computed once per plan
             target.edge(prefix + plan.parts[a].id, prefix + plan.parts[b].id)
         if several:
             g.subgraph(target)

@@ -43,7 +43,10 @@ _NUMERIC = ("quantity", "install", "acquire")
 # Bounds besides the nodes (MAX_TASKS) and edges (MAX_PAIRS) of opportune.formats.graphs, each
 # keeping the largest file accepted read within a few seconds and a few times its size in memory.
 MAX_TOKENS = 16 * MAX_TASKS + 4 * MAX_PAIRS   # DOT tokens: a node with its attributes, an edge statement
-MAX_ELEMENTS = 1_000_000                      # GraphML elements (a node per strategy, their data, edges)
+# GraphML elements: 64 strategies that each list all 10,000 parts, and 120,000 edges, are 760,000.
+# (It was 1,000,000: a file of a million elements took 4 to 5 s of CPU time to read and check on a
+# busy machine, with Python's calls per element the most of it; 800,000 take about 3.5 s.)
+MAX_ELEMENTS = 800_000
 
 
 class _Bad(Exception):
@@ -109,12 +112,12 @@ def _node_data(part) -> list[tuple[str, str]]:
 
 
 def _covers(plan, k: int) -> list[tuple[str, str]]:
-    """The cover relations of strategy ``k`` as part-id pairs: the fewest edges that give its order."""
-    from opportune.engine.poset import Poset
+    """The cover relations of strategy ``k`` as part-id pairs: the fewest edges that give its order.
+    O(constraints) (:func:`~opportune.formats.summary.strategy_summaries`, computed once per plan)."""
+    from opportune.formats.summary import strategy_summaries
 
     ids = plan.part_ids
-    pairs = [(ids.index(a), ids.index(b)) for b, before in plan.strategies[k].requires.items() for a in before]
-    return [(ids[a], ids[b]) for a, b in Poset.from_pairs(len(ids), pairs).cover_pairs()]
+    return [(ids[a], ids[b]) for a, b in strategy_summaries(plan)[k][0]]
 
 
 def _given(part, key: str):
@@ -132,7 +135,7 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     nodes: dict[str, dict] = {}
     node_lines: dict[str, int] = {}
     graphs: list[tuple[str, list[tuple[str, str, int]]]] = []
-    stack: list[tuple[str, dict]] = []
+    stack: list[str] = []               # the tags of the open elements
     text: list[str] = []
     parser = expat.ParserCreate()
 
@@ -158,31 +161,38 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                            "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line, "limit")
             ids.add(pid)
 
+    # The handlers run once per element (a million at most; Python's calls alone cost 1 µs per
+    # element): the common elements (node, edge) are tested first, the stack holds tags only, the line
+    # is asked for only where it is kept, and text is collected only inside a node's <data> (the
+    # handler is set there and removed after: whitespace between elements would cost a call each).
+    elements = 0
+    node_ids: list = []          # the ids of the open <node> elements (a node may hold a graph of nodes)
+    data_key: list = [None]      # the key of the node's <data> being read
+
     def start(tag, attrs):
-        tag = tag.rpartition(":")[2]
-        line = parser.CurrentLineNumber
-        count("element", MAX_ELEMENTS, line)
+        nonlocal elements
+        elements += 1
+        if elements > MAX_ELEMENTS:
+            counts["element"] = elements - 1
+            count("element", MAX_ELEMENTS, parser.CurrentLineNumber)
         if len(stack) >= MAX_DEPTH:
             raise _Bad(f"elements nested more than {MAX_DEPTH} levels deep", "GraphML nests 4 levels: "
-                       "graphml, graph, node, data", line, "limit")
-        if tag == "key":
-            keys[attrs.get("id", "")] = attrs.get("attr.name", attrs.get("id", ""))
-        elif tag == "graph":
-            if attrs.get("edgedefault", "directed") != "directed" and not stack_has("graph"):
-                raise _Bad("the graph is undirected", "a precedence graph is directed: edgedefault=\"directed\"",
-                           line)
-            if len(graphs) >= MAX_STRATEGIES:
-                raise _Bad(f"more than {MAX_STRATEGIES} <graph> elements; a plan holds at most {MAX_STRATEGIES} "
-                           "strategies", "keep the strategies that add sequences", line, "limit")
-            graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
-        elif tag == "node":
+                       "graphml, graph, node, data", parser.CurrentLineNumber, "limit")
+        if ":" in tag:
+            tag = tag.rpartition(":")[2]
+        stack.append(tag)
+        if tag == "node":
             pid = attrs.get("id")
             if not pid:
-                raise _Bad("a node has no id", "give every <node> an id attribute", line)
-            named(pid, line)
-            nodes.setdefault(pid, {})
-            node_lines.setdefault(pid, line)
+                raise _Bad("a node has no id", "give every <node> an id attribute", parser.CurrentLineNumber)
+            node_ids.append(pid)
+            if pid not in nodes:
+                line = parser.CurrentLineNumber
+                named(pid, line)
+                nodes[pid] = {}
+                node_lines[pid] = line
         elif tag == "edge":
+            line = parser.CurrentLineNumber
             a, b = attrs.get("source"), attrs.get("target")
             if not a or not b:
                 raise _Bad("an edge lacks its source or target", "write <edge source=\"a\" target=\"b\"/>", line)
@@ -191,24 +201,38 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
             count("edge", MAX_PAIRS, line, "split the graph into smaller ones, or list only the covering edges "
                   "(opportune convert writes those)")
             for pid in (a, b):  # an edge may name a node declared nowhere: it is a node too (added at the end)
-                named(pid, line)
+                if pid not in ids:
+                    named(pid, line)
             graphs[-1][1].append((a, b, line))
+        elif tag == "key":
+            keys[attrs.get("id", "")] = attrs.get("attr.name", attrs.get("id", ""))
+        elif tag == "graph":
+            line = parser.CurrentLineNumber
+            if attrs.get("edgedefault", "directed") != "directed" and "graph" not in stack[:-1]:
+                raise _Bad("the graph is undirected", "a precedence graph is directed: edgedefault=\"directed\"",
+                           line)
+            if len(graphs) >= MAX_STRATEGIES:
+                raise _Bad(f"more than {MAX_STRATEGIES} <graph> elements; a plan holds at most {MAX_STRATEGIES} "
+                           "strategies", "keep the strategies that add sequences", line, "limit")
+            graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
         elif tag == "data":
             text.clear()
-            collecting[:] = [stack and stack[-1][0] == "node"]
-        stack.append((tag, attrs))
+            collecting[:] = [len(stack) > 1 and stack[-2] == "node"]
+            if collecting[0]:
+                data_key[0] = attrs.get("key", "")
+                parser.CharacterDataHandler = characters
 
-    def stack_has(tag):
-        return any(t == tag for t, _ in stack)
-
-    def end(tag):
-        tag = tag.rpartition(":")[2]
-        _, attrs = stack.pop()
-        if tag == "data":
-            collecting[:] = []
-        if tag == "data" and stack and stack[-1][0] == "node":
-            key = keys.get(attrs.get("key", ""), attrs.get("key", ""))
-            pid = stack[-1][1].get("id")
+    def end(_tag):
+        tag = stack.pop()
+        if tag != "data":
+            if tag == "node":
+                node_ids.pop()
+            return
+        collecting[:] = []
+        parser.CharacterDataHandler = None
+        if stack and stack[-1] == "node":
+            key = keys.get(data_key[0], data_key[0])
+            pid = node_ids[-1]
             value = "".join(text).strip()
             line = parser.CurrentLineNumber
             if key in ("label", "name"):
@@ -228,7 +252,7 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end
-    parser.CharacterDataHandler = characters
+    parser.buffer_text = True  # one call per run of text, not one per line of it
     parser.StartDoctypeDeclHandler = refuse_dtd
     parser.EntityDeclHandler = refuse_dtd
     try:
@@ -274,14 +298,21 @@ def to_graphml(plan) -> str:
 
 # ---------------------------------------------------------------- DOT
 
+# Blanks before a token are matched with it (one match per token, not two).
 _TOKEN = re.compile(r'''
-    (?P<space>[ \t\r]+) | (?P<newline>\n) |
+    [ \t\r]*(?: (?P<newline>\n) |
     (?P<comment>//[^\n]*|\#[^\n]*|/\*.*?\*/) |
     (?P<string>"(?>[^"\\]++|\\.)*+") |
     (?P<arrow>->) | (?P<undirected>--) |
     (?P<punct>[{}\[\];,=:]) |
     (?P<id>[A-Za-z_\x80-\uffff][A-Za-z_0-9\x80-\uffff]*|-?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)) |
-    (?P<other>.)''', re.VERBOSE | re.DOTALL)
+    (?P<other>.) | (?P<space>\Z))''', re.VERBOSE | re.DOTALL)
+
+
+def _too_many_tokens(line: int) -> "_Bad":
+    return _Bad(f"more than {MAX_TOKENS:,} tokens (names, arrows, brackets, separators); DOT files of at most "
+                f"{MAX_TOKENS:,} are read ({MAX_TASKS:,} nodes and {MAX_PAIRS:,} edges at most)",
+                "split the graph into smaller ones", line, "limit")
 
 
 def _tokens(text: str):
@@ -293,12 +324,20 @@ def _tokens(text: str):
     """
     line, count, last = 1, 0, 1
     for m in _TOKEN.finditer(text):
-        kind, value = m.lastgroup, m.group()
-        if kind in ("space",):
+        kind = m.lastgroup
+        if kind == "id" or kind == "punct" or kind == "arrow":  # most tokens: the checks below do not apply
+            count += 1
+            if count > MAX_TOKENS:
+                raise _too_many_tokens(line)
+            last = line
+            yield kind, m.group(kind), line
             continue
         if kind == "newline":
             line += 1
             continue
+        if kind == "space":  # blanks at the end of the text
+            continue
+        value = m.group(kind)
         if kind == "comment":
             line += value.count("\n")
             continue
@@ -314,9 +353,7 @@ def _tokens(text: str):
             raise _Bad("an undirected edge '--'", "a precedence graph is a digraph: write a -> b", line)
         count += 1
         if count > MAX_TOKENS:
-            raise _Bad(f"more than {MAX_TOKENS:,} tokens (names, arrows, brackets, separators); DOT files of at most "
-                       f"{MAX_TOKENS:,} are read ({MAX_TASKS:,} nodes and {MAX_PAIRS:,} edges at most)",
-                       "split the graph into smaller ones", line, "limit")
+            raise _too_many_tokens(line)
         last = line
         yield kind, value, line
     yield "eof", "", last  # placed on the last token's line, where the missing text belongs
@@ -345,6 +382,8 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         end: list = []          # the eof token, once read
 
         def peek(k=0):
+            if len(ahead) > k:  # the common case: the token is read already
+                return ahead[k]
             while len(ahead) <= k and not end:
                 tok = next(stream)
                 (end if tok[0] == "eof" else ahead).append(tok)
@@ -374,12 +413,17 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
             return out
 
         def node(pid: str, line: int, given: dict | None = None) -> None:
-            if pid not in nodes and len(nodes) >= MAX_TASKS:
-                raise _Bad(f"more than {MAX_TASKS:,} nodes; graph files of at most {MAX_TASKS:,} are read "
-                           "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line, "limit")
-            entry = nodes.setdefault(pid, {})
-            node_lines.setdefault(pid, line)
-            for key, value in (given or {}).items():
+            entry = nodes.get(pid)
+            if entry is None:
+                if len(nodes) >= MAX_TASKS:
+                    raise _Bad(f"more than {MAX_TASKS:,} nodes; graph files of at most {MAX_TASKS:,} are read "
+                               "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line,
+                               "limit")
+                entry = nodes[pid] = {}
+                node_lines[pid] = line
+            if not given:
+                return
+            for key, value in given.items():
                 if key in ("label", "name"):
                     entry["name"] = value
                 elif key in _NUMERIC:
@@ -389,31 +433,39 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
             if depth > MAX_DEPTH:
                 raise _Bad(f"subgraphs nested more than {MAX_DEPTH} levels deep", "flatten the subgraphs", peek()[2],
                            "limit")
-            while peek()[1] != "}":
-                if peek()[0] == "eof":
-                    raise _Bad("the file ends before the closing '}'", "close the digraph with '}'", peek()[2])
+            # Each statement peeks at its first token once (800,000 tokens at most: the parser's own
+            # steps are most of the time spent on a large file).
+            while True:
                 tok = peek()
-                if tok[1] == "subgraph" or tok[1] == "{":
-                    if tok[1] == "subgraph":
+                value = tok[1]
+                if value == "}":
+                    break
+                if tok[0] == "eof":
+                    raise _Bad("the file ends before the closing '}'", "close the digraph with '}'", tok[2])
+                if value == "subgraph" or value == "{":
+                    if value == "subgraph":
                         take()
                         if peek()[0] == "id":
                             take()
                     take(value="{")
                     statements(depth + 1)
                     take(value="}")
-                elif tok[1] in ("graph", "node", "edge") and peek(1)[1] == "[":
+                elif tok[0] != "id":
+                    raise _Bad(f"unexpected {value!r}", "check the DOT syntax here", tok[2])
+                elif (after := peek(1)[1]) == "[" and value in ("graph", "node", "edge"):
                     take()
                     attrs()
-                elif tok[0] == "id" and peek(1)[1] == "=":
+                elif after == "=":
                     take(), take(), take("id")
-                elif tok[0] == "id":
-                    chain = [take("id")]
+                else:
+                    ahead.popleft()   # tok, an id (peeked above)
+                    chain = [tok]
                     while peek()[0] == "arrow":
-                        take()
+                        ahead.popleft()
                         if peek()[1] in ("{", "subgraph"):
                             raise _Bad("an edge to a subgraph", "write one edge per pair: a -> b; a -> c", peek()[2])
                         chain.append(take("id"))
-                    given = attrs()
+                    given = attrs() if peek()[1] == "[" else None
                     if len(chain) == 1:
                         node(chain[0][1], chain[0][2], given)
                     for (_, a, la), (_, b, _) in zip(chain, chain[1:]):
@@ -424,10 +476,9 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                                        "split the graph into smaller ones, or list only the covering edges "
                                        "(opportune convert writes those)", la, "limit")
                         edges.append((a, b, la))
-                else:
-                    raise _Bad(f"unexpected {tok[1]!r}", "check the DOT syntax here", tok[2])
-                if peek()[1] in (";", ","):
-                    take()
+                sep = peek()[1]
+                if sep == ";" or sep == ",":
+                    ahead.popleft()
 
         if peek()[1] == "strict":
             take()

@@ -9,12 +9,13 @@ Every size is bounded before it can cost time or memory, and each refusal
 states its limit, the file and the line: a file holds at most
 :data:`MAX_FILE_BYTES` (checked before it is read: at most one byte more is
 read); a document holds at most :data:`MAX_VALUES` values (scalars, lists and
-mappings, keys included) — counted by a pre-scan that builds nothing (string
-literals removed and separators counted for JSON; for YAML a pass over
-libyaml's events that stops at the first bound passed), so a document of
-millions of values is refused in well under a second and a few times its size
-in memory; values nest at most :data:`MAX_DEPTH` deep (checked by the same
-pre-scans); a YAML file uses at most :data:`MAX_ALIASES` aliases,
+mappings, keys included) — counted by a pre-scan that builds nothing for JSON
+(string literals removed and separators counted), and for YAML while its
+values are built from libyaml's events in one pass that stops at the first
+bound passed, so a document of millions of values is refused in well under a
+second and a few times its size in memory; values nest at most
+:data:`MAX_DEPTH` deep (checked by the same passes); a YAML file uses at most
+:data:`MAX_ALIASES` aliases,
 none of them inside the value it names, and its aliases add at most
 :data:`MAX_ALIAS_VALUES` values by repeating what they name (an "alias bomb"
 of a few hundred bytes would otherwise expand to billions); a string holds at
@@ -22,7 +23,9 @@ most :data:`~opportune.formats.validate.MAX_TEXT` characters.  The limits on
 plans themselves (parts, units, strategies, constraints) are in
 :mod:`opportune.plan`; :data:`MAX_VALUES` keeps every document the loaders
 accept (10,000 parts and about 130,000 constraints at most) loaded within
-5 s of CPU time and 500 MB.
+5 s of CPU time and 500 MB (``benchmarks/bench_loaders.py`` measures every
+bound's corner).  A JSON plan's lines are found only when a problem needs one,
+by one pass over its tokens (:func:`json_lines`).
 
 >>> check_text('parts: [' + ', '.join(['a'] * (MAX_VALUES + 1)) + ']', file='big.yaml').errors[0].where
 'big.yaml:1'
@@ -421,6 +424,11 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
         return doc
 
     try:
+        if getattr(yaml, "__with_libyaml__", False):
+            try:
+                return _build_from_events(text, doc, yaml)
+            except _Fallback:  # aliases, merge keys, keys that are lists: the composer's path below
+                doc = Document(None, {}, file)
         aliases = _prescan_yaml(text)
         loader = (_bounded_loader() if aliases is None else yaml.CSafeLoader)(text)
         try:
@@ -509,6 +517,140 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
     return doc
 
 
+class _Fallback(Exception):
+    """What only the composer's path of :func:`parse_yaml` reads: an alias, a merge key (``<<``), a
+    key that is a list or a mapping, a collection with an explicit tag."""
+
+
+_SEQ_TAG = "tag:yaml.org,2002:seq"
+_MAP_TAG = "tag:yaml.org,2002:map"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+def _build_from_events(text: str, doc: Document, yaml) -> Document:
+    """Build ``doc`` (data, lines, problems) from libyaml's events in one pass, within the bounds.
+
+    The values and depth are counted on the way, as :func:`_prescan_yaml` counts them (the same
+    refusals, on the same lines), so one pass replaces three (the pre-scan, the composer and the
+    build): about 5 µs a value instead of 20 (a plan at :data:`MAX_VALUES` read in 0.8 s instead of
+    3 s).  No node is made: plain scalars that resolve to strings are taken as they are, others
+    built by PyYAML's safe constructor.  Raises :class:`_Fallback` at the first alias, merge key,
+    list or mapping key, or tagged collection (the composer's path reads those);
+    :class:`_Refused` past a bound; PyYAML's errors for bad syntax.
+    """
+    loader = yaml.CSafeLoader(text)
+    constructor = yaml.SafeLoader("")
+    resolve = loader.resolve
+    scalar_node = yaml.ScalarNode
+    scalar_event, alias_event = yaml.ScalarEvent, yaml.AliasEvent
+    seq_start, map_start = yaml.SequenceStartEvent, yaml.MappingStartEvent
+    ends = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+    doc_start = yaml.DocumentStartEvent
+    lines, problems, file = doc.lines, doc.problems, doc.file
+    # frames of the open collections: [value, path, is_mapping, key, key_due, key_line, attached]
+    stack: list[list] = []
+    root = None
+    documents = 0
+    first_doc_mark = None
+    values = 0
+
+    def scalar(event):
+        tag = event.tag
+        if tag is None or tag == "!":
+            tag = resolve(scalar_node, event.value, event.implicit)
+        if tag == _STR_TAG:
+            return event.value, tag
+        node = scalar_node(tag, event.value, event.start_mark, event.end_mark, style=event.style)
+        try:
+            return constructor.construct_object(node, deep=True), tag
+        except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of more than 4,300 digits
+            message = exc.args[0] if isinstance(exc, ValueError) and exc.args else exc
+            problems.append(Problem(f"cannot read value: {message}", "write a plain string or number",
+                                    file=file, line=event.start_mark.line + 1, code="type"))
+            return None, tag
+
+    try:
+        while loader.check_event():
+            event = loader.get_event()
+            kind = event.__class__
+            if kind in ends:
+                stack.pop()
+                continue
+            if kind is alias_event:
+                raise _Fallback
+            if kind is not scalar_event and kind is not seq_start and kind is not map_start:
+                if kind is doc_start:
+                    documents += 1
+                    if documents > 1:
+                        raise yaml.composer.ComposerError("expected a single document in the stream", first_doc_mark,
+                                                          "but found another document", event.start_mark)
+                    first_doc_mark = event.start_mark
+                continue  # stream and document events
+            line = event.start_mark.line + 1
+            values += 1
+            if values > MAX_VALUES:
+                raise _Refused(*_too_many_values(), line)
+            if len(stack) + 1 > MAX_DEPTH:
+                raise _Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT, line)
+            top = stack[-1] if stack else None
+            if top is not None and top[2] and top[4]:       # a mapping's key
+                if kind is not scalar_event:
+                    raise _Fallback
+                key, tag = scalar(event)
+                if tag == _MERGE_TAG:
+                    raise _Fallback
+                top[3], top[4], top[5] = key, False, line
+                continue
+            if kind is scalar_event:
+                value = scalar(event)[0]
+            else:
+                tag = event.tag
+                if tag is not None and tag != "!" and tag != (_SEQ_TAG if kind is seq_start else _MAP_TAG):
+                    raise _Fallback
+                value = [] if kind is seq_start else {}
+            attached = True
+            if top is None:
+                path: tuple = ()
+                root = value
+                lines[path] = line
+            elif top[2]:
+                key = top[3]
+                top[4] = True
+                container = top[0]
+                if key in container or not top[6]:
+                    # a repeated key (PyYAML would keep the last) is a problem; its value is read, not kept
+                    if top[6]:
+                        problems.append(Problem(f"duplicate key {key!r}",
+                                                "each key may appear once per mapping: merge the two entries",
+                                                file=file, line=top[5], parts=(str(key),), code="duplicate-key"))
+                    path, attached = (), False
+                else:
+                    path = top[1] + (key,)
+                    container[key] = value
+                    lines[path] = top[5]
+            else:
+                container = top[0]
+                path = top[1] + (len(container),)
+                if top[6]:
+                    lines[path] = line
+                container.append(value)
+                attached = top[6]
+            if kind is not scalar_event:
+                stack.append([value, path, kind is map_start, None, True, line, attached])
+    except (_Refused, yaml.YAMLError):
+        lines.clear()  # a refused or broken document is only that problem, as when the pre-scan finds it
+        problems.clear()
+        raise
+    finally:
+        loader.dispose()
+    if root is None and not documents:
+        problems.append(Problem("the file is empty", "write a plan with at least `parts:`", file=file, line=1,
+                                code="empty"))
+        return doc
+    doc.data = root
+    return doc
+
+
 def _measure(root, yaml) -> None:
     """Refuse a composed YAML document whose values, aliases expanded, are endless, too many or too deep.
 
@@ -583,6 +725,71 @@ def _too_big(data: Any) -> str | None:
     return None
 
 
+# The tokens of valid JSON that :func:`json_lines` needs: strings (possessive, as in _JSON_STRING:
+# constant memory on a long one), brackets, and other scalars; commas and colons are skipped.
+_JSON_TOKEN = re.compile(r'"(?>[^"\\\n]++|\\.)*+"|[\[\]{}]|[^\s\[\]{},:"]+')
+
+
+def json_lines(text: str) -> dict[tuple, int]:
+    """The line of every value of valid JSON ``text``, by path (a list item's where it starts, a
+    mapping value's where its key stands), as :func:`parse_yaml` records them.
+
+    One regular-expression pass over the tokens: O(len(text)), about 0.5 µs a value (the YAML pass
+    it replaces costs 15 µs a value: 2.3 s for a document at :data:`MAX_VALUES`).  Memory: the
+    paths (a few tens of bytes each).
+
+    >>> lines = json_lines('{"parts": ["a",\\n "b"], "requires": {\\n"b": "a"}}')
+    >>> lines[("parts", 1)], lines[("requires", "b")]
+    (2, 3)
+    """
+    lines: dict[tuple, int] = {}
+    # frames of the open containers: [is_mapping, path, next index | current key, a key is due]
+    stack: list[list] = []
+    line, pos = 1, 0
+    count = text.count
+    for m in _JSON_TOKEN.finditer(text):
+        start = m.start()
+        line += count("\n", pos, start)
+        pos = start
+        tok = m.group()
+        c = tok[0]
+        if c == "]" or c == "}":
+            stack.pop()
+            if stack:
+                top = stack[-1]
+                if top[0]:
+                    top[3] = True
+                else:
+                    top[2] += 1
+            continue
+        if not stack:
+            path: tuple = ()
+            lines[path] = line
+        else:
+            top = stack[-1]
+            if top[0]:
+                if top[3]:      # a key: the value's path, at the key's line
+                    key = tok[1:-1] if "\\" not in tok else json.loads(tok)
+                    top[2], top[3] = key, False
+                    lines[top[1] + (key,)] = line
+                    continue
+                path = top[1] + (top[2],)
+            else:
+                path = top[1] + (top[2],)
+                lines[path] = line
+        if c == "{":
+            stack.append([True, path, None, True])
+        elif c == "[":
+            stack.append([False, path, 0, False])
+        elif stack:
+            top = stack[-1]
+            if top[0]:
+                top[3] = True
+            else:
+                top[2] += 1
+    return lines
+
+
 def parse_json(text: str, file: str | None = None) -> Document:
     """Parse JSON strictly (its own syntax errors, with line); lines come from a YAML pass when first asked for.
 
@@ -635,7 +842,9 @@ def parse_json(text: str, file: str | None = None) -> Document:
         return doc
 
     def locate() -> dict[tuple, int]:
-        # JSON is (almost) YAML: the YAML composer gives the lines.  libyaml refuses the escapes of
+        if not repeated:
+            return json_lines(text)
+        # JSON is (almost) YAML: the YAML composer gives the lines, and each repeated key with its own.  libyaml refuses the escapes of
         # UTF-16 surrogates that JSON allows (\\ud83d\\ude00): for this pass they become '?' (the same
         # length: every line and column stays where it was).
         located = parse_yaml(_SURROGATE_ESCAPE.sub(r"\\u003f", text), file)

@@ -93,7 +93,8 @@ def parse_in2(raw: bytes, file: str | None = None) -> tuple[In2 | None, list[Pro
     repeats: dict[tuple[int, int], list[int]] = {}  # pair -> [count, line of the first repeat]
     end_line = None
     for k, (no, s) in enumerate(it):
-        if k == MAX_PAIRS:
+        if k == MAX_PAIRS and not ((m := PAIR.fullmatch(s)) and (int(m[1]), int(m[2])) == (-1, -1)):
+            # (the end marker right after MAX_PAIRS pairs is no pair)
             out.add(f"more than {MAX_PAIRS:,} precedence lines", "split the graph into smaller ones", no, code="limit")
             return done()
         match = PAIR.fullmatch(s)

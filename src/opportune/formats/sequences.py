@@ -138,7 +138,7 @@ def sequences_from(items: Iterable[tuple[int, tuple[str, ...]]], *, file: str | 
     for no, seq in items:
         if len(seqs) >= MAX_SEQUENCES:
             raise SequenceError(Problem(f"more than {MAX_SEQUENCES:,} {what}", f"give at most {MAX_SEQUENCES:,} "
-                                        "(a sample of them is enough: see the learning curve in the README)",
+                                        "(a sample of them is enough: see the learning curve in docs/learn.md)",
                                         file=file, line=no if file else None, code="limit"))
         counts = _check_line(seq, no, file, reference, ref_where)
         if reference is None:

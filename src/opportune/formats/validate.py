@@ -81,15 +81,16 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
     ids = [p.id for p in parts]
     known = set(ids)
     andor = None
+    unlisted_unknown = [0]
     if "assemblies" in data:  # an AND/OR graph (issue 15): expanded into strategies, checked there
         from opportune.formats.andor import check_assemblies
 
         strategies, andor, strat_problems = check_assemblies(data, doc, ids)
     else:
-        strategies, strat_problems = _read_strategies(data, doc, known)
+        strategies, strat_problems = _read_strategies(data, doc, known, unlisted_unknown)
     problems += strat_problems
     # Entries with unknown ids were left out above, so cycles can still be found and reported.
-    order_problems, unlisted = _order_problems(ids, strategies, doc, allow_cycles=allow_cycles)
+    order_problems, unlisted, orders = _order_problems(ids, strategies, doc, allow_cycles=allow_cycles)
     problems += order_problems
     errors = [p for p in problems if p.severity == "error"]
     plan = None
@@ -98,6 +99,11 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
         plan = Plan(name=str(name), parts=tuple(parts), strategies=tuple(strategies),
                     source=doc.file, description=data.get("description") or data.get("source"),
                     simulation=data.get("simulation") or {}, andor=andor)
+        if all(o is not None for o in orders):  # built once: the summary (`check`) uses them again
+            from opportune.formats.summary import keep_summary
+
+            object.__setattr__(plan, "_strategy_summaries", tuple(keep_summary(o) for o in orders))
+    unlisted[("unknown-part", "error")] += unlisted_unknown[0]
     return CheckResult(plan, _capped(_sorted(problems), unlisted))
 
 
@@ -535,9 +541,9 @@ def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict 
 
 
 def _read_parts(data: dict, doc: Document) -> tuple[list[Part], list[Problem]]:
-    parts, problems, first_line = [], [], {}
+    # Lines are looked up only for a problem: a JSON plan's lines cost a second pass over the text.
+    parts, problems, first_at = [], [], {}
     for i, item in enumerate(data["parts"]):
-        line = doc.line(("parts", i))
         if isinstance(item, dict):
             pid = str(item["id"])
             part = Part(id=pid, name=item.get("name"), quantity=int(item.get("quantity", 1)),
@@ -546,25 +552,32 @@ def _read_parts(data: dict, doc: Document) -> tuple[list[Part], list[Problem]]:
         else:
             pid = str(item)
             part = Part(id=pid)
-        if pid in first_line:
-            problems.append(Problem(f"duplicate part id '{pid}' (first declared at line {first_line[pid]})"
-                                    if first_line[pid] else f"duplicate part id '{pid}'",
+        if pid in first_at:
+            first = doc.line(("parts", first_at[pid]))
+            problems.append(Problem(f"duplicate part id '{pid}' (first declared at line {first})"
+                                    if first else f"duplicate part id '{pid}'",
                                     "give every part a unique id; for identical units use `quantity`",
-                                    file=doc.file, line=line, parts=(pid,), code="duplicate-part"))
+                                    file=doc.file, line=doc.line(("parts", i)), parts=(pid,), code="duplicate-part"))
             continue
-        first_line[pid] = line
+        first_at[pid] = i
         parts.append(part)
     return parts, problems
 
 
-def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[Strategy], list[Problem]]:
+def _read_strategies(data: dict, doc: Document, known: set[str],
+                     unlisted_unknown: list[int] | None = None) -> tuple[list[Strategy], list[Problem]]:
+    """The strategies of a plan document and the problems of their entries.  Unknown part ids past
+    ``MAX_PER_KIND + 1`` are counted into ``unlisted_unknown[0]``, not built (as redundant constraints
+    are: a document can name 70,000 of them)."""
+    if unlisted_unknown is None:
+        unlisted_unknown = [0]
     if "strategies" in data:
         entries = [(("strategies", i), s.get("name") or f"strategy {i + 1}", s.get("requires"))
                    for i, s in enumerate(data["strategies"])]
     else:
         entries = [((), DEFAULT_STRATEGY, data.get("requires"))]
     strategies, problems, names = [], [], {}
-    choices = sorted(known)
+    choices: list[str] | None = None  # sorted when a suggestion is first searched for
     unknown_seen = 0  # suggestions cost O(parts) each: only the problems shown get one
     for path, name, requires in entries:
         if name in names:
@@ -576,63 +589,82 @@ def _read_strategies(data: dict, doc: Document, known: set[str]) -> tuple[list[S
         for key, before in (requires or {}).items():
             kpath = path + ("requires", key)
             key = str(key)
-            line = doc.line(kpath)
             if before is None:
                 before = []
             elif not isinstance(before, list):
                 before = [before]
-            for b in before:  # a weighted entry {part: ID, weight: W}: the schema has checked its fields
-                if isinstance(b, dict) and b.get("weight", 1) != 1:
-                    weights[(str(b["part"]), str(key))] = max(float(b["weight"]),
-                                                              weights.get((str(b["part"]), str(key)), 0.0))
-            before = [str(b["part"]) if isinstance(b, dict) else str(b) for b in before]
+            # (the common entry, a list of known ids without repeats, takes the fast paths below:
+            # a document can hold 75,000 entries)
+            if not all(type(b) is str for b in before):
+                for b in before:  # a weighted entry {part: ID, weight: W}: the schema has checked its fields
+                    if isinstance(b, dict) and b.get("weight", 1) != 1:
+                        weights[(str(b["part"]), str(key))] = max(float(b["weight"]),
+                                                                  weights.get((str(b["part"]), str(key)), 0.0))
+                before = [str(b["part"]) if isinstance(b, dict) else str(b) for b in before]
             # Every problem of the entry is reported, and what is left of it (its known parts) still
             # takes part in the search for cycles: an unknown id does not hide a cycle.
             unknown = set()
-            for pid in [key] + before:
+            for pid in [key] + before if key not in known or not known.issuperset(before) else ():
                 if pid not in known and pid not in unknown:
                     unknown.add(pid)
                     unknown_seen += 1
+                    if unknown_seen > MAX_PER_KIND + 1:  # past the cap of _capped: counted, not built
+                        continue
+                    if choices is None:
+                        choices = sorted(known)
                     guess = difflib.get_close_matches(pid, choices, n=1) if unknown_seen <= MAX_PER_KIND else []
                     role = "listed with requirements" if pid == key else f"in the requirements of '{key}'"
                     problems.append(Problem(
                         f"unknown part '{pid}' {role} (strategy '{name}')",
                         (f"did you mean '{guess[0]}'? " if guess else "") + "declare it under `parts` or fix the id",
-                        file=doc.file, line=line, parts=(pid,), code="unknown-part"))
+                        file=doc.file, line=doc.line(kpath), parts=(pid,), code="unknown-part"))
             if key in before:
                 problems.append(Problem(f"part '{key}' requires itself (strategy '{name}')",
-                                        f"remove '{key}' from its own list", file=doc.file, line=line,
+                                        f"remove '{key}' from its own list", file=doc.file, line=doc.line(kpath),
                                         parts=(key,), code="self-requirement"))
-            counts = Counter(before)  # linear: a list repeating one id 100,000 times costs 100,000 steps
-            for d in sorted(b for b, k in counts.items() if k > 1):
-                problems.append(Problem(f"'{key}' lists '{d}' more than once (strategy '{name}')",
-                                        "list each required part once", file=doc.file, line=line,
-                                        parts=(key, d), severity="warning", code="repeated"))
+            if len(set(before)) < len(before):
+                counts = Counter(before)  # linear: a list repeating one id 100,000 times costs 100,000 steps
+                for d in sorted(b for b, k in counts.items() if k > 1):
+                    problems.append(Problem(f"'{key}' lists '{d}' more than once (strategy '{name}')",
+                                            "list each required part once", file=doc.file, line=doc.line(kpath),
+                                            parts=(key, d), severity="warning", code="repeated"))
+                before = list(counts)
             if key in known:
-                req[key] = tuple(b for b in counts if b in known and b != key)
+                req[key] = tuple(b for b in before if b in known and b != key)
         strategies.append(Strategy(name=str(name), requires=req,
                                    weights={k: w for k, w in weights.items() if k[1] in req and k[0] in req[k[1]]}))
+    unlisted_unknown[0] = max(0, unknown_seen - MAX_PER_KIND - 1)
     return strategies, problems
 
 
 def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document, *,
-                    allow_cycles: bool = False) -> tuple[list[Problem], Counter]:
+                    allow_cycles: bool = False) -> tuple[list[Problem], Counter, list]:
     """Cycles (unless ``allow_cycles``), duplicate or subsumed strategies, redundant constraints.
 
     Redundant constraints past ``MAX_PER_KIND + 1`` (the one past the cap is where the summary of
     :func:`_capped` stands) are counted, not built: the second result counts them for :func:`_capped`
-    (a plan of 10,000 parts can state 100,000 redundant constraints).
+    (a plan of 10,000 parts can state 100,000 redundant constraints).  The third is each
+    strategy's :class:`~opportune.formats.summary.StrategyOrder` (None for a cyclic one), kept with
+    the plan for its summary.  Each order covers only the parts its strategy constrains, and
+    strategies are compared by their covers, so 64 strategies of 10,000 parts cost what their
+    constraints cost, not 64 closures of 10,000-bit sets.
     """
-    from opportune.engine.poset import Poset
+    from opportune.engine.poset import CycleError
+    from opportune.formats.summary import StrategyOrder
 
     index = {pid: i for i, pid in enumerate(ids)}
     problems: list[Problem] = []
-    posets: list[Poset | None] = []
+    orders: list[StrategyOrder | None] = []
     spath = ("strategies",) if len(strategies) > 1 or "strategies" in (doc.data or {}) else ()
     redundant = 0  # the chain that implies a redundant constraint is searched for the first few only
     for si, s in enumerate(strategies):
         base = spath + (si,) if spath else ()
-        cycles = find_cycles(ids, s.requires)
+        pairs = [(index[b], index[a]) for b, a in s.pairs()]
+        try:
+            order = StrategyOrder(pairs)
+            cycles = []
+        except CycleError:  # the search for cycles (one per strongly connected part) only when there is one
+            order, cycles = None, find_cycles(ids, s.requires, index=index)
         for cycle in cycles if not allow_cycles else ():
             arrow = " -> ".join(cycle)
             problems.append(Problem(
@@ -640,15 +672,13 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document, *
                 f"remove one of these constraints (each '{cycle[0]} -> {cycle[1]}' means '{cycle[0]}' must come before "
                 f"'{cycle[1]}'), or let `opportune relax` drop the cheapest set of them",
                 file=doc.file, line=doc.line(base + ("requires", cycle[1])), parts=tuple(cycle[:-1]), code="cycle"))
-        if cycles:
-            posets.append(None)
+        orders.append(order)
+        if order is None:
             continue
-        pairs = [(index[b], index[a]) for b, a in s.pairs()]
-        poset = Poset.from_pairs(len(ids), pairs)
-        posets.append(poset)
-        cover_list = poset.cover_pairs()
-        cover = set(cover_list)
+        local = order.local
+        cover = order.covers()
         covers: dict[int, list[int]] | None = None
+        local_ids: list[str] = []
         for b, a in pairs:
             if (b, a) not in cover:
                 redundant += 1
@@ -657,9 +687,10 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document, *
                 if redundant <= MAX_PER_KIND:
                     if covers is None:
                         covers = {}
-                        for x, y in cover_list:
-                            covers.setdefault(x, []).append(y)
-                    implied = " -> ".join(_path_between(poset, b, a, ids, covers))
+                        for x, y in order.cover_pairs():
+                            covers.setdefault(local[x], []).append(local[y])
+                        local_ids = [ids[g] for g in order.support]
+                    implied = " -> ".join(_path_between(order, local[b], local[a], local_ids, covers))
                 else:
                     implied = "other constraints"
                 problems.append(Problem(
@@ -667,28 +698,29 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document, *
                     "the constraint is redundant: remove it, or keep it as documentation",
                     file=doc.file, line=doc.line(base + ("requires", ids[a])), parts=(ids[b], ids[a]),
                     severity="warning", code="redundant"))
+    # Equal orders have equal covers (an order's transitive reduction is unique); frozensets whose
+    # hashes are known and differ compare unequal at once, so 2,016 pairs of strategies cost 64 hashes.
+    for o in orders:
+        if o is not None:
+            hash(o.covers())
     for i in range(len(strategies)):
         for j in range(i):
-            pi, pj = posets[i], posets[j]
-            if pi is None or pj is None:
+            oi, oj = orders[i], orders[j]
+            if oi is None or oj is None:
                 continue
-            line = doc.line(spath + (i,)) if spath else None
-            if pi == pj:
+            if oi.covers() == oj.covers():
                 problems.append(Problem(
                     f"strategies '{strategies[j].name}' and '{strategies[i].name}' admit exactly the same sequences",
-                    f"remove '{strategies[i].name}', it adds nothing", file=doc.file, line=line, code="duplicate-strategy"))
-            elif _contains(pi, pj) or _contains(pj, pi):
-                small, big = (i, j) if _contains(pi, pj) else (j, i)
+                    f"remove '{strategies[i].name}', it adds nothing", file=doc.file,
+                    line=doc.line(spath + (i,)) if spath else None, code="duplicate-strategy"))
+            elif (inside := oi.contains(oj)) or oj.contains(oi):  # each containment tested once
+                small, big = (i, j) if inside else (j, i)
                 problems.append(Problem(
                     f"every sequence of strategy '{strategies[small].name}' is also admitted by '{strategies[big].name}'",
                     f"'{strategies[small].name}' adds no sequences; remove it unless you keep it on purpose",
-                    file=doc.file, line=line, severity="warning", code="subsumed-strategy"))
-    return problems, Counter({("redundant", "warning"): max(0, redundant - MAX_PER_KIND - 1)})
-
-
-def _contains(stricter, looser) -> bool:
-    """True if every constraint of ``looser`` is in ``stricter`` (so stricter's sequences ⊆ looser's)."""
-    return all((looser.below[k] & ~stricter.below[k]) == 0 for k in range(stricter.n))
+                    file=doc.file, line=doc.line(spath + (i,)) if spath else None, severity="warning",
+                    code="subsumed-strategy"))
+    return problems, Counter({("redundant", "warning"): max(0, redundant - MAX_PER_KIND - 1)}), orders
 
 
 def _path_between(poset, b: int, a: int, ids: list[str], covers: dict[int, list[int]]) -> list[str]:
@@ -715,15 +747,21 @@ def _path_between(poset, b: int, a: int, ids: list[str], covers: dict[int, list[
     return [ids[b], ids[a]]
 
 
-def find_cycles(ids: list[str], requires) -> list[list[str]]:
+def find_cycles(ids: list[str], requires, *, index: dict[str, int] | None = None) -> list[list[str]]:
     """One cycle per strongly connected component of the 'must come before' graph.
 
     Each cycle is a list of ids that starts and ends with the same id, e.g.
-    ``['ba', 'rl', 'ba']`` (ba before rl before ba).  Linear time (Tarjan) in the constraints, plus
-    one pass over ``ids``: a part in no constraint is in no cycle, so the search starts from the
-    others only (a plan of 64 strategies over 10,000 parts, each constraining a few hundred).
+    ``['ba', 'rl', 'ba']`` (ba before rl before ba).  Linear time (Tarjan) in the constraints: a
+    part in no constraint is in no cycle, so the search starts from the others only.  ``index``
+    (each id's position in ``ids``), when the caller has it, saves the one pass over ``ids``
+    (a plan of 64 strategies over 10,000 parts, each constraining a few hundred).
+
+    >>> find_cycles(["a", "b", "c"], {"b": ["a"], "a": ["b"], "c": ["a"]})
+    [['a', 'b', 'a']]
     """
-    known = set(ids)
+    if index is None:
+        index = {pid: i for i, pid in enumerate(ids)}
+    known = index
     succ: dict[str, list[str]] = {}  # only the parts that must come before another
     for after, befores in requires.items():
         if after not in known:
@@ -735,8 +773,8 @@ def find_cycles(ids: list[str], requires) -> list[list[str]]:
         return []
     index_of, low, on_stack, stack, sccs = {}, {}, set(), [], []
     counter = 0
-    for root in ids:
-        if root in index_of or root not in succ:
+    for root in sorted(succ, key=index.__getitem__):  # in declaration order: the same cycles every time
+        if root in index_of:
             continue
         work = [(root, iter(succ[root]))]
         index_of[root] = low[root] = counter
@@ -773,9 +811,8 @@ def find_cycles(ids: list[str], requires) -> list[list[str]]:
                 if len(comp) > 1:
                     sccs.append(set(comp))
     cycles = []
-    order = {pid: i for i, pid in enumerate(ids)}
     for comp in sccs:
-        start = min(comp, key=order.__getitem__)
+        start = min(comp, key=index.__getitem__)
         # BFS inside the component back to start: the shortest cycle through it.
         prev, frontier, found = {start: None}, [start], None
         while frontier and found is None:

@@ -190,6 +190,10 @@ class Lookahead(DecidesOnMasks):
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
     #: Plans of more units than this decide as the base does (the programme would take too long).
     MAX_UNITS = 16
+    #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
+    #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
+    #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
+    deadline = None
 
     def __init__(self, base=None, *, budget: float | None = None, max_states: int = 200_000, **solver_settings):
         # With a budget, the programme gets most of it at each decision, resuming where it stopped; a
@@ -260,12 +264,16 @@ class Lookahead(DecidesOnMasks):
             ev = self._values(engine)
             if self.lookahead_budget is not None:
                 ev.deadline = time.perf_counter() + 0.7 * self.lookahead_budget
+            elif self.deadline is not None:
+                ev.deadline = self.deadline
             try:
                 action, self.last_cost = ev._deep(
                     lambda key: self._best(ev, engine, key, buffer, visible), (mask, consistent, ev.buffer_counts(buffer)))
                 return action
             except OutOfTime:
-                pass                        # this decision is the base's; the next one goes on from here
+                if self.lookahead_budget is None:
+                    raise                   # exact: never the base's decision in its place; the caller stops
+                # this decision is the base's; the next one goes on from here
             except BudgetExceeded as exc:   # a count of the programme past the engine's deadline (a service
                 if exc.reason != "time":    # look's): likewise; past a memory budget, the plan is too large
                     self._too_large = True

@@ -33,6 +33,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
+import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Annotated, Literal, Optional
@@ -229,6 +230,32 @@ class CatchAll:
             response = error_response(internal(ref), 500)
             response.headers["x-content-type-options"] = "nosniff"
             await response(scope, receive, send)
+
+
+class Timing:
+    """Notes the moment a request arrives (``request.state.arrived``, on ``time.perf_counter``'s clock)
+    and, once its answer's last byte is handed to the server, calls ``request.state.on_sent(moment)``
+    if the handler set it: a look's budget counts from here, and the time its answer takes to leave
+    is learned, not guessed (pure ASGI, the outermost layer).  O(1) per request.
+    """
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        state = scope.setdefault("state", {})
+        state["arrived"] = time.perf_counter()
+
+        async def timed_send(message):
+            await send(message)
+            if message["type"] == "http.response.body" and not message.get("more_body"):
+                on_sent = state.pop("on_sent", None)
+                if on_sent is not None:
+                    on_sent(time.perf_counter())
+
+        await self.app(scope, receive, timed_send)
 
 
 class SecurityHeaders:
@@ -532,7 +559,11 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     def post_look(body: LookIn, request: Request, run_id: int = RUN_ID, p: Principal = Depends(principal),
                   idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
         key = idem.check_key(idempotency_key)
-        return replayable(*manager.command(p, run_id, "look", body.model_dump(), key, request.url.path))
+        # the look's budget counts from its arrival; the seconds its answer then takes to leave are learned
+        answer = manager.command(p, run_id, "look", body.model_dump(), key, request.url.path,
+                                 arrived=getattr(request.state, "arrived", None))
+        request.state.on_sent = manager.answer_sent(time.perf_counter())
+        return replayable(*answer)
 
     @app.post("/runs/{run_id}/outcomes", tags=["runs"], operation_id="postOutcome",
               summary="The outcome of the pending action", openapi_extra=IDEMPOTENCY_KEY,
@@ -615,5 +646,6 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     app.openapi = openapi
     app.add_middleware(BodyLimit, limit=settings.max_body)
     app.add_middleware(SecurityHeaders)
-    app.add_middleware(CatchAll)  # outermost of ours: covers the other two as well
+    app.add_middleware(CatchAll)  # covers the two above as well
+    app.add_middleware(Timing)    # outermost: a request's clock starts before any other work
     return app

@@ -14,6 +14,10 @@ Stored answers are kept for ``Settings.idempotency_seconds`` (7 days by default:
 far longer than any retry loop) and then forgotten, so the table does not grow
 with every request the service ever answered; a request retried after that is
 judged afresh.
+
+The answer to a look, an outcome or a cancel is the response stored with its event in the run's log;
+its key then stores where that is (``@event RUN SEQ``) rather than the same text again, so a look of
+a large plan writes its answer once.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from sqlalchemy import bindparam, delete, insert, select
 from sqlalchemy.engine import Connection
 
 from opportune.service.errors import ApiError
-from opportune.service.storage import dumps, idempotency, now
+from opportune.service.storage import dumps, events, idempotency, now
 
 HEADER = "Idempotency-Key"
 MAX_KEY = 200
@@ -37,6 +41,8 @@ _LOOKUP = select(idempotency.c.request_hash, idempotency.c.status, idempotency.c
     idempotency.c.scope == bindparam("scope"), idempotency.c.key == bindparam("key"))
 _INSERT = insert(idempotency)
 _FORGET = delete(idempotency).where(idempotency.c.created_at < bindparam("before"))
+_EVENT = select(events.c.response).where(events.c.run_id == bindparam("run_id"), events.c.seq == bindparam("seq"))
+_POINTER = "@event "   # no JSON text starts so
 
 
 @dataclass(frozen=True)
@@ -76,13 +82,20 @@ def lookup(conn: Connection, scope: str, key: str, req_hash: str) -> Stored | No
                        f"the {HEADER} {key!r} was already used for a different request",
                        "use a fresh key for every new request; reuse a key only to retry the identical request",
                        where=f"header {HEADER}")
-    return Stored(row.status, row.response)
+    text = row.response
+    if text.startswith(_POINTER):   # the answer stored with an event of a run's log
+        run_id, seq = map(int, text[len(_POINTER):].split())
+        text = conn.execute(_EVENT, {"run_id": run_id, "seq": seq}).scalar_one()
+    return Stored(row.status, text)
 
 
-def remember(conn: Connection, scope: str, key: str, req_hash: str, status: int, text: str) -> None:
-    """Store an answer (its JSON text, as sent)."""
+def remember(conn: Connection, scope: str, key: str, req_hash: str, status: int, text: str,
+             event: tuple[int, int] | None = None) -> None:
+    """Store an answer (its JSON text, as sent); with ``event=(run id, seq)``, where that text is already
+    stored as that event's response (in the same transaction)."""
     conn.execute(_INSERT, {"scope": scope, "key": key, "request_hash": req_hash, "status": status,
-                           "response": text, "created_at": now()})
+                           "response": text if event is None else f"{_POINTER}{event[0]} {event[1]}",
+                           "created_at": now()})
 
 
 def forget_before(conn: Connection, before: float) -> int:

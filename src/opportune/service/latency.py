@@ -36,7 +36,8 @@ PERCENTILE = 0.95
 
 
 class Reserves:
-    """Seconds to keep in reserve after a look's decision (and after its answer's counts), per plan.
+    """Seconds to keep in reserve after a look's decision (and after its answer's counts), per plan,
+    plus the seconds an answer takes to leave the server once returned (the same for every plan).
 
     O(WINDOW log WINDOW) per reading, O(1) per measurement; memory O(PLANS × WINDOW).  Thread-safe.
     """
@@ -45,6 +46,18 @@ class Reserves:
         self.budget = budget
         self._lock = threading.Lock()
         self._plans: OrderedDict[str, tuple[deque, deque]] = OrderedDict()
+        self._outside: deque = deque(maxlen=WINDOW)
+
+    def measured_outside(self, seconds: float) -> None:
+        """Record the seconds one look's answer took from its return to its last byte sent."""
+        with self._lock:
+            self._outside.append(seconds)
+
+    def outside(self) -> float:
+        """Seconds an answer recently needed to leave once returned (the 95th percentile; 0 before any)."""
+        with self._lock:
+            xs = sorted(self._outside)
+        return xs[min(len(xs) - 1, int(PERCENTILE * len(xs)))] if xs else 0.0
 
     def measured(self, plan_id: str, *, after_decision: float, after_counts: float) -> None:
         """Record one look: seconds from the decision's end, and from the answer's counts' end, to the reply."""
@@ -67,7 +80,7 @@ class Reserves:
             x = guess
         else:
             x = xs[min(len(xs) - 1, int(PERCENTILE * len(xs)))]
-        return min(MOST * self.budget, max(LEAST, x))
+        return min(MOST * self.budget, max(LEAST, x + self.outside()))
 
     def after_decision(self, plan_id: str) -> float:
         """Seconds the rest of a look of this plan needs after its decision."""

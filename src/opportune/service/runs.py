@@ -163,9 +163,11 @@ class RunManager:
                 finally:
                     live.lock.release()
 
-    def _remember(self, c, scope: str, key: str, h: str, status: int, text: str) -> None:
-        """Store an answer; at most once a minute, in the same transaction, forget those past their time."""
-        idem.remember(c, scope, key, h, status, text)
+    def _remember(self, c, scope: str, key: str, h: str, status: int, text: str,
+                  event: tuple[int, int] | None = None) -> None:
+        """Store an answer (or where its event holds it); at most once a minute, in the same transaction,
+        forget those past their time."""
+        idem.remember(c, scope, key, h, status, text, event)
         clock = time.monotonic()
         if clock >= self._next_forget:
             self._next_forget = clock + FORGET_EVERY
@@ -393,14 +395,16 @@ class RunManager:
 
     # ------------------------------------------------------------ commands
 
-    def command(self, principal: Principal, run_id: int, kind: str, request: dict, key: str, path: str
-                ) -> tuple[int, str, bool]:
-        """Apply a look, outcome or cancel; return ``(status, answer JSON text, replayed)``."""
+    def command(self, principal: Principal, run_id: int, kind: str, request: dict, key: str, path: str,
+                arrived: float | None = None) -> tuple[int, str, bool]:
+        """Apply a look, outcome or cancel; return ``(status, answer JSON text, replayed)``.  ``arrived``:
+        when the request arrived (``time.perf_counter()``), where a look's budget starts (default: now)."""
         if principal.is_operator:
             self.row(principal, run_id)  # 404 first: an operator learns nothing new from a 403 on a real run
             raise forbidden("an operator token reads runs; only the run's cell drives it",
                             "use the token of the cell the run belongs to")
-        arrived = time.perf_counter()   # the look's one deadline starts here: its budget covers the whole request
+        if arrived is None:   # the look's one deadline starts here: its budget covers the whole request
+            arrived = time.perf_counter()
         h = idem.request_hash("POST", path, request)
         try:
             # A look, answer and commit included, runs with the cyclic collector paused (not only its decision):
@@ -409,7 +413,19 @@ class RunManager:
             with self.book.busy(), collector_paused() if kind == "look" and self.budget is not None else nullcontext():
                 return self._command(principal, run_id, kind, request, key, path, h, arrived)
         finally:
-            self.book.settle(self._last_used.pop(threading.get_ident(), None))
+            used = self._last_used.pop(threading.get_ident(), None)
+            # Measuring a plan (up to ~20 ms on a large one) and evicting are for the outcome that follows
+            # every look's action, not for the look: its answer waits for nothing but its own work.
+            if kind != "look":
+                self.book.settle(used)
+
+    def answer_sent(self, returned: float):
+        """A callback for the moment a look's answer has been sent, given the moment it was returned
+        (``time.perf_counter()``): the seconds between are kept in reserve for later looks."""
+        reserves = self.reserves
+        if reserves is None:
+            return None
+        return lambda sent: reserves.measured_outside(sent - returned)
 
     def _command(self, principal, run_id, kind, request, key, path, h, arrived=None):
         for attempt in range(ATTEMPTS):
@@ -484,7 +500,7 @@ class RunManager:
                                           "response": text, "created_at": t})
                 # The key's primary key makes a concurrent use of the same key (another run, another
                 # process) fail here: the transaction rolls back and the retry answers from the store.
-                self._remember(c, principal.scope, key, h, 200, text)
+                self._remember(c, principal.scope, key, h, 200, text, event=(live.id, expected + 1))
         except _Stale:
             raise
         except IntegrityError:

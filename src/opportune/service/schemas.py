@@ -88,7 +88,7 @@ class ErrorBody(Model):
     error: ErrorDetail
 
 
-#: What each status means, and the codes the service answers it with (the table in the README).
+#: What each status means, and the codes the service answers it with (shown in the OpenAPI document).
 STATUS_TEXT = {
     400: "The request could not be read",
     401: "No valid bearer token",
@@ -183,7 +183,9 @@ class Decision(Model):
 
 
 class Count(Model):
-    """A number of admissible completions: exact, as decimal text (JSON numbers lose digits)."""
+    """A number of admissible completions, as decimal text (JSON numbers lose digits): exact up to 4,300
+    digits; a larger count is written with its first 17 digits in scientific notation
+    (``2.8462596809170545e+35659``), as writing it exactly would take longer than a look's budget."""
 
     value: str
     log10: float | None = Field(..., description="log10 of the value; null when the value is 0")
