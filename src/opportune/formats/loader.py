@@ -755,33 +755,29 @@ def json_lines(text: str) -> dict[tuple, int]:
         c = tok[0]
         if c == "]" or c == "}":
             stack.pop()
-            if stack:
+        else:
+            if not stack:
+                path: tuple = ()
+                lines[path] = line
+            else:
                 top = stack[-1]
                 if top[0]:
-                    top[3] = True
+                    if top[3]:      # a key: the value's path, at the key's line
+                        key = tok[1:-1] if "\\" not in tok else json.loads(tok)
+                        top[2], top[3] = key, False
+                        lines[top[1] + (key,)] = line
+                        continue
+                    path = top[1] + (top[2],)
                 else:
-                    top[2] += 1
-            continue
-        if not stack:
-            path: tuple = ()
-            lines[path] = line
-        else:
-            top = stack[-1]
-            if top[0]:
-                if top[3]:      # a key: the value's path, at the key's line
-                    key = tok[1:-1] if "\\" not in tok else json.loads(tok)
-                    top[2], top[3] = key, False
-                    lines[top[1] + (key,)] = line
-                    continue
-                path = top[1] + (top[2],)
-            else:
-                path = top[1] + (top[2],)
-                lines[path] = line
-        if c == "{":
-            stack.append([True, path, None, True])
-        elif c == "[":
-            stack.append([False, path, 0, False])
-        elif stack:
+                    path = top[1] + (top[2],)
+                    lines[path] = line
+            if c == "{":
+                stack.append([True, path, None, True])
+                continue
+            if c == "[":
+                stack.append([False, path, 0, False])
+                continue
+        if stack:           # a value ended (a scalar, or a closed container): its container moves on
             top = stack[-1]
             if top[0]:
                 top[3] = True
