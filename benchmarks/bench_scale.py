@@ -56,10 +56,10 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def server_memory(pid: int) -> str:
-    """The server's resident memory now and at its peak, against its memory cap (the default: a quarter
-    of the machine's memory, as the server computes it), as a sentence."""
-    from opportune.service.plans import memory_total
+def server_memory(pid: int, start: float) -> str:
+    """The server's resident memory now and at its peak, against its footprint at ``start`` (MB) plus its
+    memory cap (the default: a quarter of the machine's memory, as the server computes it), as a sentence."""
+    from opportune.engine.memory import memory_total
 
     peak = float("nan")
     try:
@@ -69,9 +69,12 @@ def server_memory(pid: int) -> str:
     except OSError:
         pass
     cap = memory_total() // 4 / 2**20
-    return (f"Server memory after every row: {rss_mb(pid):,.0f} MB resident, {peak:,.0f} MB at its peak, under its "
-            f"memory cap of {cap:,.0f} MB (the default: a quarter of the machine's memory); the cap bounds the bytes "
-            f"the plans' engines account, enforced by evicting the least recently used plan.")
+    now = rss_mb(pid)
+    verdict = "under" if peak - start <= cap else "over"
+    return (f"Server memory after every row: {now:,.0f} MB resident, {peak:,.0f} MB at its peak, {start:,.0f} MB at "
+            f"start; the peak is {verdict} the start plus the memory cap of {cap:,.0f} MB (the default: a quarter of "
+            f"the machine's memory). The cap is kept between requests on the bytes the plans' engines account and on "
+            f"the process's resident memory (memos shrunk, then the least recently used plans evicted).")
 
 
 def make_plans(tmp: Path, names: set[str] | None) -> list[tuple[str, str]]:
@@ -270,6 +273,7 @@ def main(argv=None) -> int:
         run_dir = Path(tempfile.mkdtemp(prefix="run-", dir=tmp))
         svc = ServiceProcess(run_dir / "scale.db", extra_args=("--no-access-log",), log=run_dir / "server.log").start(60)
         client = Client(svc.url, svc.token(cell="scale"), timeout=600)
+        rss_start = rss_mb(svc.proc.pid)
     load0 = os.getloadavg()[0]
     try:
         for name, spec in plans:
@@ -287,7 +291,7 @@ def main(argv=None) -> int:
             print(json.dumps({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()
                               if k not in ("fresh", "late")}), file=sys.stderr, flush=True)
         if svc is not None:
-            server = server_memory(svc.proc.pid)
+            server = server_memory(svc.proc.pid, rss_start)
     finally:
         if svc is not None:
             client.close()

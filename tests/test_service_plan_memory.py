@@ -238,3 +238,50 @@ def test_a_hub_paths_accounted_bytes_grow_with_its_memos():
     empty = hub.nbytes()
     assert hub.count(p.full, discover=True) == Counter(p).count()
     assert hub.nbytes() > empty > 0       # its counter's memo (and tails, where it found a hub)
+
+
+def test_the_servers_resident_memory_is_kept_under_its_cap_by_shrinking_then_evicting(tmp_path):
+    """The process's resident memory read through an injected reading that is twice the engines' live
+    bytes (the allocator's slack, fragmentation): past the cap, the plans' memos are shrunk (their runs
+    go on, with the decisions of a fresh engine), then plans evicted; after every outcome the reading is
+    under the cap again."""
+    plans = [layered(40, seed) for seed in range(3)]
+    expected = {p.name: library_run(p, 5, 12) for p in plans}
+    with Cell(tmp_path, decision_budget=None, plan_share=1.0) as cell:
+        book = cell.book
+
+        def reading():
+            return book.baseline + 2 * sum(p.engine.nbytes() for p in book.loaded())
+
+        pids = [cell.upload(p) for p in plans]
+        runs = {pid: cell.post("/runs", {"plan": pid}, expect=201)["id"] for pid in pids}
+        cell.drive(runs[pids[0]], expected[plans[0].name][0][:1])
+        book.resident = reading
+        book.memory_cap = int(3.0 * book.loaded()[0].engine.nbytes())
+        decided = {pid: [] for pid in pids}
+        decided[pids[0]].append(expected[plans[0].name][1][0])
+        for k in range(12):
+            for pid, plan in zip(pids, plans):
+                if k == 0 and pid == pids[0]:
+                    continue
+                decided[pid] += cell.drive(runs[pid], [expected[plan.name][0][k]])
+                assert reading() - book.baseline <= book.memory_cap
+        assert book.shrinks >= 1
+        for pid, plan in zip(pids, plans):
+            assert decided[pid] == expected[plan.name][1]
+
+
+def test_a_reading_over_the_cap_with_every_plan_in_use_changes_nothing(tmp_path):
+    """Plans whose locks are held (inside a decision) are neither shrunk nor evicted, however high the
+    reading: the next request between decisions does it."""
+    with Cell(tmp_path, decision_budget=None) as cell:
+        pid = cell.upload(layered(20, 1))
+        cell.post("/runs", {"plan": pid}, expect=201)
+        book = cell.book
+        (loaded,) = book.loaded()
+        book.resident = lambda: book.baseline + 10 * book.memory_cap
+        with loaded.lock:
+            book.settle()
+        assert book.loaded() == [loaded] and book.shrinks == 0 and book.evictions == 0
+        book.settle()
+        assert book.shrinks == 1 and book.evictions == 1 and not book.loaded()

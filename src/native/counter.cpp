@@ -373,10 +373,17 @@ class Counter {
     }
 
     size_t size() const { return size_; }
+    // Bytes held: the count memo, its arenas, and every tail memo (distributions and buckets).
     size_t memory() const {
-        return table_.bytes() + arena_cap_ * sizeof(u64) + next_.bytes() + arena_next_.bytes();
+        size_t total = table_.bytes() + arena_cap_ * sizeof(u64) + next_.bytes() + arena_next_.bytes();
+        for (const auto& tm : tails_)
+            if (tm) total += tm->bytes + tm->memo.bucket_count() * sizeof(void*) + tm->memo.size() * (sizeof(B) + 32);
+        return total;
     }
+    // Forget every entry, the tail memos' too (their handles stay valid).
     void reset() {
+        for (auto& tm : tails_)
+            if (tm) fresh_memo(*tm);
         next_ = Buffer<Slot>();
         next_at_ = 0;
         arena_next_ = Buffer<u64>();

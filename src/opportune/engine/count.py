@@ -394,12 +394,13 @@ class Counter:
             total += poset_nbytes(self._rev.poset) + nbytes(getattr(self._rev, "_tabs", None), depth=4)
         return total
 
-    def maintain(self) -> bool:
+    def maintain(self, deadline: float = _INF) -> bool:
         """Keep the memo within ``max_total``: evict the oldest half if it is over, restart the compiled
         memo if it is over (entries or bytes).  True if anything was dropped.
 
-        Every call does it at its start unless ``hold_upkeep`` is set; an engine that holds it during
-        decisions calls this between them.  Complexity: O(1) when under the caps, else O(entries
+        Every call does it at its start unless ``hold_upkeep`` is set (evicting then stops at the call's
+        deadline, ``BudgetExceeded``); an engine that holds it during decisions calls this between them
+        (no deadline: the upkeep finishes).  Complexity: O(1) when under the caps, else O(entries
         dropped).
 
         >>> c = Counter(Poset.antichain(3), max_total=1, native=False); _ = c.count(0b011), c.count(0b101)
@@ -409,7 +410,7 @@ class Counter:
         limit = self.max_total
         dropped = False
         if limit is not None and len(self._memo) + len(self._vec) > limit:
-            self._evict(limit // 2)
+            self._evict(limit // 2, deadline)
             dropped = True
         if self._native is not None and self._native.over(limit):
             self._native.reset()        # the compiled memo starts again (Python's keeps what it holds)
@@ -455,7 +456,7 @@ class Counter:
                     b[1] = at
         b[2] = 0
         if not self.hold_upkeep:
-            self.maintain()
+            self.maintain(b[1])
         self._maybe_narrow()
         if sys.getrecursionlimit() < self._depth:   # Python 3.11 frames do not use the C stack
             sys.setrecursionlimit(self._depth)
@@ -469,18 +470,34 @@ class Counter:
             if self._g is not None:
                 self._g = self._make_vectors()
 
-    def _evict(self, keep: int) -> None:
+    def shrink(self, keep: float = 0.0) -> None:
+        """Between calls: drop all but the newest ``keep`` share (0 to 1) of the memo's entries, vectors
+        first, and restart the compiled memo (tail memos included) unless ``keep`` is 1.  What an engine
+        over its memory limit does.  O(entries dropped).
+
+        >>> c = Counter(Poset.antichain(4), native=False); _ = c.count(0b0111), c.count(0b1110)
+        >>> c.shrink(0.0); c.memo_size, c.count(0b0111)
+        (1, 6)
+        """
+        if not 0 <= keep <= 1:
+            raise ValueError("keep is a share, from 0 to 1")
+        self._evict(int(keep * (len(self._memo) + len(self._vec))), _INF)
+        self._shares.clear()
+        if self._native is not None and keep < 1:
+            self._native.reset()
+
+    def _evict(self, keep: int, deadline: float) -> None:
         """Drop the oldest entries (insertion order) until at most ``keep`` remain in all.
 
-        Dropping a million entries takes a large share of a second: it reads the current call's
-        clock every 4,096 of them and, past it, raises :class:`BudgetExceeded` (what is left is
-        valid; the next call goes on evicting)."""
+        Dropping a million entries takes a large share of a second: within a call it reads the
+        call's clock (``deadline``) every 4,096 of them and, past it, raises :class:`BudgetExceeded`
+        (what is left is valid; the next call goes on evicting)."""
         memo, vec = self._memo, self._vec
         total = len(memo) + len(vec)
         if total <= keep:
             return
         drop = total - keep
-        deadline, perf = self._budget[1], time.perf_counter
+        perf = time.perf_counter
         # Vectors are the larger entries: drop them first, then the oldest counts.
         k = min(drop, len(vec))
         for i, key in enumerate(list(islice(vec, k))):

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
-from itertools import combinations
+from itertools import combinations, islice
 from math import comb
 from operator import mul
 
@@ -105,6 +105,12 @@ class TailCounter:
         core = getattr(self, "_core", None)
         if core is not None:
             core.tails_drop(self._handle)
+
+    def shrink(self, keep: float = 0.0) -> None:
+        """Drop all but the newest ``keep`` share (0 to 1) of the memo (insertion order). O(entries dropped)."""
+        memo = self._memo
+        for key in list(islice(memo, len(memo) - int(keep * len(memo)))):
+            del memo[key]
 
     def tail(self, s: int, *, deadline: Deadline | float | None = None) -> list[int]:
         if not s & self.marks:
@@ -556,6 +562,13 @@ class HubPath:
         for tails in list(self.tails.values()):
             total += nbytes(tails._memo) + nbytes(getattr(tails._binom, "_rows", {}))
         return total
+
+    def shrink(self, keep: float = 0.0) -> None:
+        """Between calls: keep the newest ``keep`` share of its counter's memo and of every tail memo
+        (the compiled ones restart).  O(entries dropped)."""
+        self.counter.shrink(keep)
+        for tails in list(self.tails.values()):
+            tails.shrink(keep)
 
     # ------------------------------------------------------------ public
     def applies(self, s: int) -> bool:

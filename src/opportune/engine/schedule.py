@@ -38,11 +38,19 @@ from typing import Collection, Iterable, Sequence
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.hub import HubPath
+from opportune.engine.memory import memory_total
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
 from opportune.plan import Plan
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
 STATE_CACHE_LIMIT = 300_000  # entries per per-state cache before it is cleared
+#: An engine's default ``memory_limit``: a quarter of the machine's memory (a service sets its plan share).
+DEFAULT_MEMORY = memory_total() // 4
+#: Between two measurements of an engine's bytes in :meth:`OrderEngine.maintain`, seconds (a measurement
+#: samples every memo: a few milliseconds; a decision adds a bounded number of entries meanwhile).
+MEASURE_EVERY = 0.5
+#: Memos over ``memory_limit`` are shrunk to this share of it (room for hours before the next shrink).
+SHRINK_TO = 0.5
 HUB_PROBE = 100_000  # new memo entries a plain count may add before counting through a hub is tried
 COUNT_MARGIN = 0.25  # seconds Schedule.count_result may take past its deadline (checks' granularity, the answer)
 ESTIMATE_RESERVE = 3e-5  # seconds per element an estimate needs for its bounds and first path (~0.25 s for 10,000)
@@ -222,14 +230,21 @@ class OrderEngine:
     """
 
     def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
-                 deadline: Deadline | float | None = None):
+                 deadline: Deadline | float | None = None, memory_limit: int | None = DEFAULT_MEMORY):
         """``deadline``: building the strategies' orders (a closure per strategy: O(units × covers)
         big-integer operations each, seconds for 64 strategies over 10,000 parts) stops past it with
-        ``BudgetExceeded``."""
+        ``BudgetExceeded``.  ``memory_limit``: bytes the memos and caches may hold between decisions
+        (see :meth:`maintain`; None: only each memo's entry cap)."""
         dl = as_deadline(deadline)
         self.plan = plan
         self.max_memo = max_memo
         self.time_limit = time_limit
+        if memory_limit is not None and memory_limit <= 0:
+            raise ValueError("memory_limit must be a positive number of bytes, or None")
+        self.memory_limit = memory_limit
+        self.shrunk = 0                 # times maintain() shrank the memos to keep within memory_limit
+        self.measure_every = MEASURE_EVERY
+        self._measured = (float("-inf"), 0)     # (time.monotonic(), bytes) of the last measurement
         # Units: part i owns units first[i] .. first[i] + quantity - 1, installed in that order.
         self.first: list[int] = []
         self.unit_part: list[int] = []
@@ -536,8 +551,45 @@ class OrderEngine:
                     dropped = True
             for c in self._all_counters():
                 dropped |= c.maintain()
+            if self.memory_limit is not None:
+                dropped |= self._keep_within(self.memory_limit)
             self.maintained += dropped
             return dropped
+
+    def _keep_within(self, limit: int, *, now: float | None = None) -> bool:
+        """Measure the engine's bytes (at most every ``measure_every`` seconds) and, if they are
+        over ``limit``, clear the per-state caches and drop the oldest entries of every memo (counts,
+        vectors, tail distributions; the compiled memos restart) in proportion, until about
+        :data:`SHRINK_TO` of ``limit`` is held.  Caller holds ``_upkeep_lock`` between decisions.
+        True if anything was dropped.  O(memos) to measure, O(entries dropped) to shrink."""
+        now = time.monotonic() if now is None else now
+        if now < self._measured[0] + self.measure_every:
+            return False
+        used = self.nbytes()
+        self._measured = (now, used)
+        if used <= limit:
+            return False
+        self._drop(SHRINK_TO * limit / used)
+        self.shrunk += 1
+        self._measured = (now, self.nbytes())
+        return True
+
+    def shrink(self, keep: float = 0.0) -> None:
+        """Drop all but the newest ``keep`` share of every memo and clear the per-state caches, now
+        (between decisions): what a service does when the whole process is over its memory cap.
+        Later questions are counted again.  O(entries dropped)."""
+        with self._upkeep_lock:
+            if not self._deciding:
+                self._drop(keep)
+                self._measured = (float("-inf"), 0)
+
+    def _drop(self, keep: float) -> None:
+        self.clear_state_caches()
+        for c in self._all_counters():
+            c.shrink(keep)
+        for hub in list(self._hubs.values()) + list(self._hub_search.values()):
+            if hub is not None:
+                hub.shrink(keep)
 
     def warm_up(self, time_limit: float | None = None) -> bool:
         """Build what every decision uses (:meth:`prepare`), then count the first state exactly, within

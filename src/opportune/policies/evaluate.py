@@ -79,8 +79,7 @@ class PolicyEvaluator(OptimalSolver):
             self._policy_values[key] = 0.0
             return 0.0
         stored = len(self._policy_values)
-        if not stored & 63:
-            self._tick("the policy's evaluation")
+        self._tick("the policy's evaluation", stored)
         if stored >= self.max_states:
             raise OptimalTooLarge(f"evaluating the policy needs more than {self.max_states:,} states for this "
                                   "plan; raise the state limit, or estimate with `opportune simulate`")

@@ -75,6 +75,7 @@ class OptimalSolver:
         looks_at_start = comb(len(self.ids) + visible - 1, visible) if self.ids else 1
         self._looks = lru_cache(maxsize=max(16, LOOK_CACHE_LOOKS // max(1, looks_at_start)))(self._look_distribution)
         self._until = Deadline.NEVER
+        self._next_report = 0
         #: Called as ``progress(self)`` every 64 new states (for a progress bar; None: not called).
         self.progress = None
 
@@ -92,11 +93,14 @@ class OptimalSolver:
     def deadline(self, value) -> None:
         self._until = as_deadline(value)
 
-    def _tick(self, what: str) -> None:
-        """Between states (every 64 new ones): the deadline, then the progress report."""
+    def _tick(self, what: str, stored: int) -> None:
+        """On entering every new state: the deadline (a state's children are entered before it is
+        stored, so a count of stored states would miss whole descents); the progress report once per
+        64 more stored.  O(1)."""
         if self._until.expired():
             raise OutOfTime(f"{what} passed its deadline")
-        if self.progress is not None:
+        if self.progress is not None and stored >= self._next_report:
+            self._next_report = stored + 64
             self.progress(self)
 
     # ------------------------------------------------------------ states
@@ -232,8 +236,7 @@ class OptimalSolver:
             self._values[key] = 0.0
             return 0.0
         stored = len(self._values)
-        if not stored & 63:
-            self._tick("the optimum's programme")
+        self._tick("the optimum's programme", stored)
         if stored >= self.max_states:
             raise OptimalTooLarge(
                 f"the optimum needs more than {self.max_states:,} states for this plan; "

@@ -44,7 +44,6 @@ class PileSolver(OptimalSolver):
         # values under (key, window), values of a freshly shaken pile under ("shaken", key)
         self._window_values = self._values
         self._shaken = _Prefixed(self._values)
-        self._next_tick = 0
 
     # ------------------------------------------------------------ public
 
@@ -97,9 +96,7 @@ class PileSolver(OptimalSolver):
         if key[0] == self.engine.full:
             return 0.0
         stored = len(self._values)
-        if stored >= self._next_tick:       # a shake stores all the windows of a state at once: no "& 63"
-            self._next_tick = stored + 64
-            self._tick("the pile's programme")
+        self._tick("the pile's programme", stored)
         if stored >= self.max_states:
             raise OptimalTooLarge(f"the pile bin needs more than {self.max_states:,} states for this plan; raise the "
                                   "state limit, or estimate with `opportune simulate --bin pile`")

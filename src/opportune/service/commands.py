@@ -59,9 +59,10 @@ def serve(
     workers: int = typer.Option(1, "--workers", min=1, max=64,
                                 help="Server processes sharing the port and the database (more than 1: PostgreSQL only)"),
     memory_cap: Optional[int] = typer.Option(None, "--memory-cap", min=16, max=1 << 22,
-                                             help="Megabytes the loaded plans' engines may hold in all (memos, "
-                                                  "caches, programmes; least recently used plans are evicted "
-                                                  "between requests); default a quarter of the machine's memory",
+                                             help="Megabytes the server may hold beyond its footprint at start "
+                                                  "(the plans' memos, caches, programmes: shrunk, then least "
+                                                  "recently used plans evicted, between requests); default a "
+                                                  "quarter of the machine's memory",
                                              show_default=False),
     warm_up_seconds: float = typer.Option(30.0, "--warm-up-seconds", min=0.0, max=3600.0,
                                           help="Most seconds a plan's warm-up (counting its first state, once per "

@@ -41,11 +41,14 @@ class Settings:
     most), a read's 0.25 s; a count that misses its
     time is null); None: every decision exact, each count bounded by ``count_seconds``.
 
-    Memory.  ``memory_cap`` bounds the bytes the loaded plans' engines hold (memos, vectors, tails,
-    programmes, per-state caches), over all plans; None: a quarter of the machine's memory
-    (``MemTotal``).  Least recently used plans are evicted between requests to keep under it (their
-    runs are rebuilt from their logs when next asked).  One plan may hold at most ``plan_share`` of
-    the cap: a plan whose minimum working set is over that is refused at upload (413).
+    Memory.  ``memory_cap`` bounds the memory the server holds beyond its footprint at start, over
+    all plans; None: a quarter of the machine's memory (``MemTotal``).  Two checks keep it, between
+    requests: the bytes the loaded plans' engines account (memos, vectors, tails, programmes,
+    per-state caches; least recently used plans are evicted past the cap, their runs rebuilt from
+    their logs when next asked), and the process's resident memory (past the cap, the plans' memos
+    are shrunk to their newest quarter and freed pages given back; then plans are evicted).  One plan
+    may hold at most ``plan_share`` of the cap: its engine shrinks its memos to half of that share
+    between decisions, and a plan whose minimum working set is over it is refused at upload (413).
     ``warm_up_seconds`` is the most time the warm-up of one plan (counting its first state, once per
     plan and process, in the background) may take.
     """

@@ -10,6 +10,7 @@ engine's use between threads.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
 import os
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 from sqlalchemy import insert, select
 
 from opportune.engine import OrderEngine
+from opportune.engine.memory import memory_total, resident, trim
 from opportune.formats import CheckResult, check_text, plan_from_dict
 from opportune.formats.loader import detect_format, not_utf8
 from opportune.plan import Plan, PlanError
@@ -131,21 +133,6 @@ def list_plans(store: Store) -> list[dict]:
     return [{"id": r["id"], "name": r["name"], "format": r["format"], "created_at": iso(r["created_at"])} for r in rows]
 
 
-def memory_total() -> int:
-    """Bytes of memory of this machine (``MemTotal``; 4 GiB where it cannot be read)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemTotal:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):
-        return 4 << 30
-
-
 def _int_bytes(bits: int) -> int:
     """Bytes of a Python int of ``bits`` bits (30-bit digits)."""
     return 28 + 4 * (-(-bits // 30))
@@ -232,6 +219,10 @@ WARM_SLICE = 0.02   # seconds of warm-up work per hold of a plan's lock: a look 
 WARM_GAP = 0.005    # seconds the warm-up lets go of the lock between slices, so that a waiting look gets it
 WARM_YIELD = 1.0    # longest a warm-up waits for requests in progress before its next slice
 WARM_IDLE = 0.05    # seconds without a request before a warm-up slice starts
+#: Over its memory cap, a process keeps this share of each plan's memos (the newest entries) ...
+SHRINK_KEEP = 0.25
+#: ... and shrinks or evicts until it holds at most this share of the cap beyond its footprint at start.
+SHRINK_TO = 0.75
 MEASURE_EVERY = 0.5  # seconds between measurements of a plan in use (one decision adds a bounded number of entries)
 
 
@@ -249,7 +240,7 @@ class PlanBook:
     """
 
     def __init__(self, store: Store, size: int = 64, *, count_seconds: float | None = None,
-                 memory_cap: int | None = None, plan_share: float = 0.5):
+                 memory_cap: int | None = None, plan_share: float = 0.5, resident=resident):
         if memory_cap is not None and memory_cap <= 0:
             raise ValueError("memory_cap must be a positive number of bytes (or None: a quarter of the memory)")
         if not 0 < plan_share <= 1:
@@ -259,6 +250,9 @@ class PlanBook:
         self.count_seconds = count_seconds
         self.memory_cap = memory_cap if memory_cap is not None else memory_total() // 4
         self.plan_share = plan_share
+        self.resident = resident        # () -> this process's resident bytes (or None); tests inject one
+        self.baseline = resident() or 0     # the process's footprint before any plan: not the plans'
+        self.shrinks = 0                # times the plans' memos were shrunk for the process's memory
         self.on_evict: list = []        # callables(pid), told when a plan is evicted
         self.loads = 0                  # engines built (a reloaded, evicted plan counts again)
         self.evictions = 0
@@ -266,6 +260,7 @@ class PlanBook:
         self.last_request = float("-inf")   # time.monotonic() when the last one ended
         self._plans: OrderedDict[str, LoadedPlan] = OrderedDict()
         self._lock = threading.Lock()
+        self._evicted: list[str] = []   # evicted, not yet told to ``on_evict``
 
     @property
     def share(self) -> int:
@@ -306,7 +301,8 @@ class PlanBook:
                            where="body.plan", extra={"problems": [p.to_dict() for p in exc.problems]}) from None
         self.check_fits(plan)   # stored under a larger cap, or a joint plan of several products
         self.settle(room=min_working_set(plan))
-        loaded = LoadedPlan(pid, plan, OrderEngine(plan, time_limit=self.count_seconds), summarize(plan), row.created_at)
+        engine = OrderEngine(plan, time_limit=self.count_seconds, memory_limit=self.share)
+        loaded = LoadedPlan(pid, plan, engine, summarize(plan), row.created_at)
         with self._lock:
             hit = self._plans.setdefault(pid, loaded)
             self._plans.move_to_end(pid)
@@ -400,7 +396,8 @@ class PlanBook:
         """Between requests: measure ``used`` (if its lock is free), then evict least recently used plans
         not in use until the accounted bytes plus ``room`` fit the cap.  A plan over its own share first
         loses its per-state caches (its runs go on, nothing to rebuild), and is evicted if that is not
-        enough.  O(plans + sampled memos of the plans measured)."""
+        enough.  Then the process itself: see :meth:`hold_resident`.  O(plans + sampled memos of the
+        plans measured)."""
         now = time.monotonic()
         if used is not None and now >= used.measured + MEASURE_EVERY and used.lock.acquire(blocking=False):
             try:
@@ -408,30 +405,85 @@ class PlanBook:
                     used.measure()
             finally:
                 used.lock.release()
-        evicted = []
         with self._lock:
             total = sum(p.nbytes for p in self._plans.values()) + room
             for pid, p in list(self._plans.items()):
                 over_share = p.nbytes > self.share
                 if total <= self.memory_cap and len(self._plans) <= self.size and not over_share:
                     continue
-                if not p.lock.acquire(blocking=False):
-                    continue            # inside a decision (or a warm-up slice): next time
-                try:
-                    if over_share:      # first the per-state caches (its runs go on without a rebuild)
-                        before = p.nbytes
-                        p.engine.clear_state_caches()
-                        total += p.measure() - before
-                        if p.nbytes <= self.share and total <= self.memory_cap:
-                            continue
-                    del self._plans[pid]
-                    p.evicted = True
-                    p._stop.set()
-                finally:
-                    p.lock.release()
-                total -= p.nbytes
-                evicted.append(pid)
-            self.evictions += len(evicted)
+                # first the per-state caches (its runs go on without a rebuild)
+                before = self._try(p, p.engine.clear_state_caches) if over_share else None
+                if before is not None:
+                    total += p.nbytes - before
+                    if p.nbytes <= self.share and total <= self.memory_cap:
+                        continue
+                if self._evict(pid, p):
+                    total -= p.nbytes
+        self._tell()
+        self.hold_resident()
+
+    def hold_resident(self) -> None:
+        """Keep what this process holds beyond its footprint at start (:attr:`baseline`) within the cap.
+        The accounted bytes are sampled estimates and freed memory is not all given back, so the
+        resident memory itself is read (O(1)); over the cap, every plan not in use loses all but the
+        newest :data:`SHRINK_KEEP` of its memos (largest plans first, its runs go on) and the freed
+        pages go back to the system, until under :data:`SHRINK_TO` of the cap; if that is not enough,
+        least recently used plans are evicted too.  Never a plan whose lock is held (inside a decision)."""
+        if not self._over(1.0):
+            return
+        for p in sorted(self.loaded(), key=lambda p: -p.nbytes):
+            if self._try(p, lambda: p.engine.shrink(SHRINK_KEEP)) is not None:
+                self.shrinks += 1
+                trim()
+                if not self._over(SHRINK_TO):
+                    return
+        for p in self.loaded():
+            with self._lock:
+                gone = self._plans.get(p.id) is p and self._evict(p.id, p)
+            if gone:
+                self._tell()
+                gc.collect()        # an engine's counters hold closures over themselves: cycles
+                trim()
+                if not self._over(SHRINK_TO):
+                    return
+
+    def _over(self, share: float) -> bool:
+        rss = self.resident()
+        return rss is not None and rss - self.baseline > share * self.memory_cap
+
+    @staticmethod
+    def _try(p: LoadedPlan, work) -> int | None:
+        """Do ``work`` on a plan not in use and measure it again: its bytes before (None: its lock is
+        held, or it is evicted)."""
+        if not p.lock.acquire(blocking=False):
+            return None
+        try:
+            if p.evicted:
+                return None
+            before = p.nbytes
+            work()
+            p.measure()
+            return before
+        finally:
+            p.lock.release()
+
+    def _evict(self, pid: str, p: LoadedPlan) -> bool:
+        """Drop a plan not in use (caller holds ``_lock``); False if its lock is held."""
+        if not p.lock.acquire(blocking=False):
+            return False            # inside a decision (or a warm-up slice): next time
+        try:
+            del self._plans[pid]
+            p.evicted = True
+            p._stop.set()
+        finally:
+            p.lock.release()
+        self.evictions += 1
+        self._evicted.append(pid)
+        return True
+
+    def _tell(self) -> None:
+        with self._lock:
+            evicted, self._evicted = self._evicted, []
         for pid in evicted:
             for tell in self.on_evict:
                 tell(pid)
