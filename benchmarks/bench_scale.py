@@ -56,9 +56,10 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def server_memory(pid: int, start: float) -> str:
+def server_memory(pid: int, start: float, cap_mb: int | None = None) -> str:
     """The server's resident memory now and at its peak, against its footprint at ``start`` (MB) plus its
-    memory cap (the default: a quarter of the machine's memory, as the server computes it), as a sentence."""
+    memory cap (``cap_mb``; None: the default, a quarter of the machine's memory, as the server computes
+    it), as a sentence."""
     from opportune.engine.memory import memory_total
 
     peak = float("nan")
@@ -68,13 +69,14 @@ def server_memory(pid: int, start: float) -> str:
                 peak = int(line.split()[1]) / 1024
     except OSError:
         pass
-    cap = memory_total() // 4 / 2**20
+    cap = memory_total() // 4 / 2**20 if cap_mb is None else cap_mb
+    which = "the default: a quarter of the machine's memory" if cap_mb is None else "`serve --memory-cap`"
     now = rss_mb(pid)
     verdict = "under" if peak - start <= cap else "over"
     return (f"Server memory after every row: {now:,.0f} MB resident, {peak:,.0f} MB at its peak, {start:,.0f} MB at "
-            f"start; the peak is {verdict} the start plus the memory cap of {cap:,.0f} MB (the default: a quarter of "
-            f"the machine's memory). The cap is kept between requests on the bytes the plans' engines account and on "
-            f"the process's resident memory (memos shrunk, then the least recently used plans evicted).")
+            f"start; the peak is {verdict} the start plus the memory cap of {cap:,.0f} MB ({which}). The cap is kept "
+            f"between requests on the bytes the plans' engines account and on the process's resident memory (past "
+            f"85% of it the plans' memos are shrunk; over it, least recently used plans are evicted).")
 
 
 def make_plans(tmp: Path, names: set[str] | None) -> list[tuple[str, str]]:
@@ -255,6 +257,7 @@ def main(argv=None) -> int:
     ap.add_argument("--budget", type=float, default=0.05, help="the decision budget, if the run does not say")
     ap.add_argument("--evaluate-timeout", type=float, default=180.0, help="seconds before evaluate is killed")
     ap.add_argument("--skip", default="", help="comma-separated parts to skip: count, service, evaluate")
+    ap.add_argument("--memory-cap", type=int, help="the server's --memory-cap in MB (default: its own default)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--work", type=Path, help="where generated plans are kept (default: opportune-scale in the temp dir)")
     ap.add_argument("--out", type=Path, help="also write the Markdown table here")
@@ -271,7 +274,8 @@ def main(argv=None) -> int:
         from opportune.service.testing import Client, ServiceProcess
 
         run_dir = Path(tempfile.mkdtemp(prefix="run-", dir=tmp))
-        svc = ServiceProcess(run_dir / "scale.db", extra_args=("--no-access-log",), log=run_dir / "server.log").start(60)
+        extra = ("--no-access-log",) + (("--memory-cap", str(args.memory_cap)) if args.memory_cap else ())
+        svc = ServiceProcess(run_dir / "scale.db", extra_args=extra, log=run_dir / "server.log").start(60)
         client = Client(svc.url, svc.token(cell="scale"), timeout=600)
         rss_start = rss_mb(svc.proc.pid)
     load0 = os.getloadavg()[0]
@@ -291,7 +295,7 @@ def main(argv=None) -> int:
             print(json.dumps({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()
                               if k not in ("fresh", "late")}), file=sys.stderr, flush=True)
         if svc is not None:
-            server = server_memory(svc.proc.pid, rss_start)
+            server = server_memory(svc.proc.pid, rss_start, args.memory_cap)
     finally:
         if svc is not None:
             client.close()

@@ -241,3 +241,20 @@ def test_graph_dpi_and_part_names(tmp_path):
     dot = run("graph", GEARBOX, "--names").output
     assert "cover" in dot                          # the cover's name, under its id "co"
     assert "cover" not in run("graph", GEARBOX).output.replace("tooltip=cover", "")
+
+
+def test_replay_under_another_policy_prints_the_trace_up_to_the_look_that_does_not_fit():
+    """Table 1's looks were recorded under the paper's rule; the look-ahead decides otherwise before the
+    end, so a later look names parts no longer in the bin: the rows decided so far are printed, then
+    the look and why (exit 1); under --json the error carries the trace."""
+    looks = GEARBOX.parent / "gearbox-table1.looks"
+    r = runner.invoke(app, ["replay", str(GEARBOX), str(looks), "--policy", "lookahead"])
+    assert r.exit_code == 1, r.output
+    assert "lookahead schedule (stopped after" in r.stdout and "look " in r.stderr and "--policy paper" in r.stderr
+    rows = [line for line in r.stdout.splitlines() if line.startswith("│")]
+    assert rows, r.stdout
+    r = runner.invoke(app, ["replay", str(GEARBOX), str(looks), "--policy", "lookahead", "--json"])
+    assert r.exit_code == 1
+    doc = json.loads(r.stdout)["error"]
+    assert doc["trace"] and all("action" in row for row in doc["trace"])
+    assert len(doc["trace"]) < len([line for line in looks.read_text().splitlines() if line.strip()])

@@ -19,7 +19,8 @@ httpx = pytest.importorskip("httpx")
 pytest.importorskip("fastapi")
 
 from opportune.client import (ActionPending, AsyncCell, Cell, CellError, InvalidPlan, LookContradictsState,  # noqa: E402
-                              NoPendingAction, NotFound, ServerError, ServiceUnreachable, Unauthorized, UnknownPart)
+                              NoPendingAction, NotFound, RunComplete, ServerError, ServiceUnreachable, Unauthorized,
+                              UnknownPart)
 from opportune.service.testing import ServiceProcess, free_port  # noqa: E402
 
 
@@ -131,7 +132,9 @@ async def table1(c, plan, label):
         assert answer.decision.exact and answer.run.pending is not None
         done = await c.outcome(answer, "success")
         assert done.row.outcome == "success" and done.run.pending is None
-    assert (await c.look(run.id, [])).action.kind == "done"
+        assert (done.run.status == "complete") == (action == TABLE1[-1][3])   # complete at its last install
+    with pytest.raises(RunComplete):
+        await c.look(run.id, [])
     return run
 
 
@@ -147,7 +150,7 @@ def test_a_gearbox_run_gives_table1(svc, token, plan, kind):
                 final = await c.state(run.id)
                 assert final.status == "complete" and final.finished and final.progress.installed == 10
                 trace = await c.trace(run.id)
-                assert [f"{r.action.kind} {r.action.part}" for r in trace.rows[:-1]] == [a for *_, a in TABLE1]
+                assert [f"{r.action.kind} {r.action.part}" for r in trace.rows] == [a for *_, a in TABLE1]
             done = {r.id for r in await c.runs(status="complete")}
             assert {run.id for run in runs} <= done
             assert (await c.plan(plan.id)).plan["name"] == "gearbox"
@@ -275,3 +278,11 @@ def test_without_httpx_the_import_says_what_to_install():
     code = "import sys; sys.modules['httpx'] = None\ntry:\n import opportune.client\nexcept ImportError as e:\n print(e)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
     assert "pip install 'opportune[service]'" in out and "httpx" in out
+
+
+def test_a_path_given_as_a_string_is_read_as_a_file(cell, plan, tmp_path):
+    """``upload_plan("examples/gearbox.yaml")`` reads the file (it used to be taken for plan text: 422); a
+    one-line name of a plan file that does not exist says so, before any request."""
+    assert cell.upload_plan(str(GEARBOX)).id == plan.id
+    with pytest.raises(FileNotFoundError, match="no such plan file"):
+        cell.upload_plan(str(tmp_path / "nope.yaml"))

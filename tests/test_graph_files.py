@@ -42,6 +42,7 @@ def test_graphml_round_trip_keeps_every_strategy(plan):
     result = check_graphml_bytes(to_graphml(plan).encode(), file="p.graphml")
     assert result.ok, [str(p) for p in result.problems]
     same(plan, result.plan)
+    assert result.plan.name == plan.name
 
 
 @settings(max_examples=40, deadline=None)
@@ -60,8 +61,11 @@ def test_the_gearbox_through_every_format(tmp_path):
         assert r.exit_code == 0, r.output
         back = load_plan(out)
         assert OrderEngine(back).count(0, 1) == 336
-        if fmt != "alb":                 # .alb names tasks 1..n
-            assert back.part_ids == plan.part_ids
+        if fmt != "alb":                 # .alb names tasks 1..n, and says so
+            assert back.part_ids == plan.part_ids and back.name == plan.name
+        else:
+            assert back.part_ids == tuple(str(i) for i in range(1, 11))
+            assert "1 = ca" in r.stderr and "not kept" in r.stderr
     # two strategies: GraphML keeps both; DOT and .alb hold one, and say so
     import json
 

@@ -24,7 +24,7 @@ from conftest import GEARBOX, CpuTime
 from opportune.service.app import create_app
 from opportune.service.auth import create_token, revoke_token
 from opportune.service.config import Settings
-from opportune.service.storage import Store, dumps, now, plans
+from opportune.service.storage import Store, dumps, now, plan_owners, plans
 from opportune.service.testing import ServiceProcess, free_port
 
 
@@ -195,6 +195,7 @@ def test_a_stored_plan_over_the_limits_is_refused_at_post_runs_not_a_500(server,
     with server.store.write() as c:
         c.execute(plans.insert().values(id="f" * 64, name="old", format="json", source="{}", doc=dumps(doc),
                                         created_at=now()))
+        c.execute(plan_owners.insert().values(plan_id="f" * 64, cell="cell-h", created_at=now()))
     err = error_of(post(cell, "/runs", {"plan": "f" * 64}), 422)
     assert err["code"] == "plan_refused" and "at most 10,000" in err["message"]
     assert cell.get("/healthz").status_code == 200

@@ -251,7 +251,7 @@ def test_real_answers_match_the_document(env, spec):
     call("uploadPlan", None, content=yaml, headers={"Content-Type": "application/yaml"}, expect=401)
     call("uploadPlan", "opp_not-a-token", content=yaml, headers={"Content-Type": "application/yaml"}, expect=401)
     call("listPlans", op, expect=200)
-    call("listPlans", a, expect=403)
+    call("listPlans", a, expect=200)   # a cell: the plans it uploaded
     call("getPlan", a, plan_id=plan, expect=200)
     call("getPlan", a, plan_id="0" * 64, expect=404)
     call("listCells", a, expect=200)
@@ -279,8 +279,7 @@ def test_real_answers_match_the_document(env, spec):
         call("postLook", a, run_id=run, json={"visible": split(visible)}, expect=409)  # action_pending
         call("getTrace", a, run_id=run, expect=200)
         call("postOutcome", a, run_id=run, json={"outcome": "success"}, expect=200)
-    call("postLook", a, run_id=run, json={"visible": ["ca"]}, expect=409)  # installed already
-    assert call("postLook", a, run_id=run, json={"visible": []}, expect=200).json()["action"]["kind"] == "done"
+    call("postLook", a, run_id=run, json={"visible": ["ca"]}, expect=409)  # run_complete: cl was the last part
     call("postLook", a, run_id=run, json={"visible": []}, expect=409)  # run_complete
     call("postOutcome", a, run_id=run, json={"outcome": "success"}, expect=409)  # no_pending_action
     call("cancelAction", a, run_id=run, expect=409)
@@ -486,14 +485,12 @@ def test_a_generated_client_drives_a_gearbox_run(spec, tmp_path):
                     assert done.row.outcome == "success"
                 refused = post_look.sync(run.id, client=client, body=LookIn(visible=["ca"]),
                                          idempotency_key=uuid.uuid4().hex)
-                assert isinstance(refused, ErrorBody) and refused.error.code == "look_contradicts_state"
+                assert isinstance(refused, ErrorBody) and refused.error.code == "run_complete"
                 assert refused.error.status == 409 and refused.error.hint
-                last = post_look.sync(run.id, client=client, body=LookIn(visible=[]), idempotency_key=uuid.uuid4().hex)
-                assert last.action.kind == "done"
                 final = get_run.sync(run.id, client=client)
                 assert final.status == "complete" and final.state.installed == split(TABLE1[-1][2]) + ["cl"]
                 trace = get_trace.sync(run.id, client=client)
-                assert len(trace.rows) == len(TABLE1) + 1
+                assert len(trace.rows) == len(TABLE1)
     finally:
         sys.path.remove(str(tmp_path))
         for name in [m for m in sys.modules if m == "opportune_api" or m.startswith("opportune_api.")]:
@@ -643,9 +640,9 @@ else:
 
         for name in machine.root_rules - starts:
             setattr(Workflow, name, None)
-        # The derandomized scenarios follow the schema and this function's text: since RunIn has `products`
-        # (issue 15), more of them, so that enough reach outcomes and cancels whatever ran before
-        Workflow.run(settings=settings(derandomize=True, database=None, max_examples=70, stateful_step_count=10,
+        # The derandomized scenarios follow the schema and this function's text: enough of them that some reach
+        # outcomes and cancels whatever ran before (more as the schema grew: `products`, owners, 400 everywhere)
+        Workflow.run(settings=settings(derandomize=True, database=None, max_examples=120, stateful_step_count=10,
                                        deadline=None, suppress_health_check=list(HealthCheck)))
         fresh.store.dispose()
         # the runs were driven (dozens of runs started and looks decided, outcomes and cancels, alone or after the

@@ -84,9 +84,10 @@ def split(text):
 
 
 def library_trace(looks):
-    """The trace the library itself gives for these looks (every action succeeding)."""
+    """The trace the library itself gives for these looks (every action succeeding), without the closing
+    ``done`` row: a run of the service is complete at its last install."""
     seq = Sequencer(load_plan(GEARBOX))
-    return [row.to_dict() for row in seq.run(looks)]
+    return [row.to_dict() for row in seq.run(looks) if row.action.kind != "done"]
 
 
 def strip(row):
@@ -104,8 +105,11 @@ def drive_table1(client, run_id):
         assert body["run"]["pending"]["action_text"].startswith(action)
         r = client.post(f"/runs/{run_id}/outcomes", {"outcome": "success"})
         assert r.status_code == 200, r.text
-    r = client.post(f"/runs/{run_id}/looks", {"visible": []})
-    assert r.status_code == 200 and r.json()["action"]["kind"] == "done", r.text
+        # complete at the outcome of its last install, not before
+        assert (r.json()["run"]["status"] == "complete") == (installed.count(",") == 8), r.text
+    assert r.json()["run"]["finished"] is True
+    r = client.post(f"/runs/{run_id}/looks", {"visible": []})      # nothing more to look at
+    assert r.status_code == 409 and r.json()["error"]["code"] == "run_complete", r.text
 
 
 # ---------------------------------------------------------------- Table 1
@@ -124,10 +128,10 @@ def test_table1_over_http_gives_table1_actions(a, plan_id):
     trace = a.get(f"/runs/{run_id}/trace").json()["rows"]
     expected = library_trace(read_looks(EXAMPLES / "gearbox-table1.looks"))
     assert [strip(r) for r in trace] == expected
-    assert [r["n"] for r in trace] == list(range(1, 17))
+    assert [r["n"] for r in trace] == list(range(1, 16))
     counts = [int(r["count"]["value"]) for r in trace]  # completions left before each action: never rising
     assert counts[0] == 336 and counts[-1] == 1 and all(x >= y for x, y in zip(counts, counts[1:]))
-    # After done, looks are refused and nothing changes.
+    # Complete: looks are refused and nothing changes.
     r = a.post(f"/runs/{run_id}/looks", {"visible": []})
     assert r.status_code == 409 and r.json()["error"]["code"] == "run_complete"
     assert a.get(f"/runs/{run_id}").json()["seq"] == run["seq"]
@@ -201,6 +205,7 @@ def test_keys_are_required_and_scoped_per_cell(a, b, plan_id):
     assert a.get(f"/runs/{run_id}").json()["seq"] == 0
     # The same key in another cell is another request.
     ra = a.post("/runs", {"plan": plan_id}, key="shared-key")
+    b.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}, key=False)
     rb = b.post("/runs", {"plan": plan_id}, key="shared-key")
     assert ra.status_code == rb.status_code == 201 and ra.json()["id"] != rb.json()["id"]
 
@@ -337,9 +342,32 @@ def test_access_is_refused_without_leaking(svc, a, b, op, plan_id):
     error_of(op.post(f"/runs/{run_id}/looks", {"visible": ["ca"]}), 403)
     error_of(op.post("/runs", {"plan": plan_id}), 403)
     error_of(op.post(f"/runs/{missing}/looks", {"visible": ["ca"]}), 404)
-    error_of(a.get("/plans"), 403)
-    assert plan_id in [p["id"] for p in op.get("/plans").json()["plans"]]
+    listed = {p["id"]: p for p in op.get("/plans").json()["plans"]}
+    assert "cell-a" in listed[plan_id]["owners"]
+    assert plan_id in [p["id"] for p in a.get("/plans").json()["plans"]]
     assert a.get(f"/runs/{run_id}").json()["seq"] == 0
+
+
+def test_a_plan_belongs_to_the_cells_that_uploaded_it(svc, plan_id):
+    """Cell B neither sees nor runs cell A's plan, exactly as if it did not exist; B's upload of the same
+    plan says `created: true` (nothing about A), and from then on B runs it too; operators see both owners."""
+    c = Client(svc.url, svc.token(cell="cell-own"))
+    try:
+        assert plan_id not in [p["id"] for p in c.get("/plans").json()["plans"]]
+        theirs, nothing = c.get(f"/plans/{plan_id}"), c.get("/plans/" + "0" * 64)
+        assert theirs.status_code == nothing.status_code == 404
+        assert theirs.text.replace(plan_id, "N") == nothing.text.replace("0" * 64, "N")
+        err = error_of(c.post("/runs", {"plan": plan_id}), 422)
+        assert err["code"] == "unknown_plan"
+        r = c.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}, key=False)
+        assert r.status_code == 201 and r.json()["created"] is True and r.json()["id"] == plan_id
+        again = c.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}, key=False)
+        assert again.status_code == 200 and again.json()["created"] is False
+        assert c.get(f"/plans/{plan_id}").status_code == 200
+        assert c.post("/runs", {"plan": plan_id}).status_code == 201
+        assert [p["id"] for p in c.get("/plans").json()["plans"]] == [plan_id]
+    finally:
+        c.close()
 
 
 # ---------------------------------------------------------------- concurrency
@@ -363,6 +391,9 @@ def test_concurrent_requests_on_one_run_are_serialized(a, plan_id):
 
 def test_runs_driven_at_once_each_follow_the_library(svc, plan_id):
     cells = [Client(svc.url, svc.token(cell=f"par-{i}")) for i in range(4)]
+    for c in cells:     # each cell runs the plans it uploaded
+        assert c.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"},
+                      key=False).json()["id"] == plan_id
     try:
         runs = [new_run(c, plan_id) for c in cells]
         with ThreadPoolExecutor(4) as pool:
@@ -486,8 +517,8 @@ def test_a_revoked_token_is_refused(svc, plan_id):
 
 
 def test_the_event_stream_says_when_the_run_completes_and_ends(svc, a, plan_id):
-    """Issue 12: when a run completes (the look after its last part answers `done`), the stream sends a
-    `complete` event and ends; a stream opened on a complete run gets its snapshot and `complete` at once."""
+    """When a run completes (the outcome of its last install), the stream sends a `complete` event and
+    ends; a stream opened on a complete run gets its snapshot and `complete` at once."""
     run_id = new_run(a, plan_id)
     got: list = []
 
@@ -502,7 +533,7 @@ def test_the_event_stream_says_when_the_run_completes_and_ends(svc, a, plan_id):
     drive_table1(a, run_id)
     t.join(30)
     assert not t.is_alive()
-    assert got[-1][0] == "complete" and got[-2][0] == "look" and got[-2][2]["row"]["action"]["kind"] == "done"
+    assert got[-1][0] == "complete" and got[-2][0] == "outcome" and got[-2][2]["row"]["action"]["part"] == "cl"
     done = got[-1][2]
     assert done["run"] == run_id and done["installed"] == ["ca", "ba", "rl", "dr", "sm", "ml", "ra", "co", "st", "cl"]
     with httpx.Client(base_url=svc.url, headers=a.http.headers, timeout=10) as h:

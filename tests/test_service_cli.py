@@ -72,3 +72,17 @@ def test_token_and_serve_mistakes_are_clear(tmp_path):
         r = invoke(*args)
         assert r.exit_code == 1, (args, r.output)
         assert words in r.output and "Traceback" not in r.output, r.output
+
+
+def test_the_revoke_hint_names_the_same_database(tmp_path):
+    """The hint printed after a token is created revokes it in the database it was created in (without
+    `--db` it made a stray ./opportune.db); a URL's password is not repeated."""
+    db = tmp_path / "my tokens.db"
+    r = invoke("token", "create", "cell-1", "--db", str(db))
+    assert r.exit_code == 0, r.output
+    hint = r.stderr.strip().splitlines()[-1]
+    token_id = hint.split()[1]
+    assert f"opportune token revoke {token_id} --db '{db}'" in hint
+    r = invoke("token", "revoke", token_id, "--db", str(db))
+    assert r.exit_code == 0, r.output
+    assert not (tmp_path / "opportune.db").exists()

@@ -61,8 +61,8 @@ class Cell:
         for look in looks:
             answer = self.post(f"/runs/{run_id}/looks", {"visible": look})
             actions.append(answer["action"])
-            if answer["action"]["kind"] != "done":
-                self.post(f"/runs/{run_id}/outcomes", {"outcome": "success"})
+            if self.post(f"/runs/{run_id}/outcomes", {"outcome": "success"})["run"]["status"] == "complete":
+                break           # the last part is in: the run takes no more looks
         return actions
 
 
@@ -271,17 +271,27 @@ def test_the_servers_resident_memory_is_kept_under_its_cap_by_shrinking_then_evi
             assert decided[pid] == expected[plan.name][1]
 
 
-def test_a_reading_over_the_cap_with_every_plan_in_use_changes_nothing(tmp_path):
+def test_resident_memory_rules_locks_high_water_rearm_and_the_plan_at_work(tmp_path):
     """Plans whose locks are held (inside a decision) are neither shrunk nor evicted, however high the
-    reading: the next request between decisions does it."""
+    reading: the next request between decisions does it.  Past the high water (under the cap) the memos
+    are shrunk and nothing is evicted, and nothing is done again until the reading grows; over the cap
+    itself, least recently used plans are evicted, never the most recently used one."""
     with Cell(tmp_path, decision_budget=None) as cell:
-        pid = cell.upload(layered(20, 1))
-        cell.post("/runs", {"plan": pid}, expect=201)
         book = cell.book
-        (loaded,) = book.loaded()
-        book.resident = lambda: book.baseline + 10 * book.memory_cap
-        with loaded.lock:
+        old = cell.upload(layered(20, 1))
+        cell.post("/runs", {"plan": old}, expect=201)
+        pid = cell.upload(layered(20, 2))
+        cell.post("/runs", {"plan": pid}, expect=201)
+        first, last = book.loaded()
+        reading = [book.baseline + int(0.9 * book.memory_cap)]     # over the high water, under the cap
+        book.resident = lambda: reading[0]
+        with first.lock, last.lock:
             book.settle()
-        assert book.loaded() == [loaded] and book.shrinks == 0 and book.evictions == 0
+        assert book.shrinks == 0 and book.evictions == 0
         book.settle()
-        assert book.shrinks == 1 and book.evictions == 1 and not book.loaded()
+        assert book.shrinks == 2 and book.evictions == 0 and book.loaded() == [first, last]
+        book.settle()
+        assert book.shrinks == 2                # the reading has not grown since: nothing more to do yet
+        reading[0] = book.baseline + 10 * book.memory_cap               # over the cap itself
+        book.settle()
+        assert book.shrinks == 4 and book.evictions == 1 and book.loaded() == [last]   # never the plan at work

@@ -127,8 +127,8 @@ def test_a_replay_that_disagrees_with_the_record_is_refused(store):
     from opportune.service.storage import events
 
     result, fmt, source = check_upload(GEARBOX.read_bytes(), "application/yaml", "g.yaml", "yaml")
-    pid, _ = store_plan(store, result, fmt, source)
     create_token(store, cell="c1")
+    pid, _ = store_plan(store, result, fmt, source, "c1")
     me = Principal("t", "cell", "c1")
     m = RunManager(store, PlanBook(store))
     run = json.loads(m.create(me, {"plan": pid}, "k1", "/runs")[1])
@@ -163,8 +163,8 @@ def test_stored_answers_are_forgotten_after_their_time(store):
     from opportune.service.storage import idempotency
 
     result, fmt, source = check_upload(GEARBOX.read_bytes(), "application/yaml", "g.yaml", "yaml")
-    pid, _ = store_plan(store, result, fmt, source)
     create_token(store, cell="c1")
+    pid, _ = store_plan(store, result, fmt, source, "c1")
     me = Principal("t", "cell", "c1")
     m = RunManager(store, PlanBook(store), keep_answers=3600.0)
     first = json.loads(m.create(me, {"plan": pid}, "old", "/runs")[1])
@@ -201,9 +201,9 @@ def test_a_plan_too_large_to_count_is_refused_clearly(store):
     rng = random.Random(1)  # 30 parts each needing 3 of 30 others: far too many states to count in 0.05 s
     bottom, top = [f"b{i}" for i in range(30)], [f"t{i}" for i in range(30)]
     wide = make_plan(bottom + top, {t: rng.sample(bottom, 3) for t in top}, name="wide")
-    pid, _ = store_plan(store, CheckResult(wide, []), "json", json.dumps(wide.to_dict()))
-    me = Principal("t", "cell", "c1")
     create_token(store, cell="c1")
+    pid, _ = store_plan(store, CheckResult(wide, []), "json", json.dumps(wide.to_dict()), "c1")
+    me = Principal("t", "cell", "c1")
     m = RunManager(store, PlanBook(store, count_seconds=0.05))
     with CpuTime() as cpu, pytest.raises(ApiError) as e:
         m.create(me, {"plan": pid}, "k1", "/runs")
@@ -227,9 +227,9 @@ def test_with_a_decision_budget_a_plan_too_large_to_count_runs_on_estimates_and_
     rng = random.Random(1)
     bottom, top = [f"b{i}" for i in range(30)], [f"t{i}" for i in range(30)]
     wide = make_plan(bottom + top, {t: rng.sample(bottom, 3) for t in top}, name="wide")
-    pid, _ = store_plan(store, CheckResult(wide, []), "json", json.dumps(wide.to_dict()))
-    me = Principal("t", "cell", "c1")
     create_token(store, cell="c1")
+    pid, _ = store_plan(store, CheckResult(wide, []), "json", json.dumps(wide.to_dict()), "c1")
+    me = Principal("t", "cell", "c1")
     m = RunManager(store, PlanBook(store, count_seconds=0.05), budget=0.02, warm_up=0.05)
     run = json.loads(m.create(me, {"plan": pid}, "k1", "/runs")[1])
     estimated = 0
@@ -244,3 +244,39 @@ def test_with_a_decision_budget_a_plan_too_large_to_count_runs_on_estimates_and_
     rows = fresh.trace(me, run["id"])["rows"]
     assert [r["action"] for r in rows] == [r["action"] for r in m.trace(me, run["id"])["rows"]]
     assert any(r["reasons"]["exact"] is False and r["reasons"]["estimates"] for r in rows)   # as recorded
+
+
+def test_a_database_from_before_plan_owners_gives_each_cell_the_plans_it_ran(tmp_path):
+    """Opening a database whose plans have no owners yet: every cell owns the plans it has runs of (and
+    only those); a plan nobody ran is seen by operators only, until a cell uploads it again."""
+    from dataclasses import replace
+
+    from sqlalchemy import delete, insert, select
+
+    from opportune.formats.loader import CheckResult
+    from opportune.service.auth import Principal
+    from opportune.service.plans import check_upload, list_plans, may_see, store_plan
+    from opportune.service.storage import now, plan_owners, runs
+
+    url = f"sqlite:///{tmp_path / 'old.db'}"
+    store = Store(url)
+    for cell in ("c1", "c2"):
+        create_token(store, cell=cell)
+    result, fmt, source = check_upload(GEARBOX.read_bytes(), "application/yaml", "g.yaml", "yaml")
+    ran, _ = store_plan(store, result, fmt, source, "c1")
+    idle, _ = store_plan(store, CheckResult(replace(load_plan(GEARBOX), name="never run"), []), "json", "{}", "c1")
+    with store.write() as c:
+        c.execute(insert(runs).values(cell="c2", plan_id=ran, units=10, created_at=now(), updated_at=now()))
+        c.execute(delete(plan_owners))                  # as a database made before owners existed
+    store.dispose()
+    store = Store(url)
+    try:
+        with store.read() as c:
+            assert c.execute(select(plan_owners.c.plan_id, plan_owners.c.cell)).all() == [(ran, "c2")]
+        c1, c2, op = Principal("t1", "cell", "c1"), Principal("t2", "cell", "c2"), Principal("t3", "operator")
+        assert may_see(store, c2, ran) and not may_see(store, c1, ran) and not may_see(store, c2, idle)
+        assert may_see(store, op, idle) and [p["id"] for p in list_plans(store, c2)] == [ran]
+        assert {p["id"]: p["owners"] for p in list_plans(store, op)} == {ran: ["c2"], idle: []}
+        assert store_plan(store, result, fmt, source, "c1") == (ran, True)     # new to c1, not to the store
+    finally:
+        store.dispose()

@@ -495,8 +495,8 @@ def test_figures_are_paper_ready_and_byte_identical_for_the_same_study(tmp_path)
     import struct
     png = (a / "mean_time.png").read_bytes()
     width = struct.unpack(">I", png[16:20])[0]
-    assert width >= 2000                                      # 9 inches at 300 dpi
-    assert "5th-95th percentile" in (a / "time_distribution.svg").read_text()
+    assert width == 1050                                      # 3.5 inches (a single column) at 300 dpi
+    assert "5th and 95th percentiles" in (a / "time_distribution.svg").read_text()
 
 
 def test_paired_differences_use_the_same_bins_and_are_tighter():

@@ -68,11 +68,36 @@ def _console(stderr: bool) -> Console:
 
         from rich.console import Console
 
-        console = Console(stderr=stderr, highlight=False, soft_wrap=True)
+        class Printable(Console):
+            """Every text printed is made printable first: control characters (an ESC sequence in a file
+            name, a look or a message quoting bad input) are written as escapes, never sent raw.  Rich
+            adds its own styles after this, so colours are kept."""
+
+            def render_str(self, text, **kwargs):
+                return super().render_str(printable(text), **kwargs)
+
+        console = Printable(stderr=stderr, highlight=False, soft_wrap=True)
         if not stderr and not console.is_terminal and "COLUMNS" not in os.environ:
             console.width = 132  # piped or logged output has no width of its own: rich would squeeze tables into 80
         _consoles[key] = console
     return _consoles[key]
+
+
+_CONTROL = None
+
+
+def printable(text: str) -> str:
+    """``text`` with every control character but tab and line feed written as an escape (``\\x1b``).
+
+    >>> printable("a\\x1b[2Jb\\tc")
+    'a\\\\x1b[2Jb\\tc'
+    """
+    global _CONTROL
+    if _CONTROL is None:
+        import re
+
+        _CONTROL = re.compile("[\\x00-\\x08\\x0b-\\x1f\\x7f-\\x9f]")
+    return _CONTROL.sub(lambda m: ascii(m.group())[1:-1], text)
 
 
 def _out() -> Console:
@@ -327,7 +352,8 @@ def count(
         return
     state = f" after {' '.join(prefix)}" if prefix else ""
     if result.exact:
-        _out().print(f"{_escape(plan.name)}{state}: {decimal(result.value)} admissible sequences "
+        noun = "admissible sequence" if result.value == 1 else "admissible sequences"
+        _out().print(f"{_escape(plan.name)}{state}: {decimal(result.value)} {noun} "
                      f"(log10 {result.log10:.3f})")
     elif interval is not None and not math.isnan(result.log10) and not result.rel_error < 1:
         # a wide estimate: the interval says what is known (within bounds the order itself gives)
@@ -447,12 +473,17 @@ def replay(
     except UnknownPolicy as exc:
         fail(str(exc), 2)
     seq = Sequencer(plan, chosen, buffer_capacity=buffer_capacity, budget=decision_budget)
+    stopped = None      # the look the policy's state contradicts: the trace up to it is printed, then why
     for i, look in enumerate(looks, start=1):
         try:
             seq.step(look)
         except SequencerError as exc:
-            fail(f"{looks_file}: look {i} ({' '.join(look) or '-'}): {exc}")
-    if seq.state.is_complete and not seq.finished:
+            stopped = f"{looks_file}: look {i} ({' '.join(look) or '-'}): {exc}"
+            if chosen.name != "opportunistic":
+                stopped += ("; looks recorded under another policy fit only that policy's actions: replay them "
+                            "with it (the paper's Table 1: --policy paper)")
+            break
+    if stopped is None and seq.state.is_complete and not seq.finished:
         seq.step(())
     from opportune.formats.summary import printable_decision
 
@@ -462,9 +493,13 @@ def replay(
                for row in rows]
         for d in doc:
             d.pop("outcome", None)
+        if stopped is not None:
+            _print_error({"message": stopped, "trace": doc}, 1)
+            raise typer.Exit(1)
         print(json.dumps(doc, indent=2))
         return
-    table = Table(title=f"{plan.name}: opportunistic schedule")
+    table = Table(title=f"{plan.name}: {chosen.name} schedule" + (f" (stopped after {len(rows)} looks)"
+                                                                 if stopped else ""))
     if explain:
         table.add_column("#", justify="right")
     for col in ("Visible", "Buffered", "Installed", "Action"):
@@ -478,6 +513,8 @@ def replay(
         for i, row in enumerate(rows, start=1):
             _out().print(f"{i:>2}. " + _escape(printable_decision(row.decision).explain()).replace("\n", "\n   "),
                          crop=False)
+    if stopped is not None:
+        fail(stopped)
     if seq.state.is_complete:
         _out().print(f"complete: {','.join(seq.state.installed)}")
     else:
@@ -513,6 +550,23 @@ def _recorded_study(path: Path, as_json: bool) -> tuple[dict, Plan]:
 OPTIMAL_DEFAULT_UNITS = 14  # above this, the optimum is only attempted when asked for
 
 
+def _check_report_path(path: Path, products: Optional[int], out_dir: Optional[Path], as_json: bool) -> None:
+    """Exit with what to do when ``simulate --report PATH`` could not be written (before the study runs);
+    a report inside ``--out DIR`` is fine, that directory is made before the report is written."""
+    from opportune.report_html import REPORT_SUFFIXES
+
+    if products is not None:
+        fail("--report is the paper's comparison of strategies on one plan; it is not made for --products: "
+             "leave out one of them", 2, as_json=as_json)
+    if path.is_dir():
+        fail(f"--report {path} is a directory: give a file name, such as {path / 'report.html'}", 2, as_json=as_json)
+    if path.suffix.lower() not in REPORT_SUFFIXES:
+        fail(f"--report {path}: the report is one HTML page; give a file name ending in .html", 2, as_json=as_json)
+    if not path.parent.is_dir() and not (out_dir is not None and path.parent.resolve() == out_dir.resolve()):
+        fail(f"--report {path}: the directory {path.parent} does not exist: create it, or give another path", 2,
+             as_json=as_json)
+
+
 @app.command()
 def simulate(
     ctx: typer.Context,
@@ -531,6 +585,10 @@ def simulate(
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)"),
     dask: Optional[str] = typer.Option(None, "--dask", help="Address of a Dask distributed scheduler"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Write results.json, trials.csv and plots here"),
+    report_file: Optional[Path] = typer.Option(
+        None, "--report", show_default=False,
+        help="Also write the comparison on one self-contained HTML page (setup, table, figures, notes) to this "
+             "file, e.g. report.html"),
     as_json: bool = json_option("Print the results as JSON (errors too)"),
     training_runs: int = typer.Option(200, "--training-runs", min=1, help="Training runs of the quantify strategy"),
     optimal_states: int = typer.Option(500_000, "--optimal-states", min=1, help="State limit of the optimum"),
@@ -555,6 +613,8 @@ def simulate(
              "paper,lookahead)"),
 ):
     """Run the paper's comparison by simulation: every strategy, a bin model, Monte Carlo trials."""
+    if report_file is not None:   # checked before any work: a study of minutes must not end in "cannot write"
+        _check_report_path(report_file, products, out_dir, as_json)
     if products is not None:   # several products at once (issue 15): its own study, below
         return _simulate_products(ctx, plan_file, products, strategies=strategies, trials=trials, seed=seed,
                                   bin_model=bin_model, visible=visible, buffer_capacity=buffer_capacity,
@@ -650,6 +710,13 @@ def simulate(
             written = write_outputs(result, out_dir)
         except OSError as exc:
             fail(f"cannot write to {out_dir}: {exc.strerror or exc}")
+    if report_file:
+        from opportune.report_html import write_report
+
+        try:
+            write_report(result, report_file, doc)
+        except OSError as exc:
+            fail(f"cannot write the report to {report_file}: {exc.strerror or exc}")
     if as_json:
         print(json.dumps(doc, indent=2))
     else:
@@ -678,6 +745,8 @@ def simulate(
                          f"{'its' if len(budgeted) == 1 else 'their'} numbers depend on this machine's speed")
         if out_dir:
             _out().print(f"wrote {', '.join(str(p) for p in written)}")
+        if report_file:
+            _out().print(f"wrote the report: {report_file}")
     if result.interrupted:
         _err().print("interrupted: the table shows the trials that finished")
         raise typer.Exit(130)
@@ -929,6 +998,12 @@ def convert(
         text = writers[fmt]()
     except ValueError as exc:
         fail(str(exc))
+    if fmt == "alb":        # what the format cannot hold is said, not silently dropped
+        shown = ", ".join(f"{i} = {p}" for i, p in enumerate(plan.part_ids[:4], 1))
+        more = ", ..." if len(plan.parts) > 4 else ""
+        _err().print(_escape(f"note: an .alb file numbers its tasks: the parts are 1 to {len(plan.parts)} in their "
+                             f"order in the plan ({shown}{more}); the plan's name and the parts' names are not "
+                             "kept"))
     if str(output) == "-":
         sys.stdout.write(text)
         return
@@ -936,7 +1011,7 @@ def convert(
         output.write_text(text, encoding="utf-8")
     except OSError as exc:
         fail(f"cannot write {output}: {exc.strerror or exc}")
-    _out().print(f"wrote {output}")
+    _out().print(f"wrote {_escape(str(output))}")
 
 @app.command()
 def schema():

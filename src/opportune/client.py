@@ -44,6 +44,7 @@ import time
 import uuid
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Generic, Literal, ParamSpec, TypeVar, overload
 
 try:
@@ -55,6 +56,9 @@ try:
 except ImportError as exc:  # pragma: no cover - depends on the installation
     raise ImportError(f"opportune.client needs httpx and pydantic ({exc.name} is missing): "
                       "pip install 'opportune[service]'", name=exc.name) from None
+
+#: Suffixes of plan files: a one-line ``str`` ending in one is taken for a path by ``upload_plan``.
+PLAN_SUFFIXES = (".yaml", ".yml", ".json", ".in2", ".alb", ".graphml", ".dot", ".gv")
 
 __all__ = [
     "Cell", "AsyncCell", "CellError", "BadRequest", "Unauthorized", "Forbidden", "NotFound", "Conflict", "LookContradictsState",
@@ -122,7 +126,8 @@ class ActionPending(Conflict):
 
 
 class RunComplete(Conflict):
-    """409 ``run_complete``: the assembly is done."""
+    """409 ``run_complete``: the run's last part is installed (it is complete at the outcome of its last
+    install: no look follows; the next assembly is a new run)."""
 
 
 class NoPendingAction(Conflict):
@@ -352,13 +357,21 @@ class _Client:
                     filename: str | None = None) -> _Call[PlanUploaded]:
         """Upload a plan, validated as ``opportune check`` does; its ``id`` starts runs.
 
-        ``plan`` is a file (a path), the file's text (``str`` or ``bytes``: YAML, JSON or SALBP .IN2,
-        detected, or ``format``), or a plan in the JSON file schema (a ``dict``).  An invalid plan
-        raises :class:`InvalidPlan`, whose ``problems`` say what and where.
+        ``plan`` is a file (a path, or a one-line ``str`` naming an existing file), the file's text
+        (``str`` or ``bytes``: YAML, JSON or SALBP .IN2, detected, or ``format``), or a plan in the JSON
+        file schema (a ``dict``).  An invalid plan raises :class:`InvalidPlan`, whose ``problems`` say
+        what and where; a one-line ``str`` ending in a plan file's suffix that names no file raises
+        ``FileNotFoundError``.
         """
         if isinstance(plan, dict):
             body: dict[str, Any] = {"json": plan}
         else:
+            if isinstance(plan, str) and "\n" not in plan and len(plan) < 4096:
+                if os.path.isfile(plan):
+                    plan = Path(plan)
+                elif plan.strip().lower().endswith(PLAN_SUFFIXES):
+                    raise FileNotFoundError(f"no such plan file: {plan!r} (pass a plan's text, or the path of an "
+                                            "existing file)")
             if isinstance(plan, os.PathLike):
                 filename = filename or os.path.basename(os.fspath(plan))
                 with open(plan, "rb") as f:

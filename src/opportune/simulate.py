@@ -184,12 +184,14 @@ class Prepared:
     optimal_states: int = 0
     optimal_seconds: float = 0.0
     quantify_rank: dict | None = None
+    seconds: float = 0.0   # wall seconds prepare() took (part of the study's wall_seconds)
 
 
 def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
     """Compute once, in the parent, what every worker needs (optimum, training statistics)."""
     from opportune.policies.fixed import Quantify, planned_sequence
 
+    began = _time.perf_counter()
     engine = engine or OrderEngine(config.plan)
     prepared = Prepared(sequence=planned_sequence(engine))
     counting = [s for s in config.strategies if s in COUNTING_STRATEGIES]
@@ -232,6 +234,7 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
     if "quantify" in config.strategies:
         q = Quantify.train(engine, _world(config, prepared), runs=config.training_runs, seed=config.seed)
         prepared.quantify_rank = q.mean_rank
+    prepared.seconds = _time.perf_counter() - began
     return prepared
 
 
@@ -547,11 +550,25 @@ def chunks(trials: int, size: int) -> list[tuple[int, int]]:
 
 @dataclass
 class StudyResult:
+    """A study's trials per strategy, and what the study cost.
+
+    ``cpu_seconds[strategy]``: CPU seconds of that strategy's trials summed over every worker that ran
+    them (the same measure on 1 worker or 20); ``wall_seconds``: elapsed seconds of the whole study,
+    preparation (the optimum, quantify's training) and trials together.
+    """
+
     config: StudyConfig
     prepared: Prepared
     trials: dict[str, list[TrialResult]]
-    seconds: dict[str, float]
+    cpu_seconds: dict[str, float]
     interrupted: bool = False
+    wall_seconds: float = 0.0
+    workers: int | None = 1   # local worker processes (None: on a Dask cluster)
+
+    @property
+    def seconds(self) -> dict[str, float]:
+        """The CPU seconds per strategy (:attr:`cpu_seconds`), under the name earlier versions used."""
+        return self.cpu_seconds
 
     def to_frame(self):
         """The trials as a pandas DataFrame, one row per trial of each strategy (the rows of ``trials.csv``).
@@ -588,11 +605,15 @@ def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: 
     the result holds the trials that finished, with ``interrupted`` set.
     """
     config.validate()
+    began = _time.perf_counter()
     # The engine the trials use here and in forked workers (run_chunk finds it in the cache): what
     # prepare() counts with it, they need not count again.
     engine_key = (hash_config(config), "engine")
     engine = _WORKER_CACHE.get(engine_key) or _WORKER_CACHE.setdefault(engine_key, OrderEngine(config.plan))
-    prepared = prepared or prepare(config, engine)
+    if prepared is None:
+        prepared = prepare(config, engine)
+    else:
+        began -= prepared.seconds   # prepared beforehand (the command line does): still part of the study
     workers = workers if workers is not None else _default_workers()
     # about four chunks per worker, so that the last ones end together (but not so small that handing them
     # out costs more than they take)
@@ -601,25 +622,20 @@ def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: 
     seconds: dict[str, float] = {}
     interrupted = False
     jobs = [(s, a, b) for s in config.strategies for a, b in chunks(config.trials, size)]
-    started: dict[str, float] = {}
     try:
         if dask_address:
-            _run_dask(dask_address, config, prepared, jobs, results, seconds, started, progress)
+            _run_dask(dask_address, config, prepared, jobs, results, seconds, progress)
         elif workers <= 1:
             for s, a, b in jobs:
-                started.setdefault(s, _time.perf_counter())
-                rows = run_chunk(config, prepared, s, a, b)
-                results[s].extend(TrialResult(*r) for r in rows)
-                seconds[s] = _time.perf_counter() - started[s]
-                if progress:
-                    progress(s, len(rows))
+                _collect(s, timed_chunk(config, prepared, s, a, b), results, seconds, progress)
         else:
-            _run_processes(workers, config, prepared, jobs, results, seconds, started, progress)
+            _run_processes(workers, config, prepared, jobs, results, seconds, progress)
     except KeyboardInterrupt:
         interrupted = True
     for s in results:
         results[s].sort(key=lambda r: r.trial)
-    return StudyResult(config, prepared, results, seconds, interrupted)
+    return StudyResult(config, prepared, results, seconds, interrupted,
+                       wall_seconds=_time.perf_counter() - began, workers=None if dask_address else max(1, workers))
 
 
 def _default_workers() -> int:
@@ -628,9 +644,18 @@ def _default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
 
 
-def _collect(s, rows, results, seconds, started, progress):
+def timed_chunk(config: StudyConfig, prepared: Prepared, strategy: str, start: int, stop: int) -> tuple[list, float]:
+    """:func:`run_chunk` and the CPU seconds it took in the thread that ran it (a Dask worker's
+    other threads and this process's other work are not counted)."""
+    cpu = _time.thread_time()
+    rows = run_chunk(config, prepared, strategy, start, stop)
+    return rows, _time.thread_time() - cpu
+
+
+def _collect(s, timed, results, seconds, progress):
+    rows, cpu = timed
     results[s].extend(TrialResult(*r) for r in rows)
-    seconds[s] = _time.perf_counter() - started[s]
+    seconds[s] = seconds.get(s, 0.0) + cpu   # summed over chunks, whichever worker ran them
     if progress:
         progress(s, len(rows))
 
@@ -638,12 +663,12 @@ def _collect(s, rows, results, seconds, started, progress):
 _FORKED_STUDY = None
 
 
-def _run_forked_chunk(strategy: str, start: int, stop: int) -> list[tuple]:
+def _run_forked_chunk(strategy: str, start: int, stop: int) -> tuple[list, float]:
     config, prepared = _FORKED_STUDY
-    return run_chunk(config, prepared, strategy, start, stop)
+    return timed_chunk(config, prepared, strategy, start, stop)
 
 
-def _run_processes(workers, config, prepared, jobs, results, seconds, started, progress):
+def _run_processes(workers, config, prepared, jobs, results, seconds, progress):
     """The chunks on a pool of ``workers`` processes, each handed out as a worker frees up.
 
     No chunk runs here before the pool starts: each worker's caches warm up on its own first
@@ -663,15 +688,13 @@ def _run_processes(workers, config, prepared, jobs, results, seconds, started, p
             if ctx is not None:
                 fut = pool.submit(_run_forked_chunk, s, a, b)
             else:
-                fut = pool.submit(run_chunk, config, prepared, s, a, b)
+                fut = pool.submit(timed_chunk, config, prepared, s, a, b)
             pending[fut] = s
-        for s, _, _ in jobs:
-            started.setdefault(s, _time.perf_counter())
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
                 s = pending.pop(fut)
-                _collect(s, fut.result(), results, seconds, started, progress)
+                _collect(s, fut.result(), results, seconds, progress)
     except KeyboardInterrupt:
         for fut in list(pending):
             fut.cancel()
@@ -680,7 +703,7 @@ def _run_processes(workers, config, prepared, jobs, results, seconds, started, p
     pool.shutdown()
 
 
-def _run_dask(address, config, prepared, jobs, results, seconds, started, progress):
+def _run_dask(address, config, prepared, jobs, results, seconds, progress):
     try:
         from distributed import Client, as_completed
     except ImportError:
@@ -695,10 +718,9 @@ def _run_dask(address, config, prepared, jobs, results, seconds, started, progre
         prep = client.scatter(prepared, broadcast=True)
         futures = {}
         for s, a, b in jobs:
-            futures[client.submit(run_chunk, cfg, prep, s, a, b, pure=False)] = s
-            started.setdefault(s, _time.perf_counter())
+            futures[client.submit(timed_chunk, cfg, prep, s, a, b, pure=False)] = s
         for fut in as_completed(list(futures)):
-            _collect(futures[fut], fut.result(), results, seconds, started, progress)
+            _collect(futures[fut], fut.result(), results, seconds, progress)
     finally:
         if own:
             client.close()

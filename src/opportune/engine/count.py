@@ -470,10 +470,11 @@ class Counter:
             if self._g is not None:
                 self._g = self._make_vectors()
 
-    def shrink(self, keep: float = 0.0) -> None:
+    def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> None:
         """Between calls: drop all but the newest ``keep`` share (0 to 1) of the memo's entries, vectors
         first, and restart the compiled memo (tail memos included) unless ``keep`` is 1.  What an engine
-        over its memory limit does.  O(entries dropped).
+        over its memory limit does.  Past ``deadline``, :class:`BudgetExceeded` (what is left is
+        valid).  O(entries dropped).
 
         >>> c = Counter(Poset.antichain(4), native=False); _ = c.count(0b0111), c.count(0b1110)
         >>> c.shrink(0.0); c.memo_size, c.count(0b0111)
@@ -481,10 +482,10 @@ class Counter:
         """
         if not 0 <= keep <= 1:
             raise ValueError("keep is a share, from 0 to 1")
-        self._evict(int(keep * (len(self._memo) + len(self._vec))), _INF)
-        self._shares.clear()
         if self._native is not None and keep < 1:
             self._native.reset()
+        self._shares.clear()
+        self._evict(int(keep * (len(self._memo) + len(self._vec))), as_deadline(deadline).at)
 
     def _evict(self, keep: int, deadline: float) -> None:
         """Drop the oldest entries (insertion order) until at most ``keep`` remain in all.

@@ -106,11 +106,14 @@ class TailCounter:
         if core is not None:
             core.tails_drop(self._handle)
 
-    def shrink(self, keep: float = 0.0) -> None:
-        """Drop all but the newest ``keep`` share (0 to 1) of the memo (insertion order). O(entries dropped)."""
-        memo = self._memo
-        for key in list(islice(memo, len(memo) - int(keep * len(memo)))):
+    def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> None:
+        """Drop all but the newest ``keep`` share (0 to 1) of the memo (insertion order); past ``deadline``
+        (read every 4,096 entries), :class:`BudgetExceeded`, the rest kept.  O(entries dropped)."""
+        memo, until = self._memo, as_deadline(deadline)
+        for i, key in enumerate(list(islice(memo, len(memo) - int(keep * len(memo))))):
             del memo[key]
+            if not i & 4095 and until.expired():
+                raise BudgetExceeded("shrinking a tail memo passed its deadline", reason="time")
 
     def tail(self, s: int, *, deadline: Deadline | float | None = None) -> list[int]:
         if not s & self.marks:
@@ -563,12 +566,12 @@ class HubPath:
             total += nbytes(tails._memo) + nbytes(getattr(tails._binom, "_rows", {}))
         return total
 
-    def shrink(self, keep: float = 0.0) -> None:
+    def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> None:
         """Between calls: keep the newest ``keep`` share of its counter's memo and of every tail memo
-        (the compiled ones restart).  O(entries dropped)."""
-        self.counter.shrink(keep)
+        (the compiled ones restart); past ``deadline``, :class:`BudgetExceeded`.  O(entries dropped)."""
+        self.counter.shrink(keep, deadline)
         for tails in list(self.tails.values()):
-            tails.shrink(keep)
+            tails.shrink(keep, deadline)
 
     # ------------------------------------------------------------ public
     def applies(self, s: int) -> bool:

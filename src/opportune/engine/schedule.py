@@ -51,6 +51,8 @@ DEFAULT_MEMORY = memory_total() // 4
 MEASURE_EVERY = 0.5
 #: Memos over ``memory_limit`` are shrunk to this share of it (room for hours before the next shrink).
 SHRINK_TO = 0.5
+#: Most seconds one :meth:`OrderEngine.maintain` spends shrinking (the rest waits for the next one).
+SHRINK_SECONDS = 0.02
 HUB_PROBE = 100_000  # new memo entries a plain count may add before counting through a hub is tried
 COUNT_MARGIN = 0.25  # seconds Schedule.count_result may take past its deadline (checks' granularity, the answer)
 ESTIMATE_RESERVE = 3e-5  # seconds per element an estimate needs for its bounds and first path (~0.25 s for 10,000)
@@ -569,27 +571,35 @@ class OrderEngine:
         self._measured = (now, used)
         if used <= limit:
             return False
-        self._drop(SHRINK_TO * limit / used)
+        self._drop(SHRINK_TO * limit / used, Deadline.after(SHRINK_SECONDS))
         self.shrunk += 1
         self._measured = (now, self.nbytes())
         return True
 
-    def shrink(self, keep: float = 0.0) -> None:
+    def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> bool:
         """Drop all but the newest ``keep`` share of every memo and clear the per-state caches, now
         (between decisions): what a service does when the whole process is over its memory cap.
-        Later questions are counted again.  O(entries dropped)."""
+        Later questions are counted again.  Stops at ``deadline`` (what is left is valid; the next
+        call goes on); True if it finished.  O(entries dropped)."""
         with self._upkeep_lock:
-            if not self._deciding:
-                self._drop(keep)
-                self._measured = (float("-inf"), 0)
+            if self._deciding:
+                return False
+            self._measured = (float("-inf"), 0)
+            return self._drop(keep, as_deadline(deadline))
 
-    def _drop(self, keep: float) -> None:
+    def _drop(self, keep: float, deadline: Deadline) -> bool:
+        """Shrink every memo to its newest ``keep`` share, within ``deadline``: dropping a million entries
+        takes a large share of a second, and a plan's other runs wait meanwhile.  True if all done."""
         self.clear_state_caches()
-        for c in self._all_counters():
-            c.shrink(keep)
-        for hub in list(self._hubs.values()) + list(self._hub_search.values()):
-            if hub is not None:
-                hub.shrink(keep)
+        try:
+            for c in self._all_counters():
+                c.shrink(keep, deadline)
+            for hub in list(self._hubs.values()) + list(self._hub_search.values()):
+                if hub is not None:
+                    hub.shrink(keep, deadline)
+        except BudgetExceeded:
+            return False
+        return True
 
     def warm_up(self, time_limit: float | None = None) -> bool:
         """Build what every decision uses (:meth:`prepare`), then count the first state exactly, within

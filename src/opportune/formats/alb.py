@@ -25,7 +25,8 @@ comma by the original data set; both ``,`` and ``.`` are read.
 
 Reading tolerates blank lines, CRLF/CR ends, a UTF-8 byte-order mark, sections
 in any order and unknown sections (a warning; their lines are skipped: the ALB
-variants add e.g. ``<number of stations>``).  Text after ``<end>`` is ignored;
+variants add e.g. ``<number of stations>``).  Text after ``<end>`` is not read (a warning; a
+second graph there is an error);
 a file without ``<end>`` is refused as truncated.  As with ``.IN2`` files,
 parts are named by task number and task times become per-part ``install``
 costs; every problem is reported with its file and line, never as a traceback.
@@ -102,6 +103,8 @@ def parse_alb(raw: bytes, file: str | None = None) -> tuple[Alb | None, list[Pro
         out.add("the file ends without `<end>`: it is probably truncated",
                 "check that the whole file was copied; a complete .alb file ends with a line `<end>`",
                 last_line, code="truncated")
+    if end_line is not None:
+        _after_end(lines, end_line, out)
     where_end = end_line or last_line
     n = _task_count(sections.get("number of tasks"), out)
     cycle_time = _cycle_time(sections.get("cycle time"), out)
@@ -139,6 +142,24 @@ def check_alb_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     if checked.plan is not None and content.order_strength is not None:
         problems += _strength_mismatch(content, file)
     return CheckResult(checked.plan, _in_file_order(problems))
+
+
+def _after_end(lines: list[str], end_line: int, out: Findings) -> None:
+    """Text after ``<end>``: a second graph is an error (one graph per file), anything else a warning
+    (it is not read).  O(lines after it)."""
+    rest = [(no, s.strip()) for no, s in enumerate(lines[end_line:], end_line + 1) if s.strip()]
+    if not rest:
+        return
+    no, first = rest[0]
+    header = next(((n, t) for n, t in rest if " ".join(t.lower().split()) == "<number of tasks>"), None)
+    if header is not None:
+        out.add(f"a second graph starts at line {header[0]}, after `<end>` at line {end_line}",
+                "an .alb file holds one graph: put each graph in a file of its own", header[0],
+                code="second-graph")
+    else:
+        out.add(f"{len(rest):,} line{'s' if len(rest) > 1 else ''} after `<end>` (from {_show(first)}) "
+                f"{'are' if len(rest) > 1 else 'is'} not read", "remove them, or move the values they hold above `<end>`", no,
+                code="after-end", severity="warning")
 
 
 @dataclass

@@ -30,7 +30,7 @@ from collections import deque
 from xml.parsers import expat
 from xml.sax.saxutils import escape, quoteattr
 
-from opportune.formats.graphs import MAX_PAIRS, MAX_TASKS
+from opportune.formats.graphs import MAX_PAIRS, MAX_TASKS, file_stem
 from opportune.formats.loader import MAX_DEPTH, CheckResult, Document
 from opportune.formats.problems import Problem
 from opportune.formats.validate import MAX_TEXT
@@ -129,6 +129,11 @@ def _given(part, key: str):
 
 # ---------------------------------------------------------------- GraphML
 
+#: The encodings a GraphML file may declare: those expat reads itself (any other name would be handed to
+#: Python's codecs, which include rot13, base64 and zlib).
+_XML_ENCODINGS = frozenset({"utf-8", "utf8", "us-ascii", "ascii", "iso-8859-1", "latin-1", "latin1", "utf-16"})
+_XML_ENCODING = re.compile(rb'^(?:\xef\xbb\xbf)?<\?xml[^>]*?\bencoding\s*=\s*["\']([A-Za-z0-9._-]{1,64})["\']')
+
 def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     """Read a GraphML file as a plan (one strategy per ``<graph>``), checked like any plan."""
     keys: dict[str, str] = {}          # key id -> attribute name
@@ -168,6 +173,7 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     elements = 0
     node_ids: list = []          # the ids of the open <node> elements (a node may hold a graph of nodes)
     data_key: list = [None]      # the key of the node's <data> being read
+    plan_name: list = [""]       # a <data> of the <graphml> element keyed "name": the plan's name
 
     def start(tag, attrs):
         nonlocal elements
@@ -217,7 +223,7 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
             graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
         elif tag == "data":
             text.clear()
-            collecting[:] = [len(stack) > 1 and stack[-2] == "node"]
+            collecting[:] = [len(stack) > 1 and stack[-2] in ("node", "graphml")]
             if collecting[0]:
                 data_key[0] = attrs.get("key", "")
                 parser.CharacterDataHandler = characters
@@ -239,6 +245,8 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                 nodes[pid]["name"] = value
             elif key in _NUMERIC:
                 nodes[pid][key] = _number(value, f"node {pid}'s {key}", line)
+        elif stack and stack[-1] == "graphml" and keys.get(data_key[0], data_key[0]) == "name":
+            plan_name[0] = "".join(text).strip()    # the plan's name (as convert writes it)
 
     kept = [0]  # characters of the <data> being read
 
@@ -255,10 +263,21 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     parser.buffer_text = True  # one call per run of text, not one per line of it
     parser.StartDoctypeDeclHandler = refuse_dtd
     parser.EntityDeclHandler = refuse_dtd
+    declared = _XML_ENCODING.match(raw[:200])
+    if declared and declared.group(1).decode("ascii").lower().replace("_", "-") not in _XML_ENCODINGS:
+        name = declared.group(1).decode("ascii")[:40]
+        return CheckResult(None, [Problem(f"the XML declaration names the encoding {name!r}; GraphML files are read "
+                                          "in UTF-8 (or US-ASCII, ISO-8859-1, UTF-16)",
+                                          'write the file as UTF-8 (encoding="UTF-8")', file=file, line=1,
+                                          code="syntax")])
     try:
         parser.Parse(raw, True)
     except _Bad as exc:
         return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code=exc.code)])
+    except (LookupError, ValueError, UnicodeError) as exc:    # an encoding the codecs refuse midway
+        return CheckResult(None, [Problem(f"the file cannot be decoded: {ascii(str(exc))[1:-1][:200]}",
+                                          'write the file as UTF-8 (encoding="UTF-8")', file=file,
+                                          line=parser.CurrentLineNumber, code="syntax")])
     except expat.ExpatError as exc:
         return CheckResult(None, [Problem(f"XML syntax error: {expat.ErrorString(exc.code)}",
                                           "fix the XML at this line", file=file, line=exc.lineno, code="syntax")])
@@ -271,7 +290,7 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                 if pid not in nodes:
                     nodes[pid] = {}
                     node_lines[pid] = line
-    name = file.rsplit("/", 1)[-1].rsplit(".", 1)[0] if file else "graphml"
+    name = plan_name[0] or (file_stem(file) if file else "graphml")
     return _build(name, "GraphML precedence graph", nodes, node_lines, graphs, file)
 
 
@@ -282,7 +301,9 @@ def to_graphml(plan) -> str:
            '  <key id="name" for="node" attr.name="name" attr.type="string"/>',
            '  <key id="quantity" for="node" attr.name="quantity" attr.type="int"/>',
            '  <key id="install" for="node" attr.name="install" attr.type="double"/>',
-           '  <key id="acquire" for="node" attr.name="acquire" attr.type="double"/>']
+           '  <key id="acquire" for="node" attr.name="acquire" attr.type="double"/>',
+           '  <key id="plan" for="graphml" attr.name="name" attr.type="string"/>',
+           f'  <data key="plan">{escape(plan.name)}</data>']
     for k, strategy in enumerate(plan.strategies):
         out.append(f"  <graph id={quoteattr(strategy.name)} edgedefault=\"directed\">")
         for part in plan.parts:
@@ -489,7 +510,7 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         if head[1] != "digraph":
             raise _Bad(f"expected 'digraph' but found {head[1]!r}", "a DOT precedence graph starts with 'digraph'",
                        head[2])
-        name = take("id")[1] if peek()[0] == "id" else (file.rsplit("/", 1)[-1].rsplit(".", 1)[0] if file else "dot")
+        name = take("id")[1] if peek()[0] == "id" else (file_stem(file) if file else "dot")
         take(value="{")
         statements(0)
         take(value="}")

@@ -144,6 +144,19 @@ def in_file_order(problems: list[Problem]) -> list[Problem]:
     return sorted(problems, key=lambda p: (p.severity != "error", p.line or 0))
 
 
+def file_stem(file: str) -> str:
+    """A plan's default name from its file's label: the file name without its suffix, and a shipped file
+    named ``salbp:TONGE70`` or ``example:gearbox`` by its own name (``TONGE70``).
+
+    >>> file_stem("/data/TONGE70.IN2"), file_stem("salbp:TONGE70"), file_stem("graph")
+    ('TONGE70', 'TONGE70', 'graph')
+    """
+    tail = file.replace("\\", "/").rsplit("/", 1)[-1]
+    if tail.lower().startswith(("salbp:", "example:")):
+        return tail.split(":", 1)[1]
+    return tail.rsplit(".", 1)[0] if "." in tail.lstrip(".") else tail
+
+
 def check_graph(
     durations: Sequence[int | float],
     pairs: Sequence[tuple[int, int]],
@@ -169,7 +182,7 @@ def check_graph(
     for a, b in pairs:
         requires.setdefault(str(b), []).append(str(a))
     data = {
-        "name": Path(file).stem if file else default_name,
+        "name": file_stem(file) if file else default_name,
         "source": f"{source} {Path(file).name if file else ''}".strip(),
         "parts": [{"id": str(i + 1), "install": d} for i, d in enumerate(durations)],
         "requires": requires,

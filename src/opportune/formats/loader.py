@@ -125,10 +125,12 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
     (:mod:`opportune.datasets`), and ``-`` standard input.  ``allow_cycles`` keeps the cyclic
     strategies of a YAML or JSON plan instead of refusing it (for ``opportune relax`` only).
     """
+    shipped = None      # a shipped file is named by its short name in messages, not its installed path
     if str(path).lower().startswith(("salbp:", "example:")):
         from opportune import datasets
 
         try:
+            shipped = str(path)
             path = datasets.resolve(path)
         except KeyError as exc:
             example = "salbp:KILBRID" if str(path).lower().startswith("salbp:") else "example:gearbox"
@@ -136,7 +138,7 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
                                               code="io")])
     stdin = str(path) == "-"
     path = Path("<stdin>") if stdin else Path(path)
-    name = str(path)
+    name = shipped or str(path)
     try:
         if stdin:       # `-`: the plan on standard input (YAML or JSON by its content, .IN2 or .alb by its shape)
             import sys

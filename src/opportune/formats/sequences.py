@@ -42,6 +42,8 @@ MAX_SEQUENCE_LINE_CHARS = 1_000_000  # characters of one line (10,000 installati
 # What str.splitlines splits on: counted before any line is built.
 _LINE_BREAKS = ("\n", "\r", "\x0b", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029")
 _SURROGATE = re.compile("[\ud800-\udfff]")
+#: Control characters no part id may hold (as plans refuse them): C0, DEL and C1.
+_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f]")
 _SPLIT = re.compile(r"[\s,]+")
 
 
@@ -99,6 +101,11 @@ def _check_line(tokens: tuple[str, ...], no: int, file: str | None, reference: M
     for t in tokens:
         if _SURROGATE.search(t):
             raise SequenceError(Problem(f"{where}{_shown(t)} is not valid Unicode text", "write part ids as text",
+                                        file=file, line=line, code="text"))
+        control = _CONTROL.search(t)
+        if control:
+            raise SequenceError(Problem(f"{where}{_shown(t)} contains the control character "
+                                        f"U+{ord(control.group()):04X}", "write part ids as printable text",
                                         file=file, line=line, code="text"))
     counts = Multiset(tokens)
     if len(counts) > MAX_PARTS:

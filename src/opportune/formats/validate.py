@@ -29,7 +29,10 @@ DEFAULT_STRATEGY = "default"
 # A file can hold a problem on every line: past this many of one kind, one problem sums up the rest.
 MAX_PER_KIND = 100
 MAX_TEXT = 100_000  # characters of one string (an id, a name, a description)
-_SURROGATE = re.compile("[\ud800-\udfff]")
+#: Characters no text of a plan may hold: lone UTF-16 surrogates (not Unicode text), C0 controls but tab,
+#: line feed and carriage return, DEL and C1 controls (an ESC sequence in a part id would reach the
+#: terminal of everyone who checks the plan; U+0000 cannot be stored in PostgreSQL).
+_BAD_CHAR = re.compile("[\ud800-\udfff\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
 
 
 @lru_cache(maxsize=1)
@@ -140,17 +143,17 @@ def _clean_values(data: Any) -> bool:
         kind = type(value)
         if kind is dict:
             keys = [k for k in value if type(k) is str]
-            if keys and (max(map(len, keys)) > MAX_TEXT or _SURROGATE.search("".join(keys))):
+            if keys and (max(map(len, keys)) > MAX_TEXT or _BAD_CHAR.search("".join(keys))):
                 return False
             stack.extend(value.values())
         elif kind is list or kind is tuple:
             texts = [v for v in value if type(v) is str]
-            if texts and (max(map(len, texts)) > MAX_TEXT or _SURROGATE.search("".join(texts))):
+            if texts and (max(map(len, texts)) > MAX_TEXT or _BAD_CHAR.search("".join(texts))):
                 return False
             if len(texts) < len(value):
                 stack.extend(v for v in value if type(v) is not str)
         elif kind is str:
-            if len(value) > MAX_TEXT or _SURROGATE.search(value):
+            if len(value) > MAX_TEXT or _BAD_CHAR.search(value):
                 return False
         elif isinstance(value, float) and not math.isfinite(value):
             return False
@@ -173,14 +176,14 @@ def _value_problems(data: Any, doc: Document) -> list[Problem]:
         value, path = stack.pop()
         if isinstance(value, dict):
             for k, v in value.items():
-                if isinstance(k, str) and (len(k) > MAX_TEXT or _SURROGATE.search(k)):
+                if isinstance(k, str) and (len(k) > MAX_TEXT or _BAD_CHAR.search(k)):
                     out.append(_bad_text(k, path, doc))
                     continue
                 stack.append((v, path + (k,)))
         elif isinstance(value, (list, tuple)):
             stack.extend((v, path + (i,)) for i, v in enumerate(value))
         elif isinstance(value, str):
-            if len(value) > MAX_TEXT or _SURROGATE.search(value):
+            if len(value) > MAX_TEXT or _BAD_CHAR.search(value):
                 out.append(_bad_text(value, path, doc))
         elif isinstance(value, float) and not math.isfinite(value):
             out.append(Problem(f"{_path_text(path)}: {value!r} is not a finite number",
@@ -194,11 +197,16 @@ def _bad_text(text: str, path: tuple, doc: Document) -> Problem:
         return Problem(f"{_path_text(path)}: a text of {len(text):,} characters; at most {MAX_TEXT:,} are accepted",
                        "shorten it: ids and names are short, a description a few paragraphs",
                        file=doc.file, line=doc.line(path), code="limit")
-    char = _SURROGATE.search(text).group()
+    char = _BAD_CHAR.search(text).group()
     shown = ascii(text if len(text) <= 40 else text[:37] + "...")
-    return Problem(f"{_path_text(path)}: {shown} contains {ascii(char)[1:-1]}, half of a UTF-16 surrogate pair: "
-                   "it is not valid Unicode text",
-                   "write the character itself, or both halves of the pair (e.g. \\ud83d\\ude00)",
+    if "\ud800" <= char <= "\udfff":
+        return Problem(f"{_path_text(path)}: {shown} contains {ascii(char)[1:-1]}, half of a UTF-16 surrogate pair: "
+                       "it is not valid Unicode text",
+                       "write the character itself, or both halves of the pair (e.g. \\ud83d\\ude00)",
+                       file=doc.file, line=doc.line(path), code="text")
+    return Problem(f"{_path_text(path)}: {shown} contains the control character U+{ord(char):04X}: a plan's "
+                   "text is printable (tab and line breaks aside)",
+                   "remove it (a terminal would act on it; a database refuses U+0000)",
                    file=doc.file, line=doc.line(path), code="text")
 
 
@@ -843,6 +851,6 @@ def _sorted(problems: list[Problem]) -> list[Problem]:
 
 
 def _stem(file: str) -> str:
-    from pathlib import Path
+    from opportune.formats.graphs import file_stem
 
-    return Path(file).stem
+    return file_stem(file)

@@ -4,7 +4,7 @@ Routes (all JSON; OpenAPI at ``/openapi.json``, readable at ``/docs``):
 
 =======  ==========================  =============================================================
 POST     /plans                      upload a plan (YAML, JSON or SALBP .IN2), validated as ``opportune check``
-GET      /plans, /plans/{id}         list (operator) / one plan with its summary
+GET      /plans, /plans/{id}         the plans this token may run / one plan with its summary
 GET      /cells                      cells with their run counts
 POST     /runs                       start a run: ``{"plan": id, "buffer_capacity": null, "label": ""}``
 GET      /runs                       runs visible to the token (``?cell=&status=``)
@@ -37,6 +37,7 @@ import time
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Annotated, Literal, Optional
+from urllib.parse import unquote
 
 from fastapi import Depends, FastAPI, Header, Path as PathParam, Query, Request
 from fastapi.exceptions import RequestValidationError
@@ -55,9 +56,9 @@ from opportune.service import idempotency as idem
 from opportune.service.auth import Authenticator, Principal
 from opportune.service.config import Settings
 from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, is_json,
-                                      new_reference, unauthorized, unsupported_media_type)
+                                      new_reference, plan_not_found, unauthorized, unsupported_media_type)
 from opportune.service.events import Broker, stream
-from opportune.service.plans import PlanBook, check_upload, list_plans, store_plan
+from opportune.service.plans import PlanBook, check_upload, list_plans, may_see, store_plan
 from opportune.service.runs import RunManager
 from opportune.service.schemas import (BOWMAN8_IN2, GEARBOX_PLAN, GEARBOX_PLAN_ID, GEARBOX_YAML, CancelAnswer, CellList,
                                        Graph, Health, LookAnswer, OutcomeAnswer, PlanDetail, PlanList, PlanUploaded,
@@ -153,15 +154,52 @@ class CancelIn(BaseModel):
 
 # ---------------------------------------------------------------- middleware
 
+#: Characters no request may hold in its path, query or body text: C0 controls but tab, line feed and
+#: carriage return, DEL, and C1 controls.  U+0000 cannot be stored in a PostgreSQL text column, and the
+#: others would reach a terminal through the logs.
+_CONTROL = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
+#: The same characters written as JSON escapes (an even number of backslashes before one is text).
+_CONTROL_ESCAPE = re.compile(rb"(?<!\\)(?:\\\\)*\\u00(?:0[0-8bBcCeEfF]|1[0-9a-fA-F]|7[fF]|[89][0-9a-fA-F])")
+
+
+def _control_problem(scope, body: bytes) -> ApiError | None:
+    """A 400/422 for a control character in the path, the query or the body; None if there is none.
+    O(length of the request)."""
+    where = None
+    if _CONTROL.search(scope.get("path", "")):
+        where = "path"
+    elif _CONTROL.search(unquote(scope.get("query_string", b"").decode("latin-1"))):
+        where = "query"
+    if where is not None:
+        return ApiError(400, "invalid_request", f"the {where} holds a control character (such as U+0000 or ESC)",
+                        "send printable text only", where=where)
+    try:        # a body that is not UTF-8 is the handler's to refuse, with what it is instead
+        text = body.decode("utf-8") if body else ""
+    except UnicodeDecodeError:
+        text = ""
+    if text and (_CONTROL_ESCAPE.search(body) or _CONTROL.search(text)):
+        return ApiError(422, "invalid_request", "the body holds a control character (such as U+0000 or ESC) in its "
+                        "text", "send printable text only: part ids, names, labels and keys are printable",
+                        where="body")
+    return None
+
+
 class BodyLimit:
-    """Refuses bodies over ``limit`` bytes with 413 before the application reads them (pure ASGI)."""
+    """Refuses bodies over ``limit`` bytes with 413 before the application reads them, and requests
+    whose path, query or body holds a control character (see :data:`_CONTROL`) with 400/422 (pure ASGI).
+    """
 
     def __init__(self, app, limit: int):
         self.app = app
         self.limit = limit
 
     async def __call__(self, scope, receive, send):
-        if scope["type"] != "http" or scope["method"] in ("GET", "HEAD", "OPTIONS"):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        if scope["method"] in ("GET", "HEAD", "OPTIONS"):
+            err = _control_problem(scope, b"")
+            if err is not None:
+                return await error_response(err.body(), err.status)(scope, receive, send)
             return await self.app(scope, receive, send)
         declared = dict(scope.get("headers") or []).get(b"content-length")
         too_big = declared is not None and declared.isdigit() and int(declared) > self.limit
@@ -185,6 +223,9 @@ class BodyLimit:
             response = error_response(err.body(), 413, {"Connection": "close"})
             return await response(scope, receive, send)
         body = b"".join(chunks)
+        err = _control_problem(scope, body)
+        if err is not None:
+            return await error_response(err.body(), err.status)(scope, receive, send)
         sent = False
 
         async def replay():
@@ -373,11 +414,6 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
             raise unauthorized()
         return p
 
-    def operator(p: Principal = Depends(principal)) -> Principal:
-        if not p.is_operator:
-            raise forbidden("this needs an operator token", "create one with `opportune token create --operator NAME`")
-        return p
-
     def replayable(status: int, text: str, replayed: bool) -> Response:
         # The same bytes the first time and on every retry: the stored answer is this JSON text.
         return Response(text, status_code=status, media_type="application/json",
@@ -413,7 +449,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
     # ------------------------------------------------------------ plans
 
     @app.post("/plans", tags=["plans"], status_code=201, operation_id="uploadPlan",
-              summary="Upload a plan, validated as `opportune check` does",
+              summary="Upload a plan, validated as opportune check does",
               responses={201: {"model": PlanUploaded, "description": "The plan was stored", "links": PLAN_LINKS},
                          200: {"model": PlanUploaded, "description": "The plan was already stored (same content hash)",
                                "links": PLAN_LINKS},
@@ -455,7 +491,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                "fix every problem listed (each has its line), then upload again",
                                where=first.where if first else "body", extra={"problems": problems})
             book.check_fits(result.plan)    # within its share of the server's memory, before it is stored
-            pid, created = store_plan(store, result, fmt, source)
+            pid, created = store_plan(store, result, fmt, source, p.cell)
             from opportune.formats.summary import summarize
 
             return (201 if created else 200), {"id": pid, "name": result.plan.name, "created": created,
@@ -467,11 +503,11 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         return JSONResponse(body, status_code=status)
 
     @app.get("/plans", tags=["plans"], operation_id="listPlans",
-             summary="Every stored plan (operator)",
-             responses={200: {"model": PlanList}, **errors({401: ["unauthorized"], 403: ["forbidden"],
-                                                             500: ["internal_error"]})})
-    def get_plans(_p: Principal = Depends(operator)):
-        return {"plans": list_plans(store)}
+             summary="The plans this token may run (a cell: those it uploaded; an operator: every plan, with "
+                     "its owners)",
+             responses={200: {"model": PlanList}, **errors({401: ["unauthorized"], 500: ["internal_error"]})})
+    def get_plans(p: Principal = Depends(principal)):
+        return {"plans": list_plans(store, p)}
 
     @app.get("/plans/{plan_id}", tags=["plans"], operation_id="getPlan",
              summary="A plan: its document (file schema), summary and graph layout",
@@ -479,7 +515,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                         **errors({401: ["unauthorized"], 404: ["plan_not_found"],
                                   422: ["plan_refused", "invalid_request"], 500: ["internal_error"]})})
     def get_plan(plan_id: str = PathParam(..., description="A plan id returned by POST /plans"),
-                 _p: Principal = Depends(principal)):
+                 p: Principal = Depends(principal)):
+        if not may_see(store, p, plan_id):    # another cell's plan: not found, as one that does not exist
+            raise plan_not_found(plan_id)
         loaded = book.get(plan_id)
         return {"id": loaded.id, "name": loaded.plan.name, "plan": loaded.plan.to_dict(), "summary": loaded.summary,
                 "graph": loaded.layouts}

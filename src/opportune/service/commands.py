@@ -70,6 +70,10 @@ def serve(
     poll_seconds: float = typer.Option(2.0, "--poll-seconds", min=0.05, max=86400.0,
                                        help="How often an event stream looks for changes made by other processes "
                                             "(PostgreSQL also pushes them at once)"),
+    request_seconds: float = typer.Option(10.0, "--request-seconds", min=0.5, max=3600.0,
+                                          help="Most seconds a request may take to arrive whole (its line, headers "
+                                               "and body, from its first byte or the connection's opening); a slower "
+                                               "one's connection is closed"),
 ):
     """Serve the sequencer over HTTP for robot cells, with the live dashboard at /."""
     _require("sqlalchemy", "fastapi", "uvicorn")
@@ -90,7 +94,7 @@ def serve(
                err=True)
     run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers,
         settings={"memory_cap": None if memory_cap is None else memory_cap << 20, "warm_up_seconds": warm_up_seconds,
-                  "sse_poll_seconds": poll_seconds})
+                  "sse_poll_seconds": poll_seconds, "request_seconds": request_seconds})
 
 
 def token_create(
@@ -118,8 +122,15 @@ def token_create(
         return
     typer.echo(token)
     who = f"operator {operator!r}" if operator else f"cell {cell!r}"
+    where = ""
+    if db is not None:      # the same database (a password in a URL is not repeated: `***`)
+        import shlex
+
+        from opportune.service.server import safe_url
+
+        where = f" --db {shlex.quote(safe_url(db) if '://' in db else db)}"
     typer.echo(f"token {token_id} for {who}: shown once, keep it secret "
-               f"(revoke with `opportune token revoke {token_id}`)", err=True)
+               f"(revoke with `opportune token revoke {token_id}{where}`)", err=True)
 
 
 def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),

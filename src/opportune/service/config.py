@@ -45,12 +45,16 @@ class Settings:
     all plans; None: a quarter of the machine's memory (``MemTotal``).  Two checks keep it, between
     requests: the bytes the loaded plans' engines account (memos, vectors, tails, programmes,
     per-state caches; least recently used plans are evicted past the cap, their runs rebuilt from
-    their logs when next asked), and the process's resident memory (past the cap, the plans' memos
-    are shrunk to their newest quarter and freed pages given back; then plans are evicted).  One plan
-    may hold at most ``plan_share`` of the cap: its engine shrinks its memos to half of that share
-    between decisions, and a plan whose minimum working set is over it is refused at upload (413).
+    their logs when next asked), and the process's resident memory (past 85% of the cap, the plans'
+    memos are shrunk to their newest quarter and freed pages given back; over the cap itself, least
+    recently used plans are evicted, never the one used last).  One plan
+    may hold at most ``plan_share`` of the cap: its engine keeps its accounted memos within half of that
+    share between decisions (resident memory runs up to twice the accounted bytes), and a plan whose
+    minimum working set is over the share is refused at upload (413).
     ``warm_up_seconds`` is the most time the warm-up of one plan (counting its first state, once per
-    plan and process, in the background) may take.
+    plan and process, in the background) may take.  ``request_seconds``: a request must arrive whole
+    (line, headers, body) within this many seconds of its first byte or of its connection's opening,
+    or its connection is closed (:mod:`opportune.service.protocol`).
     """
 
     db_url: str = DEFAULT_DB
@@ -62,6 +66,7 @@ class Settings:
     decision_budget: float | None = 0.05
     idempotency_seconds: float = 7 * 24 * 3600.0
     sse_poll_seconds: float = 2.0
+    request_seconds: float = 10.0
     sse_keepalive_seconds: float = 15.0
     memory_cap: int | None = None
     plan_share: float = 0.5

@@ -22,14 +22,16 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from sqlalchemy import insert, select
+from sqlalchemy.exc import IntegrityError
 
 from opportune.engine import OrderEngine
+from opportune.engine.deadline import Deadline
 from opportune.engine.memory import memory_total, resident, trim
 from opportune.formats import CheckResult, check_text, plan_from_dict
 from opportune.formats.loader import detect_format, not_utf8
 from opportune.plan import Plan, PlanError
 from opportune.service.errors import ApiError, plan_not_found
-from opportune.service.storage import Store, dumps, now, plans
+from opportune.service.storage import Store, dumps, now, plan_owners, plans
 
 FORMATS = ("yaml", "json", "in2")
 MAX_FILENAME = 200  # characters of an upload's file name (the name used in problems)
@@ -111,26 +113,60 @@ def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt
     return check_text(text, fmt=fmt, file=name), fmt, text
 
 
-def store_plan(store: Store, result: CheckResult, fmt: str, source: str) -> tuple[str, bool]:
-    """Store a valid plan (if new); return its id and whether it was new."""
+def store_plan(store: Store, result: CheckResult, fmt: str, source: str, owner: str) -> tuple[str, bool]:
+    """Store a valid plan (its content once) and make the cell ``owner`` one of its owners; return its id
+    and whether it is new to this cell (another cell's upload of the same plan says nothing to this one)."""
     plan = result.plan
     pid = plan_id(plan)
-    with store.write() as c:
-        if c.execute(select(plans.c.id).where(plans.c.id == pid)).first() is not None:
-            return pid, False
-        c.execute(insert(plans).values(id=pid, name=plan.name, format=fmt, source=source,
-                                       doc=dumps(plan.to_dict()), created_at=now()))
-    return pid, True
+
+    def store_it() -> bool:
+        with store.write() as c:
+            if c.execute(select(plans.c.id).where(plans.c.id == pid)).first() is None:
+                c.execute(insert(plans).values(id=pid, name=plan.name, format=fmt, source=source,
+                                               doc=dumps(plan.to_dict()), created_at=now()))
+            mine = select(plan_owners.c.plan_id).where(plan_owners.c.plan_id == pid, plan_owners.c.cell == owner)
+            if c.execute(mine).first() is not None:
+                return False
+            c.execute(insert(plan_owners).values(plan_id=pid, cell=owner, created_at=now()))
+        return True
+
+    try:
+        return pid, store_it()
+    except IntegrityError:      # the same plan stored at the same moment by another request: now it is there
+        return pid, store_it()
 
 
-def list_plans(store: Store) -> list[dict]:
-    """Every stored plan: id, name, format, when it was stored."""
+def may_see(store: Store, principal, pid: str) -> bool:
+    """Whether ``principal`` may read and run plan ``pid``: an operator any stored plan, a cell the plans
+    it uploaded.  One indexed read."""
+    with store.read() as c:
+        if principal.is_operator:
+            return c.execute(select(plans.c.id).where(plans.c.id == pid)).first() is not None
+        return c.execute(select(plan_owners.c.plan_id).where(plan_owners.c.plan_id == pid,
+                                                             plan_owners.c.cell == principal.cell)).first() is not None
+
+
+def list_plans(store: Store, principal) -> list[dict]:
+    """The stored plans ``principal`` may see (an operator: all, with their owners; a cell: its own):
+    id, name, format, when it was stored."""
     from opportune.service.views import iso
 
     with store.read() as c:
-        rows = c.execute(select(plans.c.id, plans.c.name, plans.c.format, plans.c.created_at)
-                         .order_by(plans.c.created_at)).mappings().all()
-    return [{"id": r["id"], "name": r["name"], "format": r["format"], "created_at": iso(r["created_at"])} for r in rows]
+        q = select(plans.c.id, plans.c.name, plans.c.format, plans.c.created_at).order_by(plans.c.created_at)
+        if not principal.is_operator:
+            q = q.where(plans.c.id.in_(select(plan_owners.c.plan_id).where(plan_owners.c.cell == principal.cell)))
+        rows = c.execute(q).mappings().all()
+        owners: dict[str, list[str]] = {}
+        if principal.is_operator:
+            for pid, cell in c.execute(select(plan_owners.c.plan_id, plan_owners.c.cell).order_by(plan_owners.c.cell)):
+                owners.setdefault(pid, []).append(cell)
+    out = []
+    for r in rows:
+        item = {"id": r["id"], "name": r["name"], "format": r["format"], "created_at": iso(r["created_at"])}
+        if principal.is_operator:
+            item["owners"] = owners.get(r["id"], [])
+        out.append(item)
+    return out
 
 
 def _int_bytes(bits: int) -> int:
@@ -219,10 +255,14 @@ WARM_SLICE = 0.02   # seconds of warm-up work per hold of a plan's lock: a look 
 WARM_GAP = 0.005    # seconds the warm-up lets go of the lock between slices, so that a waiting look gets it
 WARM_YIELD = 1.0    # longest a warm-up waits for requests in progress before its next slice
 WARM_IDLE = 0.05    # seconds without a request before a warm-up slice starts
-#: Over its memory cap, a process keeps this share of each plan's memos (the newest entries) ...
+#: Past this share of its memory cap (beyond its footprint at start), a process shrinks its plans' memos ...
+HIGH_WATER = 0.85
+#: ... to this share of each (the newest entries), ...
 SHRINK_KEEP = 0.25
-#: ... and shrinks or evicts until it holds at most this share of the cap beyond its footprint at start.
-SHRINK_TO = 0.75
+#: ... spending at most this many seconds per plan between two requests (the rest, after the next one);
+SHRINK_SECONDS = 0.05
+#: then it acts again only once its memory has grown by this share of the cap beyond what was left.
+REARM = 0.05
 MEASURE_EVERY = 0.5  # seconds between measurements of a plan in use (one decision adds a bounded number of entries)
 
 
@@ -253,6 +293,7 @@ class PlanBook:
         self.resident = resident        # () -> this process's resident bytes (or None); tests inject one
         self.baseline = resident() or 0     # the process's footprint before any plan: not the plans'
         self.shrinks = 0                # times the plans' memos were shrunk for the process's memory
+        self._floor = 0                 # resident bytes beyond the baseline after the last shrink
         self.on_evict: list = []        # callables(pid), told when a plan is evicted
         self.loads = 0                  # engines built (a reloaded, evicted plan counts again)
         self.evictions = 0
@@ -301,7 +342,8 @@ class PlanBook:
                            where="body.plan", extra={"problems": [p.to_dict() for p in exc.problems]}) from None
         self.check_fits(plan)   # stored under a larger cap, or a joint plan of several products
         self.settle(room=min_working_set(plan))
-        engine = OrderEngine(plan, time_limit=self.count_seconds, memory_limit=self.share)
+        # accounted bytes are sampled, and resident memory runs up to twice them (allocator slack): half the share
+        engine = OrderEngine(plan, time_limit=self.count_seconds, memory_limit=self.share // 2)
         loaded = LoadedPlan(pid, plan, engine, summarize(plan), row.created_at)
         with self._lock:
             hit = self._plans.setdefault(pid, loaded)
@@ -407,7 +449,8 @@ class PlanBook:
                 used.lock.release()
         with self._lock:
             total = sum(p.nbytes for p in self._plans.values()) + room
-            for pid, p in list(self._plans.items()):
+            items = list(self._plans.items())
+            for k, (pid, p) in enumerate(items):
                 over_share = p.nbytes > self.share
                 if total <= self.memory_cap and len(self._plans) <= self.size and not over_share:
                     continue
@@ -417,39 +460,53 @@ class PlanBook:
                     total += p.nbytes - before
                     if p.nbytes <= self.share and total <= self.memory_cap:
                         continue
+                if k == len(items) - 1 and not room:
+                    break       # the plan used last: its cell's next look would rebuild it (its engine shrinks itself)
                 if self._evict(pid, p):
                     total -= p.nbytes
-        self._tell()
+        if self._tell():
+            gc.collect()        # an engine's counters hold closures over themselves: freed by the collector only
+            trim()
         self.hold_resident()
 
     def hold_resident(self) -> None:
-        """Keep what this process holds beyond its footprint at start (:attr:`baseline`) within the cap.
-        The accounted bytes are sampled estimates and freed memory is not all given back, so the
-        resident memory itself is read (O(1)); over the cap, every plan not in use loses all but the
-        newest :data:`SHRINK_KEEP` of its memos (largest plans first, its runs go on) and the freed
-        pages go back to the system, until under :data:`SHRINK_TO` of the cap; if that is not enough,
-        least recently used plans are evicted too.  Never a plan whose lock is held (inside a decision)."""
-        if not self._over(1.0):
+        """Keep what this process holds beyond its footprint at start (:attr:`baseline`) under the cap,
+        with a margin.  The accounted bytes are sampled estimates and freed memory is not all given
+        back, so the resident memory itself is read (O(1)).  Past :data:`HIGH_WATER` of the cap, every
+        plan not in use loses all but the newest :data:`SHRINK_KEEP` of its memos (largest plans first;
+        its runs go on) and the freed pages go back to the system.  Only if the process is then still
+        over the cap itself are least recently used plans evicted, never the most recently used one
+        (the cell at work would rebuild it inside its next look).  Memory freed inside the process is
+        reused before the process grows again, so after acting it waits until the resident memory has
+        grown by :data:`REARM` of the cap beyond what it was, or reached the cap (no cascade of shrinks
+        and evictions that free nothing the system sees).  Never a plan whose lock is held (inside a decision)."""
+        held = self._held()
+        cap = self.memory_cap
+        if held is None or held <= max(HIGH_WATER * cap, min(self._floor + REARM * cap, cap)):
             return
+        acted = False
         for p in sorted(self.loaded(), key=lambda p: -p.nbytes):
-            if self._try(p, lambda: p.engine.shrink(SHRINK_KEEP)) is not None:
+            if self._try(p, lambda: p.engine.shrink(SHRINK_KEEP, Deadline.after(SHRINK_SECONDS))) is not None:
                 self.shrinks += 1
-                trim()
-                if not self._over(SHRINK_TO):
-                    return
-        for p in self.loaded():
+                acted = True
+        trim()
+        for p in self.loaded()[:-1]:
+            if (self._held() or 0) <= cap:
+                break
             with self._lock:
                 gone = self._plans.get(p.id) is p and self._evict(p.id, p)
             if gone:
+                acted = True
                 self._tell()
-                gc.collect()        # an engine's counters hold closures over themselves: cycles
+                gc.collect()        # an engine's counters hold closures over themselves: freed by the collector only
                 trim()
-                if not self._over(SHRINK_TO):
-                    return
+        if acted:                   # (all in use: the next request between decisions tries again)
+            self._floor = self._held() or 0
 
-    def _over(self, share: float) -> bool:
+    def _held(self) -> int | None:
+        """Resident bytes beyond the footprint at start (None where they cannot be read)."""
         rss = self.resident()
-        return rss is not None and rss - self.baseline > share * self.memory_cap
+        return None if rss is None else rss - self.baseline
 
     @staticmethod
     def _try(p: LoadedPlan, work) -> int | None:
@@ -481,12 +538,14 @@ class PlanBook:
         self._evicted.append(pid)
         return True
 
-    def _tell(self) -> None:
+    def _tell(self) -> int:
+        """Tell ``on_evict`` of the plans evicted since the last call; how many there were."""
         with self._lock:
             evicted, self._evicted = self._evicted, []
         for pid in evicted:
             for tell in self.on_evict:
                 tell(pid)
+        return len(evicted)
 
     def close(self) -> None:
         """Stop every warm-up (the service is shutting down)."""

@@ -65,8 +65,8 @@ from opportune.service.errors import ApiError, forbidden, run_not_found
 from opportune.service.latency import Reserves, decision_budget
 from opportune.service.plans import LoadedPlan, PlanBook
 from opportune.service.storage import Store, cells, dumps, events, now, plans, runs
-from opportune.service.views import (count_view, counting_seconds, decision_view, row_view, run_summary, run_view,
-                                     trace_view)
+from opportune.service.views import (count_view, counting_seconds, decision_view, row_view, run_complete, run_summary,
+                                     run_view, trace_view)
 
 # Statements of the hot path, built once (each request only binds values).
 FORGET_EVERY = 60.0  # seconds between clean-ups of stored idempotent answers past their time
@@ -281,8 +281,8 @@ class RunManager:
         return make(loaded.engine, self._policy(loaded, capacity, policy, budget=self.budget),
                     buffer_capacity=capacity, budget=self.budget, warm_up=0)
 
-    def _joint_plan(self, base: LoadedPlan, products: int) -> LoadedPlan:
-        """The stored joint plan of ``products`` copies of a stored plan (stored now if new)."""
+    def _joint_plan(self, base: LoadedPlan, products: int, cell: str) -> LoadedPlan:
+        """The stored joint plan of ``products`` copies of a stored plan (stored now if new, owned by ``cell``)."""
         from types import SimpleNamespace
 
         from opportune.engine.schedule import MAX_STRATEGIES_EXACT
@@ -297,7 +297,7 @@ class RunManager:
                                     f"{MAX_STRATEGIES_EXACT} strategies")
         except ProductsError as exc:
             raise ApiError(422, "invalid_request", str(exc), "use fewer products", where="body.products") from None
-        pid, _ = store_plan(self.store, SimpleNamespace(plan=joint), "json", dumps(joint.to_dict()))
+        pid, _ = store_plan(self.store, SimpleNamespace(plan=joint), "json", dumps(joint.to_dict()), cell)
         return self.book.get(pid)
 
     @staticmethod
@@ -335,13 +335,16 @@ class RunManager:
             stored = idem.lookup(c, principal.scope, key, h)
         if stored:
             return stored.status, stored.text, True
-        if not self.book.exists(body["plan"]):
-            raise ApiError(422, "unknown_plan", f"no plan {body['plan']!r}",
-                           "upload it first with POST /plans and use the `id` it returns", where="body.plan")
+        from opportune.service.plans import may_see
+
+        if not may_see(self.store, principal, body["plan"]):    # another cell's plan is not known here either
+            raise ApiError(422, "unknown_plan", f"no plan {body['plan']!r} for cell {principal.cell!r}",
+                           "upload it first with POST /plans (with this cell's token) and use the `id` it returns",
+                           where="body.plan")
         loaded = self.book.get(body["plan"])
         products = body.get("products") or 1
         if products > 1:   # several products at once: a run of the joint plan, fed from one bin
-            loaded = self._joint_plan(loaded, products)
+            loaded = self._joint_plan(loaded, products, principal.cell)
         if loaded.too_large:
             raise plan_too_large(loaded.too_large)
         if self.budget is not None:
@@ -491,7 +494,7 @@ class RunManager:
             with self.store.write() as c:
                 n = c.execute(_ADVANCE, {
                     "b_id": live.id, "b_expected": expected, "b_seq": expected + 1,
-                    "b_status": "complete" if seq.finished else "active", "b_installed": len(state.installed),
+                    "b_status": "complete" if run_complete(seq) else "active", "b_installed": len(state.installed),
                     "b_count": count["value"] if count else None,
                     "b_pending": str(seq.pending.action) if seq.pending else None, "b_t": t}).rowcount
                 if n != 1:
@@ -541,10 +544,11 @@ class RunManager:
                     raise ApiError(422, "unknown_part", f"unknown part {part!r} in the look",
                                    (f"did you mean {close[0]!r}? " if close else "")
                                    + f"the plan's parts are {', '.join(known)}", where=f"body.visible[{i}]")
-            code = ("action_pending" if seq.pending is not None else "run_complete" if seq.finished
-                    else "look_contradicts_state")
+            if run_complete(seq):    # its last part is installed: nothing more to look at
+                raise ApiError(409, "run_complete", f"run {live.id} is complete: its last part is installed",
+                               "start a new run (POST /runs) for the next assembly", where="path")
+            code = "action_pending" if seq.pending is not None else "look_contradicts_state"
             hint = {"action_pending": "report the pending action's outcome (POST /runs/{id}/outcomes) or cancel it first",
-                    "run_complete": "the assembly is done: start a new run (POST /runs)",
                     "look_contradicts_state": "send only parts that can still be in the bin (see `state.in_bin` in GET /runs/{id})",
                     }[code]
             try:

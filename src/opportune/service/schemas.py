@@ -110,7 +110,9 @@ ERROR_HEADERS = {
 
 
 def errors(codes: dict[int, list[str]]) -> dict[int, dict]:
-    """``responses=`` entries: for each status, the error model and the codes the route answers it with."""
+    """``responses=`` entries: for each status, the error model and the codes the route answers it with.
+    Every route may answer 400 ``invalid_request``: a control character in its path or query."""
+    codes = {**codes, 400: list(dict.fromkeys([*codes.get(400, []), "invalid_request"]))}
     out: dict[int, dict] = {}
     for status, names in sorted(codes.items()):
         text = STATUS_TEXT[status]
@@ -126,8 +128,9 @@ def errors(codes: dict[int, list[str]]) -> dict[int, dict]:
 # ---------------------------------------------------------------- decisions and trace rows
 
 class Action(Model):
-    """One robot action: install a part (from the bin or a buffer location), buffer a visible part,
-    shake the bin and look again, or done."""
+    """One robot action: install a part (from the bin or a buffer location), buffer a visible part, or
+    shake the bin and look again.  (``done`` closes the traces of runs from earlier versions, which took
+    one more look after the last install; a run is now complete at the outcome of its last install.)"""
 
     kind: Literal["install", "buffer", "shake", "done"]
     part: Part | None = Field(..., description="The part to install or buffer; null for shake and done")
@@ -457,6 +460,8 @@ class PlanListed(Model):
     name: str
     format: Literal["yaml", "json", "in2"]
     created_at: Timestamp
+    owners: list[str] | None = Field(None, description="The cells that uploaded the plan (in an operator's list "
+                                                       "only)")
 
 
 class PlanList(Model):

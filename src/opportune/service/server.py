@@ -135,7 +135,10 @@ def app_from_environment():
     from opportune.service.app import create_app
     from opportune.service.config import Settings
 
+    from opportune.service.protocol import Guarded
+
     settings = Settings(**json.loads(os.environ[SETTINGS_ENV]))
+    Guarded.seconds = settings.request_seconds
     logging.getLogger("opportune.service").info("worker %d: database %s", os.getpid(), safe_url(settings.db_url))
     app = create_app(settings)
     app.add_middleware(Recycle)
@@ -150,8 +153,11 @@ def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool 
     settings = {"db_url": db_url, "max_body": max_body, **(settings or {})}
     import uvicorn
 
+    from opportune.service.protocol import REQUEST_SECONDS, Guarded
+
+    Guarded.seconds = float(settings.get("request_seconds", REQUEST_SECONDS))
     common = dict(host=host, port=port, log_config=log_config(), access_log=access_log, timeout_graceful_shutdown=3,
-                  server_header=False, proxy_headers=False)
+                  server_header=False, proxy_headers=False, http=Guarded)
     if workers > 1:
         # Spawned workers import the application by name; the settings travel in the environment.
         os.environ[SETTINGS_ENV] = json.dumps(settings)

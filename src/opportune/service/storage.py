@@ -9,6 +9,7 @@ for installations with many cells.  Tables:
 * ``events`` — the event log of each run (looks, outcomes, cancels) with the
   answer that was sent; the sequencer's state is rebuilt by replaying it;
 * ``idempotency`` — the stored answer of every state-changing request;
+* ``plan_owners`` — which cells may see and run each plan (those that uploaded it);
 * ``meta`` — the schema version and the secret that signs SSE tickets.
 
 Writes go through :meth:`Store.write`: one transaction, committed before the
@@ -46,6 +47,7 @@ from sqlalchemy import (
     Text,
     create_engine,
     event,
+    func,
     insert,
     inspect,
     select,
@@ -79,6 +81,15 @@ plans = Table(
 cells = Table(
     "cells", metadata,
     Column("name", String(100), primary_key=True),
+    Column("created_at", Float, nullable=False),
+)
+
+# Who may see and run a plan: the cells that uploaded it (operators read every plan).  A plan's content
+# is stored once (its id is its content hash); each cell that uploads it becomes one of its owners.
+plan_owners = Table(
+    "plan_owners", metadata,
+    Column("plan_id", String(64), ForeignKey("plans.id"), primary_key=True),
+    Column("cell", String(100), ForeignKey("cells.name"), primary_key=True),
     Column("created_at", Float, nullable=False),
 )
 
@@ -176,6 +187,12 @@ class Store:
             # a database made before several products at once (issue 15) has runs without `products`
             if "products" not in {col["name"] for col in inspect(c).get_columns("runs")}:
                 c.execute(text("ALTER TABLE runs ADD COLUMN products INTEGER"))
+            # a database made before plans had owners: each cell owns the plans it has runs of (a plan never
+            # run is seen by operators until a cell uploads it again)
+            if c.execute(select(plan_owners.c.plan_id).limit(1)).first() is None:
+                c.execute(insert(plan_owners).from_select(
+                    ["plan_id", "cell", "created_at"],
+                    select(runs.c.plan_id, runs.c.cell, func.min(runs.c.created_at)).group_by(runs.c.plan_id, runs.c.cell)))
         self._init_meta()
 
     @staticmethod

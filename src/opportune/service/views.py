@@ -107,6 +107,12 @@ def run_summary(r) -> dict:
     }
 
 
+def run_complete(seq) -> bool:
+    """A run is complete once its last part is installed (the outcome of the last install, with
+    nothing pending), or once it answered ``done`` (runs of earlier versions ended so)."""
+    return seq.finished or (seq.pending is None and seq.state.is_complete)
+
+
 def run_view(live, loaded, updated_at: float) -> dict:
     """A run's full state from its live sequencer."""
     seq = live.sequencer
@@ -116,7 +122,7 @@ def run_view(live, loaded, updated_at: float) -> dict:
     return {
         "id": live.id, "cell": live.cell, "label": live.label,
         "plan": {"id": loaded.id, "name": loaded.plan.name},
-        "status": "complete" if seq.finished else "active",
+        "status": "complete" if run_complete(seq) else "active",
         "policy": live.policy, "buffer_capacity": state.capacity, "products": getattr(live, "products", 1),
         "seq": live.applied,
         "state": state.to_dict(),
@@ -126,7 +132,7 @@ def run_view(live, loaded, updated_at: float) -> dict:
         "pending": row_view(pending, len(seq.trace) + 1, loaded.engine, state.schedule) if pending else None,
         "last_look": list(last.visible) if last else [],
         "rows": len(seq.trace) + (1 if pending else 0),
-        "finished": seq.finished,
+        "finished": run_complete(seq),
         "created_at": iso(live.created_at), "updated_at": iso(updated_at),
     }
 

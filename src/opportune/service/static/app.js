@@ -65,11 +65,26 @@ function setupLogin(onReady) {
 
 const fmtList = (xs) => (xs || []).join(",");
 
+// A count at any magnitude: its decimal text (exact), or the rounded form the service writes past
+// 4,300 digits ("2.8462596809170545e+35659"); three significant digits past 15 digits.
 function fmtCount(c) {
   if (!c) return "—";
-  const v = c.value;
+  const v = String(c.value);
+  const e = /^(\d+(?:\.\d+)?)e\+?(\d+)$/i.exec(v);
+  if (e) return fmtSci(Number(e[1]), Number(e[2]));
   if (v.length <= 15) return Number(v).toLocaleString("en-US");
-  return `${v[0]}.${v.slice(1, 4)}e${v.length - 1}`;
+  return fmtSci(Number(`${v[0]}.${v.slice(1, 17)}`), v.length - 1);
+}
+
+// A count from its log10 (an axis label), in the same form as fmtCount.
+function fmtLog10(l) {
+  if (l < 15) return Math.round(10 ** l).toLocaleString("en-US");
+  return fmtSci(10 ** (l - Math.floor(l)), Math.floor(l));
+}
+
+function fmtSci(m, e) {
+  if (Number(m.toFixed(2)) >= 10) { m /= 10; e += 1; }
+  return `${m.toFixed(2)}e${e}`;
 }
 
 // ------------------------------------------------------------------ runs list
@@ -127,7 +142,9 @@ function initIndex() {
 
 function initRun() {
   const runId = Number(location.pathname.split("/").filter(Boolean).pop());
-  const view = { run: null, rows: [], graph: [], strategy: 0, chosen: false, es: null, seq: -1, retry: null };
+  const view = { run: null, rows: [], graph: [], strategy: 0, chosen: false, es: null, seq: -1, retry: null,
+                 mode: location.hash === "#full" ? "full" : "frontier", cam: null, moved: false, found: null };
+  setupGraphControls();
   const relogin = setupLogin(connect);
 
   function setLive(on, text) {
@@ -202,7 +219,262 @@ function initRun() {
     const installed = {}, buffered = new Set(run.state.buffered), visible = new Set(run.last_look);
     for (const p of run.state.installed) installed[p] = (installed[p] || 0) + 1;
     const pendingPart = run.pending && run.pending.action.part;
-    return { installed, buffered, visible, installable: new Set(run.installable), pendingPart };
+    return { installed, buffered, visible, installable: new Set(run.installable || []), pendingPart };
+  }
+
+  // ---------------------------------------------------------------- the precedence graph
+  // Two views of one strategy's layout (GET /runs/{id}/graph): the frontier (default) and the full
+  // graph. The SVG fills its panel; its viewBox is a camera (centre x, y and scale k in pixels per
+  // layout unit) moved by fit, zoom, pan and find, so nothing is re-laid out to move around.
+
+  const NODE_H = 26, DX = 120, DY = 56, MARGIN = 40;
+  const FIT_MAX = 1.6, ZOOM_MAX = 8;  // a fit never magnifies a small view past 1.6x
+
+  const nodeWidth = (id) => Math.min(110, Math.max(44, 12 + 7.2 * id.length));
+  const shortId = (id) => (id.length > 14 ? id.slice(0, 13) + "…" : id);
+
+  // The parts that matter now: installable now (from the run, or from this strategy's constraints when
+  // the run could not say in time), visible, buffered, pending and partly installed; below them the
+  // installed boundary (their installed requirements), above them the next layer (the parts requiring
+  // them). When nothing is left to install, the last parts of the plan. O(parts + constraints).
+  function frontier(g, s) {
+    const quantity = new Map(g.nodes.map((n) => [n.id, n.quantity]));
+    const preds = new Map(g.nodes.map((n) => [n.id, []])), succs = new Map(g.nodes.map((n) => [n.id, []]));
+    for (const e of g.edges) { preds.get(e.to).push(e.from); succs.get(e.from).push(e.to); }
+    const done = (id) => (s.installed[id] || 0) >= quantity.get(id);
+    const core = g.nodes.map((n) => n.id).filter((id) => !done(id) && (
+      s.installable.has(id) || s.buffered.has(id) || s.visible.has(id) || s.pendingPart === id ||
+      (s.installed[id] || 0) > 0 || preds.get(id).every(done)));
+    const shown = new Set(core);
+    for (const id of core) {
+      for (const p of preds.get(id)) if (done(p)) shown.add(p);
+      for (const q of succs.get(id)) shown.add(q);
+    }
+    if (!core.length) for (const n of g.nodes) if (!succs.get(n.id).length) shown.add(n.id);
+    return { shown, complete: !core.length };
+  }
+
+  // The frontier laid out compactly: one column per layer that has a part shown (in the full layout's
+  // order within the column), a header naming the layer, "⋯" where layers are skipped. A layer taller
+  // than the panel allows wraps into several columns, at the number of rows that draws the frontier
+  // largest in the panel. O(parts shown x their tallest layer).
+  function frontierLayout(g, shown) {
+    const nodes = g.nodes.filter((n) => shown.has(n.id));
+    const layers = [...new Set(nodes.map((n) => n.layer))].sort((a, b) => a - b);
+    const column = new Map(layers.map((l, k) => [l, k]));
+    const columns = layers.map(() => []);
+    for (const n of nodes) columns[column.get(n.layer)].push(n);
+    // columns as close as the widest part shown allows (room for an arrow between): more fit a screen
+    const dx = Math.min(DX, 52 + nodes.reduce((m, n) => Math.max(m, nodeWidth(n.id)), 0));
+    const tallest = columns.reduce((m, c) => Math.max(m, c.length), 1);
+    const p = panelSize();
+    let rows = tallest, best = 0;
+    for (let r = tallest; r >= 1; r--) {
+      const wide = columns.reduce((m, c) => m + Math.ceil(c.length / r), 0);
+      const k = Math.min(p.w / (wide * dx), p.h / (r * DY + 2 * MARGIN));
+      if (k > best * 1.0001) { best = k; rows = r; }
+    }
+    const height = Math.min(rows, tallest);
+    const placed = [], heads = [];
+    let x = MARGIN;
+    columns.forEach((c, k) => {
+      c.sort((a, b) => a.y - b.y || (a.id < b.id ? -1 : 1));
+      heads.push({ x, layer: layers[k], skipped: k ? layers[k] - layers[k - 1] - 1 : 0 });
+      for (let start = 0; start < c.length; start += rows) {
+        const part = c.slice(start, start + rows);
+        const offset = (height - part.length) * DY / 2;
+        part.forEach((n, i) => placed.push(Object.assign({}, n, { x, y: MARGIN + offset + i * DY })));
+        x += dx;
+      }
+    });
+    const edges = g.edges.filter((e) => shown.has(e.from) && shown.has(e.to)).map((e) => ({ from: e.from, to: e.to }));
+    return { nodes: placed, edges, heads, dx };
+  }
+
+  function drawGraph(lay, s, curved) {
+    const svg = el("svg:svg", { role: "img", "aria-label": "precedence graph", preserveAspectRatio: "xMidYMid meet" });
+    svg.append(el("svg:defs", {}, el("svg:marker", { id: "arrow", viewBox: "0 0 10 10", refX: 10, refY: 5,
+      markerWidth: 7, markerHeight: 7, orient: "auto-start-reverse" }, el("svg:path", { d: "M 0 0 L 10 5 L 0 10 z", fill: "#9aa3ad" }))));
+    const at = new Map(lay.nodes.map((n) => [n.id, n]));
+    for (const h of lay.heads || []) {
+      svg.append(el("svg:text", { class: "layer", x: h.x, y: MARGIN - NODE_H, text: `layer ${h.layer + 1}` }));
+      if (h.skipped) svg.append(el("svg:text", { class: "layer", x: h.x - lay.dx / 2, y: MARGIN - NODE_H, text: "⋯" },
+                                   el("svg:title", { text: `${h.skipped} layer${h.skipped > 1 ? "s" : ""} not shown` })));
+    }
+    for (const e of lay.edges) {
+      const a = at.get(e.from), b = at.get(e.to);
+      const done = (s.installed[e.from] || 0) >= a.quantity;
+      const attrs = { class: "edge" + (done ? " done" : ""), "marker-end": "url(#arrow)", "data-edge": `${e.from}>${e.to}` };
+      const x1 = a.x + nodeWidth(a.id) / 2, x2 = b.x - nodeWidth(b.id) / 2;
+      if (curved) {  // the frontier's columns are not the layout's: a curve from part to part
+        const mx = (x1 + x2) / 2;
+        svg.append(el("svg:path", Object.assign(attrs, { d: `M ${x1} ${a.y} C ${mx} ${a.y}, ${mx} ${b.y}, ${x2} ${b.y}` })));
+      } else {
+        const pts = e.points.map((p) => p.slice());
+        pts[0][0] = x1; pts[pts.length - 1][0] = x2;
+        svg.append(el("svg:polyline", Object.assign(attrs, { points: pts.map((p) => p.join(",")).join(" ") })));
+      }
+    }
+    for (const n of lay.nodes) svg.append(drawNode(n, s));
+    return svg;
+  }
+
+  function drawNode(n, s) {
+    const k = s.installed[n.id] || 0, W = nodeWidth(n.id);
+    const cls = ["node"];
+    let state = "remaining";
+    if (k >= n.quantity) { cls.push("installed"); state = "installed"; }
+    else {
+      if (k > 0) cls.push("partly");
+      if (s.installable.has(n.id)) { cls.push("installable"); state = "installable"; }
+      if (s.visible.has(n.id)) { cls.push("visible"); state = "visible"; }
+      if (s.buffered.has(n.id)) { cls.push("buffered"); state = "buffered"; }
+    }
+    if (s.pendingPart === n.id) { cls.push("pending"); state = "pending"; }
+    if (view.found === n.id) cls.push("found");
+    const title = (n.name ? `${n.id} (${n.name})` : n.id) + (n.quantity > 1 ? `: ${k} of ${n.quantity} installed` : `: ${state}`);
+    const grp = el("svg:g", { class: cls.join(" "), "data-part": n.id, "data-state": state },
+      el("svg:title", { text: title }),
+      view.found === n.id ? el("svg:rect", { class: "halo", x: n.x - W / 2 - 6, y: n.y - NODE_H / 2 - 6,
+                                             width: W + 12, height: NODE_H + 12, rx: 10 }) : null,
+      el("svg:rect", { x: n.x - W / 2, y: n.y - NODE_H / 2, width: W, height: NODE_H, rx: 6 }),
+      el("svg:text", { x: n.x, y: n.y - (n.quantity > 1 ? 4 : 0), text: shortId(n.id) }));
+    if (n.quantity > 1) grp.append(el("svg:text", { class: "units", x: n.x, y: n.y + 8, text: `${k}/${n.quantity}` }));
+    return grp;
+  }
+
+  // The drawing's extent in layout units (parts, edges, the frontier's layer headers). O(parts + bends).
+  function extent(lay) {
+    let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
+    for (const n of lay.nodes) {
+      const w = nodeWidth(n.id) / 2;
+      x0 = Math.min(x0, n.x - w); x1 = Math.max(x1, n.x + w);
+      y0 = Math.min(y0, n.y - NODE_H / 2); y1 = Math.max(y1, n.y + NODE_H / 2);
+    }
+    if (!lay.nodes.length) return { x: 0, y: 0, w: 100, h: 100 };
+    for (const e of lay.edges) {  // the full layout's long edges bend through points beyond the parts
+      for (const [x, y] of e.points || []) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+    }
+    if (lay.heads && lay.heads.length) y0 = Math.min(y0, MARGIN - NODE_H - 14);
+    const pad = 12;
+    return { x: x0 - pad, y: y0 - pad, w: x1 - x0 + 2 * pad, h: y1 - y0 + 2 * pad };
+  }
+
+  function panelSize() {
+    const box = document.getElementById("graph");
+    return { w: Math.max(1, box.clientWidth), h: Math.max(1, box.clientHeight) };
+  }
+
+  // Fit: the whole view inside the panel, centred, never magnified past FIT_MAX.
+  function fit() {
+    const b = view.extent, p = panelSize();
+    view.cam = { x: b.x + b.w / 2, y: b.y + b.h / 2, k: Math.min(p.w / b.w, p.h / b.h, FIT_MAX) };
+    view.fitK = view.cam.k;
+    view.moved = false;
+  }
+
+  // The viewBox from the camera, with the panel's aspect ratio (so 1 unit is k pixels both ways).
+  function applyCamera() {
+    if (!view.svg || !view.cam) return;
+    const p = panelSize(), c = view.cam;
+    const w = p.w / c.k, h = p.h / c.k;
+    view.svg.setAttribute("viewBox", `${c.x - w / 2} ${c.y - h / 2} ${w} ${h}`);
+    view.svg.dataset.scale = c.k.toFixed(4);
+  }
+
+  // Zoom by factor f about (ux, uy) in layout units (the panel's centre by default).
+  function zoom(f, ux, uy) {
+    const c = view.cam;
+    if (!c) return;
+    const k = Math.min(ZOOM_MAX, Math.max(Math.min(view.fitK, 0.1) / 2, c.k * f));
+    f = k / c.k;
+    if (ux === undefined) { ux = c.x; uy = c.y; }
+    view.cam = { x: ux - (ux - c.x) / f, y: uy - (uy - c.y) / f, k };
+    view.moved = true;
+    applyCamera();
+  }
+
+  // A point of the panel (client pixels) in layout units.
+  function toLayout(clientX, clientY) {
+    const r = document.getElementById("graph").getBoundingClientRect(), c = view.cam;
+    return { x: c.x + (clientX - r.left - r.width / 2) / c.k, y: c.y + (clientY - r.top - r.height / 2) / c.k };
+  }
+
+  function setupGraphControls() {
+    const panel = document.getElementById("graph");
+    panel.addEventListener("wheel", (ev) => {
+      if (!view.cam) return;
+      ev.preventDefault();
+      const p = toLayout(ev.clientX, ev.clientY);
+      zoom(Math.exp(-ev.deltaY * (ev.deltaMode === 1 ? 0.05 : 0.0015)), p.x, p.y);
+    }, { passive: false });
+    let drag = null;
+    panel.addEventListener("pointerdown", (ev) => {
+      if (ev.button !== 0 || !view.cam) return;
+      drag = { id: ev.pointerId, x: ev.clientX, y: ev.clientY, cam: Object.assign({}, view.cam) };
+      panel.setPointerCapture(ev.pointerId);
+    });
+    panel.addEventListener("pointermove", (ev) => {
+      if (!drag || ev.pointerId !== drag.id) return;
+      const dx = ev.clientX - drag.x, dy = ev.clientY - drag.y;
+      if (!view.moved && Math.abs(dx) + Math.abs(dy) < 3) return;  // a click, not a drag
+      panel.classList.add("dragging");
+      view.cam = { x: drag.cam.x - dx / drag.cam.k, y: drag.cam.y - dy / drag.cam.k, k: drag.cam.k };
+      view.moved = true;
+      applyCamera();
+    });
+    const end = () => { drag = null; panel.classList.remove("dragging"); };
+    panel.addEventListener("pointerup", end);
+    panel.addEventListener("pointercancel", end);
+    document.getElementById("zoom-in").addEventListener("click", () => zoom(1.5));
+    document.getElementById("zoom-out").addEventListener("click", () => zoom(1 / 1.5));
+    document.getElementById("fit").addEventListener("click", () => { view.found = null; fit(); renderGraph(); });
+    for (const mode of ["frontier", "full"]) {
+      document.getElementById(`view-${mode}`).addEventListener("click", () => {
+        view.mode = mode; view.moved = false;
+        history.replaceState(null, "", mode === "full" ? "#full" : location.pathname);
+        renderGraph();
+      });
+    }
+    const input = document.getElementById("find");
+    document.getElementById("find-form").addEventListener("submit", (ev) => { ev.preventDefault(); find(input.value); });
+    input.addEventListener("change", () => find(input.value));
+    new ResizeObserver(() => { if (!view.svg) return; if (!view.moved) fit(); applyCamera(); }).observe(panel);
+  }
+
+  // Find a part by id (exact, then ignoring case, then a unique prefix): centre it, outlined; a part
+  // off the frontier is shown in the full graph.
+  function find(q) {
+    const note = document.getElementById("find-note");
+    q = q.trim();
+    if (!view.graph.length) return;
+    // Enter in the box both changes and submits it: find once
+    if (q === view.lastFind && performance.now() - view.lastFindAt < 300) return;
+    view.lastFind = q; view.lastFindAt = performance.now();
+    if (!q) { view.found = null; note.textContent = ""; renderGraph(); return; }
+    const ids = view.graph[view.strategy].nodes.map((n) => n.id), lower = q.toLowerCase();
+    let id = ids.find((i) => i === q) ?? ids.find((i) => i.toLowerCase() === lower);
+    if (id === undefined) {
+      const starts = ids.filter((i) => i.toLowerCase().startsWith(lower));
+      if (starts.length !== 1) {
+        note.textContent = starts.length ? `${starts.length} parts start with "${q}": type more of the id`
+                                         : `no part "${q}" in this plan`;
+        return;
+      }
+      id = starts[0];
+    }
+    view.found = id;
+    if (!view.layout.nodes.some((n) => n.id === id)) {
+      view.mode = "full";
+      history.replaceState(null, "", "#full");
+    }
+    renderGraph();
+    const n = view.layout.nodes.find((m) => m.id === id);
+    view.cam = { x: n.x, y: n.y, k: Math.max(view.cam.k, 1) };
+    view.moved = true;
+    applyCamera();
+    const g = view.svg.querySelector(`[data-part="${CSS.escape(id)}"]`);
+    note.textContent = `${id}: ${g ? g.dataset.state : ""}`;
   }
 
   function renderGraph() {
@@ -219,44 +491,41 @@ function initRun() {
         select.value = String(view.strategy);
       }
       select.hidden = false;
-      select.onchange = () => { view.strategy = Number(select.value); view.chosen = true; renderGraph(); };
+      select.onchange = () => { view.strategy = Number(select.value); view.chosen = true; view.moved = false; renderGraph(); };
     }
     const g = view.graph[view.strategy];
     const s = nodeStates(view.run);
-    const svg = el("svg:svg", { width: g.width, height: g.height, viewBox: `0 0 ${g.width} ${g.height}`, role: "img",
-                                "aria-label": "precedence graph" });
-    svg.append(el("svg:defs", {}, el("svg:marker", { id: "arrow", viewBox: "0 0 10 10", refX: 10, refY: 5,
-      markerWidth: 7, markerHeight: 7, orient: "auto-start-reverse" }, el("svg:path", { d: "M 0 0 L 10 5 L 0 10 z", fill: "#9aa3ad" }))));
-    const W = 44, H = 26;
-    const quantity = Object.fromEntries(g.nodes.map((n) => [n.id, n.quantity]));
-    for (const e of g.edges) {
-      const pts = e.points.map((p) => p.slice());
-      pts[0][0] += W / 2; pts[pts.length - 1][0] -= W / 2;
-      const done = (s.installed[e.from] || 0) >= quantity[e.from];
-      svg.append(el("svg:polyline", { class: "edge" + (done ? " done" : ""), points: pts.map((p) => p.join(",")).join(" "),
-                                      "marker-end": "url(#arrow)", "data-edge": `${e.from}>${e.to}` }));
+    const key = `${view.mode}/${view.strategy}`;
+    let lay, note;
+    if (view.mode === "frontier") {
+      const f = frontier(g, s);
+      lay = frontierLayout(g, f.shown);
+      const hidden = g.nodes.length - f.shown.size;
+      note = f.complete ? `Complete: the last ${f.shown.size} parts of the plan`
+        : `Frontier: ${f.shown.size} of ${g.nodes.length.toLocaleString("en-US")} parts (installed boundary, ` +
+          "installable now, visible, buffered, pending, next layer)" + (hidden ? `; ${hidden.toLocaleString("en-US")} not shown` : "");
+    } else {
+      lay = g;
+      note = `Full graph: ${g.nodes.length.toLocaleString("en-US")} parts, ${g.edges.length.toLocaleString("en-US")} ` +
+             "constraints (the minimal ones); drag to pan, wheel to zoom";
     }
-    for (const n of g.nodes) {
-      const k = s.installed[n.id] || 0;
-      const cls = ["node"];
-      let state = "remaining";
-      if (k >= n.quantity) { cls.push("installed"); state = "installed"; }
-      else {
-        if (k > 0) cls.push("partly");
-        if (s.installable.has(n.id)) { cls.push("installable"); state = "installable"; }
-        if (s.visible.has(n.id)) { cls.push("visible"); state = "visible"; }
-        if (s.buffered.has(n.id)) { cls.push("buffered"); state = "buffered"; }
-      }
-      if (s.pendingPart === n.id) { cls.push("pending"); state = "pending"; }
-      const title = (n.name ? `${n.id} (${n.name})` : n.id) + (n.quantity > 1 ? `: ${k} of ${n.quantity} installed` : `: ${state}`);
-      const grp = el("svg:g", { class: cls.join(" "), "data-part": n.id, "data-state": state },
-        el("svg:title", { text: title }),
-        el("svg:rect", { x: n.x - W / 2, y: n.y - H / 2, width: W, height: H, rx: 6 }),
-        el("svg:text", { x: n.x, y: n.y - (n.quantity > 1 ? 4 : 0), text: n.id }));
-      if (n.quantity > 1) grp.append(el("svg:text", { class: "units", x: n.x, y: n.y + 8, text: `${k}/${n.quantity}` }));
-      svg.append(grp);
-    }
+    const svg = drawGraph(lay, s, view.mode === "frontier");
+    svg.dataset.view = view.mode;
     document.getElementById("graph").replaceChildren(svg);
+    view.svg = svg; view.layout = lay; view.extent = extent(lay);
+    if (key !== view.drawn) {  // another view or strategy: its part ids for the search box, and a fresh fit
+      if (view.drawn === undefined || view.drawn.split("/")[1] !== String(view.strategy)) {
+        document.getElementById("part-ids").replaceChildren(...g.nodes.map((n) => el("option", { value: n.id })));
+      }
+      view.drawn = key;
+      if (!view.found) view.moved = false;
+    }
+    if (!view.moved || !view.cam) fit();  // until the user moves the view, it follows the run
+    applyCamera();
+    document.getElementById("graph-note").textContent = note;
+    for (const mode of ["frontier", "full"]) {
+      document.getElementById(`view-${mode}`).setAttribute("aria-pressed", String(view.mode === mode));
+    }
   }
 
   function renderCount() {
@@ -264,26 +533,28 @@ function initRun() {
     document.getElementById("count").textContent = fmtCount(run.count);
     document.getElementById("count").dataset.value = run.count ? run.count.value : "";
     document.getElementById("progress").textContent =
-      `${run.progress.installed} of ${run.progress.units} installed · buffer ${run.state.buffered.length}` +
+      `${run.progress.installed.toLocaleString("en-US")} of ${run.progress.units.toLocaleString("en-US")} installed` +
+      ` · buffer ${run.state.buffered.length}` +
       (run.buffer_capacity === null ? " (unlimited)" : ` of ${run.buffer_capacity}`) +
       (run.state.defects ? ` · ${run.state.defects} defective` : "") +
       (view.graph.length > 1 ? ` · strategies still open: ${run.state.strategies.join(", ") || "none"}` : "");
     // The count before each row, then now: it falls as the run proceeds.
     const pts = view.rows.filter((r) => r.count).map((r) => [r.n, r.count.log10]);
     if (run.count && !run.pending) pts.push([view.rows.length + 1, run.count.log10]);
-    const W = 320, H = 150, L = 34, B = 18;
-    const svg = el("svg:svg", { viewBox: `0 0 ${W} ${H}`, preserveAspectRatio: "none", "aria-label": "sequences left per step" });
     const maxX = Math.max(2, ...pts.map((p) => p[0]));
     const maxY = Math.max(0.3, ...pts.map((p) => p[1] === null ? 0 : p[1]));
+    const top = fmtLog10(maxY);
+    const W = 320, H = 150, L = Math.max(34, 8 + 6 * top.length), B = 18;  // the axis right of its top label
+    const svg = el("svg:svg", { viewBox: `0 0 ${W} ${H}`, preserveAspectRatio: "none", "aria-label": "sequences left per step" });
     const x = (v) => L + (W - L - 6) * (v - 1) / (maxX - 1);
     const y = (v) => (H - B) - (H - B - 8) * ((v === null ? 0 : v) / maxY);
     svg.append(el("svg:line", { class: "axis", x1: L, y1: H - B, x2: W, y2: H - B }),
                el("svg:line", { class: "axis", x1: L, y1: 4, x2: L, y2: H - B }),
-               el("svg:text", { x: 2, y: 12, text: fmtCount({ value: String(Math.round(10 ** maxY)) }) }),
+               el("svg:text", { x: 2, y: 12, class: "top-label", text: top }),
                el("svg:text", { x: 2, y: H - B, text: "1" }),
                el("svg:text", { x: L, y: H - 4, text: "step 1" }),
                el("svg:text", { x: W - 40, y: H - 4, text: `step ${maxX}` }),
-               el("svg:text", { x: W - 60, y: 12, text: "log scale" }));
+               el("svg:text", { x: (L + W) / 2, y: H - 4, "text-anchor": "middle", text: "log scale" }));
     if (pts.length) {
       svg.append(el("svg:polyline", { class: "line", points: pts.map((p) => `${x(p[0])},${y(p[1])}`).join(" ") }));
       for (const p of pts) svg.append(el("svg:circle", { class: "dot", cx: x(p[0]), cy: y(p[1]), r: 2.5 }));
