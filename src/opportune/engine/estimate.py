@@ -70,6 +70,7 @@ takes ~0.2 s and a path ~0.05 s of CPU here.
 
 from __future__ import annotations
 
+import gc
 import math
 import random
 import time
@@ -738,7 +739,13 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
             # cost (SKETCH_FLOOR per element, at most SKETCH_FLOOR_MOST seconds) even where the time is spent,
             # on a busy machine too; past that, the trivial bounds
             floor = time.perf_counter() + min(SKETCH_FLOOR_MOST, SKETCH_FLOOR * mask.bit_count())
-            sketch = OrderSketch(poset, mask, hard_end if hard_end.at >= floor else Deadline(floor))
+            collecting = gc.isenabled()
+            gc.disable()        # a full collection (tens of ms in a large process) must not eat the floor
+            try:
+                sketch = OrderSketch(poset, mask, hard_end if hard_end.at >= floor else Deadline(floor))
+            finally:
+                if collecting:
+                    gc.enable()
             low, high = sketch.low, sketch.high
         except BudgetExceeded:
             pass
