@@ -235,7 +235,8 @@ def test_timing_means_the_same_on_one_worker_and_on_two(workers):
     assert timing["workers"] == workers and timing["optimal_solve_seconds"] is None
     assert list(timing["cpu_seconds"]) == list(names) and all(v > 0 for v in timing["cpu_seconds"].values())
     # CPU seconds summed over the workers: never more than the workers could spend in the study's elapsed time
-    # (the former per-strategy wall clock counted the same seconds once per strategy on several workers)
+    # (the former per-strategy wall clock counted the same seconds once per strategy on several workers).
+    # Not a time bound: load only adds elapsed time, so these hold on a loaded machine as on an idle one.
     assert sum(timing["cpu_seconds"].values()) <= workers * timing["wall_seconds"] + 0.05
     assert timing["wall_seconds"] >= result.prepared.seconds > 0
     assert result.seconds == result.cpu_seconds                     # the former name reads the same numbers

@@ -96,7 +96,9 @@ def printable(text: str) -> str:
     if _CONTROL is None:
         import re
 
-        _CONTROL = re.compile("[\\x00-\\x08\\x0b-\\x1f\\x7f-\\x9f]")
+        from opportune.formats.problems import CONTROL_CHARS
+
+        _CONTROL = re.compile(f"[{CONTROL_CHARS}]")
     return _CONTROL.sub(lambda m: ascii(m.group())[1:-1], text)
 
 

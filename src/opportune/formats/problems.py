@@ -4,6 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+#: The control characters no text of a plan, a request or a terminal line may hold, as the body of a
+#: regular-expression class: C0 but tab, line feed and carriage return, DEL, and C1 (an ESC sequence would
+#: act on a terminal; PostgreSQL refuses U+0000).
+CONTROL_CHARS = "\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f"
+
 
 @dataclass(frozen=True)
 class Problem:

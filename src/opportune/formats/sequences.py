@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
-from opportune.formats.problems import Problem
+from opportune.formats.problems import CONTROL_CHARS, Problem
 from opportune.plan import MAX_PARTS, MAX_UNITS
 
 __all__ = ["MAX_SEQUENCE_BYTES", "MAX_SEQUENCE_ITEMS", "MAX_SEQUENCE_LINE_CHARS", "MAX_SEQUENCE_LINES", "MAX_SEQUENCES",
@@ -43,7 +43,7 @@ MAX_SEQUENCE_LINE_CHARS = 1_000_000  # characters of one line (10,000 installati
 _LINE_BREAKS = ("\n", "\r", "\x0b", "\x0c", "\x1c", "\x1d", "\x1e", "\x85", "\u2028", "\u2029")
 _SURROGATE = re.compile("[\ud800-\udfff]")
 #: Control characters no part id may hold (as plans refuse them): C0, DEL and C1.
-_CONTROL = re.compile("[\x00-\x1f\x7f-\x9f]")
+_CONTROL = re.compile(f"[{CONTROL_CHARS}]")
 _SPLIT = re.compile(r"[\s,]+")
 
 

@@ -18,7 +18,7 @@ from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 from opportune.formats.loader import CheckResult, Document
-from opportune.formats.problems import Problem
+from opportune.formats.problems import CONTROL_CHARS, Problem
 from opportune.plan import (MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS, MAX_WEIGHT, Part, Plan,
                             Strategy)
 
@@ -32,7 +32,7 @@ MAX_TEXT = 100_000  # characters of one string (an id, a name, a description)
 #: Characters no text of a plan may hold: lone UTF-16 surrogates (not Unicode text), C0 controls but tab,
 #: line feed and carriage return, DEL and C1 controls (an ESC sequence in a part id would reach the
 #: terminal of everyone who checks the plan; U+0000 cannot be stored in PostgreSQL).
-_BAD_CHAR = re.compile("[\ud800-\udfff\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
+_BAD_CHAR = re.compile(f"[\ud800-\udfff{CONTROL_CHARS}]")
 
 
 @lru_cache(maxsize=1)
@@ -98,7 +98,9 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
     errors = [p for p in problems if p.severity == "error"]
     plan = None
     if not errors:
-        name = data.get("name") or (_stem(doc.file) if doc.file else "plan")
+        from opportune.formats.graphs import file_stem   # (graphs checks its plans here: imported when used)
+
+        name = data.get("name") or (file_stem(doc.file) if doc.file else "plan")
         plan = Plan(name=str(name), parts=tuple(parts), strategies=tuple(strategies),
                     source=doc.file, description=data.get("description") or data.get("source"),
                     simulation=data.get("simulation") or {}, andor=andor)
@@ -848,9 +850,3 @@ def find_cycles(ids: list[str], requires, *, index: dict[str, int] | None = None
 
 def _sorted(problems: list[Problem]) -> list[Problem]:
     return sorted(problems, key=lambda p: (p.severity != "error", p.line or 0))
-
-
-def _stem(file: str) -> str:
-    from opportune.formats.graphs import file_stem
-
-    return file_stem(file)

@@ -53,6 +53,7 @@ from starlette.routing import Match
 from opportune import __version__
 from opportune.policies.named import DEFAULT_POLICY, POLICIES
 from opportune.service import idempotency as idem
+from opportune.formats.problems import CONTROL_CHARS
 from opportune.service.auth import Authenticator, Principal
 from opportune.service.config import Settings
 from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, is_json,
@@ -157,7 +158,7 @@ class CancelIn(BaseModel):
 #: Characters no request may hold in its path, query or body text: C0 controls but tab, line feed and
 #: carriage return, DEL, and C1 controls.  U+0000 cannot be stored in a PostgreSQL text column, and the
 #: others would reach a terminal through the logs.
-_CONTROL = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
+_CONTROL = re.compile(f"[{CONTROL_CHARS}]")
 #: The same characters written as JSON escapes (an even number of backslashes before one is text).
 _CONTROL_ESCAPE = re.compile(rb"(?<!\\)(?:\\\\)*\\u00(?:0[0-8bBcCeEfF]|1[0-9a-fA-F]|7[fF]|[89][0-9a-fA-F])")
 
