@@ -145,3 +145,70 @@ def test_a_long_run_stays_near_its_engines_limit_in_resident_memory():
     grown, shrunk = map(int, out.stdout.split())
     assert shrunk >= 1
     assert grown <= 2.5 * 48, f"resident memory grew by {grown} MB against a limit of 48 MB"
+
+
+def _tail_memo_bytes(tails) -> int:
+    """A tail memo's bytes counted from scratch, entry by entry (what the running total must equal)."""
+    from opportune.engine.hub import entry_bytes
+
+    return sys.getsizeof(tails._memo) + sum(entry_bytes(v) for v in tails._memo.values())
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 10**6), st.floats(0.0, 1.0))
+def test_a_tail_memo_keeps_its_bytes_as_entries_come_and_go(seed, keep):
+    """Tail distributions counted in Python on a random order of 30 elements with three marked
+    elements: the memo's running byte total equals a count from scratch after counting and after a
+    shrink to any share, and it is at least the bytes the entries really hold (``sys.getsizeof`` of
+    keys, lists and counts) and within twice them: a memory limit is kept on the safe side."""
+    from opportune.engine.hub import TailCounter
+
+    rng = random.Random(seed)
+    n = 30
+    p = Poset.from_pairs(n, [(a, b) for a in range(n) for b in range(a + 1, min(n, a + 6)) if rng.random() < 0.3])
+    tails = TailCounter(Counter(p, native=False), marks=sum(1 << rng.randrange(n) for _ in range(3)))
+    s = p.full
+    for _ in range(6):
+        tails.tail(s)
+        s &= ~(1 << (s & -s).bit_length() - 1)
+    assert tails._core is None and tails._memo
+    real = sys.getsizeof(tails._memo) + sum(sys.getsizeof(k) + sys.getsizeof(v) + sum(map(sys.getsizeof, v))
+                                            for k, v in tails._memo.items())
+    assert tails.nbytes() == _tail_memo_bytes(tails)
+    assert real <= tails.nbytes() <= 2 * real
+    tails.shrink(keep)
+    assert tails.nbytes() == _tail_memo_bytes(tails)
+    assert tails.tail(p.full) == TailCounter(Counter(p, native=False), marks=tails.marks).tail(p.full)
+
+
+def test_a_shrink_too_long_for_one_slice_goes_on_at_every_outcome(monkeypatch):
+    """When a slice of shrinking cannot drop what is over the limit, the next call goes on without
+    waiting for the next measurement (memos that grew faster than one slice per measurement stayed
+    over their limit), and a resumed pass drops what was planned, not more: the engine ends under
+    :data:`SHRINK_TO` of its limit with every memo at the share planned, and counts as before."""
+    from opportune.engine import schedule
+
+    plan = load_plan("salbp:TONGE70")
+    engine = OrderEngine(plan, memory_limit=None)
+    seq = Sequencer(engine, make_policy("paper"), warm_up=0)
+    for _, _ in zip(range(60), looks_of(plan, 5, 60)(seq)):
+        pass
+    used = engine.nbytes()
+    engine.memory_limit = used // 2
+    monkeypatch.setattr(schedule, "SHRINK_SECONDS", 0.0)     # every slice stops after its first entry
+    engine.measure_every = float("inf")
+    engine._measured = (float("-inf"), 0)
+    engine.maintain()
+    assert engine._pass is not None, "the first slice should have stopped early"
+    planned = list(engine._pass[1])      # (memo, entries to keep), fixed when the pass started
+    calls = 1
+    while engine._pass is not None:
+        calls += 1
+        engine.maintain()
+        assert calls < 10**5
+    assert engine.shrunk == 1, "one measurement, one pass"
+    assert engine.nbytes() <= schedule.SHRINK_TO * engine.memory_limit
+    for memo, target in planned:        # each memo kept what was planned: a resumed pass drops no more
+        assert abs(memo.entries() - target) <= 1 or memo.entries() <= 1
+    fresh = OrderEngine(plan, memory_limit=None)
+    assert engine.count(0, engine.all_strategies) == fresh.count(0, fresh.all_strategies)

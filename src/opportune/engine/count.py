@@ -90,6 +90,7 @@ def _check_every(n: int) -> int:
 _NARROW = 64        # posets up to this size may scan with chunk tables of at most 16 bits (three up to 48)
 _WIDE = 1024        # posets up to this size scan with byte tables; larger ones element by element
 _INF = float("inf")
+EVICT_CHUNK = 4096  # memo entries dropped between two readings of the clock
 _PROBE = 1 << 13    # new entries the plain recursion may spend on a set before its hard pieces get a method each
 _DP_COST = 0.7      # one down-set of the dynamic programme costs about this many memo entries of the recursion
 _IDEAL_PROBE = 20_000   # sets the bounded down-set count may memoise before it gives up
@@ -375,6 +376,10 @@ class Counter:
         """Number of entries in the memo (counts plus position-sum vectors)."""
         return len(self._memo) + len(self._vec) + (self._native.size() if self._native is not None else 0)
 
+    def entries(self) -> int:
+        """What :meth:`shrink` keeps a share of: :attr:`memo_size`.  O(1)."""
+        return self.memo_size
+
     def nbytes(self) -> int:
         """Estimated bytes this counter holds: memo, vectors, compiled memo, scan tables, its order and
         the reversed view's (see :mod:`opportune.engine.memory`; O(1) in the memo's size).
@@ -490,31 +495,28 @@ class Counter:
     def _evict(self, keep: int, deadline: float) -> None:
         """Drop the oldest entries (insertion order) until at most ``keep`` remain in all.
 
-        Dropping a million entries takes a large share of a second: within a call it reads the
-        call's clock (``deadline``) every 4,096 of them and, past it, raises :class:`BudgetExceeded`
-        (what is left is valid; the next call goes on evicting)."""
+        Dropping a million entries takes a large share of a second: it drops them in chunks of
+        :data:`EVICT_CHUNK`, reads the call's clock (``deadline``) after each and, past it, raises
+        :class:`BudgetExceeded` (what is left is valid; the next call goes on evicting).  Only the
+        chunk at hand is listed, so a drop spread over many calls is O(entries dropped) in all."""
         memo, vec = self._memo, self._vec
-        total = len(memo) + len(vec)
-        if total <= keep:
-            return
-        drop = total - keep
+        drop = len(memo) + len(vec) - keep
         perf = time.perf_counter
-        # Vectors are the larger entries: drop them first, then the oldest counts.
-        k = min(drop, len(vec))
-        for i, key in enumerate(list(islice(vec, k))):
-            del vec[key]
-            if not i & 4095 and perf() > deadline:
-                raise BudgetExceeded("evicting old entries exceeded the time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
-        drop -= k
-        if drop:
-            for i, key in enumerate(list(islice(memo, drop + 1))):
-                if key:
-                    del memo[key]
-                if not i & 4095 and perf() > deadline:
+        # Vectors are the larger entries: drop them first, then the oldest counts (never the empty set's).
+        for table, floor in ((vec, 0), (memo, 1)):
+            while drop > 0 and len(table) > floor:
+                chunk = list(islice(table, min(drop, EVICT_CHUNK) + floor))
+                for key in chunk:
+                    if drop <= 0:
+                        break
+                    if key or table is vec:
+                        del table[key]
+                        drop -= 1
+                if table is memo:
+                    memo[0] = 1
+                if perf() > deadline:
                     raise BudgetExceeded("evicting old entries exceeded the time limit", reason="time",
                                          memo_size=len(memo) + len(vec))
-            memo[0] = 1
 
     def _count_miss(self, mask: int | None, deadline: Deadline | float | None = None) -> int:
         if mask is None:

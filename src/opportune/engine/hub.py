@@ -33,13 +33,14 @@ the mark" parts).
 
 from __future__ import annotations
 
+import sys
 import time
 from contextlib import contextmanager
 from itertools import combinations, islice
 from math import comb
-from operator import mul
+from operator import add, mul
 
-from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.count import EVICT_CHUNK, BudgetExceeded, Counter
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import (
     CycleError,
@@ -55,6 +56,21 @@ __all__ = ["HubPath", "TailCounter", "hub_count", "hub_candidates", "hub_split"]
 #: Largest order whose tail distributions the compiled core computes (it keeps Pascal's triangle up
 #: to n, about n^2/2 big integers); larger ones run in Python.
 NATIVE_TAILS = 256
+
+
+#: Bytes of one memo entry beside its vector: the key (a set of up to a few hundred elements) and the table's slot.
+ENTRY_OVERHEAD = 120
+
+
+def entry_bytes(d: tuple[int, ...]) -> int:
+    """Bytes one tail-memo entry holds, from its vector ``d``: the tuple, and its length times the size of
+    its middle count (the largest counts are near the middle of a tail distribution, so this errs
+    high, the safe side of a memory limit).  O(1).
+
+    >>> entry_bytes([1, 10 ** 30, 1]) > entry_bytes([1, 2, 1])
+    True
+    """
+    return ENTRY_OVERHEAD + sys.getsizeof(d) + len(d) * sys.getsizeof(d[len(d) >> 1]) if d else ENTRY_OVERHEAD
 
 
 class TailCounter:
@@ -84,7 +100,8 @@ class TailCounter:
         self.poset = counter.poset
         self.marks = marks
         self.deadline = deadline
-        self._memo: dict[int, list[int]] = {}
+        self._memo: dict[int, tuple[int, ...]] = {}
+        self._held = [0]        # bytes of the memo's entries (see entry_bytes), kept as they come and go
         n = self.poset.n
         self._binom = _BinomialRows()          # rows of Pascal's triangle, as the Python recursion asks
         self._rec = None
@@ -106,13 +123,27 @@ class TailCounter:
         if core is not None:
             core.tails_drop(self._handle)
 
+    def entries(self) -> int:
+        """Entries in the memo (what :meth:`shrink` keeps a share of).  O(1)."""
+        return len(self._memo)
+
+    def nbytes(self) -> int:
+        """Bytes of the memo: its table plus every entry's :func:`entry_bytes`, added as entries are stored
+        and taken off as they are dropped (sampling both ends of the memo missed the long vectors of the
+        middle by a third).  O(1)."""
+        return sys.getsizeof(self._memo) + self._held[0]
+
     def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> None:
         """Drop all but the newest ``keep`` share (0 to 1) of the memo (insertion order); past ``deadline``
         (read every 4,096 entries), :class:`BudgetExceeded`, the rest kept.  O(entries dropped)."""
-        memo, until = self._memo, as_deadline(deadline)
-        for i, key in enumerate(list(islice(memo, len(memo) - int(keep * len(memo))))):
-            del memo[key]
-            if not i & 4095 and until.expired():
+        memo, until, held = self._memo, as_deadline(deadline), self._held
+        drop = len(memo) - int(keep * len(memo))
+        while drop > 0:                 # in chunks, each listed when it is dropped: O(entries dropped) in all
+            chunk = list(islice(memo, min(drop, EVICT_CHUNK)))
+            for key in chunk:
+                held[0] -= entry_bytes(memo.pop(key))
+            drop -= len(chunk)
+            if until.expired():
                 raise BudgetExceeded("shrinking a tail memo passed its deadline", reason="time")
 
     def tail(self, s: int, *, deadline: Deadline | float | None = None) -> list[int]:
@@ -127,10 +158,10 @@ class TailCounter:
                 d = self._tail(s)
             finally:
                 self._deadline = saved
-        return d + [0] * (s.bit_count() - len(d))
+        return [*d, *[0] * (s.bit_count() - len(d))]
 
     # -------------------------------------------------------------- recursion
-    def _tail(self, s: int) -> list[int]:
+    def _tail(self, s: int) -> tuple[int, ...]:
         r = self._memo.get(s)
         if r is not None:
             return r
@@ -154,13 +185,16 @@ class TailCounter:
         if status == 1:
             raise BudgetExceeded(f"hub count needs more than max_memo={b[0]} new memo entries",
                                  reason="memo", memo_size=c.memo_size)
+        r = tuple(r)
         self._memo[s] = r
+        self._held[0] += entry_bytes(r)
         return r
 
     def _make_recursion(self):
         """The memoised recursion as a closure over local names (it is the hot path)."""
         memo = self._memo
         get = memo.get
+        held = self._held
         below, above = self.poset.below, self.poset.above
         marks = self.marks
         counter = self.counter
@@ -222,17 +256,22 @@ class TailCounter:
                         if r is None:
                             r = d
                         elif len(r) >= len(d):
-                            r = [x + y for x, y in zip(r, d)] + r[len(d):]
+                            r = [*map(add, r, d), *r[len(d):]]
                         else:
-                            r = [x + y for x, y in zip(d, r)] + d[len(r):]
+                            r = [*map(add, d, r), *d[len(r):]]
                     else:                       # b is the last marked element
                         last += count(rest) if rest else 1
                 if last:
-                    r = (r or []) + [0] * (n - len(r or ()))
+                    r = [*(r or ()), *[0] * (n - len(r or ()))]
                     r[n - 1] += last
-            while not r[-1]:
-                r.pop()                         # no orders with that many elements after the last mark
+            end = len(r)
+            while not r[end - 1]:
+                end -= 1                        # no orders with that many elements after the last mark
+            # a tuple of ints: the collector stops tracking it, so a full collection does not walk
+            # every count of every vector (0.4 s on a 300-task plan's memo, inside whichever request)
+            r = tuple(r[:end]) if end < len(r) else tuple(r)
             memo[s] = r
+            held[0] += entry_bytes(r)
             return r
 
         return f
@@ -563,7 +602,7 @@ class HubPath:
         total = self.counter.nbytes() + nbytes(self._q, depth=2) + nbytes(self._up) + nbytes(self._weights)
         total += nbytes(self._up_tables, depth=4) + nbytes(self._covers)
         for tails in list(self.tails.values()):
-            total += nbytes(tails._memo) + nbytes(getattr(tails._binom, "_rows", {}))
+            total += tails.nbytes() + nbytes(getattr(tails._binom, "_rows", {}))
         return total
 
     def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> None:

@@ -247,6 +247,7 @@ class OrderEngine:
         self.shrunk = 0                 # times maintain() shrank the memos to keep within memory_limit
         self.measure_every = MEASURE_EVERY
         self._measured = (float("-inf"), 0)     # (time.monotonic(), bytes) of the last measurement
+        self._pass = None   # a shrink under way: (keep share, [(memo, entries to keep)]) left to do
         # Units: part i owns units first[i] .. first[i] + quantity - 1, installed in that order.
         self.first: list[int] = []
         self.unit_part: list[int] = []
@@ -562,43 +563,66 @@ class OrderEngine:
         """Measure the engine's bytes (at most every ``measure_every`` seconds) and, if they are
         over ``limit``, clear the per-state caches and drop the oldest entries of every memo (counts,
         vectors, tail distributions; the compiled memos restart) in proportion, until about
-        :data:`SHRINK_TO` of ``limit`` is held.  Caller holds ``_upkeep_lock`` between decisions.
-        True if anything was dropped.  O(memos) to measure, O(entries dropped) to shrink."""
+        :data:`SHRINK_TO` of ``limit`` is held.  A shrink stops after :data:`SHRINK_SECONDS` and goes on
+        at the next call, without waiting for a measurement: memos that grow faster than one slice
+        per measurement drops were kept over their limit before.  Caller holds ``_upkeep_lock``
+        between decisions.  True if anything was dropped.  O(memos) to measure, O(entries dropped) to
+        shrink."""
         now = time.monotonic() if now is None else now
+        if self._pass is not None:
+            self._drop(self._pass[0], Deadline.after(SHRINK_SECONDS))
+            self._measured = (now, self.nbytes()) if self._pass is None else (now, self._measured[1])
+            return True
         if now < self._measured[0] + self.measure_every:
             return False
         used = self.nbytes()
         self._measured = (now, used)
         if used <= limit:
             return False
-        self._drop(SHRINK_TO * limit / used, Deadline.after(SHRINK_SECONDS))
         self.shrunk += 1
-        self._measured = (now, self.nbytes())
+        self._drop(SHRINK_TO * limit / used, Deadline.after(SHRINK_SECONDS), fresh=True)
+        if self._pass is None:
+            self._measured = (now, self.nbytes())
         return True
 
     def shrink(self, keep: float = 0.0, deadline: Deadline | float | None = None) -> bool:
         """Drop all but the newest ``keep`` share of every memo and clear the per-state caches, now
         (between decisions): what a service does when the whole process is over its memory cap.
         Later questions are counted again.  Stops at ``deadline`` (what is left is valid; the next
-        call goes on); True if it finished.  O(entries dropped)."""
+        call with the same ``keep`` goes on where it stopped); True if it finished.  O(entries dropped)."""
         with self._upkeep_lock:
             if self._deciding:
                 return False
             self._measured = (float("-inf"), 0)
-            return self._drop(keep, as_deadline(deadline))
+            return self._drop(keep, as_deadline(deadline), fresh=self._pass is None or self._pass[0] != keep)
 
-    def _drop(self, keep: float, deadline: Deadline) -> bool:
+    def _shrinkables(self) -> list:
+        """Every memo :meth:`_drop` shrinks: the counters (their own and the hubs') and the hubs' tail memos."""
+        out: list = list(self._all_counters())
+        for hub in list(self._hubs.values()) + list(self._hub_search.values()):
+            if hub is not None:
+                out.extend(hub.tails.values())
+        return out
+
+    def _drop(self, keep: float, deadline: Deadline, *, fresh: bool = False) -> bool:
         """Shrink every memo to its newest ``keep`` share, within ``deadline``: dropping a million entries
-        takes a large share of a second, and a plan's other runs wait meanwhile.  True if all done."""
-        self.clear_state_caches()
+        takes a large share of a second, and a plan's other runs wait meanwhile.  Each memo's target is
+        a number of entries fixed when the pass starts (``fresh``), so a pass resumed by a later call
+        drops what is left of it, no more.  True if the pass is done (else it stays in ``_pass``)."""
+        if fresh or self._pass is None:
+            self.clear_state_caches()
+            self._pass = (keep, [(m, int(keep * m.entries())) for m in self._shrinkables()])
+        todo = self._pass[1]
         try:
-            for c in self._all_counters():
-                c.shrink(keep, deadline)
-            for hub in list(self._hubs.values()) + list(self._hub_search.values()):
-                if hub is not None:
-                    hub.shrink(keep, deadline)
+            while todo:
+                memo, target = todo[-1]
+                n = memo.entries()
+                if n > target:
+                    memo.shrink(target / n, deadline)
+                todo.pop()
         except BudgetExceeded:
             return False
+        self._pass = None
         return True
 
     def warm_up(self, time_limit: float | None = None) -> bool:
