@@ -342,7 +342,7 @@ class PlanBook:
                            where="body.plan", extra={"problems": [p.to_dict() for p in exc.problems]}) from None
         self.check_fits(plan)   # stored under a larger cap, or a joint plan of several products
         self.settle(room=min_working_set(plan))
-        # accounted bytes are sampled, and resident memory runs up to twice them (allocator slack): half the share
+        # resident memory runs above the accounted bytes (allocator slack, memory freed and reused): half the share
         engine = OrderEngine(plan, time_limit=self.count_seconds, memory_limit=self.share // 2)
         loaded = LoadedPlan(pid, plan, engine, summarize(plan), row.created_at)
         with self._lock:
