@@ -255,7 +255,7 @@ def test_a_plan_whose_orders_take_longer_than_the_time_limit_still_gets_its_inte
     path = tmp_path / "many.json"
     path.write_text(json.dumps({"name": "many", "parts": [f"p{i}" for i in range(n)], "strategies": strategies}))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    out = subprocess.run([sys.executable, "-m", "opportune.cli", "count", str(path), "--time-limit", "0.5", "--json"],
+    out = subprocess.run([sys.executable, "-m", "opportune", "count", str(path), "--time-limit", "0.5", "--json"],
                          capture_output=True, text=True, timeout=600)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime

@@ -133,7 +133,7 @@ def bin_dir(tmp: Path) -> Path:
         return here
     shim = tmp / ".bin" / "opportune"      # no console script (an unusual install): the module, the same code
     shim.parent.mkdir()
-    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m opportune.cli "$@"\n')
+    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m opportune "$@"\n')
     shim.chmod(shim.stat().st_mode | stat.S_IEXEC)
     return shim.parent
 

@@ -1,5 +1,5 @@
 """``python -m opportune``: the command line, as the ``opportune`` script runs it."""
 
-from opportune.cli import main
+from opportune.launch import main
 
 main()

@@ -9,13 +9,14 @@ never with a traceback.
 from __future__ import annotations
 
 import json
-import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
 
 import typer
 from typer.core import TyperGroup
+
+from opportune import cli_count
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -283,117 +284,31 @@ def _print_check(plan_file: Path, result) -> None:
 # ---------------------------------------------------------------- count
 
 
-@app.command()
+def _count_option(name: str, **extra):
+    """A ``count`` option from :data:`opportune.cli_count.OPTIONS` (the quick path reads the same table)."""
+    flag, kind, default, text = cli_count.OPTIONS[name]
+    if kind is None:
+        return json_option(text)
+    return typer.Option(default, flag, help=text, **extra)
+
+
+@app.command(help=f"{cli_count.SUMMARY}\n\n{cli_count.DESCRIPTION}")
 def count(
-    plan_file: Path = PLAN_ARG,
-    after: Optional[str] = typer.Option(None, "--after", help='Parts installed first, in order: "ca ba" or "ca,ba"'),
-    as_json: bool = json_option(),
-    time_limit: float = typer.Option(10.0, "--time-limit", min=0.1,
-                                     help="Seconds in all, reading the plan included; the answer comes within "
-                                          "them plus 0.25 s: a tenth for the plain exact count, then exact "
-                                          "counting through a hub, then (only if still needed) an estimate "
-                                          "with an interval"),
-    max_memo: int = typer.Option(2_000_000, "--max-memo", help="Memo entries for an exact count before estimating"),
+    plan_file: Path = typer.Argument(..., help=cli_count.PLAN_HELP, show_default=False, autocompletion=_complete_plan),
+    after: Optional[str] = _count_option("after"),
+    as_json: bool = _count_option("as_json"),
+    time_limit: float = _count_option("time_limit", min=cli_count.MIN_TIME_LIMIT),
+    max_memo: int = _count_option("max_memo"),
 ):
-    """Count the admissible sequences of a plan (exact integer; an estimate, marked so, only over budget).
+    # the work is in opportune.cli_count, which opportune.launch runs without typer for a well-formed command line
+    def write(line: str) -> None:
+        if as_json:
+            print(line)
+        else:
+            _out().print(line, markup=False, emoji=False)
 
-    Answers within --time-limit seconds plus 0.25 s (after Python's start-up), on every plan it
-    reads: exact if the count finishes in time, else an estimate with an interval (from the runs
-    of the estimator, within bounds the order itself gives, which always hold).
-    """
-    from opportune.engine.deadline import Deadline
-
-    # one deadline for the whole command: loading the engine, reading the plan and building its orders count too
-    deadline = Deadline.after(time_limit)
-    from opportune.engine import NotAdmissible, OrderEngine, Schedule
-    from opportune.engine.deadline import BudgetExceeded
-    from opportune.engine.schedule import decimal, interval_unbuilt
-
-    plan = load_or_exit(plan_file, json_errors=as_json)
-    prefix = [p for p in (after or "").replace(",", " ").split() if p]
-    # A tenth of the time for the plain exact count; the rest for the hub split and, if needed, the estimate.
-    # Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
-    # take seconds); past it, the interval that holds without them.
-    try:
-        engine = OrderEngine(plan, max_memo=max_memo, time_limit=time_limit / 10, deadline=deadline.share(0.5))
-    except BudgetExceeded:
-        if prefix:
-            fail(f"the plan's {len(plan.strategies)} strategies could not be built within --time-limit "
-                 f"{time_limit:g} s to check --after: raise --time-limit", as_json=as_json)
-        engine = None
-    if engine is None:
-        result = interval_unbuilt(plan)
-    else:
-        sched = Schedule(engine)
-        for i, part in enumerate(prefix):
-            try:
-                sched = sched.install(part)
-            except NotAdmissible as exc:
-                done = " ".join(prefix[:i]) or "nothing"
-                fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
-        result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline)
-    interval = result.interval_log10
-    if as_json:
-        doc = {
-            "plan": plan.name,
-            "parts": len(plan.parts),
-            "strategies": len(plan.strategies),
-            "after": prefix,
-            "sequences": decimal(result.value) if result.exact else
-            (_sci(result.log10, 6) if math.isfinite(result.log10) else None),
-            "log10": round(result.log10, 6) if math.isfinite(result.log10) else None,
-            "exact": result.exact,
-        }
-        if not result.exact:    # null, not a non-standard Infinity, where the runs gave no bound
-            doc.update(rel_error=result.rel_error if math.isfinite(result.rel_error) else None,
-                       confidence=result.confidence, method=result.method)
-            if interval is not None:
-                doc.update(log10_low=round(interval[0], 6), log10_high=round(interval[1], 6),
-                           interval_certain=not math.isfinite(result.rel_error))
-        print(json.dumps(doc, indent=2))
-        return
-    state = f" after {' '.join(prefix)}" if prefix else ""
-    if result.exact:
-        noun = "admissible sequence" if result.value == 1 else "admissible sequences"
-        _out().print(f"{_escape(plan.name)}{state}: {decimal(result.value)} {noun} "
-                     f"(log10 {result.log10:.3f})")
-    elif interval is not None and not math.isnan(result.log10) and not result.rel_error < 1:
-        # a wide estimate: the interval says what is known (within bounds the order itself gives)
-        lo, hi = interval
-        where = f"between {_sci(lo, 1)} and {_sci(hi, 1)} (log10 {lo:.1f} to {hi:.1f})"
-        known = (f"{where} at {100 * result.confidence:.0f}% confidence ({result.method})"
-                 if math.isfinite(result.rel_error) else
-                 f"certainly {where}, from the order itself; no error can be stated from the samples "
-                 f"({result.method})")
-        _out().print(f"{_escape(plan.name)}{state}: about {_sci(result.log10, 1)} admissible sequences "
-                     f"(log10 {result.log10:.1f}) — ESTIMATE, only the order of magnitude is known: {known}; "
-                     f"the exact count exceeded the budget (a longer --time-limit narrows it)")
-    elif math.isnan(result.log10):
-        _out().print(f"{_escape(plan.name)}{state}: not counted — the exact count exceeded the budget and the "
-                     f"estimate ({result.method}) did not finish a run within it: allow more time with --time-limit")
-    elif result.rel_error < 1:
-        _out().print(f"{_escape(plan.name)}{state}: about {_sci(result.log10, 4)} admissible sequences "
-                     f"(log10 {result.log10:.3f}) — ESTIMATE, ±{100 * result.rel_error:.2f}% at "
-                     f"{100 * result.confidence:.0f}% confidence ({result.method}); the exact count exceeded the budget")
-    else:
-        # an interval of ±100% or more bounds nothing from below: say what is known, not a percentage
-        bound = (f"at most {_sci(result.log10 + math.log10(1 + result.rel_error), 1)} at "
-                 f"{100 * result.confidence:.0f}% confidence" if math.isfinite(result.rel_error) else
-                 "its runs disagree too much to bound it")
-        _out().print(f"{_escape(plan.name)}{state}: about {_sci(result.log10, 1)} admissible sequences "
-                     f"(log10 {result.log10:.1f}) — ESTIMATE, only the order of magnitude is known: {bound} "
-                     f"({result.method}); the exact count exceeded the budget (a longer --time-limit narrows it)")
-
-
-def _sci(log10: float, digits: int) -> str:
-    """A positive number given by its log10, in scientific notation, however large (``1.2346e+403``)."""
-    if not math.isfinite(log10):
-        return "nan" if math.isnan(log10) else ("0" if log10 < 0 else "inf")
-    exponent = math.floor(log10)
-    mantissa = 10 ** (log10 - exponent)
-    if round(mantissa, digits) >= 10:       # 9.99995 rounds up to the next power of ten
-        mantissa, exponent = mantissa / 10, exponent + 1
-    return f"{mantissa:.{digits}f}e{exponent:+03d}"
+    cli_count.run(plan_file, after, as_json, time_limit, max_memo,
+                  load=lambda path: load_or_exit(path, json_errors=as_json), fail=fail, write=write)
 
 
 # ---------------------------------------------------------------- graph

@@ -31,9 +31,8 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
-from fractions import Fraction
 from itertools import combinations
-from typing import Collection, Iterable, Sequence
+from typing import TYPE_CHECKING, Collection, Iterable, Sequence
 
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.deadline import Deadline, as_deadline
@@ -41,6 +40,9 @@ from opportune.engine.hub import HubPath
 from opportune.engine.memory import memory_total
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
 from opportune.plan import Plan
+
+if TYPE_CHECKING:
+    from fractions import Fraction     # loaded where a fraction is made: it loads decimal (5 ms at start-up)
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
 STATE_CACHE_LIMIT = 300_000  # entries per per-state cache before it is cleared
@@ -873,6 +875,8 @@ class OrderEngine:
     def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
         """Expected position (1 = next) of each remaining part's next unit (declaration order)."""
         total, sums = self.position_sums_for(mask, consistent, (p.id for p in self.plan.parts))
+        from fractions import Fraction
+
         return {part: Fraction(s, total) for part, s in sums.items()}
 
     def position_sums_for(self, mask: int, consistent: int, parts: Iterable[str]) -> tuple[int, dict[str, int]]:
@@ -1249,6 +1253,8 @@ class Schedule:
     def next_probabilities(self) -> dict[str, Fraction]:
         """Probability that each installable part comes next in a uniformly random admissible completion."""
         total = self.count()
+        from fractions import Fraction
+
         return {p: Fraction(c, total) for p, c in self.options().items()}
 
     def expected_positions(self) -> dict[str, Fraction]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fractions import Fraction
+from functools import lru_cache
 
 from opportune.engine.poset import CycleError, Poset
 from opportune.plan import Plan
@@ -180,15 +180,20 @@ def summarize(plan: Plan) -> dict:
 _BIG = 14_000  # bits: fewer than 4,215 decimal digits, which str() writes
 
 
-class _DecimalFraction(Fraction):
-    """A Fraction that writes itself as text however many digits its terms have."""
+@lru_cache(maxsize=1)
+def _decimal_fraction():
+    """A Fraction that writes itself as text however many digits its terms have (made on first use:
+    ``fractions`` loads ``decimal``, which a plan's loading never needs)."""
+    
+    from opportune.engine.schedule import decimal
 
-    def __str__(self):
-        from opportune.engine.schedule import decimal
+    class DecimalFraction(Fraction):
+        def __str__(self):
+            if self.denominator == 1:
+                return decimal(self.numerator)
+            return f"{decimal(self.numerator)}/{decimal(self.denominator)}"
 
-        if self.denominator == 1:
-            return decimal(self.numerator)
-        return f"{decimal(self.numerator)}/{decimal(self.denominator)}"
+    return DecimalFraction
 
 
 def printable_decision(decision, exact_digits: int | None = None):
@@ -221,5 +226,5 @@ def printable_decision(decision, exact_digits: int | None = None):
         return decision
     candidates = tuple(replace(c, options=decimal(c.options) if large(c.options) else c.options,
                                total=decimal(c.total) if large(c.total) else c.total) for c in decision.candidates)
-    positions = tuple((p, _DecimalFraction(v.numerator, v.denominator)) for p, v in decision.positions)
+    positions = tuple((p, _decimal_fraction()(v.numerator, v.denominator)) for p, v in decision.positions)
     return replace(decision, candidates=candidates, positions=positions)

@@ -8,13 +8,11 @@ number of parts and constraints.
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import re
 from collections import Counter
 from functools import lru_cache
-from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 from opportune.formats.loader import CheckResult, Document
@@ -35,9 +33,18 @@ MAX_TEXT = 100_000  # characters of one string (an id, a name, a description)
 _BAD_CHAR = re.compile(f"[\ud800-\udfff{CONTROL_CHARS}]")
 
 
+def _close(word: str, choices) -> list[str]:
+    """The closest of ``choices`` to a misspelt ``word`` (a list of at most one): for a suggestion."""
+    import difflib     # loaded only when a plan has a mistake to suggest a correction for
+
+    return difflib.get_close_matches(word, choices, n=1)
+
+
 @lru_cache(maxsize=1)
 def plan_schema() -> dict:
     """The published JSON Schema of plan files (``opportune/formats/plan.schema.json``)."""
+    from importlib import resources     # 9 ms of imports: only for the schema's users
+
     return json.loads(resources.files("opportune.formats").joinpath("plan.schema.json").read_text("utf-8"))
 
 
@@ -506,7 +513,7 @@ def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict 
         extras = [k for k in error.instance if k not in error.schema.get("properties", {})]
         out = []
         for extra in extras:
-            guess = difflib.get_close_matches(str(extra), allowed, n=1)
+            guess = _close(str(extra), allowed)
             hint = f"did you mean `{guess[0]}`?" if guess else f"allowed fields: {', '.join(allowed)}"
             line_k = doc.line(path + (extra,))
             out.append(Problem(f"{where}: unknown field `{extra}`", hint, file=doc.file, line=line_k, code="unknown-field"))
@@ -622,7 +629,7 @@ def _read_strategies(data: dict, doc: Document, known: set[str],
                         continue
                     if choices is None:
                         choices = sorted(known)
-                    guess = difflib.get_close_matches(pid, choices, n=1) if unknown_seen <= MAX_PER_KIND else []
+                    guess = _close(pid, choices) if unknown_seen <= MAX_PER_KIND else []
                     role = "listed with requirements" if pid == key else f"in the requirements of '{key}'"
                     problems.append(Problem(
                         f"unknown part '{pid}' {role} (strategy '{name}')",
