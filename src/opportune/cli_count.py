@@ -210,8 +210,9 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
 def sci(log10: float, digits: int) -> str:
     """A positive number given by its log10, in scientific notation, however large (``1.2346e+403``).
 
-    >>> sci(403.0915, 4)
-    '1.2346e+403'
+    >>> import math
+    >>> sci(403 + math.log10(1.2346), 4), sci(math.log10(999.99999), 4)
+    ('1.2346e+403', '1.0000e+03')
     """
     if not math.isfinite(log10):
         return "nan" if math.isnan(log10) else ("0" if log10 < 0 else "inf")
