@@ -84,23 +84,7 @@ def _console(stderr: bool) -> Console:
     return _consoles[key]
 
 
-_CONTROL = None
-
-
-def printable(text: str) -> str:
-    """``text`` with every control character but tab and line feed written as an escape (``\\x1b``).
-
-    >>> printable("a\\x1b[2Jb\\tc")
-    'a\\\\x1b[2Jb\\tc'
-    """
-    global _CONTROL
-    if _CONTROL is None:
-        import re
-
-        from opportune.formats.problems import CONTROL_CHARS
-
-        _CONTROL = re.compile(f"[{CONTROL_CHARS}]")
-    return _CONTROL.sub(lambda m: ascii(m.group())[1:-1], text)
+printable = cli_count.printable   # one escaping of control characters for every command's output
 
 
 def _out() -> Console:

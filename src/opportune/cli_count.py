@@ -1,7 +1,7 @@
 """``opportune count`` without typer or rich: the command's options, its help and its work, in one place.
 
 Counting a small plan takes microseconds; a command line that loads typer and rich first (0.1 s
-of imports) makes every count pay for them.  :func:`opportune.cli.main` hands a well-formed
+of imports) makes every count pay for them.  :func:`opportune.launch.main` hands a well-formed
 ``count`` command line to :func:`quick` before typer is imported; anything else (an unknown or
 malformed option, a missing plan, any error while reading the plan or checking ``--after``) goes
 on to the typer command, which runs the same :func:`run` and says what is wrong.  The typer
@@ -223,14 +223,29 @@ def sci(log10: float, digits: int) -> str:
     return f"{mantissa:.{digits}f}e{exponent:+03d}"
 
 
+_CONTROL = None
+
+
+def printable(text: str) -> str:
+    """``text`` with every control character but tab and line feed written as an escape (``\\x1b``).
+
+    >>> printable("a\\x1b[2Jb\\tc")
+    'a\\\\x1b[2Jb\\tc'
+    """
+    global _CONTROL
+    if _CONTROL is None:
+        import re
+
+        from opportune.formats.problems import CONTROL_CHARS
+
+        _CONTROL = re.compile(f"[{CONTROL_CHARS}]")
+    return _CONTROL.sub(lambda m: ascii(m.group())[1:-1], text)
+
+
 def printable_line(text: str) -> str:
-    """``text`` as the terminal may see it: control characters and undecodable bytes written as escapes."""
-    import re
-
-    from opportune.formats.problems import CONTROL_CHARS
-
-    text = re.sub(f"[{CONTROL_CHARS}]", lambda m: ascii(m.group())[1:-1], text)
-    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+    """``text`` as the terminal may see it: :func:`printable`, and undecodable bytes (the lone surrogates
+    that stand for them in file names) written as escapes, as the typer command's console writes them."""
+    return printable(text).encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def quick(argv: list[str]) -> bool:
