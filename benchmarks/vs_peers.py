@@ -103,15 +103,16 @@ def write_files(folder: Path, name: str, n: int, pairs) -> tuple[Path, Path]:
     return plan, matrix
 
 
-def timed(argv: list[str], timeout: float) -> tuple[float, str | None]:
-    """Wall seconds and standard output (None if killed at ``timeout`` or failed)."""
+def timed(argv: list[str], timeout: float, *, stderr: bool = False) -> tuple[float, str | None]:
+    """Wall seconds and the programme's standard output, followed by its standard error if ``stderr``
+    (None if killed at ``timeout`` or failed): linext writes ``LINEXT_LOG_COUNT`` to standard error."""
     t0 = time.perf_counter()
     try:
         p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
     except subprocess.TimeoutExpired:
         return time.perf_counter() - t0, None
     wall = time.perf_counter() - t0
-    return wall, (p.stdout if p.returncode == 0 else None)
+    return wall, ((p.stdout + p.stderr if stderr else p.stdout) if p.returncode == 0 else None)
 
 
 def run_opportune(plan: Path, time_limit: float) -> dict:
@@ -134,7 +135,10 @@ def run_engine(n: int, pairs, time_limit: float) -> dict:
         requires.setdefault(ids[b], []).append(ids[a])
     plan = make_plan(ids, requires, name="order")
     wall, cpu = time.perf_counter(), time.process_time()
-    engine = OrderEngine(plan, max_memo=2_000_000, time_limit=time_limit / 10)
+    from opportune.engine.count import entries_within
+    from opportune.engine.schedule import DEFAULT_MEMORY
+
+    engine = OrderEngine(plan, max_memo=entries_within(n, DEFAULT_MEMORY), time_limit=time_limit / 10)
     result = Schedule(engine).count_result(time_limit=time_limit * 9 / 10)
     return {"wall": time.perf_counter() - wall, "cpu": time.process_time() - cpu, "exact": result.exact,
             "log10": result.log10}
@@ -143,7 +147,8 @@ def run_engine(n: int, pairs, time_limit: float) -> dict:
 def run_linext(binary: str | None, matrix: Path, method: str, args) -> dict | None:
     if binary is None:
         return None
-    wall, out = timed([binary, str(matrix), method, str(args.epsilon), str(args.delta)], args.timeout)
+    wall, out = timed([binary, str(matrix), method, str(args.epsilon), str(args.delta)], args.timeout,
+                      stderr=True)
     if out is None:
         return {"wall": wall, "log10": None}
     found = re.findall(r"LINEXT_LOG_COUNT\s+(\S+)", out)
@@ -153,7 +158,7 @@ def run_linext(binary: str | None, matrix: Path, method: str, args) -> dict | No
 def run_lecount(binary: str | None, matrix: Path, args) -> dict | None:
     if binary is None:
         return None
-    wall, out = timed([binary, str(matrix), *args.lecount_args.split()], args.timeout)
+    wall, out = timed([binary, str(matrix), *args.lecount_args.split()], args.timeout, stderr=True)
     if out is None:
         return {"wall": wall, "log10": None}
     numbers = re.findall(r"\b\d+(?:\.\d+)?(?:[eE][+-]?\d+)?\b", out)

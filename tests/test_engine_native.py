@@ -96,7 +96,7 @@ def test_big_counts_and_every_width():
     """Counts far beyond 64 bits, components and cut elements, on 1 to 16 words."""
     for n in (30, 64, 100, 250, 500, 1000):
         anti = Poset.antichain(n)
-        core = native.NativeCounter(anti)            # directly: the counter hands over only n <= 256
+        core = native.NativeCounter(anti)
         assert core.count(anti.full, 0, -1, -1.0)[1] == math.factorial(n)
         assert Counter(anti).count() == math.factorial(n)
         assert Counter(anti).compiled == (n <= native.MAX_ELEMENTS)
@@ -112,6 +112,48 @@ def test_big_counts_and_every_width():
         assert native.NativeCounter(p).count(p.full, 1, -1, -1.0)[1] == math.comb(2 * k, k) ** 2
         assert Counter(p).count() == math.comb(2 * k, k) ** 2
         assert Counter(p).count() == Counter(p, native=False).count()
+
+
+@needs_core
+@pytest.mark.parametrize("seed", range(6))
+def test_the_core_takes_orders_past_256_and_agrees_with_python(seed):
+    """Orders of 257 to 1,024 elements go to the core, components of very unequal sizes included
+    (the multinomial of a set is built from the smaller components' sizes), and every count equals
+    the pure-Python one, on the whole order and on random subsets."""
+    rng = random.Random(seed)      # a plain loop: the Python counter raises the recursion limit
+    n = rng.randint(257, native.MAX_ELEMENTS)
+    perm = list(range(n))
+    rng.shuffle(perm)
+    pairs, at = [], 0
+    while at < n:           # components: narrow strips (two or three chains with random links)
+        size = min(n - at, rng.choice((1, 2, 5, 20, n // 2)))
+        block = perm[at:at + size]
+        width = rng.choice((1, 2, 3))
+        for i in range(size - width):
+            pairs.append((block[i], block[i + width]))
+            if rng.random() < 0.2 and i + width + 1 < size:
+                pairs.append((block[i], block[i + width + 1]))
+        at += size
+    p = Poset.from_pairs(n, pairs)
+    fast, slow = Counter(p, max_memo=None), Counter(p, native=False, max_memo=None)
+    assert fast.compiled and not slow.compiled
+    for mask in random_subsets(rng, p, 3):
+        assert fast.count(mask) == slow.count(mask)
+
+
+def test_entries_within_a_memory_budget_scale_with_the_entry_size():
+    """A count's entry budget from bytes: more entries for small orders than for large ones, never
+    none, and within the bytes by the stated size of an entry."""
+    from opportune.engine.count import entries_within
+
+    for n in (2, 50, 300, 1024, 5000):
+        per = native.entry_bytes(n) if native.available() and n <= native.MAX_ELEMENTS else None
+        got = entries_within(n, 2**30)
+        assert got >= 1
+        if per is not None:
+            assert got * per <= 2**30 < (got + 1) * per
+    assert entries_within(50, 2**30) > entries_within(300, 2**30) > entries_within(1024, 2**30)
+    assert entries_within(1000, 10) == 1
 
 
 @needs_core

@@ -40,7 +40,8 @@ def fake(tmp_path, name: str, answer: str):
 def test_the_side_by_side_table_reads_both_peers_and_agrees_with_them(tmp_path, capsys):
     import vs_peers
 
-    linext = fake(tmp_path, "linext", 'print("0.01 0.01 -- LINEXT_LOG_COUNT", math.log(count))')
+    # linext writes its log, the count included, to standard error
+    linext = fake(tmp_path, "linext", 'print("0.01 0.01 -- LINEXT_LOG_COUNT", math.log(count), file=sys.stderr)')
     lecount = fake(tmp_path, "lecount", 'print("Counting..."); print(count)')
     assert vs_peers.main(["--linext", linext, "--lecount", lecount, "--salbp", "", "--no-generated",
                           "--sizes", "9,12", "--degrees", "2,4", "--time-limit", "5", "--json"]) == 0

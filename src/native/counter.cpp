@@ -231,6 +231,16 @@ void mul_into(const Limbs& a, const u64* b, size_t nb, Limbs& out) {
     trim(out);
 }
 
+void mul_small(Limbs& a, u64 m) {  // a *= m
+    u64 carry = 0;
+    for (auto& x : a) {
+        u128 t = (u128)x * m + carry;
+        x = (u64)t;
+        carry = (u64)(t >> 64);
+    }
+    if (carry) a.push_back(carry);
+}
+
 void div_small(Limbs& a, std::uint32_t d) {  // exact division by d < 2^32, in 32-bit halves (no 128-bit division)
     u64 rem = 0;
     for (size_t i = a.size(); i-- > 0;) {
@@ -263,19 +273,6 @@ class Counter {
             below_[i] = unpack(below[i]);
             above_[i] = unpack(above[i]);
             nbr_[i] = below_[i] | above_[i];
-        }
-        fact_.resize(n + 1);
-        fact_[0] = Limbs{1};
-        for (int k = 1; k <= n; ++k) {
-            Limbs f = fact_[k - 1];
-            u64 carry = 0;
-            for (auto& x : f) {
-                u128 t = (u128)x * (u64)k + carry;
-                x = (u64)t;
-                carry = (u64)(t >> 64);
-            }
-            if (carry) f.push_back(carry);
-            fact_[k] = f;
         }
         acc_.resize(n + 2);
         tmp_.resize(n + 2);
@@ -670,7 +667,6 @@ class Counter {
 
     int n_;
     std::vector<B> below_, above_, nbr_;
-    std::vector<Limbs> fact_;
     std::vector<Limbs> acc_, tmp_;  // scratch per recursion depth
     std::vector<std::vector<B>> comps_;
     Buffer<Slot> table_;
@@ -779,10 +775,12 @@ class Counter {
         B mins = B::zero(), maxs = B::zero();
         B cuts = B::zero();  // elements comparable to every other element of s
         int k = 0, nmin = 0, nmax = 0;
+        // only the side the recursion takes is scanned (both when it chooses per set)
+        const bool want_min = dir_ != 1, want_max = dir_ != 0;
         s.each([&](int x) {
             ++k;
-            if ((below_[x] & s).none()) mins.set(x), ++nmin;
-            if ((above_[x] & s).none()) maxs.set(x), ++nmax;
+            if (want_min && (below_[x] & s).none()) mins.set(x), ++nmin;
+            if (want_max && (above_[x] & s).none()) maxs.set(x), ++nmax;
             if (s.without(nbr_[x]).is_single(x)) cuts.set(x);
         });
         tick(4LL + 4LL * k * W);
@@ -817,12 +815,30 @@ class Counter {
         std::vector<B>& comps = comps_[depth];
         components(s, comps);
         if (comps.size() > 1) {
-            // |s|! / (|C1|! ... |Cm|!) e(C1) ... e(Cm); dividing by 2..|C| one at a time stays exact
-            acc = fact_[k];
-            // divide by the factors 2..|C| of each component, batched into products below 2^32
+            // |s|! / (|C1|! ... |Cm|!) e(C1) ... e(Cm), with C1 the largest component:
+            // (|C1|+1)(|C1|+2)...|s| / (|C2|! ... |Cm|!), so the work grows with the smaller
+            // components only (a big component beside a few small ones is the common case, and
+            // starting from |s|! cost hundreds of divisions of a long number per set).  Factors are
+            // batched into products below 2^32; dividing by 2..|C| one at a time stays exact, and
+            // every division comes after the whole product.
+            int big = 0;
+            for (size_t i = 1; i < comps.size(); ++i)
+                if (comps[i].count() > comps[big].count()) big = (int)i;
+            acc.assign(1, 1);
             u64 batch = 1;
-            for (const B& c : comps) {
-                int ck = c.count();
+            for (int f = comps[big].count() + 1; f <= k; ++f) {
+                if (batch * (u64)f >> 32) {
+                    mul_small(acc, batch);
+                    tick(2LL * acc.size());
+                    batch = 1;
+                }
+                batch *= (u64)f;
+            }
+            if (batch > 1) mul_small(acc, batch);
+            batch = 1;
+            for (size_t i = 0; i < comps.size(); ++i) {
+                if ((int)i == big) continue;
+                int ck = comps[i].count();
                 for (int d = 2; d <= ck; ++d) {
                     if (batch * (u64)d >> 32) {
                         div_small(acc, (std::uint32_t)batch);
@@ -848,7 +864,11 @@ class Counter {
             ext.each([&](int x) {
                 B t = s;
                 t.flip(x);
-                __builtin_prefetch(&table_[t.hash() & m]);
+                // every cache line of the slot: past 4 words a slot spans two or three lines, and
+                // find() reads its length (the last field) before its key
+                const char* at = reinterpret_cast<const char*>(&table_[t.hash() & m]);
+                for (size_t line = 0; line < sizeof(Slot); line += 64) __builtin_prefetch(at + line);
+                if (sizeof(Slot) % 64) __builtin_prefetch(at + sizeof(Slot) - 1);
             });
         }
         acc.assign(1, 0);

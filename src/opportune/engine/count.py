@@ -74,8 +74,10 @@ from typing import Callable
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline  # noqa: F401 (BudgetExceeded: its documented import)
 from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain, split_components
 
-__all__ = ["BudgetExceeded", "Counter", "count_linear_extensions"]
+__all__ = ["BudgetExceeded", "Counter", "count_linear_extensions", "entries_within"]
 
+#: Memo entries a counter holds between top-level calls, by default (see :meth:`Counter.maintain`).
+_MAX_TOTAL = 2_000_000
 _CHECK_EVERY = 256  # new memo entries between clock checks (a power of two), on small posets
 
 
@@ -164,13 +166,16 @@ class Counter:
     """
 
     def __init__(self, poset: Poset, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
-                 max_total: int | None = 2_000_000, native: bool | None = None):
+                 max_total: int | None = _MAX_TOTAL, native: bool | None = None):
         self.poset = poset
         self._native = None
         self._direction = 0                     # 1 for the reversed view (see _reverse)
         if native is not False:
-            from opportune.engine.native import native_counter
+            from opportune.engine.native import MAX_BYTES, entry_bytes, native_counter
             self._native = native_counter(poset, max_total)
+            if self._native is not None and max_total is not None and max_total > _MAX_TOTAL:
+                # a counter made to hold more entries than usual holds their bytes too
+                self._native.max_bytes = max(MAX_BYTES, max_total * entry_bytes(poset.n))
         self.max_memo = max_memo
         self.time_limit = time_limit
         self.max_total = max_total
@@ -1274,6 +1279,26 @@ def _ratio(a: int, b: int) -> float:
     except OverflowError:  # pragma: no cover - only for astronomically large counts
         shift = max(a.bit_length(), b.bit_length()) - 900
         return (a >> shift) / (b >> shift)
+
+
+def entries_within(n: int, nbytes: int) -> int:
+    """Memo entries an exact count on an order of ``n`` elements may make within ``nbytes`` bytes of
+    memory: by :func:`~opportune.engine.native.entry_bytes` where the compiled core takes the order,
+    else by a Python entry's size (a dict slot, a key of ``n`` bits and a count of ``log2(n!)``
+    bits, about 100 bytes of objects besides).  At least 1.  O(1).
+
+    >>> entries_within(50, 2**30) > 1_000_000
+    True
+    """
+    import math
+
+    from opportune.engine import native
+
+    if native.available() and n <= native.MAX_ELEMENTS:
+        per = native.entry_bytes(n)
+    else:
+        per = 100 + n // 8 + int(math.lgamma(n + 1) / math.log(2)) // 8
+    return max(1, nbytes // per)
 
 
 def count_linear_extensions(poset: Poset, mask: int | None = None, *, max_memo: int | None = None,

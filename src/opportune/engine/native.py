@@ -28,13 +28,15 @@ from opportune.engine.poset import Poset
 #: a count of ~1 KB): growing the table is one uninterruptible copy of hundreds of megabytes, and on
 #: 1,000-task graphs budgeted decisions stalled for up to 1.4 s (pure Python: 0.2 s), without being
 #: exact more often.  So larger orders run in Python.
-MAX_ELEMENTS = 256
+MAX_ELEMENTS = 1024
 #: What the core itself can take (``NativeCounter`` directly, e.g. in tests).
 CORE_MAX_ELEMENTS = 1024
 
 #: Bytes of memo the compiled counter holds for one order before it starts again (at the start of
-#: a top-level count; one count may add its ``max_memo`` entries on top).  About 100 bytes an entry
-#: on orders of 50 elements, about 1.5 KB on orders of 1,000 (keys of 128 bytes, counts of ~1 KB).
+#: a top-level count; one count may add its ``max_memo`` entries on top), unless its counter was made
+#: for more entries (:attr:`NativeCounter.max_bytes`).  About 100 bytes an entry on orders of 50
+#: elements, about 1.5 KB on orders of 1,000 (keys of 128 bytes, counts of ~1 KB): see
+#: :func:`entry_bytes`.
 MAX_BYTES = 400 * 2**20
 
 try:
@@ -43,6 +45,25 @@ try:
     from opportune import _native
 except ImportError:     # pragma: no cover - depends on the build
     _native = None
+
+
+def entry_bytes(n: int) -> int:
+    """Bytes one entry of the compiled memo may take on an order of ``n`` elements, for budgets: its
+    table slot (a key of ``n`` bits rounded up to 1, 2, 4, 8 or 16 words, and 16 bytes) three times
+    over (the table is at most half full, and doubling holds both tables for a moment), and a count
+    of ``log2(n!)`` bits once and a half (the arena doubles too).  Counts are smaller on most sets,
+    so real entries take less.  O(1).
+
+    >>> entry_bytes(50), entry_bytes(300)
+    (120, 624)
+    """
+    import math
+
+    words = 1
+    while 64 * words < n:
+        words *= 2
+    limbs = max(1, -(-int(math.lgamma(n + 1) / math.log(2) + 1) // 64))
+    return 3 * (8 * words + 16) + 12 * limbs
 
 
 def available() -> bool:
@@ -62,7 +83,7 @@ class NativeCounter:
     microseconds), table and arena growth included.
     """
 
-    __slots__ = ("_core", "_nbytes", "max_total")
+    __slots__ = ("_core", "_nbytes", "max_total", "max_bytes")
 
     def __init__(self, poset: Poset, max_total: int | None = None):
         if poset.n > CORE_MAX_ELEMENTS:
@@ -76,6 +97,9 @@ class NativeCounter:
         self._core = cls(poset.n, [m.to_bytes(nb, "little") for m in poset.below],
                          [m.to_bytes(nb, "little") for m in poset.above])
         self.max_total = max_total
+        #: Bytes past which :meth:`over` says to start again (:data:`MAX_BYTES`, or more for a counter
+        #: made for a larger count: see :class:`~opportune.engine.count.Counter`).
+        self.max_bytes = MAX_BYTES
 
     def count(self, mask: int, direction: int, max_new: int,
               seconds: float | Deadline) -> tuple[int, int | None, int]:
@@ -85,12 +109,12 @@ class NativeCounter:
         return status, (int.from_bytes(value, "little") if value is not None else None), added
 
     def over(self, max_total: int | None = None) -> bool:
-        """Whether the memo holds more than ``max_total`` entries or :data:`MAX_BYTES` bytes (the
+        """Whether the memo holds more than ``max_total`` entries or :attr:`max_bytes` bytes (the
         caller then resets it, at the start of a top-level call: never within one, where the
         recursions above the core rely on what it has stored)."""
         if max_total is None:
             max_total = self.max_total
-        return (max_total is not None and self._core.size() > max_total) or self._core.memory() > MAX_BYTES
+        return (max_total is not None and self._core.size() > max_total) or self._core.memory() > self.max_bytes
 
     def lookup(self, mask: int) -> int | None:
         value = self._core.lookup(mask.to_bytes(self._nbytes, "little"))

@@ -306,7 +306,10 @@ class OrderEngine:
             except CycleError:
                 self._counters[strategies] = None
             else:
-                self._counters[strategies] = Counter(poset, max_memo=self.max_memo, time_limit=self.time_limit)
+                # a count allowed more entries than a counter usually holds keeps them between its
+                # phases (the memory limit still bounds what stays between decisions)
+                self._counters[strategies] = Counter(poset, max_memo=self.max_memo, time_limit=self.time_limit,
+                                                     max_total=max(2_000_000, self.max_memo or 0))
                 self._counters[strategies].hold_upkeep = self._deciding > 0
         return self._counters[strategies]
 
