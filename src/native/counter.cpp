@@ -277,6 +277,7 @@ class Counter {
         acc_.resize(n + 2);
         tmp_.resize(n + 2);
         comps_.resize(n + 2);
+        hs_.resize(n + 2);
         reset();
     }
 
@@ -308,7 +309,7 @@ class Counter {
         if (s.at_most_one()) return to_bytes(Val{0, 1});
         const Slot* slot = find(s);
         if (!slot->len) return py::none();
-        return to_bytes(Val{slot->off, slot->len});
+        return to_bytes(Val{slot->off, (std::uint32_t)slot->len});
     }
 
     // Store the exact count of a set found by another method (the hub split, the down-set programme).
@@ -659,16 +660,22 @@ class Counter {
         u64 off;
         std::uint32_t len;
     };
+    // 16 bytes, four to a cache line: the set's hash and where its entry lies in the arena (the set's
+    // W key words, then its count).  A look-up that misses reads one line of the table; a hit reads
+    // the entry's lines, which the caller reads for the count anyway.  (Slots that held the key took
+    // W + 2 words: two or three lines each past 4 words, read on every look-up.)
     struct Slot {
-        B key;
-        u64 off = 0;
-        std::uint32_t len = 0;  // 0: empty
+        u64 hash = 0;
+        u64 off : 40;   // the count's first limb in the arena (its key is the W words before)
+        u64 len : 24;   // limbs of the count; 0: empty
+        Slot() : off(0), len(0) {}
     };
 
     int n_;
     std::vector<B> below_, above_, nbr_;
     std::vector<Limbs> acc_, tmp_;  // scratch per recursion depth
     std::vector<std::vector<B>> comps_;
+    std::vector<std::vector<u64>> hs_;  // the children's hashes, per recursion depth
     Buffer<Slot> table_;
     Buffer<Slot> next_;          // the doubled table while grow() fills it (empty otherwise)
     size_t next_at_ = 0;         // slots of table_ copied into next_ so far
@@ -693,13 +700,15 @@ class Counter {
         return py::bytes(reinterpret_cast<const char*>(arena_.data() + v.off), 8 * size_t(v.len));
     }
 
-    const Slot* find(const B& s) const {
+    const Slot* find(const B& s) const { return find(s, s.hash()); }
+    const Slot* find(const B& s, u64 h) const {
         size_t m = table_.size() - 1;
-        size_t i = s.hash() & m;
-        while (table_[i].len && !(table_[i].key == s)) i = (i + 1) & m;
+        size_t i = h & m;
+        while (table_[i].len && !(table_[i].hash == h && key_at(table_[i]) == s)) i = (i + 1) & m;
         return &table_[i];
     }
     Slot* find(const B& s) { return const_cast<Slot*>(static_cast<const Counter*>(this)->find(s)); }
+    const B& key_at(const Slot& sl) const { return *reinterpret_cast<const B*>(arena_.data() + sl.off - W); }
 
     // Double the table.  A table of millions of slots takes tens of milliseconds to copy: the copy
     // reads the clock as it goes and, past the deadline, stops the call with the old table whole
@@ -714,10 +723,10 @@ class Counter {
         size_t m = next_.size() - 1;
         for (; next_at_ < table_.size(); ++next_at_) {
             size_t j = next_at_;
-            if (!(j & 1023)) tick(1024 * (W + 2));     // before slot j is copied: a stop resumes at j
+            if (!(j & 1023)) tick(1024 * 2);     // before slot j is copied: a stop resumes at j
             const Slot& sl = table_[j];
             if (!sl.len) continue;
-            size_t i = sl.key.hash() & m;
+            size_t i = sl.hash & m;
             while (next_[i].len) i = (i + 1) & m;
             next_[i] = sl;
         }
@@ -729,34 +738,33 @@ class Counter {
     Val store(const B& s, const Limbs& value) {
         // grow first (either may stop the call, and then nothing of this entry is stored)
         if (2 * (size_ + 1) > table_.size()) grow();
-        Val v{arena_size_, (std::uint32_t)value.size()};
-        if (value.size() == 1 && value[0] == 1) {
-            v = Val{0, 1};
-        } else {
-            if (arena_size_ + value.size() > arena_cap_) {
-                // copied in pieces with the clock read between them, and resumed by the next call
-                // after a stop, like grow() (the arena does not change until the copy is done)
-                if (arena_next_.size() < arena_size_ + value.size() || arena_next_at_ > arena_size_) {
-                    arena_next_ = Buffer<u64>(2 * (arena_size_ + value.size()));
-                    arena_next_at_ = 0;
-                }
-                const size_t piece = size_t(1) << 15;
-                while (arena_next_at_ < arena_size_) {
-                    tick((long long)piece / 4);
-                    size_t k = std::min(piece, arena_size_ - arena_next_at_);
-                    std::memcpy(arena_next_.data() + arena_next_at_, arena_.data() + arena_next_at_, k * sizeof(u64));
-                    arena_next_at_ += k;
-                }
-                arena_.swap(arena_next_);
-                arena_cap_ = arena_.size();
-                arena_next_ = Buffer<u64>();
+        const size_t need = W + value.size();   // the key, then the count
+        if (arena_size_ + need > arena_cap_) {
+            // copied in pieces with the clock read between them, and resumed by the next call
+            // after a stop, like grow() (the arena does not change until the copy is done)
+            if (arena_next_.size() < arena_size_ + need || arena_next_at_ > arena_size_) {
+                arena_next_ = Buffer<u64>(2 * (arena_size_ + need));
                 arena_next_at_ = 0;
             }
-            std::memcpy(arena_.data() + arena_size_, value.data(), value.size() * sizeof(u64));
-            arena_size_ += value.size();
+            const size_t piece = size_t(1) << 15;
+            while (arena_next_at_ < arena_size_) {
+                tick((long long)piece / 4);
+                size_t k = std::min(piece, arena_size_ - arena_next_at_);
+                std::memcpy(arena_next_.data() + arena_next_at_, arena_.data() + arena_next_at_, k * sizeof(u64));
+                arena_next_at_ += k;
+            }
+            arena_.swap(arena_next_);
+            arena_cap_ = arena_.size();
+            arena_next_ = Buffer<u64>();
+            arena_next_at_ = 0;
         }
-        Slot* slot = find(s);
-        slot->key = s;
+        std::memcpy(arena_.data() + arena_size_, s.w, W * sizeof(u64));
+        std::memcpy(arena_.data() + arena_size_ + W, value.data(), value.size() * sizeof(u64));
+        Val v{arena_size_ + W, (std::uint32_t)value.size()};
+        arena_size_ += need;
+        const u64 h = s.hash();
+        Slot* slot = const_cast<Slot*>(find(s, h));
+        slot->hash = h;
         slot->off = v.off;
         slot->len = v.len;
         ++size_;
@@ -767,7 +775,7 @@ class Counter {
         if (s.at_most_one()) return Val{0, 1};
         {
             const Slot* slot = find(s);
-            if (slot->len) return Val{slot->off, slot->len};
+            if (slot->len) return Val{slot->off, (std::uint32_t)slot->len};
         }
         // budget: counted when a set is entered (every entered set is stored once finished)
         if (++added_ > max_new_) throw Stop{1};
@@ -858,21 +866,50 @@ class Counter {
             }
             return store(s, acc);
         }
-        // look the children up together: their slots are fetched from memory in parallel
-        {
-            const size_t m = table_.size() - 1;
-            ext.each([&](int x) {
-                B t = s;
-                t.flip(x);
-                // every cache line of the slot: past 4 words a slot spans two or three lines, and
-                // find() reads its length (the last field) before its key
-                const char* at = reinterpret_cast<const char*>(&table_[t.hash() & m]);
-                for (size_t line = 0; line < sizeof(Slot); line += 64) __builtin_prefetch(at + line);
-                if (sizeof(Slot) % 64) __builtin_prefetch(at + sizeof(Slot) - 1);
-            });
+        // Look the children up together, in passes, so that their memory is fetched in parallel: the
+        // slots first, then the entries of the children already counted, whose counts are added;
+        // only then are the others counted (a recursion goes deep and would evict what was fetched
+        // for the siblings after it).
+        std::vector<u64>& hs = hs_[depth];
+        hs.clear();
+        const size_t m = table_.size() - 1;
+        ext.each([&](int x) {
+            B t = s;
+            t.flip(x);
+            const u64 h = t.hash();
+            hs.push_back(h);
+            __builtin_prefetch(&table_[h & m]);
+        });
+        for (u64 h : hs) {
+            for (size_t j = h & m; table_[j].len; j = (j + 1) & m) {
+                if (table_[j].hash == h) {
+                    const u64* at = arena_.data() + table_[j].off;
+                    __builtin_prefetch(at - W);
+                    __builtin_prefetch(at);
+                    break;
+                }
+            }
         }
         acc.assign(1, 0);
+        B todo = B::zero();
+        size_t i = 0;
         ext.each([&](int x) {
+            B t = s;
+            t.flip(x);
+            const u64 h = hs[i++];
+            Val v{0, 1};
+            if (!t.at_most_one()) {
+                const Slot* slot = find(t, h);
+                if (!slot->len) {
+                    todo.set(x);
+                    return;
+                }
+                v = Val{slot->off, (std::uint32_t)slot->len};
+            }
+            add_into(acc, arena_.data() + v.off, v.len);
+            tick(4LL + v.len);
+        });
+        todo.each([&](int x) {
             B t = s;
             t.flip(x);
             Val v = rec(t, depth + 1);

@@ -23,11 +23,10 @@ import os
 from opportune.engine.deadline import Deadline
 from opportune.engine.poset import Poset
 
-#: Largest order the counter hands to the compiled core.  The core takes up to 1,024 elements (16
-#: machine words), but above a few hundred its memo's slots and counts are large (a key of 128 bytes,
-#: a count of ~1 KB): growing the table is one uninterruptible copy of hundreds of megabytes, and on
-#: 1,000-task graphs budgeted decisions stalled for up to 1.4 s (pure Python: 0.2 s), without being
-#: exact more often.  So larger orders run in Python.
+#: Largest order the counter hands to the compiled core: all it takes (16 machine words).  Growing
+#: its table and arena is resumable (a copy stops at the deadline and goes on at the next call), so
+#: budgeted decisions on 1,000-task graphs keep their budget with it too.  Larger orders run in
+#: Python.
 MAX_ELEMENTS = 1024
 #: What the core itself can take (``NativeCounter`` directly, e.g. in tests).
 CORE_MAX_ELEMENTS = 1024
@@ -49,13 +48,13 @@ except ImportError:     # pragma: no cover - depends on the build
 
 def entry_bytes(n: int) -> int:
     """Bytes one entry of the compiled memo may take on an order of ``n`` elements, for budgets: its
-    table slot (a key of ``n`` bits rounded up to 1, 2, 4, 8 or 16 words, and 16 bytes) three times
-    over (the table is at most half full, and doubling holds both tables for a moment), and a count
-    of ``log2(n!)`` bits once and a half (the arena doubles too).  Counts are smaller on most sets,
-    so real entries take less.  O(1).
+    table slot of 16 bytes three times over (the table is at most half full, and doubling holds both
+    tables for a moment), and in the arena its key (``n`` bits rounded up to 1, 2, 4, 8 or 16 words)
+    and a count of ``log2(n!)`` bits, once and a half (the arena doubles too).  Counts are smaller on
+    most sets, so real entries take less.  O(1).
 
     >>> entry_bytes(50), entry_bytes(300)
-    (120, 624)
+    (108, 528)
     """
     import math
 
@@ -63,7 +62,7 @@ def entry_bytes(n: int) -> int:
     while 64 * words < n:
         words *= 2
     limbs = max(1, -(-int(math.lgamma(n + 1) / math.log(2) + 1) // 64))
-    return 3 * (8 * words + 16) + 12 * limbs
+    return 3 * 16 + 12 * (words + limbs)
 
 
 def available() -> bool:
