@@ -297,16 +297,6 @@ public:
     const Node& node(Ref r) const { return nodes_[r]; }
     Ref kid(const Node& nd, int i) const { return kids_[std::size_t(nd.a) + i]; }
 
-    Ref find(u64 s) const {  // a stored set (or a single element)
-        if ((s & (s - 1)) == 0) return -1 - __builtin_ctzll(s);
-        std::size_t mask = slots_.size() - 1, i = hash(s) & mask;
-        while (true) {
-            std::uint32_t e = slots_[i];
-            if (nodes_[e - 1].key == s) return Ref(e - 1);  // stored sets are never missing when asked for
-            i = (i + 1) & mask;
-        }
-    }
-
 private:
     int k_;
     std::vector<u64> pred_, near_;

@@ -723,8 +723,9 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
     far (hundreds of percent from 2–3 runs of a variable estimator), and is
     then the honest statement of the error.
 
-    With the compiled core, on a set of :data:`ARMC_MIN_N` to :data:`ARMC_MAX_N` elements and with
-    ``exact_memo > 0`` (its relaxations are exact counts: ``exact_memo=0`` asks for sampling alone),
+    With the compiled core, on a set of :data:`ARMC_MIN_N` to :data:`ARMC_MAX_N` elements, with
+    ``exact_memo > 0`` (its relaxations are exact counts: ``exact_memo=0`` asks for sampling alone)
+    and a time limit or deadline (without one its draws could go on for ever where hits are rare),
     adaptive relaxation Monte Carlo on the whole set (:mod:`opportune.engine.relaxmc`) comes before the
     runs, with the share :data:`ARMC_SHARE` of the time left: its estimate (method ``"armc"``,
     ``samples`` its draws) is returned at once if its stated interval is within ``rel_error``, else at
@@ -839,7 +840,7 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
         # relaxation and a binomial interval; returned at once when it is as narrow as asked, else
         # kept to compare with the runs'
         if (sketch is not None and exact_memo > 0 and ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N
-                and relaxmc_available() and not soft.expired()):
+                and relaxmc_available() and soft.finite and not soft.expired()):
             armc = _armc(poset, mask, rel_error, confidence, seed, soft.share(ARMC_SHARE), low, high, start)
             if armc is not None and armc.rel_error <= rel_error:
                 return armc

@@ -29,15 +29,18 @@ nest, whichever stop comes first), and its upper end is the fixed-draws one, wid
 one for stopping on hits.  Why not Dagum–Karp–Luby–Ross's rule (linext's): it guarantees
 ``1 ± ε`` but needs about three times the hits for the same width at 95 %.  A stop on the clock
 depends a little on the draws (rejected draws are quicker), which the statement neglects; the tests
-check coverage on orders with known counts.
+check coverage on orders with known counts.  The pilots' draws only choose ``k``: the estimate uses
+fresh draws (another random stream), so the choice does not bias it.
 
 Determinism: the partition, the counts and the draws depend only on ``seed`` (and ``k``); the choice
-of ``k`` uses counted work (memo entries, elements placed), not the clock.  A stop on the clock
-depends on the machine's speed, as elsewhere in the engine.
+of ``k`` uses counted work (memo entries, elements placed), not the clock.  A stop on the clock (a
+count cut short, draws stopped before the target) depends on the machine's speed, as elsewhere in
+the engine.
 
 Memory: each relaxation's memos are capped at ``max_bytes`` (checked before every allocation, the
 hash tables' and the arrays' growth included); a count that would pass it stops with a status and
-the best relaxation so far is used.  Two relaxations are alive at most.
+the best relaxation so far is used.  Two relaxations are alive at most: at most ``2 · max_bytes``
+(512 MiB by default; the counts of sparse orders of 100 elements took 1-120 MB here).
 
 Complexity: the partition O(n² + tries · swaps · (n / k) · k) operations; a piece's count O(memo
 entries · k) (up to about 2^k entries on a piece without order, far fewer on ordered ones); a draw
