@@ -145,7 +145,7 @@ def test_hit_counts_match_the_true_proportion():
     """sample()'s early rejection gives the same proportion as whole draws: e(P) / e(R)."""
     rng = random.Random(4)
     p = random_poset(18, 0.15, rng)
-    pieces = [list(range(0, 9)), list(range(9, 18))]
+    pieces = [list(range(9)), list(range(9, 18))]
     relax = core.ArmcRelaxation(18, preds(p), pieces)
     _, log_r = relax.count(-1.0, -1)
     prop = Counter(p).count() / math.exp(log_r)
@@ -263,7 +263,7 @@ def test_pure_python_still_estimates():
             "p = Poset.from_pairs(30, [(i, i + 3) for i in range(27)]);"
             "e = estimate_count(p, exact_memo=10, time_limit=2, seed=1);"
             "print(relaxmc.estimate(p), e.method != 'armc', e.log10_low <= e.log10_high)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+    out = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=120,
                          env={**os.environ, "OPPORTUNE_PURE_PYTHON": "1"})
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["None", "True", "True"]

@@ -648,7 +648,8 @@ SKETCH_FLOOR = 2.5e-5
 SKETCH_FLOOR_MOST = 0.05
 #: Orders of at most this many elements (and at least :data:`ARMC_MIN_N`) are tried by adaptive
 #: relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`, compiled core only) before sequential
-#: Monte Carlo: on sparse orders of 64-100 elements it states about ±5 % in 3 seconds.  Larger orders need pieces of far more than 64 elements for a draw to hit.
+#: Monte Carlo: on sparse orders of 64-100 elements it states about ±5 % in 3 seconds.  Larger
+#: orders need pieces of far more than 64 elements for a draw to hit.
 ARMC_MAX_N = 256
 ARMC_MIN_N = 8
 #: Share of the time left (after the exact attempts) that it may take; it draws nothing, and leaves
@@ -665,7 +666,7 @@ def relaxmc_available() -> bool:
 
 
 def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: int, deadline: Deadline,
-          low: float, high: float, start: float) -> "Estimate | None":
+          low: float, high: float, start: float) -> Estimate | None:
     """Adaptive relaxation Monte Carlo on the subposet ``mask`` (:func:`opportune.engine.relaxmc.estimate`)
     as an :class:`Estimate` (method ``"armc"``, ``samples`` its draws), its value and interval within
     the certain bounds ``low``/``high`` (natural logs); None without the compiled core, without a hit,

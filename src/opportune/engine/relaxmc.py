@@ -100,8 +100,8 @@ class RelaxEstimate:
     ``status``: ``"exact"`` (one piece, or no constraint between pieces: the count is exact up to
     the rounding of doubles), ``"hits"`` (the target number of hits reached), ``"draws"`` (the cap
     on draws reached first), ``"time"`` (the deadline came first), ``"none"`` (no relaxation could
-    be counted within the time or memory; ``log10`` is nan), ``"hopeless"`` (see :func:`estimate`).  ``bytes``: the memos of the relaxation
-    used."""
+    be counted within the time or memory; ``log10`` is nan), ``"hopeless"`` (see :func:`estimate`).
+    ``bytes``: the memos of the relaxation used."""
 
     log10: float
     log10_low: float
