@@ -74,7 +74,7 @@ MAX_N = 1024
 K_START, K_STEP, K_MAX = 20, 5, 64
 #: Random starts of the partition's swap search per ``k`` (as ``armc``).
 TRIES = 50
-#: Bytes the memos of one relaxation may hold (about 45 bytes an entry).
+#: Bytes the memos of one relaxation may hold (about 100-140 bytes an entry, with the growth slack).
 MAX_BYTES = 256 * 2**20
 #: The next ``k``'s count is predicted to take this many times this one's memo entries (``armc``: 10).
 COUNT_GROWTH = 10.0
