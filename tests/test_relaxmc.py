@@ -220,6 +220,15 @@ def test_deterministic_for_a_seed():
     assert a == b and a.status == "hits" and c != a
 
 
+@needs_core
+def test_adaptive_choice_is_deterministic_without_a_clock():
+    """Without a deadline the choice of k rests on counted work only: the same seed, the same answer."""
+    p = random_poset(70, 3 / 69, random.Random(12))
+    a = relaxmc.estimate(p, rel_error=0.1, seed=5)
+    b = relaxmc.estimate(p, rel_error=0.1, seed=5)
+    assert a == b and a.status == "hits" and relaxmc.K_START <= a.k <= relaxmc.K_MAX
+
+
 # ------------------------------------------------------------------------------ budgets
 
 @needs_core
