@@ -946,6 +946,7 @@ void bind(py::module_& m, const char* name) {
 }  // namespace
 
 void bind_chains(py::module_& m);  // chains.cpp
+void bind_relax(py::module_& m);   // relax.cpp
 
 PYBIND11_MODULE(_native, m) {
     m.doc() = "Compiled core of opportune's order engine (see opportune.engine.native)";
@@ -955,4 +956,5 @@ PYBIND11_MODULE(_native, m) {
     bind<8>(m, "Counter8");
     bind<16>(m, "Counter16");
     bind_chains(m);
+    bind_relax(m);
 }
