@@ -266,6 +266,36 @@ def test_estimate_count_uses_it_where_the_exact_attempt_fails():
     assert e.log10_low <= math.log10(true) + 1e-9 and math.log10(true) - 1e-9 <= e.log10_high
 
 
+@needs_core
+def test_count_result_takes_the_relaxation_estimate_when_the_exact_count_does_not_fit(monkeypatch):
+    """``Schedule.count_result`` (what ``opportune count`` runs): with a memo budget too small for the
+    exact count, relaxation Monte Carlo runs while the exact count still could finish, and the answer
+    is an estimate at least as narrow as its interval (the later runs' if narrower), which holds the
+    true count."""
+    from opportune import make_plan
+    from opportune.engine import OrderEngine, Schedule
+
+    p = random_poset(50, 3 / 49, random.Random(5))       # a random sparse order: no hub, no cut
+    true = Counter(p, max_memo=None).count()
+    ids = [f"t{i}" for i in range(p.n)]
+    plan = make_plan(ids, {ids[b]: [ids[a] for a in bits(p.below[b])] for b in range(p.n)}, name="sparse")
+    made = []
+    original = Schedule._relaxation_estimate
+
+    def spy(*args):
+        made.append(original(*args))
+        return made[-1]
+
+    monkeypatch.setattr(Schedule, "_relaxation_estimate", staticmethod(spy))
+    r = Schedule(OrderEngine(plan, max_memo=300, time_limit=1.0)).count_result(time_limit=6.0, rel_error=0.05)
+    assert len(made) == 1 and made[0] is not None and made[0].method == "armc"
+    assert not r.exact and r.method in ("armc", "smc")
+    assert r.rel_error <= made[0].rel_error <= 0.05
+    if r.method == "armc":
+        assert made[0].log10_low - 1e-9 <= r.log10_low <= r.log10_high <= made[0].log10_high + 1e-9
+    assert r.log10_low <= math.log10(true) <= r.log10_high
+
+
 def test_pure_python_still_estimates():
     code = ("import random; from opportune.engine import relaxmc; from opportune.engine.poset import Poset;"
             "from opportune.engine.estimate import estimate_count;"

@@ -82,7 +82,7 @@ from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.hub import hub_split
 from opportune.engine.poset import Poset, bits, components, cut_blocks
 
-__all__ = ["Estimate", "OrderSketch", "estimate_count"]
+__all__ = ["Estimate", "OrderSketch", "estimate_count", "relaxation_estimate"]
 
 
 @dataclass(frozen=True)
@@ -686,6 +686,30 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
     hi = min(high, max(low, r.log10_high * _LN10))
     return Estimate(math.exp(lmean) if lmean < 709 else math.inf, r.rel_error, confidence, "armc", r.draws,
                     lmean / _LN10, None, time.perf_counter() - start, lo / _LN10, hi / _LN10)
+
+
+def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01, seed: int = 0,
+                        confidence: float = 0.95, deadline: Deadline | float | None = None) -> Estimate | None:
+    """Adaptive relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`) on the subposet ``mask`` of
+    ``poset`` as an :class:`Estimate` (method ``"armc"``; where one piece held the whole order, its
+    count in doubles, ``rel_error`` of about 1e-9), its interval within the order's trivial bounds ``1 <= e <= n!``; None where it does not
+    apply (no compiled core, fewer than :data:`ARMC_MIN_N` or more than :data:`ARMC_MAX_N`
+    elements, no finite ``deadline``) or found no hit in time.  Stops once the interval is within
+    ``rel_error``, and at once where the draws it would need are hopeless.
+
+    >>> from opportune.engine.poset import Poset
+    >>> e = relaxation_estimate(Poset.antichain(3), deadline=Deadline.after(1.0))
+    >>> e is None or e.value                                  # too small: None
+    True
+    """
+    start = time.perf_counter()
+    if mask is None:
+        mask = poset.full
+    dl = as_deadline(deadline)
+    if not (ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N and dl.finite and relaxmc_available()) or dl.expired():
+        return None
+    low, high = OrderSketch.trivial(mask.bit_count())
+    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start)
 
 
 def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01,

@@ -29,7 +29,7 @@ import random
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import combinations
 from typing import TYPE_CHECKING, Collection, Iterable, Sequence
@@ -59,6 +59,10 @@ HUB_PROBE = 100_000  # new memo entries a plain count may add before counting th
 COUNT_MARGIN = 0.25  # seconds Schedule.count_result may take past its deadline (checks' granularity, the answer)
 ESTIMATE_RESERVE = 3e-5  # seconds per element an estimate needs for its bounds and first path (~0.25 s for 10,000)
 GRACE = 0.05  # seconds the exact count and the estimate each get in count_result when its deadline has passed
+#: Share of count_result's exact phase that relaxation Monte Carlo takes first, when the plain count did
+#: not finish (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as soon
+#: as its interval is within the error asked, and gives the time back at once where it cannot hit.
+EARLY_ESTIMATE = 0.5
 
 
 class NotAdmissible(ValueError):
@@ -1159,6 +1163,7 @@ class Schedule:
 
         remaining = self.engine.full & ~self.mask
         n = remaining.bit_count()
+        early = None
         if terms is not None:
             # the phases share what is left of the time (a caller's deadline may have taken some),
             # and the exact ones leave the estimate at least its one pass over each order
@@ -1171,6 +1176,11 @@ class Schedule:
                 # a deadline spent before the call (reading the plan) still leaves a small plan its
                 # exact count: GRACE seconds, within COUNT_MARGIN
                 until = min(until, last) if not plain_only else max(min(until, last), start + GRACE)
+                if not plain_only and len(terms) == 1:
+                    # the plain count did not finish: relaxation Monte Carlo gets its share now, while
+                    # a narrow interval is still possible, and the exact count the rest of its phase
+                    early = self._relaxation_estimate(terms[0][1], remaining, rel_error, seed,
+                                                      Deadline.after(EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
                 try:
                     return exact_by(until, plain_only)
                 except BudgetExceeded:
@@ -1206,6 +1216,10 @@ class Schedule:
                                  time_limit=seconds / 2, overrun=math.inf, deadline=share, seed=seed,
                                  counter=counter, exact_memo=0, particles=particles,
                                  confidence=1 - 0.05 / len(terms), **hub)
+            if early is not None and est.exact is None and early.rel_error < est.rel_error:
+                # the narrower stated interval, within the order's certain bounds
+                est = replace(early, log10_low=max(early.log10_low, est.log10_low),
+                              log10_high=min(early.log10_high, est.log10_high))
             ests.append(est)
             exact = None if exact is None or est.exact is None else exact + sign * est.exact
             parts.append((sign, est.log10_value, est.rel_error))
@@ -1240,6 +1254,14 @@ class Schedule:
                            confidence=max(0.0, 1 - missed),
                            method=("union:" if union_only else "") + "+".join(sorted(methods)), log10_value=log10,
                            log10_low=lo, log10_high=hi)
+
+    @staticmethod
+    def _relaxation_estimate(counter, mask: int, rel_error: float, seed: int, deadline):
+        """Relaxation Monte Carlo on ``mask`` of ``counter``'s order within ``deadline`` (an
+        :class:`~opportune.engine.estimate.Estimate`, or None where it does not apply or found nothing)."""
+        from opportune.engine.estimate import relaxation_estimate
+
+        return relaxation_estimate(counter.poset, mask, rel_error=rel_error, seed=seed, deadline=deadline)
 
     def options(self) -> dict[str, int]:
         """For each installable part, how many admissible completions remain after installing it.
