@@ -242,6 +242,43 @@ def test_a_budgeted_decision_pauses_the_collector_and_gives_it_back():
         (gc.enable if was else gc.disable)()
 
 
+def test_no_collection_starts_inside_a_budgeted_decision():
+    """The pause covers the whole decision, its first and last allocations included: with the
+    collector set to run at every allocation, none starts between the call and its return (a
+    pause written as a ``with`` block let the collection that waited start in the block's exit,
+    inside the decision)."""
+    import gc
+
+    plan = load_plan("example:gearbox")
+    engine = OrderEngine(plan)
+    policy = Opportunistic(budget=0.05)
+    look = tuple(plan.part_ids[:2])
+    policy.choose_at(engine, 0, engine.all_strategies, (), 1, look)    # warm: the same work each time
+    inside = [False]
+    started = []
+
+    def watch(phase, info):
+        if phase == "start" and inside[0]:
+            started.append(info["generation"])
+
+    threshold = gc.get_threshold()
+    was = gc.isenabled()
+    gc.callbacks.append(watch)
+    try:
+        gc.enable()
+        for _ in range(20):
+            gc.set_threshold(1)
+            inside[0] = True
+            policy._budgeted(engine, 0, engine.all_strategies, (), 1, look)
+            inside[0] = False
+            gc.set_threshold(*threshold)
+    finally:
+        gc.callbacks.remove(watch)
+        gc.set_threshold(*threshold)
+        (gc.enable if was else gc.disable)()
+    assert started == []
+
+
 def test_a_budget_must_be_positive():
     with pytest.raises(ValueError):
         Opportunistic(budget=0)

@@ -643,6 +643,9 @@ class Counter {
                 frontier = grow.without(comp);
                 comp = comp | grow;
                 tick(4 * W);
+                // everything left is reached: the last frontier need not be expanded (usually the
+                // largest, as comparability reaches most of a set in two rounds)
+                if (rest.without(comp).none()) break;
             }
             rest = rest.without(comp);
             comps.push_back(comp);

@@ -143,7 +143,7 @@ class Counter:
 
     native : bool or None
         Run the recursion in the compiled core (:mod:`opportune.engine.native`)
-        when it is built and the order has at most 256 elements (None, the
+        when it is built and the order has at most 1,024 elements (None, the
         default), or never (False).  Results are the same exact integers; the
         compiled memo holds the counts of every set the recursion visits, the
         Python memo only those asked for.

@@ -38,8 +38,8 @@ from fractions import Fraction
 from opportune.engine.count import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.sampling import CompletionChains
-from opportune.policies.base import (DONE, SHAKE, Action, Candidate, Decision, DecidesOnMasks, Estimate, collector_paused,
-                                     shared_action)
+from opportune.policies.base import (DONE, SHAKE, Action, Candidate, Decision, DecidesOnMasks, Estimate,
+                                     pause_collector, resume_collector, shared_action)
 
 MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
 EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
@@ -239,9 +239,12 @@ class Opportunistic(DecidesOnMasks):
 
     def _budgeted(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
         """The rule within the budget (:meth:`_within_budget`), with the garbage collector paused: a
-        collection waits for the next look (see :func:`~opportune.policies.base.collector_paused`)."""
-        with collector_paused():
+        collection waits for the next look (see :func:`~opportune.policies.base.pause_collector`)."""
+        pause_collector()       # before anything allocates, resumed after the answer is built
+        try:
             return self._within_budget(engine, mask, consistent, buffer, free, visible)
+        finally:
+            resume_collector()
 
     def _within_budget(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, _How]:
         """The rule within the budget.  Exact counts first while they have been quick; where they have

@@ -29,8 +29,8 @@ from dataclasses import replace
 
 from opportune.engine.count import BudgetExceeded
 from opportune.engine.sampling import prob_positive
-from opportune.policies.base import (DONE, SHAKE, Action, DecidesOnMasks, Decision, Estimate, collector_paused,
-                                     shared_action)
+from opportune.policies.base import (DONE, SHAKE, Action, DecidesOnMasks, Decision, Estimate,
+                                     pause_collector, resume_collector, shared_action)
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.opportunistic import (_CLOSE, INDIFFERENT, MARGIN, SURE, Opportunistic, _How, _join,
                                               _mixed)
@@ -85,8 +85,11 @@ class Slack(BinFirst):
     def _how(self, engine, mask, consistent, buffer, free, visible):
         if self.total_budget is None:
             return self._slack_how(engine, mask, consistent, buffer, free, visible)
-        with collector_paused():    # the whole budgeted decision, the rule's part and the slack's
+        pause_collector()       # the whole budgeted decision, the rule's part and the slack's
+        try:
             return self._slack_how(engine, mask, consistent, buffer, free, visible)
+        finally:
+            resume_collector()
 
     def _slack_how(self, engine, mask, consistent, buffer, free, visible):
         start = time.perf_counter()
