@@ -716,7 +716,8 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
                    time_limit: float | None = 10.0, seed: int = 0, confidence: float = 0.95,
                    counter: Counter | None = None, exact_memo: int = 300_000, particles: int = 1024,
                    tail: int | None = None, tail_memo: int = 500, min_runs: int = 20, hub: float = 0.85,
-                   overrun: float = math.inf, deadline: Deadline | float | None = None) -> Estimate:
+                   overrun: float = math.inf, deadline: Deadline | float | None = None,
+                   relaxation: bool | None = None) -> Estimate:
     """Estimate the number of linear extensions of the subposet induced on ``mask``, with a stated error.
 
     All the work stops at ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`; a float is a
@@ -749,8 +750,8 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
     then the honest statement of the error.
 
     With the compiled core, on a set of :data:`ARMC_MIN_N` to :data:`ARMC_MAX_N` elements, with
-    ``exact_memo > 0`` (its relaxations are exact counts: ``exact_memo=0`` asks for sampling alone)
-    and a time limit or deadline (without one its draws could go on for ever where hits are rare),
+    ``exact_memo > 0`` (its relaxations are exact counts: ``exact_memo=0`` asks for sampling alone,
+    unless ``relaxation`` is True; False turns it off) and a time limit or deadline (without one its draws could go on for ever where hits are rare),
     adaptive relaxation Monte Carlo on the whole set (:mod:`opportune.engine.relaxmc`) comes before the
     runs, with the share :data:`ARMC_SHARE` of the time left: its estimate (method ``"armc"``,
     ``samples`` its draws) is returned at once if its stated interval is within ``rel_error``, else at
@@ -864,7 +865,9 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
         # 4. adaptive relaxation Monte Carlo (compiled core) on the whole set: an exactly counted
         # relaxation and a binomial interval; returned at once when it is as narrow as asked, else
         # kept to compare with the runs'
-        if (sketch is not None and exact_memo > 0 and ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N
+        if relaxation is None:
+            relaxation = exact_memo > 0
+        if (sketch is not None and relaxation and ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N
                 and relaxmc_available() and soft.finite and not soft.expired()):
             armc = _armc(poset, mask, rel_error, confidence, seed, soft.share(ARMC_SHARE), low, high, start)
             if armc is not None and armc.rel_error <= rel_error:

@@ -63,6 +63,10 @@ GRACE = 0.05  # seconds the exact count and the estimate each get in count_resul
 #: not finish (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as soon
 #: as its interval is within the error asked, and gives the time back at once where it cannot hit.
 EARLY_ESTIMATE = 0.5
+#: The relative error at which that first relaxation estimate stops (the error asked, if looser):
+#: ±5% takes a few thousand hits; where the exact count then fails too, the estimate phase runs it
+#: again towards the error asked.
+EARLY_ERROR = 0.05
 
 
 class NotAdmissible(ValueError):
@@ -1179,7 +1183,9 @@ class Schedule:
                 if not plain_only and len(terms) == 1:
                     # the plain count did not finish: relaxation Monte Carlo gets its share now, while
                     # a narrow interval is still possible, and the exact count the rest of its phase
-                    early = self._relaxation_estimate(terms[0][1], remaining, rel_error, seed,
+                    # (to a looser error than asked, so that an exact count that was about to finish
+                    # is not held up long; the estimate phase may narrow it)
+                    early = self._relaxation_estimate(terms[0][1], remaining, max(rel_error, EARLY_ERROR), seed,
                                                       Deadline.after(EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
                 try:
                     return exact_by(until, plain_only)
@@ -1215,7 +1221,8 @@ class Schedule:
             est = estimate_count(counter.poset, remaining, rel_error=rel_error / max(1, len(terms)),
                                  time_limit=seconds / 2, overrun=math.inf, deadline=share, seed=seed,
                                  counter=counter, exact_memo=0, particles=particles,
-                                 confidence=1 - 0.05 / len(terms), **hub)
+                                 confidence=1 - 0.05 / len(terms), relaxation=early is not None
+                                 and early.rel_error > rel_error, **hub)
             if early is not None and est.exact is None and early.rel_error < est.rel_error:
                 # the narrower stated interval, within the order's certain bounds
                 est = replace(early, log10_low=max(early.log10_low, est.log10_low),
