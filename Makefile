@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 # included): no extra, no system package.  `setup` builds on it, so the core is compiled once.
 CORE_STAMP := $(VENV)/.installed-core
 EXTRAS := service,postgres,scale,dev,docs
-SOURCES := pyproject.toml CMakeLists.txt src/native/counter.cpp src/native/chains.cpp src/native/relax.cpp
+SOURCES := pyproject.toml CMakeLists.txt $(wildcard src/native/*.cpp src/native/*.hpp)
 
 .PHONY: demo test docs setup core system-deps pg-deps bench bench-service clean
 

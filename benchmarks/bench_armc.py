@@ -149,7 +149,7 @@ def main() -> None:
     ap.add_argument("--skip-speed", action="store_true")
     ap.add_argument("--skip-coverage", action="store_true")
     args = ap.parse_args()
-    if relaxmc._native() is None:
+    if not relaxmc.available():
         sys.exit("relaxation Monte Carlo needs the compiled core (pip install -e . with a compiler)")
     print(f"load average {os.getloadavg()[0]:.2f} at the start; {os.cpu_count()} cores")
     if not args.skip_speed:

@@ -156,6 +156,22 @@ def test_entries_within_a_memory_budget_scale_with_the_entry_size():
     assert entries_within(1000, 10) == 1
 
 
+def test_an_engine_with_max_memo_0_budgets_its_counts_by_its_memory_limit():
+    """``max_memo=0`` (what ``opportune count`` passes): entries from the engine's own memory limit and
+    the order's size in units (a part of quantity 3 is 3 units), so the limit decides, not the part count."""
+    from opportune import make_plan
+    from opportune.engine import OrderEngine
+    from opportune.engine.count import entries_within
+
+    plan = make_plan(["a", {"id": "b", "quantity": 300}, "c"], {"c": ["a"]})
+    assert entries_within(302, 2**30) != entries_within(3, 2**30)
+    for limit in (2**20, 2**30):
+        engine = OrderEngine(plan, max_memo=0, memory_limit=limit)
+        assert engine.max_memo == entries_within(engine.n_units, limit)
+    assert OrderEngine(plan, max_memo=0, memory_limit=2**30).max_memo > OrderEngine(plan, max_memo=0, memory_limit=2**20).max_memo
+    assert OrderEngine(plan, max_memo=1234).max_memo == 1234
+
+
 @needs_core
 def test_budgets_stop_the_core_and_its_memo_survives():
     rng = random.Random(3)

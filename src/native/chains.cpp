@@ -11,17 +11,13 @@
 #include <stdexcept>
 #include <vector>
 
+#include "splitmix.hpp"
+
 namespace py = pybind11;
 
 namespace {
 
-double next_uniform(uint64_t& state) {   // splitmix64, then the top 53 bits as a double in [0, 1)
-    uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    z ^= z >> 31;
-    return (double)(z >> 11) * (1.0 / 9007199254740992.0);
-}
+double next_uniform(uint64_t& state) { return opportune::uniform53(state); }
 
 // `chains` spread-out admissible sequences of the steps `remaining` (an up-set), by Kahn's algorithm
 // with a uniformly drawn minimal step each time (CompletionChains._start_orders, the same draws).

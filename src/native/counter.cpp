@@ -738,7 +738,8 @@ class Counter {
         next_at_ = 0;
     }
 
-    Val store(const B& s, const Limbs& value) {
+    Val store(const B& s, const Limbs& value) { return store(s, value, s.hash()); }
+    Val store(const B& s, const Limbs& value, u64 h) {   // h: s.hash()
         // grow first (either may stop the call, and then nothing of this entry is stored)
         if (2 * (size_ + 1) > table_.size()) grow();
         const size_t need = W + value.size();   // the key, then the count
@@ -765,7 +766,6 @@ class Counter {
         std::memcpy(arena_.data() + arena_size_ + W, value.data(), value.size() * sizeof(u64));
         Val v{arena_size_ + W, (std::uint32_t)value.size()};
         arena_size_ += need;
-        const u64 h = s.hash();
         Slot* slot = const_cast<Slot*>(find(s, h));
         slot->hash = h;
         slot->off = v.off;
@@ -774,10 +774,12 @@ class Counter {
         return v;
     }
 
-    Val rec(const B& s, int depth) {
+    Val rec(const B& s, int depth) { return rec(s, depth, s.hash()); }
+    // h: s.hash(), computed once (a parent computed its children's for their look-ups already)
+    Val rec(const B& s, int depth, u64 h) {
         if (s.at_most_one()) return Val{0, 1};
         {
-            const Slot* slot = find(s);
+            const Slot* slot = find(s, h);
             if (slot->len) return Val{slot->off, (std::uint32_t)slot->len};
         }
         // budget: counted when a set is entered (every entered set is stored once finished)
@@ -800,7 +802,7 @@ class Counter {
         Limbs& acc = acc_[depth];
         Limbs& tmp = tmp_[depth];
         if (!cuts.none()) {
-            if (cuts == s) return store(s, Limbs{1});
+            if (cuts == s) return store(s, Limbs{1}, h);
             // the cut elements form a chain: order them by how many elements of s lie below
             std::vector<std::pair<int, int>> chain;
             cuts.each([&](int z) { chain.emplace_back((below_[z] & s).count(), z); });
@@ -820,7 +822,7 @@ class Counter {
                 times(block);
             }
             times(rest);
-            return store(s, acc);
+            return store(s, acc, h);
         }
         // components of the comparability graph on s
         std::vector<B>& comps = comps_[depth];
@@ -867,7 +869,7 @@ class Counter {
                 acc.swap(tmp);
                 tick((long long)acc.size() * v.len);
             }
-            return store(s, acc);
+            return store(s, acc, h);
         }
         // Look the children up together, in passes, so that their memory is fetched in parallel: the
         // slots first, then the entries of the children already counted, whose counts are added;
@@ -879,13 +881,13 @@ class Counter {
         ext.each([&](int x) {
             B t = s;
             t.flip(x);
-            const u64 h = t.hash();
-            hs.push_back(h);
-            __builtin_prefetch(&table_[h & m]);
+            const u64 ht = t.hash();
+            hs.push_back(ht);
+            __builtin_prefetch(&table_[ht & m]);
         });
-        for (u64 h : hs) {
-            for (size_t j = h & m; table_[j].len; j = (j + 1) & m) {
-                if (table_[j].hash == h) {
+        for (u64 ht : hs) {
+            for (size_t j = ht & m; table_[j].len; j = (j + 1) & m) {
+                if (table_[j].hash == ht) {
                     const u64* at = arena_.data() + table_[j].off;
                     __builtin_prefetch(at - W);
                     __builtin_prefetch(at);
@@ -895,16 +897,17 @@ class Counter {
         }
         acc.assign(1, 0);
         B todo = B::zero();
-        size_t i = 0;
+        size_t i = 0, missed = 0;   // the hashes of the children still to count move to the front of hs
         ext.each([&](int x) {
             B t = s;
             t.flip(x);
-            const u64 h = hs[i++];
+            const u64 ht = hs[i++];
             Val v{0, 1};
             if (!t.at_most_one()) {
-                const Slot* slot = find(t, h);
+                const Slot* slot = find(t, ht);
                 if (!slot->len) {
                     todo.set(x);
+                    hs[missed++] = ht;
                     return;
                 }
                 v = Val{slot->off, (std::uint32_t)slot->len};
@@ -912,14 +915,15 @@ class Counter {
             add_into(acc, arena_.data() + v.off, v.len);
             tick(4LL + v.len);
         });
-        todo.each([&](int x) {
+        i = 0;
+        todo.each([&](int x) {      // in the same order as above
             B t = s;
             t.flip(x);
-            Val v = rec(t, depth + 1);
+            Val v = rec(t, depth + 1, hs[i++]);
             add_into(acc, arena_.data() + v.off, v.len);
             tick(4LL + v.len);
         });
-        return store(s, acc);
+        return store(s, acc, h);
     }
 };
 

@@ -38,6 +38,8 @@
 #include <utility>
 #include <vector>
 
+#include "splitmix.hpp"
+
 namespace py = pybind11;
 
 namespace {
@@ -48,15 +50,10 @@ using Clock = std::chrono::steady_clock;
 constexpr int MAX_PIECE = 64;      // a piece's sets are one machine word
 constexpr int MAX_ORDER = 4096;    // what the partition and the draws take (sets of 64 words)
 
-struct Rng {  // splitmix64, the project's stream (chains.cpp uses the same)
+struct Rng {  // the project's stream (splitmix.hpp)
     u64 state;
-    u64 next() {
-        u64 z = (state += 0x9E3779B97F4A7C15ULL);
-        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-        z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-        return z ^ (z >> 31);
-    }
-    double uniform() { return double(next() >> 11) * (1.0 / 9007199254740992.0); }  // [0, 1)
+    u64 next() { return opportune::splitmix64(state); }
+    double uniform() { return opportune::uniform53(state); }  // [0, 1)
     // [0, m): the high word of a 64x64-bit product (bias below m / 2^64, immaterial here)
     u64 below(u64 m) { return u64((unsigned __int128)next() * m >> 64); }
 };

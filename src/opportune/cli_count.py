@@ -137,13 +137,6 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
     # A tenth of the time for the plain exact count; the rest for the hub split and, if needed, the estimate.
     # Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
     # take seconds); past it, the interval that holds without them.
-    if max_memo <= 0:
-        # the memory the engine may hold, not a number of entries: entries on 1,000 elements are 20
-        # times those on 50
-        from opportune.engine.count import entries_within
-        from opportune.engine.schedule import DEFAULT_MEMORY
-
-        max_memo = entries_within(len(plan.parts), DEFAULT_MEMORY)
     try:
         engine = OrderEngine(plan, max_memo=max_memo, time_limit=time_limit / 10, deadline=deadline.share(0.5))
     except BudgetExceeded:

@@ -80,7 +80,7 @@ __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions", "entries_with
 #: :meth:`Counter._count_piece` (the other gets the whole turn).  Tunable for experiments.
 OTHER_SHARE = 0.25
 #: Memo entries a counter holds between top-level calls, by default (see :meth:`Counter.maintain`).
-_MAX_TOTAL = 2_000_000
+MAX_TOTAL = 2_000_000
 _CHECK_EVERY = 256  # new memo entries between clock checks (a power of two), on small posets
 
 
@@ -169,14 +169,14 @@ class Counter:
     """
 
     def __init__(self, poset: Poset, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
-                 max_total: int | None = _MAX_TOTAL, native: bool | None = None):
+                 max_total: int | None = MAX_TOTAL, native: bool | None = None):
         self.poset = poset
         self._native = None
         self._direction = 0                     # 1 for the reversed view (see _reverse)
         if native is not False:
             from opportune.engine.native import MAX_BYTES, entry_bytes, native_counter
             self._native = native_counter(poset, max_total)
-            if self._native is not None and max_total is not None and max_total > _MAX_TOTAL:
+            if self._native is not None and max_total is not None and max_total > MAX_TOTAL:
                 # a counter made to hold more entries than usual holds their bytes too
                 self._native.max_bytes = max(MAX_BYTES, max_total * entry_bytes(poset.n))
         self.max_memo = max_memo

@@ -662,7 +662,7 @@ ARMC_HOPELESS = 30
 def relaxmc_available() -> bool:
     """True when adaptive relaxation Monte Carlo can run (the compiled core is there)."""
     from opportune.engine import relaxmc
-    return relaxmc._native() is not None
+    return relaxmc.available()
 
 
 def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: int, deadline: Deadline,
@@ -692,8 +692,8 @@ def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: flo
                         confidence: float = 0.95, deadline: Deadline | float | None = None) -> Estimate | None:
     """Adaptive relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`) on the subposet ``mask`` of
     ``poset`` as an :class:`Estimate` (method ``"armc"``; where one piece held the whole order, its
-    count in doubles, ``rel_error`` of about 1e-9), its interval within the order's trivial bounds ``1 <= e <= n!``; None where it does not
-    apply (no compiled core, fewer than :data:`ARMC_MIN_N` or more than :data:`ARMC_MAX_N`
+    count in doubles, ``rel_error`` of about 1e-9), its interval within the order's trivial bounds
+    ``1 <= e <= n!``; None where it does not apply (no compiled core, fewer than :data:`ARMC_MIN_N` or more than :data:`ARMC_MAX_N`
     elements, no finite ``deadline``) or found no hit in time.  Stops once the interval is within
     ``rel_error``, and at once where the draws it would need are hopeless.
 
@@ -751,8 +751,8 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
 
     With the compiled core, on a set of :data:`ARMC_MIN_N` to :data:`ARMC_MAX_N` elements, with
     ``exact_memo > 0`` (its relaxations are exact counts: ``exact_memo=0`` asks for sampling alone,
-    unless ``relaxation`` is True; False turns it off) and a time limit or deadline (without one its draws could go on for ever where hits are rare),
-    adaptive relaxation Monte Carlo on the whole set (:mod:`opportune.engine.relaxmc`) comes before the
+    unless ``relaxation`` is True; False turns it off) and a time limit or deadline (without one its
+    draws could go on for ever where hits are rare), adaptive relaxation Monte Carlo on the whole set (:mod:`opportune.engine.relaxmc`) comes before the
     runs, with the share :data:`ARMC_SHARE` of the time left: its estimate (method ``"armc"``,
     ``samples`` its draws) is returned at once if its stated interval is within ``rel_error``, else at
     the end if it is narrower than the runs'.  ``log10_low``/``log10_high`` always hold finite

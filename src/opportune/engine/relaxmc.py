@@ -238,6 +238,11 @@ def _native():
     return core if core is not None and hasattr(core, "ArmcRelaxation") else None
 
 
+def available() -> bool:
+    """True when the compiled core with relaxation Monte Carlo is there (else :func:`estimate` gives None)."""
+    return _native() is not None
+
+
 def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0.05, confidence: float = 0.95,
              seed: int = 0, deadline: Deadline | float | None = None, k: int | None = None,
              max_bytes: int = MAX_BYTES, max_draws: int | None = None,

@@ -34,7 +34,7 @@ from functools import lru_cache
 from itertools import combinations
 from typing import TYPE_CHECKING, Collection, Iterable, Sequence
 
-from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.count import MAX_TOTAL, BudgetExceeded, Counter, entries_within
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.hub import HubPath
 from opportune.engine.memory import memory_total
@@ -238,7 +238,9 @@ class OrderEngine:
     what makes repeated questions cheap.
 
     ``max_memo`` and ``time_limit`` bound each exact count; beyond them
-    :meth:`Schedule.count_result` falls back to an estimate and says so.
+    :meth:`Schedule.count_result` falls back to an estimate and says so.  ``max_memo=0``: as many
+    entries as ``memory_limit`` (or :data:`DEFAULT_MEMORY`) holds at the order's entry size
+    (:func:`~opportune.engine.count.entries_within`), what ``opportune count`` uses.
     """
 
     def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
@@ -249,7 +251,6 @@ class OrderEngine:
         (see :meth:`maintain`; None: only each memo's entry cap)."""
         dl = as_deadline(deadline)
         self.plan = plan
-        self.max_memo = max_memo
         self.time_limit = time_limit
         if memory_limit is not None and memory_limit <= 0:
             raise ValueError("memory_limit must be a positive number of bytes, or None")
@@ -266,6 +267,10 @@ class OrderEngine:
             self.unit_part.extend([i] * part.quantity)
         self.n_units = len(self.unit_part)
         self.full = (1 << self.n_units) - 1
+        if max_memo == 0:
+            # bytes, not entries: an entry on 1,000 units takes 20 times one on 50
+            max_memo = entries_within(self.n_units, memory_limit or DEFAULT_MEMORY)
+        self.max_memo = max_memo
         chain = [(u, u + 1) for u in range(self.n_units - 1) if self.unit_part[u] == self.unit_part[u + 1]]
         self.posets: list[Poset] = []
         for strategy in plan.strategies:
@@ -317,7 +322,7 @@ class OrderEngine:
                 # a count allowed more entries than a counter usually holds keeps them between its
                 # phases (the memory limit still bounds what stays between decisions)
                 self._counters[strategies] = Counter(poset, max_memo=self.max_memo, time_limit=self.time_limit,
-                                                     max_total=max(2_000_000, self.max_memo or 0))
+                                                     max_total=max(MAX_TOTAL, self.max_memo or 0))
                 self._counters[strategies].hold_upkeep = self._deciding > 0
         return self._counters[strategies]
 
@@ -1185,8 +1190,11 @@ class Schedule:
                     # a narrow interval is still possible, and the exact count the rest of its phase
                     # (to a looser error than asked, so that an exact count that was about to finish
                     # is not held up long; the estimate phase may narrow it)
-                    early = self._relaxation_estimate(terms[0][1], remaining, max(rel_error, EARLY_ERROR), seed,
-                                                      Deadline.after(EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
+                    from opportune.engine.estimate import relaxation_estimate
+
+                    early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
+                                                seed=seed, deadline=Deadline.after(
+                                                    EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
                 try:
                     return exact_by(until, plain_only)
                 except BudgetExceeded:
@@ -1261,14 +1269,6 @@ class Schedule:
                            confidence=max(0.0, 1 - missed),
                            method=("union:" if union_only else "") + "+".join(sorted(methods)), log10_value=log10,
                            log10_low=lo, log10_high=hi)
-
-    @staticmethod
-    def _relaxation_estimate(counter, mask: int, rel_error: float, seed: int, deadline):
-        """Relaxation Monte Carlo on ``mask`` of ``counter``'s order within ``deadline`` (an
-        :class:`~opportune.engine.estimate.Estimate`, or None where it does not apply or found nothing)."""
-        from opportune.engine.estimate import relaxation_estimate
-
-        return relaxation_estimate(counter.poset, mask, rel_error=rel_error, seed=seed, deadline=deadline)
 
     def options(self) -> dict[str, int]:
         """For each installable part, how many admissible completions remain after installing it.

@@ -219,12 +219,11 @@ def pause_collector() -> None:
     in a ``with`` block it ran in the block's own exit, inside the decision: 114 ms on a 1,000-task
     plan against a 50 ms budget)."""
     global _gc_pausers, _gc_was_enabled
-    was = gc.isenabled()
-    gc.disable()
     _gc_lock.acquire()      # a method call, not ``with``: entering a block allocates
     try:
         if _gc_pausers == 0:
-            _gc_was_enabled = was
+            _gc_was_enabled = gc.isenabled()
+            gc.disable()
         _gc_pausers += 1
     finally:
         _gc_lock.release()
@@ -236,11 +235,10 @@ def resume_collector() -> None:
     _gc_lock.acquire()
     try:
         _gc_pausers -= 1
-        last = _gc_pausers == 0 and _gc_was_enabled
+        if _gc_pausers == 0 and _gc_was_enabled:
+            gc.enable()
     finally:
         _gc_lock.release()
-    if last:
-        gc.enable()
 
 
 @contextmanager
