@@ -114,8 +114,10 @@ def test_lookahead_within_a_budget_goes_on_from_where_it_stopped():
     exact = Lookahead(visible=2)
     plan = engine.plan
     rng = random.Random(3)
-    marked = 0
-    for _ in range(400):
+    marked = checked = 0
+    # as many decisions as the programme needs to finish, whatever the machine gives each budget (about
+    # 300 idle here), then 100 more compared with the exact look-ahead
+    for _ in range(20_000):
         look = tuple(sorted(rng.sample(plan.part_ids, 2), key=plan.index))
         with CpuTime() as cpu:
             action = ahead.choose_at(engine, 0, engine.all_strategies, (), math.inf, look)
@@ -124,7 +126,11 @@ def test_lookahead_within_a_budget_goes_on_from_where_it_stopped():
             marked += 1
             continue
         assert action == exact.choose_at(engine, 0, engine.all_strategies, (), math.inf, look)
+        checked += 1
+        if checked == 100:
+            break
     assert marked > 0 and ahead.last_cost is not None     # it did not fit at first, and then it did
+    assert checked == 100
 
 
 def test_lookahead_past_the_engines_deadline_decides_as_its_base():
