@@ -229,6 +229,18 @@ def test_adaptive_choice_is_deterministic_without_a_clock():
     assert a == b and a.status == "hits" and relaxmc.K_START <= a.k <= relaxmc.K_MAX
 
 
+@needs_core
+def test_whole_false_skips_the_one_piece_count():
+    """An order of at most 64 elements is first counted as one piece (exact, in doubles) unless
+    ``whole=False``: then it is estimated from pieces of at most 60 elements, its interval holding the count."""
+    p = random_poset(40, 0.1, random.Random(21))
+    true = Counter(p).count()
+    whole = relaxmc.estimate(p, rel_error=0.1, seed=2)
+    assert whole.status == "exact" and whole.k == 40 and contains(whole, true)
+    parts = relaxmc.estimate(p, rel_error=0.1, seed=2, whole=False)
+    assert parts.k < 40 and parts.status == "hits" and parts.draws > 0 and contains(parts, true)
+
+
 # ------------------------------------------------------------------------------ budgets
 
 @needs_core

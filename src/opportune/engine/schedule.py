@@ -1140,7 +1140,6 @@ class Schedule:
         >>> r.value, r.exact, r.interval_log10 == (r.log10, r.log10)
         (3, True, True)
         """
-        import contextlib
 
         from opportune.engine.deadline import Deadline, as_deadline
 
@@ -1159,8 +1158,9 @@ class Schedule:
             for c, _ in saved:
                 c.deadline = until
             try:
-                with (self.engine.time_limited(plain) if plain_only else contextlib.nullcontext()), \
-                        self.engine.deadline(until):
+                # the plain phase: each count its `plain` seconds; the engine's phase: only `until`
+                # (not the engine's time limit per count, which cut it short at `plain` from its start)
+                with self.engine.time_limited(plain if plain_only else None), self.engine.deadline(until):
                     if plain_only:      # each term's counter by itself (its own choice of method per piece)
                         remaining = self.engine.full & ~self.mask
                         for _, c in terms:
@@ -1192,8 +1192,9 @@ class Schedule:
                     # is not held up long; the estimate phase may narrow it)
                     from opportune.engine.estimate import relaxation_estimate
 
+                    # (no one-piece count of a small order first: the exact count goes on with it next)
                     early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
-                                                seed=seed, deadline=Deadline.after(
+                                                seed=seed, whole=False, deadline=Deadline.after(
                                                     EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
                 try:
                     return exact_by(until, plain_only)
