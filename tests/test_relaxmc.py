@@ -241,6 +241,42 @@ def test_whole_false_skips_the_one_piece_count():
     assert parts.k < 40 and parts.status == "hits" and parts.draws > 0 and contains(parts, true)
 
 
+@needs_core
+def test_draws_go_on_from_where_they_stopped():
+    """A run stopped by its cap on draws and resumed is the run made in one go: the same draws, hits and
+    interval (draw i has its own stream, whichever call makes it); a resumed run of another order is refused."""
+    p = random_poset(50, 0.05, random.Random(31))
+    whole = relaxmc.estimate(p, rel_error=0.01, seed=4, k=20, max_draws=6000)
+    first = relaxmc.estimate(p, rel_error=0.01, seed=4, k=20, max_draws=2500)
+    assert first.status == "draws" and first.draws == 2500 and first.run is not None
+    again = relaxmc.estimate(p, rel_error=0.01, seed=4, k=20, max_draws=6000, resume=first)
+    assert (again.draws, again.hits, again.status) == (whole.draws, whole.hits, whole.status)
+    assert again == whole and again.draws > first.draws
+    with pytest.raises(ValueError, match="50 elements"):
+        relaxmc.estimate(random_poset(30, 0.1, random.Random(1)), rel_error=0.1, resume=first)
+
+
+@needs_core
+def test_draws_in_turns_are_the_draws_one_after_another():
+    """Eight draws advance in turns, and the outcomes count in the order of the draws: a run of d draws is
+    the first d draws of a longer run (so the stop on the target of hits is the one of drawing one by one)."""
+    p = random_poset(40, 0.08, random.Random(5))
+    relax = core.ArmcRelaxation(40, preds(p), core.armc_partition(40, preds(p), 10, 5, 7, -1.0)[0])
+    assert relax.count(-1.0, -1)[0] == 0
+    long = relax.sample(4000, 10**9, -1.0, 99)
+    for d in (1, 7, 8, 9, 1000):
+        short = relax.sample(d, 10**9, -1.0, 99)
+        assert short[1] == d and short[2] <= long[2]
+    # draws 0..d-1 then d..: the same hits as 0..4000 in one call
+    a = relax.sample(1234, 10**9, -1.0, 99)
+    b = relax.sample(4000 - 1234, 10**9, -1.0, 99, 1234)
+    assert a[2] + b[2] == long[2] and a[3] + b[3] == long[3]
+    # stopping on hits: the first draw that reaches the target, as one by one
+    h = relax.sample(10**9, 5, -1.0, 99)
+    assert h[0] == 0 and h[2] == 5
+    assert relax.sample(h[1] - 1, 10**9, -1.0, 99)[2] == 4
+
+
 # ------------------------------------------------------------------------------ budgets
 
 @needs_core

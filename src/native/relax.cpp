@@ -492,38 +492,83 @@ public:
     // order, or `max_draws` are drawn, or `seconds` pass (negative: no limit; the clock read every 64
     // draws): (status 0 hits, 1 draws, 2 clock, -1 not counted; draws; hits; elements placed over
     // all draws, the work done).
-    std::tuple<int, long long, long long, long long> sample(long long max_draws, long long target_hits, double seconds, u64 seed) {
+    //
+    // LANES draws advance in turns, one memory access each, and each prefetches what its next turn
+    // reads: a draw chases pointers through memos of tens of megabytes, and one draw at a time waited
+    // for every miss in turn.  Draw i has its own random stream (from `seed` and i), and outcomes are
+    // taken in the order of i, so the result is the one of drawing 0, 1, 2, ... one after another.
+    // `first` numbers the first draw: a call that goes on from an earlier one's draws passes how many
+    // it made, and the two together are one run.
+    std::tuple<int, long long, long long, long long> sample(long long max_draws, long long target_hits, double seconds, u64 seed,
+                                                            long long first) {
         if (!counted_) return {-1, 0, 0, 0};
+        if (first < 0) throw std::invalid_argument("first must be >= 0");
+        if (target_hits <= 0) return {0, 0, 0, 0};
         py::gil_scoped_release release;
-        Rng rng{seed};
         auto until = after(seconds);
-        std::vector<long long> stamp(n_, -1);   // stamp[v] == draw: v placed in this draw
-        long long drawn = 0, hits = 0, steps = 0;
-        int status = 1;
-        while (drawn < max_draws) {
-            if (hits >= target_hits) { status = 0; break; }
-            if (!(drawn & 63) && seconds >= 0 && Clock::now() > until) { status = 2; break; }
-            bool ok = draw(rng, [&](int v) {
-                ++steps;
-                for (int i = cross_start_[v]; i < cross_start_[v + 1]; ++i)
-                    if (stamp[cross_[i]] != drawn) return false;
-                stamp[v] = drawn;
-                return true;
-            });
-            ++drawn;
-            hits += ok;
+        std::vector<Walk> lanes(LANES);
+        std::vector<std::vector<long long>> stamps(LANES, std::vector<long long>(n_, -1));
+        // outcomes of draws base, base + 1, ...: 0 running, 1 rejected, 2 a hit; and elements placed
+        std::vector<signed char> outcome;
+        std::vector<int> placed;
+        outcome.reserve(4 * LANES);
+        placed.reserve(4 * LANES);
+        long long base = first, next_id = first, drawn = 0, hits = 0, steps = 0, finished = 0;
+        int status = -1;
+        auto start = [&](Walk& w) {
+            if (next_id - first >= max_draws) return false;
+            begin(w, next_id++, seed);
+            outcome.push_back(0);
+            placed.push_back(0);
+            return true;
+        };
+        int active = 0;
+        for (Walk& w : lanes) active += w.live = start(w);
+        while (active > 0 && status < 0) {
+            for (int l = 0; l < LANES && status < 0; ++l) {
+                Walk& w = lanes[l];
+                if (!w.live) continue;
+                std::vector<long long>& stamp = stamps[l];
+                const long long id = w.id;
+                int r = advance(w, [&](int v) {
+                    ++placed[id - base];
+                    for (int i = cross_start_[v]; i < cross_start_[v + 1]; ++i)
+                        if (stamp[cross_[i]] != id) return false;
+                    stamp[v] = id;
+                    return true;
+                });
+                if (r == 0) continue;
+                outcome[id - base] = r > 0 ? 2 : 1;
+                // the outcomes finished in order of their draws count; then the stops, as one after another
+                std::size_t k = 0;
+                while (k < outcome.size() && outcome[k] && status < 0) {
+                    ++drawn;
+                    hits += outcome[k] == 2;
+                    steps += placed[k];
+                    ++k;
+                    if (hits >= target_hits) status = 0;
+                    else if (drawn >= max_draws) status = 1;
+                }
+                if (k) {
+                    outcome.erase(outcome.begin(), outcome.begin() + k);
+                    placed.erase(placed.begin(), placed.begin() + k);
+                    base += (long long)k;
+                }
+                if (!(++finished & 63) && seconds >= 0 && Clock::now() > until && status < 0) status = 2;
+                if (status < 0 && !(w.live = start(w))) --active;
+            }
         }
-        if (drawn >= max_draws && hits < target_hits) status = 1;
-        else if (hits >= target_hits) status = 0;
+        if (status < 0) status = hits >= target_hits ? 0 : 1;   // (max_draws of 0)
         return {status, drawn, hits, steps};
     }
 
     // One uniform linear extension of R, whole (no rejection): the global ids in order (tests).
     std::vector<int> extension(u64 seed) {
         if (!counted_) throw std::logic_error("count the pieces first");
-        Rng rng{seed};
         std::vector<int> out;
-        draw(rng, [&](int v) { out.push_back(v); return true; });
+        Walk w;
+        begin(w, 0, seed);
+        while (!advance(w, [&](int v) { out.push_back(v); return true; })) {}
         return out;
     }
 
@@ -537,84 +582,127 @@ private:
     std::vector<int> cross_, cross_start_;
     double log_r_ = NAN;
     bool counted_ = false;
-    // the parts of the draw in progress: a set of a piece (its reference) and its size
-    std::vector<Ref> part_ref_;
-    std::vector<int> part_piece_, part_size_;
+    static constexpr int LANES = 8;   // draws in progress at once in sample()
 
-    // Elements of a uniform linear extension of R one at a time, each handed to `take` (false: stop).
-    // The next element lies in a part with probability size / elements left (a uniform interleaving
-    // of the parts' own uniform extensions); a part that is not connected splits in two first; a
-    // connected part S starts with its minimal x with probability e(S \ x) / e(S).
-    template <class Take>
-    bool draw(Rng& rng, Take&& take) {
-        part_ref_.clear();
-        part_piece_.clear();
-        part_size_.clear();
+    // A draw in progress: its parts (a set of a piece, by reference, its piece and size), the
+    // elements left, and where it stands: 0, choose a part; 1, at the part's set (split it if it is
+    // not connected); 2, at the children of a connected set (place one of its minimal elements).
+    struct Walk {
+        std::vector<Ref> ref;
+        std::vector<int> piece, size;
+        Rng rng{0};
+        long long id = 0;
+        int left = 0, stage = 0;
+        bool live = false;   // a draw is in progress (sample())
+        std::size_t j = 0;   // the part chosen
+        u64 r = 0;           // the position chosen within it
+    };
+
+    // Draw `id`'s random stream: splitmix64 of the seed and the draw's number.
+    void begin(Walk& w, long long id, u64 seed) const {
+        u64 st = seed ^ (0x9E3779B97F4A7C15ULL * u64(id + 1));
+        w.rng = Rng{opportune::splitmix64(st)};
+        w.id = id;
+        w.left = n_;
+        w.stage = 0;
+        w.ref.clear();
+        w.piece.clear();
+        w.size.clear();
         for (std::size_t i = 0; i < pieces_.size(); ++i) {
-            part_ref_.push_back(pieces_[i].root());
-            part_piece_.push_back(int(i));
-            part_size_.push_back(pieces_[i].size());
+            w.ref.push_back(pieces_[i].root());
+            w.piece.push_back(int(i));
+            w.size.push_back(pieces_[i].size());
         }
-        for (int left = n_; left > 0; --left) {
-            u64 r = rng.below(u64(left));
+    }
+
+    // One memory access of a draw of a uniform linear extension of R: 0 while it goes on, 1 when it
+    // is whole, -1 when `take` refused an element (each placed element is handed to `take`).  The
+    // next element lies in a part with probability size / elements left (a uniform interleaving of
+    // the parts' own uniform extensions); a part that is not connected splits in two first; a
+    // connected part S starts with its minimal x with probability e(S \ x) / e(S).  What the next
+    // turn reads is prefetched.
+    template <class Take>
+    int advance(Walk& w, Take&& take) {
+        if (w.stage == 0) {
+            w.r = w.rng.below(u64(w.left));
             std::size_t j = 0;
-            while (r >= u64(part_size_[j])) r -= part_size_[j++];
-            const Piece& p = pieces_[part_piece_[j]];
-            Ref ref = part_ref_[j];
-            while (ref >= 0 && p.node(ref).mins == 0) {  // not connected: split, follow r
+            while (w.r >= u64(w.size[j])) w.r -= w.size[j++];
+            w.j = j;
+            w.stage = 1;
+            Ref ref = w.ref[j];
+            if (ref >= 0) {
+                __builtin_prefetch(&pieces_[w.piece[j]].node(ref));
+                return 0;
+            }
+        }
+        const std::size_t j = w.j;
+        const Piece& p = pieces_[w.piece[j]];
+        Ref ref = w.ref[j];
+        int x;
+        if (w.stage == 1) {
+            if (ref >= 0 && p.node(ref).mins == 0) {  // not connected: split, follow r
                 const Piece::Node& nd = p.node(ref);
                 int sa = p.ones(nd.a);
-                part_ref_.push_back(nd.b);
-                part_piece_.push_back(part_piece_[j]);
-                part_size_.push_back(part_size_[j] - sa);
-                part_size_[j] = sa;
-                if (r < u64(sa)) {
+                w.ref.push_back(nd.b);
+                w.piece.push_back(w.piece[j]);
+                w.size.push_back(w.size[j] - sa);
+                w.size[j] = sa;
+                if (w.r < u64(sa)) {
                     ref = nd.a;
                 } else {
-                    r -= sa;
+                    w.r -= sa;
                     ref = nd.b;
                     // the part followed is the new last one
-                    std::swap(part_ref_[j], part_ref_.back());
-                    std::swap(part_size_[j], part_size_.back());
-                    part_ref_.back() = nd.a;
+                    std::swap(w.ref[j], w.ref.back());
+                    std::swap(w.size[j], w.size.back());
+                    w.ref.back() = nd.a;
                 }
-                part_ref_[j] = ref;
-            }
-            int x;
-            if (ref < 0) {  // a single element: the part is used up
-                x = -1 - ref;
-                std::size_t last = part_ref_.size() - 1;
-                part_ref_[j] = part_ref_[last];
-                part_piece_[j] = part_piece_[last];
-                part_size_[j] = part_size_[last];
-                part_ref_.pop_back();
-                part_piece_.pop_back();
-                part_size_.pop_back();
-            } else {
-                const Piece::Node& nd = p.node(ref);
-                const Piece::Kid* kid = p.kids(nd);
-                int last = __builtin_popcountll(nd.mins) - 1, i = 0;
-                double u = rng.uniform();
-                while (i < last && u >= double(kid[i].cum)) ++i;
-                // the floats are within 1e-7 of the exact shares: nearer a boundary than 1e-6, the
-                // counts decide, as they always would
-                if ((i > 0 && u - double(kid[i - 1].cum) < 1e-6) || (i < last && double(kid[i].cum) - u < 1e-6)) {
-                    double w = u * nd.value;
-                    for (i = 0; i < last; ++i) {
-                        w -= p.value(kid[i].ref);
-                        if (w < 0) break;
-                    }
+                w.ref[j] = ref;
+                if (ref >= 0) {
+                    __builtin_prefetch(&p.node(ref));
+                    return 0;
                 }
-                u64 m = nd.mins;
-                for (int j = 0; j < i; ++j) m &= m - 1;
-                x = __builtin_ctzll(m);
-                Ref next = kid[i].ref;
-                part_ref_[j] = next;
-                --part_size_[j];
             }
-            if (!take(ids_[&p - pieces_.data()][x])) return false;
+            if (ref >= 0) {       // connected: its children next
+                __builtin_prefetch(p.kids(p.node(ref)));
+                w.stage = 2;
+                return 0;
+            }
+            // a single element: the part is used up
+            x = -1 - ref;
+            std::size_t last = w.ref.size() - 1;
+            w.ref[j] = w.ref[last];
+            w.piece[j] = w.piece[last];
+            w.size[j] = w.size[last];
+            w.ref.pop_back();
+            w.piece.pop_back();
+            w.size.pop_back();
+        } else {
+            const Piece::Node& nd = p.node(ref);
+            const Piece::Kid* kid = p.kids(nd);
+            int last = __builtin_popcountll(nd.mins) - 1, i = 0;
+            double u = w.rng.uniform();
+            while (i < last && u >= double(kid[i].cum)) ++i;
+            // the floats are within 1e-7 of the exact shares: nearer a boundary than 1e-6, the
+            // counts decide, as they always would
+            if ((i > 0 && u - double(kid[i - 1].cum) < 1e-6) || (i < last && double(kid[i].cum) - u < 1e-6)) {
+                double v = u * nd.value;
+                for (i = 0; i < last; ++i) {
+                    v -= p.value(kid[i].ref);
+                    if (v < 0) break;
+                }
+            }
+            u64 m = nd.mins;
+            for (int q = 0; q < i; ++q) m &= m - 1;
+            x = __builtin_ctzll(m);
+            Ref next = kid[i].ref;
+            w.ref[j] = next;
+            --w.size[j];
+            if (next >= 0) __builtin_prefetch(&p.node(next));
         }
-        return true;
+        w.stage = 0;
+        if (!take(ids_[&p - pieces_.data()][x])) return -1;
+        return --w.left > 0 ? 0 : 1;
     }
 };
 
@@ -634,6 +722,6 @@ void bind_relax(py::module_& m) {
         .def("bytes", &Relaxation::bytes, "bytes the memos hold (their capacity)")
         .def("cross_pairs", &Relaxation::cross_pairs, "cover pairs between two pieces (0: R is the order)")
         .def("sample", &Relaxation::sample, py::arg("max_draws"), py::arg("target_hits"), py::arg("seconds"),
-             py::arg("seed"), "(status, draws, hits, elements placed)")
+             py::arg("seed"), py::arg("first") = 0, "(status, draws, hits, elements placed)")
         .def("extension", &Relaxation::extension, py::arg("seed"), "one uniform linear extension of R");
 }

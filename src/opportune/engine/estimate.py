@@ -118,6 +118,9 @@ class Estimate:
     seconds: float = field(default=0.0, compare=False)
     log10_low: float = field(default=float("nan"), compare=False)
     log10_high: float = field(default=float("nan"), compare=False)
+    #: ``"armc"``: the relaxation and its draws, for a later estimate of the same set to go on from
+    #: (``resume=`` of :func:`relaxation_estimate` and :func:`estimate_count`)
+    resume: object = field(default=None, compare=False, repr=False)
 
     def interval(self) -> tuple[float, float]:
         """The stated interval ``(value * (1 - rel_error), value * (1 + rel_error))``."""
@@ -666,7 +669,8 @@ def relaxmc_available() -> bool:
 
 
 def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: int, deadline: Deadline,
-          low: float, high: float, start: float, whole: bool = True) -> Estimate | None:
+          low: float, high: float, start: float, whole: bool = True,
+          resume: Estimate | None = None) -> Estimate | None:
     """Adaptive relaxation Monte Carlo on the subposet ``mask`` (:func:`opportune.engine.relaxmc.estimate`)
     as an :class:`Estimate` (method ``"armc"``, ``samples`` its draws), its value and interval within
     the certain bounds ``low``/``high`` (natural logs); None without the compiled core, without a hit,
@@ -678,26 +682,28 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
     except BudgetExceeded:
         return None
     r = relaxmc.estimate(sub, rel_error=rel_error, confidence=confidence, seed=seed, deadline=deadline,
-                         hopeless=ARMC_HOPELESS, whole=whole)
+                         hopeless=ARMC_HOPELESS, whole=whole,
+                         resume=resume.resume if resume is not None and resume.method == "armc" else None)
     if r is None or not math.isfinite(r.log10) or r.hits == 0 and r.status != "exact":
         return None
     lmean = min(max(r.log10 * _LN10, low), high)
     lo = max(low, min(high, r.log10_low * _LN10))
     hi = min(high, max(low, r.log10_high * _LN10))
     return Estimate(math.exp(lmean) if lmean < 709 else math.inf, r.rel_error, confidence, "armc", r.draws,
-                    lmean / _LN10, None, time.perf_counter() - start, lo / _LN10, hi / _LN10)
+                    lmean / _LN10, None, time.perf_counter() - start, lo / _LN10, hi / _LN10, r)
 
 
 def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01, seed: int = 0,
                         confidence: float = 0.95, deadline: Deadline | float | None = None,
-                        whole: bool = True) -> Estimate | None:
+                        whole: bool = True, resume: Estimate | None = None) -> Estimate | None:
     """Adaptive relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`) on the subposet ``mask`` of
     ``poset`` as an :class:`Estimate` (method ``"armc"``; where one piece held the whole order, its
     count in doubles, ``rel_error`` of about 1e-9), its interval within the order's trivial bounds
     ``1 <= e <= n!``; None where it does not apply (no compiled core, fewer than :data:`ARMC_MIN_N` or more than :data:`ARMC_MAX_N`
     elements, no finite ``deadline``) or found no hit in time.  Stops once the interval is within
     ``rel_error``, and at once where the draws it would need are hopeless.  ``whole=False``: no
-    one-piece count first (see :func:`opportune.engine.relaxmc.estimate`).
+    one-piece count first (see :func:`opportune.engine.relaxmc.estimate`); ``resume``: an earlier
+    estimate of the same set by this function, whose draws go on (see there).
 
     >>> from opportune.engine.poset import Poset
     >>> e = relaxation_estimate(Poset.antichain(3), deadline=Deadline.after(1.0))
@@ -711,7 +717,7 @@ def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: flo
     if not (ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N and dl.finite and relaxmc_available()) or dl.expired():
         return None
     low, high = OrderSketch.trivial(mask.bit_count())
-    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start, whole)
+    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start, whole, resume)
 
 
 def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01,
@@ -719,7 +725,7 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
                    counter: Counter | None = None, exact_memo: int = 300_000, particles: int = 1024,
                    tail: int | None = None, tail_memo: int = 500, min_runs: int = 20, hub: float = 0.85,
                    overrun: float = math.inf, deadline: Deadline | float | None = None,
-                   relaxation: bool | None = None) -> Estimate:
+                   relaxation: bool | None = None, resume: Estimate | None = None) -> Estimate:
     """Estimate the number of linear extensions of the subposet induced on ``mask``, with a stated error.
 
     All the work stops at ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`; a float is a
@@ -757,7 +763,8 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
     draws could go on for ever where hits are rare), adaptive relaxation Monte Carlo on the whole set (:mod:`opportune.engine.relaxmc`) comes before the
     runs, with the share :data:`ARMC_SHARE` of the time left: its estimate (method ``"armc"``,
     ``samples`` its draws) is returned at once if its stated interval is within ``rel_error``, else at
-    the end if it is narrower than the runs'.  ``log10_low``/``log10_high`` always hold finite
+    the end if it is narrower than the runs' (``resume``: an earlier ``"armc"`` estimate of the same
+    set, whose relaxation and draws it goes on with).  ``log10_low``/``log10_high`` always hold finite
     bounds (the stated interval within the order's certain bounds), and ``value`` is never nan.
 
     Pass the plan's ``counter`` to reuse (and extend) its memo.  Deterministic
@@ -871,7 +878,8 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
             relaxation = exact_memo > 0
         if (sketch is not None and relaxation and ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N
                 and relaxmc_available() and soft.finite and not soft.expired()):
-            armc = _armc(poset, mask, rel_error, confidence, seed, soft.share(ARMC_SHARE), low, high, start)
+            armc = _armc(poset, mask, rel_error, confidence, seed, soft.share(ARMC_SHARE), low, high, start,
+                         resume=resume)
             if armc is not None and armc.rel_error <= rel_error:
                 return armc
             if armc is not None:        # an error is stated already: the runs need not overrun for one

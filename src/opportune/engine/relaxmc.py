@@ -60,7 +60,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
@@ -101,7 +101,8 @@ class RelaxEstimate:
     the rounding of doubles), ``"hits"`` (the target number of hits reached), ``"draws"`` (the cap
     on draws reached first), ``"time"`` (the deadline came first), ``"none"`` (no relaxation could
     be counted within the time or memory; ``log10`` is nan), ``"hopeless"`` (see :func:`estimate`).
-    ``bytes``: the memos of the relaxation used."""
+    ``bytes``: the memos of the relaxation used; ``run``: the relaxation and the draws made, for a
+    later call to go on from (``estimate(..., resume=this)``), None where there is none."""
 
     log10: float
     log10_low: float
@@ -113,6 +114,7 @@ class RelaxEstimate:
     hits: int
     status: str
     bytes: int = 0
+    run: _Run | None = field(default=None, compare=False, repr=False)
 
     @property
     def rel_error(self) -> float:
@@ -223,6 +225,19 @@ def target_hits(rel_error: float, confidence: float = 0.95) -> int:
 
 # ------------------------------------------------------------------------------ the estimate
 
+@dataclass(frozen=True)
+class _Run:
+    """A counted relaxation and the draws made from it so far (draws 0 .. ``draws`` - 1 of the stream ``mix``)."""
+
+    relax: object
+    n: int
+    log_r: float
+    k: int
+    mix: int
+    draws: int
+    hits: int
+
+
 @dataclass
 class _Candidate:
     relax: object
@@ -246,7 +261,8 @@ def available() -> bool:
 def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0.05, confidence: float = 0.95,
              seed: int = 0, deadline: Deadline | float | None = None, k: int | None = None,
              max_bytes: int = MAX_BYTES, max_draws: int | None = None,
-             hopeless: float | None = None, whole: bool = True) -> RelaxEstimate | None:
+             hopeless: float | None = None, whole: bool = True,
+             resume: RelaxEstimate | None = None) -> RelaxEstimate | None:
     """Estimate the number of linear extensions of ``poset`` within ``seconds`` and ``deadline``, aiming
     at a stated interval of relative half-width ``rel_error`` at ``confidence`` (see the module's text).
 
@@ -257,6 +273,9 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     fixes the piece size (no adaptation); ``max_draws`` caps the draws (default: none but the clock);
     ``whole=False`` skips the one-piece count of an order of at most 64 elements (for a caller whose
     exact counter is at work on it anyway: that count took most of a ±5% estimate's time on 64 elements).
+    ``resume``: an earlier estimate of the same order (its ``run``): its relaxation is drawn from again,
+    from where its draws stopped, and the two calls' draws make one run (the stopping rule's statement
+    holds for the whole, which stopped on the clock once and went on), instead of starting over.
     Complexity: see the module.
 
     >>> from opportune.engine.poset import Poset
@@ -277,6 +296,10 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     none = RelaxEstimate(math.nan, -math.inf, math.inf, confidence, math.nan, 0, 0, 0, "none")
     mix = (seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) % 2**64
     count_end = Deadline(start + COUNT_SHARE * end.remaining()) if end.finite else end
+    if resume is not None and resume.run is not None:
+        if resume.run.n != n:
+            raise ValueError(f"resume: an estimate of an order of {resume.run.n} elements, not {n}")
+        return _draw(resume.run, hits_wanted, end, confidence, max_draws)
 
     def relaxation(kk: int, pieces: list[list[int]], until: Deadline):
         relax = core.ArmcRelaxation(n, preds, pieces)
@@ -328,14 +351,24 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     if hopeless is not None and end.finite and best.hit_seconds * hopeless > end.remaining():
         return RelaxEstimate(math.nan, -math.inf, math.inf, confidence, best.log_r / math.log(10), best.k, 0, 0,
                              "hopeless", best.relax.bytes())
-    relax = best.relax
-    cap = (1 << 62) if max_draws is None else max_draws
-    status, draws, hits, _placed = relax.sample(cap, hits_wanted, end.seconds(), mix)
-    log10_r = best.log_r / math.log(10)
+    return _draw(_Run(best.relax, n, best.log_r, best.k, mix, 0, 0), hits_wanted, end, confidence, max_draws)
+
+
+def _draw(run: _Run, hits_wanted: int, end: Deadline, confidence: float, max_draws: int | None) -> RelaxEstimate:
+    """Draw from ``run``'s relaxation, after its draws so far, until ``hits_wanted`` hits in all, ``max_draws``
+    draws in all, or ``end``; the estimate of every draw made, with the run to go on from."""
+    relax = run.relax
+    cap = ((1 << 62) if max_draws is None else max_draws) - run.draws
+    status, d, h, _placed = relax.sample(max(0, cap), max(0, hits_wanted - run.hits), end.seconds(), run.mix,
+                                         run.draws) if cap > 0 and run.hits < hits_wanted else (
+        0 if run.hits >= hits_wanted else 1, 0, 0, 0)
+    draws, hits = run.draws + d, run.hits + h
+    after = _Run(relax, run.n, run.log_r, run.k, run.mix, draws, hits)
+    log10_r = run.log_r / math.log(10)
     lo, hi = clopper_pearson(hits, draws, confidence)
     how = {0: "hits", 1: "draws", 2: "time"}.get(status, "time")
     if hits == 0:
         up = log10_r + math.log10(hi) if hi > 0 else log10_r
-        return RelaxEstimate(up - 1, -math.inf, up, confidence, log10_r, best.k, draws, hits, how, relax.bytes())
+        return RelaxEstimate(up - 1, -math.inf, up, confidence, log10_r, run.k, draws, hits, how, relax.bytes(), after)
     return RelaxEstimate(log10_r + math.log10(hits / draws), log10_r + math.log10(lo), log10_r + math.log10(hi),
-                         confidence, log10_r, best.k, draws, hits, how, relax.bytes())
+                         confidence, log10_r, run.k, draws, hits, how, relax.bytes(), after)

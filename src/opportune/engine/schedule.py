@@ -1189,10 +1189,11 @@ class Schedule:
                     # the plain count did not finish: relaxation Monte Carlo gets its share now, while
                     # a narrow interval is still possible, and the exact count the rest of its phase
                     # (to a looser error than asked, so that an exact count that was about to finish
-                    # is not held up long; the estimate phase may narrow it)
+                    # is not held up long; the estimate phase may narrow it, going on with its draws:
+                    # its memos, at most relaxmc.MAX_BYTES, stay until this call returns).  No one-piece
+                    # count of a small order first: the exact count goes on with it next.
                     from opportune.engine.estimate import relaxation_estimate
 
-                    # (no one-piece count of a small order first: the exact count goes on with it next)
                     early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
                                                 seed=seed, whole=False, deadline=Deadline.after(
                                                     EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
@@ -1231,7 +1232,7 @@ class Schedule:
                                  time_limit=seconds / 2, overrun=math.inf, deadline=share, seed=seed,
                                  counter=counter, exact_memo=0, particles=particles,
                                  confidence=1 - 0.05 / len(terms), relaxation=early is not None
-                                 and early.rel_error > rel_error, **hub)
+                                 and early.rel_error > rel_error, resume=early, **hub)
             if early is not None and est.exact is None and early.rel_error < est.rel_error:
                 # the narrower stated interval, within the order's certain bounds
                 est = replace(early, log10_low=max(early.log10_low, est.log10_low),
