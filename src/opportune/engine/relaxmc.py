@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import functools
 import math
+import statistics
 import time
 from dataclasses import dataclass, field
 
@@ -159,16 +160,31 @@ def _betainc(a: float, b: float, x: float) -> float:
 
 
 def _beta_quantile(a: float, b: float, q: float) -> float:
-    """The x with I_x(a, b) = q, by bisection on log x (relative precision ~1e-12)."""
+    """The x with I_x(a, b) = q: Newton's method on log x from the normal approximation, kept within a
+    bracket that shrinks as bisection's would (relative precision ~1e-12, a few steps where bisection
+    took forty-five: 4 ms an interval at ten thousand hits)."""
     lo, hi = -745.0, 0.0
+    log_beta = math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b)
+    mean, sd = a / (a + b), math.sqrt(a * b / ((a + b) ** 2 * (a + b + 1)))
+    x0 = mean + statistics.NormalDist().inv_cdf(min(max(q, 1e-300), 1 - 1e-16)) * sd
+    y = math.log(x0) if 0 < x0 < 1 else (lo + hi) / 2
     for _ in range(200):
-        mid = (lo + hi) / 2
-        if _betainc(a, b, math.exp(mid)) < q:
-            lo = mid
+        x = math.exp(y)
+        f = _betainc(a, b, x) - q
+        if f < 0:
+            lo = y
         else:
-            hi = mid
+            hi = y
         if hi - lo < 1e-13:
-            break
+            return math.exp((lo + hi) / 2)
+        # dI/dy = x^a (1 - x)^(b - 1) / B(a, b); a step outside the bracket bisects instead
+        slope = math.exp(a * y + (b - 1) * math.log1p(-x) - log_beta) if x < 1 else 0.0
+        step = y - f / slope if slope > 0 else math.nan
+        if not lo < step < hi:
+            step = (lo + hi) / 2
+        if abs(step - y) < 1e-13 * max(1.0, abs(y)):
+            return math.exp(step)
+        y = step
     return math.exp((lo + hi) / 2)
 
 
@@ -209,9 +225,15 @@ def target_hits(rel_error: float, confidence: float = 0.95) -> int:
         lo, hi = clopper_pearson(h, n, confidence)
         return max(hi * n / h - 1, 1 - lo * n / h)
 
-    lo, hi = 1, 1
+    # bracket the answer from the normal approximation's (z / rel_error)^2, in steps of 2 rel_error: a
+    # dozen evaluations of 4 ms each, where doubling from 1 took 50 of them (0.2 s at 1%)
+    z = statistics.NormalDist().inv_cdf(0.5 + confidence / 2)
+    step = 1 + 2 * rel_error
+    lo = hi = max(1, int((z / rel_error) ** 2))
+    while lo > 1 and width(lo) <= rel_error:
+        lo, hi = max(1, int(lo / step)), lo
     while width(hi) > rel_error:
-        lo, hi = hi, hi * 2
+        lo, hi = hi, int(hi * step) + 1
         if hi > 10**9:
             raise ValueError("rel_error too small")
     while lo < hi:

@@ -59,10 +59,12 @@ HUB_PROBE = 100_000  # new memo entries a plain count may add before counting th
 COUNT_MARGIN = 0.25  # seconds Schedule.count_result may take past its deadline (checks' granularity, the answer)
 ESTIMATE_RESERVE = 3e-5  # seconds per element an estimate needs for its bounds and first path (~0.25 s for 10,000)
 GRACE = 0.05  # seconds the exact count and the estimate each get in count_result when its deadline has passed
-#: Share of count_result's exact phase that relaxation Monte Carlo takes first, when the plain count did
-#: not finish (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as soon
-#: as its interval is within the error asked, and gives the time back at once where it cannot hit.
-EARLY_ESTIMATE = 0.5
+#: Share of count_result's exact phase that relaxation Monte Carlo may take first, when the plain count
+#: did not finish (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as
+#: soon as its interval is within EARLY_ERROR (a tenth of a second to a few seconds on sparse orders of
+#: 64-100 elements), and gives the time back at once where it cannot hit; the exact count has the rest.
+#: (A half left orders of 80-100 elements at ±12-23% within 3 s, and the exact count had no chance there.)
+EARLY_ESTIMATE = 0.9
 #: The relative error at which that first relaxation estimate stops (the error asked, if looser):
 #: ±5% takes a few thousand hits; where the exact count then fails too, the estimate phase runs it
 #: again towards the error asked.
@@ -1219,8 +1221,9 @@ class Schedule:
         for i, (sign, counter) in enumerate(terms):
             share = end.share(1 / (len(terms) - i))
             seconds = max(0.0, share.remaining())
-            # the hub split again only if the exact phases did not already look for a hub
-            hub = {"hub": 0.0} if counter in self.engine._hubs else {}
+            # the hub split again only if the exact phases did not already look for a hub (found one,
+            # found none, or were cut short in the search: a new split would start over with less time)
+            hub = {"hub": 0.0} if counter in self.engine._hubs or counter in self.engine._hub_search else {}
             # fewer particles when time is short, so that two runs fit (a run of p particles on n
             # elements took about 2e-7 p n^2 seconds here: ARC111 with 1,024 particles ~3 s)
             particles = 1024
