@@ -14,6 +14,7 @@ from opportune.datasets import salbp
 from opportune.engine import OrderEngine
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.opportunistic import Opportunistic
+from opportune.policies.optimal import OptimalSolver
 from opportune.policies.variants import BinFirst, Lookahead, Slack
 from opportune.simulate import StudyConfig, run_study
 
@@ -52,6 +53,31 @@ def test_lookahead_is_never_worse_than_its_base_and_nothing_beats_the_optimum(pl
             # the evaluator checks every action is a legal move of the state (else ValueError)
             assert PolicyEvaluator(engine, policy, visible=2, capacity=capacity).value() >= best - 1e-9
         assert improved.value() >= best - 1e-9
+
+
+@settings(max_examples=10, deadline=None)
+@given(plan=random_plans(max_parts=5, max_units=6, max_strategies=2))
+def test_lookahead_is_the_optimum_where_the_optimums_programme_fits(plan):
+    """Its exact value is the optimum's at 1 and 2 parts visible, 1, 2 and unlimited buffer locations."""
+    engine = OrderEngine(plan)
+    for visible, capacity in ((1, 1), (1, 2), (2, None)):
+        best = OptimalSolver(engine, visible=visible, capacity=capacity).value()
+        got = PolicyEvaluator(engine, Lookahead(visible=visible, capacity=capacity), visible=visible,
+                              capacity=capacity).value()
+        assert got == pytest.approx(best, rel=1e-12, abs=1e-12)
+
+
+def test_the_improvement_step_alone_is_weaker_with_one_part_visible():
+    """The gearbox with one part visible and one buffer location: the step over slack is 1.75% above the
+    optimum; the look-ahead is the optimum (218 states), and its decisions say so."""
+    engine = OrderEngine(GEAR)
+    settings1 = {"visible": 1, "capacity": 1}
+    best = OptimalSolver(engine, **settings1).value()
+    step = PolicyEvaluator(engine, Lookahead(optimal=False, **settings1), **settings1).value()
+    assert round(100 * (step / best - 1), 2) == 1.75
+    assert PolicyEvaluator(engine, Lookahead(**settings1), **settings1).value() == pytest.approx(best, rel=1e-12)
+    assert "exact optimum" in Sequencer(GEAR, policy=Lookahead(**settings1)).decide(["ca"]).rule
+    assert "base rule" in Sequencer(GEAR, policy=Lookahead(optimal=False, **settings1)).decide(["ca"]).rule
 
 
 def test_slack_evaluated_exactly_agrees_with_its_simulation():

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 #: The policies a cell can run, by name.  ``paper`` and ``opportunistic`` are the paper's rule.
 POLICIES = ("lookahead", "paper", "opportunistic", "bin-first", "slack", "rollout")
-#: The default policy of a cell and of `opportune evaluate`: the exact look-ahead over ``slack``
-#: (within 0.01% of the optimum on the policy lab's plans, see docs/comparison.md); on plans too large for its
-#: programme it decides as ``slack`` does.  The paper's rule stays one flag away (``paper``).
+#: The default policy of a cell and of `opportune evaluate`: the optimum's action where its programme
+#: fits, else the exact look-ahead over ``slack`` (see docs/comparison.md); on plans too large for
+#: either programme it decides as ``slack`` does.  The paper's rule stays one flag away (``paper``).
 DEFAULT_POLICY = "lookahead"
 
 

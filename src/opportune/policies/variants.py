@@ -34,7 +34,7 @@ from opportune.policies.base import (DONE, SHAKE, Action, DecidesOnMasks, Decisi
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.opportunistic import (_CLOSE, INDIFFERENT, MARGIN, SURE, Opportunistic, _How, _join,
                                               _mixed)
-from opportune.policies.optimal import OptimalTooLarge, same_action
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, same_action
 
 __all__ = ["BinFirst", "Lookahead", "Slack"]
 
@@ -180,16 +180,24 @@ class Slack(BinFirst):
 
 
 class Lookahead(DecidesOnMasks):
-    """One step of policy improvement over ``base`` (default :class:`Slack`), exact on small plans.
+    """The optimal action where the optimum's programme fits, else one step of policy improvement over
+    ``base`` (default :class:`Slack`); on plans too large for either, the base's action.
 
     ``solver_settings`` are the bin and costs of the world it acts in (``visible``, ``capacity``,
     ``costs``, ``weights``; see :class:`~opportune.policies.evaluate.PolicyEvaluator`): the scores
-    are expected costs in that world.  ``max_states`` bounds the base policy's programme; above it
-    (a large plan) the policy decides as its base does.
+    are expected costs in that world.  ``max_states`` bounds either programme: the optimum's
+    (:class:`~opportune.policies.optimal.OptimalSolver`, every state any policy reaches, counted
+    before it starts by :func:`~opportune.policies.states.estimate_states`) is used when it holds
+    at most that many states, else the base policy's (the states the base reaches, fewer: its values
+    after each action make the improvement step).  ``optimal=False`` keeps to the improvement step.
+    (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
+    where the optimum's programme is smallest.)  The pile bin has the base's programme only.
     """
 
     name = "lookahead"
     rule = "the action with the least expected cost of finishing by the base rule"
+    #: What the decisions say where the optimum's programme decides.
+    OPTIMAL_RULE = "the action with the least expected cost of finishing (the exact optimum)"
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
     #: Plans of more units than this decide as the base does (the programme would take too long).
     MAX_UNITS = 16
@@ -198,7 +206,8 @@ class Lookahead(DecidesOnMasks):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
     deadline = None
 
-    def __init__(self, base=None, *, budget: float | None = None, max_states: int = 200_000, **solver_settings):
+    def __init__(self, base=None, *, budget: float | None = None, max_states: int = 200_000, optimal: bool = True,
+                 **solver_settings):
         # With a budget, the programme gets most of it at each decision, resuming where it stopped; a
         # decision it does not finish in time is the base's (itself within the rest of the budget).
         self.lookahead_budget = budget
@@ -209,6 +218,7 @@ class Lookahead(DecidesOnMasks):
         self.fallback = self.base if budget is None else Slack(budget=budget / 4)
         self.fallback_alone = self.base if budget is None else Slack(budget=budget)
         self.max_states = max_states
+        self.optimal = optimal
         # the pile bin has its own programme (policies/pile.py): the window is part of the state
         self.pile = solver_settings.pop("bin", "uniform") == "pile"
         if self.pile:
@@ -231,6 +241,8 @@ class Lookahead(DecidesOnMasks):
                     from opportune.policies.pile import PileSolver
 
                     ev = PileSolver(engine, self.base, max_states=self.max_states, **self.settings)
+                elif self._optimum_fits(engine):
+                    ev = OptimalSolver(engine, max_states=self.max_states, **self.settings)
                 else:
                     ev = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
                 if key is not None:
@@ -239,12 +251,28 @@ class Lookahead(DecidesOnMasks):
             self._too_large = False
         return self._evaluator
 
+    def _optimum_fits(self, engine) -> bool:
+        """Whether the optimum's programme holds at most ``max_states`` states (listed before it starts,
+        within a second: where the listing cannot tell, it does not fit)."""
+        if not self.optimal or engine.n_units > self.MAX_UNITS:
+            return False
+        from opportune.policies.states import estimate_states
+
+        est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
+                              stop_above=self.max_states, time_limit=1.0)
+        return est.exact and est.states <= self.max_states
+
+    @property
+    def deciding_rule(self) -> str:
+        """The rule of the programme that decides (after the first decision on a plan)."""
+        return self.OPTIMAL_RULE if type(self._evaluator) is OptimalSolver else self.rule
+
     def _share_key(self):
         """What the programme's values depend on, when that is known (the default base rule); else None."""
         if type(self.base) is not Slack or self.base.budget is not None:
             return None
         settings = tuple(sorted((k, repr(v)) for k, v in self.settings.items()))
-        return (self.base.weight, self.max_states, self.pile, settings)
+        return (self.base.weight, self.max_states, self.pile, self.optimal, settings)
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
@@ -322,5 +350,6 @@ class Lookahead(DecidesOnMasks):
             exact = base.exact and self._too_large
             return replace(base, rule=f"as the base rule ({self.base.name}), because {why}: {base.rule}",
                            exact=exact, method=base.method if base.method != "exact" or exact else self.base.name)
-        return Decision(action, self.rule, note=f"expected remaining cost {self.last_cost:.4f} "
-                                                f"(base: {self.base.name})")
+        optimum = type(self._evaluator) is OptimalSolver
+        return Decision(action, self.deciding_rule, note=f"expected remaining cost {self.last_cost:.4f} " + (
+            "(the optimum's)" if optimum else f"(base: {self.base.name})"))
