@@ -22,6 +22,7 @@ from opportune.engine import OrderEngine
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.fixed import BufferFixed, planned_sequence
 from opportune.policies.opportunistic import Opportunistic
+from opportune.policies.pile import PileSolver
 from opportune.policies.states import estimate_states, orderings_factor
 from opportune.policies.variants import BinFirst, Lookahead, Slack
 from opportune.worlds import TimeModel
@@ -69,6 +70,49 @@ def by_the_sequencer(engine, policy, visible: int, capacity: int | None, costs: 
     return value(seq.state)
 
 
+def pile_by_the_sequencer(engine, policy, visible: int, capacity: int | None, costs: TimeModel = TimeModel()) -> float:
+    """The policy's expected cost in the pile bin, through a real Sequencer: after a shake every arrangement of
+    the bin's units is equally likely; a look shows the top ``visible`` units; taking one uncovers the next.
+    ``fresh(state)``: the cost from a freshly shaken pile; ``at(state, pile)``: ``(a, b)``, the cost from a look at
+    ``pile`` being ``a + b * fresh(state)`` (the policy's shakes at this state come back to it)."""
+    seq = Sequencer(engine, policy, buffer_capacity=capacity, budget=None)
+    fresh_memo: dict[tuple, float] = {}
+    at_memo: dict[tuple, tuple[float, float]] = {}
+
+    def fresh(state) -> float:
+        key = (state.installed, state.buffer)
+        if key not in fresh_memo:
+            units = [p for p, n in state.in_bin.items() for _ in range(n)]
+            piles = list(itertools.permutations(units))
+            a = sum(at(state, pile)[0] for pile in piles) / len(piles)
+            b = sum(at(state, pile)[1] for pile in piles) / len(piles)
+            assert b < 1 - 1e-9, "the policy never moves from a state it reaches"
+            fresh_memo[key] = a / (1 - b)
+        return fresh_memo[key]
+
+    def at(state, pile) -> tuple[float, float]:
+        key = (state.installed, state.buffer, pile)
+        if key in at_memo:
+            return at_memo[key]
+        if state.is_complete:
+            return 0.0, 0.0
+        seq.state, seq.pending = state, None
+        action = seq.decide(pile[:visible]).action
+        if action.kind == "shake":
+            out = (costs.look + costs.shake, 1.0)
+        else:
+            nxt = seq.report("success")
+            if action.source != "buffer":       # taken from the top: the next unit comes into view
+                i = pile.index(action.part)
+                pile = pile[:i] + pile[i + 1:]
+            a, b = at(nxt, pile)
+            out = (costs.look + costs.move(action.part) + a + (b * fresh(nxt) if b else 0.0), 0.0)
+        at_memo[key] = out
+        return out
+
+    return fresh(seq.state)
+
+
 class DeclarationOrder(Opportunistic):
     """The paper's rule as the evaluation scored it before: the buffer rebuilt in declaration order."""
 
@@ -98,6 +142,17 @@ def test_the_evaluation_equals_the_chain_driven_through_the_sequencer(plan):
             bound = estimate_states(engine, visible=1, capacity=capacity).states * orderings_factor(
                 engine, capacity, ev.ties)
             assert ev.policy_states <= bound
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(plan=random_plans(max_parts=4, max_units=5, max_strategies=2))
+def test_the_pile_evaluation_equals_the_pile_driven_through_the_sequencer(plan):
+    engine = OrderEngine(plan)
+    for visible, capacity in ((1, 2), (1, None), (2, 1)):
+        for policy in (Opportunistic(), Slack()):
+            truth = pile_by_the_sequencer(engine, policy, visible, capacity)
+            solver = PileSolver(engine, policy, visible=visible, capacity=capacity)
+            assert solver.ordered and solver.value() == pytest.approx(truth, abs=1e-12), (policy.name, visible, capacity)
 
 
 @pytest.mark.parametrize("policy", [BinFirst(), Slack(), Lookahead(visible=1, capacity=2)], ids=lambda p: p.name)

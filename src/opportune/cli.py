@@ -745,8 +745,8 @@ def evaluate(
         else:
             ev = PolicyEvaluator(engine, chosen, weights=config.weights if chosen_bin == "weighted" else None,
                                  **settings)
-            ev.deadline = until         # finding where the buffer's order decides counts options: within it too
-            policy_bound, ordered = ev.states_bound(estimate.states), ev.ordered
+        ev.deadline = until         # finding where the buffer's order decides counts options: within it too
+        policy_bound, ordered = ev.states_bound(estimate.states), ev.ordered
         kept = " (its buffer kept in the order of buffering)" if ordered else ""
         if not as_json:
             # a bound, not a count: the policy reaches a part of these states (it stops at --max-states if not)

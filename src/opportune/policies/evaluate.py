@@ -42,34 +42,27 @@ import heapq
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, OutOfTime, check_evaluable
 from opportune.policies.states import orderings_factor, reachable_keys
 
-__all__ = ["OutOfTime", "PolicyEvaluator", "PolicyStuck"]
+__all__ = ["BufferOrder", "OutOfTime", "PolicyEvaluator", "PolicyStuck"]
 
 
 class PolicyStuck(RuntimeError):
     """The policy shakes at every look of some state it reaches: it never finishes."""
 
 
-class PolicyEvaluator(OptimalSolver):
-    """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at``).
+class BufferOrder:
+    """The states of a policy's programme, with the buffer in the order of buffering where the policy uses it.
 
-    Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
-    shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it), ``deadline``
-    the time (:class:`OutOfTime`).  :func:`~opportune.policies.states.estimate_states` says how many
-    states the optimum needs; a policy that ignores the buffer's order reaches at most as many, one
-    that uses it (:attr:`ordered`) at most :meth:`states_bound` of them.
-    Complexity: O(states × looks × one decision of the policy).
+    For :class:`PolicyEvaluator` and the pile's :class:`~opportune.policies.pile.PileSolver` (both
+    :class:`OptimalSolver`): call :meth:`_keep_order` with the policy (None: the optimum) in ``__init__``.
+    See the module's docstring.
     """
 
-    def __init__(self, engine, policy, **settings):
-        super().__init__(engine, **settings)
-        check_evaluable(policy)
-        self.policy = policy
+    def _keep_order(self, policy) -> None:
         #: The policy's states keep the buffer in the order of buffering (see the module's docstring).
         self.ordered = bool(getattr(policy, "uses_buffer_order", False))
         self._ties: set | None = set()
         self._listing = None            # the reachable states still to list for the ties (None: all listed)
         self._ties_known = False
-        self._policy_values: dict[tuple, float] = {}
 
     #: :attr:`ties` lists at most this many (installed, strategies) states; past it any pair's order may decide.
     TIES_MAX_KEYS = 100_000
@@ -97,11 +90,6 @@ class PolicyEvaluator(OptimalSolver):
                     raise OutOfTime("listing where the buffer's order decides passed its deadline")
             self._ties_known, self._listing = True, None
         return self._ties
-
-    def value(self, key: tuple | None = None) -> float:
-        """Expected remaining cost of the policy from a state (a :meth:`policy_key`; default: the start)."""
-        return self._deep(self._policy_value, self.policy_key(0, self.engine.all_strategies, ()) if key is None
-                          else key)
 
     def policy_key(self, mask: int, consistent: int, buffer) -> tuple:
         """The policy's key for a state: ``(mask, strategies, buffer)``, the buffer as part indices in the
@@ -195,6 +183,37 @@ class PolicyEvaluator(OptimalSolver):
             return optimum_states
         return optimum_states * orderings_factor(self.engine, self.capacity, self.ties)
 
+    def policy_start(self) -> tuple:
+        """The policy's key of the start."""
+        return self.policy_key(0, self.engine.all_strategies, ())
+
+    def _counts_key(self, key: tuple) -> tuple:
+        """The optimum's form of a policy's key (the buffer as counts), for the looks of its bin."""
+        return (key[0], key[1], self._counts(key[2])) if self.ordered else key
+
+
+class PolicyEvaluator(BufferOrder, OptimalSolver):
+    """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at``).
+
+    Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
+    shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it), ``deadline``
+    the time (:class:`OutOfTime`).  :func:`~opportune.policies.states.estimate_states` says how many
+    states the optimum needs; a policy that ignores the buffer's order reaches at most as many, one
+    that uses it (:attr:`ordered`) at most :meth:`states_bound` of them.
+    Complexity: O(states × looks × one decision of the policy).
+    """
+
+    def __init__(self, engine, policy, **settings):
+        super().__init__(engine, **settings)
+        check_evaluable(policy)
+        self.policy = policy
+        self._keep_order(policy)
+        self._policy_values: dict[tuple, float] = {}
+
+    def value(self, key: tuple | None = None) -> float:
+        """Expected remaining cost of the policy from a state (a :meth:`policy_key`; default: the start)."""
+        return self._deep(self._policy_value, self.policy_start() if key is None else key)
+
     def optimal(self) -> float:
         """The optimum from the start, for comparison (see :class:`OptimalSolver`)."""
         return OptimalSolver.value(self)
@@ -226,8 +245,7 @@ class PolicyEvaluator(OptimalSolver):
                                   "plan; raise the state limit, or estimate with `opportune simulate`")
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
         p_shake = 0.0
-        counts = (key[0], key[1], self._counts(key[2])) if self.ordered else key
-        for look, p in self._looks(self._bin_counts(counts)):
+        for look, p in self._looks(self._bin_counts(self._counts_key(key))):
             move = self._policy_move(self.policy, key, look)
             if move is None:
                 p_shake += p

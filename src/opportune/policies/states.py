@@ -8,7 +8,9 @@ pile bin times every window as well.  So the state count is a sum over the order
     states = Σ_keys  Σ_{buffer b ≤ remaining, |b| ≤ capacity}  w(remaining − b)
 
 with ``w = 1`` in a Markov bin and ``w = 1 + windows(bin)`` in the pile (one value after a shake,
-one per window).  A policy reaches a subset of the same states, so this bounds its programme too.
+one per window).  A policy that ignores the buffer's order reaches a subset of the same states, so
+this bounds its programme too; one that keeps the order (:mod:`.evaluate`) at most
+:func:`orderings_factor` times as many.
 
 :func:`estimate_states` finds it in three ways, cheapest first, and says which it used:
 
