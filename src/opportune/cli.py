@@ -733,6 +733,7 @@ def evaluate(
              f"--visible, or estimate it by Monte Carlo with {simulate_hint}")
     until = Deadline.after(time_limit)
     ev = optimum = None
+    policy_bound, ordered = estimate.states, False
     try:
         chosen = make_policy(policy, engine, config, prepare(config, engine))
         settings = dict(visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
@@ -744,6 +745,14 @@ def evaluate(
         else:
             ev = PolicyEvaluator(engine, chosen, weights=config.weights if chosen_bin == "weighted" else None,
                                  **settings)
+        ev.deadline = until         # finding where the buffer's order decides counts options: within it too
+        policy_bound, ordered = ev.states_bound(estimate.states), ev.ordered
+        kept = " (its buffer kept in the order of buffering)" if ordered else ""
+        if not as_json:
+            # a bound, not a count: the policy reaches a part of these states (it stops at --max-states if not)
+            _out().print(f"states: {estimate.describe()} for the optimum, at most {big(policy_bound)} for the "
+                         f"policy{kept}" + (f"; it stops if it passes --max-states {max_states:,}"
+                                            if policy_bound > max_states else ""))
         with _evaluation_progress(estimate, enabled=not as_json) as report:
             for solver in {id(ev): ev, id(optimum): optimum}.values():
                 if solver is not None:
@@ -763,8 +772,10 @@ def evaluate(
     except (OptimalTooLarge, OutOfTime) as exc:
         why = (f"passed --time-limit {time_limit:g} s" if isinstance(exc, OutOfTime)
                else f"needed more than --max-states {max_states:,} states")
+        bound = f", at most {big(policy_bound)} for the policy" if policy_bound != estimate.states else ""
         fail(f"the exact evaluation of {plan.name} {why}: it stopped after {_how_far(ev, optimum, chosen_bin)} of "
-             f"{estimate.describe()} expected; raise the limit, or estimate it by Monte Carlo with {simulate_hint}")
+             f"{estimate.describe()} expected for the optimum{bound}; raise the limit, or estimate it by Monte Carlo "
+             f"with {simulate_hint}")
     except StrategyUnavailable:
         fail(f"the exact evaluation of {plan.name} ({plan.n_units} parts) is out of reach: the policy's first "
              "decision alone does not finish in 10 s, and the states to evaluate grow exponentially with the parts "
@@ -775,7 +786,8 @@ def evaluate(
     doc = {"plan": plan.name, "policy": policy, "bin": chosen_bin, "visible": config.visible,
            "buffer_capacity": config.buffer_capacity, "expected_time": value, "optimal": best,
            "ratio": value / best if best else None, "states": states, "policy_states": policy_states,
-           "estimated_states": estimate.states, "estimate_exact": estimate.exact}
+           "estimated_states": estimate.states, "estimate_exact": estimate.exact,
+           "estimated_policy_states": policy_bound, "buffer_order_kept": ordered}
     if as_json:
         print(json.dumps(doc, indent=2))
         return

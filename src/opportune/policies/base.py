@@ -185,7 +185,13 @@ class DecidesOnMasks:
     locations and the look.  A simulation calls it directly, with no
     :class:`~opportune.sequencer.State` per look; :meth:`choose` adapts a ``State`` to it,
     and the policy's ``decide`` adds the reasons, so every world takes the same decision.
+
+    ``uses_buffer_order``: whether the action depends on the order of ``buffer`` (the order of
+    buffering, as the sequencer keeps it), not only on its contents.  The exact evaluation
+    (:class:`~opportune.policies.evaluate.PolicyEvaluator`) then keeps that order in its states.
     """
+
+    uses_buffer_order = False
 
     def choose(self, state: State, visible: tuple[str, ...]) -> Action:
         """The action alone (what ``decide`` decides, without building its reasons)."""

@@ -12,6 +12,18 @@ move installs or buffers a part, so the recursion terminates).  Beside it, the o
 :class:`~opportune.policies.optimal.OptimalSolver` gives the best any online policy can do, and
 their ratio says how far the policy is from it — with no Monte Carlo error.
 
+The buffer's order.  A policy that declares ``uses_buffer_order`` (the paper's rule and its variants:
+among equally good buffered candidates, the part buffered longest first) is scored on states that keep
+the buffer as the running :class:`~opportune.sequencer.Sequencer` keeps it: in the order of buffering,
+an installation taking the part's first location.  So the value is that of the rule `simulate` and the
+sequencer run, not of a rule breaking that tie by declaration order (on a five-part plan with a part
+of two units, 1 visible and 2 locations, the two differ by 0.006).  The order is kept only between
+the pairs of parts the policy says can tie (``buffer_ties_at``, over every reachable state): buffers
+that differ elsewhere share one state.  Other policies, and the optimum, keep the buffer as counts
+per part.  How many states the policy may need is known before the work: the optimum's count
+(:func:`~opportune.policies.states.estimate_states`) times the orders of a buffer that differ in those
+pairs (:meth:`PolicyEvaluator.states_bound`).
+
 Example
 -------
 >>> from opportune import make_plan
@@ -25,22 +37,169 @@ Example
 
 from __future__ import annotations
 
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, OutOfTime, check_evaluable
+import heapq
 
-__all__ = ["OutOfTime", "PolicyEvaluator", "PolicyStuck"]
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, OutOfTime, check_evaluable
+from opportune.policies.states import orderings_factor, reachable_keys
+
+__all__ = ["BufferOrder", "OutOfTime", "PolicyEvaluator", "PolicyStuck"]
 
 
 class PolicyStuck(RuntimeError):
     """The policy shakes at every look of some state it reaches: it never finishes."""
 
 
-class PolicyEvaluator(OptimalSolver):
+class BufferOrder:
+    """The states of a policy's programme, with the buffer in the order of buffering where the policy uses it.
+
+    For :class:`PolicyEvaluator` and the pile's :class:`~opportune.policies.pile.PileSolver` (both
+    :class:`OptimalSolver`): call :meth:`_keep_order` with the policy (None: the optimum) in ``__init__``.
+    See the module's docstring.
+    """
+
+    def _keep_order(self, policy) -> None:
+        #: The policy's states keep the buffer in the order of buffering (see the module's docstring).
+        self.ordered = bool(getattr(policy, "uses_buffer_order", False))
+        self._ties: set | None = set()
+        self._listing = None            # the reachable states still to list for the ties (None: all listed)
+        self._ties_known = False
+
+    #: :attr:`ties` lists at most this many (installed, strategies) states; past it any pair's order may decide.
+    TIES_MAX_KEYS = 100_000
+
+    @property
+    def ties(self) -> set | None:
+        """The pairs of parts (declaration indices) whose order in the buffer the states keep: the union of
+        the policy's ``buffer_ties_at`` over the reachable (installed, strategies) states (None: every pair,
+        where the policy does not say, or past :attr:`TIES_MAX_KEYS` states).  Listed once, before the first
+        state, within the ``deadline``: past it :class:`OutOfTime`, and a later call goes on from there."""
+        if not self._ties_known:
+            at = getattr(self.policy, "buffer_ties_at", None)
+            if self._listing is None:
+                self._listing = enumerate(reachable_keys(self.engine))
+            for n, (mask, cons) in self._listing:
+                if n >= self.TIES_MAX_KEYS:
+                    self._ties = None
+                    break
+                pairs = None if at is None else at(self.engine, mask, cons)
+                if pairs is None:
+                    self._ties = None
+                    break
+                self._ties.update(pairs)
+                if self._until.expired():
+                    raise OutOfTime("listing where the buffer's order decides passed its deadline")
+            self._ties_known, self._listing = True, None
+        return self._ties
+
+    def policy_key(self, mask: int, consistent: int, buffer) -> tuple:
+        """The policy's key for a state: ``(mask, strategies, buffer)``, the buffer as part indices in the
+        order of buffering if the policy uses it (:attr:`ordered`), else as counts per part.  O(buffer).
+
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> PolicyEvaluator(OrderEngine(make_plan(["a", "b"], {})), Opportunistic()).policy_key(0, 1, ("b", "a"))
+        (0, 1, (1, 0))
+        """
+        if not self.ordered:
+            return super().policy_key(mask, consistent, buffer)
+        return (mask, consistent, self._canonical(tuple(self.plan.index(p) for p in buffer)))
+
+    def _canonical(self, order: tuple[int, ...]) -> tuple[int, ...]:
+        """One representative of the buffers that differ from ``order`` only between parts whose order
+        never decides (not a pair of :attr:`ties`): the least by declaration index of the orders that keep
+        every tied pair as it is (a topological sort, least first).  Equal representatives mean equal
+        decisions, now and after any move.  O(buffer²)."""
+        n = len(order)
+        if n < 2:
+            return order
+        ties = self.ties
+        if ties is None:
+            return order
+        waits = [0] * n
+        after: list[list[int]] = [[] for _ in range(n)]
+        for j in range(1, n):
+            b = order[j]
+            for i in range(j):
+                a = order[i]
+                if (a, b) in ties or (b, a) in ties:
+                    waits[j] += 1
+                    after[i].append(j)
+        ready = [(order[i], i) for i in range(n) if not waits[i]]
+        heapq.heapify(ready)
+        out = []
+        while ready:
+            part, i = heapq.heappop(ready)
+            out.append(part)
+            for j in after[i]:
+                waits[j] -= 1
+                if not waits[j]:
+                    heapq.heappush(ready, (order[j], j))
+        return tuple(out)
+
+    def policy_moves(self, key: tuple, look: tuple[int, ...]):
+        """The moves of :meth:`_moves` between the policy's keys: with an ordered buffer a buffered part
+        goes last, and an installation from the buffer takes the part's first location, as in
+        :meth:`Sequencer.report <opportune.sequencer.Sequencer.report>`.  O(parts) per move."""
+        if not self.ordered:
+            yield from self._moves(key, look)
+            return
+        mask, cons, order = key
+        for cost, nxt, action in self._moves((mask, cons, self._counts(order)), look):
+            if action.kind == "buffer":
+                yield cost, (mask, cons, self._canonical(order + (self.plan.index(action.part),))), action
+            elif action.source == "buffer":
+                i = order.index(self.plan.index(action.part))
+                yield cost, (nxt[0], nxt[1], self._canonical(order[:i] + order[i + 1:])), action
+            else:
+                yield cost, (nxt[0], nxt[1], order), action
+
+    def _counts(self, order: tuple[int, ...]) -> tuple[int, ...]:
+        """Units buffered per part (the optimum's form) from an ordered buffer."""
+        buf = [0] * len(self.ids)
+        for i in order:
+            buf[i] += 1
+        return tuple(buf)
+
+    def _buffered(self, key: tuple) -> tuple[str, ...]:
+        if not self.ordered:
+            return super()._buffered(key)
+        return tuple(self.ids[i] for i in key[2])
+
+    def states_bound(self, optimum_states: int) -> int:
+        """At most how many states the policy's programme stores, given the optimum's count (from
+        :func:`~opportune.policies.states.estimate_states`): as many for the order-free key (the policy
+        reaches a subset of the optimum's states), times the orders of a buffer content that differ in
+        :attr:`ties` for the ordered one (:func:`~opportune.policies.states.orderings_factor`).
+        Finds :attr:`ties` if not yet known.
+
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> PolicyEvaluator(OrderEngine(make_plan(["a", "b", "c"], {})), Opportunistic()).states_bound(100)
+        600
+        """
+        if not self.ordered:
+            return optimum_states
+        return optimum_states * orderings_factor(self.engine, self.capacity, self.ties)
+
+    def policy_start(self) -> tuple:
+        """The policy's key of the start."""
+        return self.policy_key(0, self.engine.all_strategies, ())
+
+    def _counts_key(self, key: tuple) -> tuple:
+        """The optimum's form of a policy's key (the buffer as counts), for the looks of its bin."""
+        return (key[0], key[1], self._counts(key[2])) if self.ordered else key
+
+
+class PolicyEvaluator(BufferOrder, OptimalSolver):
     """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at``).
 
     Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
     shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it), ``deadline``
-    the time (:class:`OutOfTime`); :func:`~opportune.policies.states.estimate_states` says how many
-    states the optimum needs, and the policy reaches at most as many.
+    the time (:class:`OutOfTime`).  :func:`~opportune.policies.states.estimate_states` says how many
+    states the optimum needs; a policy that ignores the buffer's order reaches at most as many, one
+    that uses it (:attr:`ordered`) at most :meth:`states_bound` of them.
     Complexity: O(states × looks × one decision of the policy).
     """
 
@@ -48,11 +207,12 @@ class PolicyEvaluator(OptimalSolver):
         super().__init__(engine, **settings)
         check_evaluable(policy)
         self.policy = policy
+        self._keep_order(policy)
         self._policy_values: dict[tuple, float] = {}
 
     def value(self, key: tuple | None = None) -> float:
-        """Expected remaining cost of the policy from a state (default: the start)."""
-        return self._deep(self._policy_value, key)
+        """Expected remaining cost of the policy from a state (a :meth:`policy_key`; default: the start)."""
+        return self._deep(self._policy_value, self.policy_start() if key is None else key)
 
     def optimal(self) -> float:
         """The optimum from the start, for comparison (see :class:`OptimalSolver`)."""
@@ -85,7 +245,7 @@ class PolicyEvaluator(OptimalSolver):
                                   "plan; raise the state limit, or estimate with `opportune simulate`")
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
         p_shake = 0.0
-        for look, p in self._looks(self._bin_counts(key)):
+        for look, p in self._looks(self._bin_counts(self._counts_key(key))):
             move = self._policy_move(self.policy, key, look)
             if move is None:
                 p_shake += p

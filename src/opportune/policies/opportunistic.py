@@ -31,6 +31,7 @@ tie-breaks decide between them.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass
 from fractions import Fraction
@@ -202,6 +203,29 @@ class Opportunistic(DecidesOnMasks):
     """
 
     name = "opportunistic"
+    #: Among buffered candidates equal in options and cost, the one buffered longest: the order decides.
+    uses_buffer_order = True
+    def buffer_ties_at(self, engine, mask: int, consistent: int) -> list[tuple[int, int]]:
+        """The pairs of parts (declaration indices, the lower first) whose order in the buffer can decide
+        an action in this (installed, strategies) state: both installable, with as many options and the
+        same cost, so that "buffered longest" breaks their tie.  The exact evaluation keeps the buffer's
+        order between the pairs of every state it can reach, and only between them.  Complexity: one
+        count of options.
+
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> Opportunistic().buffer_ties_at(engine, 0, 1), Opportunistic().buffer_ties_at(engine, 0b001, 1)
+        ([(0, 1)], [])
+        """
+        can = engine.installable(mask, consistent)
+        if len(can) < 2:
+            return []
+        plan = engine.plan
+        alike: dict[tuple, list[int]] = {}
+        for part, options in engine.options_for(mask, consistent, can).items():
+            alike.setdefault((options, plan.part(part).cost), []).append(plan.index(part))
+        return [pair for group in alike.values() for pair in itertools.combinations(sorted(group), 2)]
 
     def __init__(self, budget: float | None = None, *, seed: int = 0, chains: int = 8):
         if budget is not None and not budget > 0:

@@ -112,6 +112,20 @@ class OptimalSolver:
         """The solver's key for a sequencer :class:`~opportune.sequencer.State`."""
         return (state.schedule.mask, state.schedule.consistent, self.buffer_counts(state.buffer))
 
+    def policy_key(self, mask: int, consistent: int, buffer) -> tuple:
+        """The key a policy's programme keeps for a state: here the optimum's, with the buffer as counts
+        (:class:`~opportune.policies.evaluate.PolicyEvaluator` keeps the buffer's order where the policy
+        uses it)."""
+        return (mask, consistent, self.buffer_counts(buffer))
+
+    def policy_moves(self, key: tuple, look: tuple[int, ...]):
+        """The moves of :meth:`_moves` between the keys of :meth:`policy_key` (here the same)."""
+        return self._moves(key, look)
+
+    def _buffered(self, key: tuple) -> tuple[str, ...]:
+        """The buffer of a :meth:`policy_key` as the policy sees it (here in declaration order)."""
+        return tuple(self.ids[i] for i, c in enumerate(key[2]) for _ in range(c))
+
     def buffer_counts(self, buffer) -> tuple[int, ...]:
         """The buffer as the solver keeps it: units buffered per part, in declaration order."""
         buf = [0] * len(self.ids)
@@ -186,15 +200,16 @@ class OptimalSolver:
     def _policy_move(self, policy, key: tuple, look: tuple[int, ...]):
         """The move ``policy`` makes at ``key`` on ``look``, as ``(cost, next key, action)`` of
         :meth:`_moves`, or None when it shakes; a move that is not legal there is a ``ValueError``.
-        The policy decides on the machine form of the state (``choose_at``)."""
-        mask, cons, buf = key
+        The policy decides on the machine form of the state (``choose_at``), its key that of
+        :meth:`policy_key`."""
+        mask, cons, _ = key
         ids = self.ids
-        buffer = tuple(ids[i] for i, c in enumerate(buf) for _ in range(c))
-        free = float("inf") if self.capacity is None else self.capacity - sum(buf)
+        buffer = self._buffered(key)
+        free = float("inf") if self.capacity is None else self.capacity - len(buffer)
         action = policy.choose_at(self.engine, mask, cons, buffer, free, tuple(ids[i] for i in look))
         if action.kind == "shake":
             return None
-        for move in self._moves(key, look):
+        for move in self.policy_moves(key, look):
             if same_action(move[2], action):
                 return move
         raise ValueError(f"the policy chose {action} at a state where it is not a legal move")

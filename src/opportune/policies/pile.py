@@ -22,16 +22,19 @@ Example (the gearbox, 2 visible, unlimited buffer):
 
 from __future__ import annotations
 
+from opportune.policies.evaluate import BufferOrder
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
 
 __all__ = ["PileSolver"]
 
 
-class PileSolver(OptimalSolver):
+class PileSolver(BufferOrder, OptimalSolver):
     """Exact least expected cost in the pile bin, and (with ``policy``) the exact cost of a policy.
 
     Same settings as :class:`OptimalSolver` (the weights do not apply: a pile has none);
-    ``max_states`` bounds the (state, window) pairs.  Complexity: O(states × windows × moves).
+    ``max_states`` bounds the (state, window) pairs.  A policy that uses the buffer's order is scored on
+    states that keep it (:class:`~opportune.policies.evaluate.BufferOrder`).
+    Complexity: O(states × windows × moves).
     """
 
     def __init__(self, engine, policy=None, **settings):
@@ -40,6 +43,7 @@ class PileSolver(OptimalSolver):
         if policy is not None:
             check_evaluable(policy, "pile")
         self.policy = policy
+        self._keep_order(policy)
         # one memo (OptimalSolver._values, which a study hands from its parent to its workers): window
         # values under (key, window), values of a freshly shaken pile under ("shaken", key)
         self._window_values = self._values
@@ -50,7 +54,10 @@ class PileSolver(OptimalSolver):
     def value(self, key: tuple | None = None) -> float:
         """Expected cost from a freshly shaken pile at ``key`` (default: the start): the optimum, or
         the policy's if one was given."""
-        return self._deep(self._shake_value, key)
+        return self._deep(self._shake_value, self.policy_start() if key is None else key)
+
+    def _bin_counts(self, key: tuple) -> tuple[int, ...]:
+        return super()._bin_counts(self._counts_key(key))
 
     @property
     def states(self) -> int:

@@ -48,6 +48,17 @@ class Rollout(DecidesOnMasks):
     name = "rollout"
     rule = "the action with the least mean cost of finishing, over sampled futures (common random numbers)"
     decision_key = None
+    #: The futures' seed is drawn from the state with its buffer in order (and small plans decide as the
+    #: look-ahead, which keeps it too).
+    uses_buffer_order = True
+
+    def buffer_ties_at(self, engine, mask: int, consistent: int):
+        """Where the order of the buffer can decide (see :meth:`Opportunistic.buffer_ties_at
+        <opportune.policies.opportunistic.Opportunistic.buffer_ties_at>`): the look-ahead's on a small plan;
+        None (any pair) on a larger one, whose futures are drawn from the whole buffer's order."""
+        if engine.n_units <= self.exact_below:
+            return self._exact_policy().buffer_ties_at(engine, mask, consistent)
+        return None
 
     def __init__(self, *, samples: int = 16, budget: float | None = None, min_samples: int = 4, seed: int = 0,
                  visible: int = 2, capacity: int | None = None, costs=None, exact_below: int | None = None,

@@ -8,7 +8,9 @@ pile bin times every window as well.  So the state count is a sum over the order
     states = Σ_keys  Σ_{buffer b ≤ remaining, |b| ≤ capacity}  w(remaining − b)
 
 with ``w = 1`` in a Markov bin and ``w = 1 + windows(bin)`` in the pile (one value after a shake,
-one per window).  A policy reaches a subset of the same states, so this bounds its programme too.
+one per window).  A policy that ignores the buffer's order reaches a subset of the same states, so
+this bounds its programme too; one that keeps the order (:mod:`.evaluate`) at most
+:func:`orderings_factor` times as many.
 
 :func:`estimate_states` finds it in three ways, cheapest first, and says which it used:
 
@@ -42,7 +44,8 @@ from functools import lru_cache
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 
-__all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states"]
+__all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states",
+           "orderings_factor", "reachable_keys"]
 
 #: Memory a programme uses per state, rounded up: the dict entry, the key and buffer tuples and the
 #: value (measured: 574 bytes per state for the optimum of KILBRID, 716 on the gearbox, 220-260 per
@@ -241,24 +244,40 @@ class _Listed:
 
 
 def _list_keys(engine, weigh: _Weigher, stop_above: int | None, until: Deadline) -> _Listed:
-    """Every (installed units, consistent strategies) key the programmes can reach, level by level
-    (one more unit per level), weighed; stops past ``stop_above`` states or ``until``."""
+    """Every (installed units, consistent strategies) key the programmes can reach, weighed
+    (:func:`reachable_keys`); stops past ``stop_above`` states or ``until``."""
+    total = 0
+    keys = 0
+    limit = float("inf") if stop_above is None else stop_above
+    check = until.finite
+    for mask, _ in reachable_keys(engine, until):
+        keys += 1
+        total += weigh.of_mask(mask)
+        # the clock at every key: a key costs O(units), thousands of operations on a large plan
+        if total > limit or (check and until.expired()):
+            return _Listed(total, keys, False)
+    return _Listed(total, keys, not (check and until.expired()))
+
+
+def reachable_keys(engine, until: Deadline = Deadline.NEVER):
+    """Yield every (installed units mask, consistent strategies) key reachable by installations,
+    level by level (one more unit per level); the generator ends early once ``until`` has passed
+    (the caller reads ``until.expired()`` to tell).  Complexity: O(keys × units).
+
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> list(reachable_keys(OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))))
+    [(0, 1), (1, 1), (3, 1)]
+    """
     n = engine.n_units
     posets = engine.posets
     k = engine.k
-    total = 0
-    keys = 0
-    level = {(0, engine.all_strategies)}
-    limit = float("inf") if stop_above is None else stop_above
+    level = [(0, engine.all_strategies)]
     check = until.finite
     for _ in range(n + 1):
-        nxt = set()
+        nxt = {}
         for mask, cons in level:
-            keys += 1
-            total += weigh.of_mask(mask)
-            # the clock at every key: a key costs O(units), thousands of operations on a large plan
-            if total > limit or (check and until.expired()):
-                return _Listed(total, keys, False)
+            yield mask, cons
             rest = engine.full ^ mask
             steps = 0
             while rest:
@@ -266,19 +285,51 @@ def _list_keys(engine, weigh: _Weigher, stop_above: int | None, until: Deadline)
                 rest ^= b
                 steps += 1
                 if check and not steps & 1023 and until.expired():
-                    return _Listed(total, keys, False)
+                    return
                 u = b.bit_length() - 1
                 if k == 1:
                     if not posets[0].below[u] & ~mask:
-                        nxt.add((mask | b, cons))
+                        nxt[(mask | b, cons)] = None
                 else:
                     after = engine.consistent_after(mask, cons, u)
                     if after:
-                        nxt.add((mask | b, after))
+                        nxt[(mask | b, after)] = None
+            if check and until.expired():
+                return
         if not nxt:
             break
-        level = nxt
-    return _Listed(total, keys, True)
+        level = list(nxt)
+
+
+def orderings_factor(engine, capacity: int | None, ties) -> int:
+    """At most how many orders of one buffer content a programme that keeps the buffer's order stores:
+    the buffer's order matters only between parts of one pair of ``ties`` (part indices; None: every
+    pair), so the orders of a content are at most the product, over the connected groups of the tie
+    graph, of the factorial of the units of the group it can hold.  Complexity: O(parts + ties).
+
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> e = OrderEngine(make_plan(["a", "b", "c"], {}))
+    >>> orderings_factor(e, None, None), orderings_factor(e, 2, None), orderings_factor(e, None, {(0, 2)})
+    (6, 2, 2)
+    """
+    quantity = [p.quantity for p in engine.plan.parts]
+    group = list(range(len(quantity)))
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            group[i] = group[group[i]]
+            i = group[i]
+        return i
+
+    pairs = ((0, i) for i in range(len(quantity))) if ties is None else ties
+    for a, b in pairs:
+        group[root(a)] = root(b)
+    units: dict[int, int] = {}
+    for i, q in enumerate(quantity):
+        units[root(i)] = units.get(root(i), 0) + q
+    cap = float("inf") if capacity is None else capacity
+    return math.prod(math.factorial(int(min(u, cap))) for u in units.values())
 
 
 # ---------------------------------------------------------------- the down-set estimate

@@ -228,6 +228,17 @@ class Lookahead(DecidesOnMasks):
         self._too_large = False
         self.last_cost: float | None = None
 
+    @property
+    def uses_buffer_order(self) -> bool:
+        """As its base: the scores are the base's values, on states that keep the buffer's order if the base uses it."""
+        return bool(getattr(self.base, "uses_buffer_order", False))
+
+    def buffer_ties_at(self, engine, mask: int, consistent: int):
+        """The base's (the look-ahead's own tie-breaks are by kind and declaration order, not by the buffer's;
+        its scores differ only through the base's values).  None: any pair's order may decide."""
+        ties = getattr(self.base, "buffer_ties_at", None)
+        return None if ties is None else ties(engine, mask, consistent)
+
     def _values(self, engine):
         if self._evaluator is None or self._evaluator.engine is not engine:
             # One programme per plan and world, shared by every look-ahead of the same settings (the service
@@ -299,7 +310,7 @@ class Lookahead(DecidesOnMasks):
                 ev.deadline = self.deadline
             try:
                 action, self.last_cost = ev._deep(
-                    lambda key: self._best(ev, engine, key, buffer, visible), (mask, consistent, ev.buffer_counts(buffer)))
+                    lambda key: self._best(ev, engine, key, buffer, visible), ev.policy_key(mask, consistent, buffer))
                 return action
             except OutOfTime:
                 if self.lookahead_budget is None:
@@ -325,7 +336,7 @@ class Lookahead(DecidesOnMasks):
         best, best_cost = base, None
         kind_rank = {"install": 0, "buffer": 1}
         ranked = [(cost + ev._after(key, look, action, nxt), kind_rank[action.kind], plan.index(action.part), action)
-                  for cost, nxt, action in ev._moves(key, look)]
+                  for cost, nxt, action in ev.policy_moves(key, look)]
         ranked.append((ev.costs.shake + ev._after_shake(key), 2, 0, SHAKE))
         for total, _, _, action in ranked:
             if same_action(action, base):
