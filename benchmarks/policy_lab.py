@@ -5,7 +5,8 @@ range of densities; seeded), each policy's exact expected time
 (:class:`~opportune.policies.evaluate.PolicyEvaluator`, uniform bin, ``--visible`` parts per
 look) is divided by the optimum's; the table gives the mean, median and largest gap per policy,
 over all plans and over those with two strategies.  Then the gearbox with buffer capacity 1, 2
-and unlimited, and with 1, 2 and 3 parts visible.  No Monte Carlo: every number is exact.
+and unlimited with 2 parts visible, 1, 2 and unlimited with 1, unlimited and 1 with 3.  No Monte
+Carlo: every number is exact.
 
 Plans too large for exact evaluation (``--paired``, default KILBRID and TONGE70) are compared by
 paired Monte Carlo instead: every policy runs on the same ``--paired-trials`` random bins (trial
@@ -151,7 +152,7 @@ def main(argv=None) -> int:
     gear = load_plan(GEARBOX)
     if args.plans:
         print("\ngearbox: gap to the optimum per setting")
-    for visible, capacity in ((2, None), (2, 1), (2, 2), (1, None), (3, None)) if args.plans else ():
+    for visible, capacity in ((2, None), (2, 1), (2, 2), (1, None), (1, 1), (1, 2), (3, None), (3, 1)) if args.plans else ():
         g, best, _ = gaps(gear, visible, capacity)
         cap = "unlimited" if capacity is None else capacity
         print(f"  visible {visible}, buffer {cap:<9}: optimum {best:.4f}; "

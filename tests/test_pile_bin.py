@@ -77,3 +77,17 @@ def test_pile_lookahead_is_never_worse_than_its_base(plan):
         base = PileSolver(engine, Slack(), capacity=capacity).value()
         ahead = PileSolver(engine, Lookahead(visible=2, bin="pile", capacity=capacity), capacity=capacity).value()
         assert ahead <= base + 1e-9
+
+
+@settings(max_examples=10, deadline=None)
+@given(plan=random_plans(max_parts=5, max_units=6, max_strategies=1))
+def test_pile_lookahead_is_the_pile_optimum_where_it_fits(plan):
+    """Where the pile's optimum fits its programme, the look-ahead acts by it: its exact value is the optimum's."""
+    from opportune.policies.variants import Lookahead
+
+    engine = OrderEngine(plan)
+    for visible, capacity in ((1, 1), (2, None)):
+        best = PileSolver(engine, visible=visible, capacity=capacity).value()
+        ahead = PileSolver(engine, Lookahead(visible=visible, bin="pile", capacity=capacity), visible=visible,
+                           capacity=capacity).value()
+        assert ahead == pytest.approx(best, rel=1e-12, abs=1e-12)

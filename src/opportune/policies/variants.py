@@ -191,7 +191,8 @@ class Lookahead(DecidesOnMasks):
     at most that many states, else the base policy's (the states the base reaches, fewer: its values
     after each action make the improvement step).  ``optimal=False`` keeps to the improvement step.
     (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
-    where the optimum's programme is smallest.)  The pile bin has the base's programme only.
+    where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
+    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).
     """
 
     name = "lookahead"
@@ -248,14 +249,16 @@ class Lookahead(DecidesOnMasks):
             shared = _EVALUATORS.setdefault(engine, {}) if key is not None else {}
             ev = shared.get(key)
             if ev is None:
+                # the optimum's values where they fit (a policy of None), else the base's
+                base = None if self._optimum_fits(engine) else self.base
                 if self.pile:
                     from opportune.policies.pile import PileSolver
 
-                    ev = PileSolver(engine, self.base, max_states=self.max_states, **self.settings)
-                elif self._optimum_fits(engine):
+                    ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
+                elif base is None:
                     ev = OptimalSolver(engine, max_states=self.max_states, **self.settings)
                 else:
-                    ev = PolicyEvaluator(engine, self.base, max_states=self.max_states, **self.settings)
+                    ev = PolicyEvaluator(engine, base, max_states=self.max_states, **self.settings)
                 if key is not None:
                     shared[key] = ev
             self._evaluator = ev
@@ -270,13 +273,18 @@ class Lookahead(DecidesOnMasks):
         from opportune.policies.states import estimate_states
 
         est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
-                              stop_above=self.max_states, time_limit=1.0)
+                              pile=self.pile, stop_above=self.max_states, time_limit=1.0)
         return est.exact and est.states <= self.max_states
 
     @property
     def deciding_rule(self) -> str:
         """The rule of the programme that decides (after the first decision on a plan)."""
-        return self.OPTIMAL_RULE if type(self._evaluator) is OptimalSolver else self.rule
+        return self.OPTIMAL_RULE if self._optimum else self.rule
+
+    @property
+    def _optimum(self) -> bool:
+        """Whether the programme is the optimum's (no policy evaluated)."""
+        return self._evaluator is not None and getattr(self._evaluator, "policy", None) is None
 
     def _share_key(self):
         """What the programme's values depend on, when that is known (the default base rule); else None."""
@@ -361,6 +369,5 @@ class Lookahead(DecidesOnMasks):
             exact = base.exact and self._too_large
             return replace(base, rule=f"as the base rule ({self.base.name}), because {why}: {base.rule}",
                            exact=exact, method=base.method if base.method != "exact" or exact else self.base.name)
-        optimum = type(self._evaluator) is OptimalSolver
         return Decision(action, self.deciding_rule, note=f"expected remaining cost {self.last_cost:.4f} " + (
-            "(the optimum's)" if optimum else f"(base: {self.base.name})"))
+            "(the optimum's)" if self._optimum else f"(base: {self.base.name})"))
