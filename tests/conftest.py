@@ -239,15 +239,23 @@ def run_cli(*args):
 LONGEST_FIRST = (
     "tests/test_openapi.py::test_schemathesis_follows_the_links",
     "tests/test_reproducible.py::test_two_runs_of_the_demo_write_the_same_files",
-    "tests/test_openapi.py::test_schemathesis_finds_answers_as_documented",
+    "tests/test_readme.py::test_every_readme_command_runs_from_an_empty_directory[simulate",
     "tests/test_engine_hub.py::test_arc111_exact_through_its_hub",
-    "tests/test_engine_count.py::test_salbp_decomposition_agrees_with_downsets",
+    "tests/test_service_scaleout.py::test_two_processes_kill_9_under_load",
+    "tests/test_service_plan_memory.py::test_the_servers_resident_memory_is_kept_under_its_cap",
+    "tests/test_service_browser.py::test_dashboard_frontier_on_large_plans",
     "tests/test_pile_bin.py::test_lookahead_on_the_piles_own_programme",
-    "tests/test_docs.py::test_the_examples_of_a_page_run",
-    "tests/test_service_restart.py::test_kill_9_under_load",
+    "tests/test_service_scaleout.py::test_serve_workers_2_replaces_a_killed_worker",
+    "tests/test_memory_limit.py::test_a_long_run_stays_near_its_engines_limit",
     "tests/test_docs.py::test_the_site_builds_offline",
+    "tests/test_docs.py::test_the_examples_of_a_page_run",
+    "tests/test_memory_limit.py::test_an_engine_keeps_its_memos_within_its_limit",
+    "tests/test_engine_native.py::test_compiled_equals_pure_python_on_random_orders",
+    "tests/test_engine_count_scans.py::test_narrow_and_wide_scans_agree",
     "tests/test_reproducible.py::test_a_recorded_study_runs_again",
-    "tests/test_schedule.py::test_schedule_matches_brute_force",
+    "tests/test_openapi.py::test_schemathesis_finds_answers_as_documented",
+    "tests/test_engine_count.py::test_salbp_decomposition_agrees_with_downsets",
+    "tests/test_service_restart.py::test_kill_9_under_load",
 )
 
 
