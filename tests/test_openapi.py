@@ -562,29 +562,31 @@ else:
 
     # ------------------------------------------------------------ stateful: runs driven through the links
 
-    class FreshApp:
-        """The application over a fresh copy of a template database (a cell's token, the gearbox plan) for
-        each scenario: the same requests get the same answers (run ids from 1), which Hypothesis needs to
-        generate, replay and shrink scenarios ("inconsistent data generation" otherwise).  Decisions are
-        exact whatever the machine's load (``decision_budget=None``: over a budget a decision is estimated)."""
+    class FreshDatabase:
+        """One application whose database is put back to a copy of a template (a cell's token, the gearbox plan)
+        before each scenario: the same requests get the same answers (run ids from 1), which Hypothesis needs to
+        generate, replay and shrink scenarios ("inconsistent data generation" otherwise).  Decisions are exact
+        whatever the machine's load (``decision_budget=None``: over a budget a decision is estimated).
+
+        The application is built once, and with it the gearbox's engine and the look-ahead's programme, which
+        the scenarios share: an application per scenario spent most of the test building its routes and the
+        programme again.  Exact decisions are a function of the run's state, so a programme carried over from
+        the last scenario decides as a new one would."""
 
         def __init__(self, template: Path):
-            self.template, self.scenarios, self.store, self.app = template, 0, None, None
-
-        def reset(self) -> None:
-            if self.store is not None:
-                self.store.dispose()
-            self.scenarios += 1
-            db = self.template.with_name(f"scenario-{self.scenarios}.db")
-            shutil.copy(self.template, db)
-            url = f"sqlite:///{db}"
+            self.template, self.db = template, template.with_name("scenario.db")
+            shutil.copy(template, self.db)
+            url = f"sqlite:///{self.db}"
             self.store = Store(url)
             self.app = create_app(Settings(db_url=url, max_body=MAX_BODY, decision_budget=None), self.store)
 
-        async def __call__(self, scope, receive, send):
-            if self.app is None:
-                self.reset()
-            await self.app(scope, receive, send)
+        def reset(self) -> None:
+            self.store.dispose()   # every pooled connection closed (the pools open new ones on the new file)
+            for name in (f"{self.db.name}-wal", f"{self.db.name}-shm"):
+                self.db.with_name(name).unlink(missing_ok=True)
+            shutil.copy(self.template, self.db)
+            # the last scenario's runs, kept live in memory: the next scenario's run ids start from 1 again
+            self.app.state.manager._live.clear()
 
     def test_schemathesis_follows_the_links_from_a_run_to_its_looks_and_outcomes(tmp_path):
         """Scenarios of up to 10 requests that start a run (from an uploaded plan, or the gearbox's id) and
@@ -597,7 +599,7 @@ else:
             plan = client.post("/plans", content=GEARBOX.read_text(), headers={
                 "Authorization": f"Bearer {token}", "Content-Type": "application/yaml"}).json()["id"]
         store.dispose()
-        fresh = FreshApp(template)
+        fresh = FreshDatabase(template)
         parts = ["ca", "ba", "rl", "dr", "sm", "ml", "ra", "co", "st", "cl"]
         config = schemathesis.Config.from_dict({
             "seed": 12,
@@ -617,7 +619,7 @@ else:
                            # HTTP in test_products.py, and fuzzed by the stateless test above)
                            "body.products": 1},
         })
-        schema = schemathesis.openapi.from_asgi("/openapi.json", fresh, config=config).include(
+        schema = schemathesis.openapi.from_asgi("/openapi.json", fresh.app, config=config).include(
             operation_id=["uploadPlan", "startRun", "postLook", "postOutcome", "cancelAction"])
         machine = schema.as_state_machine()
         # Scenarios start with a plan or a run: a look, outcome or cancel on a random run id is a 404 that leads

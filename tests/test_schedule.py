@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 from collections import Counter as Tally
 from fractions import Fraction
@@ -10,9 +11,25 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import GEARBOX, brute_sequences, random_plans
+from conftest import GEARBOX, brute_sequences, multiset_permutations, random_plans, respects
 from opportune import load_plan, make_plan
 from opportune.engine import NotAdmissible, OrderEngine, Schedule
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(0, 3), max_size=7))
+def test_the_brute_force_makes_every_distinct_ordering_once_in_order(items):
+    """The references below rest on it: the orderings of a multiset, against every permutation deduplicated."""
+    assert list(multiset_permutations(items)) == sorted(set(itertools.permutations(items)))
+
+
+@settings(max_examples=100, deadline=None)
+@given(random_plans(max_parts=5, max_units=6))
+def test_brute_sequences_are_the_orderings_that_respect_a_strategy(plan):
+    units = [p.id for p in plan.parts for _ in range(p.quantity)]
+    every = set(itertools.permutations(units))
+    admissible = [s for s in every if any(respects(s, strategy) for strategy in plan.strategies)]
+    assert brute_sequences(plan) == sorted(admissible)
 
 
 @st.composite
