@@ -277,6 +277,23 @@ def test_draws_in_turns_are_the_draws_one_after_another():
     assert relax.sample(h[1] - 1, 10**9, -1.0, 99)[2] == 4
 
 
+@needs_core
+def test_count_share_bounds_the_time_spent_on_relaxations_that_never_hit():
+    """ARC111 cut into pieces of 20-30 elements: no pilot draw hits, so the estimate is hopeless; the
+    relaxations' counts stop within ``count_share`` of the time (CPU time, with a margin for the last
+    count's pilot), not half of it as by default."""
+    from conftest import CpuTime
+    from opportune.datasets import salbp_path
+    from opportune.formats.salbp import read_in2
+
+    g = read_in2(salbp_path("ARC111"))
+    p = Poset.from_pairs(g.n, [(a - 1, b - 1) for a, b in g.pairs])
+    with CpuTime() as cpu:
+        r = relaxmc.estimate(p, rel_error=0.05, deadline=Deadline.after(8.0), count_share=0.02, hopeless=20)
+    assert r.status in ("hopeless", "none") and r.draws == 0
+    assert cpu.seconds < 0.02 * 8.0 + 0.5, cpu.seconds
+
+
 # ------------------------------------------------------------------------------ budgets
 
 @needs_core

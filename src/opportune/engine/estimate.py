@@ -670,7 +670,7 @@ def relaxmc_available() -> bool:
 
 def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: int, deadline: Deadline,
           low: float, high: float, start: float, whole: bool = True,
-          resume: Estimate | None = None) -> Estimate | None:
+          resume: Estimate | None = None, count_share: float | None = None) -> Estimate | None:
     """Adaptive relaxation Monte Carlo on the subposet ``mask`` (:func:`opportune.engine.relaxmc.estimate`)
     as an :class:`Estimate` (method ``"armc"``, ``samples`` its draws), its value and interval within
     the certain bounds ``low``/``high`` (natural logs); None without the compiled core, without a hit,
@@ -683,6 +683,7 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
         return None
     r = relaxmc.estimate(sub, rel_error=rel_error, confidence=confidence, seed=seed, deadline=deadline,
                          hopeless=ARMC_HOPELESS, whole=whole,
+                         **({} if count_share is None else {"count_share": count_share}),
                          resume=resume.resume if resume is not None and resume.method == "armc" else None)
     if r is None or not math.isfinite(r.log10) or r.hits == 0 and r.status != "exact":
         return None
@@ -695,7 +696,8 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
 
 def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01, seed: int = 0,
                         confidence: float = 0.95, deadline: Deadline | float | None = None,
-                        whole: bool = True, resume: Estimate | None = None) -> Estimate | None:
+                        whole: bool = True, resume: Estimate | None = None,
+                        count_share: float | None = None) -> Estimate | None:
     """Adaptive relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`) on the subposet ``mask`` of
     ``poset`` as an :class:`Estimate` (method ``"armc"``; where one piece held the whole order, its
     count in doubles, ``rel_error`` of about 1e-9), its interval within the order's trivial bounds
@@ -703,7 +705,8 @@ def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: flo
     elements, no finite ``deadline``) or found no hit in time.  Stops once the interval is within
     ``rel_error``, and at once where the draws it would need are hopeless.  ``whole=False``: no
     one-piece count first (see :func:`opportune.engine.relaxmc.estimate`); ``resume``: an earlier
-    estimate of the same set by this function, whose draws go on (see there).
+    estimate of the same set by this function, whose draws go on (see there); ``count_share``: the
+    share of the time for counting relaxations (default :data:`opportune.engine.relaxmc.COUNT_SHARE`).
 
     >>> from opportune.engine.poset import Poset
     >>> e = relaxation_estimate(Poset.antichain(3), deadline=Deadline.after(1.0))
@@ -717,7 +720,7 @@ def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: flo
     if not (ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N and dl.finite and relaxmc_available()) or dl.expired():
         return None
     low, high = OrderSketch.trivial(mask.bit_count())
-    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start, whole, resume)
+    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start, whole, resume, count_share)
 
 
 def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01,

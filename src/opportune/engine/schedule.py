@@ -65,6 +65,9 @@ GRACE = 0.05  # seconds the exact count and the estimate each get in count_resul
 #: 64-100 elements), and gives the time back at once where it cannot hit; the exact count has the rest.
 #: (A half left orders of 80-100 elements at ±12-23% within 3 s, and the exact count had no chance there.)
 EARLY_ESTIMATE = 0.9
+#: Share of that first estimate's time for counting its relaxations: where its draws never hit (ARC111),
+#: it is found hopeless after this, so that the exact count (through a hub there) loses little.
+EARLY_COUNT_SHARE = 0.25
 #: The relative error at which that first relaxation estimate stops (the error asked, if looser):
 #: ±5% takes a few thousand hits; where the exact count then fails too, the estimate phase runs it
 #: again towards the error asked.
@@ -1197,7 +1200,8 @@ class Schedule:
                     from opportune.engine.estimate import relaxation_estimate
 
                     early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
-                                                seed=seed, whole=False, deadline=Deadline.after(
+                                                seed=seed, whole=False, count_share=EARLY_COUNT_SHARE,
+                                                deadline=Deadline.after(
                                                     EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
                 try:
                     return exact_by(until, plain_only)
