@@ -266,14 +266,17 @@ class Lookahead(DecidesOnMasks):
         return self._evaluator
 
     def _optimum_fits(self, engine) -> bool:
-        """Whether the optimum's programme holds at most ``max_states`` states (listed before it starts,
-        within a second: where the listing cannot tell, it does not fit)."""
+        """Whether the optimum's programme holds at most ``max_states`` states, listed before it starts
+        within a second, or within a third of the decision budget where there is one (it runs inside the
+        first decision on the plan, within the programme's share: up to 0.3 s on plans of 15-16 units);
+        where the listing cannot tell in that time, it does not fit, and the step over the base decides."""
         if not self.optimal or engine.n_units > self.MAX_UNITS:
             return False
         from opportune.policies.states import estimate_states
 
+        seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
         est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
-                              pile=self.pile, stop_above=self.max_states, time_limit=1.0)
+                              pile=self.pile, stop_above=self.max_states, time_limit=seconds)
         return est.exact and est.states <= self.max_states
 
     @property
@@ -311,9 +314,10 @@ class Lookahead(DecidesOnMasks):
         if engine.n_units > self.MAX_UNITS:
             self._too_large = True
         if not self._too_large:
+            start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
             ev = self._values(engine)
             if self.lookahead_budget is not None:
-                ev.deadline = time.perf_counter() + 0.7 * self.lookahead_budget
+                ev.deadline = start + 0.7 * self.lookahead_budget
             elif self.deadline is not None:
                 ev.deadline = self.deadline
             try:
