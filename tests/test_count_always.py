@@ -65,7 +65,9 @@ def assert_stated(result, n: int) -> None:
     assert high <= math.lgamma(n + 1) / math.log(10) + 1e-6, result
 
 
-@pytest.mark.parametrize("kind, n", [("layered", 200), ("layered", 1000), ("layered", 3000),
+# (400, not 200: the 200-task order is exact in 0.14 s, within the engine's phase of this budget on an
+# idle machine, now that the phase runs to its deadline; the 400-task one takes about 6 s)
+@pytest.mark.parametrize("kind, n", [("layered", 400), ("layered", 1000), ("layered", 3000),
                                      ("sparse", 300), ("sparse", 3000)])
 def test_count_result_answers_on_time_with_a_value_and_an_interval(kind, n):
     """Tiny time limits on orders far too large to count exactly in them: the answer comes within
