@@ -291,6 +291,7 @@ def test_count_share_bounds_the_time_spent_on_relaxations_that_never_hit():
     with CpuTime() as cpu:
         r = relaxmc.estimate(p, rel_error=0.05, deadline=Deadline.after(8.0), count_share=0.02, hopeless=20)
     assert r.status in ("hopeless", "none") and r.draws == 0
+    # CPU time: the share is of the deadline's wall time, which CPU time never exceeds, loaded or not
     assert cpu.seconds < 0.02 * 8.0 + 0.5, cpu.seconds
 
 

@@ -682,8 +682,7 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
     except BudgetExceeded:
         return None
     r = relaxmc.estimate(sub, rel_error=rel_error, confidence=confidence, seed=seed, deadline=deadline,
-                         hopeless=ARMC_HOPELESS, whole=whole,
-                         **({} if count_share is None else {"count_share": count_share}),
+                         hopeless=ARMC_HOPELESS, whole=whole, count_share=count_share,
                          resume=resume.resume if resume is not None and resume.method == "armc" else None)
     if r is None or not math.isfinite(r.log10) or r.hits == 0 and r.status != "exact":
         return None

@@ -284,7 +284,7 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
              seed: int = 0, deadline: Deadline | float | None = None, k: int | None = None,
              max_bytes: int = MAX_BYTES, max_draws: int | None = None,
              hopeless: float | None = None, whole: bool = True,
-             resume: RelaxEstimate | None = None, count_share: float = COUNT_SHARE) -> RelaxEstimate | None:
+             resume: RelaxEstimate | None = None, count_share: float | None = None) -> RelaxEstimate | None:
     """Estimate the number of linear extensions of ``poset`` within ``seconds`` and ``deadline``, aiming
     at a stated interval of relative half-width ``rel_error`` at ``confidence`` (see the module's text).
 
@@ -298,8 +298,9 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     ``resume``: an earlier estimate of the same order (its ``run``): its relaxation is drawn from again,
     from where its draws stopped, and the two calls' draws make one run (the stopping rule's statement
     holds for the whole, which stopped on the clock once and went on), instead of starting over.
-    ``count_share``: the share of the time the relaxations' exact counts may take (the rest is for
-    draws; an order whose draws never hit spends it all before it is found hopeless).
+    ``count_share``: the share of the time the relaxations' exact counts may take (None:
+    :data:`COUNT_SHARE`; the rest is for draws, and an order whose draws never hit spends it all
+    before it is found hopeless).
     Complexity: see the module.
 
     >>> from opportune.engine.poset import Poset
@@ -319,7 +320,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     hits_wanted = target_hits(rel_error, confidence)
     none = RelaxEstimate(math.nan, -math.inf, math.inf, confidence, math.nan, 0, 0, 0, "none")
     mix = (seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) % 2**64
-    count_end = Deadline(start + count_share * end.remaining()) if end.finite else end
+    share = COUNT_SHARE if count_share is None else count_share
+    count_end = Deadline(start + share * end.remaining()) if end.finite else end
     if resume is not None and resume.run is not None:
         if resume.run.n != n:
             raise ValueError(f"resume: an estimate of an order of {resume.run.n} elements, not {n}")

@@ -205,6 +205,7 @@ class Opportunistic(DecidesOnMasks):
     name = "opportunistic"
     #: Among buffered candidates equal in options and cost, the one buffered longest: the order decides.
     uses_buffer_order = True
+
     def buffer_ties_at(self, engine, mask: int, consistent: int) -> list[tuple[int, int]]:
         """The pairs of parts (declaration indices, the lower first) whose order in the buffer can decide
         an action in this (installed, strategies) state: both installable, with as many options and the
