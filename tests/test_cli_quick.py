@@ -48,7 +48,28 @@ def test_count_and_its_help_load_neither_typer_nor_rich(six):
     count_mods = modules_after("count", six)
     assert "opportune.engine.schedule" in count_mods        # it did count
     assert not {"typer", "rich", "click"} & count_mods
+    # a count's start-up pays only for what counting needs (each of these costs 2-5 ms)
+    assert not {"typing", "pathlib", "json", "random", "threading", "ast", "dis", "tokenize"} & count_mods
     assert "typer" in modules_after("check", six)           # the other commands are typer's
+
+
+def test_a_deferred_module_loads_at_its_first_use_and_then_works_as_itself():
+    code = ("import sys\n"
+            "from opportune.launch import defer\n"
+            "defer('inspect')\n"
+            "import dataclasses\n"
+            "print('ast' in sys.modules)\n"
+            "@dataclasses.dataclass\n"
+            "class Point:\n"
+            "    x: int\n"
+            "    y: int = 2\n"
+            "import inspect\n"
+            "print('ast' in sys.modules, Point.__doc__, inspect.signature(Point), inspect.isclass(Point))\n")
+    lines = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                           check=True).stdout.splitlines()
+    assert lines[0] == "False"          # dataclasses imported inspect without loading it
+    # a class without a docstring made inspect load, and it answers as inspect itself does
+    assert lines[1] == "True Point(x: int, y: int = 2) (x: int, y: int = 2) -> None True"
 
 
 @pytest.mark.parametrize("extra", [(), ("--json",), ("--after", "a,b"), ("--after=b a", "--json"),
@@ -159,3 +180,14 @@ def test_parsing_never_fails_and_takes_only_what_it_understands(argv):
     assert isinstance(args["plan_file"], str) and args["plan_file"] in argv
     assert args["time_limit"] >= cli_count.MIN_TIME_LIMIT and isinstance(args["max_memo"], int)
     assert isinstance(args["as_json"], bool)
+
+
+@pytest.mark.parametrize("columns", [None, "", "0", "-3", "abc", "1", "72", "200"])
+def test_the_help_is_as_wide_as_shutil_says_the_terminal_is(monkeypatch, columns):
+    import shutil
+
+    if columns is None:
+        monkeypatch.delenv("COLUMNS", raising=False)
+    else:
+        monkeypatch.setenv("COLUMNS", columns)
+    assert cli_count.terminal_columns() == shutil.get_terminal_size().columns

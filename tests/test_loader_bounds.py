@@ -538,3 +538,15 @@ def test_a_results_file_of_a_plan_at_the_bounds_is_read_within_the_promise(strat
     small = tmp_path / "small.json"
     small.write_text(json.dumps({"provenance": {"study": {"strategies": ["random"]}, "plan": {"parts": ["a"]}}}))
     assert read_recorded_study(small)["plan"] == {"parts": ["a"]}
+
+
+def test_a_files_suffix_is_read_as_pathlib_reads_it():
+    # the loader reads suffixes without pathlib (a count's start-up): every name of up to 7
+    # characters over these letters gets Path.suffix's answer
+    import itertools
+    from pathlib import Path
+
+    from opportune.formats.loader import _suffix
+
+    names = ("".join(t) for n in range(1, 8) for t in itertools.product("a./Y", repeat=n))
+    assert [n for n in names if _suffix(n) != Path(n).suffix.lower()] == []

@@ -13,9 +13,9 @@ every question about admissible sequences in :mod:`opportune.engine`.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Iterable, Mapping
 
 
 # Limits on every plan, whatever its format (YAML, JSON, .IN2, .alb), enforced by

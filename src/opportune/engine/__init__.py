@@ -9,8 +9,6 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from opportune._lazy import attach
 
 __all__ = ["CountResult", "NotAdmissible", "OrderEngine", "Schedule"]
@@ -19,6 +17,8 @@ __all__ = ["CountResult", "NotAdmissible", "OrderEngine", "Schedule"]
 # load the counter, the hub and the schedule.
 _LAZY = dict.fromkeys(__all__, "opportune.engine.schedule")
 
+# not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
+TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.engine.schedule import CountResult, NotAdmissible, OrderEngine, Schedule
 

@@ -25,14 +25,12 @@ How a plan becomes posets:
 from __future__ import annotations
 
 import math
-import random
-import threading
 import time
+from _thread import allocate_lock     # threading.Lock without threading's import (a count's start-up)
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import combinations
-from typing import TYPE_CHECKING, Collection, Iterable, Sequence
 
 from opportune.engine.count import MAX_TOTAL, BudgetExceeded, Counter, entries_within
 from opportune.engine.deadline import Deadline, as_deadline
@@ -41,7 +39,12 @@ from opportune.engine.memory import memory_total
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
 from opportune.plan import Plan
 
+# not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    import random
+    from typing import Collection, Iterable, Sequence
+
     from fractions import Fraction     # loaded where a fraction is made: it loads decimal (5 ms at start-up)
 
 MAX_STRATEGIES_EXACT = 12  # inclusion–exclusion has 2^k terms
@@ -307,7 +310,7 @@ class OrderEngine:
         # Decisions under way (see :meth:`deciding`): while any is, caches and memos may grow but are
         # never trimmed or evicted; :meth:`maintain` does that between decisions.
         self._deciding = 0
-        self._upkeep_lock = threading.Lock()
+        self._upkeep_lock = allocate_lock()
         self.upkeep_due = False     # a cache or memo went over its cap during a decision
         self.maintained = 0         # maintain() calls that dropped something
 
@@ -1312,6 +1315,8 @@ class Schedule:
 
     def sample(self, seed: int | random.Random | None = 0) -> list[str]:
         """One admissible completion drawn uniformly at random (exactly, from the counts)."""
+        import random     # here: a count never draws
+
         rng = seed if isinstance(seed, random.Random) else random.Random(seed)
         s, out = self, []
         while not s.is_complete:

@@ -14,7 +14,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from opportune.formats.loader import CheckResult
+from opportune.formats.loader import CheckResult, file_stem  # noqa: F401 (file_stem: its former home)
 from opportune.formats.problems import Problem
 from opportune.plan import MAX_UNITS
 
@@ -142,19 +142,6 @@ class Findings:
 def in_file_order(problems: list[Problem]) -> list[Problem]:
     """Errors first, each kind by line (as :func:`~opportune.formats.validate.check_document` orders them)."""
     return sorted(problems, key=lambda p: (p.severity != "error", p.line or 0))
-
-
-def file_stem(file: str) -> str:
-    """A plan's default name from its file's label: the file name without its suffix, and a shipped file
-    named ``salbp:TONGE70`` or ``example:gearbox`` by its own name (``TONGE70``).
-
-    >>> file_stem("/data/TONGE70.IN2"), file_stem("salbp:TONGE70"), file_stem("graph")
-    ('TONGE70', 'TONGE70', 'graph')
-    """
-    tail = file.replace("\\", "/").rsplit("/", 1)[-1]
-    if tail.lower().startswith(("salbp:", "example:")):
-        return tail.split(":", 1)[1]
-    return tail.rsplit(".", 1)[0] if "." in tail.lstrip(".") else tail
 
 
 def check_graph(

@@ -34,14 +34,18 @@ by one pass over its tokens (:func:`json_lines`).
 from __future__ import annotations
 
 import itertools
-import json
+import os
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Callable
 
 from opportune.formats.problems import Problem
 from opportune.plan import Plan, PlanError
+
+# not typing.TYPE_CHECKING: importing typing (and pathlib) costs 10 ms of a count's start-up
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from pathlib import Path
+    from typing import Any, Callable
 
 MAX_FILE_BYTES = 32 << 20   # a plan file (32 MiB)
 MAX_DEPTH = 64              # nesting of values (a plan needs 6)
@@ -99,9 +103,16 @@ class CheckResult:
         return self.plan is not None and not self.errors
 
 
+def _suffix(path: str | Path) -> str:
+    """The suffix of the file name, lower case (``".yaml"``; ``""`` for none), as ``Path.suffix`` gives it."""
+    name = os.path.basename(os.path.normpath(os.fspath(path)))
+    i = name.rfind(".")
+    return name[i:].lower() if 0 < i < len(name) - 1 else ""
+
+
 def detect_format(path: str | Path, text: str | None = None) -> str:
     """``"yaml"``, ``"json"`` or ``"in2"`` from the suffix, else from the content."""
-    suffix = Path(path).suffix.lower()
+    suffix = _suffix(path)
     if suffix in YAML_SUFFIXES:
         return "yaml"
     if suffix in JSON_SUFFIXES:
@@ -116,6 +127,19 @@ def detect_format(path: str | Path, text: str | None = None) -> str:
         if first.isdigit():
             return "in2"
     return "yaml"
+
+
+def file_stem(file: str) -> str:
+    """A plan's default name from its file's label: the file name without its suffix, and a shipped file
+    named ``salbp:TONGE70`` or ``example:gearbox`` by its own name (``TONGE70``).
+
+    >>> file_stem("/data/TONGE70.IN2"), file_stem("salbp:TONGE70"), file_stem("graph")
+    ('TONGE70', 'TONGE70', 'graph')
+    """
+    tail = file.replace("\\", "/").rsplit("/", 1)[-1]
+    if tail.lower().startswith(("salbp:", "example:")):
+        return tail.split(":", 1)[1]
+    return tail.rsplit(".", 1)[0] if "." in tail.lstrip(".") else tail
 
 
 def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
@@ -137,7 +161,7 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
             return CheckResult(None, [Problem(str(exc.args[0]), f"use one of these names, e.g. {example}",
                                               code="io")])
     stdin = str(path) == "-"
-    path = Path("<stdin>") if stdin else Path(path)
+    path = "<stdin>" if stdin else os.fspath(path)
     name = shipped or str(path)
     try:
         if stdin:       # `-`: the plan on standard input (YAML or JSON by its content, .IN2 or .alb by its shape)
@@ -145,7 +169,7 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
 
             raw = sys.stdin.buffer.read(MAX_FILE_BYTES + 1)
         else:
-            with path.open("rb") as f:  # read at most the limit (and one byte more, to know): /dev/zero is a file too
+            with open(path, "rb") as f:  # read at most the limit (and one byte more, to know): /dev/zero is a file too
                 raw = f.read(MAX_FILE_BYTES + 1)
         if len(raw) > MAX_FILE_BYTES:
             return CheckResult(None, [Problem(f"{name} is larger than {MAX_FILE_BYTES:,} bytes; plan files of at most "
@@ -157,11 +181,12 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
         return CheckResult(None, [Problem(f"{name} is a directory, not a plan file", "give a .yaml, .json or .IN2 file", code="io")])
     except OSError as exc:
         return CheckResult(None, [Problem(f"cannot read {name}: {exc.strerror}", "check the file's permissions", code="io")])
-    from opportune.formats.alb import check_alb_bytes, is_alb
+    suffix = _suffix(path)
+    if suffix == ".alb" or b"<" in raw[:200]:   # .alb's first line is `<number of tasks>`: else no need to load it
+        from opportune.formats.alb import check_alb_bytes, is_alb
 
-    if is_alb(path, raw):
-        return check_alb_bytes(raw, file=name)
-    suffix = path.suffix.lower()
+        if is_alb(path, raw):
+            return check_alb_bytes(raw, file=name)
     head = raw[:400].lstrip()
     if suffix == ".graphml" or (suffix not in YAML_SUFFIXES | JSON_SUFFIXES and head.startswith(b"<")):
         from opportune.formats.graphfiles import check_graphml_bytes
@@ -744,6 +769,8 @@ def json_lines(text: str) -> dict[tuple, int]:
     >>> lines[("parts", 1)], lines[("requires", "b")]
     (2, 3)
     """
+    import json     # here, not at the top: a YAML plan never needs it
+
     lines: dict[tuple, int] = {}
     # frames of the open containers: [is_mapping, path, next index | current key, a key is due]
     stack: list[list] = []
@@ -802,6 +829,8 @@ def parse_json(text: str, file: str | None = None) -> Document:
     except _Refused as exc:
         doc.problems.append(Problem(exc.message, exc.hint, file=file, line=exc.line, code="limit"))
         return doc
+    import json     # here, not at the top: a YAML plan never needs it
+
     repeated = []
 
     def mapping(pairs):

@@ -8,19 +8,21 @@ number of parts and constraints.
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections import Counter
 from functools import lru_cache
-from typing import TYPE_CHECKING, Any
 
-from opportune.formats.loader import CheckResult, Document
+from opportune.formats.loader import CheckResult, Document, file_stem
 from opportune.formats.problems import CONTROL_CHARS, Problem
 from opportune.plan import (MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS, MAX_WEIGHT, Part, Plan,
                             Strategy)
 
+# not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any
+
     import jsonschema
 
 DEFAULT_STRATEGY = "default"
@@ -43,6 +45,7 @@ def _close(word: str, choices) -> list[str]:
 @lru_cache(maxsize=1)
 def plan_schema() -> dict:
     """The published JSON Schema of plan files (``opportune/formats/plan.schema.json``)."""
+    import json
     from importlib import resources     # 9 ms of imports: only for the schema's users
 
     return json.loads(resources.files("opportune.formats").joinpath("plan.schema.json").read_text("utf-8"))
@@ -105,8 +108,6 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
     errors = [p for p in problems if p.severity == "error"]
     plan = None
     if not errors:
-        from opportune.formats.graphs import file_stem   # (graphs checks its plans here: imported when used)
-
         name = data.get("name") or (file_stem(doc.file) if doc.file else "plan")
         plan = Plan(name=str(name), parts=tuple(parts), strategies=tuple(strategies),
                     source=doc.file, description=data.get("description") or data.get("source"),
@@ -454,6 +455,8 @@ def _describe(value: Any) -> str:
         return f"{value!r} (YAML reads yes/no/on/off/true/false as booleans: quote it)"
     if value is None:
         return "nothing (an empty value)"
+    import json
+
     text = json.dumps(value, default=str)
     return text if len(text) < 60 else text[:57] + "..."
 
