@@ -73,7 +73,8 @@ def test_a_deferred_module_loads_at_its_first_use_and_then_works_as_itself():
 
 
 @pytest.mark.parametrize("extra", [(), ("--json",), ("--after", "a,b"), ("--after=b a", "--json"),
-                                   ("--time-limit", "3", "--max-memo", "5000"), ("--max-memo=100",)])
+                                   ("--time-limit", "3", "--max-memo", "5000"), ("--max-memo=100",),
+                                   ("--threads", "2"), ("--threads=0", "--json")])
 def test_the_quick_path_answers_as_the_typer_command(six, extra):
     """Byte for byte, on standard output, for every option and both output forms (exact counts)."""
     fast = quick("count", six, *extra)
@@ -109,6 +110,8 @@ def test_a_prefix_that_is_not_admissible_is_refused_as_the_typer_command_refuses
     (("count", "{six}", "{six}"), 2, "unexpected extra argument"),
     (("count", "{six}", "--json=yes"), 2, "does not take a value"),
     (("count", "{six}", "--after"), 2, "requires an argument"),
+    (("count", "{six}", "--threads", "-1"), 2, "-1 is not in the range 0<=x<=256"),
+    (("count", "{six}", "--threads", "257"), 2, "257 is not in the range 0<=x<=256"),
     (("count", "no-such-plan.yaml"), 1, "no such file"),
 ])
 def test_every_command_line_the_quick_path_does_not_take_gets_the_typer_commands_answer(six, argv, code, words):
@@ -162,14 +165,15 @@ def test_the_quick_help_says_what_the_typer_help_says():
                           timeout=120).stdout
     assert fast.splitlines()[0] == slow.splitlines()[0]
     assert _options(fast) == _options(slow)
-    assert set(_options(fast)) == {"--after", "--json", "--time-limit", "--max-memo", "-h, --help"}
+    assert set(_options(fast)) == {"--after", "--json", "--time-limit", "--max-memo", "--threads", "-h, --help"}
     fold = lambda text: " ".join(text.split("Options:")[0].split())  # noqa: E731
     assert fold(fast) == fold(slow)
 
 
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.sampled_from(["--after", "--json", "--time-limit", "--max-memo", "-h", "--", "-", "x.yaml",
-                                 "0.5", "7", "--time-limit=2", "--json=1", "--max-memo=x", "", "-x", "a,b"]),
+                                 "0.5", "7", "--time-limit=2", "--json=1", "--max-memo=x", "", "-x", "a,b",
+                                 "--threads", "--threads=300", "-1"]),
                 max_size=6))
 def test_parsing_never_fails_and_takes_only_what_it_understands(argv):
     """Any command line: None (the typer command takes it) or arguments of the declared types, one plan,
@@ -179,6 +183,7 @@ def test_parsing_never_fails_and_takes_only_what_it_understands(argv):
         return
     assert isinstance(args["plan_file"], str) and args["plan_file"] in argv
     assert args["time_limit"] >= cli_count.MIN_TIME_LIMIT and isinstance(args["max_memo"], int)
+    assert 0 <= args["threads"] <= cli_count.MAX_THREADS
     assert isinstance(args["as_json"], bool)
 
 
@@ -191,3 +196,9 @@ def test_the_help_is_as_wide_as_shutil_says_the_terminal_is(monkeypatch, columns
     else:
         monkeypatch.setenv("COLUMNS", columns)
     assert cli_count.terminal_columns() == shutil.get_terminal_size().columns
+
+
+def test_the_quick_path_bounds_threads_as_the_engine_does():
+    from opportune.engine import relaxmc
+
+    assert cli_count.MAX_THREADS == relaxmc.MAX_THREADS

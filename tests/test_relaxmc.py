@@ -278,6 +278,31 @@ def test_draws_in_turns_are_the_draws_one_after_another():
 
 
 @needs_core
+def test_any_number_of_threads_makes_the_same_draws():
+    """Draws are shared out to threads in blocks and their outcomes merged in the order of the draws: the
+    stops on hits and on draws fall on the same draw, with the same hits and elements placed, for 1-4
+    threads, from any first draw; and so the whole estimate is the same."""
+    p = random_poset(60, 0.06, random.Random(17))
+    relax = core.ArmcRelaxation(60, preds(p), core.armc_partition(60, preds(p), 15, 5, 3, -1.0)[0])
+    assert relax.count(-1.0, -1)[0] == 0
+    for args in [(5000, 10**9, -1.0, 11, 0),          # a cap on draws, not a multiple of a block
+                 (10**9, 40, -1.0, 11, 0),            # a target of hits
+                 (10**9, 40, -1.0, 11, 3333),         # from a later draw
+                 (1, 10**9, -1.0, 2, 0), (0, 5, -1.0, 2, 0)]:
+        answers = {relax.sample(*args, threads=t) for t in (1, 2, 3, 4)}
+        assert len(answers) == 1, (args, answers)
+    hits = relax.sample(10**9, 40, -1.0, 11, threads=1)
+    assert hits[0] == 0 and hits[2] == 40 and relax.sample(hits[1] - 1, 10**9, -1.0, 11, threads=3)[2] == 39
+    one = relaxmc.estimate(p, rel_error=0.1, seed=6, k=15)
+    assert one.status == "hits" and relaxmc.estimate(p, rel_error=0.1, seed=6, k=15, threads=3) == one
+    for bad in (0, relaxmc.MAX_THREADS + 1):
+        with pytest.raises(ValueError, match="threads"):
+            relaxmc.estimate(p, rel_error=0.1, threads=bad)
+        with pytest.raises(ValueError, match="threads"):
+            relax.sample(10, 10, -1.0, 1, 0, threads=bad)
+
+
+@needs_core
 def test_count_share_bounds_the_time_spent_on_relaxations_that_never_hit():
     """ARC111 cut into pieces of 20-30 elements: no pilot draw hits, so the estimate is hopeless; the
     relaxations' counts stop within ``count_share`` of the time (CPU time, with a margin for the last

@@ -28,12 +28,17 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <map>
+#include <mutex>
 #include <new>
 #include <numeric>
 #include <stdexcept>
+#include <string>
+#include <thread>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -500,65 +505,101 @@ public:
     // `first` numbers the first draw: a call that goes on from an earlier one's draws passes how many
     // it made, and the two together are one run.
     std::tuple<int, long long, long long, long long> sample(long long max_draws, long long target_hits, double seconds, u64 seed,
-                                                            long long first) {
+                                                            long long first, int threads) {
         if (!counted_) return {-1, 0, 0, 0};
         if (first < 0) throw std::invalid_argument("first must be >= 0");
+        if (threads < 1 || threads > MAX_THREADS)
+            throw std::invalid_argument("threads must be in 1.." + std::to_string(MAX_THREADS));
         if (target_hits <= 0) return {0, 0, 0, 0};
+        if (max_draws <= 0) return {1, 0, 0, 0};
         py::gil_scoped_release release;
+        // Blocks of BLOCK draws, numbered from `first`: each thread takes the next block not taken,
+        // draws it whole, and hands its outcomes over; they are merged in the order of the blocks,
+        // so the stops fall on the same draw for any number of threads.  A block cut short by the
+        // clock is dropped (its draws are made again by a call that goes on from this one).
+        const long long blocks = (max_draws + BLOCK - 1) / BLOCK;
         auto until = after(seconds);
-        std::vector<Walk> lanes(LANES);
-        std::vector<std::vector<long long>> stamps(LANES, std::vector<long long>(n_, -1));
-        // outcomes of draws base, base + 1, ...: 0 running, 1 rejected, 2 a hit; and elements placed
-        std::vector<signed char> outcome;
-        std::vector<int> placed;
-        outcome.reserve(4 * LANES);
-        placed.reserve(4 * LANES);
-        long long base = first, next_id = first, drawn = 0, hits = 0, steps = 0, finished = 0;
+        std::mutex mu;
+        std::map<long long, std::pair<std::vector<signed char>, std::vector<int>>> waiting;
+        long long merged = 0, drawn = 0, hits = 0, steps = 0;
         int status = -1;
-        auto start = [&](Walk& w) {
-            if (next_id - first >= max_draws) return false;
-            begin(w, next_id++, seed);
-            outcome.push_back(0);
-            placed.push_back(0);
-            return true;
-        };
-        int active = 0;
-        for (Walk& w : lanes) active += w.live = start(w);
-        while (active > 0 && status < 0) {
-            for (int l = 0; l < LANES && status < 0; ++l) {
-                Walk& w = lanes[l];
-                if (!w.live) continue;
-                std::vector<long long>& stamp = stamps[l];
-                const long long id = w.id;
-                int r = advance(w, [&](int v) {
-                    ++placed[id - base];
-                    for (int i = cross_start_[v]; i < cross_start_[v + 1]; ++i)
-                        if (stamp[cross_[i]] != id) return false;
-                    stamp[v] = id;
-                    return true;
-                });
-                if (r == 0) continue;
-                outcome[id - base] = r > 0 ? 2 : 1;
-                // the outcomes finished in order of their draws count; then the stops, as one after another
-                std::size_t k = 0;
-                while (k < outcome.size() && outcome[k] && status < 0) {
+        std::atomic<long long> next_block{0};
+        std::atomic<bool> stop{false};
+        auto merge = [&](long long b, std::vector<signed char>&& out, std::vector<int>&& placed) {
+            std::lock_guard<std::mutex> lock(mu);
+            if (status >= 0) return;
+            waiting.emplace(b, std::make_pair(std::move(out), std::move(placed)));
+            for (auto it = waiting.find(merged); it != waiting.end(); it = waiting.find(merged)) {
+                const auto& [o, pl] = it->second;
+                for (std::size_t k = 0; k < o.size() && status < 0; ++k) {
                     ++drawn;
-                    hits += outcome[k] == 2;
-                    steps += placed[k];
-                    ++k;
+                    hits += o[k] == 2;
+                    steps += pl[k];
                     if (hits >= target_hits) status = 0;
                     else if (drawn >= max_draws) status = 1;
                 }
-                if (k) {
-                    outcome.erase(outcome.begin(), outcome.begin() + k);
-                    placed.erase(placed.begin(), placed.begin() + k);
-                    base += (long long)k;
+                waiting.erase(it);
+                ++merged;
+                if (status >= 0) {
+                    stop = true;
+                    return;
                 }
-                if (!(++finished & 63) && seconds >= 0 && Clock::now() > until && status < 0) status = 2;
-                if (status < 0 && !(w.live = start(w))) --active;
             }
-        }
-        if (status < 0) status = hits >= target_hits ? 0 : 1;   // (max_draws of 0)
+        };
+        auto worker = [&]() {
+            std::vector<Walk> lanes(LANES);
+            std::vector<std::vector<long long>> stamps(LANES, std::vector<long long>(n_, -1));
+            long long finished = 0;
+            while (!stop.load(std::memory_order_relaxed)) {
+                const long long b = next_block.fetch_add(1);
+                if (b >= blocks) return;
+                const long long lo = first + b * BLOCK, hi = first + std::min(max_draws, (b + 1) * BLOCK);
+                std::vector<signed char> out(std::size_t(hi - lo), 0);
+                std::vector<int> placed(std::size_t(hi - lo), 0);
+                long long next_id = lo;
+                int active = 0;
+                for (Walk& w : lanes) {
+                    w.live = next_id < hi;
+                    if (w.live) {
+                        begin(w, next_id++, seed);
+                        ++active;
+                    }
+                }
+                while (active > 0) {
+                    for (int l = 0; l < LANES; ++l) {
+                        Walk& w = lanes[l];
+                        if (!w.live) continue;
+                        std::vector<long long>& stamp = stamps[l];
+                        const long long id = w.id;
+                        int r = advance(w, [&](int v) {
+                            ++placed[std::size_t(id - lo)];
+                            for (int i = cross_start_[v]; i < cross_start_[v + 1]; ++i)
+                                if (stamp[cross_[i]] != id) return false;
+                            stamp[v] = id;
+                            return true;
+                        });
+                        if (r == 0) continue;
+                        out[std::size_t(id - lo)] = r > 0 ? 2 : 1;
+                        if (!(++finished & 63)) {
+                            if (stop.load(std::memory_order_relaxed)) return;
+                            if (seconds >= 0 && Clock::now() > until) {
+                                stop = true;
+                                return;
+                            }
+                        }
+                        w.live = next_id < hi;
+                        if (w.live) begin(w, next_id++, seed);
+                        else --active;
+                    }
+                }
+                merge(b, std::move(out), std::move(placed));
+            }
+        };
+        std::vector<std::thread> pool;
+        for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+        worker();
+        for (std::thread& t : pool) t.join();
+        if (status < 0) status = drawn >= max_draws ? 1 : 2;
         return {status, drawn, hits, steps};
     }
 
@@ -583,6 +624,8 @@ private:
     double log_r_ = NAN;
     bool counted_ = false;
     static constexpr int LANES = 8;   // draws in progress at once in sample()
+    static constexpr long long BLOCK = 1024;   // draws a thread of sample() takes at a time
+    static constexpr int MAX_THREADS = 256;
 
     // A draw in progress: its parts (a set of a piece, by reference, its piece and size), the
     // elements left, and where it stands: 0, choose a part; 1, at the part's set (split it if it is
@@ -722,6 +765,7 @@ void bind_relax(py::module_& m) {
         .def("bytes", &Relaxation::bytes, "bytes the memos hold (their capacity)")
         .def("cross_pairs", &Relaxation::cross_pairs, "cover pairs between two pieces (0: R is the order)")
         .def("sample", &Relaxation::sample, py::arg("max_draws"), py::arg("target_hits"), py::arg("seconds"),
-             py::arg("seed"), py::arg("first") = 0, "(status, draws, hits, elements placed)")
+             py::arg("seed"), py::arg("first") = 0, py::arg("threads") = 1,
+             "(status, draws, hits, elements placed): the same for any number of threads, but for a stop on the clock")
         .def("extension", &Relaxation::extension, py::arg("seed"), "one uniform linear extension of R");
 }

@@ -283,6 +283,7 @@ def count(
     as_json: bool = _count_option("as_json"),
     time_limit: float = _count_option("time_limit", min=cli_count.MIN_TIME_LIMIT),
     max_memo: int = _count_option("max_memo"),
+    threads: int = _count_option("threads", min=0, max=cli_count.MAX_THREADS),
 ):
     # the work is in opportune.cli_count, which opportune.launch runs without typer for a well-formed command line
     def write(line: str) -> None:
@@ -291,7 +292,7 @@ def count(
         else:
             _out().print(line, markup=False, emoji=False)
 
-    cli_count.run(plan_file, after, as_json, time_limit, max_memo,
+    cli_count.run(plan_file, after, as_json, time_limit, max_memo, threads,
                   load=lambda path: load_or_exit(path, json_errors=as_json), fail=fail, write=write)
 
 

@@ -34,7 +34,11 @@ OPTIONS = {
                     "needed) an estimate with an interval")),
     "max_memo": ("--max-memo", int, 0, "Memo entries for an exact count before estimating (0: as many as "
                  "a quarter of the machine's memory holds)"),
+    "threads": ("--threads", int, 0, "Threads that draw when the count is estimated (0: one per core); the "
+                "estimate is the same for any number, but for a stop on the clock"),
 }
+#: Threads the estimate may draw on, at most (``--threads``).
+MAX_THREADS = 256   # as opportune.engine.relaxmc.MAX_THREADS (not imported here: the help loads no engine)
 MIN_TIME_LIMIT = 0.1
 
 
@@ -79,7 +83,8 @@ def parse(argv: list[str]) -> dict | None:
         else:
             plan = arg
         i += 1
-    if plan is None or not out["time_limit"] >= MIN_TIME_LIMIT or not math.isfinite(out["time_limit"]):
+    if (plan is None or not out["time_limit"] >= MIN_TIME_LIMIT or not math.isfinite(out["time_limit"])
+            or not 0 <= out["threads"] <= MAX_THREADS):
         return None
     out["plan_file"] = plan
     return out
@@ -92,14 +97,16 @@ def help_text(width: int = 80) -> str:
     def para(text: str, indent: str) -> str:
         return textwrap.fill(text, width, initial_indent=indent, subsequent_indent=indent)
 
+    ranges = {"time_limit": f"x>={MIN_TIME_LIMIT}", "threads": f"0<=x<={MAX_THREADS}"}   # as the typer options say
     rows = []
     for name, (flag, kind, default, text) in OPTIONS.items():
-        head = flag if kind is None else f"{flag} <{ {str: 'str', int: 'int', float: 'float range'}[kind]}>"
+        label = {str: "str", int: "int", float: "float"}.get(kind, "") + (" range" if name in ranges else "")
+        head = flag if kind is None else f"{flag} <{label}>"
         extra = []
         if kind is not None and default is not None:
             extra.append(f"default: {default}")
-        if name == "time_limit":
-            extra.append(f"x>={MIN_TIME_LIMIT}")
+        if name in ranges:
+            extra.append(ranges[name])
         rows.append((head, text + (f"  [{'; '.join(extra)}]" if extra else "")))
     rows.append(("-h, --help", "Show this message and exit."))
     col = min(max(len(h) for h, _ in rows) + 4, 30)
@@ -117,15 +124,21 @@ def help_text(width: int = 80) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo: int, *, load, fail, write) -> None:
+def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo: int, threads: int = 0, *,
+        load, fail, write) -> None:
     """Count ``plan_file`` (a path or a ``salbp:``/``example:`` name) after ``after``, within ``time_limit``
     seconds in all, reading the plan included.  ``load(path)`` gives the plan (or does not return),
     ``fail(message, as_json=...)`` reports a user's mistake (and does not return), ``write(line)``
-    prints one line of the answer.  See :func:`opportune.engine.schedule.Schedule.count_result`."""
+    prints one line of the answer; ``threads``: threads that draw in an estimate (0: one per core).  See
+    :func:`opportune.engine.schedule.Schedule.count_result`."""
     from opportune.engine.deadline import Deadline
 
     # one deadline for the whole command: loading the engine, reading the plan and building its orders count too
     deadline = Deadline.after(time_limit)
+    if threads == 0:
+        import os
+
+        threads = min(MAX_THREADS, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
     from opportune.engine import NotAdmissible, OrderEngine, Schedule
     from opportune.engine.deadline import BudgetExceeded
     from opportune.engine.schedule import decimal, interval_unbuilt
@@ -152,7 +165,7 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
             except NotAdmissible as exc:
                 done = " ".join(prefix[:i]) or "nothing"
                 fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
-        result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline)
+        result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline, threads=threads)
     interval = result.interval_log10
     if as_json:
         doc = {
@@ -299,7 +312,7 @@ def quick(argv: list[str]) -> bool:
 
     lines: list[str] = []
     try:
-        run(args["plan_file"], args["after"], args["as_json"], args["time_limit"], args["max_memo"],
+        run(args["plan_file"], args["after"], args["as_json"], args["time_limit"], args["max_memo"], args["threads"],
             load=load, fail=fail, write=lines.append)
     except Refer:
         return False

@@ -670,7 +670,7 @@ def relaxmc_available() -> bool:
 
 def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: int, deadline: Deadline,
           low: float, high: float, start: float, whole: bool = True,
-          resume: Estimate | None = None, count_share: float | None = None) -> Estimate | None:
+          resume: Estimate | None = None, count_share: float | None = None, threads: int = 1) -> Estimate | None:
     """Adaptive relaxation Monte Carlo on the subposet ``mask`` (:func:`opportune.engine.relaxmc.estimate`)
     as an :class:`Estimate` (method ``"armc"``, ``samples`` its draws), its value and interval within
     the certain bounds ``low``/``high`` (natural logs); None without the compiled core, without a hit,
@@ -682,7 +682,7 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
     except BudgetExceeded:
         return None
     r = relaxmc.estimate(sub, rel_error=rel_error, confidence=confidence, seed=seed, deadline=deadline,
-                         hopeless=ARMC_HOPELESS, whole=whole, count_share=count_share,
+                         hopeless=ARMC_HOPELESS, whole=whole, count_share=count_share, threads=threads,
                          resume=resume.resume if resume is not None and resume.method == "armc" else None)
     if r is None or not math.isfinite(r.log10) or r.hits == 0 and r.status != "exact":
         return None
@@ -696,7 +696,7 @@ def _armc(poset: Poset, mask: int, rel_error: float, confidence: float, seed: in
 def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01, seed: int = 0,
                         confidence: float = 0.95, deadline: Deadline | float | None = None,
                         whole: bool = True, resume: Estimate | None = None,
-                        count_share: float | None = None) -> Estimate | None:
+                        count_share: float | None = None, threads: int = 1) -> Estimate | None:
     """Adaptive relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`) on the subposet ``mask`` of
     ``poset`` as an :class:`Estimate` (method ``"armc"``; where one piece held the whole order, its
     count in doubles, ``rel_error`` of about 1e-9), its interval within the order's trivial bounds
@@ -705,7 +705,8 @@ def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: flo
     ``rel_error``, and at once where the draws it would need are hopeless.  ``whole=False``: no
     one-piece count first (see :func:`opportune.engine.relaxmc.estimate`); ``resume``: an earlier
     estimate of the same set by this function, whose draws go on (see there); ``count_share``: the
-    share of the time for counting relaxations (default :data:`opportune.engine.relaxmc.COUNT_SHARE`).
+    share of the time for counting relaxations (default :data:`opportune.engine.relaxmc.COUNT_SHARE`);
+    ``threads``: threads that draw (the same answer for any number, but for a stop on the clock).
 
     >>> from opportune.engine.poset import Poset
     >>> e = relaxation_estimate(Poset.antichain(3), deadline=Deadline.after(1.0))
@@ -719,7 +720,7 @@ def relaxation_estimate(poset: Poset, mask: int | None = None, *, rel_error: flo
     if not (ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N and dl.finite and relaxmc_available()) or dl.expired():
         return None
     low, high = OrderSketch.trivial(mask.bit_count())
-    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start, whole, resume, count_share)
+    return _armc(poset, mask, rel_error, confidence, seed, dl, low, high, start, whole, resume, count_share, threads)
 
 
 def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 0.01,
@@ -727,7 +728,7 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
                    counter: Counter | None = None, exact_memo: int = 300_000, particles: int = 1024,
                    tail: int | None = None, tail_memo: int = 500, min_runs: int = 20, hub: float = 0.85,
                    overrun: float = math.inf, deadline: Deadline | float | None = None,
-                   relaxation: bool | None = None, resume: Estimate | None = None) -> Estimate:
+                   relaxation: bool | None = None, resume: Estimate | None = None, threads: int = 1) -> Estimate:
     """Estimate the number of linear extensions of the subposet induced on ``mask``, with a stated error.
 
     All the work stops at ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`; a float is a
@@ -881,7 +882,7 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
         if (sketch is not None and relaxation and ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N
                 and relaxmc_available() and soft.finite and not soft.expired()):
             armc = _armc(poset, mask, rel_error, confidence, seed, soft.share(ARMC_SHARE), low, high, start,
-                         resume=resume)
+                         resume=resume, threads=threads)
             if armc is not None and armc.rel_error <= rel_error:
                 return armc
             if armc is not None:        # an error is stated already: the runs need not overrun for one

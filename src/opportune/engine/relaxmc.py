@@ -90,6 +90,8 @@ ENTRY_SECONDS = 0.5e-6
 STEP_SECONDS = 0.1e-6
 #: Share of the time the exact counts of the relaxations may take, over every ``k`` tried.
 COUNT_SHARE = 0.5
+#: Threads that draw, at most (the core's own bound).
+MAX_THREADS = 256
 
 
 @dataclass(frozen=True)
@@ -284,7 +286,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
              seed: int = 0, deadline: Deadline | float | None = None, k: int | None = None,
              max_bytes: int = MAX_BYTES, max_draws: int | None = None,
              hopeless: float | None = None, whole: bool = True,
-             resume: RelaxEstimate | None = None, count_share: float | None = None) -> RelaxEstimate | None:
+             resume: RelaxEstimate | None = None, count_share: float | None = None,
+             threads: int = 1) -> RelaxEstimate | None:
     """Estimate the number of linear extensions of ``poset`` within ``seconds`` and ``deadline``, aiming
     at a stated interval of relative half-width ``rel_error`` at ``confidence`` (see the module's text).
 
@@ -300,7 +303,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     holds for the whole, which stopped on the clock once and went on), instead of starting over.
     ``count_share``: the share of the time the relaxations' exact counts may take (None:
     :data:`COUNT_SHARE`; the rest is for draws, and an order whose draws never hit spends it all
-    before it is found hopeless).
+    before it is found hopeless).  ``threads``: threads that draw (the draws and their outcomes are
+    the same for any number: only a stop on the clock falls elsewhere; at most :data:`MAX_THREADS`).
     Complexity: see the module.
 
     >>> from opportune.engine.poset import Poset
@@ -314,6 +318,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
         return None
     if not 0 < confidence < 1:
         raise ValueError("confidence must be in (0, 1)")
+    if not 1 <= threads <= MAX_THREADS:
+        raise ValueError(f"threads must be in 1..{MAX_THREADS}")
     end = as_deadline(deadline).within(seconds)
     start = time.perf_counter()
     preds = [list(bits(poset.below[v])) for v in range(n)]
@@ -325,7 +331,7 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     if resume is not None and resume.run is not None:
         if resume.run.n != n:
             raise ValueError(f"resume: an estimate of an order of {resume.run.n} elements, not {n}")
-        return _draw(resume.run, hits_wanted, end, confidence, max_draws)
+        return _draw(resume.run, hits_wanted, end, confidence, max_draws, threads)
 
     def relaxation(kk: int, pieces: list[list[int]], until: Deadline):
         relax = core.ArmcRelaxation(n, preds, pieces)
@@ -362,7 +368,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
             return exact(relax, log_r, kk)
         entries_work = relax.entries() * ENTRY_SECONDS
         # the pilot: how often a draw hits and how much work a draw is
-        _st, d, h, placed = relax.sample(PILOT_DRAWS, PILOT_HITS, end.seconds(), (mix ^ 0x5851F42D4C957F2D) + kk)
+        _st, d, h, placed = relax.sample(PILOT_DRAWS, PILOT_HITS, end.seconds(), (mix ^ 0x5851F42D4C957F2D) + kk,
+                                     0, threads)
         per_hit = math.inf if h == 0 else d / h * (placed / max(1, d)) * STEP_SECONDS
         cand = _Candidate(relax, log_r, kk, entries_work, hits_wanted * per_hit, per_hit)
         if best is None or (cand.draw_seconds, cand.log_r) < (best.draw_seconds, best.log_r):
@@ -377,16 +384,17 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     if hopeless is not None and end.finite and best.hit_seconds * hopeless > end.remaining():
         return RelaxEstimate(math.nan, -math.inf, math.inf, confidence, best.log_r / math.log(10), best.k, 0, 0,
                              "hopeless", best.relax.bytes())
-    return _draw(_Run(best.relax, n, best.log_r, best.k, mix, 0, 0), hits_wanted, end, confidence, max_draws)
+    return _draw(_Run(best.relax, n, best.log_r, best.k, mix, 0, 0), hits_wanted, end, confidence, max_draws, threads)
 
 
-def _draw(run: _Run, hits_wanted: int, end: Deadline, confidence: float, max_draws: int | None) -> RelaxEstimate:
+def _draw(run: _Run, hits_wanted: int, end: Deadline, confidence: float, max_draws: int | None,
+          threads: int = 1) -> RelaxEstimate:
     """Draw from ``run``'s relaxation, after its draws so far, until ``hits_wanted`` hits in all, ``max_draws``
     draws in all, or ``end``; the estimate of every draw made, with the run to go on from."""
     relax = run.relax
     cap = ((1 << 62) if max_draws is None else max_draws) - run.draws
     status, d, h, _placed = relax.sample(max(0, cap), max(0, hits_wanted - run.hits), end.seconds(), run.mix,
-                                         run.draws) if cap > 0 and run.hits < hits_wanted else (
+                                         run.draws, threads) if cap > 0 and run.hits < hits_wanted else (
         0 if run.hits >= hits_wanted else 1, 0, 0, 0)
     draws, hits = run.draws + d, run.hits + h
     after = _Run(relax, run.n, run.log_r, run.k, run.mix, draws, hits)

@@ -70,11 +70,16 @@ GRACE = 0.05  # seconds the exact count and the estimate each get in count_resul
 EARLY_ESTIMATE = 0.9
 #: Share of that first estimate's time for counting its relaxations: where its draws never hit (ARC111),
 #: it is found hopeless after this, so that the exact count (through a hub there) loses little.
-EARLY_COUNT_SHARE = 0.25
+EARLY_COUNT_SHARE = 0.4
 #: The relative error at which that first relaxation estimate stops (the error asked, if looser):
 #: ±5% takes a few thousand hits; where the exact count then fails too, the estimate phase runs it
 #: again towards the error asked.
 EARLY_ERROR = 0.05
+#: Share of the estimate phase the first relaxation estimate's draws go on for, when it stated an error
+#: wider than asked (one strategy): its draws are the best use of the time (the estimate's own split
+#: gave them a third, then sequential Monte Carlo runs that are far wider on such orders); the rest is
+#: for the estimate's certain bounds and its own go at the draws.
+EARLY_RESUME = 0.85
 
 
 class NotAdmissible(ValueError):
@@ -1108,7 +1113,7 @@ class Schedule:
         return self.engine.count(self.mask, self.consistent)
 
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
-                     exact_share: float = 0.65, deadline=None) -> CountResult:
+                     exact_share: float = 0.65, deadline=None, threads: int = 1) -> CountResult:
         """Number of completions: exact within the engine's budget, else a clearly marked estimate
         with an interval.
 
@@ -1141,7 +1146,9 @@ class Schedule:
         ``1 <= count <= n!`` at the very least); ``rel_error`` is infinite when no error could be
         stated from the runs.  Building the inclusion–exclusion terms is inside the budget (a
         deadline between unions); building the engine's orders is the caller's (O(units + pairs)
-        big-int operations, ~0.1 s for 10,000 units).
+        big-int operations, ~0.1 s for 10,000 units).  ``threads``: threads that draw in relaxation
+        Monte Carlo (its draws and answer are the same for any number, but for a stop on the clock;
+        the exact phases use one).
 
         >>> from opportune import make_plan
         >>> r = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).count_result(time_limit=1.0)
@@ -1204,6 +1211,7 @@ class Schedule:
 
                     early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
                                                 seed=seed, whole=False, count_share=EARLY_COUNT_SHARE,
+                                                threads=threads,
                                                 deadline=Deadline.after(
                                                     EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
                 try:
@@ -1222,6 +1230,12 @@ class Schedule:
             union_only = True
         else:
             union_only = False
+        if early is not None and early.resume is not None and early.rel_error > rel_error and len(terms) == 1:
+            from opportune.engine.estimate import relaxation_estimate
+
+            early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=rel_error, seed=seed, resume=early,
+                                        threads=threads,
+                                        deadline=Deadline.after(EARLY_RESUME * max(0.0, end.remaining()))) or early
         singles = self.consistent.bit_count()
         missed, methods, parts, ests = 0.0, set(), [], []
         exact: int | None = 0
@@ -1242,7 +1256,7 @@ class Schedule:
                                  time_limit=seconds / 2, overrun=math.inf, deadline=share, seed=seed,
                                  counter=counter, exact_memo=0, particles=particles,
                                  confidence=1 - 0.05 / len(terms), relaxation=early is not None
-                                 and early.rel_error > rel_error, resume=early, **hub)
+                                 and early.rel_error > rel_error, resume=early, threads=threads, **hub)
             if early is not None and est.exact is None and early.rel_error < est.rel_error:
                 # the narrower stated interval, within the order's certain bounds
                 est = replace(early, log10_low=max(early.log10_low, est.log10_low),
