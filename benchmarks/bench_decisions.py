@@ -11,6 +11,7 @@ cost of the budgeted policy against the exact one on the same trials
     python benchmarks/bench_decisions.py                       # KILBRID, TONGE70, ARC111, generated graphs
     python benchmarks/bench_decisions.py --plans salbp:ARC111 --trials 5
     python benchmarks/bench_decisions.py --plans gen:300:0.6 --trials 2
+    python benchmarks/bench_decisions.py --policy lookahead --settings all --plans salbp:ARC111,gen:1000:0.6 --trials 1
 
 Plans: ``salbp:NAME``, a plan file, or ``gen:N:OS`` (a generated assembly-like graph of
 ``N`` tasks and order strength ``OS``, from ``gen_precedence.py`` beside this file, seed 1).
@@ -64,10 +65,11 @@ def pct(xs, q):
     return xs[min(len(xs) - 1, int(q * len(xs)))] if xs else float("nan")
 
 
-def run_plan(spec: str, args) -> dict:
+def run_plan(spec: str, args, visible: int, capacity: int | None = None, bin: str = "uniform") -> dict:
     plan, offline_ok = plan_of(spec)
-    config = StudyConfig(plan, strategies=(args.policy,), trials=args.trials, seed=args.seed,
-                         visible=args.visible, decision_budget=args.budget, count_time_limit=args.warm_up)
+    config = StudyConfig(plan, strategies=(args.policy,), trials=args.trials, seed=args.seed, bin=bin,
+                         visible=visible, buffer_capacity=capacity, decision_budget=args.budget,
+                         count_time_limit=args.warm_up)
     engine = OrderEngine(plan)
     t0 = time.perf_counter()
     prepared = prepare(config, engine)          # the warm-up: count the first state
@@ -100,7 +102,8 @@ def run_plan(spec: str, args) -> dict:
            "p50": pct(lat, 0.5), "p95": pct(lat, 0.95), "max": max(lat), "exact": sum(r[1] for r in records),
            "conf": statistics.mean([r[2] for r in records if not r[1]] or [1.0]),
            "budget_cost": statistics.mean(budget_costs), "trials": args.trials, "run_s": run_seconds}
-    if not offline_ok or not paper:     # the offline checks compare with the paper's exact rule
+    if not offline_ok or not paper or (visible, capacity, bin) != (args.visible, None, "uniform"):
+        # the offline checks compare with the paper's exact rule, in the first setting
         return out
     # Offline: the exact rule on the same states and looks (its own engine, no budget).  A decision
     # marked exact is the exact rule's (tests/test_decision_budget.py); the estimated ones are checked
@@ -125,7 +128,7 @@ def run_plan(spec: str, args) -> dict:
     out["identical"] = (exact_n + same, exact_n + checked, same, checked)
     if args.exact_trials:
         exact_config = StudyConfig(plan, strategies=("opportunistic",), trials=args.exact_trials, seed=args.seed,
-                                   visible=args.visible)
+                                   visible=visible)
         exact_runner = TrialRunner("opportunistic", exact_engine, exact_config, prepared)
         n = min(args.exact_trials, args.trials)
         costs = []
@@ -153,27 +156,34 @@ def main(argv=None) -> None:
     ap.add_argument("--warm-up", type=float, default=10.0, help="seconds to count the first state")
     ap.add_argument("--offline-limit", type=float, default=120.0, help="seconds per plan for the exact checks")
     ap.add_argument("--exact-trials", type=int, default=3, help="trials of the exact policy, for the mean cost")
+    ap.add_argument("--settings", default="", help="'all': also every setting of 1-3 visible x buffer 1, 2, "
+                    "unlimited x uniform and pile bins (a row each; the offline checks in the first only)")
     args = ap.parse_args(argv)
+    settings = [(args.visible, None, "uniform")]
+    if args.settings == "all":
+        settings += [(v, c, b) for b in ("uniform", "pile") for v in (1, 2, 3) for c in (1, 2, None)
+                     if (v, c, b) != settings[0]]
     console = Console(width=160)
-    table = Table(title=f"budgeted {args.policy} decisions (budget {1000 * args.budget:g} ms, uniform bin, "
-                        f"{args.visible} visible; {platform.machine()}, {os.cpu_count()} cores, "
-                        f"Python {platform.python_version()})")
-    for col in ("plan", "tasks", "warm-up s", "decisions", "p50 ms", "p95 ms", "max ms", "exact",
+    table = Table(title=f"budgeted {args.policy} decisions (budget {1000 * args.budget:g} ms; "
+                        f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()})")
+    for col in ("plan", "setting", "tasks", "warm-up s", "decisions", "p50 ms", "p95 ms", "max ms", "exact",
                 "mean conf.", "identical to exact (estimated ones checked)", "mean cost: budget / exact (trials)"):
         table.add_column(col, justify="left" if col == "plan" else "right")
-    for spec in args.plans.split(","):
-        r = run_plan(spec.strip(), args)
+    for spec, (visible, capacity, bin) in ((s, t) for s in args.plans.split(",") for t in settings):
+        r = run_plan(spec.strip(), args, visible, capacity, bin)
         ident = r.get("identical")
         cost = f"{r['budget_cost']:.2f}"
         if "exact_cost" in r:
             diff = r["paired_budget_cost"] / r["exact_cost"] - 1
             cost = f"{r['paired_budget_cost']:.2f} / {r['exact_cost']:.2f} ({100 * diff:+.2f}%, {r['exact_trials']})"
-        table.add_row(r["plan"], str(r["n"]), f"{r['warm']:.2f}", str(r["decisions"]), f"{1000 * r['p50']:.2f}",
+        setting = f"{bin}, {visible} visible, buffer {'unlimited' if capacity is None else capacity}"
+        table.add_row(r["plan"], setting, str(r["n"]), f"{r['warm']:.2f}", str(r["decisions"]), f"{1000 * r['p50']:.2f}",
                       f"{1000 * r['p95']:.1f}", f"{1000 * r['max']:.1f}",
                       f"{100 * r['exact'] / r['decisions']:.0f}%", f"{r['conf']:.3f}",
                       f"{100 * ident[0] / ident[1]:.1f}% of {ident[1]} ({ident[2]}/{ident[3]} est.)"
                       if ident and ident[1] else "n/a", cost)
-        console.print(f"[dim]{spec}: {r['trials']} trials in {r['run_s']:.1f} s[/dim]")
+        console.print(f"[dim]{spec}, {setting}: {r['trials']} trials in {r['run_s']:.1f} s, "
+                      f"max decision {1000 * r['max']:.1f} ms[/dim]")
     console.print(table)
 
 
