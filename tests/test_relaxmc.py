@@ -278,10 +278,11 @@ def test_draws_in_turns_are_the_draws_one_after_another():
 
 
 @needs_core
-def test_any_number_of_threads_makes_the_same_draws():
+def test_any_number_of_threads_makes_the_same_counts_and_draws():
     """Draws are shared out to threads in blocks and their outcomes merged in the order of the draws: the
     stops on hits and on draws fall on the same draw, with the same hits and elements placed, for 1-4
-    threads, from any first draw; and so the whole estimate is the same."""
+    threads, from any first draw; pieces counted by threads give the same counts; and so the whole
+    estimate is the same."""
     p = random_poset(60, 0.06, random.Random(17))
     relax = core.ArmcRelaxation(60, preds(p), core.armc_partition(60, preds(p), 15, 5, 3, -1.0)[0])
     assert relax.count(-1.0, -1)[0] == 0
@@ -293,6 +294,17 @@ def test_any_number_of_threads_makes_the_same_draws():
         assert len(answers) == 1, (args, answers)
     hits = relax.sample(10**9, 40, -1.0, 11, threads=1)
     assert hits[0] == 0 and hits[2] == 40 and relax.sample(hits[1] - 1, 10**9, -1.0, 11, threads=3)[2] == 39
+    # the pieces counted by threads: the same counts, summed in the order of the pieces
+    counts = set()
+    for t in (1, 2, 3, 8):
+        fresh = core.ArmcRelaxation(60, preds(p), core.armc_partition(60, preds(p), 15, 5, 3, -1.0)[0])
+        counts.add((fresh.count(-1.0, -1, t), fresh.entries()))
+    assert counts == {(relax.count(-1.0, -1), relax.entries())}
+    for t in (1, 3):            # a cap or a clock passed stops every thread, with its status
+        fresh = core.ArmcRelaxation(60, preds(p), core.armc_partition(60, preds(p), 15, 5, 3, -1.0)[0])
+        assert fresh.count(-1.0, 1024, t)[0] == 1 and fresh.count(0.0, -1, t)[0] in (0, 2)
+        with pytest.raises(ValueError, match="threads"):
+            fresh.count(-1.0, -1, 0)
     one = relaxmc.estimate(p, rel_error=0.1, seed=6, k=15)
     assert one.status == "hits" and relaxmc.estimate(p, rel_error=0.1, seed=6, k=15, threads=3) == one
     for bad in (0, relaxmc.MAX_THREADS + 1):

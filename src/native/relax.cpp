@@ -237,25 +237,42 @@ std::tuple<std::vector<std::vector<int>>, long long, int> partition(
 
 struct Halt { int status; };  // 1: the entry cap, 2: the clock, 3: no memory
 
+// What the threads counting the pieces share: the memos' bytes over all pieces, and the first
+// halt (0: none), which stops the others at their next check.
+struct Shared {
+    std::atomic<std::size_t> bytes{0};
+    std::atomic<int> halt{0};
+};
+
+// One thread's budget: the clock, the cap on the bytes of every piece's memos (one count, shared).
 struct Budget {
     Clock::time_point until;
     bool timed;
     std::size_t max_bytes;        // the memos' allocations over all pieces
-    std::size_t bytes = 0;
+    Shared* shared;
     unsigned tick = 0;
-    void entry() {  // one more entry: the clock, now and then
-        if (timed && !(++tick & 255) && Clock::now() > until) throw Halt{2};
+    void entry() {  // one more entry: the clock and the other threads' halts, now and then
+        if (!(++tick & 255)) {
+            if (int h = shared->halt.load(std::memory_order_relaxed)) throw Halt{h};
+            if (timed && Clock::now() > until) throw Halt{2};
+        }
     }
+    // `add` more bytes, if the cap allows (then counted; else nothing)
+    bool take(std::size_t add) {
+        std::size_t before = shared->bytes.fetch_add(add);
+        if (before + add <= max_bytes) return true;
+        shared->bytes.fetch_sub(add);
+        return false;
+    }
+    void give(std::size_t bytes) { shared->bytes.fetch_sub(bytes); }
     // a vector of `size` items of `item` bytes about to take one more: grow it (doubled) if the cap
     // allows, before anything is allocated
     template <class V>
     void room(V& v, std::size_t more = 1) {
         if (v.size() + more <= v.capacity()) return;
         std::size_t cap = std::max<std::size_t>(64, std::max(2 * v.capacity(), v.size() + more));
-        std::size_t add = (cap - v.capacity()) * sizeof(typename V::value_type);
-        if (bytes + add > max_bytes) throw Halt{1};
+        if (!take((cap - v.capacity()) * sizeof(typename V::value_type))) throw Halt{1};
         v.reserve(cap);
-        bytes += add;
     }
 };
 
@@ -337,7 +354,8 @@ private:
         if (nodes_.size() >= 0x7ffffff0u || kids_.size() + nk >= 0x7ffffff0u) throw Halt{1};
         if (2 * (nodes_.size() + 1) > slots_.size()) {  // load at most 1/2
             std::size_t size = std::max<std::size_t>(64, 2 * slots_.size());
-            if (b.bytes + size * sizeof(std::uint32_t) > b.max_bytes) throw Halt{1};  // before growing
+            // before growing: both tables are alive while the entries move
+            if (!b.take(size * sizeof(std::uint32_t))) throw Halt{1};
             std::vector<std::uint32_t> grown(size, 0);
             std::size_t mask = grown.size() - 1;
             for (std::size_t e = 0; e < nodes_.size(); ++e) {
@@ -345,7 +363,7 @@ private:
                 while (grown[i]) i = (i + 1) & mask;
                 grown[i] = std::uint32_t(e + 1);
             }
-            b.bytes += (grown.size() - slots_.size()) * sizeof(std::uint32_t);
+            b.give(slots_.size() * sizeof(std::uint32_t));
             slots_.swap(grown);
         }
         b.room(nodes_);
@@ -462,20 +480,43 @@ public:
     // Count every piece exactly: (status, natural log of e(R)); status 1: the memos would hold more
     // than `max_bytes` over all pieces (checked before each allocation), 2: out of `seconds`
     // (negative: no limit), 3: no memory.  What was counted stays; a later call goes on from there.
-    std::pair<int, double> count(double seconds, long long max_bytes) {
-        Budget b{after(seconds), seconds >= 0, max_bytes < 0 ? ~std::size_t(0) : std::size_t(max_bytes)};
-        b.bytes = bytes();
-        double log_r = std::lgamma(n_ + 1.0);
-        for (Piece& p : pieces_) {
-            try {
-                double c = p.count(b);
-                log_r += std::log(c) - std::lgamma(p.size() + 1.0);
-            } catch (Halt& h) {
-                return {h.status, NAN};
-            } catch (std::bad_alloc&) {
-                return {3, NAN};
+    // `threads` count pieces at once (each piece by one thread); the counts, and their sum in the
+    // order of the pieces, are the same for any number (a stop on the cap or the clock may differ).
+    std::pair<int, double> count(double seconds, long long max_bytes, int threads) {
+        if (threads < 1 || threads > MAX_THREADS)
+            throw std::invalid_argument("threads must be in 1.." + std::to_string(MAX_THREADS));
+        Shared shared;
+        shared.bytes = bytes();
+        const auto until = after(seconds);
+        const std::size_t cap = max_bytes < 0 ? ~std::size_t(0) : std::size_t(max_bytes);
+        std::vector<double> counts(pieces_.size(), 0.0);
+        std::atomic<std::size_t> next{0};
+        auto worker = [&]() {
+            Budget b{until, seconds >= 0, cap, &shared};
+            int status = 0;
+            for (std::size_t i = next++; i < pieces_.size() && !status; i = next++) {
+                try {
+                    counts[i] = pieces_[i].count(b);
+                } catch (Halt& h) {
+                    status = h.status;
+                } catch (std::bad_alloc&) {
+                    status = 3;
+                }
+                if (shared.halt.load()) return;
             }
-        }
+            if (status) {
+                int none = 0;
+                shared.halt.compare_exchange_strong(none, status);
+            }
+        };
+        std::vector<std::thread> pool;
+        for (int t = 1; t < std::min<int>(threads, int(pieces_.size())); ++t) pool.emplace_back(worker);
+        worker();
+        for (std::thread& t : pool) t.join();
+        if (int h = shared.halt.load()) return {h, NAN};
+        double log_r = std::lgamma(n_ + 1.0);
+        for (std::size_t i = 0; i < pieces_.size(); ++i)
+            log_r += std::log(counts[i]) - std::lgamma(pieces_[i].size() + 1.0);
         counted_ = true;
         log_r_ = log_r;
         return {0, log_r};
@@ -759,8 +800,9 @@ void bind_relax(py::module_& m) {
     py::class_<Relaxation>(m, "ArmcRelaxation")
         .def(py::init<int, const std::vector<std::vector<int>>&, std::vector<std::vector<int>>>(),
              py::arg("n"), py::arg("preds"), py::arg("pieces"))
-        .def("count", &Relaxation::count, py::arg("seconds"), py::arg("max_bytes"),
-             py::call_guard<py::gil_scoped_release>(), "count every piece exactly: (status, log e(R))")
+        .def("count", &Relaxation::count, py::arg("seconds"), py::arg("max_bytes"), py::arg("threads") = 1,
+             py::call_guard<py::gil_scoped_release>(),
+             "count every piece exactly: (status, log e(R)), the same for any number of threads")
         .def("entries", &Relaxation::entries, "memo entries over all pieces")
         .def("bytes", &Relaxation::bytes, "bytes the memos hold (their capacity)")
         .def("cross_pairs", &Relaxation::cross_pairs, "cover pairs between two pieces (0: R is the order)")

@@ -303,8 +303,9 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     holds for the whole, which stopped on the clock once and went on), instead of starting over.
     ``count_share``: the share of the time the relaxations' exact counts may take (None:
     :data:`COUNT_SHARE`; the rest is for draws, and an order whose draws never hit spends it all
-    before it is found hopeless).  ``threads``: threads that draw (the draws and their outcomes are
-    the same for any number: only a stop on the clock falls elsewhere; at most :data:`MAX_THREADS`).
+    before it is found hopeless).  ``threads``: threads that count the pieces and draw (the counts,
+    the draws and their outcomes are the same for any number: only a stop on the clock or the memory
+    cap falls elsewhere; at most :data:`MAX_THREADS`).
     Complexity: see the module.
 
     >>> from opportune.engine.poset import Poset
@@ -335,7 +336,7 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
 
     def relaxation(kk: int, pieces: list[list[int]], until: Deadline):
         relax = core.ArmcRelaxation(n, preds, pieces)
-        status, log_r = relax.count(until.seconds(), max_bytes)
+        status, log_r = relax.count(until.seconds(), max_bytes, threads)
         return relax, status, log_r
 
     def exact(relax, log_r: float, kk: int) -> RelaxEstimate:
