@@ -376,13 +376,15 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
         if best is None or (cand.draw_seconds, cand.log_r) < (best.draw_seconds, best.log_r):
             best = cand
         del relax, cand
-        # the next k's count is worth it only while it is cheaper than the draws still needed
+        # the next k's count is worth it only while it is cheaper than the draws still needed (both
+        # shared by the threads: its pieces counted at once, the draws in blocks), and fits in the time
         nxt = COUNT_GROWTH * max(entries_work, 1e-4)
-        if nxt > best.draw_seconds or (end.finite and nxt > count_end.remaining()):
+        at_once = min(threads, -(-n // min(n, kk + K_STEP)))
+        if nxt > best.draw_seconds or (end.finite and nxt / at_once > count_end.remaining()):
             break
     if best is None:
         return none
-    if hopeless is not None and end.finite and best.hit_seconds * hopeless > end.remaining():
+    if hopeless is not None and end.finite and best.hit_seconds * hopeless / threads > end.remaining():
         return RelaxEstimate(math.nan, -math.inf, math.inf, confidence, best.log_r / math.log(10), best.k, 0, 0,
                              "hopeless", best.relax.bytes())
     return _draw(_Run(best.relax, n, best.log_r, best.k, mix, 0, 0), hits_wanted, end, confidence, max_draws, threads)
