@@ -301,7 +301,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     ``resume``: an earlier estimate of the same order (its ``run``): its relaxation is drawn from again,
     from where its draws stopped, and the two calls' draws make one run (the stopping rule's statement
     holds for the whole, which stopped on the clock once and went on), instead of starting over.
-    ``count_share``: the share of the time the relaxations' exact counts may take (None:
+    ``count_share``: the share of the time the relaxations' exact counts may take, their own time
+    (None:
     :data:`COUNT_SHARE`; the rest is for draws, and an order whose draws never hit spends it all
     before it is found hopeless).  ``threads``: threads that count the pieces and draw (the counts,
     the draws and their outcomes are the same for any number: only a stop on the clock or the memory
@@ -328,7 +329,17 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     none = RelaxEstimate(math.nan, -math.inf, math.inf, confidence, math.nan, 0, 0, 0, "none")
     mix = (seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) % 2**64
     share = COUNT_SHARE if count_share is None else count_share
-    count_end = Deadline(start + share * end.remaining()) if end.finite else end
+    # the relaxations' counts may take `share` of the time, their own time only (not the partitions'
+    # search or the pilots' draws, which would leave a loaded machine's larger pieces uncounted)
+    count_budget = share * end.remaining() if end.finite else math.inf
+    spent = [0.0]
+
+    def count_left() -> float:
+        return count_budget - spent[0]
+
+    def count_deadline() -> Deadline:
+        return end.sooner(Deadline.after(max(0.0, count_left()))) if end.finite else end
+
     if resume is not None and resume.run is not None:
         if resume.run.n != n:
             raise ValueError(f"resume: an estimate of an order of {resume.run.n} elements, not {n}")
@@ -336,7 +347,9 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
 
     def relaxation(kk: int, pieces: list[list[int]], until: Deadline):
         relax = core.ArmcRelaxation(n, preds, pieces)
+        began = time.perf_counter()
         status, log_r = relax.count(until.seconds(), max_bytes, threads)
+        spent[0] += time.perf_counter() - began
         return relax, status, log_r
 
     def exact(relax, log_r: float, kk: int) -> RelaxEstimate:
@@ -346,7 +359,8 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
 
     # an order of at most 64 elements: one piece, exact if it fits (a third of the counting time)
     if n <= K_MAX and (k is None and whole or k is not None and k >= n):
-        relax, status, log_r = relaxation(n, [list(range(n))], count_end.share(0.3) if k is None else count_end)
+        relax, status, log_r = relaxation(n, [list(range(n))], count_deadline().share(0.3) if k is None
+                                          else count_deadline())
         if status == 0:
             return exact(relax, log_r, n)
         del relax
@@ -356,13 +370,13 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     best: _Candidate | None = None
     steps = [min(k, K_MAX, n)] if k is not None else list(range(K_START, min(K_MAX, n - 1) + 1, K_STEP))
     for kk in steps:
-        if count_end.expired():
+        if count_left() <= 0 or end.expired():
             break
         pieces, _inside, _tries = core.armc_partition(n, preds, kk, TRIES, (mix + kk) % 2**64,
-                                                      count_end.share(0.1).seconds())
+                                                      count_deadline().share(0.1).seconds())
         if not pieces:
             break
-        relax, status, log_r = relaxation(kk, pieces, count_end)
+        relax, status, log_r = relaxation(kk, pieces, count_deadline())
         if status != 0:
             break
         if relax.cross_pairs() == 0:
@@ -380,7 +394,7 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
         # shared by the threads: its pieces counted at once, the draws in blocks), and fits in the time
         nxt = COUNT_GROWTH * max(entries_work, 1e-4)
         at_once = min(threads, -(-n // min(n, kk + K_STEP)))
-        if nxt > best.draw_seconds or (end.finite and nxt / at_once > count_end.remaining()):
+        if nxt > best.draw_seconds or (end.finite and nxt / at_once > count_left()):
             break
     if best is None:
         return none
