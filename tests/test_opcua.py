@@ -1,0 +1,278 @@
+"""The sequencer over OPC UA: a real asyncua client against ``opportune serve --opcua`` in another process.
+
+Table 1 over OPC UA gives what the library and the HTTP API give for the same looks; a refused call
+answers a Bad status with the service's message and changes nothing; a run started over OPC UA is
+the same run over HTTP; ``kill -9`` under a driving client loses no acknowledged call; a client
+with a wrong token or an untrusted certificate is refused.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import shutil
+import sqlite3
+import threading
+
+import pytest
+
+pytest.importorskip("asyncua")
+
+from asyncua import ua  # noqa: E402
+
+from conftest import EXAMPLES, GEARBOX  # noqa: E402
+from opportune import load_plan  # noqa: E402
+from opportune.formats.looks import read_looks  # noqa: E402
+from opportune.sequencer import Sequencer  # noqa: E402
+from opportune.service.opcua import client_certificate  # noqa: E402
+from opportune.service.opcua_client import CellClient, Refused, listing  # noqa: E402
+from opportune.service.testing import Client, ServiceProcess  # noqa: E402
+
+LOOKS = read_looks(EXAMPLES / "gearbox-table1.looks")
+APP = "urn:opportune:test-cell"
+
+
+def library_rows(looks):
+    """The library's rows for these looks, without its closing ``done`` (a run is complete at its last install)."""
+    return [row.to_dict() for row in Sequencer(load_plan(GEARBOX)).run(looks) if row.action.kind != "done"]
+
+
+def strip(row):
+    return {k: row[k] for k in ("visible", "buffered", "installed", "action", "outcome")}
+
+
+@pytest.fixture(scope="session")
+def client_cert(tmp_path_factory):
+    """A client certificate and key, made once per session (RSA key generation takes a moment)."""
+    return client_certificate(tmp_path_factory.mktemp("opcua-client"), APP)
+
+
+def trusting(pki, cert):
+    (pki / "trusted").mkdir(parents=True, exist_ok=True)
+    shutil.copy(cert, pki / "trusted" / "test-cell.der")
+
+
+def cell(svc, token, client_cert, **kw):
+    cert, key = client_cert
+    return CellClient(svc.opcua_endpoint, token, certificate=cert, private_key=key, app_uri=APP, **kw)
+
+
+def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
+    pki = tmp_path / "pki"
+    trusting(pki, client_cert[0])
+    # anonymous sessions (development, loopback) act as cell-1: seen at the end
+    with ServiceProcess(tmp_path / "t.db", opcua=True, pki=pki,
+                        extra_args=("--no-access-log", "--opcua-anonymous", "cell-1")) as svc:
+        token = svc.token(cell="cell-1")
+        http = Client(svc.url, token)
+
+        async def drive():
+            async with cell(svc, token, client_cert) as ua_cell:
+                plan = await ua_cell.upload_plan(GEARBOX.read_text())
+                r = http.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"},
+                              key=False)
+                assert r.json()["id"] == plan        # one plan, whichever protocol stored it
+                run_ua = await ua_cell.start_run(plan, policy="paper", label="SN 1")
+                run_http = http.post("/runs", {"plan": plan, "policy": "paper"}).json()["id"]
+                assert await ua_cell.read(run_ua, "State") == "Idle"
+                for look in LOOKS:
+                    got = await ua_cell.look(run_ua, list(look))
+                    over_http = http.post(f"/runs/{run_http}/looks", {"visible": list(look)}).json()
+                    assert got["answer"]["action"] == over_http["action"]
+                    assert (got["action"], got["part"] or None) == (over_http["action"]["kind"],
+                                                                     over_http["action"]["part"])
+                    assert got["explanation"] == over_http["decision"]["explain"]
+                    assert (await ua_cell.outcome(run_ua, "success"))["seq"] == got["seq"] + 1
+                    assert http.post(f"/runs/{run_http}/outcomes", {"outcome": "success"}).status_code == 200
+                return run_ua, run_http, plan, ua_cell
+
+        run_ua, run_http, plan, _ = asyncio.run(drive())
+        # The run driven over OPC UA, read over HTTP: Table 1, as the library decides it.
+        seen = http.get(f"/runs/{run_ua}").json()
+        assert seen["status"] == "complete" and seen["cell"] == "cell-1" and seen["label"] == "SN 1"
+        rows = [strip(r) for r in http.get(f"/runs/{run_ua}/trace").json()["rows"]]
+        assert rows == library_rows(LOOKS)
+        assert rows == [strip(r) for r in http.get(f"/runs/{run_http}/trace").json()["rows"]]
+
+        async def refusals_and_retries():
+            async with cell(svc, token, client_cert) as ua_cell:
+                # The variables of the finished run, as HTTP states it.
+                assert await ua_cell.read(run_ua, "State") == "Complete"
+                assert await ua_cell.read(run_ua, "Installed") == seen["state"]["installed"]
+                assert await ua_cell.read(run_ua, "Seq") == seen["seq"]
+                assert await ua_cell.read(run_ua, "AdmissibleCount") == seen["count"]["value"]
+                active = ua.NodeId("Cells/cell-1/ActiveRuns", ua_cell.ns)
+                assert run_ua not in await ua_cell.client.get_node(active).read_value()
+
+                run = await ua_cell.start_run(plan, policy="paper", buffer_capacity=2, request_id="start-2")
+                assert await ua_cell.start_run(plan, policy="paper", buffer_capacity=2, request_id="start-2") == run
+                first = await ua_cell.look(run, ["rl", "ra"], request_id="look-1")
+                assert (first["action"], first["part"], first["replayed"]) == ("buffer", "rl", False)
+                again = await ua_cell.look(run, ["rl", "ra"], request_id="look-1")     # a retry: the recorded answer
+                assert again["replayed"] and again["answer"] == first["answer"]
+                # the same request id over HTTP is the same request: the same answer, byte for byte
+                r = http.post(f"/runs/{run}/looks", {"visible": ["rl", "ra"]}, key="look-1")
+                assert r.headers.get("Idempotent-Replayed") == "true" and r.json() == first["answer"]
+                assert await ua_cell.read(run, "PendingAction") == "buffer rl"
+                await ua_cell.outcome(run, "success")
+                assert await ua_cell.read(run, "Buffered") == ["rl"]
+                before = http.get(f"/runs/{run}").json()
+                for n, (call, status, said) in enumerate((
+                        (ua_cell.look(run, ["rl"]), "BadInvalidArgument", "rl"),         # rl is in the buffer now
+                        (ua_cell.look(run, ["ra", "cace"]), "BadInvalidArgument", "did you mean 'ca'"),
+                        (ua_cell.outcome(run, "success"), "BadInvalidState", "no action is pending"),
+                        (ua_cell.outcome(run, "exploded"), "BadInvalidArgument", "success, failed or defective"),
+                        (ua_cell.look(run, ["ra"], request_id=""), "BadInvalidArgument", "RequestId is empty"),
+                        (ua_cell.look(run + 100, ["ra"]), "BadNotFound", f"no run {run + 100}"),
+                        (ua_cell.look(run, ["ra"], request_id="look-1"), "BadInvalidArgument", "already used"),
+                        (ua_cell.start_run("0" * 64), "BadInvalidArgument", "no plan"),
+                        (ua_cell.look(run, ["ra"] * 100_001), "BadInvalidArgument", "at most 100,000"),
+                        (ua_cell.look(run, ["x" * 201]), "BadInvalidArgument", "Visible[0] must be 1-200"),
+                        (ua_cell.start_run(plan, policy="best"), "BadInvalidArgument", "unknown policy"),
+                        (ua_cell.start_run("parts: [a, a]"), "BadInvalidArgument", "invalid_plan"),
+                        (ua_cell.upload_plan("#" * (1 << 20) + "\nparts: [a]"), "BadRequestTooLarge", "--max-body"))):
+                    with pytest.raises(Refused) as refused:
+                        await call
+                    assert refused.value.name == status and said in refused.value.message, (n, refused.value)
+                after = http.get(f"/runs/{run}").json()
+                assert {k: after[k] for k in ("seq", "state", "pending", "count")} == \
+                       {k: before[k] for k in ("seq", "state", "pending", "count")}       # nothing changed
+                assert await ua_cell.read(run, "Seq") == before["seq"]
+                assert run in await ua_cell.client.get_node(active).read_value()
+                # a run started over HTTP shows up in the address space too
+                other = http.post("/runs", {"plan": plan}).json()["id"]
+                for _ in range(100):
+                    try:
+                        if await ua_cell.read(other, "State") == "Idle":
+                            break
+                    except ua.UaStatusCodeError:
+                        pass
+                    await asyncio.sleep(0.05)
+                assert await ua_cell.read(other, "Policy") == "lookahead"
+                text = await listing(ua_cell.client)
+                for line in ("Opportune/Look(RunId: Int64, Visible: String[], RequestId: String)",
+                             f"s=Runs/{run}/AdmissibleCount", f"Objects/Opportune/Runs/{run}/Installed: String[]"):
+                    assert line in text, text
+
+        asyncio.run(refusals_and_retries())
+
+        async def anonymous():
+            async with CellClient(svc.opcua_endpoint, None) as dev:     # no security, no token: cell-1's runs
+                assert await dev.read(run_ua, "State") == "Complete"
+                run = await dev.start_run(plan, policy="paper")
+                assert (await dev.look(run, ["rl", "ra"]))["part"] == "rl"
+                return run
+
+        assert http.get(f"/runs/{asyncio.run(anonymous())}").json()["cell"] == "cell-1"
+
+        stranger = client_certificate(tmp_path / "stranger", APP)      # the same application, not in the trust list
+        operator = svc.token(operator="alice")
+
+        async def refused_sessions():
+            for who, cert, status in (("opp_not-a-token", client_cert, ua.uaerrors.BadUserAccessDenied),
+                                      (token, stranger, ua.uaerrors.BadCertificateUntrusted)):
+                c = CellClient(svc.opcua_endpoint, who, certificate=cert[0], private_key=cert[1], app_uri=APP)
+                with pytest.raises(status):
+                    await c.connect()
+                await c.__aexit__(None, None, None)
+            async with cell(svc, operator, client_cert) as reader:   # an operator reads, and drives nothing
+                assert await reader.read(run_ua, "State") == "Complete"
+                with pytest.raises(Refused) as refused:
+                    await reader.start_run(plan)
+                assert refused.value.name == "BadUserAccessDenied" and "operator" in refused.value.message
+
+        asyncio.run(refused_sessions())
+        http.close()
+
+
+def test_kill_9_under_a_driving_opcua_client_loses_no_acknowledged_call(tmp_path, client_cert):
+    """OPC UA alone (``--no-http``), anonymous sessions refused by default; every call of Table 1 has a
+    request id, and its answer, acknowledged before the kill or got by retrying it after, is applied once."""
+    pki = tmp_path / "pki"
+    trusting(pki, client_cert[0])
+    db = tmp_path / "k.db"
+    svc = ServiceProcess(db, opcua=True, pki=pki, extra_args=("--no-http",))
+    calls = [c for look in LOOKS for c in (("look", list(look)), ("outcome", "success"))]
+    answers: dict[int, dict] = {}     # index of the call -> its answer, as the client received it
+    in_flight: list[int] = []
+    try:
+        svc.start()
+        token = svc.token(cell="cell-1")
+
+        async def one(ua_cell, run, i):
+            kind, arg = calls[i]
+            if kind == "look":
+                return await ua_cell.look(run, arg, request_id=f"call-{i}")
+            return await ua_cell.outcome(run, arg, request_id=f"call-{i}")
+
+        async def start():
+            for who, status in ((None, ua.uaerrors.BadIdentityTokenRejected),):   # anonymous: refused by default
+                c = CellClient(svc.opcua_endpoint, who, certificate=client_cert[0], private_key=client_cert[1],
+                               app_uri=APP)
+                with pytest.raises(status):
+                    await c.connect()
+                await c.__aexit__(None, None, None)
+            with pytest.raises(ua.UaError, match="No matching endpoints"):    # nor is there an unsecured endpoint
+                await CellClient(svc.opcua_endpoint, None).connect()
+            async with cell(svc, token, client_cert) as ua_cell:
+                return await ua_cell.start_run(GEARBOX.read_text(), policy="paper", request_id="start")
+
+        run = asyncio.run(start())
+
+        async def drive():
+            async with cell(svc, token, client_cert, timeout=5) as ua_cell:
+                for i in range(len(calls)):
+                    in_flight[:] = [i]
+                    try:
+                        answers[i] = await one(ua_cell, run, i)
+                    except Exception:
+                        return      # the server is gone
+
+        driver = threading.Thread(target=asyncio.run, args=(drive(),))
+        driver.start()
+        while len(answers) < 11 and driver.is_alive():
+            driver.join(0.005)
+        svc.kill()
+        driver.join(30)
+        acked = len(answers)
+        assert 11 <= acked < len(calls) and in_flight == [acked]
+
+        svc.start()          # the same database and certificates, a new process on a new port
+
+        async def resume():
+            async with cell(svc, token, client_cert) as ua_cell:
+                assert await ua_cell.read(run, "Seq") >= answers[acked - 1]["seq"]   # every acknowledged call survived
+                again = await one(ua_cell, run, acked - 1)           # the last acknowledged call, repeated
+                assert again["replayed"] and again["answer"] == answers[acked - 1]["answer"]
+                # the call in flight at the kill, retried with its request id, then the rest
+                for i in range(acked, len(calls)):
+                    answers[i] = await one(ua_cell, run, i)
+                return await ua_cell.read(run, "State"), await ua_cell.read(run, "Installed")
+
+        state, installed = asyncio.run(resume())
+    finally:
+        svc.stop()
+    # Each call applied exactly once, in order, and the decisions are the library's for Table 1.
+    assert [answers[i]["seq"] for i in range(len(calls))] == list(range(1, len(calls) + 1))
+    rows = library_rows(LOOKS)
+    assert [answers[2 * k]["answer"]["action"] for k in range(len(LOOKS))] == [r["action"] for r in rows]
+    assert state == "Complete" and installed == answers[len(calls) - 1]["answer"]["run"]["state"]["installed"]
+    with sqlite3.connect(db) as con:
+        assert con.execute("SELECT count(*) FROM events WHERE run_id = ?", (run,)).fetchone()[0] == len(calls)
+
+
+@pytest.mark.parametrize("args, said", [
+    (("--opcua", "--opcua-endpoint", "opc.tcp://0.0.0.0:4840", "--opcua-anonymous", "cell-1"), "loopback only"),
+    (("--opcua", "--opcua-endpoint", "http://127.0.0.1:4840"), "not an opc.tcp://HOST:PORT URL"),
+    (("--opcua", "--opcua-endpoint", "opc.tcp://127.0.0.1:99999"), "bad port"),
+    (("--opcua", "--workers", "2"), "--workers 1"),
+    (("--no-http",), "add --opcua"),
+    (("--opcua", "--opcua-anonymous", "bad name!"), "invalid cell name"),
+])
+def test_serve_opcua_mistakes_are_refused_before_anything_starts(tmp_path, args, said):
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    r = CliRunner().invoke(app, ["serve", "--db", str(tmp_path / "t.db"), *args])
+    assert r.exit_code == 1 and said in r.output and "Traceback" not in r.output, r.output
+    assert not (tmp_path / "opcua-pki").exists()
