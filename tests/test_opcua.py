@@ -40,6 +40,15 @@ def strip(row):
     return {k: row[k] for k in ("visible", "buffered", "installed", "action", "outcome")}
 
 
+class Events:
+    """An OPC UA subscription's handler: the events received, in order."""
+
+    got: list = []
+
+    def event_notification(self, event):
+        Events.got.append(event)
+
+
 @pytest.fixture(scope="session")
 def client_cert(tmp_path_factory):
     """A client certificate and key, made once per session (RSA key generation takes a moment)."""
@@ -67,6 +76,10 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
 
         async def drive():
             async with cell(svc, token, client_cert) as ua_cell:
+                # every change of a run is an event on Objects/Opportune
+                etype = await ua_cell.client.nodes.base_event_type.get_child(f"{ua_cell.ns}:RunChangedEventType")
+                subscription = await ua_cell.client.create_subscription(20, Events())
+                await subscription.subscribe_events(ua_cell.client.get_node(ua_cell.node_id("Opportune")), etype)
                 plan = await ua_cell.upload_plan(GEARBOX.read_text())
                 r = http.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"},
                               key=False)
@@ -83,9 +96,17 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
                     assert got["explanation"] == over_http["decision"]["explain"]
                     assert (await ua_cell.outcome(run_ua, "success"))["seq"] == got["seq"] + 1
                     assert http.post(f"/runs/{run_http}/outcomes", {"outcome": "success"}).status_code == 200
+                for _ in range(200):       # the last event of each run has arrived
+                    if {(e.RunId, e.Seq) for e in Events.got} >= {(run_ua, 30), (run_http, 30)}:
+                        break
+                    await asyncio.sleep(0.05)
                 return run_ua, run_http, plan, ua_cell
 
         run_ua, run_http, plan, _ = asyncio.run(drive())
+        for run in (run_ua, run_http):    # one event per change, in order, whichever protocol made it
+            events = [(e.Seq, e.Kind, e.State) for e in Events.got if e.RunId == run]
+            assert events == [(0, "start", "Idle")] + [(k, "look" if k % 2 else "outcome", "Execute")
+                                                      for k in range(1, 30)] + [(30, "outcome", "Complete")]
         # The run driven over OPC UA, read over HTTP: Table 1, as the library decides it.
         seen = http.get(f"/runs/{run_ua}").json()
         assert seen["status"] == "complete" and seen["cell"] == "cell-1" and seen["label"] == "SN 1"

@@ -71,6 +71,7 @@ DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
 MAX_RUN_NODES = 1000      # runs with nodes in the address space (active ones first; the oldest go first)
 MAX_VISIBLE = 100_000     # parts in one look (as over HTTP)
 MAX_TEXT = 200            # characters of a part id, a label, a request id
+EVENTS_AT_ONCE = 200      # committed events read at once to emit their OPC UA events
 PLAN_ID = re.compile(r"^[0-9a-f]{64}$")
 #: PackML's state numbers (ISA-TR88.00.02) of the states a run goes through.
 PACKML = {"Idle": 4, "Execute": 6, "Held": 11, "Complete": 17, "Aborted": 9}
@@ -334,6 +335,12 @@ async def _one_dimension(var) -> None:
     await var.write_array_dimensions([0])
 
 
+def _explained(answer: dict) -> str:
+    """The explanation of the decision of the row an answer added, completed or dropped."""
+    row = answer.get("row") or answer.get("cancelled") or {}
+    return (row.get("reasons") or {}).get("explain", "")
+
+
 @dataclass
 class _RunNodes:
     node: object
@@ -578,21 +585,23 @@ class OpcUaFront:
                 log.exception("OPC UA: refreshing run %s failed", run_id)
 
     async def _refresh(self, run_id: int) -> None:
-        """Bring a run's nodes up to its last committed event (one indexed read); create them if new; emit one
-        event per refresh that found a change."""
+        """Bring a run's nodes up to its committed events, with one event per change since the last refresh
+        (read :data:`EVENTS_AT_ONCE` at a time); a run seen for the first time gets its nodes from its last
+        event (one indexed read), or from its view if nothing was done in it yet."""
         nodes = self._runs.get(run_id)
         manager = self.core.manager
+        if nodes is not None:
+            while True:
+                new = await asyncio.to_thread(manager.events_after, run_id, nodes.seq, EVENTS_AT_ONCE)
+                for _seq, kind, answer in new:
+                    await self._show(run_id, nodes, kind, answer["run"], run_values(answer["run"], _explained(answer)))
+                if len(new) < EVENTS_AT_ONCE:
+                    return
         last = await asyncio.to_thread(manager.last_event, run_id)
         if last is not None:
-            seq, kind, answer = last
-            if nodes is not None and seq <= nodes.seq:
-                return
-            run = answer["run"]
-            row = answer.get("row") or answer.get("cancelled") or {}
-            values = run_values(run, (row.get("reasons") or {}).get("explain", ""))
+            _seq, kind, answer = last
+            run, values = answer["run"], run_values(answer["run"], _explained(answer))
         else:   # a run nothing was done in yet: its view (which builds its sequencer)
-            if nodes is not None:
-                return
             kind = "start"
             try:
                 run = await asyncio.to_thread(manager.view, SYSTEM, run_id)
@@ -603,14 +612,19 @@ class OpcUaFront:
                 row = await asyncio.to_thread(manager.row, SYSTEM, run_id)
                 run = {"cell": row["cell"], "seq": row["seq"], "status": "active"}
                 values = {"State": "Aborted", "StateNumber": PACKML["Aborted"], "Cell": row["cell"]}
-        if nodes is None:
-            nodes = await self._add_run(run_id, run["cell"])
+        await self._show(run_id, await self._add_run(run_id, run["cell"]), kind, run, values)
+
+    async def _show(self, run_id: int, nodes: "_RunNodes", kind: str, run: dict, values: dict) -> None:
+        """Write a run's variables and emit its ``RunChangedEventType`` event."""
         for name, value in values.items():
             var, vtype = nodes.variables[name]
             await self.server.write_attribute_value(var.nodeid, ua.DataValue(ua.Variant(value, vtype)))
+        first = nodes.seq < 0
         nodes.seq = run["seq"]
-        nodes.active = run["status"] != "complete"
-        await self._cell_runs(nodes.cell)
+        active = run["status"] != "complete"
+        if first or active != nodes.active:     # the cell's list of active runs changes
+            nodes.active = active
+            await self._cell_runs(nodes.cell)
         ev = self.events.event
         ev.SourceNode, ev.SourceName = nodes.node.nodeid, f"Run {run_id}"
         ev.RunId, ev.Seq, ev.Kind, ev.State, ev.Cell = run_id, nodes.seq, kind, values["State"], nodes.cell
