@@ -9,6 +9,7 @@ with a wrong token or an untrusted certificate is refused.
 from __future__ import annotations
 
 import asyncio
+import re
 import shutil
 import sqlite3
 import threading
@@ -19,7 +20,7 @@ pytest.importorskip("asyncua")
 
 from asyncua import ua  # noqa: E402
 
-from conftest import EXAMPLES, GEARBOX  # noqa: E402
+from conftest import EXAMPLES, GEARBOX, REPO  # noqa: E402
 from opportune import load_plan  # noqa: E402
 from opportune.formats.looks import read_looks  # noqa: E402
 from opportune.sequencer import Sequencer  # noqa: E402
@@ -53,6 +54,17 @@ class Events:
 def client_cert(tmp_path_factory):
     """A client certificate and key, made once per session (RSA key generation takes a moment)."""
     return client_certificate(tmp_path_factory.mktemp("opcua-client"), APP)
+
+
+def documented_listing() -> str:
+    page = (REPO / "docs" / "opcua.md").read_text(encoding="utf-8")
+    return re.search(r"<!-- address-space -->\n```text\n(.*?)```", page, re.S).group(1)
+
+
+def shapes(text: str) -> set[str]:
+    """A listing's lines with run ids and cell names made general, and the padding dropped."""
+    text = re.sub(r"Runs/\d+", "Runs/ID", re.sub(r"Cells/[^/\s]+", "Cells/CELL", text))
+    return {" ".join(line.split()) for line in text.splitlines() if line.strip()}
 
 
 def trusting(pki, cert):
@@ -173,6 +185,8 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
                 for line in ("Opportune/Look(RunId: Int64, Visible: String[], RequestId: String)",
                              f"s=Runs/{run}/AdmissibleCount", f"Objects/Opportune/Runs/{run}/Installed: String[]"):
                     assert line in text, text
+                # docs/opcua.md lists what this server has, node for node (runs and cells aside)
+                assert shapes(documented_listing()) == shapes(text)
 
         asyncio.run(refusals_and_retries())
 

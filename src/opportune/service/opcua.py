@@ -371,6 +371,7 @@ class OpcUaFront:
         """Build the address space and listen.  Raises :class:`OpcUaError` if the port is taken."""
         self._loop = asyncio.get_running_loop()
         self._changed = asyncio.Queue()
+        self._refreshing = asyncio.Lock()   # one refresh at a time: each event is emitted once, in order
         pki = self.options.pki
         cert, key = own_files(pki)
         await make_certificate(key, cert, APPLICATION_URI, client=False, host=socket.gethostname())
@@ -523,11 +524,14 @@ class OpcUaFront:
         body = {"plan": plan_id, "cell": None, "buffer_capacity": None if capacity < 0 else capacity, "label": label,
                 "policy": policy}
         _status, text, _replayed = await asyncio.to_thread(self.core.manager.create, principal, body, key, "/runs")
-        return [ua.Variant(json.loads(text)["id"], I64)]
+        run_id = json.loads(text)["id"]
+        await self._refresh_now(run_id)
+        return [ua.Variant(run_id, I64)]
 
     async def _command(self, principal: Principal, run_id: int, kind: str, path: str, request: dict, key: str):
         status, text, replayed = await asyncio.to_thread(self.core.manager.command, principal, run_id, kind, request,
                                                          key, f"/runs/{run_id}/{path}")
+        await self._refresh_now(run_id)
         return json.loads(text), text, replayed
 
     async def _look(self, principal: Principal, run_id, visible, request_id) -> list[ua.Variant]:
@@ -574,11 +578,20 @@ class OpcUaFront:
             except RuntimeError:   # the loop has stopped: the server is going down
                 pass
 
+    async def _refresh_now(self, run_id: int) -> None:
+        """Before a method answers: the run's variables show what it did (a client reads its own writes)."""
+        try:
+            async with self._refreshing:
+                await self._refresh(run_id)
+        except Exception:     # the call itself is committed and answered; the queued refresh tries again
+            log.exception("OPC UA: refreshing run %s failed", run_id)
+
     async def _refresh_loop(self) -> None:
         while True:
             run_id = await self._changed.get()
             try:
-                await self._refresh(run_id)
+                async with self._refreshing:
+                    await self._refresh(run_id)
             except asyncio.CancelledError:
                 raise
             except Exception:     # a refresh that fails leaves the nodes as they were: the next change retries
