@@ -12,6 +12,8 @@ import asyncio
 import re
 import shutil
 import sqlite3
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -162,7 +164,8 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
                         (ua_cell.look(run, ["x" * 201]), "BadInvalidArgument", "Visible[0] must be 1-200"),
                         (ua_cell.start_run(plan, policy="best"), "BadInvalidArgument", "unknown policy"),
                         (ua_cell.start_run("parts: [a, a]"), "BadInvalidArgument", "invalid_plan"),
-                        (ua_cell.upload_plan("#" * (1 << 20) + "\nparts: [a]"), "BadRequestTooLarge", "--max-body"))):
+                        (ua_cell.upload_plan("#" * (1 << 20) + "\nparts: [a]"), "BadRequestTooLarge", "--max-body"),
+                        (ua_cell.upload_plan("parts: [a\x00]"), "BadInvalidArgument", "control character"))):
                     with pytest.raises(Refused) as refused:
                         await call
                     assert refused.value.name == status and said in refused.value.message, (n, refused.value)
@@ -216,6 +219,18 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
                 assert refused.value.name == "BadUserAccessDenied" and "operator" in refused.value.message
 
         asyncio.run(refused_sessions())
+
+        # The reference cell drives a simulated bin through the server, end to end.
+        done = subprocess.run([sys.executable, str(EXAMPLES / "opcua_cell.py"), "example:gearbox", "--endpoint",
+                               svc.opcua_endpoint, "--token", token, "--cert", str(client_cert[0]), "--key",
+                               str(client_cert[1]), "--app-uri", APP, "--policy", "paper", "--seed", "3"],
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr[-2000:]
+        run = int(done.stdout.split()[1])
+        rows = [strip(r) for r in http.get(f"/runs/{run}/trace").json()["rows"]]
+        assert rows == library_rows([tuple(r["visible"]) for r in rows])   # the library's decisions, look by look
+        installed = http.get(f"/runs/{run}").json()["state"]["installed"]
+        assert done.stdout.splitlines()[-1] == "installed: " + " ".join(installed) and len(installed) == 10
         http.close()
 
 

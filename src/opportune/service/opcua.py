@@ -56,6 +56,7 @@ from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
 from asyncua.server.internal_session import InternalSession
 
+from opportune.formats.problems import CONTROL_CHARS
 from opportune.policies.named import POLICIES
 from opportune.service import idempotency as idem
 from opportune.service.auth import Principal
@@ -73,6 +74,7 @@ MAX_VISIBLE = 100_000     # parts in one look (as over HTTP)
 MAX_TEXT = 200            # characters of a part id, a label, a request id
 EVENTS_AT_ONCE = 200      # committed events read at once to emit their OPC UA events
 PLAN_ID = re.compile(r"^[0-9a-f]{64}$")
+_CONTROL = re.compile(f"[{CONTROL_CHARS}]")
 #: PackML's state numbers (ISA-TR88.00.02) of the states a run goes through.
 PACKML = {"Idle": 4, "Execute": 6, "Held": 11, "Complete": 17, "Aborted": 9}
 #: Who reads runs to refresh their nodes: the server itself, as an operator.
@@ -500,6 +502,9 @@ class OpcUaFront:
         if principal.is_operator:
             raise ApiError(403, "forbidden", "an operator token reads plans and runs; only a cell's token can "
                            "upload a plan", "use the token of the cell that will assemble it")
+        if _CONTROL.search(text):     # as over HTTP: no NUL or escape reaches the store or the logs
+            raise bad("PlanText holds a control character (such as U+0000 or ESC)", "send the plan file's text",
+                      "body.text")
         raw = text.encode("utf-8", "surrogatepass")
         if len(raw) > self.core.settings.max_body:
             raise ApiError(413, "body_too_large", f"the plan is larger than the limit of {self.core.settings.max_body} "

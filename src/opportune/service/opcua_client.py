@@ -119,6 +119,32 @@ class CellClient:
         return await self.client.get_node(self.node_id(f"Runs/{run_id}/{name}")).read_value()
 
 
+async def drive(cell: CellClient, run_id: int, world, *, max_looks: int | None = None) -> list[dict]:
+    """Drive a run to completion through a simulated bin (a :class:`~opportune.worlds.World` filled with the
+    plan's units): look, do what the server decides, report success; the answers of the looks, in order.
+
+    Installing or buffering a part takes it from the bin (an install from the buffer does not); a shake
+    shakes it.  At most ``max_looks`` looks (default 20 per unit in the bin, plus 100), then
+    :class:`RuntimeError`: a bin that never shows what the run needs does not loop for ever.
+    O(looks) calls, each a round trip.
+
+    >>> world = UniformBin(visible=2); world.reset(units, random.Random(7))     # doctest: +SKIP
+    >>> looks = await drive(cell, run, world)                                  # doctest: +SKIP
+    """
+    limit = max_looks if max_looks is not None else 20 * len(world) + 100
+    answers = []
+    for _ in range(limit):
+        answer = await cell.look(run_id, list(world.look()))
+        answers.append(answer)
+        if answer["action"] == "shake":
+            world.shake()
+        elif answer["action"] in ("install", "buffer") and answer["source"] != "buffer":
+            world.take(answer["part"])
+        if (await cell.outcome(run_id, "success"))["status"] == "complete":
+            return answers
+    raise RuntimeError(f"run {run_id} is not complete after {limit} looks")
+
+
 async def listing(client: Client, root: ua.NodeId | None = None) -> str:
     """The address space under ``Objects/Opportune`` as text, one node a line: its node id, class and browse path;
     methods with their arguments, variables with their data type.  O(nodes)."""
