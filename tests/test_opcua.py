@@ -49,7 +49,11 @@ class Events:
     got: list = []
 
     def event_notification(self, event):
-        Events.got.append(event)
+        type(self).got.append(event)
+
+
+class CellEvents(Events):
+    got: list = []
 
 
 @pytest.fixture(scope="session")
@@ -88,17 +92,23 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
         token = svc.token(cell="cell-1")
         http = Client(svc.url, token)
 
+        operator = svc.token(operator="alice")
+
+        async def subscribe(session, node: str, handler):
+            etype = await session.client.nodes.base_event_type.get_child(f"{session.ns}:RunChangedEventType")
+            subscription = await session.client.create_subscription(20, handler)
+            await subscription.subscribe_events(session.client.get_node(session.node_id(node)), etype)
+
         async def drive():
-            async with cell(svc, token, client_cert) as ua_cell:
-                # every change of a run is an event on Objects/Opportune
-                etype = await ua_cell.client.nodes.base_event_type.get_child(f"{ua_cell.ns}:RunChangedEventType")
-                subscription = await ua_cell.client.create_subscription(20, Events())
-                await subscription.subscribe_events(ua_cell.client.get_node(ua_cell.node_id("Opportune")), etype)
+            async with cell(svc, token, client_cert) as ua_cell, cell(svc, operator, client_cert) as watcher:
+                # every change of a run is an event on Objects/Opportune (for operators) and on its cell's object
+                await subscribe(watcher, "Opportune", Events())
                 plan = await ua_cell.upload_plan(GEARBOX.read_text())
                 r = http.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"},
                               key=False)
                 assert r.json()["id"] == plan        # one plan, whichever protocol stored it
                 run_ua = await ua_cell.start_run(plan, policy="paper", label="SN 1")
+                await subscribe(ua_cell, "Cells/cell-1", CellEvents())     # its cell's object exists now
                 run_http = http.post("/runs", {"plan": plan, "policy": "paper"}).json()["id"]
                 assert await ua_cell.read(run_ua, "State") == "Idle"
                 for look in LOOKS:
@@ -111,7 +121,7 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
                     assert (await ua_cell.outcome(run_ua, "success"))["seq"] == got["seq"] + 1
                     assert http.post(f"/runs/{run_http}/outcomes", {"outcome": "success"}).status_code == 200
                 for _ in range(200):       # the last event of each run has arrived
-                    if {(e.RunId, e.Seq) for e in Events.got} >= {(run_ua, 30), (run_http, 30)}:
+                    if {(e.RunId, e.Seq) for e in Events.got + CellEvents.got} >= {(run_ua, 30), (run_http, 30)}:
                         break
                     await asyncio.sleep(0.05)
                 return run_ua, run_http, plan, ua_cell
@@ -121,6 +131,9 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
             events = [(e.Seq, e.Kind, e.State) for e in Events.got if e.RunId == run]
             assert events == [(0, "start", "Idle")] + [(k, "look" if k % 2 else "outcome", "Execute")
                                                       for k in range(1, 30)] + [(30, "outcome", "Complete")]
+            # the cell's own subscription: the same, from when it subscribed
+            assert [(e.Seq, e.Kind, e.State) for e in CellEvents.got if e.RunId == run] == events[events.index(
+                next(x for x in events if x[0] >= (1 if run == run_ua else 0))):]
         # The run driven over OPC UA, read over HTTP: Table 1, as the library decides it.
         seen = http.get(f"/runs/{run_ua}").json()
         assert seen["status"] == "complete" and seen["cell"] == "cell-1" and seen["label"] == "SN 1"
@@ -205,7 +218,27 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
         stranger = client_certificate(tmp_path / "stranger", APP)      # the same application, not in the trust list
         operator = svc.token(operator="alice")
 
+        other_cell = Client(svc.url, svc.token(cell="cell-2"))
+        other_cell.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}, key=False)
+        theirs = other_cell.post("/runs", {"plan": plan}).json()["id"]
+        other_cell.close()
+
         async def refused_sessions():
+            async with cell(svc, token, client_cert) as ua_cell:    # another cell's run: its values are not ours
+                node = ua_cell.client.get_node(ua_cell.node_id(f"Runs/{theirs}/State"))
+                for _ in range(100):    # its nodes appear once the server has seen the run started over HTTP
+                    try:
+                        assert (await node.read_browse_name()).Name == "State"      # the structure is no secret
+                        break
+                    except ua.UaStatusCodeError:
+                        await asyncio.sleep(0.05)
+                with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                    await node.read_value()
+                with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                    await subscribe(ua_cell, "Cells/cell-2", CellEvents())
+                with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                    await subscribe(ua_cell, "Opportune", CellEvents())       # every cell's events: operators'
+                assert await ua_cell.read(run_ua, "State") == "Complete"   # its own, still
             for who, cert, status in (("opp_not-a-token", client_cert, ua.uaerrors.BadUserAccessDenied),
                                       (token, stranger, ua.uaerrors.BadCertificateUntrusted)):
                 c = CellClient(svc.opcua_endpoint, who, certificate=cert[0], private_key=cert[1], app_uri=APP)

@@ -8,12 +8,13 @@ used once answers the same whichever protocol repeats it.
 
 The address space (namespace :data:`NAMESPACE`, string node ids, so that a PLC can name them)::
 
-    Objects/Opportune                         ns=N;s=Opportune        (emits RunChangedEventType events)
+    Objects/Opportune                         ns=N;s=Opportune        (every run's RunChangedEventType events)
       UploadPlan(PlanText) -> PlanId
       StartRun(Plan, Policy, BufferCapacity, Label, RequestId) -> RunId
       Look(RunId, Visible[], RequestId) -> Action, Part, Source, Seq, Explanation, Answer, Replayed
       ReportOutcome(RunId, Outcome, Keep, RequestId) -> Status, Seq, Answer, Replayed
       Cancel(RunId, RequestId) -> Seq, Answer, Replayed
+      Cells/<cell>                            (its runs' RunChangedEventType events)
       Cells/<cell>/ActiveRuns                 the cell's active run ids
       Runs/<id>/State, StateNumber, Seq, Cell, Plan, PlanId, Policy, PendingAction, Installed, Buffered,
                 AdmissibleCount, AdmissibleCountLog10, Explanation
@@ -34,8 +35,9 @@ Security: endpoints ``Basic256Sha256`` Sign & Encrypt only; the server's certifi
 and generated on first start in ``PKI/own``; a client is trusted when its certificate is in
 ``PKI/trusted`` (read again on every new secure channel).  Users authenticate with a user name (any,
 e.g. the cell's) and the service's token as password (``opportune token create``): a cell's token
-drives its cell's runs, an operator's reads.  Anonymous sessions are refused, unless the server
-listens on loopback only and ``anonymous_cell`` names the cell they act as (development).
+drives its cell's runs, an operator's reads; a cell reads the values of its own runs only
+(:class:`OwnCellOnly`).  Anonymous sessions are refused, unless the server listens on loopback only
+and ``anonymous_cell`` names the cell they act as (development).
 """
 
 from __future__ import annotations
@@ -225,6 +227,42 @@ class _Session(InternalSession):
             _caller.reset(mark)
 
 
+class OwnCellOnly:
+    """What a cell's session may read: the values of its own cell's runs only, as over HTTP (where another
+    cell's run is not found).  Browsing shows every node (its attributes but its value); reading the value of
+    another cell's run variable, or subscribing to it, to another cell's events or to every cell's events
+    on ``Objects/Opportune``, is refused with ``BadUserAccessDenied``.  Operators read everything.
+
+    Checked on each Read and CreateMonitoredItems request before it is served: O(nodes in the request)."""
+
+    def __init__(self, front: "OpcUaFront"):
+        from asyncua.crypto.permission_rules import SimpleRoleRuleset
+        from asyncua.ua.ua_binary import struct_from_binary
+
+        self.front = front
+        self.roles = SimpleRoleRuleset()     # asyncua's own: no address-space changes by users
+        read = ua.NodeId(ua.ObjectIds.ReadRequest_Encoding_DefaultBinary)
+        monitor = ua.NodeId(ua.ObjectIds.CreateMonitoredItemsRequest_Encoding_DefaultBinary)
+        self.decoders = {
+            read: lambda body: [(r.NodeId, r.AttributeId)
+                                for r in struct_from_binary(ua.ReadParameters, body).NodesToRead],
+            monitor: lambda body: [(i.ItemToMonitor.NodeId, None) for i in
+                                   struct_from_binary(ua.CreateMonitoredItemsParameters, body).ItemsToCreate]}
+
+    def check_validity(self, user, action_type_id, body) -> bool:
+        if not self.roles.check_validity(user, action_type_id, body):
+            return False
+        principal = getattr(user, "principal", None)
+        decode = self.decoders.get(action_type_id)
+        if decode is None or principal is None or principal.is_operator:
+            return True
+        try:
+            wanted = decode(body.copy())
+        except Exception:   # not decodable: the server's own decoding refuses it
+            return True
+        return all(self.front.may_read(principal, nid, attribute) for nid, attribute in wanted)
+
+
 # ---------------------------------------------------------------- refusals
 
 def status_of(err: ApiError) -> int:
@@ -401,7 +439,7 @@ class OpcUaFront:
         size = message_limit(self.core.settings.max_body)
         server.limits = TransportLimits(max_recv_buffer=65535, max_send_buffer=65535,
                                         max_chunk_count=-(-size // 65535), max_message_size=size)
-        server.set_security_policy(policies)
+        server.set_security_policy(policies, permission_ruleset=OwnCellOnly(self))
         server.set_identity_tokens(tokens)
         self.server = server
         await self._address_space()
@@ -433,6 +471,7 @@ class OpcUaFront:
         etype = await server.create_custom_event_type(
             ns, "RunChangedEventType", ua.ObjectIds.BaseEventType,
             [("RunId", I64), ("Seq", U32), ("Kind", S), ("State", S), ("Cell", S)])
+        self.event_type = etype
         self.events = await server.get_event_generator(etype, root)
         methods = (
             ("UploadPlan", self._upload, [_arg("PlanText", S, "A plan file's text (YAML, JSON or SALBP .IN2)")],
@@ -572,6 +611,22 @@ class OpcUaFront:
         answer, text, replayed = await self._command(principal, run_id, "cancel", "cancel", {}, key)
         return [ua.Variant(answer["seq"], U32), ua.Variant(text, S), ua.Variant(replayed, B)]
 
+    def may_read(self, principal: Principal, nid: ua.NodeId, attribute: int | None) -> bool:
+        """Whether a cell may read attribute ``attribute`` of node ``nid`` (None: subscribe to it)."""
+        if nid.NamespaceIndex != self.ns or not isinstance(nid.Identifier, str):
+            return True
+        parts = nid.Identifier.split("/")
+        if parts[0] == "Opportune":     # every cell's events: operators only
+            return attribute is not None
+        if attribute is not None and attribute != ua.AttributeIds.Value:
+            return True                 # a node's name, class, type, ...: the structure is no secret
+        if parts[0] == "Cells" and len(parts) >= 2:
+            return parts[1] == principal.cell
+        if parts[0] == "Runs" and len(parts) >= 2 and parts[1].isdigit():
+            nodes = self._runs.get(int(parts[1]))
+            return nodes is None or nodes.cell == principal.cell
+        return True
+
     # ------------------------------------------------------------ keeping the runs' nodes up to date
 
     def _on_change(self, run_id: int) -> None:
@@ -643,12 +698,14 @@ class OpcUaFront:
         if first or active != nodes.active:     # the cell's list of active runs changes
             nodes.active = active
             await self._cell_runs(nodes.cell)
-        ev = self.events.event
-        ev.SourceNode, ev.SourceName = nodes.node.nodeid, f"Run {run_id}"
-        ev.RunId, ev.Seq, ev.Kind, ev.State, ev.Cell = run_id, nodes.seq, kind, values["State"], nodes.cell
-        ev.Severity = 100
-        await self.events.trigger(message=f"run {run_id}: {kind}, {values['State']}"
-                                  + (f", pending {values['PendingAction']}" if values.get("PendingAction") else ""))
+        message = (f"run {run_id}: {kind}, {values['State']}"
+                   + (f", pending {values['PendingAction']}" if values.get("PendingAction") else ""))
+        for events in (self.events, self._cells[nodes.cell][1]):    # every cell's, and the run's cell's
+            ev = events.event
+            ev.SourceNode, ev.SourceName = nodes.node.nodeid, f"Run {run_id}"
+            ev.RunId, ev.Seq, ev.Kind, ev.State, ev.Cell = run_id, nodes.seq, kind, values["State"], nodes.cell
+            ev.Severity = 100
+            await events.trigger(message=message)
 
     async def _add_run(self, run_id: int, cell: str) -> _RunNodes:
         ns = self.ns
@@ -672,13 +729,14 @@ class OpcUaFront:
     async def _cell_runs(self, cell: str) -> None:
         """The cell's ``ActiveRuns`` variable (its node made on the cell's first run)."""
         ns = self.ns
-        var = self._cells.get(cell)
-        if var is None:
+        if cell not in self._cells:    # the cell's object: its active runs, and its runs' events
             obj = await self.cells.add_object(ua.NodeId(f"Cells/{cell}", ns), ua.QualifiedName(cell, ns))
+            await obj.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
             var = await obj.add_variable(ua.NodeId(f"Cells/{cell}/ActiveRuns", ns), ua.QualifiedName("ActiveRuns", ns),
                                          ua.Variant([], I64))
             await _one_dimension(var)
-            self._cells[cell] = var
+            self._cells[cell] = (var, await self.server.get_event_generator(self.event_type, obj))
+        var = self._cells[cell][0]
         active = sorted(r for r, n in self._runs.items() if n.cell == cell and n.active)
         await var.write_value(ua.Variant(active, I64))
 
