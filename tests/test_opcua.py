@@ -26,8 +26,11 @@ from conftest import EXAMPLES, GEARBOX, REPO  # noqa: E402
 from opportune import load_plan  # noqa: E402
 from opportune.formats.looks import read_looks  # noqa: E402
 from opportune.sequencer import Sequencer  # noqa: E402
+from opportune.service.auth import create_token, revoke_token  # noqa: E402
+from opportune.service.config import database_url  # noqa: E402
 from opportune.service.opcua import client_certificate  # noqa: E402
 from opportune.service.opcua_client import CellClient, Refused, listing  # noqa: E402
+from opportune.service.storage import Store  # noqa: E402
 from opportune.service.testing import Client, ServiceProcess  # noqa: E402
 
 LOOKS = read_looks(EXAMPLES / "gearbox-table1.looks")
@@ -250,8 +253,17 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
                 with pytest.raises(Refused) as refused:
                     await reader.start_run(plan)
                 assert refused.value.name == "BadUserAccessDenied" and "operator" in refused.value.message
+            token_id, short_lived = create_token(store, cell="cell-1")
+            async with cell(svc, short_lived, client_cert) as session:   # a token revoked during a session
+                await session.start_run(plan)
+                revoke_token(store, token_id)
+                with pytest.raises(Refused) as refused:
+                    await session.start_run(plan)
+                assert refused.value.name == "BadUserAccessDenied" and "revoked" in refused.value.message
 
+        store = Store(database_url(str(tmp_path / "t.db")))
         asyncio.run(refused_sessions())
+        store.dispose()
 
         # The reference cell drives a simulated bin through the server, end to end.
         done = subprocess.run([sys.executable, str(EXAMPLES / "opcua_cell.py"), "example:gearbox", "--endpoint",

@@ -520,6 +520,11 @@ class OpcUaFront:
                 if principal is None:
                     raise ApiError(401, "unauthorized", "this session has no service identity",
                                    "connect with a user name and the service token as password")
+                if principal.token_id != "anonymous" and \
+                        await asyncio.to_thread(self.core.auth.by_id, principal.token_id) is None:
+                    # revoked since the session began: refused from its next call on (one indexed read)
+                    raise ApiError(401, "unauthorized", "this session's token has been revoked",
+                                   "connect again with a valid token (opportune token create)")
                 if len(args) != len(names):
                     raise bad(f"this method takes {len(names)} arguments ({', '.join(names)}), got {len(args)}",
                               "see the method's InputArguments", "body")
