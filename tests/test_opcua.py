@@ -89,9 +89,9 @@ def cell(svc, token, client_cert, **kw):
 def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
     pki = tmp_path / "pki"
     trusting(pki, client_cert[0])
-    # anonymous sessions (development, loopback) act as cell-1: seen at the end
+    # anonymous sessions (development, loopback) act as cell `dev`, which has no token: seen at the end
     with ServiceProcess(tmp_path / "t.db", opcua=True, pki=pki,
-                        extra_args=("--no-access-log", "--opcua-anonymous", "cell-1")) as svc:
+                        extra_args=("--no-access-log", "--opcua-anonymous", "dev")) as svc:
         token = svc.token(cell="cell-1")
         http = Client(svc.url, token)
 
@@ -210,16 +210,20 @@ def test_table_1_over_opcua_is_the_same_run_as_over_http(tmp_path, client_cert):
         asyncio.run(refusals_and_retries())
 
         async def anonymous():
-            async with CellClient(svc.opcua_endpoint, None) as dev:     # no security, no token: cell-1's runs
-                assert await dev.read(run_ua, "State") == "Complete"
-                run = await dev.start_run(plan, policy="paper")
+            async with CellClient(svc.opcua_endpoint, None) as dev:     # no security, no token: cell dev's runs
+                with pytest.raises(ua.uaerrors.BadUserAccessDenied):
+                    await dev.read(run_ua, "State")                     # cell-1's
+                run = await dev.start_run(GEARBOX.read_text(), policy="paper")
                 assert (await dev.look(run, ["rl", "ra"]))["part"] == "rl"
                 return run
 
-        assert http.get(f"/runs/{asyncio.run(anonymous())}").json()["cell"] == "cell-1"
+        dev_run = asyncio.run(anonymous())
+        assert http.get(f"/runs/{dev_run}").status_code == 404          # not cell-1's
+        watcher = Client(svc.url, operator)
+        assert watcher.get(f"/runs/{dev_run}").json()["cell"] == "dev"
+        watcher.close()
 
         stranger = client_certificate(tmp_path / "stranger", APP)      # the same application, not in the trust list
-        operator = svc.token(operator="alice")
 
         other_cell = Client(svc.url, svc.token(cell="cell-2"))
         other_cell.post("/plans", content=GEARBOX.read_text(), headers={"Content-Type": "application/yaml"}, key=False)

@@ -61,7 +61,7 @@ from asyncua.server.internal_session import InternalSession
 from opportune.formats.problems import CONTROL_CHARS
 from opportune.policies.named import POLICIES
 from opportune.service import idempotency as idem
-from opportune.service.auth import Principal
+from opportune.service.auth import Principal, ensure_cell
 from opportune.service.core import Core
 from opportune.service.errors import ApiError
 from opportune.service.plans import accept_upload
@@ -416,6 +416,8 @@ class OpcUaFront:
         cert, key = own_files(pki)
         await make_certificate(key, cert, APPLICATION_URI, client=False, host=socket.gethostname())
         (pki / "trusted").mkdir(parents=True, exist_ok=True)
+        if self.options.anonymous_cell is not None:   # its runs belong to a cell like any other
+            await asyncio.to_thread(ensure_cell, self.core.store, self.options.anonymous_cell)
         server = Server(user_manager=Users(self.core, self.options.anonymous_cell))
         await server.init()
         iserver = server.iserver
