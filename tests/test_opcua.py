@@ -359,6 +359,20 @@ def test_kill_9_under_a_driving_opcua_client_loses_no_acknowledged_call(tmp_path
         assert con.execute("SELECT count(*) FROM events WHERE run_id = ?", (run,)).fetchone()[0] == len(calls)
 
 
+def test_a_taken_opcua_port_is_a_one_line_error(tmp_path):
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run([sys.executable, "-m", "opportune.cli", "serve", "--db", str(tmp_path / "t.db"),
+                               "--opcua", "--no-http", "--opcua-endpoint", f"opc.tcp://127.0.0.1:{port}",
+                               "--opcua-pki", str(tmp_path / "pki")], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert f"error: cannot listen on opc.tcp://127.0.0.1:{port}" in done.stderr and "choose another port" in done.stderr
+
+
 @pytest.mark.parametrize("args, said", [
     (("--opcua", "--opcua-endpoint", "opc.tcp://0.0.0.0:4840", "--opcua-anonymous", "cell-1"), "loopback only"),
     (("--opcua", "--opcua-endpoint", "http://127.0.0.1:4840"), "not an opc.tcp://HOST:PORT URL"),

@@ -409,6 +409,7 @@ class OpcUaFront:
 
     async def start(self) -> None:
         """Build the address space and listen.  Raises :class:`OpcUaError` if the port is taken."""
+        self._free_port()        # before seconds of building the address space
         self._loop = asyncio.get_running_loop()
         self._changed = asyncio.Queue()
         self._refreshing = asyncio.Lock()   # one refresh at a time: each event is emitted once, in order
@@ -445,16 +446,33 @@ class OpcUaFront:
         server.set_identity_tokens(tokens)
         self.server = server
         await self._address_space()
+        quiet = logging.getLogger("asyncua.server.server")
+        quiet.disabled = True    # it logs a failure to listen with its traceback: the message below says it all
         try:
             await server.start()
-        except OSError as exc:
-            raise OpcUaError(f"cannot listen on {self.options.endpoint}: {exc.strerror or exc}: choose another "
-                             "port (--opcua opc.tcp://127.0.0.1:PORT)") from None
+        except OSError as exc:   # taken since the check
+            raise self._taken(exc) from None
+        finally:
+            quiet.disabled = False
         self.core.manager.watch(self._on_change)
         self._refresher = asyncio.create_task(self._refresh_loop())
         for r in await asyncio.to_thread(self.core.manager.list, SYSTEM, status="active",
                                          limit=self.options.max_run_nodes):
             self._changed.put_nowait(r["id"])
+
+    def _taken(self, exc: OSError) -> OpcUaError:
+        return OpcUaError(f"cannot listen on {self.options.endpoint}: {exc.strerror or exc}: choose another "
+                          "port (--opcua-endpoint opc.tcp://127.0.0.1:PORT)")
+
+    def _free_port(self) -> None:
+        """:class:`OpcUaError` now if the endpoint's port cannot be bound (another server holds it)."""
+        try:
+            family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+            with socket.socket(family, socket.SOCK_STREAM) as probe:
+                probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as asyncio's server will
+                probe.bind((self.host, self.port))
+        except OSError as exc:
+            raise self._taken(exc) from None
 
     async def stop(self) -> None:
         if self._refresher is not None:
