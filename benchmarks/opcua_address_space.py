@@ -7,6 +7,12 @@ the listing between the page's ``<!-- address-space -->`` markers.
 
     .venv/bin/python benchmarks/opcua_address_space.py
     .venv/bin/python benchmarks/opcua_address_space.py --write docs/opcua.md
+
+With ``--endpoint``, it browses a server of yours instead (as ``--token``'s cell or operator, with a
+client certificate the server trusts), and starts nothing:
+
+    .venv/bin/python benchmarks/opcua_address_space.py --endpoint opc.tcp://127.0.0.1:4840 \
+        --token opp_... --cert cell-1-pki/cert.der --key cell-1-pki/key.pem --app-uri urn:example:cell-1
 """
 
 from __future__ import annotations
@@ -46,11 +52,27 @@ def address_space() -> str:
         return asyncio.run(browse())
 
 
+def browse_yours(args) -> str:
+    async def browse() -> str:
+        async with CellClient(args.endpoint, args.token, certificate=args.cert, private_key=args.key,
+                              app_uri=args.app_uri) as cell:
+            return await listing(cell.client)
+
+    return asyncio.run(browse())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--write", type=Path, help="a page whose <!-- address-space --> block to replace")
+    ap.add_argument("--endpoint", help="browse this server instead of a throwaway one")
+    ap.add_argument("--token", help="with --endpoint: a cell's or an operator's token")
+    ap.add_argument("--cert", help="with --endpoint: the client's certificate (DER), trusted by the server")
+    ap.add_argument("--key", help="with --endpoint: its private key (PEM)")
+    ap.add_argument("--app-uri", default="urn:opportune:client", help="the application URI in the certificate")
     args = ap.parse_args()
-    text = address_space()
+    if args.endpoint and not (args.token and args.cert and args.key):
+        ap.error("--endpoint needs --token, --cert and --key")
+    text = browse_yours(args) if args.endpoint else address_space()
     if args.write is None:
         print(text)
         return
