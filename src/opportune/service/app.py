@@ -54,13 +54,13 @@ from opportune import __version__
 from opportune.policies.named import DEFAULT_POLICY, POLICIES
 from opportune.service import idempotency as idem
 from opportune.formats.problems import CONTROL_CHARS
-from opportune.service.auth import Authenticator, Principal
+from opportune.service.auth import Principal
 from opportune.service.config import Settings
+from opportune.service.core import build as build_core
 from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, is_json,
                                       new_reference, plan_not_found, unauthorized, unsupported_media_type)
 from opportune.service.events import Broker, stream
-from opportune.service.plans import PlanBook, check_upload, list_plans, may_see, store_plan
-from opportune.service.runs import RunManager
+from opportune.service.plans import accept_upload, list_plans, may_see
 from opportune.service.schemas import (BOWMAN8_IN2, GEARBOX_PLAN, GEARBOX_PLAN_ID, GEARBOX_YAML, CancelAnswer, CellList,
                                        Graph, Health, LookAnswer, OutcomeAnswer, PlanDetail, PlanList, PlanUploaded,
                                        Run, RunList, Ticket, Trace, complete_openapi, errors)
@@ -326,16 +326,12 @@ class SecurityHeaders:
 # ---------------------------------------------------------------- the application
 
 def create_app(settings: Settings | None = None, store: Store | None = None) -> FastAPI:
-    """The service's ASGI application over a store (created from ``settings.db_url`` if not given)."""
+    """The service's ASGI application over a store (created from ``settings.db_url`` if not given); its
+    :class:`~opportune.service.core.Core` is ``app.state.core``."""
     settings = settings or Settings()
-    store = store or Store(settings.db_url)
-    book = PlanBook(store, count_seconds=settings.count_seconds, memory_cap=settings.memory_cap,
-                    plan_share=settings.plan_share)
     broker = Broker()
-    auth = Authenticator(store, cache_seconds=settings.token_cache_seconds, ticket_seconds=settings.ticket_seconds)
-    manager = RunManager(store, book, size=settings.live_runs, notify=broker.notify,
-                         keep_answers=settings.idempotency_seconds, budget=settings.decision_budget,
-                         warm_up=settings.warm_up_seconds)
+    core = build_core(settings, store, notify=broker.notify)
+    store, book, auth, manager = core.store, core.book, core.auth, core.manager
 
     @asynccontextmanager
     async def lifespan(_app):
@@ -357,6 +353,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         docs_url=None, redoc_url=None, lifespan=lifespan,
     )
     app.state.store, app.state.manager, app.state.auth, app.state.broker = store, manager, auth, broker
+    app.state.core = core   # what another front end served beside this one shares (the OPC UA server)
     bearer = HTTPBearer(auto_error=False, description="A cell or operator token from `opportune token create`")
 
     # ------------------------------------------------------------ errors
@@ -482,25 +479,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
         if ctype and ctype.split(";")[0].strip().lower() in ("application/yaml", "application/x-yaml", "text/yaml") and not format:
             format = "yaml"
 
-        def work():
-            result, fmt, source = check_upload(raw, ctype, filename, format)
-            problems = [pr.to_dict() for pr in result.problems]
-            if not result.ok:
-                first = result.errors[0] if result.errors else None
-                raise ApiError(422, "invalid_plan",
-                               f"the plan has {len(result.errors)} error(s)" + (f"; first: {first}" if first else ""),
-                               "fix every problem listed (each has its line), then upload again",
-                               where=first.where if first else "body", extra={"problems": problems})
-            book.check_fits(result.plan)    # within its share of the server's memory, before it is stored
-            pid, created = store_plan(store, result, fmt, source, p.cell)
-            from opportune.formats.summary import summarize
-
-            return (201 if created else 200), {"id": pid, "name": result.plan.name, "created": created,
-                                               "format": fmt, "parts": list(result.plan.part_ids),
-                                               "units": result.plan.n_units, "summary": summarize(result.plan),
-                                               "warnings": [w for w in problems if w["severity"] == "warning"]}
-
-        status, body = await run_in_threadpool(work)
+        status, body = await run_in_threadpool(accept_upload, store, book, p, raw, ctype, filename, format)
         return JSONResponse(body, status_code=status)
 
     @app.get("/plans", tags=["plans"], operation_id="listPlans",

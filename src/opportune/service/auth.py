@@ -81,12 +81,22 @@ def create_token(store: Store, *, cell: str | None = None, operator: str | None 
     t = now()
     with store.write() as c:
         if cell is not None:
-            check_cell_name(cell)
-            if c.execute(select(cells.c.name).where(cells.c.name == cell)).first() is None:
-                c.execute(insert(cells).values(name=cell, created_at=t))
+            _ensure_cell(c, check_cell_name(cell), t)
         c.execute(insert(tokens).values(id=token_id, hash=hash_token(token), role="cell" if cell else "operator",
                                         cell=cell, label=operator or "", created_at=t))
     return token_id, token
+
+
+def _ensure_cell(c, cell: str, t: float) -> None:
+    if c.execute(select(cells.c.name).where(cells.c.name == cell)).first() is None:
+        c.execute(insert(cells).values(name=cell, created_at=t))
+
+
+def ensure_cell(store: Store, cell: str) -> None:
+    """Create the cell ``cell`` unless it exists (a cell that runs without a token of its own: the OPC UA
+    server's anonymous cell, for development).  :class:`TokenError` for a bad name."""
+    with store.write() as c:
+        _ensure_cell(c, check_cell_name(cell), now())
 
 
 def list_tokens(store: Store) -> list[dict]:

@@ -74,9 +74,42 @@ def serve(
                                           help="Most seconds a request may take to arrive whole (its line, headers "
                                                "and body, from its first byte or the connection's opening); a slower "
                                                "one's connection is closed"),
+    opcua: bool = typer.Option(False, "--opcua", help="Serve OPC UA too (at --opcua-endpoint), on the same runs"),
+    opcua_endpoint: str = typer.Option("opc.tcp://127.0.0.1:4840", "--opcua-endpoint", metavar="URL",
+                                       help="Where OPC UA listens (with --opcua)"),
+    http: bool = typer.Option(True, "--http/--no-http", help="Serve HTTP (--no-http: OPC UA alone)"),
+    opcua_pki: str = typer.Option("opcua-pki", "--opcua-pki",
+                                  help="The OPC UA certificates' folder: own/ the server's (made on first start), "
+                                       "trusted/ the clients' certificates"),
+    opcua_anonymous: Optional[str] = typer.Option(None, "--opcua-anonymous", metavar="CELL",
+                                                  help="Development only, on a loopback endpoint: accept anonymous "
+                                                       "OPC UA sessions without security, acting as cell CELL",
+                                                  show_default=False),
 ):
-    """Serve the sequencer over HTTP for robot cells, with the live dashboard at /."""
-    _require("sqlalchemy", "fastapi", "uvicorn")
+    """Serve the sequencer over HTTP for robot cells, with the live dashboard at /; with --opcua, over OPC UA too."""
+    if not opcua and (not http or opcua_anonymous is not None):
+        _fail("--no-http and --opcua-anonymous are for OPC UA: add --opcua")
+    _require("sqlalchemy", *(("fastapi", "uvicorn") if http else ()), *(("asyncua",) if opcua else ()))
+    options = None
+    if opcua:
+        if workers > 1:
+            _fail("--opcua serves from one process: use --workers 1 (several OPC UA servers cannot share a port)")
+        from pathlib import Path
+
+        from opportune.service.opcua import OpcUaError, OpcUaOptions
+
+        options = OpcUaOptions(endpoint=opcua_endpoint, pki=Path(opcua_pki), anonymous_cell=opcua_anonymous)
+        try:
+            options.checked()
+        except OpcUaError as exc:
+            _fail(str(exc))
+        if opcua_anonymous is not None:
+            from opportune.service.auth import TokenError, check_cell_name
+
+            try:
+                check_cell_name(opcua_anonymous)
+            except TokenError as exc:
+                _fail(f"--opcua-anonymous: {exc}")
     if workers > 1:
         from opportune.service.config import database_url
 
@@ -90,11 +123,23 @@ def serve(
     from opportune.service.server import safe_url, serve as run
 
     procs = f"; {workers} processes" if workers > 1 else ""
-    typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)}{procs})",
-               err=True)
-    run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers,
-        settings={"memory_cap": None if memory_cap is None else memory_cap << 20, "warm_up_seconds": warm_up_seconds,
-                  "sse_poll_seconds": poll_seconds, "request_seconds": request_seconds})
+    if http:
+        typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)}{procs})",
+                   err=True)
+    if options is not None:
+        typer.echo(f"opportune OPC UA server on {options.endpoint}  (certificates in {options.pki}; namespace "
+                   "urn:opportune:sequencer)", err=True)
+    try:
+        run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers,
+            settings={"memory_cap": None if memory_cap is None else memory_cap << 20,
+                      "warm_up_seconds": warm_up_seconds, "sse_poll_seconds": poll_seconds,
+                      "request_seconds": request_seconds}, opcua=options, http=http)
+    except Exception as exc:
+        from opportune.service.opcua import OpcUaError
+
+        if isinstance(exc, OpcUaError):
+            _fail(str(exc))
+        raise
 
 
 def token_create(

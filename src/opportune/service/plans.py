@@ -136,6 +136,29 @@ def store_plan(store: Store, result: CheckResult, fmt: str, source: str, owner: 
         return pid, store_it()
 
 
+def accept_upload(store: Store, book: "PlanBook", principal, raw: bytes, content_type: str | None,
+                  filename: str | None = None, fmt: str | None = None) -> tuple[int, dict]:
+    """Check an uploaded plan as ``opportune check`` does, and store it for the principal's cell if it is
+    valid and fits its share of the server's memory; ``(201 if new to this cell else 200, the answer)``.
+    A plan with errors raises 422 ``invalid_plan`` listing every problem.  O(size of the plan)."""
+    result, fmt, source = check_upload(raw, content_type, filename, fmt)
+    problems = [pr.to_dict() for pr in result.problems]
+    if not result.ok:
+        first = result.errors[0] if result.errors else None
+        raise ApiError(422, "invalid_plan",
+                       f"the plan has {len(result.errors)} error(s)" + (f"; first: {first}" if first else ""),
+                       "fix every problem listed (each has its line), then upload again",
+                       where=first.where if first else "body", extra={"problems": problems})
+    book.check_fits(result.plan)    # within its share of the server's memory, before it is stored
+    pid, created = store_plan(store, result, fmt, source, principal.cell)
+    from opportune.formats.summary import summarize
+
+    return (201 if created else 200), {"id": pid, "name": result.plan.name, "created": created,
+                                       "format": fmt, "parts": list(result.plan.part_ids),
+                                       "units": result.plan.n_units, "summary": summarize(result.plan),
+                                       "warnings": [w for w in problems if w["severity"] == "warning"]}
+
+
 def may_see(store: Store, principal, pid: str) -> bool:
     """Whether ``principal`` may read and run plan ``pid``: an operator any stored plan, a cell the plans
     it uploaded.  One indexed read."""

@@ -141,14 +141,25 @@ class RunManager:
         self.book = book
         self.size = size
         self.notify = notify
+        self._watchers: list[Callable[[int], None]] = []   # more than the streams: e.g. the OPC UA server
         self.keep_answers = keep_answers  # seconds a stored idempotent answer is kept
         self._next_forget = 0.0           # monotonic time of the next clean-up of old answers
         self._live: OrderedDict[int, LiveRun] = OrderedDict()
         self._mutex = threading.Lock()
         self._last_used: dict[int, LoadedPlan] = {}   # per thread: the plan its current request used
         # PostgreSQL: wake this process's streams when another process commits (None on SQLite).
-        self.listener = store.listen(notify)
+        self.listener = store.listen(self._changed)
         book.on_evict.append(self._plan_evicted)
+
+    def watch(self, callback: Callable[[int], None]) -> None:
+        """Call ``callback(run_id)`` after every committed change of a run (this process's, and on PostgreSQL
+        the other processes'), besides ``notify``; from the thread that committed: it must return at once."""
+        self._watchers.append(callback)
+
+    def _changed(self, run_id: int) -> None:
+        self.notify(run_id)
+        for callback in self._watchers:
+            callback(run_id)
 
     def _plan_evicted(self, pid: str) -> None:
         """The book evicted a plan's engine: drop the live sequencers on it (those not in use now; the
@@ -392,7 +403,7 @@ class RunManager:
             raise
         with self._mutex:
             self._live[run_id] = live
-        self.notify(run_id)
+        self._changed(run_id)
         self.book.settle(loaded)
         return 201, text, False
 
@@ -514,7 +525,7 @@ class RunManager:
             raise
         live.applied = expected + 1
         self.store.announce(live.id)  # the other processes' streams (PostgreSQL)
-        self.notify(live.id)          # this process's
+        self._changed(live.id)        # this process's
         if self.reserves is not None and "decided" in marks:
             done = time.perf_counter()
             # the answer's counts take what the decision leaves: not reserved for
@@ -656,3 +667,11 @@ class RunManager:
                              .where(events.c.run_id == run_id, events.c.seq > after)
                              .order_by(events.c.seq).limit(limit)).all()
         return [(r.seq, r.kind, json.loads(r.response)) for r in rows]
+
+    def last_event(self, run_id: int) -> tuple[int, str, dict] | None:
+        """A run's last committed event ``(seq, kind, answer)``, or None if it has none (the caller has checked
+        access).  One indexed read."""
+        with self.store.read() as c:
+            r = c.execute(select(events.c.seq, events.c.kind, events.c.response).where(events.c.run_id == run_id)
+                          .order_by(events.c.seq.desc()).limit(1)).first()
+        return None if r is None else (r.seq, r.kind, json.loads(r.response))

@@ -146,11 +146,25 @@ def app_from_environment():
 
 
 def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool = True, workers: int = 1,
-          settings: dict | None = None) -> None:
+          settings: dict | None = None, opcua=None, http: bool = True) -> None:
     """Open the store, build the app and serve until interrupted; with ``workers`` > 1, that many processes
     sharing the port and the database (PostgreSQL: :func:`opportune.service.commands.serve` refuses SQLite).
-    ``settings``: further :class:`~opportune.service.config.Settings` fields by name."""
+    ``settings``: further :class:`~opportune.service.config.Settings` fields by name.  ``opcua``: an
+    :class:`~opportune.service.opcua.OpcUaOptions` to serve OPC UA too, on the same run manager (it
+    listens before HTTP does), or alone with ``http=False``."""
     settings = {"db_url": db_url, "max_body": max_body, **(settings or {})}
+    if not http:
+        from opportune.service.config import Settings
+        from opportune.service.core import build
+        from opportune.service.opcua import serve_alone
+
+        core = build(Settings(**settings))
+        try:
+            serve_alone(core, opcua, on_ready=lambda: logging.getLogger("opportune.service").warning(
+                "OPC UA on %s (database %s)", opcua.endpoint, safe_url(db_url)))
+        finally:
+            core.close()
+        return
     import uvicorn
 
     from opportune.service.protocol import REQUEST_SECONDS, Guarded
@@ -169,4 +183,13 @@ def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool 
 
     app = create_app(Settings(**settings))
     logging.getLogger("opportune.service").info("database %s", safe_url(db_url))
-    uvicorn.Server(uvicorn.Config(app, **common)).run()
+    beside = None
+    if opcua is not None:
+        from opportune.service.opcua import OpcUaThread
+
+        beside = OpcUaThread(app.state.core, opcua).start()
+    try:
+        uvicorn.Server(uvicorn.Config(app, **common)).run()
+    finally:
+        if beside is not None:
+            beside.stop()

@@ -52,13 +52,29 @@ def _healthy(url: str) -> bool:
         return False
 
 
+def _listening(port: int) -> bool:
+    """True if a TCP connection to 127.0.0.1:``port`` is accepted."""
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=1.0):
+            return True
+    except OSError:
+        return False
+
+
 class ServiceProcess:
     """``opportune serve`` on 127.0.0.1 over a SQLite file or a database URL; a context manager that
     always stops it.  With a URL, give ``log`` (where the server's output goes)."""
 
     def __init__(self, db: str | Path, *, max_body: int | None = None, log: str | Path | None = None,
-                 extra_args: tuple[str, ...] = (), workers: int = 1):
+                 extra_args: tuple[str, ...] = (), workers: int = 1, opcua: bool = False,
+                 pki: str | Path | None = None):
         self.db = str(db)
+        # with opcua=True, `--opcua` on a free loopback port too, its certificates in ``pki`` (default DB.pki)
+        self.opcua = opcua
+        self.pki = Path(pki) if pki else Path(str(db) + ".pki") if "://" not in str(db) else None
+        if opcua and self.pki is None:
+            raise ValueError("with a database URL and opcua=True, say where the certificates go: pki=PATH")
+        self.opcua_port: int | None = None
         self.workers = workers
         if log is None and "://" in self.db:
             raise ValueError("with a database URL, say where the server's log goes: log=PATH")
@@ -72,6 +88,10 @@ class ServiceProcess:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.port}"
 
+    @property
+    def opcua_endpoint(self) -> str:
+        return f"opc.tcp://127.0.0.1:{self.opcua_port}"
+
     def start(self, timeout: float = 30.0) -> "ServiceProcess":
         for _attempt in range(3):  # another process may take the free port first
             self.port = free_port()
@@ -81,6 +101,9 @@ class ServiceProcess:
                 args += ["--workers", str(self.workers)]
             if self.max_body:
                 args += ["--max-body", str(self.max_body)]
+            if self.opcua:   # it listens before HTTP does: a healthy server is listening on both
+                self.opcua_port = free_port()
+                args += ["--opcua", "--opcua-endpoint", self.opcua_endpoint, "--opcua-pki", str(self.pki)]
             log = open(self.log_path, "ab")
             # Its own process group: kill() reaches the workers of --workers N too.
             self.proc = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
@@ -90,7 +113,10 @@ class ServiceProcess:
             while time.monotonic() < deadline:
                 if self.proc.poll() is not None:
                     break
-                if _healthy(self.url + "/healthz") and (self.workers == 1 or len(self.worker_pids()) == self.workers):
+                if "--no-http" in self.extra_args:     # OPC UA alone: listening is being up
+                    if _listening(self.opcua_port):
+                        return self
+                elif _healthy(self.url + "/healthz") and (self.workers == 1 or len(self.worker_pids()) == self.workers):
                     return self
                 time.sleep(0.05)
             self.stop()
