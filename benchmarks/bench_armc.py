@@ -72,7 +72,7 @@ def speed_table(args) -> None:
             pairs = sparse_pairs(n, degree, seed=n * 100 + degree)
             p = Poset.from_pairs(n, pairs)
             wall, cpu = time.perf_counter(), time.process_time()
-            r = relaxmc.estimate(p, args.seconds, rel_error=args.rel_error, seed=0)
+            r = relaxmc.estimate(p, args.seconds, rel_error=args.rel_error, seed=0, threads=args.threads)
             wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
             ln = r.log10 * math.log(10)
             row = (f"{f'sparse k={degree} n={n}':<18} {wall:7.2f} {cpu:6.2f} {100 * r.rel_error:7.2f}% "
@@ -129,7 +129,7 @@ def coverage_table(args) -> None:
         covered, widths, times = 0, [], []
         for seed in range(args.runs):
             t = time.perf_counter()
-            r = relaxmc.estimate(p, args.seconds, rel_error=args.rel_error, seed=seed, k=k)
+            r = relaxmc.estimate(p, args.seconds, rel_error=args.rel_error, seed=seed, k=k, threads=args.threads)
             times.append(time.perf_counter() - t)
             widths.append(r.rel_error)
             covered += r.log10_low <= math.log10(true) <= r.log10_high
@@ -148,10 +148,12 @@ def main() -> None:
     ap.add_argument("--linext-timeout", type=float, default=120.0)
     ap.add_argument("--skip-speed", action="store_true")
     ap.add_argument("--skip-coverage", action="store_true")
+    ap.add_argument("--threads", type=int, default=os.cpu_count() or 1,
+                    help="threads that count and draw (default: one per core, as linext's armc and `opportune count`)")
     args = ap.parse_args()
     if not relaxmc.available():
         sys.exit("relaxation Monte Carlo needs the compiled core (pip install -e . with a compiler)")
-    print(f"load average {os.getloadavg()[0]:.2f} at the start; {os.cpu_count()} cores")
+    print(f"load average {os.getloadavg()[0]:.2f} at the start; {os.cpu_count()} cores, {args.threads} threads")
     if not args.skip_speed:
         speed_table(args)
     if not args.skip_coverage:
