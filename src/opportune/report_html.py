@@ -41,7 +41,7 @@ TABLE_COLUMNS = (
     ("ci_low", "95% interval, from", lambda s: s["time"]["ci95"][0], "{:.3f}"),
     ("ci_high", "to", lambda s: s["time"]["ci95"][1], "{:.3f}"),
     ("sd", "sd", lambda s: s["time"]["sd"], "{:.2f}"),
-    ("seconds", "mean seconds", lambda s: (s.get("seconds") or {}).get("mean"), "{:.1f}"),
+    ("cycle_seconds", "mean cycle s", lambda s: (s.get("cycle_seconds") or {}).get("mean"), "{:.1f}"),
     ("p5", "p5", lambda s: s["time"]["p5"], "{:g}"),
     ("p50", "median", lambda s: s["time"]["p50"], "{:g}"),
     ("p95", "p95", lambda s: s["time"]["p95"], "{:g}"),

@@ -181,15 +181,15 @@ class TrialResult:
     looks: int
     buffer_peak: int
     time: float
-    seconds: float = 0.0   # the cycle time in seconds of the study's cell model
+    cycle_seconds: float = 0.0   # the cycle time in seconds, in the study's cell model
     complete: bool = True
 
     def row(self) -> tuple:
         return (self.strategy, self.trial, self.motions, self.buffer_moves, self.shakes, self.looks,
-                self.buffer_peak, self.time, self.seconds, self.complete)
+                self.buffer_peak, self.time, self.cycle_seconds, self.complete)
 
 
-METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time", "seconds")
+METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time", "cycle_seconds")
 DECISION_CACHE_LIMIT = 200_000  # cached decisions per strategy and worker before starting afresh
 CACHE_PROBE_LOOKS = 2_000  # looks after which a decision cache that rarely answers is dropped
 CACHE_MIN_HITS = 0.2  # the share of looks a decision cache must answer to be kept
@@ -515,17 +515,17 @@ def run_trial_with_sequencer(strategy: str, engine: OrderEngine, config: StudyCo
             r.motions += 1
             r.time += config.costs.move(action.part)
             r.buffer_moves += action.kind == "buffer"
-            r.seconds += (config.cell.buffer_seconds(action.part) if action.kind == "buffer"
+            r.cycle_seconds += (config.cell.buffer_seconds(action.part) if action.kind == "buffer"
                           else config.cell.install_seconds(action.part, action.source or "bin"))
         elif action.kind == "shake":
             world.shake()
             r.shakes += 1
             r.time += config.costs.shake
-            r.seconds += config.cell.shake
+            r.cycle_seconds += config.cell.shake
         seq.report("success")
         r.buffer_peak = max(r.buffer_peak, len(seq.state.buffer))
     r.time += r.looks * config.costs.look
-    r.seconds += r.looks * config.cell.camera
+    r.cycle_seconds += r.looks * config.cell.camera
     r.complete = seq.state.is_complete
     return r
 
@@ -615,7 +615,7 @@ class StudyResult:
         """The trials as a pandas DataFrame, one row per trial of each strategy (the rows of ``trials.csv``).
 
         Columns: ``strategy``, ``trial``, the costs (``motions``, ``buffer_moves``, ``shakes``, ``looks``,
-        ``buffer_peak``, ``time``, ``seconds``) and ``complete``; trial ``i`` of every strategy saw the same bin, so
+        ``buffer_peak``, ``time``, ``cycle_seconds``) and ``complete``; trial ``i`` of every strategy saw the same bin, so
         ``df.pivot(index="trial", columns="strategy", values="time")`` pairs them.  Needs pandas
         (``pip install pandas``).
 
