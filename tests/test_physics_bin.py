@@ -10,12 +10,14 @@ import random
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from opportune import load_plan
 from opportune.cli import app
 from opportune.formats.loader import plan_from_dict
-from opportune.plan import PlanError
+from opportune.plan import MAX_DIMENSION, MIN_DIMENSION, PlanError
 from opportune.simulate import ALL_STRATEGIES, StudyConfig, StudyError, run_study
 from opportune.worlds import CellModel, make_world
 from opportune.worlds import physics
@@ -173,6 +175,19 @@ def test_geometry_in_plan_files_is_checked_with_a_clear_message():
         with pytest.raises(PlanError) as refused:
             plan_from_dict({"parts": [{"id": "p", "geometry": geometry}]})
         assert says in str(refused.value) and "geometry: {box: [x, y, z]}" in str(refused.value)
+
+
+@settings(max_examples=40, deadline=None)
+@given(shape=st.sampled_from(["box", "cylinder"]), dims=st.lists(st.floats(0.001, 0.8), min_size=3, max_size=3))
+def test_a_geometry_is_accepted_exactly_within_its_bounds(shape, dims):
+    dims = dims[:3 if shape == "box" else 2]
+    within = all(MIN_DIMENSION <= d <= MAX_DIMENSION for d in dims)
+    try:
+        plan = plan_from_dict({"parts": [{"id": "p", "geometry": {shape: dims}}]})
+    except PlanError as refused:
+        assert not within and "geometry" in str(refused)
+    else:
+        assert within and plan.part("p").geometry == (shape, tuple(dims))
 
 
 def test_simulate_runs_the_physical_bin_from_the_command_line(tmp_path):

@@ -303,10 +303,12 @@ class PhysicsBin(World):
 
     def _meets(self, unit: int, vec) -> list[bool]:
         """For each ray, whether it meets ``unit``'s part alone (nothing else in the way)."""
+        import numpy as np
+
         mujoco = require_mujoco()
         g = self._geom[unit]
         d, m = self.data, self.model
-        pnt = np_array(self.camera)
+        pnt = np.array(self.camera)
         return [mujoco.mju_rayGeom(d.geom_xpos[g], d.geom_xmat[g], m.geom_size[g], pnt, v.copy(),
                                    int(m.geom_type[g])) >= 0 for v in vec]
 
@@ -417,8 +419,3 @@ class PhysicsBin(World):
         """The MuJoCo geom id of a unit."""
         return self._geom[unit]
 
-
-def np_array(values):
-    import numpy as np
-
-    return np.array(values, dtype=float)
