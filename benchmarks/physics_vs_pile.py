@@ -5,7 +5,7 @@ Not a test: prints the table of docs/physics.md (markdown), the physical bin's t
 per trial, one core), and draws docs/img/physics-vs-pile.png.
 
     python benchmarks/physics_vs_pile.py [--trials N] [--abstract-trials N] [--workers W] [--plan example:gearbox]
-                                         [--summaries FILE]
+                                         [--summaries FILE] [--figure PNG]
 
 ``--summaries FILE`` keeps the three studies' summaries in FILE (JSON) and, when it exists, draws the figure
 and prints the table from it without running the studies again.
@@ -69,7 +69,7 @@ def figure(docs: dict, out: Path) -> None:
         fig.legend(handles=[Line2D([], [], linestyle="none", marker=STYLE[b][1], mfc="none", mec=STYLE[b][0], ms=3.0,
                                    label=f"{b} bin") for b in BINS],
                    loc="outside lower center", ncols=3, frameon=False)
-        fig.savefig(out.with_suffix(".png"), dpi=300, metadata={"Software": None})
+        fig.savefig(out, dpi=300, metadata={"Software": None})
 
 
 def main():
@@ -79,6 +79,7 @@ def main():
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--plan", default="example:gearbox")
     ap.add_argument("--summaries", type=Path, default=None)
+    ap.add_argument("--figure", type=Path, default=ROOT / "docs/img/physics-vs-pile.png")
     args = ap.parse_args()
     plan = load_plan(args.plan)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}")
@@ -105,9 +106,8 @@ def main():
             cells += [f"{s['time']['mean']:.2f} ± {half('time'):.2f}", f"{s['cycle_seconds']['mean']:.1f} ± {half('cycle_seconds'):.1f}"]
         cells.append(f"{docs['physics']['strategies'][name]['shakes']['mean']:.2f}")
         print(f"| {label(name)} | " + " | ".join(cells) + " |")
-    out = ROOT / "docs/img/physics-vs-pile"
-    figure(docs, out)
-    print(f"\nwrote {out}.png")
+    figure(docs, args.figure)
+    print(f"\nwrote {args.figure}")
 
 
 if __name__ == "__main__":
