@@ -96,7 +96,7 @@ def main():
         args.summaries.write_text(json.dumps(docs))
     names = sorted(docs["physics"]["strategies"], key=lambda n: docs["physics"]["strategies"][n]["cycle_seconds"]["mean"])
     print()
-    print("| strategy | " + " | ".join(f"{b}: time units | {b}: seconds" for b in BINS) + " | physics: shakes |")
+    print("| strategy | " + " | ".join(f"{b}: time units | {b}: cycle s" for b in BINS) + " | physics: shakes |")
     print("|---|" + "---:|" * (2 * len(BINS) + 1))
     for name in names:
         cells = []

@@ -143,7 +143,7 @@ def _model_xml(units: Sequence[str], geometry: Mapping[str, tuple], bin_size: Se
     length, width, height = bin_size
     hx, hy, t = length / 2, width / 2, _WALL
     walls = [(0, hy + t, 2 * t + hx, t), (0, -hy - t, 2 * t + hx, t), (hx + t, 0, t, hy), (-hx - t, 0, t, hy)]
-    xml = ['<mujoco><option timestep="%g" integrator="implicitfast"/>' % TIMESTEP,
+    xml = ['<mujoco><option timestep="%g" integrator="implicitfast" iterations="30" ls_iterations="10" tolerance="1e-6"/>' % TIMESTEP,
            '<default><geom friction="0.7 0.005 0.0001" solref="0.008 1" condim="3"/></default><worldbody>',
            '<geom name="floor" type="plane" size="0 0 1"/>']
     for i, (x, y, sx, sy) in enumerate(walls):
