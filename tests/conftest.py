@@ -256,6 +256,7 @@ LONGEST_FIRST = (
     "tests/test_openapi.py::test_schemathesis_finds_answers_as_documented",
     "tests/test_engine_count.py::test_salbp_decomposition_agrees_with_downsets",
     "tests/test_service_restart.py::test_kill_9_under_load",
+    "tests/test_physics_bin.py::test_every_policy_completes_on_the_physical_bin",
 )
 
 

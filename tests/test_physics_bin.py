@@ -258,3 +258,15 @@ def test_a_dask_cluster_gives_the_same_physical_trials():
                       host="127.0.0.1") as cluster:
         remote = run_study(config, dask_address=cluster.scheduler_address, chunk_size=2)
     assert [t.row() for t in local.trials["opportunistic"]] == [t.row() for t in remote.trials["opportunistic"]]
+
+
+def test_the_other_bins_never_load_mujoco():
+    """`make demo` installs no extra: a study in an abstract bin must not import MuJoCo (nor numpy for it)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from opportune import load_plan; from opportune.simulate import StudyConfig, run_study; "
+            "run_study(StudyConfig(load_plan('example:gearbox'), strategies=('opportunistic',), trials=5, bin='pile'), "
+            "workers=1); print('mujoco' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr
