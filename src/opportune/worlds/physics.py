@@ -128,9 +128,10 @@ def check_bin(units: Sequence[str], geometry: Mapping[str, tuple], bin_size: Seq
                                                                         for d in dims):
             raise PhysicsError(f"part '{part}': geometry {shape} {list(dims)} is not a box of 3 or a cylinder of 2 "
                                f"dimensions from {MIN_DIMENSION:g} to {MAX_DIMENSION:g} m")
-        smallest = min(dims) if shape == "box" else min(2 * dims[0], dims[1])
-        if smallest > min(length, width):
-            raise PhysicsError(f"part '{part}' ({shape} {list(dims)} m) cannot lie in a bin {length:g} × {width:g} m: "
+        # lying on its largest face (a cylinder on its side), its footprint must fit the bin's floor
+        footprint = sorted(dims)[1:] if shape == "box" else sorted((2 * dims[0], dims[1]))
+        if footprint[1] > max(length, width) or footprint[0] > min(length, width):
+            raise PhysicsError(f"part '{part}' ({shape} {list(dims)} m) cannot lie flat in a bin {length:g} × {width:g} m: "
                                "make the bin larger (simulation.physics.bin) or check the part's geometry")
     for part in units:
         volume += _volume(geometry.get(part, DEFAULT_GEOMETRY))
