@@ -258,6 +258,7 @@ LONGEST_FIRST = (
     "tests/test_service_restart.py::test_kill_9_under_load",
     "tests/test_opcua.py::test_kill_9_under_a_driving_opcua_client",
     "tests/test_opcua.py::test_table_1_over_opcua",
+    "tests/test_physics_bin.py::test_every_policy_completes_on_the_physical_bin",
 )
 
 

@@ -481,7 +481,9 @@ def simulate(
     strategies: Optional[str] = typer.Option(None, "--strategies", help="Comma-separated; default: all that apply"),
     trials: int = typer.Option(10_000, "--trials", min=1, help="Trials per strategy"),
     seed: int = typer.Option(0, "--seed", help="Seed: the same seed gives the same numbers on any number of workers"),
-    bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform, weighted, pile or conveyor (default: plan, else uniform)"),
+    bin_model: Optional[str] = typer.Option(
+        None, "--bin", help="uniform, weighted, pile, conveyor or physics (MuJoCo: parts heaped in a bin, seen through "
+                            "occlusion; pip install 'opportune[physics]') (default: plan, else uniform)"),
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
     buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, help="Buffer locations (default: unlimited)"),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)"),
@@ -530,7 +532,7 @@ def simulate(
 
     from opportune.simulate import (COUNTING_STRATEGIES, OPTIMAL_BINS, STRATEGIES, StrategyUnavailable, StudyConfig,
                                     StudyError, prepare, run_study)
-    from opportune.worlds import TimeModel
+    from opportune.worlds import CellModel, TimeModel
 
     if (plan_file is None) == (from_results is None):
         fail("give a plan file, or --from results.json to run a recorded study again (not both)", 2, as_json=as_json)
@@ -569,6 +571,7 @@ def simulate(
         else:
             costs = TimeModel.from_plan(plan, motion=motion_cost, shake=shake_cost, look=look_cost)
             config = StudyConfig(
+                cell=CellModel.from_plan(plan),
                 plan=plan, strategies=tuple(dict.fromkeys(names)), trials=trials, seed=seed, bin=chosen_bin,
                 visible=visible or sim.get("visible", 2),
                 buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),

@@ -28,6 +28,12 @@ MAX_UNITS = 10_000          # install operations in all (the sum of the quantiti
 MAX_STRATEGIES = 64         # alternative strategies (checking compares every pair of them)
 MAX_CONSTRAINTS = 1_000_000  # declared constraints, over all strategies
 MAX_WEIGHT = 1_000_000      # a constraint's weight (the price of dropping it; > 0, default 1)
+# A part's shape in the physical bin (``geometry``), in metres: every dimension within these bounds,
+# so that a MuJoCo model built from any valid plan is neither degenerate nor larger than a cell.
+MIN_DIMENSION = 0.005
+MAX_DIMENSION = 0.5
+#: Shapes a part may have, with the number of dimensions each takes: edge lengths, radius and height.
+SHAPES = {"box": 3, "cylinder": 2}
 
 
 class PlanError(ValueError):
@@ -48,7 +54,9 @@ class Part:
 
     ``quantity`` identical, interchangeable units (e.g. 4 screws) share every
     constraint on the part.  ``acquire`` and ``install`` are handling costs (or
-    durations) used as tie-breaks and in timing.
+    durations) used as tie-breaks and in timing.  ``geometry`` is the part's shape in the physical
+    bin, ``("box", (x, y, z))`` (edge lengths) or ``("cylinder", (radius, height))`` in metres, or
+    ``None`` for the bin's default shape.
     """
 
     id: str
@@ -57,6 +65,7 @@ class Part:
     acquire: float = 1.0
     install: float = 1.0
     visibility: float = 1.0
+    geometry: tuple | None = None
 
     @property
     def label(self) -> str:
@@ -195,6 +204,8 @@ class Plan:
                              ("visibility", p.visibility))
                 if v is not None and v != Part.__dataclass_fields__[k].default
             }
+            if p.geometry is not None:
+                extra["geometry"] = _geometry_dict(p.geometry)
             parts.append({"id": p.id, **extra} if extra else p.id)
         doc: dict = {"name": self.name}
         if self.description:
@@ -234,8 +245,14 @@ def make_plan(
 
 def _part_dict(p: Part) -> dict:
     d = {"id": p.id, "name": p.name, "quantity": p.quantity, "acquire": p.acquire, "install": p.install,
-         "visibility": p.visibility}
+         "visibility": p.visibility, "geometry": None if p.geometry is None else _geometry_dict(p.geometry)}
     return {k: v for k, v in d.items() if v is not None}
+
+
+def _geometry_dict(geometry: tuple) -> dict:
+    """A part's geometry as written in a file: ``{"box": [x, y, z]}``."""
+    shape, dims = geometry
+    return {shape: [_number(d) for d in dims]}
 
 
 def _number(value: float) -> int | float:

@@ -88,6 +88,7 @@ def summary(result: StudyResult) -> dict:
         "visible": cfg.visible,
         "buffer_capacity": cfg.buffer_capacity,
         "costs": cfg.costs.to_dict(),
+        "cell": cfg.cell.to_dict(),
         "trials": cfg.trials,
         "seed": cfg.seed,
         "interrupted": result.interrupted,
@@ -179,7 +180,7 @@ def write_outputs(result: StudyResult, out_dir: str | Path) -> list[Path]:
         for name, trials in result.trials.items():
             for t in trials:
                 w.writerow([name, t.trial, t.motions, t.buffer_moves, t.shakes, t.looks, t.buffer_peak,
-                            f"{t.time:g}", int(t.complete)])
+                            f"{t.time:g}", f"{t.cycle_seconds:.6g}", int(t.complete)])
     written.append(out / "trials.csv")
     written += plot(result, doc, out)
     return written
@@ -483,12 +484,14 @@ def table_rows(doc: dict) -> list[list[str]]:
         t = s["time"]
         ratio = s["ratio_to_optimal"]
         if not t["n"]:  # a study interrupted before any trial of this strategy finished
-            rows.append([name, "no trial finished", *["—"] * 7])
+            rows.append([name, "no trial finished", *["—"] * 8])
             continue
         half = (t["ci95"][1] - t["ci95"][0]) / 2
+        sec = s["cycle_seconds"]
         rows.append([
             name,
             f"{t['mean']:.2f} ± {half:.2f}",
+            f"{sec['mean']:.1f} ± {(sec['ci95'][1] - sec['ci95'][0]) / 2:.1f}",
             f"{t['sd']:.2f}",
             f"{t['p5']:g}/{t['p50']:g}/{t['p95']:g}",
             f"{t['max']:g}",
@@ -500,5 +503,5 @@ def table_rows(doc: dict) -> list[list[str]]:
     return rows
 
 
-TABLE_HEADER = ["strategy", "time (95% CI)", "sd", "p5/p50/p95", "max", "motions", "shakes", "buf peak",
+TABLE_HEADER = ["strategy", "time (95% CI)", "cycle s (95% CI)", "sd", "p5/p50/p95", "max", "motions", "shakes", "buf peak",
                 "× opt"]

@@ -41,6 +41,7 @@ TABLE_COLUMNS = (
     ("ci_low", "95% interval, from", lambda s: s["time"]["ci95"][0], "{:.3f}"),
     ("ci_high", "to", lambda s: s["time"]["ci95"][1], "{:.3f}"),
     ("sd", "sd", lambda s: s["time"]["sd"], "{:.2f}"),
+    ("cycle_seconds", "mean cycle s", lambda s: (s.get("cycle_seconds") or {}).get("mean"), "{:.1f}"),
     ("p5", "p5", lambda s: s["time"]["p5"], "{:g}"),
     ("p50", "median", lambda s: s["time"]["p50"], "{:g}"),
     ("p95", "p95", lambda s: s["time"]["p95"], "{:g}"),
@@ -52,6 +53,17 @@ TABLE_COLUMNS = (
     ("ratio", "× optimum", lambda s: s["ratio_to_optimal"], "{:.4f}"),
     ("paired", "paired difference", lambda s: (s.get("paired") or {}).get("mean_difference"), "{:+.3f}"),
 )
+
+def _cell_text(cell: dict) -> str:
+    """The cell model of a study, in one line (for the seconds column)."""
+    text = (f"robot {cell['speed']:g} m/s; bin–fixture {cell['bin_fixture']:g} m, bin–buffer {cell['bin_buffer']:g} m, "
+            f"buffer–fixture {cell['buffer_fixture']:g} m; pick {cell['pick']:g} s, place {cell['place']:g} s, "
+            f"install {cell['install']:g} s, look {cell['camera']:g} s, shake {cell['shake']:g} s")
+    if cell.get("parts"):
+        text += "; per part: " + ", ".join(f"{p} " + ", ".join(f"{k} {v:g} s" for k, v in sorted(t.items()))
+                                           for p, t in sorted(cell["parts"].items()))
+    return text
+
 
 _CSS = """
 body { font: 15px/1.45 system-ui, -apple-system, "Segoe UI", sans-serif; color: #111; max-width: 72rem;
@@ -107,10 +119,12 @@ def _setup_rows(result: StudyResult, doc: dict) -> list[tuple[str, str]]:
         ("bin", {"uniform": "uniform: every part in the bin equally likely to be seen",
                  "weighted": "weighted: parts seen in proportion to their visibility",
                  "pile": "pile: the top of a stacked pile is seen; a shake restacks it",
-                 "conveyor": "conveyor: parts pass a window and come round again"}.get(doc["bin"], doc["bin"])),
+                 "conveyor": "conveyor: parts pass a window and come round again",
+                 "physics": "physics: rigid parts heaped in a MuJoCo bin, seen through occlusion"}.get(doc["bin"], doc["bin"])),
         ("visible", f"{doc['visible']} parts per look"),
         ("buffer", "unlimited" if doc["buffer_capacity"] is None else f"{doc['buffer_capacity']} locations"),
         ("costs", cost_text + " (time units)"),
+        *([("cell", _cell_text(doc["cell"]))] if doc.get("cell") else []),
         ("trials", f"{doc['trials']:,} per strategy, the same bins for every strategy (trial i draws the same bin)"),
         ("seed", str(doc["seed"])),
         ("decisions", "exact" if cfg.decision_budget is None else

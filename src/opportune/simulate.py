@@ -32,7 +32,7 @@ from opportune.policies.base import Action
 from opportune.policies.named import DEFAULT_POLICY, POLICIES
 from opportune.policies.named import make_policy as make_named_policy
 from opportune.sequencer import State
-from opportune.worlds import PalletWorld, TimeModel, World, make_world
+from opportune.worlds import BIN_NAMES, CellModel, PalletWorld, TimeModel, World, make_world
 
 #: The study's default strategies: the paper's comparison, and the default policy beside the paper's rule.
 STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", DEFAULT_POLICY, "random",
@@ -77,13 +77,16 @@ class StudyConfig:
     count_time_limit: float = 10.0  # seconds the first look's exact counts may take (see prepare)
     max_steps: int | None = None
     decision_budget: float | None = None  # seconds per opportunistic decision (None: exact, reproducible)
+    cell: CellModel = field(default_factory=CellModel)  # the cell's times: cycle time in seconds
 
     def validate(self) -> "StudyConfig":
         unknown = [s for s in self.strategies if s not in ALL_STRATEGIES]
         if unknown:
             raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(ALL_STRATEGIES)}")
-        if self.bin not in ("uniform", "weighted", "pile", "conveyor"):
-            raise StudyError(f"unknown bin model '{self.bin}': use uniform, weighted, pile or conveyor")
+        if self.bin not in BIN_NAMES:
+            raise StudyError(f"unknown bin model '{self.bin}': use {', '.join(BIN_NAMES[:-1])} or {BIN_NAMES[-1]}")
+        if self.bin == "physics":
+            self._check_physics()
         if "optimal" in self.strategies and self.bin not in OPTIMAL_BINS:
             raise StudyError(f"'optimal' is defined for the uniform, weighted and pile bins, not '{self.bin}': "
                              "leave it out of --strategies or change --bin")
@@ -99,13 +102,32 @@ class StudyConfig:
             pass  # allowed: the buffer strategy then shakes like `shake`
         return self
 
+    def _check_physics(self) -> None:
+        """The physical bin's bounds on this plan, and MuJoCo, before any model is built."""
+        from opportune.worlds import physics as ph
+
+        settings = dict(self.plan.simulation.get("physics") or {})
+        units = [p.id for p in self.plan.parts for _ in range(p.quantity)]
+        try:
+            ph.check_bin(units, self.geometry, settings.get("bin", ph.DEFAULT_BIN),
+                         settings.get("settle_steps", ph.DEFAULT_SETTLE_STEPS),
+                         settings.get("visible_fraction", ph.VISIBLE_FRACTION))
+            ph.require_mujoco()
+        except ph.PhysicsError as exc:
+            raise StudyError(str(exc)) from None
+
+    @property
+    def geometry(self) -> dict[str, tuple]:
+        """Each part's shape in the physical bin, where the plan gives one."""
+        return {p.id: p.geometry for p in self.plan.parts if p.geometry is not None}
+
     def settings(self) -> dict:
         """The settings, the plan aside, as plain JSON values (``results.json``'s ``provenance.study``)."""
         return {"strategies": list(self.strategies), "trials": self.trials, "seed": self.seed, "bin": self.bin,
                 "visible": self.visible, "buffer_capacity": self.buffer_capacity, "costs": self.costs.to_dict(),
                 "training_runs": self.training_runs, "optimal_states": self.optimal_states,
                 "count_time_limit": self.count_time_limit, "max_steps": self.max_steps,
-                "decision_budget": self.decision_budget}
+                "decision_budget": self.decision_budget, "cell": self.cell.to_dict()}
 
     @classmethod
     def from_settings(cls, plan: Plan, settings: dict) -> "StudyConfig":
@@ -117,6 +139,8 @@ class StudyConfig:
                                         look=float(costs["look"]),
                                         parts={str(k): float(v) for k, v in dict(costs.get("parts") or {}).items()})
             values["strategies"] = tuple(str(s) for s in values["strategies"])
+            if "cell" in values:   # (a study recorded before cycle times in seconds has none: the defaults)
+                values["cell"] = CellModel.from_dict(values["cell"], plan.part_ids)
             unknown = set(values) - {f.name for f in fields(cls)}
             if unknown:
                 raise StudyError(f"unknown study setting(s): {', '.join(sorted(unknown))}")
@@ -157,14 +181,15 @@ class TrialResult:
     looks: int
     buffer_peak: int
     time: float
+    cycle_seconds: float = 0.0   # the cycle time in seconds, in the study's cell model
     complete: bool = True
 
     def row(self) -> tuple:
         return (self.strategy, self.trial, self.motions, self.buffer_moves, self.shakes, self.looks,
-                self.buffer_peak, self.time, self.complete)
+                self.buffer_peak, self.time, self.cycle_seconds, self.complete)
 
 
-METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time")
+METRICS = ("motions", "buffer_moves", "shakes", "looks", "buffer_peak", "time", "cycle_seconds")
 DECISION_CACHE_LIMIT = 200_000  # cached decisions per strategy and worker before starting afresh
 CACHE_PROBE_LOOKS = 2_000  # looks after which a decision cache that rarely answers is dropped
 CACHE_MIN_HITS = 0.2  # the share of looks a decision cache must answer to be kept
@@ -255,7 +280,8 @@ def _solver(engine, config):
 def _world(config: StudyConfig, prepared: Prepared, strategy: str = "") -> World:
     if strategy == "pallet":
         return PalletWorld(prepared.sequence)
-    return make_world(config.bin, visible=config.visible, weights=config.weights)
+    return make_world(config.bin, visible=config.visible, weights=config.weights, geometry=config.geometry,
+                      physics=config.plan.simulation.get("physics"))
 
 
 def make_policy(strategy: str, engine: OrderEngine, config: StudyConfig, prepared: Prepared):
@@ -315,6 +341,10 @@ class TrialRunner:
         self.cache: dict | None = {} if getattr(self.policy, "deterministic", False) else None
         self.transitions: dict = {}
         self.move = {p: self.costs.move(p) for p in engine.plan.part_ids}
+        cell = config.cell   # seconds of each motion, by what it does (op 0, 1, 2 of the trial loop)
+        self.seconds = [{p: cell.install_seconds(p, "bin") for p in engine.plan.part_ids},
+                        {p: cell.install_seconds(p, "buffer") for p in engine.plan.part_ids},
+                        {p: cell.buffer_seconds(p) for p in engine.plan.part_ids}]
         # The action without its reasons, on the machine form of the state, where the policy offers it.
         self._choose_at = getattr(self.policy, "choose_at", None)
         # A policy may say which situations it decides alike: fewer distinct keys, more cache hits.
@@ -387,7 +417,8 @@ class TrialRunner:
         full = engine.full
         mask, cons, buffer, installed = 0, engine.all_strategies, (), []
         motions = buffer_moves = shakes = looks = peak = 0
-        t = 0.0
+        t = secs = 0.0
+        seconds = self.seconds
         index = self.index
         limit = self.limit
         while mask != full:
@@ -421,24 +452,28 @@ class TrialRunner:
                 installed.append(part)
                 motions += 1
                 t += move[part]
+                secs += seconds[op][part]
             elif op == 2:  # buffer
                 take(part)
                 buffer = buffer + (part,)
                 motions += 1
                 buffer_moves += 1
                 t += move[part]
+                secs += seconds[2][part]
                 if len(buffer) > peak:
                     peak = len(buffer)
             elif op == 3:
                 world.shake()
                 shakes += 1
                 t += costs.shake
+                secs += self.config.cell.shake
             else:  # done before completion cannot happen; guard against a policy bug
                 raise RuntimeError(f"policy {self.strategy} said 'done' before the assembly was complete")
         t += looks * costs.look
+        secs += looks * self.config.cell.camera
         if cache is not None:
             self._review_cache(looks)
-        return TrialResult(self.strategy, trial, motions, buffer_moves, shakes, looks, peak, t, mask == full)
+        return TrialResult(self.strategy, trial, motions, buffer_moves, shakes, looks, peak, t, secs, mask == full)
 
 
 _OPS = {"buffer": 2, "shake": 3}
@@ -480,13 +515,17 @@ def run_trial_with_sequencer(strategy: str, engine: OrderEngine, config: StudyCo
             r.motions += 1
             r.time += config.costs.move(action.part)
             r.buffer_moves += action.kind == "buffer"
+            r.cycle_seconds += (config.cell.buffer_seconds(action.part) if action.kind == "buffer"
+                          else config.cell.install_seconds(action.part, action.source or "bin"))
         elif action.kind == "shake":
             world.shake()
             r.shakes += 1
             r.time += config.costs.shake
+            r.cycle_seconds += config.cell.shake
         seq.report("success")
         r.buffer_peak = max(r.buffer_peak, len(seq.state.buffer))
     r.time += r.looks * config.costs.look
+    r.cycle_seconds += r.looks * config.cell.camera
     r.complete = seq.state.is_complete
     return r
 
@@ -541,6 +580,8 @@ def hash_config(config: StudyConfig) -> str:
            "training": config.training_runs}
     if config.decision_budget is not None:   # another policy (an unbudgeted study keeps its hash)
         doc["budget"] = config.decision_budget
+    if config.cell != CellModel():   # another cell (a study in the default cell keeps its hash)
+        doc["cell"] = config.cell.to_dict()
     return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
 
 
@@ -574,7 +615,7 @@ class StudyResult:
         """The trials as a pandas DataFrame, one row per trial of each strategy (the rows of ``trials.csv``).
 
         Columns: ``strategy``, ``trial``, the costs (``motions``, ``buffer_moves``, ``shakes``, ``looks``,
-        ``buffer_peak``, ``time``) and ``complete``; trial ``i`` of every strategy saw the same bin, so
+        ``buffer_peak``, ``time``, ``cycle_seconds``) and ``complete``; trial ``i`` of every strategy saw the same bin, so
         ``df.pivot(index="trial", columns="strategy", values="time")`` pairs them.  Needs pandas
         (``pip install pandas``).
 

@@ -15,8 +15,8 @@ from functools import lru_cache
 
 from opportune.formats.loader import CheckResult, Document, file_stem
 from opportune.formats.problems import CONTROL_CHARS, Problem
-from opportune.plan import (MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS, MAX_WEIGHT, Part, Plan,
-                            Strategy)
+from opportune.plan import (MAX_CONSTRAINTS, MAX_DIMENSION, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS,
+                            MAX_WEIGHT, MIN_DIMENSION, SHAPES, Part, Plan, Strategy)
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
@@ -277,7 +277,9 @@ FIELD_HINTS = {
 
 _PART_ID = re.compile(r"^[^\s,#]+$")
 _PLAN_KEYS = frozenset({"name", "description", "source", "parts", "requires", "strategies"})
-_PART_KEYS = frozenset({"id", "name", "quantity", "acquire", "install", "visibility"})
+_PART_KEYS = frozenset({"id", "name", "quantity", "acquire", "install", "visibility", "geometry"})
+GEOMETRY_HINT = (f"write `geometry: {{box: [x, y, z]}}` (edge lengths) or `geometry: {{cylinder: [radius, height]}}`, "
+                 f"in metres, each from {MIN_DIMENSION:g} to {MAX_DIMENSION:g}")
 _STRATEGY_KEYS = frozenset({"name", "description", "requires"})
 
 
@@ -289,6 +291,15 @@ def _is_part_id(v) -> bool:
 
 def _is_cost(v, *, positive: bool = False) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and (v > 0 if positive else v >= 0)
+
+
+def _is_geometry(geometry) -> bool:
+    """True only if ``geometry`` is one shape of :data:`~opportune.plan.SHAPES` with its dimensions in bounds."""
+    if not (isinstance(geometry, dict) and len(geometry) == 1):
+        return False
+    (shape, dims), = geometry.items()
+    return (shape in SHAPES and isinstance(dims, list) and len(dims) == SHAPES[shape]
+            and all(_is_cost(d) and MIN_DIMENSION <= d <= MAX_DIMENSION for d in dims))
 
 
 def _is_requires(req) -> bool:
@@ -333,6 +344,8 @@ def _fits_schema(data: dict) -> bool:
                 return False
             if "visibility" in item and not _is_cost(item["visibility"], positive=True):
                 return False
+            if "geometry" in item and not _is_geometry(item["geometry"]):
+                return False
         elif not _is_part_id(item):
             return False
     if "requires" in data and not _is_requires(data["requires"]):
@@ -362,7 +375,8 @@ def _is_part(item) -> bool:
             and ("name" not in item or isinstance(item["name"], str))
             and isinstance(q, int) and not isinstance(q, bool) and 1 <= q <= MAX_QUANTITY
             and all(_is_cost(item[k]) for k in ("acquire", "install") if k in item)
-            and ("visibility" not in item or _is_cost(item["visibility"], positive=True)))
+            and ("visibility" not in item or _is_cost(item["visibility"], positive=True))
+            and ("geometry" not in item or _is_geometry(item["geometry"])))
 
 
 def _for_schema(data: dict) -> tuple[dict, dict[tuple, list[int]]]:
@@ -506,6 +520,14 @@ def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict 
                             "write `part: [before1, before2]` with part ids (no spaces or commas), or "
                             "`{part: before1, weight: 5}` for a weighted constraint", "type")]
         return [problem(f"{where}: {_describe(error.instance)} is not allowed here", "see the plan schema", "type")]
+    if "geometry" in path:
+        shown = _describe(error.instance)
+        what = {"minimum": f"{shown} is below {MIN_DIMENSION:g} m", "maximum": f"{shown} is above {MAX_DIMENSION:g} m",
+                "additionalProperties": f"{shown} is not a shape (box or cylinder)",
+                "maxProperties": f"{shown} gives more than one shape", "minProperties": "no shape is given",
+                "minItems": f"{shown} has too few dimensions", "maxItems": f"{shown} has too many dimensions",
+                }.get(v, f"{shown} is not a geometry")
+        return [problem(f"{where}: {what}", GEOMETRY_HINT, "geometry")]
     if v == "required":
         missing = error.message.split("'")[1] if "'" in error.message else error.message
         if missing == "parts":
@@ -568,7 +590,7 @@ def _read_parts(data: dict, doc: Document) -> tuple[list[Part], list[Problem]]:
             pid = str(item["id"])
             part = Part(id=pid, name=item.get("name"), quantity=int(item.get("quantity", 1)),
                         acquire=float(item.get("acquire", 1.0)), install=float(item.get("install", 1.0)),
-                        visibility=float(item.get("visibility", 1.0)))
+                        visibility=float(item.get("visibility", 1.0)), geometry=_geometry(item.get("geometry")))
         else:
             pid = str(item)
             part = Part(id=pid)
@@ -582,6 +604,14 @@ def _read_parts(data: dict, doc: Document) -> tuple[list[Part], list[Problem]]:
         first_at[pid] = i
         parts.append(part)
     return parts, problems
+
+
+def _geometry(geometry: dict | None) -> tuple | None:
+    """A checked ``geometry`` mapping as the part's ``(shape, dimensions)``."""
+    if geometry is None:
+        return None
+    (shape, dims), = geometry.items()
+    return (str(shape), tuple(float(d) for d in dims))
 
 
 def _read_strategies(data: dict, doc: Document, known: set[str],

@@ -1,7 +1,7 @@
 """Worlds the sequencer acts on: simulated bins (and their costs).  A real cell is reached through the service."""
 
-from opportune.worlds.bins import BINS, ConveyorBin, PalletWorld, PileBin, UniformBin, WeightedBin, World, make_world
-from opportune.worlds.costs import TimeModel
+from opportune.worlds.bins import BIN_NAMES, BINS, ConveyorBin, PalletWorld, PileBin, UniformBin, WeightedBin, World, make_world
+from opportune.worlds.costs import CellModel, TimeModel
 
-__all__ = ["BINS", "ConveyorBin", "PalletWorld", "PileBin", "TimeModel", "UniformBin", "WeightedBin", "World",
+__all__ = ["BIN_NAMES", "BINS", "CellModel", "ConveyorBin", "PalletWorld", "PileBin", "TimeModel", "UniformBin", "WeightedBin", "World",
            "make_world"]
