@@ -436,12 +436,141 @@ def _bounded_loader():
     return _loader_class
 
 
+# The plain YAML that :func:`_plain_yaml` reads: a key, a word (a part id), an integer, a decimal, and a
+# phrase (a name or a description: words, spaces and a few punctuation marks, starting with a letter).
+_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-/]*\Z")
+_INT = re.compile(r"-?(?:0|[1-9][0-9]{0,17})\Z")
+_DECIMAL = re.compile(r"-?[0-9]{1,15}\.[0-9]{1,15}\Z")
+_NUMBER = re.compile(r"-[0-9]")
+_PHRASE = re.compile(r"[A-Za-z][A-Za-z0-9_.,()&/\- ]*[A-Za-z0-9_.)]\Z")
+# words PyYAML reads as booleans or null in any case: such a document takes the full path
+_SPECIAL = {"yes", "no", "true", "false", "on", "off", "null", "y", "n"}
+PLAIN_MAX_CHARS = 65_536     # larger documents take the full path (its C parser is as quick there)
+PLAIN_MAX_DEPTH = 8
+
+
+def _plain_scalar(text: str, phrase: bool):
+    """A plain scalar as PyYAML's safe loader resolves it, or _NOT when it might resolve otherwise."""
+    if _KEY.match(text):
+        return _NOT if text.lower() in _SPECIAL else text
+    if _INT.match(text):
+        return int(text)
+    if _DECIMAL.match(text):
+        return float(text)
+    if phrase and _PHRASE.match(text) and "  " not in text and text.split(" ", 1)[0].lower() not in _SPECIAL:
+        return text
+    return _NOT
+
+
+_NOT = object()
+
+
+def _plain_yaml(text: str) -> tuple[dict, dict[tuple, int]] | None:
+    """The data and each value's line of a small YAML document in the plainest block style (what
+    :func:`parse_yaml` gives for it), or None for anything else, which then takes the full path.
+
+    Read: block mappings of plain keys, block sequences of scalars, one-line flow sequences of words
+    and numbers (``[a, b, c]``), plain words, integers, decimals and phrases, comments.  Anything
+    else, or anything that might read otherwise (quotes, tags, anchors, multi-line scalars, flow
+    mappings, booleans and nulls, repeated keys, tabs, several documents), is None: this path only
+    saves PyYAML's import (20 ms) on the plans most often counted; the tests compare it with PyYAML's
+    on generated and mutated documents.  O(len(text)), at most :data:`PLAIN_MAX_CHARS` characters.
+
+    >>> _plain_yaml("name: six\\nparts: [a, b]\\nrequires:\\n  b: [a]\\n")
+    ({'name': 'six', 'parts': ['a', 'b'], 'requires': {'b': ['a']}}, {(): 1, ('name',): 1, ('parts',): 2, ('parts', 0): 2, ('parts', 1): 2, ('requires',): 3, ('requires', 'b'): 4, ('requires', 'b', 0): 4})
+    """
+    if len(text) > PLAIN_MAX_CHARS or "\t" in text or "\r" in text:
+        return None
+    rows = []       # (line number, indent, content) of the lines that hold something
+    for number, line in enumerate(text.split("\n"), 1):
+        content = line.strip(" ")
+        if not content or content.startswith("#"):
+            continue
+        cut = content.find(" #")
+        if cut >= 0:
+            content = content[:cut].rstrip(" ")
+        if "#" in content or content.startswith(("---", "...")):
+            return None
+        rows.append((number, len(line) - len(line.lstrip(" ")), content))
+    if not rows or rows[0][2].startswith("-"):
+        return None
+    lines: dict[tuple, int] = {}
+    at = 0
+
+    def inline(content: str, path: tuple, number: int):
+        if content.startswith("["):
+            if not content.endswith("]"):
+                raise ValueError
+            inner = content[1:-1].strip(" ")
+            items = [] if not inner else [item.strip(" ") for item in inner.split(",")]
+            out = []
+            for i, item in enumerate(items):
+                value = _plain_scalar(item, False)
+                if value is _NOT:
+                    raise ValueError
+                lines[path + (i,)] = number
+                out.append(value)
+            return out
+        if ": " in content or content.endswith(":") or content.startswith("-") and not _NUMBER.match(content):
+            raise ValueError
+        value = _plain_scalar(content, True)
+        if value is _NOT:
+            raise ValueError
+        return value
+
+    def block(path: tuple, indent: int, depth: int):
+        nonlocal at
+        if depth > PLAIN_MAX_DEPTH:
+            raise ValueError
+        number, _, content = rows[at]
+        if content == "-" or content.startswith("- "):        # a block sequence
+            out = []
+            while at < len(rows) and rows[at][1] == indent and (rows[at][2] == "-" or rows[at][2].startswith("- ")):
+                number, _, content = rows[at]
+                item = content[1:].strip(" ")
+                if not item:
+                    raise ValueError
+                lines[path + (len(out),)] = number
+                out.append(inline(item, path + (len(out),), number))
+                at += 1
+            return out
+        out: dict = {}
+        while at < len(rows) and rows[at][1] == indent and not rows[at][2].startswith("-"):
+            number, _, content = rows[at]
+            key, colon, rest = content.partition(":")
+            if not colon or (rest and not rest.startswith(" ")) or not _KEY.match(key) or key.lower() in _SPECIAL \
+                    or key in out:
+                raise ValueError
+            rest = rest.strip(" ")
+            at += 1
+            lines[path + (key,)] = number
+            if rest:
+                out[key] = inline(rest, path + (key,), number)
+            elif at < len(rows) and (rows[at][1] > indent or rows[at][1] == indent and rows[at][2].startswith("-")):
+                out[key] = block(path + (key,), rows[at][1], depth + 1)
+            else:
+                raise ValueError        # null: the full path
+        return out
+
+    try:
+        lines[()] = rows[0][0]
+        data = block((), rows[0][1], 1)
+    except ValueError:
+        return None
+    if at != len(rows) or len(lines) > MAX_VALUES:
+        return None
+    return data, lines
+
+
 def parse_yaml(text: str, file: str | None = None) -> Document:
     """Safe-load YAML keeping each value's line; duplicate keys are problems (PyYAML would silently keep the last).
 
     Bounded (see the module's limits): depth, aliases, and the values the document expands to; an
     alias inside the value it names (``parts: &a [a, *a]``) is refused rather than followed forever.
     """
+    simple = _plain_yaml(text)
+    if simple is not None:      # the common small plan, read without PyYAML's import (a count's start-up)
+        return Document(simple[0], simple[1], file)
     import yaml  # here, not at the top: a SALBP graph or `--help` never needs PyYAML
 
     doc = Document(None, {}, file)
