@@ -300,6 +300,18 @@ class Lookahead(DecidesOnMasks):
                   visible: tuple[str, ...]) -> Action:
         if mask == engine.full:
             return DONE
+        if self.lookahead_budget is None:
+            return self._choose(engine, mask, consistent, buffer, free, visible)
+        # the whole budgeted decision with the collector paused, the programme's part and the base's:
+        # a full collection that started in it took 74 ms on a 1,000-task plan against 50
+        pause_collector()
+        try:
+            return self._choose(engine, mask, consistent, buffer, free, visible)
+        finally:
+            resume_collector()
+
+    def _choose(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                visible: tuple[str, ...]) -> Action:
         action = self._programme(engine, mask, consistent, buffer, visible)
         if action is not None:
             return action
