@@ -34,10 +34,10 @@ OPTIONS = {
                     "needed) an estimate with an interval")),
     "max_memo": ("--max-memo", int, 0, "Memo entries for an exact count before estimating (0: as many as "
                  "a quarter of the machine's memory holds)"),
-    "threads": ("--threads", int, 0, "Threads that draw when the count is estimated (0: one per core); the "
-                "estimate is the same for any number, but for a stop on the clock"),
+    "threads": ("--threads", int, 0, "Threads that count and draw when the count is estimated (0: one per "
+                "core); the estimate is the same for any number, but for a stop on the clock"),
 }
-#: Threads the estimate may draw on, at most (``--threads``).
+#: Threads the estimate may count and draw on, at most (``--threads``).
 MAX_THREADS = 256   # as opportune.engine.relaxmc.MAX_THREADS (not imported here: the help loads no engine)
 MIN_TIME_LIMIT = 0.1
 
@@ -129,7 +129,7 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
     """Count ``plan_file`` (a path or a ``salbp:``/``example:`` name) after ``after``, within ``time_limit``
     seconds in all, reading the plan included.  ``load(path)`` gives the plan (or does not return),
     ``fail(message, as_json=...)`` reports a user's mistake (and does not return), ``write(line)``
-    prints one line of the answer; ``threads``: threads that draw in an estimate (0: one per core).  See
+    prints one line of the answer; ``threads``: threads that count and draw in an estimate (0: one per core).  See
     :func:`opportune.engine.schedule.Schedule.count_result`."""
     from opportune.engine.deadline import Deadline
 

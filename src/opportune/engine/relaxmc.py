@@ -90,7 +90,7 @@ ENTRY_SECONDS = 0.5e-6
 STEP_SECONDS = 0.1e-6
 #: Share of the time the exact counts of the relaxations may take, over every ``k`` tried.
 COUNT_SHARE = 0.5
-#: Threads that draw, at most (the core's own bound).
+#: Threads that count and draw, at most (the core's own bound).
 MAX_THREADS = 256
 
 
@@ -302,8 +302,7 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     from where its draws stopped, and the two calls' draws make one run (the stopping rule's statement
     holds for the whole, which stopped on the clock once and went on), instead of starting over.
     ``count_share``: the share of the time the relaxations' exact counts may take, their own time
-    (None:
-    :data:`COUNT_SHARE`; the rest is for draws, and an order whose draws never hit spends it all
+    (None: :data:`COUNT_SHARE`; the rest is for draws, and an order whose draws never hit spends it all
     before it is found hopeless).  ``threads``: threads that count the pieces and draw (the counts,
     the draws and their outcomes are the same for any number: only a stop on the clock or the memory
     cap falls elsewhere; at most :data:`MAX_THREADS`).

@@ -1148,9 +1148,9 @@ class Schedule:
         ``1 <= count <= n!`` at the very least); ``rel_error`` is infinite when no error could be
         stated from the runs.  Building the inclusion–exclusion terms is inside the budget (a
         deadline between unions); building the engine's orders is the caller's (O(units + pairs)
-        big-int operations, ~0.1 s for 10,000 units).  ``threads``: threads that draw in relaxation
-        Monte Carlo (its draws and answer are the same for any number, but for a stop on the clock;
-        the exact phases use one).
+        big-int operations, ~0.1 s for 10,000 units).  ``threads``: threads that count and draw in
+        relaxation Monte Carlo (its counts, draws and answer are the same for any number, but for a
+        stop on the clock; the exact phases use one).
 
         >>> from opportune import make_plan
         >>> r = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).count_result(time_limit=1.0)

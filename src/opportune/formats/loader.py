@@ -447,6 +447,7 @@ _PHRASE = re.compile(r"[A-Za-z][A-Za-z0-9_.,()&/\- ]*[A-Za-z0-9_.)]\Z")
 _SPECIAL = {"yes", "no", "true", "false", "on", "off", "null", "y", "n"}
 PLAIN_MAX_CHARS = 65_536     # larger documents take the full path (its C parser is as quick there)
 PLAIN_MAX_DEPTH = 8
+_NOT = object()     # a scalar the plain path does not read
 
 
 def _plain_scalar(text: str, phrase: bool):
@@ -461,8 +462,6 @@ def _plain_scalar(text: str, phrase: bool):
         return text
     return _NOT
 
-
-_NOT = object()
 
 
 def _plain_yaml(text: str) -> tuple[dict, dict[tuple, int]] | None:
