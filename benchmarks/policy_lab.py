@@ -6,7 +6,8 @@ range of densities; seeded) and every plan file in ``--plans-dir``, each policy'
 time (:class:`~opportune.policies.evaluate.PolicyEvaluator` in the uniform bin,
 :class:`~opportune.policies.pile.PileSolver` in the pile) is divided by the optimum's, in every
 setting of ``--visible`` (1, 2, 3) × ``--capacities`` (1, 2, unlimited) × ``--bins`` (uniform, pile);
-the tables give the mean, median and largest gap per policy and setting, over all plans and over
+the tables give the mean, median and largest gap per policy and setting (``--table``, ``--readme``
+and ``--plot`` write them and the gap per setting), over all plans and over
 those with two strategies, and how many plans a setting skipped (the optimum over ``--max-states``
 states, or a plan's evaluation over ``--task-seconds``: said, never hidden).  Then the gearbox in
 every setting.  No Monte Carlo: every number is exact.
@@ -17,7 +18,9 @@ paired Monte Carlo instead: every policy runs on the same ``--paired-trials`` ra
 difference from the paper's rule with the 95% interval of that difference (Student's t).
 
     python benchmarks/policy_lab.py                    # 30 plans of 8-12 parts, every setting, then KILBRID and TONGE70
-    python benchmarks/policy_lab.py --plans 10 --visible 2 --capacities inf --bins uniform --plot docs/img/policy-gaps.png
+    python benchmarks/policy_lab.py --results lab.jsonl --table docs/policy-lab.md --readme README.md \
+        --plot docs/img/policy-lab.png --workers 2     # resumable; writes the tables and the figure
+    python benchmarks/policy_lab.py --plans 10 --visible 2 --capacities inf --bins uniform --policies lookahead
     python benchmarks/policy_lab.py --plans 0 --plans-dir my-plans/ --paired ""
     python benchmarks/policy_lab.py --plans 0 --paired salbp:KILBRID --paired-trials 400
 """
@@ -25,6 +28,7 @@ difference from the paper's rule with the 95% interval of that difference (Stude
 from __future__ import annotations
 
 import argparse
+import json
 import random
 import statistics
 import sys
@@ -68,7 +72,7 @@ def random_plan(rng: random.Random, n: int, strategies: int, density: float, lab
 
 
 def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
-         seconds: float | None = None) -> tuple[dict[str, float], float, int]:
+         seconds: float | None = None, only=None) -> tuple[dict[str, float], float, int]:
     """Each policy's exact expected time over the optimum's, less one; the optimum; its states.  Raises
     OptimalTooLarge past ``max_states`` states and OutOfTime past ``seconds`` (the whole plan)."""
     engine = OrderEngine(plan)
@@ -80,6 +84,8 @@ def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_
         best, states = optimum.value(), optimum.states
     out = {}
     for name, policy in policies(visible, capacity, bin).items():
+        if only is not None and name not in only:
+            continue
         ev = PileSolver(engine, policy, **settings) if bin == "pile" else PolicyEvaluator(engine, policy, **settings)
         ev.deadline = deadline
         value = ev.value()
@@ -91,9 +97,9 @@ def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_
 
 def _task(job):
     """One plan in one setting (a worker's job): (gaps, optimum, states) or the reason it was skipped."""
-    plan, visible, capacity, bin, max_states, seconds = job
+    plan, visible, capacity, bin, max_states, seconds, only = job
     try:
-        return gaps(plan, visible, capacity, bin, max_states=max_states, seconds=seconds)
+        return gaps(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only)
     except OptimalTooLarge:
         return f"over {max_states:,} states"
     except OutOfTime:
@@ -143,6 +149,148 @@ def setting_name(visible: int, capacity: int | None, bin: str) -> str:
     return f"{bin}, {visible} visible, buffer {'unlimited' if capacity is None else capacity}"
 
 
+POLICIES = ("paper", "bin-first", "slack", "lookahead")
+README_BEGIN = "<!-- policy-lab table: written by benchmarks/policy_lab.py --readme -->"
+README_END = "<!-- end of the policy-lab table -->"
+
+
+def _key(args, plan, setting) -> str:
+    """A job's identity in ``--results``: the plans' generator, the plan, the setting and the cap."""
+    visible, capacity, bin = setting
+    return (f"{args.seed}:{args.min_parts}-{args.max_parts}:{plan.name}:{visible}:"
+            f"{'inf' if capacity is None else capacity}:{bin}:{args.max_states}")
+
+
+def _record(plan, setting, r, two: bool) -> dict:
+    visible, capacity, bin = setting
+    out = {"plan": plan.name, "visible": visible, "capacity": capacity, "bin": bin, "two_strategies": two}
+    if isinstance(r, str):
+        out["skipped"] = r
+    else:
+        out.update(gaps=r[0], optimum=r[1], states=r[2])
+    return out
+
+
+def _run_jobs(jobs, args, done: dict, sink) -> None:
+    """Run the jobs not in ``done``, each reported as it finishes (a full run takes hours) and appended
+    to ``--results`` at once, so that an interrupted run goes on from where it stopped."""
+    todo = [j for j in jobs if j[0] not in done or ("skipped" in done[j[0]] and args.redo_skipped)]
+
+    def report(job, r) -> None:
+        key, plan, setting, two = job
+        rec = _record(plan, setting, r, two)
+        done[key] = rec
+        if isinstance(r, str):
+            print(f"{setting_name(*setting)}: {plan.name}: skipped ({r})", flush=True)
+        else:
+            print(f"{setting_name(*setting)}: {plan.name}: optimum {r[1]:.4f} ({r[2]:,} states); "
+                  + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in r[0].items()), flush=True)
+        if sink is not None:
+            sink.write(json.dumps({"key": key, **rec}) + "\n")
+            sink.flush()
+
+    tasks = [(plan, *setting, args.max_states, args.task_seconds, args.policies) for _, plan, setting, _ in todo]
+    if args.workers > 1 and len(todo) > 1:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(args.workers) as pool:
+            futures = {pool.submit(_task, t): job for t, job in zip(tasks, todo)}
+            for f in as_completed(futures):
+                report(futures[f], f.result())
+    else:
+        for t, job in zip(tasks, todo):
+            report(job, _task(t))
+
+
+def setting_rows(records: list[dict], names) -> tuple[list[dict], list[str], list[dict]]:
+    """The evaluated gaps, the skipped plans (with why) and the gaps of the plans with two strategies."""
+    rows = [r["gaps"] for r in records if "gaps" in r]
+    skipped = [f"{r['plan']} ({r['skipped']})" for r in records if "skipped" in r]
+    multi = [r["gaps"] for r in records if "gaps" in r and r["two_strategies"]]
+    return [{n: g[n] for n in names} for g in rows], skipped, [{n: g[n] for n in names} for g in multi]
+
+
+def pct(x: float) -> str:
+    """A gap in percent; a rounding error's minus sign on an exact 0 is not shown."""
+    v = 100 * x
+    return f"{0.0 if abs(v) < 5e-4 else v:+.3f}%"
+
+
+def markdown(settings, per_setting, gear, names, n_plans: int) -> str:
+    """The lab's tables in Markdown: every setting's gaps over the plans, and the gearbox's."""
+    head = "| setting | plans | skipped | " + " | ".join(f"{n} mean | {n} max" for n in names) + " |"
+    lines = [head, "| --- | ---: | ---: | " + " | ".join("---: | ---:" for _ in names) + " |"]
+    for setting in settings:
+        rows, skipped, _ = per_setting[setting]
+        if not rows:
+            lines.append(f"| {setting_name(*setting)} | 0 | {len(skipped)} | " + " | ".join("— | —" for _ in names) + " |")
+            continue
+        s = summarise(rows)
+        lines.append(f"| {setting_name(*setting)} | {len(rows)} | {len(skipped)} | "
+                     + " | ".join(f"{pct(s[n][0])} | {pct(s[n][2])}" for n in names) + " |")
+    out = [f"Gap of each policy's exact expected time to the optimum's, over {n_plans} plans "
+           "(mean and largest); a plan is skipped only when its optimum's programme is over the lab's "
+           "state cap or time, and then listed below.", "", *lines]
+    skips = [(setting_name(*st), per_setting[st][1]) for st in settings if per_setting[st][1]]
+    if skips:
+        out += ["", "Skipped: " + "; ".join(f"{name}: {', '.join(s)}" for name, s in skips) + "."]
+    if gear:
+        out += ["", "The gearbox:", "",
+                "| setting | optimum | " + " | ".join(names) + " |",
+                "| --- | ---: | " + " | ".join("---:" for _ in names) + " |"]
+        for setting in settings:
+            r = gear.get(setting)
+            if r is None:
+                continue
+            if "skipped" in r:
+                out.append(f"| {setting_name(*setting)} | skipped ({r['skipped']}) | " + " | ".join("—" for _ in names) + " |")
+            else:
+                out.append(f"| {setting_name(*setting)} | {r['optimum']:.4f} | "
+                           + " | ".join(pct(r['gaps'][n]) for n in names) + " |")
+    return "\n".join(out) + "\n"
+
+
+def replace_block(path: Path, text: str) -> None:
+    """Put ``text`` between the README's two markers of the lab's table (they must be there)."""
+    doc = path.read_text()
+    if README_BEGIN not in doc or README_END not in doc:
+        raise SystemExit(f"{path}: no lab markers ({README_BEGIN!r} ... {README_END!r}); add them where the table goes")
+    head, rest = doc.split(README_BEGIN, 1)
+    _, tail = rest.split(README_END, 1)
+    path.write_text(f"{head}{README_BEGIN}\n{text}{README_END}{tail}")
+
+
+def plot_settings(path: Path, settings, per_setting, names) -> None:
+    """One row per setting: each policy's mean gap (dot) and largest gap (end of its line)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams["svg.fonttype"] = "none"
+    shown = [st for st in settings if per_setting[st][0]]
+    fig, ax = plt.subplots(figsize=(7, 0.28 * len(shown) + 1.2), dpi=150)
+    for j, name in enumerate(names):
+        for i, st in enumerate(shown):
+            s = summarise(per_setting[st][0])[name]
+            y = i + (j - (len(names) - 1) / 2) * 0.18
+            ax.plot([100 * s[0], 100 * s[2]], [y, y], color=f"C{j}", lw=1)
+            ax.plot([100 * s[0]], [y], "o", color=f"C{j}", ms=3.5, label=name if i == 0 else None)
+    ax.set_yticks(range(len(shown)), [f"{setting_name(*st)} ({len(per_setting[st][0])})" for st in shown], fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xscale("symlog", linthresh=0.01)
+    ax.set_xlabel("gap to the optimum (%): mean (dot) to largest (line end)", fontsize=8)
+    ax.axvline(0, color="grey", lw=0.6)
+    ax.tick_params(axis="x", labelsize=7)
+    ax.set_xlim(left=-0.002)   # gaps are never below 0 but by rounding
+    ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(names), frameon=False)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, metadata={"Date": None} if path.suffix == ".pdf" else None)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--plans", type=int, default=30)
@@ -152,17 +300,26 @@ def main(argv=None) -> int:
     ap.add_argument("--visible", default="1,2,3", help="parts visible per look, comma-separated")
     ap.add_argument("--capacities", default="1,2,inf", help="buffer capacities, comma-separated (inf: unlimited)")
     ap.add_argument("--bins", default="uniform,pile", help="bins, comma-separated (uniform, pile)")
+    ap.add_argument("--policies", default=",".join(POLICIES), help="policies evaluated against the optimum, comma-separated")
     ap.add_argument("--max-states", type=int, default=2_000_000, help="states of one exact programme, at most")
     ap.add_argument("--task-seconds", type=float, default=600.0, help="seconds for one plan in one setting, at most")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (plans x settings, and the paired studies)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--plot", type=Path, help="write a dot plot of each policy's gap per plan here (PNG or PDF), "
-                    "for the first setting")
+    ap.add_argument("--results", type=Path, help="append every plan-setting's result here (JSON lines) and skip "
+                    "those already there: an interrupted run goes on where it stopped")
+    ap.add_argument("--redo-skipped", action="store_true", help="run again the plan-settings --results has as skipped")
+    ap.add_argument("--table", type=Path, help="write the tables in Markdown here")
+    ap.add_argument("--readme", type=Path, help="put the every-setting table between the lab's markers in this file")
+    ap.add_argument("--plot", type=Path, help="write the gap per setting here (PNG or PDF)")
     ap.add_argument("--paired", default="salbp:KILBRID,salbp:TONGE70",
                     help="plans compared by paired Monte Carlo (comma-separated; empty: none)")
     ap.add_argument("--paired-trials", type=int, default=200)
     ap.add_argument("--paired-visible", type=int, default=2, help="parts visible per look in the paired studies")
     args = ap.parse_args(argv)
+    args.policies = tuple(p for p in args.policies.split(",") if p)
+    unknown = set(args.policies) - set(POLICIES)
+    if unknown or not args.policies:
+        ap.error(f"--policies: unknown {', '.join(sorted(unknown)) or '(none given)'}; choose from {', '.join(POLICIES)}")
     settings = [(v, None if c == "inf" else int(c), b) for b in args.bins.split(",")
                 for v in map(int, args.visible.split(",")) for c in args.capacities.split(",")]
 
@@ -182,41 +339,31 @@ def main(argv=None) -> int:
                 plans.append(plan)
                 if len(plan.strategies) > 1:
                     two.add(len(plans) - 1)
+    gear = load_plan(GEARBOX)
     t0 = time.perf_counter()
-    jobs = [(plan, *setting, args.max_states, args.task_seconds) for setting in settings for plan in plans]
-    results = []
+    jobs = [(_key(args, plan, s), plan, s, i in two) for s in settings for i, plan in enumerate(plans)]
+    gear_jobs = [(_key(args, gear, s), gear, s, False) for s in settings] if args.plans else []
+    done: dict[str, dict] = {}
+    if args.results is not None and args.results.exists():
+        for line in args.results.read_text().splitlines():
+            if line.strip():
+                rec = json.loads(line)
+                done[rec.pop("key")] = rec
+    sink = None if args.results is None else args.results.open("a")
+    try:
+        _run_jobs(jobs + gear_jobs, args, done, sink)
+    finally:
+        if sink is not None:
+            sink.close()
 
-    def report(job, r) -> None:         # each plan in each setting as it is done (a full run takes hours)
-        plan, setting = job[0], setting_name(*job[1:4])
-        if isinstance(r, str):
-            print(f"{setting}: {plan.name}: skipped ({r})", flush=True)
-        else:
-            print(f"{setting}: {plan.name}: optimum {r[1]:.4f} ({r[2]:,} states); "
-                  + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in r[0].items()), flush=True)
-        results.append(r)
-
-    if args.workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
-
-        with ProcessPoolExecutor(args.workers) as pool:
-            for job, r in zip(jobs, pool.map(_task, jobs)):
-                report(job, r)
-    else:
-        for job in jobs:
-            report(job, _task(job))
+    names = list(args.policies)
+    per_setting = {}
     table = []
-    first_rows = []
-    for s_i, setting in enumerate(settings):
+    for setting in settings:
         name = setting_name(*setting)
-        rows, multi, skipped = [], [], []
-        for p_i, plan in enumerate(plans):
-            r = results[s_i * len(plans) + p_i]
-            if isinstance(r, str):
-                skipped.append(f"{plan.name} ({r})")
-                continue
-            rows.append(r[0])
-            if p_i in two:
-                multi.append(r[0])
+        recs = [done[key] for key, _, s, _ in jobs if s == setting]
+        rows, skipped, multi = setting_rows(recs, names)
+        per_setting[setting] = (rows, skipped, multi)
         if rows:
             print_summary(f"random plans{' and the folder' * bool(args.plans_dir)}, {name}", rows)
             table.append((name, len(rows), len(skipped), summarise(rows)))
@@ -224,54 +371,34 @@ def main(argv=None) -> int:
             print_summary(f"with two strategies, {name}", multi)
         if skipped:
             print(f"  skipped: {', '.join(skipped)}")
-        if s_i == 0:
-            first_rows = rows
     if table:
-        names = list(table[0][3])
         print(f"\nevery setting: gap to the optimum, mean / max (%), over the plans evaluated ({len(plans)} plans)")
         print(f"  {'setting':<36} {'plans':>5} {'skipped':>7}  " + "  ".join(f"{n:>17}" for n in names))
-        for name, done, skip, summ in table:
-            print(f"  {name:<36} {done:>5} {skip:>7}  "
+        for name, n_done, skip, summ in table:
+            print(f"  {name:<36} {n_done:>5} {skip:>7}  "
                   + "  ".join(f"{100 * summ[n][0]:>+8.3f} {100 * summ[n][2]:>+8.3f}" for n in names))
-
-    gear = load_plan(GEARBOX)
-    if args.plans:
+    gear_done = {s: done[key] for key, _, s, _ in gear_jobs}
+    if gear_done:
         print("\ngearbox: gap to the optimum per setting")
-        for visible, capacity, bin in settings:
-            r = _task((gear, visible, capacity, bin, args.max_states, args.task_seconds))
-            if isinstance(r, str):
-                print(f"  {setting_name(visible, capacity, bin):<36}: skipped ({r})")
-                continue
-            g, best, _ = r
-            print(f"  {setting_name(visible, capacity, bin):<36}: optimum {best:.4f}; "
-                  + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in g.items()))
-        print(f"\n{time.perf_counter() - t0:.0f} s")
-    rows = first_rows
+        for setting, r in gear_done.items():
+            if "skipped" in r:
+                print(f"  {setting_name(*setting):<36}: skipped ({r['skipped']})")
+            else:
+                print(f"  {setting_name(*setting):<36}: optimum {r['optimum']:.4f}; "
+                      + ", ".join(f"{p} {100 * r['gaps'][p]:+.3f}%" for p in names))
+    print(f"\n{time.perf_counter() - t0:.0f} s")
+    text = markdown(settings, per_setting, gear_done, names, len(plans))
+    if args.table:
+        args.table.parent.mkdir(parents=True, exist_ok=True)
+        args.table.write_text(text)
+        print(f"wrote {args.table}")
+    if args.readme:
+        replace_block(args.readme, text)
+        print(f"wrote the lab's table into {args.readme}")
+    if args.plot:
+        plot_settings(args.plot, settings, per_setting, names)
     for spec in filter(None, args.paired.split(",")):
         paired(spec, args)
-
-    if args.plot and rows:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        plt.rcParams["svg.fonttype"] = "none"
-        fig, ax = plt.subplots(figsize=(8, 3.6), dpi=150)
-        names = list(rows[0])
-        for j, name in enumerate(names):
-            ys = [100 * r[name] for r in rows]
-            xs = [j + (i - len(rows) / 2) * 0.6 / len(rows) for i in range(len(rows))]
-            ax.scatter(xs, ys, s=12, label=name)
-        ax.set_xticks(range(len(names)), names)
-        ax.set_ylabel("gap to the optimum (%)")
-        ax.set_title(f"exact expected time against the optimum, {len(rows)} random plans "
-                     f"({args.min_parts}-{args.max_parts} parts; {setting_name(*settings[0])})", fontsize=9)
-        ax.axhline(0, color="grey", lw=0.8)
-        fig.tight_layout()
-        args.plot.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(args.plot, metadata={"Date": None} if args.plot.suffix == ".pdf" else None)
-        print(f"wrote {args.plot}")
     return 0
 
 
