@@ -88,6 +88,14 @@ struct Bits {
         for (int i = 0; i < W; ++i) r.w[i] = w[i] & ~o.w[i];
         return r;
     }
+    // Whether the two sets meet, looking at word `first` first: where they meet there (an element's
+    // predecessors in the set tend to lie in the element's own word) the other W - 1 words are not read.
+    bool meets(const Bits& o, int first) const {
+        if (w[first] & o.w[first]) return true;
+        u64 x = 0;
+        for (int i = 0; i < W; ++i) x |= w[i] & o.w[i];
+        return x != 0;
+    }
     bool operator==(const Bits& o) const {
         for (int i = 0; i < W; ++i)
             if (w[i] != o.w[i]) return false;
@@ -898,8 +906,8 @@ class Counter {
         const bool want_min = dir_ != 1, want_max = dir_ != 0;
         s.each([&](int x) {
             ++k;
-            if (want_min && (below_[x] & s).none()) mins.set(x), ++nmin;
-            if (want_max && (above_[x] & s).none()) maxs.set(x), ++nmax;
+            if (want_min && !below_[x].meets(s, x >> 6)) mins.set(x), ++nmin;
+            if (want_max && !above_[x].meets(s, x >> 6)) maxs.set(x), ++nmax;
         });
         // A cut element is comparable to every minimal element of s: it is the only one, or above all
         // of them (and alike for maximal ones).  So only the elements above every minimal element
