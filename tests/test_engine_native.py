@@ -366,3 +366,31 @@ def test_counts_at_the_inline_boundaries_are_stored_and_summed_exactly(x, dx, y,
     whole = (1 << a) | (1 << b) | (1 << c) | (1 << d)
     assert core.count(whole, 0, -1, -1.0)[1] == x + y     # the minimal elements a, b removed: the two sets
     assert core.lookup(whole) == x + y
+
+
+@needs_core
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 7), density=st.floats(0.0, 0.7), seed=st.integers(0, 10**6),
+       n_total=st.sampled_from([7, 70, 150, 300]))
+def test_convex_sets_found_from_their_parents_equal_brute_force(n, density, seed, n_total):
+    """On a convex set (what remains of an order, or any interval of it) the core finds each child's
+    minimal (maximal) elements from its parent's and the covers of the removed element, instead of
+    scanning: the counts equal brute force and the scanned direction (2) on convex sets and on others,
+    on keys of 1 to 8 words (the order's elements spread over the words of a larger one)."""
+    rng = random.Random(seed)
+    small = random_poset(rng, n, density)
+    elems = spread(n_total, n, offset=rng.randrange(n_total))
+    p = Poset.from_pairs(n_total, [(elems[a], elems[b]) for a in range(n) for b in range(n) if small.less(a, b)])
+    done = 0                     # a random down-set: what remains is an up-set (convex)
+    for _ in range(rng.randrange(n + 1)):
+        ready = [i for i in range(n) if not done >> i & 1 and small.below[i] & ~done == 0]
+        done |= 1 << rng.choice(ready)
+    masks = [small.full, small.full & ~done]
+    lo, hi = rng.randrange(n), rng.randrange(n)     # an interval [lo, hi] (convex) and a random set
+    masks.append((small.above[lo] | 1 << lo) & (small.below[hi] | 1 << hi))
+    masks.append(rng.getrandbits(n))
+    for m in masks:
+        mask = sum(1 << elems[i] for i in range(n) if m >> i & 1)
+        expected = brute_force(small, m)
+        for direction in (0, 1, 2):
+            assert native.NativeCounter(p).count(mask, direction, -1, -1.0)[1] == expected, (m, direction)
