@@ -26,7 +26,9 @@ linext's estimate with ``--epsilon``/``--delta``.
     python benchmarks/vs_peers.py --json > peers.json
 
 Times depend on what else runs on the machine: run it alone.  The table states the load average
-before and after.
+before and after, and every process's CPU seconds (user and system, its children's included) beside
+its wall seconds: on a shared machine compare those (the last column does, engine CPU against the
+fastest exact peer's).  ``--no-armc`` skips linext's estimates (exact counts only).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ import os
 import platform
 import random
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -103,25 +106,33 @@ def write_files(folder: Path, name: str, n: int, pairs) -> tuple[Path, Path]:
     return plan, matrix
 
 
-def timed(argv: list[str], timeout: float, *, stderr: bool = False) -> tuple[float, str | None]:
-    """Wall seconds and the programme's standard output, followed by its standard error if ``stderr``
-    (None if killed at ``timeout`` or failed): linext writes ``LINEXT_LOG_COUNT`` to standard error."""
-    t0 = time.perf_counter()
+def children_cpu() -> float:
+    """CPU seconds (user and system) of the finished child processes so far."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def timed(argv: list[str], timeout: float, *, stderr: bool = False) -> tuple[float, float, str | None]:
+    """Wall and CPU seconds, and the programme's standard output followed by its standard error if
+    ``stderr`` (None if killed at ``timeout`` or failed): linext writes ``LINEXT_LOG_COUNT`` to
+    standard error."""
+    t0, c0 = time.perf_counter(), children_cpu()
     try:
         p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
-    except subprocess.TimeoutExpired:
-        return time.perf_counter() - t0, None
-    wall = time.perf_counter() - t0
-    return wall, ((p.stdout + p.stderr if stderr else p.stdout) if p.returncode == 0 else None)
+    except subprocess.TimeoutExpired:        # (run() kills and reaps it: its CPU time is counted)
+        return time.perf_counter() - t0, children_cpu() - c0, None
+    wall, cpu = time.perf_counter() - t0, children_cpu() - c0
+    return wall, cpu, ((p.stdout + p.stderr if stderr else p.stdout) if p.returncode == 0 else None)
 
 
 def run_opportune(plan: Path, time_limit: float) -> dict:
-    wall, out = timed([sys.executable, "-m", "opportune", "count", str(plan), "--json", "--time-limit",
-                       str(time_limit)], time_limit + 30)
+    wall, cpu, out = timed([sys.executable, "-m", "opportune", "count", str(plan), "--json", "--time-limit",
+                            str(time_limit)], time_limit + 30)
     if out is None:
-        return {"wall": wall, "exact": False, "log10": None}
+        return {"wall": wall, "cpu": cpu, "exact": False, "log10": None}
     doc = json.loads(out)
-    return {"wall": wall, "exact": doc["exact"], "log10": doc["log10"], "rel_error": doc.get("rel_error")}
+    return {"wall": wall, "cpu": cpu, "exact": doc["exact"], "log10": doc["log10"],
+            "rel_error": doc.get("rel_error")}
 
 
 def run_engine(n: int, pairs, time_limit: float) -> dict:
@@ -144,35 +155,35 @@ def run_engine(n: int, pairs, time_limit: float) -> dict:
 def run_linext(binary: str | None, matrix: Path, method: str, args) -> dict | None:
     if binary is None:
         return None
-    wall, out = timed([binary, str(matrix), method, str(args.epsilon), str(args.delta)], args.timeout,
-                      stderr=True)
+    wall, cpu, out = timed([binary, str(matrix), method, str(args.epsilon), str(args.delta)], args.timeout,
+                           stderr=True)
     if out is None:
-        return {"wall": wall, "log10": None}
+        return {"wall": wall, "cpu": cpu, "log10": None}
     found = re.findall(r"LINEXT_LOG_COUNT\s+(\S+)", out)
-    return {"wall": wall, "log10": float(found[-1]) / LN10 if found else None}
+    return {"wall": wall, "cpu": cpu, "log10": float(found[-1]) / LN10 if found else None}
 
 
 def run_lecount(binary: str | None, matrix: Path, args) -> dict | None:
     if binary is None:
         return None
-    wall, out = timed([binary, str(matrix), *args.lecount_args.split()], args.timeout, stderr=True)
+    wall, cpu, out = timed([binary, str(matrix), *args.lecount_args.split()], args.timeout, stderr=True)
     if out is None:
-        return {"wall": wall, "log10": None}
+        return {"wall": wall, "cpu": cpu, "log10": None}
     numbers = re.findall(r"\b\d+(?:\.\d+)?(?:[eE][+-]?\d+)?\b", out)
     if not numbers:
-        return {"wall": wall, "log10": None}
+        return {"wall": wall, "cpu": cpu, "log10": None}
     value = numbers[-1]
     log10 = (len(value) - 1 + math.log10(int(value[:17]) / 10 ** (min(len(value), 17) - 1))
              if value.isdigit() else math.log10(float(value)))
-    return {"wall": wall, "log10": log10}
+    return {"wall": wall, "cpu": cpu, "log10": log10}
 
 
 def cell(r: dict | None, *, exact: bool = True) -> str:
     if r is None:
         return "not given"
     if r.get("log10") is None:
-        return f"— ({r['wall']:.2f} s)"
-    return f"{r['log10']:.4f} {'' if exact else '≈'}({r['wall']:.2f} s)"
+        return f"— ({r['wall']:.2f} s; CPU {r['cpu']:.2f})"
+    return f"{r['log10']:.4f} {'' if exact else '≈'}({r['wall']:.2f} s; CPU {r['cpu']:.2f})"
 
 
 def verdict(ours: dict, engine: dict, peers: list[dict | None]) -> str:
@@ -189,6 +200,23 @@ def verdict(ours: dict, engine: dict, peers: list[dict | None]) -> str:
     return f"{'ahead' if mine <= best else 'behind'} ×{max(mine, best) / max(min(mine, best), 1e-6):.1f}"
 
 
+def cpu_verdict(ours: dict, engine: dict, peers: list[dict | None]) -> str:
+    """Engine CPU seconds against the fastest exact peer's process CPU seconds (what a shared machine
+    still compares fairly), and the process's too where either takes over a second."""
+    exact = [p for p in peers if p is not None and p.get("log10") is not None]
+    if not exact or not ours["exact"]:
+        return "—"
+    best = min(p["cpu"] for p in exact)
+
+    def ratio(mine: float) -> str:
+        return f"{'ahead' if mine <= best else 'behind'} ×{max(mine, best) / max(min(mine, best), 1e-3):.2f}"
+
+    out = f"engine {ratio(engine['cpu'])}"
+    if max(ours["cpu"], best) > 1:
+        out += f", process {ratio(ours['cpu'])}"
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--linext", help="path to a linext binary (built from its source)")
@@ -202,6 +230,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-generated", action="store_true", help="skip the generated and layered graphs")
     ap.add_argument("--sizes", default="40,50,64,80,100", help="sizes n of the random sparse orders")
     ap.add_argument("--degrees", default="3,5", help="average degrees k of the random sparse orders")
+    ap.add_argument("--no-armc", action="store_true", help="skip linext's estimates (armc): exact counts only")
     ap.add_argument("--json", action="store_true", help="one JSON object per order instead of the table")
     args = ap.parse_args(argv)
     for name, path in (("linext", args.linext), ("LEcount", args.lecount)):
@@ -217,26 +246,29 @@ def main(argv=None) -> int:
                    "opportune": run_opportune(plan, args.time_limit),
                    "engine": run_engine(n, pairs, args.time_limit),
                    "linext": run_linext(args.linext, matrix, "exact", args),
-                   "armc": run_linext(args.linext, matrix, "armc", args),
+                   "armc": None if args.no_armc else run_linext(args.linext, matrix, "armc", args),
                    "lecount": run_lecount(args.lecount, matrix, args)}
             logs = [r["log10"] for r in (row["opportune"], row["linext"], row["lecount"])
                     if r is not None and r.get("log10") is not None and (r is not row["opportune"] or r["exact"])]
             row["agree"] = all(abs(x - logs[0]) < 1e-6 * max(1.0, abs(logs[0])) for x in logs)
             row["verdict"] = verdict(row["opportune"], row["engine"], [row["linext"], row["lecount"]])
+            row["cpu_verdict"] = cpu_verdict(row["opportune"], row["engine"], [row["linext"], row["lecount"]])
             rows.append(row)
             if args.json:
                 print(json.dumps(row), flush=True)
     if args.json:
         return 0
     print(f"| order | n | pairs | opportune log10 (process s) | engine s (CPU s) | linext exact | linext armc "
-          f"(ε={args.epsilon:g}, δ={args.delta:g}) | LEcount | counts agree | opportune vs fastest peer |")
-    print("|---|---:|---:|---|---:|---|---|---|---|---|")
+          f"(ε={args.epsilon:g}, δ={args.delta:g}) | LEcount | counts agree | opportune vs fastest peer | "
+          f"by CPU |")
+    print("|---|---:|---:|---|---:|---|---|---|---|---|---|")
     for r in rows:
         o, e = r["opportune"], r["engine"]
         ours = cell(o, exact=o["exact"]) + ("" if o["exact"] else " estimate")
         print(f"| {r['order']} | {r['n']} | {r['pairs']} | {ours} | {e['wall']:.2f} ({e['cpu']:.2f}) | "
-              f"{cell(r['linext'])} | {cell(r['armc'], exact=False)} | {cell(r['lecount'])} | "
-              f"{'yes' if r['agree'] else 'NO'} | {r['verdict']} |")
+              f"{cell(r['linext'])} | {'skipped' if args.no_armc else cell(r['armc'], exact=False)} | "
+              f"{cell(r['lecount'])} | "
+              f"{'yes' if r['agree'] else 'NO'} | {r['verdict']} | {r['cpu_verdict']} |")
     print(f"\n{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; load average "
           f"{load0:.1f} at the start, {os.getloadavg()[0]:.1f} at the end; opportune --time-limit "
           f"{args.time_limit:g} s, peers stopped after {args.timeout:g} s")

@@ -301,3 +301,96 @@ def test_the_compiled_memo_starts_again_only_between_calls():
     assert len(resets) == 1                            # once, at its start (the memo was over its cap)
     c.clear()
     assert c._native.size() == 0
+
+
+def zigzag_numbers(n: int) -> list[int]:
+    """Euler's zigzag numbers E_0..E_n (the boustrophedon: no counting of orders), the number of linear
+    extensions of the fence a1 < a2 > a3 < a4 ... on n elements."""
+    out, row = [1], [1]
+    for _ in range(n):
+        new = [0]
+        for x in reversed(row):
+            new.append(new[-1] + x)
+        row = new
+        out.append(row[-1])
+    return out
+
+
+def spread(n_total: int, k: int, offset: int = 0) -> list[int]:
+    """``k`` distinct elements of ``0..n_total-1`` spread over every word of the set (stride ~ n/k)."""
+    step = max(1, n_total // k)
+    return [(offset + i * step) % n_total for i in range(k)]
+
+
+@needs_core
+@pytest.mark.parametrize("n_total", [64, 100, 200, 300])
+def test_fence_counts_cross_every_inline_boundary_on_every_width(n_total):
+    """Fences have Euler's zigzag numbers as counts: those of fences up to 60 elements run through 2^63,
+    2^64, 2^127, 2^128 and 2^192, so the memo's counts (and the sums of a set's children) cross each
+    boundary of the slots' inline counts, on keys of 1, 2, 4 and 8 words (the fence spread over the
+    words of a larger order).  Both directions, the pure-Python counter and brute force (small
+    fences) agree."""
+    k = 60
+    zig = zigzag_numbers(k)
+    assert zig[:8] == [1, 1, 1, 2, 5, 16, 61, 272]          # A000111
+    elems = spread(n_total, k, offset=3)
+    pairs = [(elems[i], elems[i + 1]) if i % 2 == 0 else (elems[i + 1], elems[i]) for i in range(k - 1)]
+    p = Poset.from_pairs(n_total, pairs)
+    core = native.NativeCounter(p)
+    for m in list(range(1, 9)) + [22, 23, 24, 25, 38, 39, 40, 51, 52, 53, k]:
+        mask = sum(1 << e for e in elems[:m])
+        for direction in (0, 1):
+            assert core.count(mask, direction, -1, -1.0)[1] == zig[m], (m, direction)
+        if m <= 8 and n_total == 64:
+            assert brute_force(p, mask) == zig[m]
+    assert Counter(p, native=False).count(sum(1 << e for e in elems)) == zig[k]
+
+
+@needs_core
+@settings(max_examples=40, deadline=None)
+@given(x=st.sampled_from([1, 2**63 - 1, 2**63, 2**64 - 1, 2**64, 2**127 - 1, 2**127, 2**128 - 1, 2**128,
+                          2**191, 2**192 - 1, 2**300 + 7]),
+       dx=st.integers(0, 3), y=st.integers(1, 2**200), n_total=st.sampled_from([4, 100, 200, 300]))
+def test_counts_at_the_inline_boundaries_are_stored_and_summed_exactly(x, dx, y, n_total):
+    """A count put in the memo comes back exact on both sides of every inline boundary (2^63 and 2^127:
+    a count below 2^127 sits in its slot, a larger one in the arena), and a set's count is the exact
+    sum of its children's (added in three words, carries past 2^128 and 2^192 included)."""
+    a, b, c, d = spread(n_total, 4, offset=1)
+    p = Poset.from_pairs(n_total, [(a, c), (b, c), (b, d)])     # N: connected, no cut element
+    core = native.NativeCounter(p)
+    x += dx
+    without_a, without_b = (1 << b) | (1 << c) | (1 << d), (1 << a) | (1 << c) | (1 << d)
+    core.put(without_a, x)
+    core.put(without_b, y)
+    assert core.lookup(without_a) == x and core.lookup(without_b) == y
+    whole = (1 << a) | (1 << b) | (1 << c) | (1 << d)
+    assert core.count(whole, 0, -1, -1.0)[1] == x + y     # the minimal elements a, b removed: the two sets
+    assert core.lookup(whole) == x + y
+
+
+@needs_core
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(2, 7), density=st.floats(0.0, 0.7), seed=st.integers(0, 10**6),
+       n_total=st.sampled_from([7, 70, 150, 300]))
+def test_convex_sets_found_from_their_parents_equal_brute_force(n, density, seed, n_total):
+    """On a convex set (what remains of an order, or any interval of it) the core finds each child's
+    minimal (maximal) elements from its parent's and the covers of the removed element, instead of
+    scanning: the counts equal brute force and the scanned direction (2) on convex sets and on others,
+    on keys of 1 to 8 words (the order's elements spread over the words of a larger one)."""
+    rng = random.Random(seed)
+    small = random_poset(rng, n, density)
+    elems = spread(n_total, n, offset=rng.randrange(n_total))
+    p = Poset.from_pairs(n_total, [(elems[a], elems[b]) for a in range(n) for b in range(n) if small.less(a, b)])
+    done = 0                     # a random down-set: what remains is an up-set (convex)
+    for _ in range(rng.randrange(n + 1)):
+        ready = [i for i in range(n) if not done >> i & 1 and small.below[i] & ~done == 0]
+        done |= 1 << rng.choice(ready)
+    masks = [small.full, small.full & ~done]
+    lo, hi = rng.randrange(n), rng.randrange(n)     # an interval [lo, hi] (convex) and a random set
+    masks.append((small.above[lo] | 1 << lo) & (small.below[hi] | 1 << hi))
+    masks.append(rng.getrandbits(n))
+    for m in masks:
+        mask = sum(1 << elems[i] for i in range(n) if m >> i & 1)
+        expected = brute_force(small, m)
+        for direction in (0, 1, 2):
+            assert native.NativeCounter(p).count(mask, direction, -1, -1.0)[1] == expected, (m, direction)

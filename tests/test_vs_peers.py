@@ -53,6 +53,22 @@ def test_the_side_by_side_table_reads_both_peers_and_agrees_with_them(tmp_path, 
         assert row["agree"], row
         assert math.isclose(row["lecount"]["log10"], row["opportune"]["log10"], abs_tol=1e-6)
         assert row["verdict"].startswith(("ahead", "behind"))
+        # CPU seconds beside wall seconds (what a shared machine compares fairly)
+        for r in (row["opportune"], row["engine"], row["linext"], row["lecount"], row["armc"]):
+            assert 0 <= r["cpu"] and 0 < r["wall"]
+        assert row["opportune"]["cpu"] > 0.01          # a Python process: its start-up alone takes that
+        assert row["cpu_verdict"].startswith(("engine ahead", "engine behind"))
+
+
+def test_exact_counts_only_skip_the_estimates_and_the_table_says_so(tmp_path, capsys):
+    import vs_peers
+
+    linext = fake(tmp_path, "linext", 'print("0.01 0.01 -- LINEXT_LOG_COUNT", math.log(count), file=sys.stderr)')
+    assert vs_peers.main(["--linext", linext, "--salbp", "", "--no-generated", "--sizes", "9", "--degrees", "2",
+                          "--time-limit", "5", "--no-armc"]) == 0
+    out = capsys.readouterr().out
+    row = [line for line in out.splitlines() if line.startswith("| sparse")][0].split(" | ")
+    assert row[6] == "skipped" and "CPU" in row[5] and row[-1].startswith("engine ")
 
 
 def test_a_peer_that_fails_shows_no_count(tmp_path, capsys):

@@ -7,7 +7,10 @@
 //   3. otherwise e(S) = sum over the minimal (direction 0) or maximal (direction 1) elements x of
 //      e(S \ {x}).
 // Sets are W-word bitsets (W = 1, 2, 4, 8, 16: up to 1024 elements); counts are unsigned big
-// integers kept as 64-bit limbs in one arena; the memo is an open-addressing hash table.  A call
+// integers of 64-bit limbs; the memo is an open-addressing hash table whose slots hold the key and
+// the count up to 4 words of key (counts past 127 bits in an arena), and past that the hash and
+// where key and count lie in the arena (see Slot).  A set's children found missing are counted
+// without a second look-up (see fresh).  A call
 // stops with a status (no exception crosses into Python) when it would add more than `max_new`
 // entries or outlive its time limit; what it stored stays, like the Python counter's memo.
 // The clock is read by work done, not by entries: every loop whose length depends on the input
@@ -17,8 +20,8 @@
 #include <pybind11/stl.h>
 
 #include <memory>
-#include <memory>
 #include <thread>
+#include <type_traits>
 #include <unordered_map>
 
 #include <algorithm>
@@ -84,6 +87,14 @@ struct Bits {
         Bits r;
         for (int i = 0; i < W; ++i) r.w[i] = w[i] & ~o.w[i];
         return r;
+    }
+    // Whether the two sets meet, looking at word `first` first: where they meet there (an element's
+    // predecessors in the set tend to lie in the element's own word) the other W - 1 words are not read.
+    bool meets(const Bits& o, int first) const {
+        if (w[first] & o.w[first]) return true;
+        u64 x = 0;
+        for (int i = 0; i < W; ++i) x |= w[i] & o.w[i];
+        return x != 0;
     }
     bool operator==(const Bits& o) const {
         for (int i = 0; i < W; ++i)
@@ -287,8 +298,10 @@ class Counter {
     py::tuple count(const std::string& mask, int direction, long long max_new, double seconds) {
         B s = unpack(mask);
         start_budget(max_new, seconds, direction);
+        convex_ = direction != 2 && convex(s);
+        if (convex_) make_covers();
         int status = 0;
-        Val v{0, 1};
+        Val v = one();
         {
             py::gil_scoped_release release;
             try {
@@ -306,17 +319,17 @@ class Counter {
 
     py::object lookup(const std::string& mask) const {
         B s = unpack(mask);
-        if (s.at_most_one()) return to_bytes(Val{0, 1});
+        if (s.at_most_one()) return to_bytes(one());
         const Slot* slot = find(s);
-        if (!slot->len) return py::none();
-        return to_bytes(Val{slot->off, (std::uint32_t)slot->len});
+        if (!full(*slot)) return py::none();
+        return to_bytes(val(*slot));
     }
 
     // Store the exact count of a set found by another method (the hub split, the down-set programme).
     void put(const std::string& mask, const std::string& value) {
         B s = unpack(mask);
         if (s.at_most_one() || value.empty() || value.size() % 8) return;
-        if (find(s)->len) return;
+        if (full(*find(s))) return;
         Limbs v(value.size() / 8);
         std::memcpy(v.data(), value.data(), value.size());
         trim(v);
@@ -328,7 +341,7 @@ class Counter {
     // decision never pays for the copy (a table of millions of slots takes tens of milliseconds).
     void reserve(long long more) {
         timed_ = false;
-        while (2 * (size_ + size_t(std::max(0LL, more))) > table_.size()) grow();
+        while (crowded(size_ + size_t(std::max(0LL, more)))) grow();
     }
 
     // ------------------------------------------------------------ tail distributions (hub.py)
@@ -353,6 +366,7 @@ class Counter {
         if ((s & tm.marks).none()) throw std::invalid_argument("the set holds no marked element");
         if (tm.bytes > TAIL_MAX_BYTES || tm.memo.size() > TAIL_BUCKETS) fresh_memo(tm);
         start_budget(max_new, seconds, 0);
+        convex_ = false;    // (tail sets are any sets: scanned)
         int status = 0;
         const Vec* r = nullptr;
         {
@@ -388,10 +402,9 @@ class Counter {
         arena_next_at_ = 0;
         table_ = Buffer<Slot>(1024);
         size_ = 0;
-        arena_ = Buffer<u64>(1 << 16);  // arena[0] = 1: the value of every set of at most one element and of chains
+        arena_ = Buffer<u64>(1 << 16);
         arena_cap_ = 1 << 16;
-        arena_[0] = 1;
-        arena_size_ = 1;
+        arena_size_ = 0;
     }
 
    private:
@@ -478,7 +491,7 @@ class Counter {
     Limbs count_of(const B& s) {
         if (s.at_most_one()) return Limbs{1};
         Val v = rec(s, 0);
-        return Limbs(arena_.data() + v.off, arena_.data() + v.off + v.len);
+        return Limbs(v.p, v.p + v.len);
     }
 
     static void mul_to(Limbs& a, const Limbs& b) {
@@ -653,26 +666,113 @@ class Counter {
         tick((long long)s.count() * W);     // every element was in one frontier
     }
 
+    // Whether the current count's set is convex (with a < b < c, a and c in the set, b is too): what
+    // remains of an order always is, and removing a minimal or maximal element, components and the
+    // blocks between cut elements keep it so.  Then fresh() finds a child's extremal elements from its
+    // parent's (see there).  Other sets (a caller's arbitrary mask, tail distributions) are scanned.
+    bool convex_ = false;
+    std::vector<B> covering_[2];    // [0][x]: the elements covering x; [1][x]: those x covers
+
+    bool convex(const B& s) const {     // O(|s| W)
+        B down = B::zero(), up = B::zero();
+        s.each([&](int x) {
+            down = down | below_[x];
+            up = up | above_[x];
+        });
+        return (down & up).without(s).none();
+    }
+    // Once, at the first convex count, outside the clock: O(n |below| W) word operations, at most 2^24
+    // (about 10 ms) on 1,024 elements.
+    void make_covers() {
+        if (!covering_[0].empty()) return;
+        covering_[0].assign(n_, B::zero());
+        covering_[1].assign(n_, B::zero());
+        for (int x = 0; x < n_; ++x) {
+            B deeper = B::zero();   // elements below something below x: not covered by x
+            below_[x].each([&](int y) { deeper = deeper | below_[y]; });
+            below_[x].without(deeper).each([&](int y) {
+                covering_[1][x].set(y);
+                covering_[0][y].set(x);
+            });
+        }
+    }
+
     static B single(int i) {
         B b = B::zero();
         b.set(i);
         return b;
     }
 
+    // A count: its limbs, little-endian, in a slot or in the arena.  Valid until the next store (which
+    // may move both): callers use it at once.
     struct Val {
-        u64 off;
+        const u64* p;
         std::uint32_t len;
     };
-    // 16 bytes, four to a cache line: the set's hash and where its entry lies in the arena (the set's
-    // W key words, then its count).  A look-up that misses reads one line of the table; a hit reads
-    // the entry's lines, which the caller reads for the count anyway.  (Slots that held the key took
-    // W + 2 words: two or three lines each past 4 words, read on every look-up.)
-    struct Slot {
+    static Val one() {
+        static const u64 kOne = 1;   // the count of every set of at most one element
+        return Val{&kOne, 1};
+    }
+
+    // Two layouts of a table slot (a zero-filled slot is empty in both):
+    //  * up to 4 words of key (orders of at most 256 elements): the key and the count inline, W + 2
+    //    words, so that a look-up reads one place of memory.  Counts below 2^127 (most sets: those of
+    //    mid-lattice sets of 64-element orders are far below it) sit in the slot; a larger one is in the
+    //    arena, and the slot holds its offset and (flagged with the top bit) its number of limbs.  The
+    //    empty set is never stored, so a zero key marks an empty slot.
+    //  * past 4 words: 16 bytes, four to a cache line: the set's hash and where its entry lies in the
+    //    arena (the set's W key words, then its count), so that a miss reads one line of the table,
+    //    not the two or three lines of a key of 8 or 16 words.
+    static constexpr bool INLINE = W <= 4;
+    static constexpr u64 BIG = u64(1) << 63;
+    struct SlotInline {
+        u64 key[W];
+        u64 v[2];   // the count (v[1] < 2^63), or: v[0] its offset in the arena, v[1] BIG | its limbs
+    };
+    struct SlotArena {
         u64 hash = 0;
         u64 off : 40;   // the count's first limb in the arena (its key is the W words before)
         u64 len : 24;   // limbs of the count; 0: empty
-        Slot() : off(0), len(0) {}
+        SlotArena() : off(0), len(0) {}
     };
+    using Slot = typename std::conditional<INLINE, SlotInline, SlotArena>::type;
+
+    static bool full(const Slot& sl) {
+        if constexpr (INLINE) {
+            u64 x = 0;
+            for (int i = 0; i < W; ++i) x |= sl.key[i];
+            return x != 0;
+        } else {
+            return sl.len != 0;
+        }
+    }
+    bool holds(const Slot& sl, const B& s, u64 h) const {   // a full slot: is its key s (hash h)?
+        if constexpr (INLINE) {
+            (void)h;
+            for (int i = 0; i < W; ++i)
+                if (sl.key[i] != s.w[i]) return false;
+            return true;
+        } else {
+            return sl.hash == h && key_at(sl) == s;
+        }
+    }
+    Val val(const Slot& sl) const {
+        if constexpr (INLINE) {
+            if (sl.v[1] & BIG) return Val{arena_.data() + sl.v[0], std::uint32_t(sl.v[1] & ~BIG)};
+            return Val{sl.v, sl.v[1] ? 2u : 1u};
+        } else {
+            return Val{arena_.data() + sl.off, std::uint32_t(sl.len)};
+        }
+    }
+    u64 slot_hash(const Slot& sl) const {
+        if constexpr (INLINE) {
+            B b;
+            for (int i = 0; i < W; ++i) b.w[i] = sl.key[i];
+            return b.hash();
+        } else {
+            return sl.hash;
+        }
+    }
 
     int n_;
     std::vector<B> below_, above_, nbr_;
@@ -700,14 +800,19 @@ class Counter {
         return b;
     }
     py::bytes to_bytes(Val v) const {
-        return py::bytes(reinterpret_cast<const char*>(arena_.data() + v.off), 8 * size_t(v.len));
+        return py::bytes(reinterpret_cast<const char*>(v.p), 8 * size_t(v.len));
     }
 
+    // Whether `entries` would fill the table past its load: three quarters for inline slots (their
+    // probes stay within a line or two), half for the 16-byte slots (whose probes read the arena too).
+    bool crowded(size_t entries) const {
+        return INLINE ? 4 * entries > 3 * table_.size() : 2 * entries > table_.size();
+    }
     const Slot* find(const B& s) const { return find(s, s.hash()); }
     const Slot* find(const B& s, u64 h) const {
         size_t m = table_.size() - 1;
         size_t i = h & m;
-        while (table_[i].len && !(table_[i].hash == h && key_at(table_[i]) == s)) i = (i + 1) & m;
+        while (full(table_[i]) && !holds(table_[i], s, h)) i = (i + 1) & m;
         return &table_[i];
     }
     Slot* find(const B& s) { return const_cast<Slot*>(static_cast<const Counter*>(this)->find(s)); }
@@ -728,9 +833,9 @@ class Counter {
             size_t j = next_at_;
             if (!(j & 1023)) tick(1024 * 2);     // before slot j is copied: a stop resumes at j
             const Slot& sl = table_[j];
-            if (!sl.len) continue;
-            size_t i = sl.hash & m;
-            while (next_[i].len) i = (i + 1) & m;
+            if (!full(sl)) continue;
+            size_t i = slot_hash(sl) & m;
+            while (full(next_[i])) i = (i + 1) & m;
             next_[i] = sl;
         }
         table_.swap(next_);
@@ -738,11 +843,41 @@ class Counter {
         next_at_ = 0;
     }
 
+    // A sum of counts: the counts of up to two limbs added in three words (no allocation, no loop),
+    // longer ones into a big integer; the total is both.
+    struct Sum {
+        u64 w[3] = {0, 0, 0};
+        void add(const Val& v, Limbs& big) {
+            if (v.len > 2) {
+                add_into(big, v.p, v.len);
+                return;
+            }
+            u128 t = (u128)w[0] + v.p[0];
+            w[0] = (u64)t;
+            t = (u128)w[1] + (v.len > 1 ? v.p[1] : 0) + (u64)(t >> 64);
+            w[1] = (u64)t;
+            w[2] += (u64)(t >> 64);
+        }
+    };
+
     Val store(const B& s, const Limbs& value) { return store(s, value, s.hash()); }
-    Val store(const B& s, const Limbs& value, u64 h) {   // h: s.hash()
+    Val store(const B& s, const Limbs& value, u64 h) { return store(s, value.data(), value.size(), h); }
+    // h: s.hash(); `value`: `len` limbs, the last nonzero (or one zero limb)
+    Val store(const B& s, const u64* value, size_t len, u64 h) {
         // grow first (either may stop the call, and then nothing of this entry is stored)
-        if (2 * (size_ + 1) > table_.size()) grow();
-        const size_t need = W + value.size();   // the key, then the count
+        if (crowded(size_ + 1)) grow();
+        if constexpr (INLINE) {
+            if (len <= 2 && !(len == 2 && (value[1] & BIG))) {
+                Slot* slot = const_cast<Slot*>(find(s, h));
+                std::memcpy(slot->key, s.w, W * sizeof(u64));
+                slot->v[0] = value[0];
+                slot->v[1] = len == 2 ? value[1] : 0;
+                ++size_;
+                return val(*slot);
+            }
+        }
+        // the key (in the arena past 4 words), then the count
+        const size_t need = (INLINE ? 0 : W) + len;
         if (arena_size_ + need > arena_cap_) {
             // copied in pieces with the clock read between them, and resumed by the next call
             // after a stop, like grow() (the arena does not change until the copy is done)
@@ -762,26 +897,46 @@ class Counter {
             arena_next_ = Buffer<u64>();
             arena_next_at_ = 0;
         }
-        std::memcpy(arena_.data() + arena_size_, s.w, W * sizeof(u64));
-        std::memcpy(arena_.data() + arena_size_ + W, value.data(), value.size() * sizeof(u64));
-        Val v{arena_size_ + W, (std::uint32_t)value.size()};
+        const size_t off = arena_size_ + (INLINE ? 0 : W);
+        if constexpr (!INLINE) std::memcpy(arena_.data() + arena_size_, s.w, W * sizeof(u64));
+        std::memcpy(arena_.data() + off, value, len * sizeof(u64));
         arena_size_ += need;
         Slot* slot = const_cast<Slot*>(find(s, h));
-        slot->hash = h;
-        slot->off = v.off;
-        slot->len = v.len;
+        if constexpr (INLINE) {
+            std::memcpy(slot->key, s.w, W * sizeof(u64));
+            slot->v[0] = off;
+            slot->v[1] = BIG | len;
+        } else {
+            slot->hash = h;
+            slot->off = off;
+            slot->len = len;
+        }
         ++size_;
-        return v;
+        return val(*slot);
     }
 
     Val rec(const B& s, int depth) { return rec(s, depth, s.hash()); }
     // h: s.hash(), computed once (a parent computed its children's for their look-ups already)
     Val rec(const B& s, int depth, u64 h) {
-        if (s.at_most_one()) return Val{0, 1};
+        if (s.at_most_one()) return one();
         {
             const Slot* slot = find(s, h);
-            if (slot->len) return Val{slot->off, (std::uint32_t)slot->len};
+            if (full(*slot)) return val(*slot);
         }
+        return fresh(s, depth, h);
+    }
+    // The count of s (of at least two elements), known not to be in the memo.  A child s \ {x} that
+    // the look-ups below found missing is counted here without looking again: nothing its siblings
+    // count can store it (all they visit lacks their own removed element, which it holds), and the
+    // look-up again, after a sibling's recursion evicted its slot, was a fifth of the time.
+    //
+    // `parent`, `removed`: s is parent's set less its extremal element `removed`, and `parent` the
+    // extremal elements of that set on the recursion's side (or null).  On a convex count (see
+    // convex_) the extremal elements of s are then found without scanning s: the parent's less the
+    // removed one, plus those of the elements covering it (covered by it) that nothing in s precedes
+    // (follows) -- one whose only predecessor in the parent's set was the removed element covers it,
+    // as anything between the two would be in the set.
+    Val fresh(const B& s, int depth, u64 h, const B* parent = nullptr, int removed = -1) {
         // budget: counted when a set is entered (every entered set is stored once finished)
         if (++added_ > max_new_) throw Stop{1};
 
@@ -790,13 +945,38 @@ class Counter {
         int k = 0, nmin = 0, nmax = 0;
         // only the side the recursion takes is scanned (both when it chooses per set)
         const bool want_min = dir_ != 1, want_max = dir_ != 0;
-        s.each([&](int x) {
-            ++k;
-            if (want_min && (below_[x] & s).none()) mins.set(x), ++nmin;
-            if (want_max && (above_[x] & s).none()) maxs.set(x), ++nmax;
+        if (parent) {
+            B& ext = dir_ == 0 ? mins : maxs;
+            const std::vector<B>& rel = dir_ == 0 ? below_ : above_;
+            ext = *parent;
+            ext.flip(removed);
+            int seen = 0;
+            (covering_[dir_][removed] & s).each([&](int y) {
+                ++seen;
+                if (!rel[y].meets(s, y >> 6)) ext.set(y);
+            });
+            k = s.count();
+            (dir_ == 0 ? nmin : nmax) = ext.count();
+            tick(4LL + 2LL * seen * W);
+        } else {
+            s.each([&](int x) {
+                ++k;
+                if (want_min && !below_[x].meets(s, x >> 6)) mins.set(x), ++nmin;
+                if (want_max && !above_[x].meets(s, x >> 6)) maxs.set(x), ++nmax;
+            });
+        }
+        // A cut element is comparable to every minimal element of s: it is the only one, or above all
+        // of them (and alike for maximal ones).  So only the elements above every minimal element
+        // (below every maximal one) are tested, when there are two or more: on sparse orders few or none.
+        B cand = s;
+        int tested = k;
+        if (want_min && nmin > 1) mins.each([&](int x) { cand = cand & above_[x]; });
+        if (want_max && nmax > 1) maxs.each([&](int x) { cand = cand & below_[x]; });
+        if (!(cand == s)) tested = cand.count();
+        cand.each([&](int x) {
             if (s.without(nbr_[x]).is_single(x)) cuts.set(x);
         });
-        tick(4LL + 4LL * k * W);
+        tick(4LL + 2LL * (k + tested + nmin + nmax) * W);
         // direction 2: per set, the side with fewer extremal elements
         const B& ext = dir_ == 0 ? mins : dir_ == 1 ? maxs : (nmax < nmin ? maxs : mins);
         Limbs& acc = acc_[depth];
@@ -812,7 +992,7 @@ class Counter {
             auto times = [&](const B& block) {
                 if (block.at_most_one()) return;
                 Val v = rec(block, depth + 1);
-                mul_into(acc, arena_.data() + v.off, v.len, tmp);
+                mul_into(acc, v.p, v.len, tmp);
                 acc.swap(tmp);
                 tick((long long)acc.size() * v.len);
             };
@@ -865,7 +1045,7 @@ class Counter {
             for (const B& c : comps) {
                 if (c.at_most_one()) continue;
                 Val v = rec(c, depth + 1);
-                mul_into(acc, arena_.data() + v.off, v.len, tmp);
+                mul_into(acc, v.p, v.len, tmp);
                 acc.swap(tmp);
                 tick((long long)acc.size() * v.len);
             }
@@ -885,44 +1065,54 @@ class Counter {
             hs.push_back(ht);
             __builtin_prefetch(&table_[ht & m]);
         });
-        for (u64 ht : hs) {
-            for (size_t j = ht & m; table_[j].len; j = (j + 1) & m) {
-                if (table_[j].hash == ht) {
-                    const u64* at = arena_.data() + table_[j].off;
-                    __builtin_prefetch(at - W);
-                    __builtin_prefetch(at);
-                    break;
+        if constexpr (!INLINE) {    // (inline slots hold the key and most counts: nothing more to fetch)
+            for (u64 ht : hs) {
+                for (size_t j = ht & m; table_[j].len; j = (j + 1) & m) {
+                    if (table_[j].hash == ht) {
+                        const u64* at = arena_.data() + table_[j].off;
+                        __builtin_prefetch(at - W);
+                        __builtin_prefetch(at);
+                        break;
+                    }
                 }
             }
         }
         acc.assign(1, 0);
+        Sum sum;
         B todo = B::zero();
         size_t i = 0, missed = 0;   // the hashes of the children still to count move to the front of hs
         ext.each([&](int x) {
             B t = s;
             t.flip(x);
             const u64 ht = hs[i++];
-            Val v{0, 1};
+            Val v = one();
             if (!t.at_most_one()) {
                 const Slot* slot = find(t, ht);
-                if (!slot->len) {
+                if (!full(*slot)) {
                     todo.set(x);
                     hs[missed++] = ht;
                     return;
                 }
-                v = Val{slot->off, (std::uint32_t)slot->len};
+                v = val(*slot);
             }
-            add_into(acc, arena_.data() + v.off, v.len);
+            sum.add(v, acc);
             tick(4LL + v.len);
         });
         i = 0;
+        const bool hinted = convex_ && dir_ != 2;
         todo.each([&](int x) {      // in the same order as above
             B t = s;
             t.flip(x);
-            Val v = rec(t, depth + 1, hs[i++]);
-            add_into(acc, arena_.data() + v.off, v.len);
+            Val v = fresh(t, depth + 1, hs[i++], hinted ? &ext : nullptr, x);
+            sum.add(v, acc);
             tick(4LL + v.len);
         });
+        if (acc.size() == 1 && acc[0] == 0 && !sum.w[2]) {     // the common case: no child past 128 bits
+            const u64 small[2] = {sum.w[0], sum.w[1]};
+            return store(s, small, sum.w[1] ? 2 : 1, h);
+        }
+        add_into(acc, sum.w, 3);
+        trim(acc);
         return store(s, acc, h);
     }
 };

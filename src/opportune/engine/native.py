@@ -33,7 +33,7 @@ CORE_MAX_ELEMENTS = 1024
 
 #: Bytes of memo the compiled counter holds for one order before it starts again (at the start of
 #: a top-level count; one count may add its ``max_memo`` entries on top), unless its counter was made
-#: for more entries (:attr:`NativeCounter.max_bytes`).  About 100 bytes an entry on orders of 50
+#: for more entries (:attr:`NativeCounter.max_bytes`).  About 60 bytes an entry on orders of 50
 #: elements, about 1.5 KB on orders of 1,000 (keys of 128 bytes, counts of ~1 KB): see
 #: :func:`entry_bytes`.
 MAX_BYTES = 400 * 2**20
@@ -47,14 +47,18 @@ except ImportError:     # pragma: no cover - depends on the build
 
 
 def entry_bytes(n: int) -> int:
-    """Bytes one entry of the compiled memo may take on an order of ``n`` elements, for budgets: its
-    table slot of 16 bytes three times over (the table is at most half full, and doubling holds both
-    tables for a moment), and in the arena its key (``n`` bits rounded up to 1, 2, 4, 8 or 16 words)
-    and a count of ``log2(n!)`` bits, once and a half (the arena doubles too).  Counts are smaller on
-    most sets, so real entries take less.  O(1).
+    """Bytes one entry of the compiled memo may take on an order of ``n`` elements, for budgets.
+
+    Up to 256 elements (keys of 1, 2 or 4 words) a table slot holds the key and a count of up to 127
+    bits (8 bytes a key word plus 16): twice over (the table is at most three quarters full, and
+    doubling holds both tables for a moment); a count of ``log2(n!)`` bits past 127 bits goes to
+    the arena, once and a half (the arena doubles too).  Past 256 elements a slot of 16 bytes three
+    times over (at most half full) and in the arena the key (8 or 16 words) and the count.  Counts
+    are smaller on most sets (most sit in their slot), so real entries take less: about 50-60 bytes
+    on sparse orders of 50-64 elements.  O(1).
 
     >>> entry_bytes(50), entry_bytes(300)
-    (108, 528)
+    (96, 528)
     """
     import math
 
@@ -62,6 +66,8 @@ def entry_bytes(n: int) -> int:
     while 64 * words < n:
         words *= 2
     limbs = max(1, -(-int(math.lgamma(n + 1) / math.log(2) + 1) // 64))
+    if words <= 4:
+        return 2 * (8 * words + 16) + (12 * limbs if limbs > 2 else 0)
     return 3 * 16 + 12 * (words + limbs)
 
 
