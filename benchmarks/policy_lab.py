@@ -174,7 +174,13 @@ def _record(plan, setting, r, two: bool) -> dict:
 def _run_jobs(jobs, args, done: dict, sink) -> None:
     """Run the jobs not in ``done``, each reported as it finishes (a full run takes hours) and appended
     to ``--results`` at once, so that an interrupted run goes on from where it stopped."""
-    todo = [j for j in jobs if j[0] not in done or ("skipped" in done[j[0]] and args.redo_skipped)]
+    def needed(key) -> bool:          # not run, skipped (with --redo-skipped), or without a policy asked for
+        rec = done.get(key)
+        if rec is None or "skipped" in rec:
+            return rec is None or args.redo_skipped
+        return not set(args.policies) <= set(rec["gaps"])
+
+    todo = [j for j in jobs if needed(j[0])]
 
     def report(job, r) -> None:
         key, plan, setting, two = job
