@@ -88,6 +88,19 @@ def elements(mask: int) -> list[int]:
     return list(bits(mask))
 
 
+def _apart(related: Sequence[int], mask: int) -> int:
+    """The members ``x`` of ``mask`` with nothing of ``mask`` in ``related[x]`` (the minimal elements
+    with ``below``, the maximal ones with ``above``).  O(popcount(mask))."""
+    out = 0
+    m = mask
+    while m:
+        low = m & -m
+        m ^= low
+        if not related[low.bit_length() - 1] & mask:
+            out |= low
+    return out
+
+
 class LazyUnion(dict):
     """A byte table built on demand: entry ``v`` is the union (``|``) of ``vals[j]`` over the bits ``j`` of ``v``."""
 
@@ -512,15 +525,7 @@ class Poset:
         >>> Poset.from_pairs(3, [(0, 1)]).minimal(0b110)
         6
         """
-        below = self.below
-        out = 0
-        m = mask
-        while m:
-            low = m & -m
-            m ^= low
-            if not below[low.bit_length() - 1] & mask:
-                out |= low
-        return out
+        return _apart(self.below, mask)
 
     def maximal(self, mask: int) -> int:
         """Bitmask of the maximal elements of the subposet induced on ``mask``. O(popcount(mask)).
@@ -528,15 +533,7 @@ class Poset:
         >>> Poset.from_pairs(3, [(0, 1)]).maximal(0b111)
         6
         """
-        above = self.above
-        out = 0
-        m = mask
-        while m:
-            low = m & -m
-            m ^= low
-            if not above[low.bit_length() - 1] & mask:
-                out |= low
-        return out
+        return _apart(self.above, mask)
 
     def is_downset(self, mask: int) -> bool:
         """Whether ``mask`` is closed downwards (everything before a member is a member).
