@@ -35,7 +35,7 @@ from opportune import load_plan
 from opportune.engine import OrderEngine
 from opportune.engine.count import BudgetExceeded
 from opportune.policies.opportunistic import choose_exact
-from opportune.simulate import StudyConfig, TrialRunner, prepare
+from opportune.study.simulate import StudyConfig, TrialRunner, prepare
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_PLANS = ["salbp:KILBRID", "salbp:TONGE70", "salbp:ARC111",
@@ -46,7 +46,7 @@ def plan_of(spec: str):
     if spec.startswith("gen:"):
         sys.path.insert(0, str(HERE))
         from gen_precedence import generate
-        from opportune.plan import make_plan
+        from opportune import make_plan
 
         _, n, os_ = spec.split(":")
         pairs, times = generate(int(n), float(os_), "mixed", seed=1)

@@ -32,7 +32,7 @@ RSS_BOUND = 500 << 20    # bytes resident
 
 
 def _limits():
-    from opportune import plan
+    from opportune.planning import plan
     from opportune.formats import graphfiles, graphs, loader, validate
 
     return loader, graphs, graphfiles, validate, plan

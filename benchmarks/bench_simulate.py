@@ -18,7 +18,7 @@ from rich.console import Console
 from rich.table import Table
 
 from opportune import load_plan
-from opportune.simulate import STRATEGIES, StudyConfig, prepare, run_study
+from opportune.study.simulate import STRATEGIES, StudyConfig, prepare, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 

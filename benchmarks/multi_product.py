@@ -1,7 +1,7 @@
 """The multi-product study: N gearboxes at once from one bin, against N separate cells and one after another.
 
 For N = 1 .. ``--max-products`` (default 4) copies of the gearbox (``example:gearbox``), each of the
-three cells of :mod:`opportune.simulate_products` — N fixtures fed from one bin, N cells each with
+three cells of :mod:`opportune.study.simulate_products` — N fixtures fed from one bin, N cells each with
 its own bin, and one product after another from the one bin — is simulated with the paper's rule and
 the default policy (``lookahead``; with a part kind needed on several fixtures it decides by its
 base rule, ``slack``), in a uniform bin showing 2 parts, for each buffer size of ``--buffers``
@@ -25,7 +25,7 @@ from pathlib import Path
 
 from opportune.datasets import example_path
 from opportune.formats import load_plan
-from opportune.simulate_products import (
+from opportune.study.simulate_products import (
     MODE_LABELS,
     MODES,
     ProductsConfig,

@@ -21,8 +21,8 @@ import time
 from pathlib import Path
 
 from opportune import load_plan
-from opportune.report import COLUMN_WIDTHS, OKABE_ITO, figure_style, label, summary
-from opportune.simulate import STRATEGIES, StudyConfig, run_study
+from opportune.study.report import COLUMN_WIDTHS, OKABE_ITO, figure_style, label, summary
+from opportune.study.simulate import STRATEGIES, StudyConfig, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 BINS = ("uniform", "pile", "physics")

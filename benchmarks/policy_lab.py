@@ -124,8 +124,8 @@ PAIRED = ("paper", "bin-first", "slack", "lookahead", "rollout")
 def paired(spec: str, args) -> None:
     """Every policy on the same random bins of a plan too large for exact evaluation: the mean time, and
     the mean difference from the paper's rule with its 95% interval."""
-    from opportune.report import summary
-    from opportune.simulate import StudyConfig, run_study
+    from opportune.study.report import summary
+    from opportune.study.simulate import StudyConfig, run_study
 
     plan = load_plan(spec)
     start = time.perf_counter()

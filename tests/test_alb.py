@@ -19,7 +19,7 @@ from opportune.engine.poset import Poset
 from opportune.formats import read_plan
 from opportune.formats import alb
 from opportune.formats.alb import AlbError, check_alb_bytes, order_strength, parse_alb, read_alb, write_alb
-from opportune.plan import make_plan
+from opportune import make_plan
 
 sys.path.insert(0, str(REPO / "benchmarks"))
 import gen_precedence  # noqa: E402

@@ -19,7 +19,7 @@ from opportune import load_plan
 from opportune.engine.schedule import Schedule
 from opportune.formats import check_text, plan_from_andor
 from opportune.formats.andor import MAX_COMBINATIONS, AndOrGraph, Way, expand, sequences
-from opportune.plan import PlanError
+from opportune.planning.plan import PlanError
 
 
 def random_andor(seed: int, max_parts: int = 8, max_ways: int = 3):

@@ -20,5 +20,7 @@ def test_the_docstring_examples_hold(name):
         module = importlib.import_module(name)
     except ImportError as exc:   # an optional extra that is not installed: nothing of it to test here
         pytest.skip(f"{name} needs {exc.name}")
+    if module.__name__ != name:     # an old path kept for imports: its module's examples run under its own name
+        pytest.skip(f"{name} is {module.__name__}")
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE, verbose=False)
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples in {name} failed (run it for details)"

@@ -163,7 +163,7 @@ def test_schedule_count_result_is_exact_through_a_hub_when_the_plain_budget_is_t
         return splits[-1]
 
     monkeypatch.setattr(estimate, "hub_split", recording_split)
-    from opportune.plan import make_plan
+    from opportune import make_plan
 
     rng = random.Random(3)
     poset, h = hub_shaped(rng, 8, 6, 5, 2)
@@ -181,7 +181,7 @@ def test_count_result_gives_the_plain_count_a_tenth_of_its_time_unless_the_engin
     """Without this, a plan too large for the plain counter (ARC111) spent half a minute filling the memo
     budget before the hub split or the estimate got their turn."""
     from opportune.engine import OrderEngine, Schedule
-    from opportune.plan import make_plan
+    from opportune import make_plan
 
     plan = make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["b", "c"]})
     given = []

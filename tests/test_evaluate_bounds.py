@@ -83,14 +83,14 @@ def test_a_large_plan_is_estimated_cheaply_and_the_listing_stops_at_the_limit():
 
 def test_the_refusal_comes_before_any_state_is_expanded(monkeypatch):
     """Counted work: no look, no move, no policy preparation happens before the refusal."""
-    import opportune.simulate
+    import opportune.study.simulate
 
     def forbidden(*args, **kwargs):
         raise AssertionError("the programme started")
 
     monkeypatch.setattr(OptimalSolver, "_moves", forbidden)
     monkeypatch.setattr(OptimalSolver, "_look_distribution", forbidden)
-    monkeypatch.setattr(opportune.simulate, "prepare", forbidden)
+    monkeypatch.setattr(opportune.study.simulate, "prepare", forbidden)
     for args in (["salbp:KILBRID"], ["salbp:KILBRID", "--bin", "pile"], ["salbp:ARC111", "--buffer-capacity", "1"],
                  [str(GEARBOX), "--max-states", "3476"]):
         out = runner.invoke(app(), ["evaluate", *args])

@@ -12,8 +12,8 @@ from opportune import load_plan, make_plan
 from opportune.cli import app
 from opportune.engine import OrderEngine
 from opportune.engine.poset import Poset
-from opportune.formats.graphfiles import check_dot_bytes, check_graphml_bytes, to_dot_precedence, to_graphml
-from opportune.plan import Plan, PlanError
+from opportune.formats.graphfiles import check_dot_bytes, check_graphml_bytes, plan_from_networkx, to_dot_precedence, to_graphml
+from opportune.planning.plan import PlanError
 
 runner = CliRunner()
 
@@ -119,12 +119,12 @@ def test_networkx_round_trip_and_errors():
     plan = load_plan(GEARBOX)
     g = plan.to_networkx()
     assert isinstance(g, nx.DiGraph) and g.nodes["co"]["name"] == "cover"
-    same(plan, Plan.from_networkx(g, name="gearbox"))
+    same(plan, plan_from_networkx(g, name="gearbox"))
     cyc = nx.DiGraph([("a", "b"), ("b", "a")])
     with pytest.raises(PlanError, match="cycle"):
-        Plan.from_networkx(cyc)
+        plan_from_networkx(cyc)
     with pytest.raises(PlanError, match="undirected"):
-        Plan.from_networkx(nx.Graph([("a", "b")]))
+        plan_from_networkx(nx.Graph([("a", "b")]))
 
 
 @settings(max_examples=40, deadline=None)
@@ -132,4 +132,4 @@ def test_networkx_round_trip_and_errors():
 def test_networkx_round_trip(plan):
     """A plan of one strategy through a NetworkX DiGraph and back: the same parts and the same order."""
     pytest.importorskip("networkx", reason="networkx is in the dev extra that make test installs")
-    same(plan, Plan.from_networkx(plan.to_networkx(), name=plan.name))
+    same(plan, plan_from_networkx(plan.to_networkx(), name=plan.name))

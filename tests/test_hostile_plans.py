@@ -18,7 +18,7 @@ from opportune.formats import check_text, read_plan
 from opportune.formats import loader
 from opportune.formats.looks import LooksError, parse_looks
 from opportune.formats.validate import plan_schema
-from opportune.plan import MAX_QUANTITY, MAX_UNITS
+from opportune.planning.plan import MAX_QUANTITY, MAX_UNITS
 
 runner = CliRunner()
 

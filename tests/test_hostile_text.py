@@ -19,7 +19,7 @@ import pytest
 
 from conftest import GEARBOX
 from opportune import make_plan
-from opportune.plan import PlanError
+from opportune.planning.plan import PlanError
 
 pytest.importorskip("fastapi")
 

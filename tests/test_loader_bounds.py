@@ -284,7 +284,7 @@ def test_a_plan_of_10000_parts_still_loads_under_the_same_limits(tmp_path):
 
 
 def test_bounds_are_consistent_with_the_plan_limits():
-    from opportune.plan import MAX_PARTS, MAX_STRATEGIES, MAX_UNITS
+    from opportune.planning.plan import MAX_PARTS, MAX_STRATEGIES, MAX_UNITS
 
     # a plan of the largest size has room for a few constraints per part in every format
     assert loader.MAX_VALUES >= 10 * MAX_PARTS and graphs.MAX_PAIRS >= 10 * MAX_UNITS
@@ -369,7 +369,7 @@ def _closure_contains(stricter, looser) -> bool:
                          min_size=2, max_size=3))))
 def test_strategy_orders_agree_with_the_closure_on_the_whole_plan(case):
     from opportune.engine.poset import CycleError, Poset
-    from opportune.formats.summary import StrategyOrder
+    from opportune.planning.orders import StrategyOrder
 
     n, strategies = case
     orders, posets = [], []
@@ -546,7 +546,7 @@ def test_a_files_suffix_is_read_as_pathlib_reads_it():
     import itertools
     from pathlib import Path
 
-    from opportune.formats.loader import _suffix
+    from opportune.formats.documents import file_suffix as _suffix
 
     names = ("".join(t) for n in range(1, 8) for t in itertools.product("a./Y", repeat=n))
     assert [n for n in names if _suffix(n) != Path(n).suffix.lower()] == []

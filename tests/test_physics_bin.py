@@ -17,8 +17,8 @@ from typer.testing import CliRunner
 from opportune import load_plan
 from opportune.cli import app
 from opportune.formats.loader import plan_from_dict
-from opportune.plan import MAX_DIMENSION, MIN_DIMENSION, PlanError
-from opportune.simulate import ALL_STRATEGIES, StudyConfig, StudyError, run_study
+from opportune.planning.plan import MAX_DIMENSION, MIN_DIMENSION, PlanError
+from opportune.study.simulate import ALL_STRATEGIES, StudyConfig, StudyError, run_study
 from opportune.worlds import CellModel, make_world
 from opportune.worlds import physics
 from opportune.worlds.physics import RAY_GRID, PhysicsBin, PhysicsError
@@ -269,7 +269,7 @@ def test_the_other_bins_never_load_mujoco():
     import subprocess
     import sys
 
-    code = ("import sys; from opportune import load_plan; from opportune.simulate import StudyConfig, run_study; "
+    code = ("import sys; from opportune import load_plan; from opportune.study.simulate import StudyConfig, run_study; "
             "run_study(StudyConfig(load_plan('example:gearbox'), strategies=('opportunistic',), trials=5, bin='pile'), "
             "workers=1); print('mujoco' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -14,7 +14,7 @@ from opportune.engine import OrderEngine
 from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.pile import PileSolver
 from opportune.policies.variants import Slack
-from opportune.simulate import StudyConfig, run_study
+from opportune.study.simulate import StudyConfig, run_study
 
 GEAR = load_plan(GEARBOX)
 

@@ -14,7 +14,7 @@ from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.fixed import BufferFixed, planned_sequence
 from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.random_policy import RandomChoice
-from opportune.simulate import StudyConfig, run_study
+from opportune.study.simulate import StudyConfig, run_study
 
 GEAR = load_plan(GEARBOX)
 

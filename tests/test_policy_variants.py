@@ -16,7 +16,7 @@ from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.optimal import OptimalSolver
 from opportune.policies.variants import BinFirst, Lookahead, Slack
-from opportune.simulate import StudyConfig, run_study
+from opportune.study.simulate import StudyConfig, run_study
 
 GEAR = load_plan(GEARBOX)
 

@@ -21,9 +21,9 @@ from opportune import OrderEngine, Sequencer, make_plan
 from opportune.datasets import example_path
 from opportune.formats import load_plan
 from opportune.multi import MultiSequencer, split_action
-from opportune.plan import MAX_STRATEGIES
+from opportune.planning.plan import MAX_STRATEGIES
 from opportune.policies.named import make_policy
-from opportune.products import (
+from opportune.planning.products import (
     MAX_PRODUCTS,
     ProductsError,
     combine_products,
@@ -34,8 +34,8 @@ from opportune.products import (
     unit_id,
 )
 from opportune.sequencer import LookError
-from opportune.simulate import trial_seed
-from opportune.simulate_products import CellRunner, ProductsConfig, run_products
+from opportune.study.simulate import trial_seed
+from opportune.study.simulate_products import CellRunner, ProductsConfig, run_products
 from opportune.worlds import make_world
 
 GEARBOX = load_plan(example_path("gearbox"))
@@ -469,9 +469,9 @@ def test_the_docstring_examples_hold():
     import doctest
 
     import opportune.multi
-    import opportune.products
-    import opportune.simulate_products
+    import opportune.planning.products
+    import opportune.study.simulate_products
 
-    for module in (opportune.products, opportune.multi, opportune.simulate_products):
+    for module in (opportune.planning.products, opportune.multi, opportune.study.simulate_products):
         failed, tried = doctest.testmod(module)
         assert tried and not failed, module.__name__

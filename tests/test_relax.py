@@ -17,10 +17,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import CpuTime, run_cli
-from opportune.engine.relax import (MAX_COMPONENT_ARCS, RelaxRefused, RelaxTimeout, min_feedback_arc_set,
+from opportune.planning.relax import (MAX_COMPONENT_ARCS, RelaxRefused, RelaxTimeout, min_feedback_arc_set,
                                     prefix_violations, relax)
 from opportune.formats.loader import check_text, read_plan
-from opportune.plan import Plan, Strategy
+from opportune.planning.plan import Plan, Strategy
 
 OVER = "example:gearbox-overconstrained"
 
@@ -124,7 +124,7 @@ def test_feedback_arc_set_edge_cases():
 
 def tiny_plan(n, arcs: dict, extra_strategies=()) -> Plan:
     """A plan straight from arcs (cycles allowed, as ``read_plan(..., allow_cycles=True)`` gives)."""
-    from opportune.plan import Part
+    from opportune.planning.plan import Part
 
     def strategy(name, arcs):
         req: dict = {}

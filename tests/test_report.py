@@ -17,7 +17,7 @@ import pytest
 from conftest import GEARBOX, run_cli
 
 from opportune import load_plan
-from opportune.report import (
+from opportune.study.report import (
     COLUMN_WIDTHS,
     GROUP_OF,
     GROUPS,
@@ -29,8 +29,8 @@ from opportune.report import (
     make_figures,
     summary,
 )
-from opportune.report_html import TABLE_COLUMNS, render_report
-from opportune.simulate import StudyConfig, run_study
+from opportune.study.report_html import TABLE_COLUMNS, render_report
+from opportune.study.simulate import StudyConfig, run_study
 
 GEAR = load_plan(GEARBOX)
 # the paper's comparison in small: every family of row, and the exact optimum (0.6 s to solve)

@@ -14,7 +14,7 @@ import pytest
 
 from conftest import GEARBOX, run_cli
 from opportune.cli import app
-from opportune.simulate import METRICS, StudyConfig, StudyError, run_study
+from opportune.study.simulate import METRICS, StudyConfig, StudyError, run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 OPPORTUNE = [sys.executable, "-m", "opportune"]
@@ -125,7 +125,7 @@ def test_study_settings_round_trip_and_refuse_nonsense():
 def test_trials_as_a_data_frame_are_the_rows_of_trials_csv(tmp_path):
     pd = pytest.importorskip("pandas", reason="pandas is an optional extra; `make test` installs it")
     from opportune import load_plan
-    from opportune.report import write_outputs
+    from opportune.study.report import write_outputs
 
     result = run_study(StudyConfig(load_plan(GEARBOX), strategies=("opportunistic", "random"), trials=60), workers=1)
     frame = result.to_frame()
@@ -137,7 +137,7 @@ def test_trials_as_a_data_frame_are_the_rows_of_trials_csv(tmp_path):
     assert (frame["trial"].to_numpy() == csv["trial"].to_numpy()).all()
     paired = frame.pivot(index="trial", columns="strategy", values="time")
     difference = (paired["random"] - paired["opportunistic"]).mean()
-    from opportune.report import summary
+    from opportune.study.report import summary
 
     assert difference == pytest.approx(summary(result)["strategies"]["random"]["paired"]["mean_difference"])
 

@@ -36,7 +36,7 @@ def test_a_count_is_written_exactly_up_to_its_bound_and_by_its_first_17_digits_p
 
 
 def test_a_decision_past_the_bound_is_written_rounded_only_when_asked():
-    from opportune.formats.summary import printable_decision
+    from opportune.policies.printable import printable_decision
     from opportune.sequencer import Sequencer
 
     seq = Sequencer(make_plan([f"p{i}" for i in range(2000)], {}), budget=None)

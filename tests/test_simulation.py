@@ -16,8 +16,8 @@ from conftest import GEARBOX, CpuTime, random_plans, salbp_dir
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver
-from opportune.report import describe, summary, table_rows, write_outputs
-from opportune.simulate import (STRATEGIES, StrategyUnavailable, StudyConfig, StudyError, TrialRunner, prepare,
+from opportune.study.report import describe, summary, table_rows, write_outputs
+from opportune.study.simulate import (STRATEGIES, StrategyUnavailable, StudyConfig, StudyError, TrialRunner, prepare,
                                 run_study, run_trial_with_sequencer)
 from opportune.worlds import ConveyorBin, PileBin, TimeModel, UniformBin, WeightedBin
 
@@ -464,7 +464,7 @@ def test_opportunistic_is_refused_when_the_first_looks_positions_do_not_fit(monk
 
 def test_results_carry_their_provenance(tmp_path):
     from opportune import __version__
-    from opportune.simulate import hash_config
+    from opportune.study.simulate import hash_config
 
     one = study(strategies=("opportunistic",), trials=50)
     doc = summary(one)["provenance"]
@@ -502,7 +502,7 @@ def test_figures_are_paper_ready_and_byte_identical_for_the_same_study(tmp_path)
 def test_paired_differences_use_the_same_bins_and_are_tighter():
     """Trial i of every strategy draws the same bin: the difference of two strategies is measured on
     pairs, with an interval much narrower than the two means' (and that contains their difference)."""
-    from opportune.report import paired_difference
+    from opportune.study.report import paired_difference
 
     r = study(strategies=("opportunistic", "random"), trials=1500)
     doc = summary(r)["strategies"]

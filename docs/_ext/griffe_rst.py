@@ -3,7 +3,7 @@ habits (Sphinx roles, ``double backticks``, doctest blocks), and mkdocstrings re
 
 Two things would render badly as they are, so they are rewritten, in the documentation only:
 
-* Sphinx roles (``:class:`~opportune.plan.Plan```, ``:meth:`Schedule.count```) become code
+* Sphinx roles (``:class:`~opportune.planning.plan.Plan```, ``:meth:`Schedule.count```) become code
   spans linked to the object's entry in the reference when it has one (an *optional*
   cross-reference: a target not in the reference is plain code, never a warning);
 * doctest blocks (``>>>`` lines and their output) become fenced ``pycon`` blocks, instead of

@@ -22,15 +22,15 @@ __all__ = ["NotAdmissible", "OrderEngine", "Part", "Plan", "PlanError", "Schedul
 
 # The names below load on first use (PEP 562), so that ``import opportune.cli`` (every run of the
 # command line, `--help` included) does not pay for the plan loader and PyYAML.
-_LAZY = {"load_plan": "opportune.formats.loader", "Part": "opportune.plan", "Plan": "opportune.plan",
-         "PlanError": "opportune.plan", "Strategy": "opportune.plan", "make_plan": "opportune.plan",
+_LAZY = {"load_plan": "opportune.formats.loader", "Part": "opportune.planning.plan", "Plan": "opportune.planning.plan",
+         "PlanError": "opportune.planning.plan", "Strategy": "opportune.planning.plan", "make_plan": "opportune.formats.loader",
          "Schedule": "opportune.engine.schedule", "OrderEngine": "opportune.engine.schedule",
          "NotAdmissible": "opportune.engine.schedule", "Sequencer": "opportune.sequencer"}
 
 if TYPE_CHECKING:
     from opportune.engine.schedule import NotAdmissible, OrderEngine, Schedule
-    from opportune.formats.loader import load_plan
-    from opportune.plan import Part, Plan, PlanError, Strategy, make_plan
+    from opportune.formats.loader import load_plan, make_plan
+    from opportune.planning.plan import Part, Plan, PlanError, Strategy
     from opportune.sequencer import Sequencer
 
 

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from rich.console import Console
 
     from opportune.formats import CheckResult
-    from opportune.plan import Plan
+    from opportune.planning.plan import Plan
 
 # Start-up (issue 11): this module imports only typer.  rich, the plan loader, the engine and every
 # command's own machinery load when a command needs them, so `opportune count --help` never pays for
@@ -387,7 +387,7 @@ def replay(
             break
     if stopped is None and seq.state.is_complete and not seq.finished:
         seq.step(())
-    from opportune.formats.summary import printable_decision
+    from opportune.policies.printable import printable_decision
 
     rows = seq.trace
     if as_json:
@@ -431,7 +431,7 @@ def _recorded_study(path: Path, as_json: bool) -> tuple[dict, Plan]:
     (read within the bounds of :mod:`opportune.formats.results`)."""
     from opportune.formats.loader import plan_from_dict
     from opportune.formats.results import ResultsError, read_recorded_study
-    from opportune.plan import PlanError
+    from opportune.planning.plan import PlanError
 
     try:
         prov = read_recorded_study(path)
@@ -441,7 +441,7 @@ def _recorded_study(path: Path, as_json: bool) -> tuple[dict, Plan]:
         plan = plan_from_dict(prov["plan"], file=f"{path}: provenance.plan")
     except PlanError as exc:
         fail(f"{path}: the recorded plan is not valid: {exc}", as_json=as_json)
-    from opportune.simulate import plan_sha256
+    from opportune.study.simulate import plan_sha256
 
     if prov.get("plan_sha256") not in (None, plan_sha256(plan)):
         fail(f"{path}: the recorded plan does not match its recorded hash (plan_sha256): the file was edited; "
@@ -455,7 +455,7 @@ OPTIMAL_DEFAULT_UNITS = 14  # above this, the optimum is only attempted when ask
 def _check_report_path(path: Path, products: Optional[int], out_dir: Optional[Path], as_json: bool) -> None:
     """Exit with what to do when ``simulate --report PATH`` could not be written (before the study runs);
     a report inside ``--out DIR`` is fine, that directory is made before the report is written."""
-    from opportune.report_html import REPORT_SUFFIXES
+    from opportune.study.report_html import REPORT_SUFFIXES
 
     if products is not None:
         fail("--report is the paper's comparison of strategies on one plan; it is not made for --products: "
@@ -527,10 +527,10 @@ def simulate(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
     from rich.table import Table
 
-    from opportune.report import TABLE_HEADER, summary, table_rows, write_outputs
+    from opportune.study.report import TABLE_HEADER, summary, table_rows, write_outputs
     from dataclasses import replace
 
-    from opportune.simulate import (COUNTING_STRATEGIES, OPTIMAL_BINS, STRATEGIES, StrategyUnavailable, StudyConfig,
+    from opportune.study.simulate import (COUNTING_STRATEGIES, OPTIMAL_BINS, STRATEGIES, StrategyUnavailable, StudyConfig,
                                     StudyError, prepare, run_study)
     from opportune.worlds import CellModel, TimeModel
 
@@ -616,7 +616,7 @@ def simulate(
         except OSError as exc:
             fail(f"cannot write to {out_dir}: {exc.strerror or exc}")
     if report_file:
-        from opportune.report_html import write_report
+        from opportune.study.report_html import write_report
 
         try:
             write_report(result, report_file, doc)
@@ -697,7 +697,7 @@ def evaluate(
     from opportune.policies.evaluate import PolicyEvaluator, PolicyStuck
     from opportune.policies.optimal import LOOK_CACHE_LOOKS, OptimalTooLarge, OutOfTime
     from opportune.policies.states import BYTES_PER_STATE, big, estimate_states
-    from opportune.simulate import (ALL_STRATEGIES, OPTIMAL_BINS, StrategyUnavailable, StudyConfig, StudyError,
+    from opportune.study.simulate import (ALL_STRATEGIES, OPTIMAL_BINS, StrategyUnavailable, StudyConfig, StudyError,
                                     make_policy, prepare)
     from opportune.worlds import TimeModel
 
@@ -965,8 +965,8 @@ def _simulate_products(ctx: typer.Context, plan_file: Optional[Path], products: 
         fail("give a plan file to build several products of", 2, as_json=as_json)
     from rich.table import Table
 
-    from opportune.products import ProductsError
-    from opportune.simulate_products import MODE_LABELS, ProductsConfig, copies, run_products
+    from opportune.planning.products import ProductsError
+    from opportune.study.simulate_products import MODE_LABELS, ProductsConfig, copies, run_products
     from opportune.worlds import TimeModel
 
     plan = load_or_exit(plan_file, json_errors=as_json)
@@ -1036,8 +1036,8 @@ def relax(
     Reads a plan whose strategies have cycles (YAML or JSON), or that contradicts --installed; writes
     the relaxed plan as YAML and lists the constraints dropped on standard error.
     """
-    from opportune.engine.relax import RelaxRefused, constraint_lines
-    from opportune.engine.relax import relax as relax_plan
+    from opportune.planning.relax import RelaxRefused, constraint_lines
+    from opportune.planning.relax import relax as relax_plan
     from opportune.formats.loader import CheckResult, read_plan
 
     result = read_plan(plan_file, allow_cycles=True)
@@ -1145,8 +1145,8 @@ def learn(
     """Learn a plan from observed successful sequences: the constraints every sequence satisfies (minimal set),
     each with its support and the probability that it is an accident of too few observations."""
     from opportune.formats.sequences import SequenceError, read_sequences
-    from opportune.learn import learn_plan
-    from opportune.plan import PlanError
+    from opportune.planning.learn import learn_plan
+    from opportune.planning.plan import PlanError
 
     if name is not None and not name.strip():
         fail("--name: give a non-empty name", 2)

@@ -1,6 +1,6 @@
 """The sequencer of a cell with several fixtures fed from one bin (several products at once).
 
-The cell's plan is a joint plan (:mod:`opportune.products`): its parts are units
+The cell's plan is a joint plan (:mod:`opportune.planning.products`): its parts are units
 ``x@i`` (part ``x`` on fixture ``i``).  The bin and the buffer hold part *kinds*: a look
 shows kinds (``x``), and a seen or buffered ``x`` can become any unit ``x@i`` still needed.
 
@@ -15,8 +15,8 @@ across all products in progress, and buffers the part needed earliest by any of 
 With one fixture (or fixtures sharing no kind) kinds and units correspond one to one, and
 the decisions are those of :class:`~opportune.sequencer.Sequencer` on the single plan.
 
->>> from opportune.plan import make_plan
->>> from opportune.products import several_products
+>>> from opportune import make_plan
+>>> from opportune.planning.products import several_products
 >>> seq = MultiSequencer(several_products(make_plan(["a", "b"], {"b": ["a"]}), 2), budget=None)
 >>> seq.decide(["b", "a"]).action
 Action(kind='install', part='a@1', source='bin')
@@ -29,9 +29,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
 from opportune.engine import OrderEngine, Schedule
-from opportune.plan import Plan
+from opportune.planning.plan import Plan
 from opportune.policies.base import Action, Decision, Policy, shared_action
-from opportune.products import split_unit
+from opportune.planning.products import split_unit
 from opportune.sequencer import DEFAULT_BUDGET, WARM_UP, LookError, Sequencer, State, look_ids
 
 __all__ = ["CellState", "Layout", "MultiSequencer", "check_kinds", "fit_policy", "layout_of", "split_action"]
@@ -41,7 +41,7 @@ class Layout:
     """Which unit of the joint plan is which part kind on which fixture.
 
     ``units[kind]``: ``(part index, unit id)`` of each fixture's copy, in fixture order.
-    Raises :class:`~opportune.products.ProductsError` if a part id is not ``KIND@FIXTURE``.
+    Raises :class:`~opportune.planning.products.ProductsError` if a part id is not ``KIND@FIXTURE``.
     O(parts).
     """
 
@@ -177,8 +177,8 @@ class MultiSequencer(Sequencer):
     """Keeps the state of a cell of several fixtures fed from one bin, and decides with a policy.
 
     A :class:`~opportune.sequencer.Sequencer` (``decide``, ``report``, ``cancel``, ``step``,
-    ``run``, ``state``, ``trace``) on a joint plan (:func:`~opportune.products.several_products`,
-    :func:`~opportune.products.combine_products`); looks and buffered parts are part kinds, installs
+    ``run``, ``state``, ``trace``) on a joint plan (:func:`~opportune.planning.products.several_products`,
+    :func:`~opportune.planning.products.combine_products`); looks and buffered parts are part kinds, installs
     name the unit (``x@2``: ``x`` on fixture 2).
     """
 

@@ -22,7 +22,7 @@ from typing import Iterable, Literal
 
 from opportune.engine import OrderEngine, Schedule
 from opportune.engine.schedule import count_pass
-from opportune.plan import Plan
+from opportune.planning.plan import Plan
 from opportune.policies.base import Action, Decision, Policy
 
 Outcome = Literal["success", "failed", "defective"]

@@ -71,6 +71,8 @@ from itertools import islice
 from math import factorial
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline  # noqa: F401 (BudgetExceeded: its documented import)
+from opportune.engine.poset import LazyMeet as _LazyMeet
+from opportune.engine.poset import LazyUnion as _LazyUnion
 from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain, split_components
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
@@ -1187,36 +1189,6 @@ class Counter:
             return vstore(s, v)
 
         return g
-
-
-class _LazyUnion(dict):
-    """A byte table built on demand: entry ``v`` is the union (``|``) of ``vals[j]`` over the bits ``j`` of ``v``."""
-
-    def __init__(self, vals: list[int]):
-        super().__init__()
-        self.vals = vals
-
-    def __missing__(self, v: int) -> int:
-        vals = self.vals
-        r = 0
-        for j in bits(v):
-            if j < len(vals):
-                r |= vals[j]
-        self[v] = r
-        return r
-
-
-class _LazyMeet(_LazyUnion):
-    """As :class:`_LazyUnion`, with the intersection (``&``; ``-1`` for no bits)."""
-
-    def __missing__(self, v: int) -> int:
-        vals = self.vals
-        r = -1
-        for j in bits(v):
-            if j < len(vals):
-                r &= vals[j]
-        self[v] = r
-        return r
 
 
 def _byte_tables(poset: Poset):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import time
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
-from opportune.engine.poset import Poset, bits
+from opportune.engine.poset import LazyUnion, Poset, bits
 
 __all__ = ["count_by_downsets", "position_sums_by_downsets", "count_downsets"]
 
@@ -293,11 +293,9 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
     else:
         # 2^14 entries of k bits per 14 elements would take gigabytes on a large order: byte
         # tables filled on demand (none of this finishes in time there, but it stops in time)
-        from opportune.engine.count import _LazyUnion
-
         c = 8
         nch = -(-k // c)
-        tables = [_LazyUnion(below[j * c:(j + 1) * c]) for j in range(nch)]
+        tables = [LazyUnion(below[j * c:(j + 1) * c]) for j in range(nch)]
     cm = (1 << c) - 1
     # sets between two readings of the clock: each costs a look-up per chunk
     every = 1023 if nch <= 4 else 63 if nch <= 32 else 0

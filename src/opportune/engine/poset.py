@@ -25,6 +25,9 @@ if TYPE_CHECKING:       # pragma: no cover
     from opportune.engine.deadline import Deadline
 
 
+from opportune.planning.orders import CycleError  # noqa: E402  (a plan's order can have one too)
+
+
 def _clock(deadline):
     """``check()``: raises :class:`~opportune.engine.deadline.BudgetExceeded` once ``deadline`` (a
     Deadline, a ``time.perf_counter()`` moment or None) has passed; None when there is none, so that
@@ -36,7 +39,7 @@ def _clock(deadline):
     d = as_deadline(deadline)
     return d.check if d.finite else None
 
-__all__ = ["CycleError", "Poset", "bits", "byte_unions", "components", "cut_blocks", "cut_chain", "elements",
+__all__ = ["CycleError", "LazyMeet", "LazyUnion", "Poset", "bits", "byte_unions", "components", "cut_blocks", "cut_chain", "elements",
            "split_components"]
 
 
@@ -83,6 +86,49 @@ def elements(mask: int) -> list[int]:
     [0, 3]
     """
     return list(bits(mask))
+
+
+def _apart(related: Sequence[int], mask: int) -> int:
+    """The members ``x`` of ``mask`` with nothing of ``mask`` in ``related[x]`` (the minimal elements
+    with ``below``, the maximal ones with ``above``).  O(popcount(mask))."""
+    out = 0
+    m = mask
+    while m:
+        low = m & -m
+        m ^= low
+        if not related[low.bit_length() - 1] & mask:
+            out |= low
+    return out
+
+
+class LazyUnion(dict):
+    """A byte table built on demand: entry ``v`` is the union (``|``) of ``vals[j]`` over the bits ``j`` of ``v``."""
+
+    def __init__(self, vals: list[int]):
+        super().__init__()
+        self.vals = vals
+
+    def __missing__(self, v: int) -> int:
+        vals = self.vals
+        r = 0
+        for j in bits(v):
+            if j < len(vals):
+                r |= vals[j]
+        self[v] = r
+        return r
+
+
+class LazyMeet(LazyUnion):
+    """As :class:`LazyUnion`, with the intersection (``&``; ``-1`` for no bits)."""
+
+    def __missing__(self, v: int) -> int:
+        vals = self.vals
+        r = -1
+        for j in bits(v):
+            if j < len(vals):
+                r &= vals[j]
+        self[v] = r
+        return r
 
 
 def byte_unions(sets: Sequence[int], n: int, width: int = 8) -> list[list[int]]:
@@ -198,18 +244,6 @@ def cut_blocks(below: Sequence[int], above: Sequence[int], s: int, cuts: int) ->
     return out
 
 
-class CycleError(ValueError):
-    """The given relation has a cycle, so it is not a partial order.
-
-    ``cycle`` lists the elements of one cycle in order, closed: its first and
-    last entries are equal, and each entry is directly before the next in the
-    given relation.  ``[1, 2, 1]`` means ``1 < 2`` and ``2 < 1`` were both given;
-    ``[3, 3]`` means ``3 < 3`` was given.
-    """
-
-    def __init__(self, cycle: Sequence[int]):
-        self.cycle = list(cycle)
-        super().__init__("cycle in the order: " + " -> ".join(map(str, self.cycle)))
 
 
 def _find_cycle(n: int, succ: Sequence[int], nodes: int) -> list[int]:
@@ -374,7 +408,7 @@ class Poset:
         >>> Poset.from_pairs(2, [(0, 1), (1, 0)])
         Traceback (most recent call last):
         ...
-        opportune.engine.poset.CycleError: cycle in the order: 0 -> 1 -> 0
+        opportune.planning.orders.CycleError: cycle in the order: 0 -> 1 -> 0
         """
         if n < 0:
             raise ValueError("n must be >= 0")
@@ -491,15 +525,7 @@ class Poset:
         >>> Poset.from_pairs(3, [(0, 1)]).minimal(0b110)
         6
         """
-        below = self.below
-        out = 0
-        m = mask
-        while m:
-            low = m & -m
-            m ^= low
-            if not below[low.bit_length() - 1] & mask:
-                out |= low
-        return out
+        return _apart(self.below, mask)
 
     def maximal(self, mask: int) -> int:
         """Bitmask of the maximal elements of the subposet induced on ``mask``. O(popcount(mask)).
@@ -507,15 +533,7 @@ class Poset:
         >>> Poset.from_pairs(3, [(0, 1)]).maximal(0b111)
         6
         """
-        above = self.above
-        out = 0
-        m = mask
-        while m:
-            low = m & -m
-            m ^= low
-            if not above[low.bit_length() - 1] & mask:
-                out |= low
-        return out
+        return _apart(self.above, mask)
 
     def is_downset(self, mask: int) -> bool:
         """Whether ``mask`` is closed downwards (everything before a member is a member).

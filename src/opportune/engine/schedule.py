@@ -37,7 +37,7 @@ from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.hub import HubPath
 from opportune.engine.memory import memory_total
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
-from opportune.plan import Plan
+from opportune.planning.plan import Plan
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False

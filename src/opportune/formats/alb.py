@@ -51,7 +51,7 @@ from opportune.formats.graphs import (MAX_PAIRS, MAX_PER_KIND, MAX_TASKS, DECIMA
                                       in_file_order as _in_file_order,
                                       last_nonblank as _last_nonblank, show as _show, text_lines, to_int as _int,
                                       too_long, too_many_lines)
-from opportune.formats.loader import CheckResult
+from opportune.formats.documents import CheckResult
 from opportune.formats.problems import Problem
 
 SECTIONS = ("number of tasks", "cycle time", "order strength", "task times", "precedence relations", "end")
@@ -381,14 +381,15 @@ def order_strength(n: int, pairs: Iterable[tuple[int, int]]) -> float:
     The number of comparable pairs of the transitive closure divided by
     n(n-1)/2 (0.0 for fewer than two tasks).  O(n + len(pairs)) big-int
     operations on n-bit masks; raises
-    :class:`~opportune.engine.poset.CycleError` on a cycle.
+    :class:`~opportune.planning.orders.CycleError` on a cycle.
 
     >>> order_strength(3, [(1, 2), (2, 3)]), order_strength(3, [(1, 2)])
     (1.0, 0.3333333333333333)
     """
-    from opportune.engine.poset import Poset
+    from opportune.planning.orders import StrategyOrder
 
-    return poset_order_strength(Poset.from_pairs(n, [(a - 1, b - 1) for a, b in pairs]))
+    total = n * (n - 1) // 2
+    return StrategyOrder([(a - 1, b - 1) for a, b in pairs]).implied / total if total else 0.0
 
 
 def poset_order_strength(poset) -> float:
@@ -437,20 +438,21 @@ def graph_text(times: list[int], pairs: Iterable[tuple[int, int]], *, cycle_time
     strength of their closure; ``cycle_time`` defaults to the longest time.
     O(n + pairs) big-int operations; ``ValueError`` beyond the reader's limits.
     """
-    from opportune.engine.poset import Poset
+    from opportune.planning.orders import StrategyOrder
 
     n = len(times)
     if n > MAX_TASKS:
         raise ValueError(f"{n:,} tasks: .alb readers here accept at most {MAX_TASKS:,}")
-    poset = Poset.from_pairs(n, [(a - 1, b - 1) for a, b in pairs])
-    arcs = poset.cover_pairs()
+    order = StrategyOrder([(a - 1, b - 1) for a, b in pairs])
+    arcs = order.cover_pairs()
     if len(arcs) > MAX_PAIRS:
         raise ValueError(f"{len(arcs):,} precedence arcs: .alb readers here accept at most {MAX_PAIRS:,}")
     if cycle_time is None:
         cycle_time = max(list(times) + [1])
     if not isinstance(cycle_time, int) or cycle_time < 1:
         raise ValueError(f"cycle_time must be a whole number ≥ 1, got {cycle_time!r}")
-    strength = f"{poset_order_strength(poset):.3f}".replace(".", ",")
+    total = n * (n - 1) // 2
+    strength = f"{order.implied / total if total else 0.0:.3f}".replace(".", ",")
     lines = ["<number of tasks>", str(n), "", "<cycle time>", str(cycle_time), "", "<order strength>", strength, "",
              "<task times>", *(f"{k} {t}" for k, t in enumerate(times, 1)), "",
              "<precedence relations>", *(f"{a + 1},{b + 1}" for a, b in arcs), "", "<end>", ""]

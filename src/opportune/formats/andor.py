@@ -43,9 +43,10 @@ Limits: the choices multiply, so the number of *combinations* (one way per reach
 is counted first, in time linear in the graph's size and without listing them, and a graph with
 more than :data:`MAX_COMBINATIONS` combinations, or whose combinations times parts exceed
 :data:`MAX_EXPANSION`, is refused with the counts; after expansion at most
-:data:`~opportune.plan.MAX_STRATEGIES` distinct partial orders are accepted.  The engine counts
+:data:`~opportune.planning.plan.MAX_STRATEGIES` distinct partial orders are accepted.  The engine counts
 exactly up to 12 strategies (inclusion–exclusion), and estimates beyond.
 
+>>> from opportune.formats import plan_from_andor
 >>> plan = plan_from_andor(["a", "b", "c"], {"p": [{"join": ["a", "b"], "then": ["c"]},
 ...                                                  {"join": ["a"], "then": ["b", "c"], "before": [["c", "b"]]}]})
 >>> [s.name for s in plan.strategies]
@@ -63,10 +64,10 @@ from itertools import permutations
 from typing import TYPE_CHECKING, Any
 
 from opportune.formats.problems import Problem
-from opportune.plan import MAX_STRATEGIES, Plan, PlanError, Strategy
+from opportune.planning.plan import MAX_STRATEGIES, PlanError, Strategy
 
 if TYPE_CHECKING:
-    from opportune.formats.loader import Document
+    from opportune.formats.documents import Document
 
 MAX_COMBINATIONS = 4_096      # combinations of ways expanded (one way per reachable assembly)
 MAX_EXPANSION = 500_000       # combinations × parts: the work of the expansion (about 1 s)
@@ -92,7 +93,7 @@ class AndOrGraph:
     """An AND/OR graph: the product, the parts (declaration order) and each assembly's ways.
 
     ``assemblies`` is a tuple of ``(name, ways)`` in declaration order (plain tuples: the graph
-    pickles and hashes).  Build one from a plan file (``plan.andor``) or with :func:`plan_from_andor`.
+    pickles and hashes).  Build one from a plan file (``plan.andor``) or with :func:`~opportune.formats.loader.plan_from_andor`.
     """
 
     product: str
@@ -167,7 +168,7 @@ def check_assemblies(data: dict, doc: Document, part_ids: list[str]) -> tuple[li
     above :data:`MAX_COMBINATIONS` combinations (or :data:`MAX_EXPANSION` combinations × parts).
     :func:`opportune.formats.validate.check_document` calls it for a document with ``assemblies``.
 
-    >>> from opportune.formats.loader import Document
+    >>> from opportune.formats.documents import Document
     >>> data = {"parts": ["a", "b", "c"], "assemblies": {"p": [{"join": ["a", "b", "b"]}]}}
     >>> strategies, graph, problems = check_assemblies(data, Document(data, {}, "f.yaml"), ["a", "b", "c"])
     >>> [str(p) for p in problems]  # doctest: +NORMALIZE_WHITESPACE
@@ -479,7 +480,7 @@ def expand(graph: AndOrGraph) -> list[Strategy]:
     partial orders are kept once (the first combination's name), then a strategy whose sequences
     another admits too is dropped.  Raises :class:`PlanError` above :data:`MAX_COMBINATIONS`
     combinations (counted first, without listing them), :data:`MAX_EXPANSION` combinations × parts,
-    or :data:`~opportune.plan.MAX_STRATEGIES` distinct partial orders.  Time O(combinations ×
+    or :data:`~opportune.planning.plan.MAX_STRATEGIES` distinct partial orders.  Time O(combinations ×
     (steps + constraints) × parts / 64).
 
     >>> g = AndOrGraph("p", ("a", "b", "c"), (("p", (Way("x", ("a", "b"), ("c",)),)),))
@@ -655,24 +656,6 @@ def _covers(below: tuple[int, ...], preds: dict[int, int]) -> list[tuple[int, in
 
 
 # ---------------------------------------------------------------- Python API
-
-
-def plan_from_andor(parts: Iterable[str | dict], assemblies: Mapping[str, list[dict]], *, product: str | None = None,
-                    name: str = "plan") -> Plan:
-    """A plan from an AND/OR graph given as Python values (the file schema's ``assemblies``).
-
-    Checked and expanded exactly as a file would be; raises :class:`PlanError` with every problem.
-
-    >>> plan = plan_from_andor(["a", "b", "c"], {"p": [{"join": ["a", "b"], "then": ["c"]}]})
-    >>> plan.strategies[0].pairs()
-    [('a', 'c'), ('b', 'c')]
-    """
-    from opportune.formats.loader import plan_from_dict
-
-    doc: dict[str, Any] = {"name": name, "parts": list(parts), "assemblies": dict(assemblies)}
-    if product is not None:
-        doc["product"] = product
-    return plan_from_dict(doc)
 
 
 def sequences(graph: AndOrGraph, limit: int = MAX_SEQUENCES) -> set[tuple[str, ...]]:

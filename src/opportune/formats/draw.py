@@ -10,8 +10,8 @@ from pathlib import Path
 
 import graphviz
 
-from opportune.formats.summary import strategy_summaries
-from opportune.plan import Plan
+from opportune.planning.orders import strategy_summaries
+from opportune.planning.plan import Plan
 
 
 class DotMissing(RuntimeError):

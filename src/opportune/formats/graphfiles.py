@@ -11,9 +11,9 @@ Bounds, each checked while the file is read (streamed: tokens and XML events, no
 each refusal with its line: the file size of :func:`~opportune.formats.loader.read_plan`; at most
 :data:`~opportune.formats.graphs.MAX_TASKS` nodes and :data:`~opportune.formats.graphs.MAX_PAIRS`
 edges; :data:`MAX_TOKENS` DOT tokens; :data:`MAX_ELEMENTS` GraphML elements nested at most
-:data:`~opportune.formats.loader.MAX_DEPTH` deep, :data:`~opportune.plan.MAX_STRATEGIES` graphs, and
+:data:`~opportune.formats.loader.MAX_DEPTH` deep, :data:`~opportune.planning.plan.MAX_STRATEGIES` graphs, and
 data of at most :data:`~opportune.formats.validate.MAX_TEXT` characters; no DTD or entity in GraphML
-(refused: they are how XML bombs work); then the plan limits of :mod:`opportune.plan`.
+(refused: they are how XML bombs work); then the plan limits of :mod:`opportune.planning.plan`.
 
 >>> from opportune import make_plan
 >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
@@ -31,10 +31,10 @@ from xml.parsers import expat
 from xml.sax.saxutils import escape, quoteattr
 
 from opportune.formats.graphs import MAX_PAIRS, MAX_TASKS, file_stem
-from opportune.formats.loader import MAX_DEPTH, CheckResult, Document
+from opportune.formats.documents import MAX_DEPTH, CheckResult, Document
 from opportune.formats.problems import Problem
 from opportune.formats.validate import MAX_TEXT
-from opportune.plan import MAX_STRATEGIES
+from opportune.planning.plan import MAX_STRATEGIES
 
 __all__ = ["check_dot_bytes", "check_graphml_bytes", "plan_from_networkx", "plan_to_networkx",
            "to_dot_precedence", "to_graphml"]
@@ -113,8 +113,8 @@ def _node_data(part) -> list[tuple[str, str]]:
 
 def _covers(plan, k: int) -> list[tuple[str, str]]:
     """The cover relations of strategy ``k`` as part-id pairs: the fewest edges that give its order.
-    O(constraints) (:func:`~opportune.formats.summary.strategy_summaries`, computed once per plan)."""
-    from opportune.formats.summary import strategy_summaries
+    O(constraints) (:func:`~opportune.planning.orders.strategy_summaries`, computed once per plan)."""
+    from opportune.planning.orders import strategy_summaries
 
     ids = plan.part_ids
     return [(ids[a], ids[b]) for a, b in strategy_summaries(plan)[k][0]]
@@ -391,7 +391,7 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        from opportune.formats.loader import not_utf8
+        from opportune.formats.documents import not_utf8
 
         return CheckResult(None, [not_utf8(raw, exc, file)])
     nodes: dict[str, dict] = {}
@@ -542,25 +542,15 @@ def to_dot_precedence(plan, strategy: int = 0) -> str:
 # ---------------------------------------------------------------- NetworkX (optional)
 
 def plan_to_networkx(plan, strategy: int = 0):
-    """One strategy as a ``networkx.DiGraph``: a node per part (its plan attributes as node data), an
-    edge per cover relation.  Needs networkx (``pip install networkx``)."""
-    try:
-        import networkx as nx
-    except ImportError:
-        raise ImportError("Plan.to_networkx needs networkx: pip install networkx") from None
-    g = nx.DiGraph(name=plan.name)
-    for part in plan.parts:
-        data = {k: getattr(part, k) for k in ("name", "quantity", "install", "acquire") if getattr(part, k) is not None}
-        g.add_node(part.id, **data)
-    g.add_edges_from(_covers(plan, strategy))
-    return g
+    """One strategy as a ``networkx.DiGraph`` (:meth:`opportune.planning.plan.Plan.to_networkx`)."""
+    return plan.to_networkx(strategy)
 
 
 def plan_from_networkx(graph, name: str | None = None):
     """A plan from a directed graph (edges ``a -> b``: a before b; node data ``name``/``label``,
-    ``quantity``, ``install``, ``acquire``).  Raises :class:`~opportune.plan.PlanError` listing every
+    ``quantity``, ``install``, ``acquire``).  Raises :class:`~opportune.planning.plan.PlanError` listing every
     problem (a cycle among them), as ``opportune check`` would."""
-    from opportune.plan import PlanError
+    from opportune.planning.plan import PlanError
 
     if not getattr(graph, "is_directed", lambda: False)():
         raise PlanError([Problem("the graph is undirected", "a precedence graph is directed: use a networkx.DiGraph")])

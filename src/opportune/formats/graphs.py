@@ -14,13 +14,13 @@ from collections import Counter
 from pathlib import Path
 from typing import Sequence
 
-from opportune.formats.loader import CheckResult, file_stem  # noqa: F401 (file_stem: its former home)
+from opportune.formats.documents import CheckResult, file_stem  # noqa: F401 (file_stem: its former home)
 from opportune.formats.problems import Problem
-from opportune.plan import MAX_UNITS
+from opportune.planning.plan import MAX_UNITS
 
 # Limits of the graph readers (.IN2, .alb, DOT, GraphML), checked while reading, before anything
 # is built from the file; each keeps the largest file accepted loaded within 5 s of CPU time and
-# 500 MB.  A graph read is then a plan like any other, limited to MAX_UNITS tasks (opportune.plan).
+# 500 MB.  A graph read is then a plan like any other, limited to MAX_UNITS tasks (opportune.planning.plan).
 MAX_TASKS = 2 * MAX_UNITS   # tasks (nodes): past MAX_UNITS the plan's own check says what to do
 MAX_PAIRS = 120_000         # precedence lines (edges), repeats included
 MAX_LINES = 4 * (MAX_TASKS + MAX_PAIRS)  # lines of a line-based graph file, blank ones and comments included
@@ -43,7 +43,7 @@ class GraphFormatError(ValueError):
 def file_bytes(path: str | Path, error: type[GraphFormatError]) -> bytes:
     """The bytes of a graph file, reading at most :data:`~opportune.formats.loader.MAX_FILE_BYTES`
     (and one more, to know): a larger file raises ``error`` with the bound, unread."""
-    from opportune.formats.loader import MAX_FILE_BYTES
+    from opportune.formats.documents import MAX_FILE_BYTES
 
     with Path(path).open("rb") as f:
         raw = f.read(MAX_FILE_BYTES + 1)
@@ -162,7 +162,7 @@ def check_graph(
     lines of the document built here are not lines of the file.  Cost: that of
     ``check_document`` on the graph.
     """
-    from opportune.formats.loader import Document
+    from opportune.formats.documents import Document
     from opportune.formats.validate import check_document
 
     requires: dict[str, list[str]] = {}

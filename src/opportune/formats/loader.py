@@ -1,7 +1,7 @@
 """Reading plan files: YAML, JSON (one schema) and SALBP ``.IN2`` precedence graphs.
 
-Every reader returns a :class:`~opportune.plan.Plan` or raises
-:class:`~opportune.plan.PlanError` carrying *every* problem found, each with
+Every reader returns a :class:`~opportune.planning.plan.Plan` or raises
+:class:`~opportune.planning.plan.PlanError` carrying *every* problem found, each with
 its file, line and what to do.  YAML is read with PyYAML's safe loader only:
 no tag in a plan file can run code.
 
@@ -21,7 +21,7 @@ none of them inside the value it names, and its aliases add at most
 of a few hundred bytes would otherwise expand to billions); a string holds at
 most :data:`~opportune.formats.validate.MAX_TEXT` characters.  The limits on
 plans themselves (parts, units, strategies, constraints) are in
-:mod:`opportune.plan`; :data:`MAX_VALUES` keeps every document the loaders
+:mod:`opportune.planning.plan`; :data:`MAX_VALUES` keeps every document the loaders
 accept (10,000 parts and about 130,000 constraints at most) loaded within
 5 s of CPU time and 500 MB (``benchmarks/bench_loaders.py`` measures every
 bound's corner).  A JSON plan's lines are found only when a problem needs one,
@@ -33,113 +33,21 @@ by one pass over its tokens (:func:`json_lines`).
 
 from __future__ import annotations
 
-import itertools
 import os
 import re
-from dataclasses import dataclass, field
 
+from opportune.formats.documents import (IN2_SUFFIXES, JSON_SUFFIXES, MAX_ALIAS_VALUES, MAX_ALIASES, MAX_DEPTH,  # noqa: F401
+                                         MAX_FILE_BYTES, MAX_VALUES, YAML_SUFFIXES, CheckResult, Document, file_suffix,
+                                         detect_format, file_stem, json_values_past, not_utf8)
 from opportune.formats.problems import Problem
-from opportune.plan import Plan, PlanError
+from opportune.planning.plan import Part, Plan, PlanError, geometry_dict
 
 # not typing.TYPE_CHECKING: importing typing (and pathlib) costs 10 ms of a count's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from collections.abc import Iterable, Mapping
     from pathlib import Path
-    from typing import Any, Callable
-
-MAX_FILE_BYTES = 32 << 20   # a plan file (32 MiB)
-MAX_DEPTH = 64              # nesting of values (a plan needs 6)
-MAX_ALIASES = 1_000         # YAML aliases (*name) in one file
-MAX_VALUES = 150_000        # values of a document (keys included), aliases expanded: 10,000 parts, ~130,000 constraints
-MAX_ALIAS_VALUES = 50_000   # values that aliases add to a YAML document by repeating what they name
-
-YAML_SUFFIXES = {".yaml", ".yml"}
-JSON_SUFFIXES = {".json"}
-IN2_SUFFIXES = {".in2"}
-
-
-@dataclass
-class Document:
-    """A parsed plan document with the line of every value (JSON-pointer-like paths)."""
-
-    data: Any
-    lines: dict[tuple, int] = field(default_factory=dict)
-    file: str | None = None
-    problems: list[Problem] = field(default_factory=list)
-    # Finds the lines when one is first asked for (a JSON plan's lines cost a second, YAML, pass:
-    # a plan without problems never needs them).
-    locate: Callable[[], dict[tuple, int]] | None = field(default=None, repr=False, compare=False)
-
-    def line(self, path: tuple) -> int | None:
-        """Line of ``path``, or of its nearest ancestor that has one."""
-        if self.locate is not None:
-            locate, self.locate = self.locate, None
-            self.lines.update(locate())
-        while True:
-            if path in self.lines:
-                return self.lines[path]
-            if not path:
-                return None
-            path = path[:-1]
-
-
-@dataclass
-class CheckResult:
-    """Outcome of reading and checking a plan: the plan (if usable) and every finding."""
-
-    plan: Plan | None
-    problems: list[Problem]
-
-    @property
-    def errors(self) -> list[Problem]:
-        return [p for p in self.problems if p.severity == "error"]
-
-    @property
-    def warnings(self) -> list[Problem]:
-        return [p for p in self.problems if p.severity == "warning"]
-
-    @property
-    def ok(self) -> bool:
-        return self.plan is not None and not self.errors
-
-
-def _suffix(path: str | Path) -> str:
-    """The suffix of the file name, lower case (``".yaml"``; ``""`` for none), as ``Path.suffix`` gives it."""
-    name = os.path.basename(os.path.normpath(os.fspath(path)))
-    i = name.rfind(".")
-    return name[i:].lower() if 0 < i < len(name) - 1 else ""
-
-
-def detect_format(path: str | Path, text: str | None = None) -> str:
-    """``"yaml"``, ``"json"`` or ``"in2"`` from the suffix, else from the content."""
-    suffix = _suffix(path)
-    if suffix in YAML_SUFFIXES:
-        return "yaml"
-    if suffix in JSON_SUFFIXES:
-        return "json"
-    if suffix in IN2_SUFFIXES:
-        return "in2"
-    if text is not None:
-        head = text.lstrip()[:1]
-        if head in "[{":
-            return "json"
-        first = text.strip().splitlines()[0].strip() if text.strip() else ""
-        if first.isdigit():
-            return "in2"
-    return "yaml"
-
-
-def file_stem(file: str) -> str:
-    """A plan's default name from its file's label: the file name without its suffix, and a shipped file
-    named ``salbp:TONGE70`` or ``example:gearbox`` by its own name (``TONGE70``).
-
-    >>> file_stem("/data/TONGE70.IN2"), file_stem("salbp:TONGE70"), file_stem("graph")
-    ('TONGE70', 'TONGE70', 'graph')
-    """
-    tail = file.replace("\\", "/").rsplit("/", 1)[-1]
-    if tail.lower().startswith(("salbp:", "example:")):
-        return tail.split(":", 1)[1]
-    return tail.rsplit(".", 1)[0] if "." in tail.lstrip(".") else tail
+    from typing import Any
 
 
 def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
@@ -151,11 +59,11 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
     """
     shipped = None      # a shipped file is named by its short name in messages, not its installed path
     if str(path).lower().startswith(("salbp:", "example:")):
-        from opportune import datasets
+        from opportune.formats.shipped import resolve
 
         try:
             shipped = str(path)
-            path = datasets.resolve(path)
+            path = resolve(path)
         except KeyError as exc:
             example = "salbp:KILBRID" if str(path).lower().startswith("salbp:") else "example:gearbox"
             return CheckResult(None, [Problem(str(exc.args[0]), f"use one of these names, e.g. {example}",
@@ -181,7 +89,7 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
         return CheckResult(None, [Problem(f"{name} is a directory, not a plan file", "give a .yaml, .json or .IN2 file", code="io")])
     except OSError as exc:
         return CheckResult(None, [Problem(f"cannot read {name}: {exc.strerror}", "check the file's permissions", code="io")])
-    suffix = _suffix(path)
+    suffix = file_suffix(path)
     if suffix == ".alb" or b"<" in raw[:200]:   # .alb's first line is `<number of tasks>`: else no need to load it
         from opportune.formats.alb import check_alb_bytes, is_alb
 
@@ -206,17 +114,6 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
     except UnicodeDecodeError as exc:
         return CheckResult(None, [not_utf8(raw, exc, name)])
     return check_text(text, fmt=fmt, file=name, allow_cycles=allow_cycles)
-
-
-def not_utf8(raw: bytes, exc: UnicodeDecodeError, file: str | None) -> Problem:
-    """The problem of bytes that are not UTF-8: the line, the column and the bytes, described (never printed raw)."""
-    start = exc.start
-    line_start = raw.rfind(b"\n", 0, start) + 1
-    bad = raw[start: max(exc.end, start + 1)][:4]
-    shown = " ".join(f"0x{b:02x}" for b in bad)
-    return Problem(f"the file is not valid UTF-8 text: byte{'s' if len(bad) > 1 else ''} {shown} at column "
-                   f"{start - line_start + 1}", "save the file as UTF-8 (an editor's 'save with encoding')",
-                   file=file, line=raw.count(b"\n", 0, start) + 1, code="syntax")
 
 
 def load_plan(path: str | Path) -> Plan:
@@ -248,6 +145,51 @@ def plan_from_dict(data: Any, *, file: str | None = None) -> Plan:
     if not result.ok:
         raise PlanError(result.errors)
     return result.plan
+
+
+def make_plan(
+    parts: Iterable[str | dict | Part],
+    requires: Mapping[str, Iterable[str]] | None = None,
+    *,
+    strategies: Mapping[str, Mapping[str, Iterable[str]]] | None = None,
+    name: str = "plan",
+) -> Plan:
+    """Build and validate a plan from Python values.
+
+    Give either ``requires`` (one strategy) or ``strategies`` (name → requires).
+    Raises :class:`PlanError` listing every problem, as ``opportune check`` would.
+
+    >>> make_plan(["a", "b"], {"b": ["a"]}).part_ids
+    ('a', 'b')
+    """
+    doc: dict = {"name": name, "parts": [p if isinstance(p, (str, dict)) else _part_dict(p) for p in parts]}
+    if strategies is not None:
+        doc["strategies"] = [{"name": k, "requires": {a: list(b) for a, b in v.items()}} for k, v in strategies.items()]
+    else:
+        doc["requires"] = {a: list(b) for a, b in (requires or {}).items()}
+    return plan_from_dict(doc)
+
+
+def plan_from_andor(parts: Iterable[str | dict], assemblies: Mapping[str, list[dict]], *, product: str | None = None,
+                    name: str = "plan") -> Plan:
+    """A plan from an AND/OR graph given as Python values (the file schema's ``assemblies``).
+
+    Checked and expanded exactly as a file would be; raises :class:`PlanError` with every problem.
+
+    >>> plan = plan_from_andor(["a", "b", "c"], {"p": [{"join": ["a", "b"], "then": ["c"]}]})
+    >>> plan.strategies[0].pairs()
+    [('a', 'c'), ('b', 'c')]
+    """
+    doc: dict[str, Any] = {"name": name, "parts": list(parts), "assemblies": dict(assemblies)}
+    if product is not None:
+        doc["product"] = product
+    return plan_from_dict(doc)
+
+
+def _part_dict(p: Part) -> dict:
+    d = {"id": p.id, "name": p.name, "quantity": p.quantity, "acquire": p.acquire, "install": p.install,
+         "visibility": p.visibility, "geometry": None if p.geometry is None else geometry_dict(p.geometry)}
+    return {k: v for k, v in d.items() if v is not None}
 
 
 # ---------------------------------------------------------------- parsing
@@ -325,38 +267,6 @@ def _prescan_yaml(text: str) -> int | None:
     finally:
         parser.dispose()
     return aliases if libyaml else None
-
-
-# A JSON string literal (no raw line break can stand in one), or an escape outside any: removed
-# before the separators are counted.  The escape alternative keeps the scan linear on a line of
-# unterminated quotes; the possessive repeats keep the matcher's memory constant (a plain repeat
-# of a group saves its state at every step: 1.2 GB for a string of ten million escapes).
-_JSON_STRING = re.compile(r'"(?>[^"\\\n]++|\\.)*+"|\\.')
-_JSON_SEPARATOR = re.compile(r"[,:\[{]")
-_SPACE = re.compile(r"\s*")
-
-
-def json_values_past(text: str, limit: int) -> int | None:
-    """The line of the first value past ``limit`` in JSON ``text``, or None if it has at most ``limit``.
-
-    A document's values are 1 + its commas + its colons (keys) + its non-empty lists and objects,
-    counted outside string literals: one regular-expression pass and four ``str.count`` (C speed,
-    O(len(text)), memory one copy of the text), before anything is parsed.  An empty list or
-    object counts one value more than it has: the count is an upper bound, exact for plans.
-
-    >>> json_values_past('[1, 2, "3,4"]', 4), json_values_past('[1,\\n 2, 3]', 3)
-    (None, 2)
-    """
-    if 1 + sum(text.count(c) for c in ",:[{") <= limit:
-        return None  # even with the separators inside strings counted
-    bare = _JSON_STRING.sub('""', text)
-    if 1 + sum(bare.count(c) for c in ",:[{") <= limit:
-        return None
-    past = next(itertools.islice(_JSON_SEPARATOR.finditer(bare), limit - 1, None), None)
-    if past is None:
-        return 1
-    start = _SPACE.match(bare, past.end()).end()  # where the value after the separator starts
-    return bare.count("\n", 0, start) + 1
 
 
 def _prescan_json(text: str) -> None:
@@ -461,7 +371,6 @@ def _plain_scalar(text: str, phrase: bool):
     if phrase and _PHRASE.match(text) and "  " not in text and text.split(" ", 1)[0].lower() not in _SPECIAL:
         return text
     return _NOT
-
 
 
 def _plain_yaml(text: str) -> tuple[dict, dict[tuple, int]] | None:

@@ -56,7 +56,7 @@ def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
     """
     stripped = text.lstrip()
     if stripped.startswith("["):
-        from opportune.formats.loader import json_values_past
+        from opportune.formats.documents import json_values_past
 
         past = json_values_past(text, 1 + MAX_LOOKS + MAX_LOOK_PARTS)
         if past is not None:
@@ -119,10 +119,10 @@ def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
 def read_looks(path: str | Path) -> list[tuple[str, ...]]:
     """Read a looks file (or ``example:NAME``, a shipped one); raise :class:`LooksError` (missing file included)."""
     if str(path).lower().startswith("example:"):
-        from opportune import datasets
+        from opportune.formats import shipped
 
         try:
-            path = datasets.example_path(str(path)[len("example:"):])
+            path = shipped.example_path(str(path)[len("example:"):])
         except KeyError as exc:
             raise LooksError(Problem(str(exc.args[0]), "use one of these names, e.g. example:gearbox-table1",
                                      code="io")) from None

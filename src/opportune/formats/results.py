@@ -7,7 +7,7 @@ bytes (read at most one byte more, whatever the file is: ``/dev/zero`` too); at 
 :data:`MAX_RESULTS_VALUES` values (counted by :func:`~opportune.formats.loader.json_values_past`
 before anything is parsed: C speed, one copy of the text), nested at most
 :data:`~opportune.formats.loader.MAX_DEPTH` deep; at most :data:`MAX_RECORDED_STRATEGIES` strategies
-in the study.  The plan is then checked as any plan (its own limits, :mod:`opportune.plan`).  A file
+in the study.  The plan is then checked as any plan (its own limits, :mod:`opportune.planning.plan`).  A file
 at these bounds is read in well under a second of CPU time and under 300 MB.
 
 >>> try:
@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from opportune.formats.loader import MAX_DEPTH, MAX_FILE_BYTES, MAX_VALUES, json_values_past
+from opportune.formats.documents import MAX_DEPTH, MAX_FILE_BYTES, MAX_VALUES, json_values_past
 
 __all__ = ["MAX_RECORDED_STRATEGIES", "MAX_RESULTS_BYTES", "MAX_RESULTS_VALUES", "ResultsError",
            "read_recorded_study"]

@@ -25,7 +25,7 @@ from pathlib import Path
 from opportune.formats.graphs import (DECIMAL, MAX_PAIRS, MAX_TASKS, PAIR, Findings, GraphFormatError, check_graph,
                                       file_bytes, in_file_order, last_nonblank, show, text_lines, to_int,
                                       too_many_lines)
-from opportune.formats.loader import CheckResult
+from opportune.formats.documents import CheckResult
 from opportune.formats.problems import Problem
 
 

@@ -9,7 +9,7 @@ Limits (each refused with a message naming the file, and the line where there is
 it bounds is built): ``MAX_SEQUENCE_BYTES`` (32 MiB) per file, ``MAX_SEQUENCES`` (100,000) sequences
 per file, ``MAX_SEQUENCE_ITEMS`` (2,000,000) installations in all, ``MAX_SEQUENCE_LINES``
 (1,000,000) lines, counted before any is built, and ``MAX_SEQUENCE_LINE_CHARS`` (1,000,000)
-characters a line; per sequence the plan limits of :mod:`opportune.plan` (``MAX_UNITS`` = 10,000
+characters a line; per sequence the plan limits of :mod:`opportune.planning.plan` (``MAX_UNITS`` = 10,000
 installations, ``MAX_PARTS`` parts).  A part id seen again is the same string: memory grows with the
 installations (8 bytes each), not with the bytes of the file.
 
@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Iterable
 
 from opportune.formats.problems import CONTROL_CHARS, Problem
-from opportune.plan import MAX_PARTS, MAX_UNITS
+from opportune.planning.plan import MAX_PARTS, MAX_UNITS
 
 __all__ = ["MAX_SEQUENCE_BYTES", "MAX_SEQUENCE_ITEMS", "MAX_SEQUENCE_LINE_CHARS", "MAX_SEQUENCE_LINES", "MAX_SEQUENCES",
            "SequenceError", "Sequences", "parse_sequences",
@@ -248,9 +248,9 @@ def _decode(raw: bytes, file: str) -> str:
 
 def _example(name: str) -> Path:
     """A shipped sequences file, by name (``gearbox-observed``; the ``.seq`` suffix is optional)."""
-    from importlib import resources
+    from opportune.formats.shipped import shipped_folder
 
-    folder = resources.files("opportune.datasets").joinpath("examples")
+    folder = shipped_folder("examples")
     stem = name.removesuffix(".seq")
     entry = folder.joinpath(f"{stem}.seq")
     if stem and "/" not in stem and "\\" not in stem and entry.is_file():

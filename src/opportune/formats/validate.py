@@ -13,9 +13,9 @@ import re
 from collections import Counter
 from functools import lru_cache
 
-from opportune.formats.loader import CheckResult, Document, file_stem
+from opportune.formats.documents import CheckResult, Document, file_stem
 from opportune.formats.problems import CONTROL_CHARS, Problem
-from opportune.plan import (MAX_CONSTRAINTS, MAX_DIMENSION, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS,
+from opportune.planning.plan import (MAX_CONSTRAINTS, MAX_DIMENSION, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS,
                             MAX_WEIGHT, MIN_DIMENSION, SHAPES, Part, Plan, Strategy)
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
@@ -56,7 +56,7 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
 
     Returns the plan (``None`` if there is any error) and all problems,
     errors and warnings, in file order where lines are known.  ``allow_cycles``
-    (for :mod:`opportune.engine.relax` only) leaves cyclic strategies in the plan
+    (for :mod:`opportune.planning.relax` only) leaves cyclic strategies in the plan
     instead of refusing it: such a plan has no admissible sequence.
     """
     problems: list[Problem] = []
@@ -113,7 +113,7 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
                     source=doc.file, description=data.get("description") or data.get("source"),
                     simulation=data.get("simulation") or {}, andor=andor)
         if all(o is not None for o in orders):  # built once: the summary (`check`) uses them again
-            from opportune.formats.summary import keep_summary
+            from opportune.planning.orders import keep_summary
 
             object.__setattr__(plan, "_strategy_summaries", tuple(keep_summary(o) for o in orders))
     unlisted[("unknown-part", "error")] += unlisted_unknown[0]
@@ -121,7 +121,7 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
 
 
 def _size_problems(data: dict, doc: Document) -> list[Problem]:
-    """Parts, strategies and declared constraints over the stated limits (:mod:`opportune.plan`)."""
+    """Parts, strategies and declared constraints over the stated limits (:mod:`opportune.planning.plan`)."""
     out = []
     parts, strategies = data.get("parts"), data.get("strategies")
     if isinstance(parts, list) and len(parts) > MAX_PARTS:
@@ -294,7 +294,7 @@ def _is_cost(v, *, positive: bool = False) -> bool:
 
 
 def _is_geometry(geometry) -> bool:
-    """True only if ``geometry`` is one shape of :data:`~opportune.plan.SHAPES` with its dimensions in bounds."""
+    """True only if ``geometry`` is one shape of :data:`~opportune.planning.plan.SHAPES` with its dimensions in bounds."""
     if not (isinstance(geometry, dict) and len(geometry) == 1):
         return False
     (shape, dims), = geometry.items()
@@ -694,13 +694,12 @@ def _order_problems(ids: list[str], strategies: list[Strategy], doc: Document, *
     Redundant constraints past ``MAX_PER_KIND + 1`` (the one past the cap is where the summary of
     :func:`_capped` stands) are counted, not built: the second result counts them for :func:`_capped`
     (a plan of 10,000 parts can state 100,000 redundant constraints).  The third is each
-    strategy's :class:`~opportune.formats.summary.StrategyOrder` (None for a cyclic one), kept with
+    strategy's :class:`~opportune.planning.orders.StrategyOrder` (None for a cyclic one), kept with
     the plan for its summary.  Each order covers only the parts its strategy constrains, and
     strategies are compared by their covers, so 64 strategies of 10,000 parts cost what their
     constraints cost, not 64 closures of 10,000-bit sets.
     """
-    from opportune.engine.poset import CycleError
-    from opportune.formats.summary import StrategyOrder
+    from opportune.planning.orders import CycleError, StrategyOrder
 
     index = {pid: i for i, pid in enumerate(ids)}
     problems: list[Problem] = []

@@ -52,6 +52,17 @@ class FixedSequencePolicy(DecidesOnMasks):
     def earliest(self, parts) -> str:
         return min(parts, key=self._rank.__getitem__)
 
+    def decide(self, state, visible) -> Decision:
+        """:meth:`~opportune.policies.base.DecidesOnMasks.choose`'s action with the reason :meth:`reason` gives it."""
+        action = self.choose(state, visible)
+        if action.kind == "done":
+            return Decision(DONE, "the assembly is complete")
+        return Decision(action, self.reason(action, self.next_part(state), visible))
+
+    def reason(self, action: Action, nxt: str, visible) -> str:
+        """Why ``action`` (not ``done``), the sequence's next part being ``nxt``."""
+        raise NotImplementedError
+
 
 class ShakeUntilVisible(FixedSequencePolicy):
     """Reduce uncertainty: a fixed sequence; install the next part when visible, otherwise shake."""
@@ -67,14 +78,10 @@ class ShakeUntilVisible(FixedSequencePolicy):
         nxt = self.sequence[mask.bit_count()]
         return shared_action("install", nxt, "bin") if nxt in visible else SHAKE
 
-    def decide(self, state, visible) -> Decision:
-        action = self.choose(state, visible)
-        if action.kind == "done":
-            return Decision(DONE, "the assembly is complete")
-        nxt = self.next_part(state)
+    def reason(self, action: Action, nxt: str, visible) -> str:
         if action.kind == "install":
-            return Decision(action, f"'{nxt}' is next in the fixed sequence and visible")
-        return Decision(SHAKE, f"'{nxt}' is next in the fixed sequence and not visible: shake")
+            return f"'{nxt}' is next in the fixed sequence and visible"
+        return f"'{nxt}' is next in the fixed sequence and not visible: shake"
 
 
 class Pallet(ShakeUntilVisible):
@@ -101,15 +108,12 @@ class Kitting(FixedSequencePolicy):
             return shared_action("buffer", self.earliest(visible)) if visible else SHAKE
         return shared_action("install", self.sequence[installed], "buffer")
 
-    def decide(self, state, visible) -> Decision:
-        action = self.choose(state, visible)
-        if action.kind == "done":
-            return Decision(DONE, "the assembly is complete")
+    def reason(self, action: Action, nxt: str, visible) -> str:
         if action.kind == "buffer":
-            return Decision(action, "lay every part out before assembling")
+            return "lay every part out before assembling"
         if action.kind == "shake":
-            return Decision(SHAKE, "parts remain in the bin but none is visible")
-        return Decision(action, "all parts laid out: assemble in the fixed sequence")
+            return "parts remain in the bin but none is visible"
+        return "all parts laid out: assemble in the fixed sequence"
 
 
 class BufferFixed(FixedSequencePolicy):
@@ -132,17 +136,13 @@ class BufferFixed(FixedSequencePolicy):
             return shared_action("buffer", self.earliest(visible))
         return SHAKE
 
-    def decide(self, state, visible) -> Decision:
-        action = self.choose(state, visible)
-        if action.kind == "done":
-            return Decision(DONE, "the assembly is complete")
-        nxt = self.next_part(state)
+    def reason(self, action: Action, nxt: str, visible) -> str:
         if action.kind == "install":
             where = "waiting in the buffer" if action.source == "buffer" else "visible"
-            return Decision(action, f"'{nxt}' is next and {where}")
+            return f"'{nxt}' is next and {where}"
         if action.kind == "buffer":
-            return Decision(action, f"'{nxt}' is next but not here: buffer the visible part needed first")
-        return Decision(SHAKE, f"'{nxt}' is next and not visible" + (", buffer full" if visible else ""))
+            return f"'{nxt}' is next but not here: buffer the visible part needed first"
+        return f"'{nxt}' is next and not visible" + (", buffer full" if visible else "")
 
 
 class Quantify(BufferFixed):

@@ -34,7 +34,7 @@ from math import comb
 from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.policies.base import DONE, SHAKE, Action, Decision
-from opportune.worlds.costs import TimeModel
+from opportune.planning.costs import TimeModel
 
 #: Looks (with their probabilities) the look cache keeps, over all the bin contents it holds: about
 #: 150 bytes each, so at most about 30 MB whatever the plan (it used to grow with the states × looks).

@@ -63,7 +63,7 @@ class Rollout(DecidesOnMasks):
     def __init__(self, *, samples: int = 16, budget: float | None = None, min_samples: int = 4, seed: int = 0,
                  visible: int = 2, capacity: int | None = None, costs=None, exact_below: int | None = None,
                  exact=None):
-        from opportune.worlds import TimeModel
+        from opportune.planning.costs import TimeModel
 
         self.samples = samples
         self.budget = budget

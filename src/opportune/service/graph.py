@@ -11,7 +11,7 @@ draws them, so nothing is fetched and nothing is built.
 
 from __future__ import annotations
 
-from opportune.plan import Plan
+from opportune.planning.plan import Plan
 
 DX = 120   # distance between columns
 DY = 56    # distance between rows

@@ -29,7 +29,7 @@ from opportune.engine.deadline import Deadline
 from opportune.engine.memory import memory_total, resident, trim
 from opportune.formats import CheckResult, check_text, plan_from_dict
 from opportune.formats.loader import detect_format, not_utf8
-from opportune.plan import Plan, PlanError
+from opportune.planning.plan import Plan, PlanError
 from opportune.service.errors import ApiError, plan_not_found
 from opportune.service.storage import Store, dumps, now, plan_owners, plans
 

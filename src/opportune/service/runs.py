@@ -106,7 +106,7 @@ class LiveRun:
     capacity: int | None
     created_at: float
     policy: str = "opportunistic"     # its name (policies/named.py); runs from before policies were chosen: the paper's
-    products: int = 1                 # fixtures fed from one bin (its plan is then the joint plan: opportune.products)
+    products: int = 1                 # fixtures fed from one bin (its plan is then the joint plan: opportune.planning.products)
     lock: threading.RLock = field(default_factory=threading.RLock)
     sequencer: Sequencer | None = None
     applied: int = 0
@@ -297,7 +297,7 @@ class RunManager:
         from types import SimpleNamespace
 
         from opportune.engine.schedule import MAX_STRATEGIES_EXACT
-        from opportune.products import ProductsError, several_products
+        from opportune.planning.products import ProductsError, several_products
         from opportune.service.plans import store_plan
 
         try:

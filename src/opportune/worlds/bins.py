@@ -166,35 +166,3 @@ class PalletWorld(World):
         if not self.units or self.units[0] != part:
             raise RuntimeError(f"the pallet presents {self.units[:1]}, not '{part}'")
         self.units.pop(0)
-
-
-BINS = {"uniform": UniformBin, "weighted": WeightedBin, "pile": PileBin, "conveyor": ConveyorBin}
-
-
-#: Every bin model by name: those of :data:`BINS` and the physical bin (:mod:`opportune.worlds.physics`, MuJoCo).
-BIN_NAMES = (*BINS, "physics")
-
-
-def make_world(kind: str, *, visible: int = 2, weights: Mapping[str, float] | None = None,
-               geometry: Mapping[str, tuple] | None = None, physics: Mapping | None = None) -> World:
-    """A bin model by name: ``uniform``, ``weighted``, ``pile``, ``conveyor`` or ``physics``.
-
-    ``weights`` are the weighted bin's visibilities; ``geometry`` (part id → ``(shape, dimensions)``) and
-    ``physics`` (``bin``, ``settle_steps``, ``visible_fraction``: a plan's ``simulation.physics``) set up
-    the physical bin.  O(1); the physical bin builds its model at its first trial.
-
-    >>> make_world("pile", visible=3).name
-    'pile'
-    """
-    if kind == "physics":
-        from opportune.worlds.physics import PhysicsBin
-
-        settings = dict(physics or {})
-        if "bin" in settings:
-            settings["bin_size"] = settings.pop("bin")
-        return PhysicsBin(visible, geometry, **settings)
-    if kind not in BINS:
-        raise ValueError(f"unknown bin model '{kind}': use one of {', '.join(BIN_NAMES)}")
-    if kind == "weighted":
-        return WeightedBin(visible, weights)
-    return BINS[kind](visible)

@@ -50,7 +50,7 @@ import random
 from collections import OrderedDict
 from typing import Mapping, Sequence
 
-from opportune.plan import MAX_DIMENSION, MIN_DIMENSION, SHAPES
+from opportune.planning.plan import MAX_DIMENSION, MIN_DIMENSION, SHAPES
 from opportune.worlds.bins import World
 
 #: The shape of a part whose plan gives no ``geometry``: a box of 40 × 30 × 20 mm.
