@@ -1,7 +1,7 @@
 """The count-based rules decide as they did before the answering layer (policies/answers.py) took
 over their budget machinery: every decision of a fixed set of seeded assemblies, replayed.
 
-The fixture ``tests/data/decisions_recorded.json`` was made by running this file as a script
+The fixture ``tests/data/decisions_recorded.json.gz`` (gzip-compressed JSON) was made by running this file as a script
 (``python tests/test_decisions_recorded.py``) on the code before the rules were rewritten over
 the answering layer (commit e1c5243): for each case (a plan, a policy, a bin size, a buffer
 capacity, a seed) it holds every decision's ``to_dict()`` and ``explain()`` along one simulated
@@ -14,6 +14,7 @@ optimum's programme for the small plans and on its base (slack) for KILBRID.
 
 from __future__ import annotations
 
+import gzip
 import json
 import random
 import sys
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-FIXTURE = Path(__file__).parent / "data" / "decisions_recorded.json"
+FIXTURE = Path(__file__).parent / "data" / "decisions_recorded.json.gz"
 ROOT = Path(__file__).parent.parent
 BIG_BUDGET = 60.0   # seconds per decision: every count of these plans fits (the exact branch of a budgeted rule)
 
@@ -110,7 +111,7 @@ def case_id(case) -> str:
 
 @pytest.fixture(scope="module")
 def recorded() -> dict:
-    return json.loads(FIXTURE.read_text())
+    return json.loads(gzip.decompress(FIXTURE.read_bytes()))
 
 
 @pytest.mark.parametrize("case", CASES, ids=case_id)
@@ -128,5 +129,6 @@ def test_the_rules_decide_as_recorded(case, recorded):
 if __name__ == "__main__":
     sys.path.insert(0, str(ROOT / "src"))
     FIXTURE.parent.mkdir(exist_ok=True)
-    FIXTURE.write_text(json.dumps({case_id(c): play(*c) for c in CASES}, indent=None, separators=(",", ":")) + "\n")
+    text = json.dumps({case_id(c): play(*c) for c in CASES}, indent=None, separators=(",", ":")) + "\n"
+    FIXTURE.write_bytes(gzip.compress(text.encode(), compresslevel=9, mtime=0))
     print(f"wrote {FIXTURE} ({FIXTURE.stat().st_size:,} bytes)")

@@ -501,6 +501,16 @@ class CountBasedRule(DecidesOnMasks):
     ``budget``: seconds per decision (None: always exact, however long it takes).  With a budget,
     ``seed`` and ``chains`` set the estimates' random streams and population.  A rule with a question
     after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the whole is ``total_budget``).
+    A decision costs what its answers cost; within a budget, at most about the budget (the estimates'
+    and counts' checks of the clock, and building the reasons, are the rest).
+
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> from opportune.policies.variants import Slack
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+    >>> p = Slack(budget=0.05)
+    >>> p.choose_at(engine, 0, engine.all_strategies, (), 1.0, ("b", "a")), p.total_budget, round(p.budget, 3)
+    (Action(kind='install', part='a', source='bin'), 0.05, 0.03)
     """
 
     #: The rules in words, as the decisions give them.
@@ -512,16 +522,18 @@ class CountBasedRule(DecidesOnMasks):
     def __init__(self, budget: float | None = None, *, seed: int = 0, chains: int = 8):
         if budget is not None and not budget > 0:
             raise ValueError("the decision budget must be a positive number of seconds (or None)")
-        asks_after = type(self).then is not CountBasedRule.then
         self.total_budget = budget
-        self.budget = None if budget is None or not asks_after else budget * THEN_SHARES[0]
-        if not asks_after:
-            self.budget = budget
+        # the rule's share, so that with the question after it the decision keeps the whole budget
+        self.budget = budget * THEN_SHARES[0] if budget is not None and self._asks_after() else budget
         self.seed = seed
         self.chains = chains
         # Exact decisions depend only on the state and the look, so a simulation may cache them.
         self.deterministic = budget is None
         self.readings = Readings(seed, chains)
+
+    @classmethod
+    def _asks_after(cls) -> bool:
+        return cls.then is not CountBasedRule.then
 
     def rule(self, ask: Answers) -> Action:
         """The action, from the answers to the rule's questions."""
@@ -551,7 +563,7 @@ class CountBasedRule(DecidesOnMasks):
         try:
             start = time.perf_counter()
             action, how = self._within_budget(engine, mask, consistent, buffer, free, visible)
-            if type(self).then is CountBasedRule.then:
+            if not self._asks_after():
                 return action, how
             ask = Answers(engine, mask, consistent, buffer, free, visible, mode="then", readings=self.readings,
                           end=start + self.total_budget * (1 - MARGIN), after=how,
@@ -627,6 +639,9 @@ class CountBasedRule(DecidesOnMasks):
         raise NotImplementedError
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        """The action with its reasons: the candidates' options and the completions now, or the visible
+        parts' expected positions, counted within what is left of the budget (said where they do not
+        fit); an estimated decision gives its estimates and how sure it is instead."""
         start = time.perf_counter()
         sched = state.schedule
         action, how = self._how(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)

@@ -101,7 +101,7 @@ class Slack(BinFirst):
 
 
 def __getattr__(name: str):
-    # The look-ahead lives in policies/lookahead.py (its programme and its limits in seconds); its old home still names it.
+    # The look-ahead lives in policies/lookahead.py (its programme and its limits in seconds): still named here.
     if name in ("Lookahead", "_EVALUATORS"):
         from opportune.policies import lookahead
 
