@@ -1111,13 +1111,23 @@ class Schedule:
         return self.engine.installable(self.mask, self.consistent)
 
     def count(self) -> int:
-        """Exact number of admissible completions (raises BudgetExceeded if over budget)."""
+        """Exact number of admissible completions (raises BudgetExceeded if over budget): the value of
+        ``count_result(estimate=False)``."""
         return self.engine.count(self.mask, self.consistent)
 
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
-                     exact_share: float = 0.65, deadline=None, threads: int = 1) -> CountResult:
+                     exact_share: float = 0.65, deadline=None, threads: int = 1, estimate: bool = True) -> CountResult:
         """Number of completions: exact within the engine's budget, else a clearly marked estimate
-        with an interval.
+        with an interval.  The one way to count a state: the exact methods, the hub split and the
+        estimates are chosen here (and in :meth:`OrderEngine.count` for the exact part), never by
+        the caller.
+
+        ``estimate=False``: the exact count alone, the same way, within ``deadline`` (a
+        :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()`` moment), or with
+        ``deadline=None`` within whatever :meth:`OrderEngine.deadline` the caller holds, else the
+        engine's time limit per count; :class:`~opportune.engine.count.BudgetExceeded` if it does
+        not fit (what was counted stays in the memos).  ``time_limit`` and the estimate's settings
+        are then unused.  :meth:`count` is the same, as a plain ``int``.
 
         Everything stops at one :class:`~opportune.engine.deadline.Deadline`: ``plain + time_limit``
         seconds from the call, or ``deadline`` if sooner, where ``plain`` is the engine's own time
@@ -1156,10 +1166,17 @@ class Schedule:
         >>> r = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).count_result(time_limit=1.0)
         >>> r.value, r.exact, r.interval_log10 == (r.log10, r.log10)
         (3, True, True)
+        >>> Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).count_result(estimate=False).value
+        3
         """
 
         from opportune.engine.deadline import Deadline, as_deadline
 
+        if not estimate:
+            if deadline is None:
+                return CountResult(self.engine.count(self.mask, self.consistent))
+            with self.engine.deadline(as_deadline(deadline).at):
+                return CountResult(self.engine.count(self.mask, self.consistent))
         start = time.perf_counter()
         plain = self.engine.time_limit if self.engine.time_limit is not None else time_limit / 10
         end = as_deadline(deadline).within(plain + time_limit)
