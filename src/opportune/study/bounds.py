@@ -327,10 +327,12 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
                   max_looks: int) -> tuple[float, bool, int]:
     """The least penalised cost of finishing the assembly on one trial's keys, or a lower bound of it.
 
-    Best-first search over (look index, state) nodes from the start, every step's cost ``w`` ≥ 0 (see the
-    module's docstring); ties go to the deeper node.  Returns ``(value, exact, nodes expanded)``: exact
-    when a finished node came off the queue within ``node_budget`` expansions, else the least cost on the
-    queue (a lower bound: every way to the end passes a queued node).  Looks past ``max_looks`` are not
+    Best-first search (A*) over (look index, state) nodes from the start, every step's cost ``w`` ≥ 0 (see
+    the module's docstring), each node ranked by its cost so far plus its own Bellman residual (a part of
+    every step out of it: an estimate of the rest that never exceeds it); ties go to the deeper node.
+    Returns ``(value, exact, nodes expanded)``: exact when a finished node came off the queue within
+    ``node_budget`` expansions, else the least rank on the queue (a lower bound: every way to the end
+    passes a queued node, and its cost from there is at least the node's residual).  Looks past ``max_looks`` are not
     expanded (their nodes stay on the queue, so the value stays a lower bound).  O(node_budget × (units +
     moves per look) × log nodes) time, O(nodes) memory.
     """
@@ -339,36 +341,38 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
     start = solver.start_key()
     base = penalty.value(start)
     shake = solver.costs.shake
-    heap = [(0.0, 0, 0, start)]
+    resid = penalty.residual
+    # the queue holds (g + h, -t, order, g, key): h = the node's own residual, a part of every step out of it
+    heap = [(resid(start), 0, 0, 0.0, start)]
     best_g: dict = {(0, start): 0.0}
     expanded = 0
     v = penalty.value
     while heap:
-        g, negt, _, key = heapq.heappop(heap)
+        priority, negt, _, g, key = heapq.heappop(heap)
         t = -negt
         if best_g.get((t, key), math.inf) < g:
             continue
         if key[0] == full:
             return base + g, True, expanded
         if expanded >= node_budget or t >= max_looks:
-            heapq.heappush(heap, (g, negt, 0, key))
+            heapq.heappush(heap, (priority, negt, 0, g, key))
             return base + min(h[0] for h in heap), False, expanded
         expanded += 1
         look = keys.look(t, penalty.bin_counts(key))
         moves = list(solver._moves(key, look))
         f = penalty.look_term(key, look, moves)
-        resid = penalty.residual(key)
+        own = priority - g
         steps = [(c + v(nxt), nxt) for c, nxt, _ in moves]
         steps.append((shake + v(key), key))
         for after, nxt in steps:
-            step = after - f + resid
+            step = after - f + own
             if step < -1e-9:
                 raise AssertionError(f"a step of cost {step} < 0: the penalty's value is not a subsolution")
             ng = g + max(0.0, step)
             node = (t + 1, nxt)
             if ng < best_g.get(node, math.inf):
                 best_g[node] = ng
-                heapq.heappush(heap, (ng, -(t + 1), expanded, nxt))
+                heapq.heappush(heap, (ng + (0.0 if nxt[0] == full else resid(nxt)), -(t + 1), expanded, ng, nxt))
     raise RuntimeError("no way to finish the assembly")  # every state has a move on some look: unreachable
 
 
