@@ -31,11 +31,12 @@ the inner objective telescopes to ``V̂(s_0) + Σ_t w_t`` with, per look,
 The first bracket is ≥ 0 by the definition of *m*; the second is the Bellman residual of *V̂*, ≥ 0
 exactly when *V̂* is a *subsolution* (``V̂ ≤ T V̂``).  Every penalty offered here is built from a
 subsolution, so every step costs ≥ 0 and the inner problem is a shortest path with non-negative
-lengths from the start over (look index, state) nodes.  It is solved by best-first search: the first
-finished node it takes off the queue is the exact minimum; if it stops at its node budget first, the
-least cost on its queue is a lower bound of the minimum (every path to the end passes a queued node,
-and costs only grow along it) — a relaxation of the inner problem, never a heuristic solution of it,
-so the bound stays valid.  With the exact optimum's values (``penalty="optimal"``) the residual is
+lengths from the start over (look index, state) nodes.  It is solved by best-first search (A*, a node
+ranked by its cost so far plus its own residual, which every step out of it pays): the first finished
+node it takes off the queue is the exact minimum; if it stops at its node budget first, the least rank
+on its queue is a lower bound of the minimum (every path to the end passes a queued node, and costs
+only grow along it) — a relaxation of the inner problem, never a heuristic solution of it, so the
+bound stays valid.  With the exact optimum's values (``penalty="optimal"``) the residual is
 zero and the optimal action costs zero at every look: the bound equals the optimum on every trial.
 
 **Penalties** (``penalty=``):
