@@ -23,6 +23,7 @@ difference from the paper's rule with the 95% interval of that difference (Stude
     python benchmarks/policy_lab.py --plans 10 --visible 2 --capacities inf --bins uniform --policies lookahead
     python benchmarks/policy_lab.py --plans 0 --plans-dir my-plans/ --paired ""
     python benchmarks/policy_lab.py --plans 0 --paired salbp:KILBRID --paired-trials 400
+    python benchmarks/policy_lab.py --plans 0 --paired salbp:KILBRID --bound   # and a lower bound beside the means
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.optimal import OptimalTooLarge, OutOfTime
 from opportune.policies.pile import PileSolver
 from opportune.policies.opportunistic import Opportunistic
-from opportune.policies.variants import BinFirst, Lookahead, Slack
+from opportune.policies.variants import BinFirst, Slack
+from opportune.policies.lookahead import Lookahead
 
 HERE = Path(__file__).resolve().parent
 GEARBOX = HERE.parent / "examples" / "gearbox.yaml"
@@ -143,6 +145,12 @@ def paired(spec: str, args) -> None:
             f"{against['mean_difference']:+.3f} ({against['ci95'][0]:+.3f} .. {against['ci95'][1]:+.3f})"
         per = result.seconds.get(name, 0.0) / max(1, s["trials"])
         print(f"  {name:<10} {s['time']['mean']:>10.3f}  {text:>32}  {per:>8.3f}")
+    if args.bound:      # the best any online policy can do is at least this (opportune.study.bounds)
+        from opportune.study.bounds import lower_bound
+
+        b = lower_bound(plan, visible=args.paired_visible, trials=min(args.paired_trials, 100), seed=args.seed)
+        print(f"  lower bound on any online policy: {b.mean:.3f} ± {b.half_width:.3f} (95%; {b.method}); each mean "
+              "above it: " + ", ".join(f"{n} {100 * (doc[n]['time']['mean'] / b.mean - 1):+.1f}%" for n in PAIRED))
 
 
 def setting_name(visible: int, capacity: int | None, bin: str) -> str:
@@ -321,6 +329,8 @@ def main(argv=None) -> int:
                     help="plans compared by paired Monte Carlo (comma-separated; empty: none)")
     ap.add_argument("--paired-trials", type=int, default=200)
     ap.add_argument("--paired-visible", type=int, default=2, help="parts visible per look in the paired studies")
+    ap.add_argument("--bound", action="store_true",
+                    help="also a certified lower bound on any online policy beside the paired studies' means")
     args = ap.parse_args(argv)
     args.policies = tuple(p for p in args.policies.split(",") if p)
     unknown = set(args.policies) - set(POLICIES)

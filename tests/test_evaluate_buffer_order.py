@@ -24,7 +24,8 @@ from opportune.policies.fixed import BufferFixed, planned_sequence
 from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.pile import PileSolver
 from opportune.policies.states import estimate_states, orderings_factor
-from opportune.policies.variants import BinFirst, Lookahead, Slack
+from opportune.policies.variants import BinFirst, Slack
+from opportune.policies.lookahead import Lookahead
 from opportune.worlds import TimeModel
 
 runner = CliRunner()

@@ -58,7 +58,7 @@ def test_no_policy_beats_the_pile_optimum(plan):
 
 
 def test_lookahead_on_the_piles_own_programme():
-    from opportune.policies.variants import Lookahead
+    from opportune.policies.lookahead import Lookahead
 
     engine = OrderEngine(GEAR)
     best = PileSolver(engine).value()
@@ -70,7 +70,7 @@ def test_lookahead_on_the_piles_own_programme():
 @settings(max_examples=10, deadline=None)
 @given(plan=random_plans(max_parts=5, max_units=6, max_strategies=1))
 def test_pile_lookahead_is_never_worse_than_its_base(plan):
-    from opportune.policies.variants import Lookahead
+    from opportune.policies.lookahead import Lookahead
 
     engine = OrderEngine(plan)
     for capacity in (None, 1):
@@ -83,7 +83,7 @@ def test_pile_lookahead_is_never_worse_than_its_base(plan):
 @given(plan=random_plans(max_parts=5, max_units=6, max_strategies=1))
 def test_pile_lookahead_is_the_pile_optimum_where_it_fits(plan):
     """Where the pile's optimum fits its programme, the look-ahead acts by it: its exact value is the optimum's."""
-    from opportune.policies.variants import Lookahead
+    from opportune.policies.lookahead import Lookahead
 
     engine = OrderEngine(plan)
     for visible, capacity in ((1, 1), (2, None)):

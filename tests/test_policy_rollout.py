@@ -17,7 +17,7 @@ from opportune.engine import OrderEngine
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.named import POLICIES, UnknownPolicy, make_policy
 from opportune.policies.rollout import Rollout
-from opportune.policies.variants import Lookahead
+from opportune.policies.lookahead import Lookahead
 
 
 @settings(max_examples=15, deadline=None)

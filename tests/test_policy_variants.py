@@ -15,7 +15,8 @@ from opportune.engine import OrderEngine
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.optimal import OptimalSolver
-from opportune.policies.variants import BinFirst, Lookahead, Slack
+from opportune.policies.variants import BinFirst, Slack
+from opportune.policies.lookahead import Lookahead
 from opportune.study.simulate import StudyConfig, run_study
 
 GEAR = load_plan(GEARBOX)

@@ -141,7 +141,8 @@ def fit_policy(policy, layout: Layout):
     is a bin of the joint plan's units, not of kinds.  They then decide by their base rule (``slack``),
     within their budget."""
     from opportune.policies.rollout import Rollout
-    from opportune.policies.variants import Lookahead, Slack
+    from opportune.policies.variants import Slack
+    from opportune.policies.lookahead import Lookahead
 
     if layout.one_to_one:
         return policy

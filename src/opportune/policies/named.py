@@ -31,7 +31,7 @@ def make_policy(name: str, *, budget: float | None = None, seed: int = 0, visibl
     the rollout score their actions in (the other policies need no model of the world).
     Raises :class:`UnknownPolicy`.
     """
-    from opportune.policies import variants
+    from opportune.policies import lookahead as lookahead_module, variants
     from opportune.policies.opportunistic import Opportunistic
 
     if name in ("paper", "opportunistic"):
@@ -44,7 +44,7 @@ def make_policy(name: str, *, budget: float | None = None, seed: int = 0, visibl
         settings = {"visible": visible, "capacity": capacity}
         if costs is not None:
             settings["costs"] = costs
-        lookahead = variants.Lookahead(budget=budget, bin=bin, weights=weights, **settings)
+        lookahead = lookahead_module.Lookahead(budget=budget, bin=bin, weights=weights, **settings)
         if name == "lookahead":
             return lookahead
         from opportune.policies.rollout import Rollout

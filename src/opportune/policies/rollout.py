@@ -1,6 +1,6 @@
 """Rollout: score each action by the mean cost of finishing over sampled futures (issue 13).
 
-The exact look-ahead (:class:`~opportune.policies.variants.Lookahead`) evaluates its base policy by a
+The exact look-ahead (:class:`~opportune.policies.lookahead.Lookahead`) evaluates its base policy by a
 dynamic programme, which only small plans allow.  On a large plan, :class:`Rollout` estimates the
 same quantity by sampling: for each legal action, the cost of the action plus the cost of finishing
 the assembly from where it leads with a cheap base rule, in a simulated uniform bin, averaged over
@@ -74,7 +74,7 @@ class Rollout(DecidesOnMasks):
         self.costs = costs if costs is not None else TimeModel()
         self.deterministic = budget is None
         # small plans: the exact look-ahead (an expectation, not a sample)
-        from opportune.policies.variants import Lookahead
+        from opportune.policies.lookahead import Lookahead
 
         self.exact_below = Lookahead.MAX_UNITS if exact_below is None else exact_below
         self.exact = exact
@@ -143,7 +143,7 @@ class Rollout(DecidesOnMasks):
 
     def _exact_policy(self):
         if self.exact is None:
-            from opportune.policies.variants import Lookahead
+            from opportune.policies.lookahead import Lookahead
 
             self.exact = Lookahead(budget=self.budget, visible=self.visible, capacity=self.capacity,
                                    costs=self.costs)

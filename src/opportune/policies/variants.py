@@ -98,12 +98,3 @@ class Slack(BinFirst):
         ask = Answers(engine, mask, consistent, (), 0, visible)
         slack = ask.slack(ask.visible_parts(), self.weight)
         return min(slack, key=lambda p: (slack[p], ask.index(p)))
-
-
-def __getattr__(name: str):
-    # The look-ahead lives in policies/lookahead.py (its programme and its limits in seconds): still named here.
-    if name in ("Lookahead", "_EVALUATORS"):
-        from opportune.policies import lookahead
-
-        return getattr(lookahead, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

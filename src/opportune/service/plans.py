@@ -262,7 +262,7 @@ class LoadedPlan:
         look-ahead programmes on it.  Caller holds ``lock`` (the memos must not change meanwhile)."""
         total = self.engine.nbytes()
         from opportune.engine.memory import nbytes
-        from opportune.policies.variants import _EVALUATORS
+        from opportune.policies.lookahead import _EVALUATORS
 
         for ev in list(_EVALUATORS.get(self.engine, {}).values()):
             total += nbytes(getattr(ev, "_values", {}))

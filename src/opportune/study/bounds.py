@@ -1,0 +1,476 @@
+"""Certified lower bounds on the expected cost of any online policy: information relaxation with a penalty.
+
+The optimum of :mod:`opportune.policies.optimal` is exact but needs every state of the plan; on plans of
+45-111 parts nobody can compute it, so how far a policy is from the best possible is unknown.  This
+module bounds the best possible from below, on any plan, by the duality of Brown, Smith & Sun
+("Information relaxations and duality in stochastic dynamic programs", Operations Research 2010).
+
+**The bin's randomness as exogenous noise.**  Before a trial, draw for every look index *t* = 0, 1, 2, ...
+an independent key per unit of the plan: uniform on (0, 1) in the uniform bin, exponential of rate equal
+to the part's visibility weight in the weighted bin.  The look at index *t* shows the ``visible`` units
+still in the bin with the smallest keys (copies of a part are interchangeable: the *c* copies of a part
+left in the bin are its slots 0 .. *c*-1).  Why any non-anticipative policy's cost has the same
+distribution as in the model: the state at look *t* depends only on the keys of looks before *t*, and
+the keys of look *t* are independent of them, so given the history the look shows a uniformly random
+set of ``visible`` remaining units (uniform keys), or units drawn one after another with chance
+proportional to their weights (the smallest of independent exponentials is each one's with chance
+proportional to its rate, and the race starts afresh among the rest): exactly the bin's law, a fresh
+look after every action, as in :class:`~opportune.worlds.bins.UniformBin` and
+:class:`~opportune.worlds.bins.WeightedBin`.
+
+**The bound.**  For any function *f(s, L)* of a state and a look, the penalty
+``Σ_t f(s_t, L_t) − E[f(s_t, L) | s_t]`` has mean zero under every non-anticipative policy (each term
+has mean zero given the past), so for every such policy ``E[cost] = E[cost − penalty] ≥ E[min over
+action sequences of (cost − penalty)]``, the minimum taken with all the keys known (a deterministic
+problem per trial).  With a value function *V̂* (zero at the end) and ``f(s, L) = m(s, L)``, the least
+over the actions at *s* on look *L* of their cost plus *V̂* after them (a shake: ``c_shake + V̂(s)``),
+the inner objective telescopes to ``V̂(s_0) + Σ_t w_t`` with, per look,
+
+    w = [c(a) + V̂(s') − m(s, L)] + [c_look + E_L m(s, L) − V̂(s)]
+
+The first bracket is ≥ 0 by the definition of *m*; the second is the Bellman residual of *V̂*, ≥ 0
+exactly when *V̂* is a *subsolution* (``V̂ ≤ T V̂``).  Every penalty offered here is built from a
+subsolution, so every step costs ≥ 0 and the inner problem is a shortest path with non-negative
+lengths from the start over (look index, state) nodes.  It is solved by best-first search (A*, a node
+ranked by its cost so far plus its own residual, which every step out of it pays): the first finished
+node it takes off the queue is the exact minimum; if it stops at its node budget first, the least rank
+on its queue is a lower bound of the minimum (every path to the end passes a queued node, and costs
+only grow along it) — a relaxation of the inner problem, never a heuristic solution of it, so the
+bound stays valid.  With the exact optimum's values (``penalty="optimal"``) the residual is
+zero and the optimal action costs zero at every look: the bound equals the optimum on every trial.
+
+**Penalties** (``penalty=``):
+
+* ``"none"``: no penalty: the clairvoyant bound (the future of the bin known, nothing charged for it).
+* ``"motions"``: *V̂* = the motions still needed (every unit not installed moves at least once).  Then
+  ``m(s, L) = V̂(s)`` when a part can go in, and one more motion or a shake when none can, so the
+  penalty charges each look the *chance* of being blocked instead of the blocking that happened:
+  the inner problem keeps the clairvoyant's foresight of which parts come but loses its luck.
+* ``"optimal"``: the exact optimum's values (:class:`~opportune.policies.optimal.OptimalSolver`; plans
+  whose optimum fits ``max_states``): the bound is the optimum, with no Monte Carlo spread (a check
+  of the method, and of this implementation).
+* ``"auto"`` (default): ``"optimal"`` where the optimum fits, else ``"motions"``.
+
+The inner search is exact when it finishes within ``node_budget`` expanded nodes; where it does not, the
+trial's value is the queue's least cost (lower, still valid).  The result says how many trials were
+solved exactly.  The Monte Carlo interval is the normal 95% interval of the trials' mean.
+
+Bounds on hostile input, checked before any work: ``trials`` at most :data:`MAX_TRIALS`,
+``node_budget`` at most :data:`MAX_NODE_BUDGET` (memory grows with the nodes: about 0.5 kB each),
+the uniform and weighted bins only.  Time: O(trials × node_budget × (units + looks' moves)).
+
+>>> from opportune import make_plan
+>>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+>>> r = lower_bound(plan, visible=1, trials=200, seed=0, penalty="optimal")
+>>> round(r.mean, 6) == round(r.optimum, 6), r.half_width
+(True, 0.0)
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import random
+import statistics
+import time
+from dataclasses import dataclass, field
+from math import comb
+
+from opportune.engine import OrderEngine
+from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
+from opportune.planning.costs import TimeModel
+
+__all__ = ["BoundError", "BoundResult", "PENALTIES", "lower_bound"]
+
+PENALTIES = ("auto", "none", "motions", "optimal")
+BINS = ("uniform", "weighted")
+MAX_TRIALS = 1_000_000
+MAX_NODE_BUDGET = 5_000_000
+#: States of the exact optimum ``penalty="auto"`` tries before it falls back to ``"motions"``.
+AUTO_OPTIMAL_STATES = 200_000
+Z95 = 1.959963984540054
+
+
+class BoundError(ValueError):
+    """A bound that cannot be computed as asked (a user mistake: the message says what to change)."""
+
+
+@dataclass(frozen=True)
+class BoundResult:
+    """A certified lower bound on the expected cost of every online policy, with its Monte Carlo error.
+
+    ``mean`` ± ``half_width`` is the 95% interval of the bound; ``values`` each trial's inner minimum
+    (or its lower bound where the search stopped at its budget: ``trials - exact_trials`` of them);
+    ``start_value`` is *V̂* at the start (itself a lower bound when the penalty's *V̂* is a subsolution);
+    ``optimum`` the exact optimum where the penalty computed it (``penalty="optimal"``), else None.
+    """
+
+    mean: float
+    half_width: float
+    trials: int
+    method: str
+    penalty: str
+    exact_trials: int
+    nodes: int
+    seconds: float
+    start_value: float
+    optimum: float | None = None
+    values: tuple[float, ...] = field(default=(), repr=False)
+
+    @property
+    def low(self) -> float:
+        return self.mean - self.half_width
+
+    @property
+    def high(self) -> float:
+        return self.mean + self.half_width
+
+    def to_dict(self) -> dict:
+        return {"mean": self.mean, "half_width": self.half_width, "ci95": [self.low, self.high],
+                "trials": self.trials, "method": self.method, "penalty": self.penalty,
+                "exact_trials": self.exact_trials, "nodes": self.nodes, "seconds": self.seconds,
+                "start_value": self.start_value, "optimum": self.optimum}
+
+
+# ---------------------------------------------------------------- the bin's keys
+
+
+class Keys:
+    """The exogenous noise of one trial: per look index, the plan's unit slots in increasing key order.
+
+    Slot ``(i, j)`` is copy *j* of part *i*; the look at index *t* with ``counts[i]`` copies of part *i*
+    in the bin shows the first ``visible`` slots of look *t*'s order with ``j < counts[i]``.  Drawn
+    lazily (one look's keys the first time it is asked for), from ``rng``.  O(units log units) per look.
+    """
+
+    def __init__(self, quantity: list[int], weights: list[float] | None, visible: int, rng: random.Random):
+        self.slots = [(i, j) for i, q in enumerate(quantity) for j in range(q)]
+        self.rates = None if weights is None else [weights[i] for i, _ in self.slots]
+        self.visible = visible
+        self.rng = rng
+        self.orders: list[list[tuple[int, int]]] = []
+
+    def order(self, t: int) -> list[tuple[int, int]]:
+        orders = self.orders
+        while len(orders) <= t:
+            rnd = self.rng.random
+            if self.rates is None:
+                keys = [rnd() for _ in self.slots]
+            else:   # exponential of rate w: -log(1 - U) / w (1 - U is never 0)
+                keys = [-math.log(1.0 - rnd()) / w for w in self.rates]
+            orders.append([s for _, s in sorted(zip(keys, self.slots))])
+        return orders[t]
+
+    def look(self, t: int, counts: tuple[int, ...]) -> tuple[int, ...]:
+        """The look at index ``t`` from a bin holding ``counts[i]`` copies of part *i*: sorted part indices."""
+        out = []
+        k = self.visible
+        for i, j in self.order(t):
+            if j < counts[i]:
+                out.append(i)
+                if len(out) == k:
+                    break
+        return tuple(sorted(out))
+
+
+# ---------------------------------------------------------------- penalties
+
+
+class _Penalty:
+    """A value function *V̂* (a subsolution) and its look term ``m(s, L)`` with its mean.
+
+    ``start`` is *V̂* at the start; :meth:`look_terms` gives, for a state and a look, the moves
+    ``(cost, next key)`` with each one's step cost ``w`` (≥ 0) and the shake's."""
+
+    name = ""
+    exact_optimum = False
+
+    def __init__(self, solver: OptimalSolver):
+        self.solver = solver
+        self.costs = solver.costs
+        engine = solver.engine
+        # each part's units as (first bit, bit mask of its units): counts by popcount, not a loop over units
+        self._units = [(first, (1 << q) - 1) for first, q in zip(engine.first, solver.quantity)]
+
+    def installed_counts(self, mask: int) -> list[int]:
+        """Units installed per part."""
+        return [(mask >> first & ones).bit_count() for first, ones in self._units]
+
+    def bin_counts(self, key) -> tuple[int, ...]:
+        """Units in the bin per part (neither installed nor buffered)."""
+        mask, _, buf = key
+        return tuple(q - (mask >> first & ones).bit_count() - b
+                     for q, (first, ones), b in zip(self.solver.quantity, self._units, buf))
+
+    def value(self, key) -> float:
+        raise NotImplementedError
+
+    def look_term(self, key, look, moves) -> float:
+        """``f(s, L)``: here the least of each move's cost plus *V̂* after it, and the shake's."""
+        v = self.value
+        best = self.costs.shake + v(key)
+        for c, nxt, _ in moves:
+            x = c + v(nxt)
+            if x < best:
+                best = x
+        return best
+
+    def residual(self, key) -> float:
+        """``c_look + E_L f(s, L) − V̂(s)`` (≥ 0 for a subsolution): by enumerating the looks."""
+        s = self.solver
+        total = 0.0
+        for look, p in s._looks(self.bin_counts(key)):
+            total += p * self.look_term(key, look, list(s._moves(key, look)))
+        return self.costs.look + total - self.value(key)
+
+
+class _NoPenalty(_Penalty):
+    """The clairvoyant bound: *V̂* = 0, f = 0 (each step costs its look and its action)."""
+
+    name = "none"
+
+    def value(self, key) -> float:
+        return 0.0
+
+    def look_term(self, key, look, moves) -> float:
+        return 0.0
+
+    def residual(self, key) -> float:
+        return self.costs.look
+
+
+class _Motions(_Penalty):
+    """*V̂* = the motions the units not yet installed still need (the bin's and the buffer's).
+
+    A subsolution: an install keeps ``c + V̂`` at *V̂(s)*; a buffer or a shake adds its cost.  So
+    ``m(s, L) = V̂(s) + extra(L)``, extra 0 when a visible or buffered part can go in, else the cheaper
+    of a shake and buffering a visible part (when a location is free).  Its mean over the looks is
+    closed-form in the uniform bin with equal motions (the chance no visible unit is installable,
+    hypergeometric); else the looks are enumerated."""
+
+    name = "motions"
+
+    def __init__(self, solver: OptimalSolver):
+        super().__init__(solver)
+        self.uniform_costs = not self.costs.parts and all(w == 1.0 for w in solver.weights)
+        self.n_units = solver.engine.n_units
+        self._installable: dict = {}
+
+    def value(self, key) -> float:
+        if self.uniform_costs:
+            return self.costs.motion * (self.n_units - key[0].bit_count())
+        s = self.solver
+        return sum((q - c) * m for q, c, m in zip(s.quantity, self.installed_counts(key[0]), s.move))
+
+    def _can_install(self, key) -> list[bool]:
+        """Per part: whether its next unit can go in now."""
+        got = self._installable.get(key[:2])
+        if got is None:
+            mask, cons, _ = key
+            e = self.solver.engine
+            got = []
+            for i in range(len(self.solver.ids)):
+                u = e.next_unit(mask, i)
+                got.append(u is not None and e.consistent_after(mask, cons, u) != 0)
+            if len(self._installable) > 200_000:
+                self._installable.clear()
+            self._installable[key[:2]] = got
+        return got
+
+    def _extra(self, key, look) -> float:
+        ok = self._can_install(key)
+        if any(ok[i] for i in look) or any(c and ok[i] for i, c in enumerate(key[2])):
+            return 0.0
+        s = self.solver
+        extra = self.costs.shake
+        if look and (s.capacity is None or sum(key[2]) < s.capacity):
+            extra = min(extra, min(s.move[i] for i in look))
+        return extra
+
+    def look_term(self, key, look, moves) -> float:
+        return self.value(key) + self._extra(key, look)
+
+    def residual(self, key) -> float:
+        if not self.uniform_costs:
+            return super().residual(key)
+        ok = self._can_install(key)
+        if any(c and ok[i] for i, c in enumerate(key[2])):
+            return self.costs.look
+        s = self.solver
+        counts = self.bin_counts(key)
+        b = sum(counts)
+        k = min(s.visible, b)
+        a = sum(c for c, good in zip(counts, ok) if good)
+        blocked = comb(b - a, k) / comb(b, k)
+        extra = self.costs.shake
+        if k and (s.capacity is None or sum(key[2]) < s.capacity):
+            extra = min(extra, self.costs.motion)
+        return self.costs.look + blocked * extra
+
+
+class _Optimal(_Penalty):
+    """*V̂* = the exact optimum's values: a solution of the Bellman equation, so the residual is zero."""
+
+    name = "optimal"
+    exact_optimum = True
+
+    def value(self, key) -> float:
+        return self.solver.value(key)
+
+    def residual(self, key) -> float:
+        return 0.0
+
+
+# ---------------------------------------------------------------- the inner problem
+
+
+def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_budget: int,
+                  max_looks: int) -> tuple[float, bool, int]:
+    """The least penalised cost of finishing the assembly on one trial's keys, or a lower bound of it.
+
+    Best-first search (A*) over (look index, state) nodes from the start, every step's cost ``w`` ≥ 0 (see
+    the module's docstring), each node ranked by its cost so far plus its own Bellman residual (a part of
+    every step out of it: an estimate of the rest that never exceeds it); ties go to the deeper node.
+    Returns ``(value, exact, nodes expanded)``: exact when a finished node came off the queue within
+    ``node_budget`` expansions, else the least rank on the queue (a lower bound: every way to the end
+    passes a queued node, and its cost from there is at least the node's residual).  Looks past ``max_looks`` are not
+    expanded (their nodes stay on the queue, so the value stays a lower bound).  O(node_budget × (units +
+    moves per look) × log nodes) time, O(nodes) memory.
+    """
+    engine = solver.engine
+    full = engine.full
+    start = solver.start_key()
+    base = penalty.value(start)
+    shake = solver.costs.shake
+    resid = penalty.residual
+    # the queue holds (g + h, -t, order, g, key): h = the node's own residual, a part of every step out of it
+    heap = [(resid(start), 0, 0, 0.0, start)]
+    best_g: dict = {(0, start): 0.0}
+    expanded = 0
+    v = penalty.value
+    while heap:
+        priority, negt, _, g, key = heapq.heappop(heap)
+        t = -negt
+        if best_g.get((t, key), math.inf) < g:
+            continue
+        if key[0] == full:
+            return base + g, True, expanded
+        if expanded >= node_budget or t >= max_looks:
+            heapq.heappush(heap, (priority, negt, 0, g, key))
+            return base + min(h[0] for h in heap), False, expanded
+        expanded += 1
+        look = keys.look(t, penalty.bin_counts(key))
+        moves = list(solver._moves(key, look))
+        f = penalty.look_term(key, look, moves)
+        own = priority - g
+        steps = [(c + v(nxt), nxt) for c, nxt, _ in moves]
+        steps.append((shake + v(key), key))
+        for after, nxt in steps:
+            step = after - f + own
+            if step < -1e-9:
+                raise AssertionError(f"a step of cost {step} < 0: the penalty's value is not a subsolution")
+            ng = g + max(0.0, step)
+            node = (t + 1, nxt)
+            if ng < best_g.get(node, math.inf):
+                best_g[node] = ng
+                heapq.heappush(heap, (ng + (0.0 if nxt[0] == full else resid(nxt)), -(t + 1), expanded, ng, nxt))
+    raise RuntimeError("no way to finish the assembly")  # every state has a move on some look: unreachable
+
+
+# ---------------------------------------------------------------- the bound
+
+
+def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
+                seed: int = 0, penalty: str = "auto", costs: TimeModel | None = None,
+                weights: dict[str, float] | None = None, node_budget: int = 5_000,
+                max_states: int = AUTO_OPTIMAL_STATES, engine: OrderEngine | None = None) -> BoundResult:
+    """A lower bound on the expected cost of every online policy on ``plan``, with its 95% interval.
+
+    ``visible``, ``capacity`` (None: unlimited), ``bin`` (``uniform`` or ``weighted``, with ``weights``:
+    part id → visibility; default the plan's) and ``costs`` (default the plan's ``simulation.costs``)
+    are the world's, as in ``opportune simulate``.  ``penalty``: one of :data:`PENALTIES` (see the
+    module's docstring); ``node_budget``: nodes the inner search of one trial expands at most (past
+    it the trial's value is a lower bound of its inner minimum); ``max_states``: states of the exact
+    optimum the ``optimal`` penalty may use.  Trial *i* draws its keys from its own stream of ``seed``:
+    the same seed gives the same numbers.
+
+    A request that cannot be served raises :class:`BoundError` saying what to change, before any work.
+    Time: O(trials × node_budget × (units + moves per look)); memory O(node_budget) nodes at a time
+    (plus the optimum's states with ``penalty="optimal"``).
+
+    >>> from opportune import load_plan
+    >>> r = lower_bound(load_plan("example:gearbox"), visible=2, trials=50, penalty="motions")
+    >>> 10.0 <= r.mean <= 13.5725 and r.exact_trials == 50
+    True
+    """
+    if visible is None or isinstance(visible, bool) or not isinstance(visible, int) or visible < 1:
+        raise BoundError(f"visible must be a whole number ≥ 1, not {visible!r}")
+    if capacity is not None and (isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 0):
+        raise BoundError(f"capacity must be a whole number ≥ 0 or None (unlimited), not {capacity!r}")
+    if bin not in BINS:
+        raise BoundError(f"the bound is defined for the Markov bins ({', '.join(BINS)}), not '{bin}': "
+                         "use --bin uniform or weighted")
+    if isinstance(trials, bool) or not isinstance(trials, int) or not 2 <= trials <= MAX_TRIALS:
+        raise BoundError(f"trials must be a whole number from 2 to {MAX_TRIALS:,} (for an interval), not {trials!r}")
+    if isinstance(node_budget, bool) or not isinstance(node_budget, int) or not 1 <= node_budget <= MAX_NODE_BUDGET:
+        raise BoundError(f"node_budget must be a whole number from 1 to {MAX_NODE_BUDGET:,}, not {node_budget!r}")
+    if penalty not in PENALTIES:
+        raise BoundError(f"unknown penalty '{penalty}': choose from {', '.join(PENALTIES)}")
+    began = time.perf_counter()
+    costs = costs if costs is not None else TimeModel.from_plan(plan)
+    if bin == "weighted":
+        weights = weights if weights is not None else {p.id: p.visibility for p in plan.parts}
+        bad = [p for p, w in weights.items() if not (isinstance(w, (int, float)) and w > 0 and math.isfinite(w))]
+        if bad:
+            raise BoundError(f"the weighted bin needs a positive visibility for every part ('{bad[0]}' has "
+                             f"{weights[bad[0]]!r})")
+    else:
+        weights = None
+    engine = engine or OrderEngine(plan)
+    solver = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights,
+                           max_states=max_states)
+    pen = _choose_penalty(penalty, solver)
+    optimum = None
+    if pen.exact_optimum:
+        optimum = solver.value()
+    quantity = list(solver.quantity)
+    wlist = None if weights is None else list(solver.weights)
+    max_looks = 1000 + 200 * engine.n_units * engine.n_units   # simulate's step limit: a hang guard
+    values, exact, nodes = [], 0, 0
+    for trial in range(trials):
+        keys = Keys(quantity, wlist, visible, random.Random(f"bound:{seed}:{trial}"))
+        value, done, n = inner_minimum(solver, pen, keys, node_budget, max_looks)
+        values.append(value)
+        exact += done
+        nodes += n
+    mean = statistics.fmean(values)
+    half = Z95 * statistics.stdev(values) / math.sqrt(trials)
+    solved = ("each inner problem solved exactly" if exact == trials else
+              f"{exact} inner problems solved exactly, {trials - exact} bounded at {node_budget:,} nodes")
+    method = (f"information relaxation (Brown, Smith & Sun 2010), {pen.name!r} penalty"
+              f"{' (the clairvoyant bound)' if pen.name == 'none' else ''}, {trials} trials, {solved}")
+    return BoundResult(mean, half, trials, method, pen.name, exact, nodes, time.perf_counter() - began,
+                       pen.value(solver.start_key()), optimum, tuple(values))
+
+
+def _choose_penalty(name: str, solver: OptimalSolver) -> _Penalty:
+    """The penalty by name; ``auto``: the optimum's where it fits within ``solver.max_states``, else motions."""
+    if name == "none":
+        return _NoPenalty(solver)
+    if name == "motions":
+        return _Motions(solver)
+    from opportune.policies.states import estimate_states
+
+    est = estimate_states(solver.engine, visible=solver.visible, capacity=solver.capacity,
+                          stop_above=solver.max_states, time_limit=2.0)
+    fits = est.exact and est.states <= solver.max_states
+    if name == "auto":
+        return _Optimal(solver) if fits else _Motions(solver)
+    if not fits:
+        raise BoundError(f"the optimum's values need more than {solver.max_states:,} states on this plan: "
+                         "use penalty 'motions' (or 'auto'), or allow more states")
+    try:
+        solver.value()
+    except OptimalTooLarge as exc:
+        raise BoundError(f"{exc}") from None
+    return _Optimal(solver)
