@@ -243,8 +243,8 @@ def markdown(settings, per_setting, gear, names, n_plans: int) -> str:
         lines.append(f"| {setting_name(*setting)} | {len(rows)} | {len(skipped)} | "
                      + " | ".join(f"{pct(s[n][0])} | {pct(s[n][2])}" for n in names) + " |")
     out = [f"Gap of each policy's exact expected time to the optimum's, over {n_plans} plans "
-           "(mean and largest); a plan is skipped only when its optimum's programme is over the lab's "
-           "state cap or time, and then listed below.", "", *lines]
+           "(mean and largest); a plan is skipped when its optimum's programme is over the lab's "
+           "state cap or time, or was not run, and then listed below.", "", *lines]
     skips = [(setting_name(*st), per_setting[st][1]) for st in settings if per_setting[st][1]]
     if skips:
         out += ["", "Skipped: " + "; ".join(f"{name}: {', '.join(s)}" for name, s in skips) + "."]
@@ -377,7 +377,7 @@ def main(argv=None) -> int:
     table = []
     for setting in settings:
         name = setting_name(*setting)
-        recs = [done[key] for key, _, s, _ in jobs if s == setting]
+        recs = [done.get(key, {"plan": plan.name, "skipped": "not run"}) for key, plan, s, _ in jobs if s == setting]
         rows, skipped, multi = setting_rows(recs, names)
         per_setting[setting] = (rows, skipped, multi)
         if rows:
@@ -393,7 +393,7 @@ def main(argv=None) -> int:
         for name, n_done, skip, summ in table:
             print(f"  {name:<36} {n_done:>5} {skip:>7}  "
                   + "  ".join(f"{100 * summ[n][0]:>+8.3f} {100 * summ[n][2]:>+8.3f}" for n in names))
-    gear_done = {s: done[key] for key, _, s, _ in gear_jobs}
+    gear_done = {s: done[key] for key, _, s, _ in gear_jobs if key in done}
     if gear_done:
         print("\ngearbox: gap to the optimum per setting")
         for setting, r in gear_done.items():
@@ -406,7 +406,8 @@ def main(argv=None) -> int:
     text = markdown(settings, per_setting, gear_done, names, len(plans))
     if args.table:
         args.table.parent.mkdir(parents=True, exist_ok=True)
-        args.table.write_text(text)
+        args.table.write_text("# The policy lab\n\nWritten by `benchmarks/policy_lab.py --table`; how it works: "
+                              "[the paper's comparison](comparison.md).\n\n" + text)
         print(f"wrote {args.table}")
     if args.readme:
         replace_block(args.readme, text)
