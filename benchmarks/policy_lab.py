@@ -158,8 +158,8 @@ def setting_name(visible: int, capacity: int | None, bin: str) -> str:
 
 
 POLICIES = ("paper", "bin-first", "slack", "lookahead")
-README_BEGIN = "<!-- policy-lab table: written by benchmarks/policy_lab.py --readme -->"
-README_END = "<!-- end of the policy-lab table -->"
+TABLE_HEAD = "| setting | plans | skipped |"      # how --readme finds the lab's table in a document
+SKIPPED_TAIL = "plan-settings skipped"
 
 
 def _key(args, plan, setting) -> str:
@@ -230,8 +230,9 @@ def pct(x: float) -> str:
     return f"{0.0 if abs(v) < 5e-4 else v:+.3f}%"
 
 
-def markdown(settings, per_setting, gear, names, n_plans: int) -> str:
-    """The lab's tables in Markdown: every setting's gaps over the plans, and the gearbox's."""
+def markdown(settings, per_setting, gear, names, n_plans: int, brief: bool = False) -> str:
+    """The lab's tables in Markdown: every setting's gaps over the plans, and the gearbox's (``brief``: the
+    first table alone, and how many were skipped)."""
     head = "| setting | plans | skipped | " + " | ".join(f"{n} mean | {n} max" for n in names) + " |"
     lines = [head, "| --- | ---: | ---: | " + " | ".join("---: | ---:" for _ in names) + " |"]
     for setting in settings:
@@ -246,6 +247,9 @@ def markdown(settings, per_setting, gear, names, n_plans: int) -> str:
            "(mean and largest); a plan is skipped when its optimum's programme is over the lab's "
            "state cap or time, or was not run, and then listed below.", "", *lines]
     skips = [(setting_name(*st), per_setting[st][1]) for st in settings if per_setting[st][1]]
+    if brief:
+        n_skip = sum(len(s) for _, s in skips)
+        return "\n".join(out + ["", f"{n_skip} {SKIPPED_TAIL}, each listed in docs/policy-lab.md."] * bool(n_skip)) + "\n"
     if skips:
         out += ["", "Skipped: " + "; ".join(f"{name}: {', '.join(s)}" for name, s in skips) + "."]
     if gear:
@@ -265,13 +269,20 @@ def markdown(settings, per_setting, gear, names, n_plans: int) -> str:
 
 
 def replace_block(path: Path, text: str) -> None:
-    """Put ``text`` between the README's two markers of the lab's table (they must be there)."""
-    doc = path.read_text()
-    if README_BEGIN not in doc or README_END not in doc:
-        raise SystemExit(f"{path}: no lab markers ({README_BEGIN!r} ... {README_END!r}); add them where the table goes")
-    head, rest = doc.split(README_BEGIN, 1)
-    _, tail = rest.split(README_END, 1)
-    path.write_text(f"{head}{README_BEGIN}\n{text}{README_END}{tail}")
+    """Put ``text`` in place of the lab's table in ``path``: the Markdown table whose header starts with
+    :data:`TABLE_HEAD`, with the line after it that says how many were skipped (the table must be there)."""
+    lines = path.read_text().split("\n")
+    start = next((k for k, line in enumerate(lines) if line.startswith(TABLE_HEAD)), None)
+    if start is None:
+        raise SystemExit(f"{path}: no lab table (a line starting {TABLE_HEAD!r}); put one where the table goes")
+    end = start
+    while end < len(lines) and lines[end].startswith("|"):
+        end += 1
+    if end + 1 < len(lines) and not lines[end] and SKIPPED_TAIL in lines[end + 1]:
+        end += 2
+    new = text.rstrip("\n").split("\n")
+    new = new[next(k for k, line in enumerate(new) if line.startswith(TABLE_HEAD)):]
+    path.write_text("\n".join(lines[:start] + new + lines[end:]))
 
 
 def plot_settings(path: Path, settings, per_setting, names) -> None:
@@ -323,7 +334,7 @@ def main(argv=None) -> int:
                     "those already there: an interrupted run goes on where it stopped")
     ap.add_argument("--redo-skipped", action="store_true", help="run again the plan-settings --results has as skipped")
     ap.add_argument("--table", type=Path, help="write the tables in Markdown here")
-    ap.add_argument("--readme", type=Path, help="put the every-setting table between the lab's markers in this file")
+    ap.add_argument("--readme", type=Path, help="replace the every-setting table in this file (found by its header)")
     ap.add_argument("--plot", type=Path, help="write the gap per setting here (PNG or PDF)")
     ap.add_argument("--paired", default="salbp:KILBRID,salbp:TONGE70",
                     help="plans compared by paired Monte Carlo (comma-separated; empty: none)")
@@ -410,7 +421,7 @@ def main(argv=None) -> int:
                               "[the paper's comparison](comparison.md).\n\n" + text)
         print(f"wrote {args.table}")
     if args.readme:
-        replace_block(args.readme, text)
+        replace_block(args.readme, markdown(settings, per_setting, gear_done, names, len(plans), brief=True))
         print(f"wrote the lab's table into {args.readme}")
     if args.plot:
         plot_settings(args.plot, settings, per_setting, names)
