@@ -55,7 +55,8 @@ def test_the_side_by_side_table_reads_both_peers_and_agrees_with_them(tmp_path, 
         assert row["verdict"].startswith(("ahead", "behind"))
         # CPU seconds beside wall seconds (what a shared machine compares fairly)
         for r in (row["opportune"], row["engine"], row["linext"], row["lecount"], row["armc"]):
-            assert 0 <= r["cpu"] and 0 < r["wall"]
+            assert isinstance(r["cpu"], float) and r["cpu"] >= 0   # both recorded, as numbers
+            assert isinstance(r["wall"], float) and r["wall"] >= 0
         assert row["opportune"]["cpu"] > 0.01          # a Python process: its start-up alone takes that
         assert row["cpu_verdict"].startswith(("engine ahead", "engine behind"))
 
