@@ -4,23 +4,38 @@
 * :mod:`~opportune.engine.count` — counting linear extensions with a memo kept for the plan's life;
 * :mod:`~opportune.engine.downsets` — an independent dynamic programme over down-sets (for checking);
 * :mod:`~opportune.engine.estimate` — estimates with a stated error when exact counting is over budget;
-* :mod:`~opportune.engine.schedule` — the schedule: installed parts plus all admissible completions.
+* :mod:`~opportune.engine.schedule` — the schedule: installed parts plus all admissible completions,
+  and the one counting entry (:meth:`~opportune.engine.schedule.Schedule.count_result` and its
+  family): the exact methods, the hub split and the estimates are chosen behind it;
+* :mod:`~opportune.engine.stats` — Student's t for the estimates' stated errors.
 """
 
 from __future__ import annotations
 
 from opportune._lazy import attach
 
-__all__ = ["CountResult", "NotAdmissible", "OrderEngine", "Schedule"]
+__all__ = ["CountResult", "NotAdmissible", "OrderEngine", "Schedule", "compiled_core"]
 
 # Loaded on first use (PEP 562): ``opportune.engine.poset`` alone (``opportune check``) does not
 # load the counter, the hub and the schedule.
-_LAZY = dict.fromkeys(__all__, "opportune.engine.schedule")
+_LAZY = dict.fromkeys(__all__[:-1], "opportune.engine.schedule")
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.engine.schedule import CountResult, NotAdmissible, OrderEngine, Schedule
+
+
+def compiled_core() -> bool:
+    """True when the compiled counting core is loaded (False: the pure-Python fallback counts, as
+    with ``OPPORTUNE_PURE_PYTHON=1``).  What a report states; O(1) once the core was looked for.
+
+    >>> isinstance(compiled_core(), bool)
+    True
+    """
+    from opportune.engine import native
+
+    return native.available()
 
 
 __getattr__, __dir__ = attach(globals(), _LAZY, __all__)

@@ -54,11 +54,11 @@ import time
 from array import array
 from collections import OrderedDict
 from dataclasses import dataclass
-from statistics import NormalDist
 
 from opportune.engine import native
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
+from opportune.engine.stats import _t_cdf, prob_positive, t_quantile  # noqa: F401 (their documented import)
 
 _M64 = (1 << 64) - 1
 _TO_UNIT = 1.0 / (1 << 53)
@@ -99,19 +99,6 @@ class ChainEstimate:
         ``margin`` (paired over chains)."""
         xs, ys = self.per_chain[kind][a], self.per_chain[kind][b]
         return prob_positive([x - y - margin for x, y in zip(xs, ys)])
-
-
-def prob_positive(diffs: list[float]) -> float:
-    """Estimated probability that the true mean of ``diffs`` (one value per chain) is positive
-    (Student's t over the chains; 0.5 with fewer than two)."""
-    k = len(diffs)
-    if k < 2:
-        return 0.5
-    mean = sum(diffs) / k
-    se = math.sqrt(sum((d - mean) ** 2 for d in diffs) / (k - 1) / k)
-    if se == 0:
-        return 1.0 if mean > 0 else 0.0 if mean < 0 else 0.5
-    return _t_cdf(mean / se, k - 1)
 
 
 class CompletionChains:
@@ -422,76 +409,3 @@ def _mean_se(xs: list[float]) -> tuple[float, float]:
     mean = sum(xs) / k
     var = sum((x - mean) ** 2 for x in xs) / (k - 1) if k > 1 else float("inf")
     return mean, math.sqrt(var / k)
-
-
-def t_quantile(q: float, df: int) -> float:
-    """Student's t quantile (Cornish–Fisher expansion; within 1% of the exact value for df ≥ 3)."""
-    z = NormalDist().inv_cdf(q)
-    g1 = (z ** 3 + z) / 4
-    g2 = (5 * z ** 5 + 16 * z ** 3 + 3 * z) / 96
-    g3 = (3 * z ** 7 + 19 * z ** 5 + 17 * z ** 3 - 15 * z) / 384
-    return z + g1 / df + g2 / df ** 2 + g3 / df ** 3
-
-
-def _t_cdf(t: float, df: int) -> float:
-    """Student's t distribution function: a finite series for whole ``df`` up to 100 (Abramowitz and
-    Stegun 26.7.3-4; the chains give df = chains - 1), else the regularised incomplete beta."""
-    if isinstance(df, int) and 1 <= df <= 100:
-        theta = math.atan(t / math.sqrt(df))
-        c2 = math.cos(theta) ** 2
-        if df % 2:      # odd: 1/2 + (theta + sin cos (1 + 2/3 c^2 + 2·4/(3·5) c^4 + ...)) / pi
-            term, total = 1.0, 1.0 if df > 1 else 0.0
-            for k in range(1, (df - 1) // 2):
-                term *= c2 * (2 * k) / (2 * k + 1)
-                total += term
-            return 0.5 + (theta + math.sin(theta) * math.cos(theta) * total) / math.pi
-        term = total = 1.0  # even: 1/2 + sin/2 (1 + 1/2 c^2 + 1·3/(2·4) c^4 + ...)
-        for k in range(1, df // 2):
-            term *= c2 * (2 * k - 1) / (2 * k)
-            total += term
-        return 0.5 + 0.5 * math.sin(theta) * total
-    return _t_cdf_beta(t, df)
-
-
-def _t_cdf_beta(t: float, df: float) -> float:
-    """Student's t distribution function (regularised incomplete beta by continued fraction)."""
-    x = df / (df + t * t)
-    tail = 0.5 * _betainc(df / 2, 0.5, x)
-    return 1 - tail if t > 0 else tail
-
-
-def _betainc(a: float, b: float, x: float) -> float:
-    """Regularised incomplete beta I_x(a, b) (Numerical Recipes' continued fraction)."""
-    if x <= 0:
-        return 0.0
-    if x >= 1:
-        return 1.0
-    lbeta = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log(1 - x)
-    front = math.exp(lbeta)
-    if x < (a + 1) / (a + b + 2):
-        return front * _betacf(a, b, x) / a
-    return 1 - front * _betacf(b, a, 1 - x) / b
-
-
-def _betacf(a: float, b: float, x: float) -> float:
-    tiny = 1e-300
-    qab, qap, qam = a + b, a + 1, a - 1
-    c, d = 1.0, 1 - qab * x / qap
-    d = 1 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 200):
-        m2 = 2 * m
-        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
-        d = 1 + aa * d
-        d = 1 / (d if abs(d) > tiny else tiny)
-        c = 1 + aa / c if abs(1 + aa / c) > tiny else tiny
-        h *= d * c
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
-        d = 1 + aa * d
-        d = 1 / (d if abs(d) > tiny else tiny)
-        c = 1 + aa / c if abs(1 + aa / c) > tiny else tiny
-        delta = d * c
-        h *= delta
-        if abs(delta - 1) < 1e-12:
-            break
-    return h

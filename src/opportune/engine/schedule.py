@@ -32,8 +32,8 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 from itertools import combinations
 
-from opportune.engine.count import MAX_TOTAL, BudgetExceeded, Counter, entries_within
-from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.count import MAX_TOTAL, Counter, entries_within
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.hub import HubPath
 from opportune.engine.memory import memory_total
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
@@ -658,17 +658,17 @@ class OrderEngine:
         self._pass = None
         return True
 
-    def warm_up(self, time_limit: float | None = None) -> bool:
-        """Build what every decision uses (:meth:`prepare`), then count the first state exactly, within
-        ``time_limit`` seconds in all: this chooses how the plan is counted (finding a hub if it has
-        one) and fills the memos every later question uses.  True if it finished; if not, what it
-        built and counted is kept.
+    def warm_up(self, time_limit: float | None = None, mask: int = 0, consistent: int | None = None) -> bool:
+        """Build what every decision uses (:meth:`prepare`), then count a state exactly (default: the
+        first), within ``time_limit`` seconds in all: this chooses how the plan is counted (finding a
+        hub if it has one) and fills the memos every later question uses.  True if it finished; if
+        not, what it built and counted is kept.  Callers above the engine use :meth:`Schedule.warm_up`.
         """
         until = time.perf_counter() + time_limit if time_limit is not None else None
         try:
             self.prepare(until)
             with self.deadline(until):
-                self.count(0, self.all_strategies)
+                self.count(mask, self.all_strategies if consistent is None else consistent)
         except BudgetExceeded:
             return False
         return True
@@ -1011,6 +1011,20 @@ class Schedule:
         s._left = None
         return s
 
+    @classmethod
+    def at(cls, engine: OrderEngine, mask: int, consistent: int, installed: tuple[str, ...] = ()) -> "Schedule":
+        """The schedule of ``engine`` at a state given as bitmasks: ``mask`` the installed units,
+        ``consistent`` the strategies still open (``installed`` the sequence, if the caller keeps it).
+        What a policy deciding on masks asks its counting questions through, so that every count goes
+        through this class.  O(1): no check that the state is reachable (the caller's states are).
+
+        >>> from opportune import make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Schedule.at(engine, 0b001, engine.all_strategies).options()
+        {'b': 1, 'c': 1}
+        """
+        return cls._make(engine, installed, mask, consistent)
+
     # ------------------------------------------------------------ state
 
     def _locate(self, part: str) -> tuple[int, int, int]:
@@ -1114,6 +1128,33 @@ class Schedule:
         """Exact number of admissible completions (raises BudgetExceeded if over budget): the value of
         ``count_result(estimate=False)``."""
         return self.engine.count(self.mask, self.consistent)
+
+    def warm_up(self, time_limit: float | None = None) -> bool:
+        """Prepare the engine's tables and count this state exactly within ``time_limit`` seconds
+        (:meth:`OrderEngine.warm_up`): how the plan is counted (a hub or not) is chosen here, once,
+        and the memos every later question uses are filled.  True if it finished in time; what was
+        built and counted is kept either way.  O(one exact count).
+
+        >>> from opportune import make_plan
+        >>> Schedule(make_plan(["a", "b"], {"b": ["a"]})).warm_up(1.0)
+        True
+        """
+        return self.engine.warm_up(time_limit, self.mask, self.consistent)
+
+    def chains(self, strategy: int, *, chains: int = 8, seed: int = 0):
+        """A population of Markov chains on this state's completions under one strategy (its index),
+        for estimates when the exact counts do not fit a decision's budget
+        (:class:`~opportune.engine.sampling.CompletionChains`).  O(steps left × chains) to start.
+
+        >>> from opportune import make_plan
+        >>> pop = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).chains(0, seed=1)
+        >>> est = pop.estimate(first=[0, 1], steps=20_000)
+        >>> abs(est.first[0][0] - 2 / 3) < 0.05
+        True
+        """
+        from opportune.engine.sampling import CompletionChains    # here: a count never draws
+
+        return CompletionChains(self.engine.posets[strategy], self.engine.full & ~self.mask, chains=chains, seed=seed)
 
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
                      exact_share: float = 0.65, deadline=None, threads: int = 1, estimate: bool = True) -> CountResult:
