@@ -208,7 +208,7 @@ class Sequencer:
         self.pending: Row | None = None
         self.trace: list[Row] = []
         self.finished = False
-        self.warmed = warm_up == 0 or self.engine.warm_up(warm_up)
+        self.warmed = warm_up == 0 or self.state.schedule.warm_up(warm_up)
         self.engine.maintain()
 
     # ------------------------------------------------------------ deciding
