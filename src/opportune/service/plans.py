@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from sqlalchemy import insert, select
 from sqlalchemy.exc import IntegrityError
 
-from opportune.engine import OrderEngine
+from opportune.engine import OrderEngine, Schedule
 from opportune.engine.deadline import Deadline
 from opportune.engine.memory import memory_total, resident, trim
 from opportune.formats import CheckResult, check_text, plan_from_dict
@@ -410,7 +410,7 @@ class PlanBook:
                 loaded.warm = "stopped"
                 return True
             try:
-                done = loaded.engine.warm_up(max(0.0, until.remaining()))
+                done = Schedule(loaded.engine).warm_up(max(0.0, until.remaining()))
             except (MemoryError, RecursionError):   # beyond what this process can count: decisions will say so
                 done = None
             loaded.warm_slices += 1

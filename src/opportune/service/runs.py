@@ -55,7 +55,7 @@ from typing import Callable
 from sqlalchemy import bindparam, case, func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 
-from opportune.engine.count import BudgetExceeded
+from opportune.engine.deadline import BudgetExceeded
 from opportune.policies.base import Action, Decision, collector_paused
 from opportune.policies.named import DEFAULT_POLICY, make_policy
 from opportune.sequencer import LookError, OutcomeError, Sequencer

@@ -15,7 +15,7 @@ import time
 from functools import lru_cache
 
 from opportune.engine import Schedule
-from opportune.engine.count import BudgetExceeded
+from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.schedule import EXACT_DIGITS, count_text, log10_int
 from opportune.policies.printable import printable_decision
 from opportune.sequencer import Row
