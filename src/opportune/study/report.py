@@ -116,7 +116,7 @@ def provenance(result: StudyResult) -> dict:
     import platform
 
     from opportune import __version__
-    from opportune.engine import native
+    from opportune.engine import compiled_core
     from opportune.study.simulate import hash_config, plan_sha256
 
     cfg = result.config
@@ -124,7 +124,7 @@ def provenance(result: StudyResult) -> dict:
         "schema_version": SCHEMA_VERSION,
         "opportune": __version__,
         "python": platform.python_version(),
-        "compiled_core": native.available(),
+        "compiled_core": compiled_core(),
         "plan_sha256": plan_sha256(cfg.plan),
         "study_sha256": hash_config(cfg),
         "strategies": list(cfg.strategies),
@@ -455,7 +455,7 @@ def plot(result: StudyResult, doc: dict, out: Path) -> list[Path]:
 
 def _t_interval(values: list[float]) -> tuple[float, float]:
     """95% interval of the mean, Student's t (exact for few trials, the normal one for many)."""
-    from opportune.engine.sampling import t_quantile
+    from opportune.engine.stats import t_quantile
 
     n = len(values)
     mean = sum(values) / n

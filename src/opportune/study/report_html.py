@@ -91,9 +91,9 @@ def _t(value) -> str:
 
 def _machine() -> str:
     from opportune import __version__
-    from opportune.engine import native
+    from opportune.engine import compiled_core
 
-    core = "compiled core" if native.available() else "pure Python"
+    core = "compiled core" if compiled_core() else "pure Python"
     return (f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
             f"opportune {__version__} ({core})")
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, fields
 from typing import Callable
 
 from opportune.engine import OrderEngine
-from opportune.engine.count import BudgetExceeded
+from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.schedule import Schedule
 from opportune.planning.plan import Plan
 from opportune.policies.base import Action
@@ -223,7 +223,7 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
     if counting and config.decision_budget is not None:
         # Budgeted decisions estimate what they cannot count: nothing to refuse; count the first
         # state now (within the time limit) so that the workers start from a chosen way of counting.
-        engine.warm_up(config.count_time_limit)
+        Schedule(engine).warm_up(config.count_time_limit)
     elif counting:
         # Such a policy counts at every look: if the first look's counts do not finish in reasonable
         # time, no trial will.  Say so now rather than hang (the counts made stay in the memo).
@@ -233,8 +233,9 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
             # the first state, under one deadline (on ARC111 the counts fit in a second, the positions
             # through its hub take about a second per part)
             with engine.time_limited(limit), engine.deadline(_time.perf_counter() + limit):
-                engine.options(0, engine.all_strategies)
-                engine.position_sums_for(0, engine.all_strategies, set(config.plan.part_ids))
+                first = Schedule(engine)
+                first.options()
+                first.position_sums_for(set(config.plan.part_ids))
         except BudgetExceeded as exc:
             within, more = ((f"in {limit:g} s", ", or allow more time with --count-time-limit")
                             if exc.reason == "time" else ("within the counter's memory budget", ""))
@@ -360,7 +361,7 @@ class TrialRunner:
         if self._choose_at is not None:
             free = math.inf if self.capacity is None else self.capacity - len(buffer)
             return self._choose_at(self.engine, mask, cons, buffer, free, look)
-        state = State._make(Schedule._make(self.engine, tuple(installed), mask, cons), buffer, self.capacity)
+        state = State._make(Schedule.at(self.engine, mask, cons, tuple(installed)), buffer, self.capacity)
         return self.policy.decide(state, look).action
 
     def _fill(self, mask, cons, installed, buffer, look) -> tuple:
@@ -549,7 +550,7 @@ def run_chunk(config: StudyConfig, prepared: Prepared, strategy: str, start: int
             # As prepare() did in the parent: count the first state before the first decision.  A budgeted
             # decision on a cold engine cannot, so the first trials would estimate what a warm engine
             # counts, and learn that exact counts are slow (ARC111: 0.6 s a trial instead of 0.3).
-            engine.warm_up(config.count_time_limit)
+            Schedule(engine).warm_up(config.count_time_limit)
         runner = _WORKER_CACHE[key] = TrialRunner(strategy, engine, config, prepared)
     # Trials make no reference cycles, but they allocate millions of small tuples, and the cyclic
     # collector would walk the ever-growing caches each time: pause it for the chunk.

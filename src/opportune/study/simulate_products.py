@@ -36,7 +36,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from opportune.engine import OrderEngine
-from opportune.engine.count import BudgetExceeded
+from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.schedule import MAX_STRATEGIES_EXACT
 from opportune.multi import Layout, fit_policy
 from opportune.planning.plan import Plan
