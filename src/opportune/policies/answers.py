@@ -13,7 +13,7 @@ Answers come in four kinds (``Answers.mode``):
 * ``"order"``: only what needs no counting (one candidate, one part to buffer, or what the partial
   order alone settles, :mod:`opportune.engine.dominance`); anything else raises :class:`MustCount`;
 * ``"exact"``: exact counts, the order's shortcuts first unless ``order_first=False`` (within the
-  engine's deadline, if the caller set one: :class:`~opportune.engine.count.BudgetExceeded`);
+  engine's deadline, if the caller set one: :class:`~opportune.engine.deadline.BudgetExceeded`);
 * ``"estimate"``: from a population of random completions
   (:class:`~opportune.engine.sampling.CompletionChains`), run until ``end`` or until sure;
 * ``"then"``: a question asked after the rule has decided (the slack after the paper's buffer
@@ -57,9 +57,10 @@ import math
 import time
 from dataclasses import dataclass
 
-from opportune.engine.count import BudgetExceeded
+from opportune.engine import Schedule
+from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
-from opportune.engine.sampling import CompletionChains, prob_positive
+from opportune.engine.stats import prob_positive
 from opportune.policies.base import (
     DONE,
     SHAKE,
@@ -72,6 +73,11 @@ from opportune.policies.base import (
     resume_collector,
     shared_action,
 )
+
+# not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from opportune.engine.sampling import CompletionChains   # made by Schedule.chains
 
 MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
 EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
@@ -158,8 +164,8 @@ class Readings:
         pop = self.population
         if pop is None or pop[0] is not engine or pop[1] != strategy or remaining & ~pop[2].remaining:
             self.starts += 1
-            chains = CompletionChains(engine.posets[strategy], remaining, chains=self.chains,
-                                      seed=self.seed * 1_000_003 + self.starts)
+            chains = Schedule.at(engine, mask, consistent).chains(strategy, chains=self.chains,
+                                                                  seed=self.seed * 1_000_003 + self.starts)
             self.population = pop = (engine, strategy, chains)
         else:
             pop[2].advance(remaining)
@@ -212,6 +218,11 @@ class Answers:
     # ------------------------------------------------------------ the state
 
     @property
+    def schedule(self) -> Schedule:
+        """The state as a :class:`~opportune.engine.Schedule`: every exact count goes through it."""
+        return Schedule.at(self.engine, self.mask, self.consistent)
+
+    @property
     def complete(self) -> bool:
         return self.mask == self.engine.full
 
@@ -261,7 +272,7 @@ class Answers:
         if self.mode == "estimate":
             return self._estimated_options(parts)
         known = self._uncounted(parts, most_options_by_order, "install")
-        return known if known is not None else self.engine.options_for(self.mask, self.consistent, parts)
+        return known if known is not None else self.schedule.options_for(parts)
 
     def positions(self, parts: list[str]) -> dict:
         """Each part's expected position in a uniformly random completion (1 = next): exact as the sum
@@ -270,7 +281,7 @@ class Answers:
         if self.mode == "estimate":
             return self._estimated_positions(parts)
         known = self._uncounted(parts, earliest_by_order, "buffer")
-        return known if known is not None else self.engine.position_sums_for(self.mask, self.consistent, set(parts))[1]
+        return known if known is not None else self.schedule.position_sums_for(set(parts))[1]
 
     def _uncounted(self, parts: list[str], by_order, kind: str) -> dict | None:
         """What needs no count: the one part asked (nothing to compare), or the best parts the order alone
@@ -333,7 +344,7 @@ class Answers:
                 min((p.above[u] & remaining).bit_count() for p in posets))
 
     def _exact_slack(self, parts, weight: float) -> dict:
-        total, sums = self.engine.position_sums_for(self.mask, self.consistent, set(parts))
+        total, sums = self.schedule.position_sums_for(set(parts))
         out = {}
         for part, s in sums.items():
             needed, after = self._needed_after(part)

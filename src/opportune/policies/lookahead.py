@@ -9,7 +9,7 @@ import time
 import weakref
 from dataclasses import replace
 
-from opportune.engine.count import BudgetExceeded
+from opportune.engine.deadline import BudgetExceeded
 from opportune.policies.base import (
     DONE,
     SHAKE,

@@ -24,6 +24,7 @@ from __future__ import annotations
 import itertools
 from fractions import Fraction
 
+from opportune.engine import Schedule
 from opportune.policies.answers import Answers, CountBasedRule
 from opportune.policies.base import DONE, SHAKE, Action
 
@@ -150,12 +151,13 @@ class Opportunistic(CountBasedRule):
         >>> Opportunistic().buffer_ties_at(engine, 0, 1), Opportunistic().buffer_ties_at(engine, 0b001, 1)
         ([(0, 1)], [])
         """
-        can = engine.installable(mask, consistent)
+        here = Schedule.at(engine, mask, consistent)
+        can = here.installable()
         if len(can) < 2:
             return []
         plan = engine.plan
         alike: dict[tuple, list[int]] = {}
-        for part, options in engine.options_for(mask, consistent, can).items():
+        for part, options in here.options_for(can).items():
             alike.setdefault((options, plan.part(part).cost), []).append(plan.index(part))
         return [pair for group in alike.values() for pair in itertools.combinations(sorted(group), 2)]
 
