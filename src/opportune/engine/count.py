@@ -785,13 +785,7 @@ class Counter:
         elements of ``rest`` comparable to some element of ``x`` (which include ``x``, as every
         element of ``rest`` is comparable to another), however many minimal elements it has.
         """
-        c, tables = self._narrow_tables()
-        T0, T1, T2, T3 = (tables + [[-1]])[:4]
-        cmask = (1 << c) - 1
-        c2 = 2 * c
-        c3 = 3 * c
-        n = self.poset.n
-        nbr = [b | a | 1 << i for i, (b, a) in enumerate(zip(self.poset.below, self.poset.above))]
+        T0, T1, T2, T3, c, c2, c3, cmask, n, nbr = self._narrow_scan()
 
         def pieces(rest: int) -> list[int]:
             comps = []
@@ -809,6 +803,16 @@ class Counter:
 
         return pieces
 
+    def _narrow_scan(self) -> tuple:
+        """What a scan with the chunk tables reads, as locals for the hot loops: ``(T0, T1, T2, T3, c,
+        2c, 3c, 2^c - 1, n, nbr)``, ``T3 = [-1]`` with three chunks, ``nbr[i]`` the elements comparable
+        to ``i`` and ``i`` itself (see :meth:`_narrow_tables`).  O(n) once the tables are built."""
+        c, tables = self._narrow_tables()
+        T0, T1, T2, T3 = (tables + [[-1]])[:4]
+        p = self.poset
+        nbr = [b | a | 1 << i for i, (b, a) in enumerate(zip(p.below, p.above))]
+        return T0, T1, T2, T3, c, 2 * c, 3 * c, (1 << c) - 1, p.n, nbr
+
     def _make_counter(self) -> Callable[[int], int]:
         if self._native is not None:
             return self._make_compiled()
@@ -820,14 +824,9 @@ class Counter:
         # some work: see _start_budget), else a byte at a time.
         narrow = getattr(self, "_ntabs", None) is not None
         if narrow:
-            c, tables = self._narrow_tables()
-            T0, T1, T2, T3 = (tables + [[-1]])[:4]
-            cmask = (1 << c) - 1
-            c2 = 2 * c
-            c3 = 3 * c
-            n = poset.n
+            T0, T1, T2, T3, c, c2, c3, cmask, n, nbr = self._narrow_scan()
             n2 = 2 * n
-            nbr = [below[i] | above[i] | 1 << i for i in range(n)]
+            pieces = self._narrow_pieces()
         else:
             nbytes, UP, CAP = self._tables()
         if poset.n <= _WIDE:
@@ -842,7 +841,7 @@ class Counter:
         vec = self._vec
         check = _check_every(self.poset.n) - 1
 
-        def wide_check() -> None:   # the clock, inside a long split of one wide set
+        def clock() -> None:   # every so many entries, sums and products, and inside a long split
             if perf() > budget[1]:
                 raise BudgetExceeded("exact count exceeded its time limit", reason="time",
                                      memo_size=len(memo) + len(vec))
@@ -859,9 +858,8 @@ class Counter:
                 raise BudgetExceeded(
                     f"exact count needs more than max_memo={budget[0]} new memo entries",
                     reason="memo", memo_size=len(memo) + len(vec))
-            if not k & check and perf() > budget[1]:
-                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
+            if not k & check:
+                clock()
             # cut elements (Counter.scan, inlined: this is the hot path)
             if narrow:
                 sc = T0[s & cmask] & T1[(s >> c) & cmask] & T2[(s >> c2) & cmask] & T3[s >> c3]
@@ -908,12 +906,13 @@ class Counter:
                 # components
                 if narrow:
                     # An element comparable to nothing else in s is a component by itself; the rest
-                    # falls into closures under comparability (_narrow_pieces, inlined: the call
-                    # alone costs about a tenth of the counter's time here).  The first closure
-                    # usually is all of s: then straight to rule 3.
+                    # falls into closures under comparability.  The first closure (_narrow_pieces'
+                    # loop, inlined: the call alone costs about a tenth of the counter's time here)
+                    # usually is all of s: then rule 3, with no list made; else the other pieces.
                     iso = s & sc >> n
                     rest = s ^ iso
                     mins = s & sc >> n2
+                    comps = ()
                     if rest:
                         x = nbr[rest.bit_length() - 1] & rest
                         while x != rest:
@@ -922,38 +921,15 @@ class Counter:
                             if y == x:
                                 break
                             x = y
-                        if x == rest and not iso:
-                            r = 0
-                            m = mins
-                            while m:
-                                b = m & -m
-                                m ^= b
-                                t = s ^ b
-                                v = get(t)
-                                r += v if v is not None else f(t)
-                            memo[s] = r
-                            return r
-                        comps = [x]
-                        rest ^= x
-                    else:
-                        comps = []
-                    while rest:
-                        x = nbr[rest.bit_length() - 1] & rest
-                        while x != rest:
-                            y = rest & ~((T0[x & cmask] & T1[(x >> c) & cmask] & T2[(x >> c2) & cmask]
-                                  & T3[x >> c3]) >> n)
-                            if y == x:
-                                break
-                            x = y
-                        comps.append(x)
-                        rest ^= x
-                    # recurse in the order of the overlap classes below (by highest minimal element),
-                    # so the memo fills in the same order whichever scan is used
-                    if len(comps) == 2:
-                        if comps[0] & mins > comps[1] & mins:
-                            comps.reverse()
-                    elif len(comps) > 2:
-                        comps.sort(key=mins.__and__)
+                        if x != rest or iso:
+                            comps = [x, *pieces(rest ^ x)]
+                            # recurse in the order of the overlap classes below (by highest minimal
+                            # element), so the memo fills in the same order whichever scan is used
+                            if len(comps) == 2:
+                                if comps[0] & mins > comps[1] & mins:
+                                    comps.reverse()
+                            elif len(comps) > 2:
+                                comps.sort(key=mins.__and__)
                 else:
                     # the overlap classes of the up-sets of the minimal elements (poset.components);
                     # a minimal element with nothing above it is a component by itself (iso), which
@@ -965,7 +941,7 @@ class Counter:
                     else:
                         # O(width^2) mask operations in all: a wide set of a large order can take
                         # seconds here, inside one entry (hence the clock)
-                        comps, iso = split_components(above, s, mins, wide_check)
+                        comps, iso = split_components(above, s, mins, clock)
                 if iso or len(comps) > 1:
                     # s!/(|C1|!...|Ck|!) e(C1)...e(Ck); every partial quotient is exact
                     r = fact[s.bit_count()]
@@ -976,9 +952,8 @@ class Counter:
                             r = r // fact[comp.bit_count()] * (v if v is not None else f(comp))
                             # each step is a division of a number of up to n log n bits
                             k += 1
-                            if not k & 15 and perf() > budget[1]:
-                                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                                     memo_size=len(memo) + len(vec))
+                            if not k & 15:
+                                clock()
                 else:
                     r = 0
                     m = mins
@@ -990,9 +965,8 @@ class Counter:
                         v = get(t)
                         r += v if v is not None else f(t)
                         k += 1
-                        if not k & 63 and perf() > budget[1]:   # a wide set of known children: big sums
-                            raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                                 memo_size=len(memo) + len(vec))
+                        if not k & 63:      # a wide set of known children: big sums
+                            clock()
             memo[s] = r
             return r
 
@@ -1045,12 +1019,7 @@ class Counter:
         below = list(poset.below)
         above = list(poset.above)
         if getattr(self, "_ntabs", None) is not None:
-            c, tables = self._narrow_tables()
-            T0, T1, T2, T3 = (tables + [[-1]])[:4]
-            cmask = (1 << c) - 1
-            c2 = 2 * c
-            c3 = 3 * c
-            n = poset.n
+            T0, T1, T2, T3, c, c2, c3, cmask, n, _ = self._narrow_scan()
             pieces = self._narrow_pieces()
 
             def split(s: int) -> tuple:
