@@ -837,14 +837,11 @@ class Counter:
             fact = _Factorials()
         budget = self._budget
         get = memo.get
-        perf = time.perf_counter
         vec = self._vec
         check = _check_every(self.poset.n) - 1
 
-        def clock() -> None:   # every so many entries, sums and products, and inside a long split
-            if perf() > budget[1]:
-                raise BudgetExceeded("exact count exceeded its time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
+        # the clock: every so many entries, sums and products, and inside a long split
+        clock = _clock(budget, "exact count exceeded its time limit", memo, vec)
 
         def f(s: int) -> int:
             r = get(s)
@@ -855,9 +852,7 @@ class Counter:
             # is stored once finished, so this counts the same new entries.
             k = budget[2] = budget[2] + 1
             if k > budget[0]:
-                raise BudgetExceeded(
-                    f"exact count needs more than max_memo={budget[0]} new memo entries",
-                    reason="memo", memo_size=len(memo) + len(vec))
+                raise _over_memo("exact count needs", budget[0], len(memo) + len(vec))
             if not k & check:
                 clock()
             # cut elements (Counter.scan, inlined: this is the hot path)
@@ -989,15 +984,13 @@ class Counter:
                 return 1
             room = budget[0] - budget[2]
             if room <= 0:
-                raise BudgetExceeded(f"exact count needs more than max_memo={budget[0]} new memo entries",
-                                     reason="memo", memo_size=self.memo_size)
+                raise _over_memo("exact count needs", budget[0], self.memo_size)
             deadline = budget[1]
             seconds = -1.0 if deadline == _INF else max(0.0, deadline - perf())
             status, r, added = core.count(s, direction, room if room < sys.maxsize else -1, seconds)
             budget[2] += added
             if status == 1:
-                raise BudgetExceeded(f"exact count needs more than max_memo={budget[0]} new memo entries",
-                                     reason="memo", memo_size=self.memo_size)
+                raise _over_memo("exact count needs", budget[0], self.memo_size)
             if status == 2:
                 raise BudgetExceeded("exact count exceeded its time limit", reason="time",
                                      memo_size=self.memo_size)
@@ -1065,7 +1058,6 @@ class Counter:
         get = memo.get
         vget = vec.get
         f = self._f
-        perf = time.perf_counter
         # fill(s, t): t in the field of every element of s, joined from little-endian bytes (fields
         # are whole bytes: see _set_width)
         nbytes = max(1, (self.poset.n + 7) // 8)
@@ -1091,23 +1083,17 @@ class Counter:
             v = get(s)
             return v if v is not None else f(s)
 
+        # the clock, read at every step of the loops below and after every vector: each is O(n)
+        # big-int work on packed vectors of a large order
+        late = _clock(budget, "position sums exceeded their time limit", memo, vec)
+
         def vstore(s: int, v: int) -> int:
             k = budget[2] = budget[2] + 1
             if k > budget[0]:
-                raise BudgetExceeded(
-                    f"position sums need more than max_memo={budget[0]} new memo entries",
-                    reason="memo", memo_size=len(memo) + len(vec))
+                raise _over_memo("position sums need", budget[0], len(memo) + len(vec))
             vec[s] = v
-            if perf() > budget[1]:   # every vector: each costs O(n) big-int operations on wide fields
-                raise BudgetExceeded("position sums exceeded their time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
+            late()
             return v
-
-        def late() -> None:
-            # each step of the loops below is O(n) big-int work on packed vectors of a large order
-            if perf() > budget[1]:
-                raise BudgetExceeded("position sums exceeded their time limit", reason="time",
-                                     memo_size=len(memo) + len(vec))
 
         def g(s: int) -> int:
             v = vget(s)
@@ -1225,6 +1211,23 @@ def _chunk_tables(c: int, values: list[int], k: int = 3) -> list[list[int]]:
             table += row
         out.append(table)
     return out
+
+
+def _clock(budget: list, message: str, memo: dict, vec: dict) -> Callable[[], None]:
+    """``clock()``: raises :class:`BudgetExceeded` (reason ``"time"``, ``message``) once the deadline
+    ``budget[1]`` (a ``time.perf_counter()`` value) has passed.  One reading of the clock, O(1)."""
+    perf = time.perf_counter
+
+    def clock() -> None:
+        if perf() > budget[1]:
+            raise BudgetExceeded(message, reason="time", memo_size=len(memo) + len(vec))
+
+    return clock
+
+
+def _over_memo(what: str, limit: int, size: int) -> BudgetExceeded:
+    """The error of a count (``what``: "exact count needs") that would store more than ``limit`` new entries."""
+    return BudgetExceeded(f"{what} more than max_memo={limit} new memo entries", reason="memo", memo_size=size)
 
 
 def _ratio(a: int, b: int) -> float:
