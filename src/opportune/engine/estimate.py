@@ -77,8 +77,8 @@ import time
 from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 
-from opportune.engine.count import BudgetExceeded, Counter
-from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.count import Counter
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.hub import hub_split
 from opportune.engine.poset import Poset, bits, components, cut_blocks
 

@@ -40,8 +40,8 @@ from itertools import combinations, islice
 from math import comb
 from operator import add, mul
 
-from opportune.engine.count import EVICT_CHUNK, BudgetExceeded, Counter
-from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.count import EVICT_CHUNK, Counter
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.poset import (
     CycleError,
     Poset,

@@ -1166,7 +1166,7 @@ class Schedule:
         ``estimate=False``: the exact count alone, the same way, within ``deadline`` (a
         :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()`` moment), or with
         ``deadline=None`` within whatever :meth:`OrderEngine.deadline` the caller holds, else the
-        engine's time limit per count; :class:`~opportune.engine.count.BudgetExceeded` if it does
+        engine's time limit per count; :class:`~opportune.engine.deadline.BudgetExceeded` if it does
         not fit (what was counted stays in the memos).  ``time_limit`` and the estimate's settings
         are then unused.  :meth:`count` is the same, as a plain ``int``.
 

@@ -42,7 +42,8 @@ from bisect import bisect_left, bisect_right
 from dataclasses import dataclass
 from typing import Iterable
 
-from opportune.engine.count import BudgetExceeded, Counter
+from opportune.engine.count import Counter
+from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.poset import Poset
 from opportune.formats.problems import Problem
 from opportune.formats.sequences import SequenceError, Sequences, sequences_from
