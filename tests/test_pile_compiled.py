@@ -132,3 +132,38 @@ def test_bad_input_is_a_message():
         CompiledPileSolver(GEAR, Opportunistic())
     one = OrderEngine(make_plan(["a"], {}))          # the smallest plan: one look, one move
     assert CompiledPileSolver(one, visible=1).value() == PileSolver(one, visible=1).value() == 1.0
+
+
+def test_the_look_ahead_uses_the_compiled_optimum_up_to_its_cap(monkeypatch):
+    """Past the Python cap (1,000 states here) the compiled optimum decides, so the look-ahead's exact value is
+    the optimum's; with the compiled cap under the count the step over slack decides instead."""
+    from opportune.policies.lookahead import Lookahead
+
+    count = estimate_states(GEAR, visible=2, pile=True).states
+    ahead = Lookahead(visible=2, bin="pile", max_states=1_000)
+    assert 1_000 < count <= Lookahead.COMPILED_STATES
+    value = PileSolver(GEAR, ahead, visible=2, max_states=10 * count).value()
+    assert type(ahead._evaluator) is CompiledPileSolver and ahead._evaluator.states == count
+    assert ahead._evaluator.max_states == Lookahead.COMPILED_STATES
+    assert abs(value - CompiledPileSolver(GEAR, visible=2).value()) < 1e-9
+    monkeypatch.setattr(Lookahead, "COMPILED_STATES", count - 1)
+    step = Lookahead(visible=2, bin="pile", max_states=count - 1)
+    step.choose_at(GEAR, 0, GEAR.all_strategies, (), float("inf"), tuple(GEAR.plan.part_ids[:2]))
+    assert type(step._evaluator) is PileSolver and step._evaluator.policy is step.base
+
+
+def test_a_budgeted_look_ahead_stops_the_compiled_optimum_at_its_deadline():
+    """A decision whose budget is spent stores no state of the compiled optimum (counted work, not the
+    clock) and is the base's; without a budget the first decision solves the whole programme (a warm-up)."""
+    from opportune.policies.lookahead import Lookahead
+
+    look = tuple(GEAR.plan.part_ids[:3])
+    spent = Lookahead(visible=3, bin="pile", budget=10.0)
+    assert type(spent._values(GEAR)) is CompiledPileSolver      # counted and reserved, nothing solved yet
+    spent.lookahead_budget = 1e-9                               # then a decision with its budget spent
+    action = spent.choose_at(GEAR, 0, GEAR.all_strategies, (), float("inf"), look)
+    assert action == spent.fallback.choose_at(GEAR, 0, GEAR.all_strategies, (), float("inf"), look)
+    assert type(spent._evaluator) is CompiledPileSolver and spent._evaluator.states == 0
+    whole = Lookahead(visible=3, bin="pile", max_states=1_000)
+    whole.choose_at(GEAR, 0, GEAR.all_strategies, (), float("inf"), look)
+    assert whole._evaluator.states == estimate_states(GEAR, visible=3, pile=True).states

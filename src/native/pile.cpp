@@ -8,7 +8,8 @@
 // A state s is (installed units, consistent strategies, buffer counts); its windows are the sorted
 // multisets of `visible` units of its bin, with the probabilities of drawing them one by one without
 // replacement.  Every value is memoised in one open-addressing table of 16-byte slots (a 64-bit code
-// of the state and window, and the value), at most half full: 32-64 bytes per stored value, plus the
+// of the state and window, and the value), at most half full: 32-64 bytes per stored value (reserved
+// for the count known before the work, the table never doubles during it), plus the
 // (installed, strategies) pairs interned once (fewer by the buffers and windows of each).  A state's
 // values go into the table only once all of them are known, so a stop (the deadline, the state cap)
 // leaves a table a later call goes on from.
@@ -19,6 +20,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
+#include <new>
 #include <limits>
 #include <stdexcept>
 #include <unordered_map>
@@ -41,7 +44,6 @@ struct PileStuck : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
 
-constexpr uint64_t EMPTY = ~uint64_t(0);
 constexpr double INF = std::numeric_limits<double>::infinity();
 
 inline uint64_t mix(uint64_t x) {  // the splitmix64 finaliser: a well-spread slot for every code
@@ -52,58 +54,64 @@ inline uint64_t mix(uint64_t x) {  // the splitmix64 finaliser: a well-spread sl
     return x ^ (x >> 31);
 }
 
-// Values by code: linear probing, power-of-two capacity, at most half full.
+// Values by code: linear probing, power-of-two capacity, at most half full.  The slots come zeroed
+// from calloc (a large block is mapped lazily by the system: reserving is immediate, a page is paid for
+// when first written), so a code is kept as code + 1 and 0 marks an empty slot.
 class Table {
 public:
+    struct Slot {
+        uint64_t key;
+        double val;
+    };
     Table() { rehash(1024); }
+    ~Table() { std::free(slots_); }
+    Table(const Table&) = delete;
+    Table& operator=(const Table&) = delete;
     const double* find(uint64_t code) const {
-        for (size_t i = mix(code) & mask_;; i = (i + 1) & mask_) {
-            if (keys_[i] == code) return &vals_[i];
-            if (keys_[i] == EMPTY) return nullptr;
+        uint64_t key = code + 1;
+        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
+            if (slots_[i].key == key) return &slots_[i].val;
+            if (slots_[i].key == 0) return nullptr;
         }
     }
     void put(uint64_t code, double v) {
-        if (2 * (size_ + 1) > keys_.size()) rehash(keys_.size() * 2);
-        for (size_t i = mix(code) & mask_;; i = (i + 1) & mask_) {
-            if (keys_[i] == code) {
-                vals_[i] = v;
-                return;
-            }
-            if (keys_[i] == EMPTY) {
-                keys_[i] = code;
-                vals_[i] = v;
-                ++size_;
+        if (2 * (size_ + 1) > cap_) rehash(cap_ * 2);
+        uint64_t key = code + 1;
+        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
+            if (slots_[i].key == key || slots_[i].key == 0) {
+                size_ += slots_[i].key == 0;
+                slots_[i].key = key;
+                slots_[i].val = v;
                 return;
             }
         }
     }
     void reserve(size_t n) {
-        size_t cap = keys_.size();
+        size_t cap = cap_;
         while (cap < 2 * n) cap *= 2;
-        if (cap > keys_.size()) rehash(cap);
+        if (cap > cap_) rehash(cap);
     }
     size_t size() const { return size_; }
-    size_t bytes() const { return keys_.size() * (sizeof(uint64_t) + sizeof(double)); }
+    size_t bytes() const { return cap_ * sizeof(Slot); }
 
 private:
     void rehash(size_t cap) {
-        std::vector<uint64_t> keys(cap, EMPTY);
-        std::vector<double> vals(cap);
+        Slot* slots = static_cast<Slot*>(std::calloc(cap, sizeof(Slot)));
+        if (!slots) throw std::bad_alloc();
         size_t m = cap - 1;
-        for (size_t j = 0; j < keys_.size(); ++j) {
-            if (keys_[j] == EMPTY) continue;
-            size_t i = mix(keys_[j]) & m;
-            while (keys[i] != EMPTY) i = (i + 1) & m;
-            keys[i] = keys_[j];
-            vals[i] = vals_[j];
+        for (size_t j = 0; j < cap_; ++j) {
+            if (slots_[j].key == 0) continue;
+            size_t i = mix(slots_[j].key) & m;
+            while (slots[i].key != 0) i = (i + 1) & m;
+            slots[i] = slots_[j];
         }
-        keys_.swap(keys);
-        vals_.swap(vals);
+        std::free(slots_);
+        slots_ = slots;
+        cap_ = cap;
         mask_ = m;
     }
-    std::vector<uint64_t> keys_;
-    std::vector<double> vals_;
-    size_t mask_ = 0, size_ = 0;
+    Slot* slots_ = nullptr;
+    size_t cap_ = 0, mask_ = 0, size_ = 0;
 };
 
 struct PairHash {
