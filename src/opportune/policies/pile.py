@@ -238,7 +238,9 @@ class CompiledPileSolver(PileSolver):
         except _native.PileStuck as exc:
             raise RuntimeError(str(exc)) from None
         finally:
-            if self.progress is not None:
+            # the progress report as the Python programme's: once per 64 more states (a call stores many)
+            if self.progress is not None and self._core.states >= self._next_report:
+                self._next_report = self._core.states + 64
                 self.progress(self)
 
 
