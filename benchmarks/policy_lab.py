@@ -330,7 +330,7 @@ def main(argv=None) -> int:
     ap.add_argument("--policies", default=",".join(POLICIES), help="policies evaluated against the optimum, comma-separated")
     ap.add_argument("--only", default="", help="only these plans (names, comma-separated: r3-11, gearbox, ...)")
     ap.add_argument("--compiled-optimum", action="store_true",
-                    help="the pile's optimum by the compiled core (the same values as the Python programme, 29-42x sooner)")
+                    help="the pile's optimum by the compiled core (the same values as the Python programme, 32-46x sooner)")
     ap.add_argument("--max-states", type=int, default=2_000_000, help="states of one exact programme, at most")
     ap.add_argument("--task-seconds", type=float, default=600.0, help="seconds for one plan in one setting, at most")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (plans x settings, and the paired studies)")

@@ -57,7 +57,7 @@ class Lookahead(DecidesOnMasks):
     #: On the pile bin the compiled optimum decides on plans of up to this many states (counted before it
     #: starts; ``max_states`` if larger): its table is reserved for the count at once, at most
     #: :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` (64) bytes a state, so at most 320 MB.
-    #: Without a budget it is solved whole in the first decision on the plan (a warm-up: about a million
+    #: Without a budget it is solved whole in the first decision on the plan (a warm-up: 0.6-1 million
     #: states a second) and shared by the look-aheads of the same settings; with one, each decision
     #: goes on with it within its share of the budget (the clock is read at every new state).
     COMPILED_STATES = 5_000_000

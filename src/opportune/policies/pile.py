@@ -21,7 +21,7 @@ Example (the gearbox, 2 visible, unlimited buffer):
 
 The optimum alone (no policy) is also compiled: :class:`CompiledPileSolver` runs the same recursion in
 C++ (``_native.PileCore``, ``src/native/pile.cpp``) with the same floating-point operations in the same
-order, so its values are the same doubles, 29-42 times faster and in at most
+order, so its values are the same doubles, 32-46 times faster and in at most
 :data:`COMPILED_BYTES_PER_STATE` bytes per stored value.  :func:`pile_solver` picks it where the
 compiled core is there (not with ``OPPORTUNE_PURE_PYTHON=1``), else PileSolver.
 """
@@ -191,7 +191,7 @@ class CompiledPileSolver(PileSolver):
     (:class:`OptimalTooLarge`), the ``deadline`` is read at every new state (:class:`OutOfTime`; what
     was finished stays).  Memory: :data:`COMPILED_BYTES_PER_STATE` bytes per value.  A ``ValueError``
     where the core does not take the plan (see :func:`compiled_pile_available`).
-    Complexity: O(states × windows × moves), as PileSolver, 29-42 times faster.
+    Complexity: O(states × windows × moves), as PileSolver, 32-46 times faster.
     """
 
     def __init__(self, engine, policy=None, **settings):
