@@ -1153,6 +1153,7 @@ void bind(py::module_& m, const char* name) {
 
 void bind_chains(py::module_& m);  // chains.cpp
 void bind_relax(py::module_& m);   // relax.cpp
+void bind_pile(py::module_& m);    // pile.cpp
 
 PYBIND11_MODULE(_native, m) {
     m.doc() = "Compiled core of opportune's order engine (see opportune.engine.native)";
@@ -1163,4 +1164,5 @@ PYBIND11_MODULE(_native, m) {
     bind<16>(m, "Counter16");
     bind_chains(m);
     bind_relax(m);
+    bind_pile(m);
 }
