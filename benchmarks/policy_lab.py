@@ -170,6 +170,23 @@ def _key(args, plan, setting) -> str:
             f"{'inf' if capacity is None else capacity}:{bin}:{args.max_states}")
 
 
+def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:
+    """Read one line of ``--results`` into ``done``. An exact result stands whatever state cap it was
+    run with (the cap decides only whether a plan is skipped), so it is filed under this run's cap; a
+    later line wins, its gaps added to an earlier result's (a rerun of one policy keeps the others'),
+    and a skip never hides a result."""
+    if "skipped" not in rec:
+        key = f"{key.rsplit(':', 1)[0]}:{max_states}"
+    old = done.get(key)
+    if "skipped" in rec:
+        if old is None or "skipped" in old:
+            done[key] = rec
+        return
+    if old is not None and "skipped" not in old:
+        rec = {**rec, "gaps": {**old["gaps"], **rec["gaps"]}}
+    done[key] = rec
+
+
 def _record(plan, setting, r, two: bool) -> dict:
     visible, capacity, bin = setting
     out = {"plan": plan.name, "visible": visible, "capacity": capacity, "bin": bin, "two_strategies": two}
@@ -387,7 +404,7 @@ def main(argv=None) -> int:
         for line in args.results.read_text().splitlines():
             if line.strip():
                 rec = json.loads(line)
-                done[rec.pop("key")] = rec
+                _keep(done, rec.pop("key"), rec, args.max_states)
     n_plans = len({plan.name for _, plan, _, _ in jobs})
     sink = None if args.results is None else args.results.open("a")
     try:
