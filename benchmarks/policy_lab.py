@@ -41,7 +41,7 @@ from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.optimal import OptimalTooLarge, OutOfTime
-from opportune.policies.pile import PileSolver
+from opportune.policies.pile import PileSolver, pile_solver
 from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.variants import BinFirst, Slack
 from opportune.policies.lookahead import Lookahead
@@ -74,14 +74,15 @@ def random_plan(rng: random.Random, n: int, strategies: int, density: float, lab
 
 
 def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
-         seconds: float | None = None, only=None) -> tuple[dict[str, float], float, int]:
+         seconds: float | None = None, only=None, compiled: bool = False) -> tuple[dict[str, float], float, int]:
     """Each policy's exact expected time over the optimum's, less one; the optimum; its states.  Raises
-    OptimalTooLarge past ``max_states`` states and OutOfTime past ``seconds`` (the whole plan)."""
+    OptimalTooLarge past ``max_states`` states and OutOfTime past ``seconds`` (the whole plan).  ``compiled``:
+    the pile's optimum by the compiled core where it is built (the same values, far sooner)."""
     engine = OrderEngine(plan)
     deadline = Deadline.after(seconds) if seconds is not None else None
     settings = dict(visible=visible, capacity=capacity, max_states=max_states)
     if bin == "pile":
-        optimum = PileSolver(engine, **settings)
+        optimum = (pile_solver if compiled else PileSolver)(engine, **settings)
         optimum.deadline = deadline
         best, states = optimum.value(), optimum.states
     out = {}
@@ -99,9 +100,9 @@ def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_
 
 def _task(job):
     """One plan in one setting (a worker's job): (gaps, optimum, states) or the reason it was skipped."""
-    plan, visible, capacity, bin, max_states, seconds, only = job
+    plan, visible, capacity, bin, max_states, seconds, only, compiled = job
     try:
-        return gaps(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only)
+        return gaps(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, compiled=compiled)
     except OptimalTooLarge:
         return f"over {max_states:,} states"
     except OutOfTime:
@@ -169,6 +170,23 @@ def _key(args, plan, setting) -> str:
             f"{'inf' if capacity is None else capacity}:{bin}:{args.max_states}")
 
 
+def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:
+    """Read one line of ``--results`` into ``done``. An exact result stands whatever state cap it was
+    run with (the cap decides only whether a plan is skipped), so it is filed under this run's cap; a
+    later line wins, its gaps added to an earlier result's (a rerun of one policy keeps the others'),
+    and a skip never hides a result."""
+    if "skipped" not in rec:
+        key = f"{key.rsplit(':', 1)[0]}:{max_states}"
+    old = done.get(key)
+    if "skipped" in rec:
+        if old is None or "skipped" in old:
+            done[key] = rec
+        return
+    if old is not None and "skipped" not in old:
+        rec = {**rec, "gaps": {**old["gaps"], **rec["gaps"]}}
+    done[key] = rec
+
+
 def _record(plan, setting, r, two: bool) -> dict:
     visible, capacity, bin = setting
     out = {"plan": plan.name, "visible": visible, "capacity": capacity, "bin": bin, "two_strategies": two}
@@ -203,7 +221,8 @@ def _run_jobs(jobs, args, done: dict, sink) -> None:
             sink.write(json.dumps({"key": key, **rec}) + "\n")
             sink.flush()
 
-    tasks = [(plan, *setting, args.max_states, args.task_seconds, args.policies) for _, plan, setting, _ in todo]
+    tasks = [(plan, *setting, args.max_states, args.task_seconds, args.policies, args.compiled_optimum)
+             for _, plan, setting, _ in todo]
     if args.workers > 1 and len(todo) > 1:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
@@ -326,6 +345,9 @@ def main(argv=None) -> int:
     ap.add_argument("--capacities", default="1,2,inf", help="buffer capacities, comma-separated (inf: unlimited)")
     ap.add_argument("--bins", default="uniform,pile", help="bins, comma-separated (uniform, pile)")
     ap.add_argument("--policies", default=",".join(POLICIES), help="policies evaluated against the optimum, comma-separated")
+    ap.add_argument("--only", default="", help="only these plans (names, comma-separated: r3-11, gearbox, ...)")
+    ap.add_argument("--compiled-optimum", action="store_true",
+                    help="the pile's optimum by the compiled core (the same values as the Python programme, 32-46x sooner)")
     ap.add_argument("--max-states", type=int, default=2_000_000, help="states of one exact programme, at most")
     ap.add_argument("--task-seconds", type=float, default=600.0, help="seconds for one plan in one setting, at most")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (plans x settings, and the paired studies)")
@@ -368,14 +390,22 @@ def main(argv=None) -> int:
                     two.add(len(plans) - 1)
     gear = load_plan(GEARBOX)
     t0 = time.perf_counter()
-    jobs = [(_key(args, plan, s), plan, s, i in two) for s in settings for i, plan in enumerate(plans)]
-    gear_jobs = [(_key(args, gear, s), gear, s, False) for s in settings] if args.plans else []
+    only = {name for name in args.only.split(",") if name}
+    unknown = only - {plan.name for plan in plans} - {gear.name}
+    if unknown:
+        ap.error(f"--only: no plan named {', '.join(sorted(unknown))}; the plans are {', '.join(p.name for p in plans)}, "
+                 f"{gear.name}")
+    jobs = [(_key(args, plan, s), plan, s, i in two) for s in settings for i, plan in enumerate(plans)
+            if not only or plan.name in only]
+    gear_jobs = [(_key(args, gear, s), gear, s, False) for s in settings
+                 if args.plans and (not only or gear.name in only)]
     done: dict[str, dict] = {}
     if args.results is not None and args.results.exists():
         for line in args.results.read_text().splitlines():
             if line.strip():
                 rec = json.loads(line)
-                done[rec.pop("key")] = rec
+                _keep(done, rec.pop("key"), rec, args.max_states)
+    n_plans = len({plan.name for _, plan, _, _ in jobs})
     sink = None if args.results is None else args.results.open("a")
     try:
         _run_jobs(jobs + gear_jobs, args, done, sink)
@@ -399,7 +429,7 @@ def main(argv=None) -> int:
         if skipped:
             print(f"  skipped: {', '.join(skipped)}")
     if table:
-        print(f"\nevery setting: gap to the optimum, mean / max (%), over the plans evaluated ({len(plans)} plans)")
+        print(f"\nevery setting: gap to the optimum, mean / max (%), over the plans evaluated ({n_plans} plans)")
         print(f"  {'setting':<36} {'plans':>5} {'skipped':>7}  " + "  ".join(f"{n:>17}" for n in names))
         for name, n_done, skip, summ in table:
             print(f"  {name:<36} {n_done:>5} {skip:>7}  "
@@ -414,14 +444,14 @@ def main(argv=None) -> int:
                 print(f"  {setting_name(*setting):<36}: optimum {r['optimum']:.4f}; "
                       + ", ".join(f"{p} {100 * r['gaps'][p]:+.3f}%" for p in names))
     print(f"\n{time.perf_counter() - t0:.0f} s")
-    text = markdown(settings, per_setting, gear_done, names, len(plans))
+    text = markdown(settings, per_setting, gear_done, names, n_plans)
     if args.table:
         args.table.parent.mkdir(parents=True, exist_ok=True)
         args.table.write_text("# The policy lab\n\nWritten by `benchmarks/policy_lab.py --table`; how it works: "
                               "[the paper's comparison](comparison.md).\n\n" + text)
         print(f"wrote {args.table}")
     if args.readme:
-        replace_block(args.readme, markdown(settings, per_setting, gear_done, names, len(plans), brief=True))
+        replace_block(args.readme, markdown(settings, per_setting, gear_done, names, n_plans, brief=True))
         print(f"wrote the lab's table into {args.readme}")
     if args.plot:
         plot_settings(args.plot, settings, per_setting, names)

@@ -254,7 +254,9 @@ def test_a_counter_on_the_compiled_core_gives_the_pure_python_count_after_stops(
     else:
         raise AssertionError("5,000 calls of 2 ms did not finish a count of 20 ms")
     assert value == exact
-    assert calls > 1 and c.memo_size > 8192        # it did stop, and across table growths
+    # it did stop, and across table growths (the table starts at 1,024 slots and doubles at three
+    # quarters full: past 2,048 entries it grew twice; split sets are stored only as a count's root)
+    assert calls > 1 and c.memo_size > 2048
 
 
 def test_the_sooner_deadline_wins_and_legacy_floats_still_work():

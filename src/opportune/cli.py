@@ -777,9 +777,10 @@ def evaluate(
         settings = dict(visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
                         max_states=max_states)
         if chosen_bin == "pile":
-            from opportune.policies.pile import PileSolver
+            from opportune.policies.pile import PileSolver, pile_solver
 
-            ev, optimum = PileSolver(engine, chosen, **settings), PileSolver(engine, **settings)
+            # the optimum compiled where the core is built (the same values): the policy's programme in Python
+            ev, optimum = PileSolver(engine, chosen, **settings), pile_solver(engine, **settings)
         else:
             ev = PolicyEvaluator(engine, chosen, weights=config.weights if chosen_bin == "weighted" else None,
                                  **settings)

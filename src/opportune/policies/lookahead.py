@@ -42,7 +42,9 @@ class Lookahead(DecidesOnMasks):
     after each action make the improvement step).  ``optimal=False`` keeps to the improvement step.
     (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
     where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
-    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).
+    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state); there the
+    optimum's programme is the compiled one where the core is built
+    (:class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states.
     """
 
     name = "lookahead"
@@ -52,6 +54,13 @@ class Lookahead(DecidesOnMasks):
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
     #: Plans of more units than this decide as the base does (the programme would take too long).
     MAX_UNITS = 16
+    #: On the pile bin the compiled optimum decides on plans of up to this many states (counted before it
+    #: starts; ``max_states`` if larger): its table is reserved for the count at once, at most
+    #: :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` (64) bytes a state, so at most 320 MB.
+    #: Without a budget it is solved whole in the first decision on the plan (a warm-up: 0.6-1 million
+    #: states a second) and shared by the look-aheads of the same settings; with one, each decision
+    #: goes on with it within its share of the budget (the clock is read at every new state).
+    COMPILED_STATES = 5_000_000
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
@@ -76,6 +85,7 @@ class Lookahead(DecidesOnMasks):
             solver_settings.pop("weights", None)
         self.settings = solver_settings
         self._evaluator = None
+        self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
         self._too_large = False
         self.last_cost: float | None = None
 
@@ -102,9 +112,18 @@ class Lookahead(DecidesOnMasks):
                 # the optimum's values where they fit (a policy of None), else the base's
                 base = None if self._optimum_fits(engine) else self.base
                 if self.pile:
-                    from opportune.policies.pile import PileSolver
+                    from opportune.policies.pile import (
+                        CompiledPileSolver,
+                        PileSolver,
+                        pile_solver,
+                    )
 
-                    ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
+                    if base is None:
+                        ev = pile_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
+                        if isinstance(ev, CompiledPileSolver):
+                            ev.reserve(self._optimum_states)    # no table doubling inside a decision
+                    else:
+                        ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
                 elif base is None:
                     ev = OptimalSolver(engine, max_states=self.max_states, **self.settings)
                 else:
@@ -115,8 +134,18 @@ class Lookahead(DecidesOnMasks):
             self._too_large = False
         return self._evaluator
 
+    def _optimum_cap(self, engine) -> int:
+        """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for the compiled
+        pile optimum, else ``max_states``.  O(1)."""
+        if self.pile:
+            from opportune.policies.pile import compiled_pile_available
+
+            if compiled_pile_available(engine):
+                return max(self.max_states, self.COMPILED_STATES)
+        return self.max_states
+
     def _optimum_fits(self, engine) -> bool:
-        """Whether the optimum's programme holds at most ``max_states`` states, listed before it starts
+        """Whether the optimum's programme holds at most its cap (:meth:`_optimum_cap`) of states, listed before it starts
         within a second, or within a third of the decision budget where there is one (it runs inside the
         first decision on the plan, within the programme's share: up to 0.3 s on plans of 15-16 units);
         where the listing cannot tell in that time, it does not fit, and the step over the base decides."""
@@ -125,9 +154,11 @@ class Lookahead(DecidesOnMasks):
         from opportune.policies.states import estimate_states
 
         seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
+        cap = self._optimum_cap(engine)
         est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
-                              pile=self.pile, stop_above=self.max_states, time_limit=seconds)
-        return est.exact and est.states <= self.max_states
+                              pile=self.pile, stop_above=cap, time_limit=seconds)
+        self._optimum_states = est.states
+        return est.exact and est.states <= cap
 
     @property
     def deciding_rule(self) -> str:

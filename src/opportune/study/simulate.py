@@ -268,9 +268,10 @@ def _solver(engine, config):
     from opportune.policies.optimal import OptimalSolver
 
     if config.bin == "pile":
-        from opportune.policies.pile import PileSolver
+        from opportune.policies.pile import pile_solver
 
-        return PileSolver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
+        # compiled where the core is built: its values stay in the core (a worker solves again, ~1 s a million states)
+        return pile_solver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
                           max_states=config.optimal_states)
 
     return OptimalSolver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,

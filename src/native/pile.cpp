@@ -1,0 +1,456 @@
+// The exact optimum of the pile bin (opportune.policies.pile), compiled.
+//
+// The same recursion as the pure-Python PileSolver with no policy, with the same floating-point
+// operations in the same order, so both give the same doubles:
+//
+//   V(s, W) = c_look + min(m(s, W), c_shake + S(s)),   S(s) = the shake loop over the windows W of s
+//
+// A state s is (installed units, consistent strategies, buffer counts); its windows are the sorted
+// multisets of `visible` units of its bin, with the probabilities of drawing them one by one without
+// replacement.  Every value is memoised in one open-addressing table of 16-byte slots (a 64-bit code
+// of the state and window, and the value), at most half full: 32-64 bytes per stored value (reserved
+// for the count known before the work, the table never doubles during it), plus the
+// (installed, strategies) pairs interned once (fewer by the buffers and windows of each).  A state's
+// values go into the table only once all of them are known, so a stop (the deadline, the state cap)
+// leaves a table a later call goes on from.
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <new>
+#include <limits>
+#include <stdexcept>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+namespace py = pybind11;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct PileTooLarge : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+struct PileTimeout : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+struct PileStuck : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+constexpr double INF = std::numeric_limits<double>::infinity();
+
+inline uint64_t mix(uint64_t x) {  // the splitmix64 finaliser: a well-spread slot for every code
+    x ^= x >> 30;
+    x *= 0xbf58476d1ce4e5b9ULL;
+    x ^= x >> 27;
+    x *= 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+}
+
+// Values by code: linear probing, power-of-two capacity, at most half full.  The slots come zeroed
+// from calloc (a large block is mapped lazily by the system: reserving is immediate, a page is paid for
+// when first written), so a code is kept as code + 1 and 0 marks an empty slot.
+class Table {
+public:
+    struct Slot {
+        uint64_t key;
+        double val;
+    };
+    Table() { rehash(1024); }
+    ~Table() { std::free(slots_); }
+    Table(const Table&) = delete;
+    Table& operator=(const Table&) = delete;
+    const double* find(uint64_t code) const {
+        uint64_t key = code + 1;
+        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
+            if (slots_[i].key == key) return &slots_[i].val;
+            if (slots_[i].key == 0) return nullptr;
+        }
+    }
+    void put(uint64_t code, double v) {
+        if (2 * (size_ + 1) > cap_) rehash(cap_ * 2);
+        uint64_t key = code + 1;
+        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
+            if (slots_[i].key == key || slots_[i].key == 0) {
+                size_ += slots_[i].key == 0;
+                slots_[i].key = key;
+                slots_[i].val = v;
+                return;
+            }
+        }
+    }
+    void reserve(size_t n) {
+        size_t cap = cap_;
+        while (cap < 2 * n) cap *= 2;
+        if (cap > cap_) rehash(cap);
+    }
+    size_t size() const { return size_; }
+    size_t bytes() const { return cap_ * sizeof(Slot); }
+
+private:
+    void rehash(size_t cap) {
+        Slot* slots = static_cast<Slot*>(std::calloc(cap, sizeof(Slot)));
+        if (!slots) throw std::bad_alloc();
+        size_t m = cap - 1;
+        for (size_t j = 0; j < cap_; ++j) {
+            if (slots_[j].key == 0) continue;
+            size_t i = mix(slots_[j].key) & m;
+            while (slots[i].key != 0) i = (i + 1) & m;
+            slots[i] = slots_[j];
+        }
+        std::free(slots_);
+        slots_ = slots;
+        cap_ = cap;
+        mask_ = m;
+    }
+    Slot* slots_ = nullptr;
+    size_t cap_ = 0, mask_ = 0, size_ = 0;
+};
+
+struct PairHash {
+    size_t operator()(const std::pair<uint64_t, uint64_t>& k) const { return mix(k.first ^ mix(k.second)); }
+};
+
+struct Look {
+    std::vector<int> window;  // sorted part indices
+    double p;
+};
+
+class PileCore {
+public:
+    // `first[i]`, `quantity[i]`: part i's units first .. first+quantity-1; `below[s][u]`: the units
+    // below unit u in strategy s; `move[i]`: the cost of moving a unit of part i; `capacity` < 0: none;
+    // `compensated`: the interpreter's sum() of floats is Neumaier's (Python 3.12 on), else plain.
+    PileCore(int n_units, std::vector<int> first, std::vector<int> quantity, std::vector<std::vector<uint64_t>> below,
+             std::vector<double> move, double look, double shake, int visible, int capacity, bool compensated)
+        : n_units_(n_units), first_(std::move(first)), quantity_(std::move(quantity)), below_(std::move(below)),
+          move_(std::move(move)), look_(look), shake_(shake), visible_(visible), capacity_(capacity),
+          compensated_(compensated) {
+        parts_ = (int)first_.size();
+        if (n_units_ < 0 || n_units_ > 64) throw std::invalid_argument("the compiled pile optimum takes up to 64 units");
+        if (below_.empty() || below_.size() > 64) throw std::invalid_argument("between 1 and 64 strategies");
+        if ((int)quantity_.size() != parts_ || (int)move_.size() != parts_ || parts_ == 0)
+            throw std::invalid_argument("first, quantity and move need one entry per part");
+        if (visible_ < 1) throw std::invalid_argument("at least one unit must be visible");
+        for (auto& b : below_)
+            if ((int)b.size() != n_units_) throw std::invalid_argument("below needs one mask per unit");
+        full_ = n_units_ == 64 ? ~uint64_t(0) : (uint64_t(1) << n_units_) - 1;
+        // codes: ((pair id × buffers) + buffer) × windows + window, the last window code for S
+        long double buffers = 1, windows = 1;
+        part_units_.resize(parts_);
+        radix_.resize(parts_);
+        for (int i = 0; i < parts_; ++i) {
+            if (quantity_[i] < 1 || first_[i] < 0 || first_[i] + quantity_[i] > n_units_)
+                throw std::invalid_argument("a part's units are out of range");
+            radix_[i] = (uint64_t)buffers;
+            buffers *= quantity_[i] + 1;
+            uint64_t units = quantity_[i] == 64 ? ~uint64_t(0) : ((uint64_t(1) << quantity_[i]) - 1);
+            part_units_[i] = units << first_[i];
+        }
+        for (int j = 0; j < visible_; ++j) windows *= parts_ + 1;
+        windows += 1;
+        if (buffers * windows > (long double)(uint64_t(1) << 62))
+            throw std::invalid_argument("too many buffer contents and windows for 64-bit codes");
+        buffers_ = (uint64_t)buffers;
+        windows_ = (uint64_t)windows;
+        max_pairs_ = (~uint64_t(0) - 1) / (buffers_ * windows_);
+        slot_.assign(windows_, -1);
+    }
+
+    double shake_value(uint64_t mask, uint64_t cons, std::vector<int> buf, double seconds, long long max_states) {
+        check_buffer(buf);
+        start(seconds, max_states);
+        if (mask == full_) return 0.0;
+        return S(mask, cons, buf);
+    }
+
+    double window_value(uint64_t mask, uint64_t cons, std::vector<int> buf, std::vector<int> window, double seconds,
+                        long long max_states) {
+        check_buffer(buf);
+        std::sort(window.begin(), window.end());
+        for (int w : window)
+            if (w < 0 || w >= parts_) throw std::invalid_argument("a window's part is out of range");
+        if ((int)window.size() > visible_) throw std::invalid_argument("a window larger than the visible units");
+        start(seconds, max_states);
+        if (mask == full_) return 0.0;
+        return V(mask, cons, buf, window);
+    }
+
+    void reserve(size_t n) { table_.reserve(n); }
+    size_t states() const { return table_.size(); }
+    size_t bytes() const {
+        return table_.bytes() + pairs_.size() * (sizeof(std::pair<uint64_t, uint64_t>) + 48) + slot_.size() * sizeof(int);
+    }
+
+private:
+    // ------------------------------------------------------------ plumbing
+
+    void check_buffer(const std::vector<int>& buf) const {
+        if ((int)buf.size() != parts_) throw std::invalid_argument("the buffer needs one count per part");
+        for (int i = 0; i < parts_; ++i)
+            if (buf[i] < 0 || buf[i] > quantity_[i]) throw std::invalid_argument("a buffer count is out of range");
+    }
+
+    void start(double seconds, long long max_states) {
+        timed_ = seconds >= 0;
+        if (timed_)
+            deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+        max_states_ = max_states < 0 ? std::numeric_limits<size_t>::max() : (size_t)max_states;
+    }
+
+    uint64_t pair_id(uint64_t mask, uint64_t cons) {
+        auto it = ids_.find({mask, cons});
+        if (it != ids_.end()) return it->second;
+        uint64_t id = pairs_.size();
+        if (id >= max_pairs_) throw PileTooLarge("too many states for 64-bit codes");
+        ids_.emplace(std::make_pair(mask, cons), id);
+        pairs_.emplace_back(mask, cons);
+        return id;
+    }
+
+    uint64_t base_code(uint64_t mask, uint64_t cons, const std::vector<int>& buf) {
+        uint64_t b = 0;
+        for (int i = 0; i < parts_; ++i) b += (uint64_t)buf[i] * radix_[i];
+        return (pair_id(mask, cons) * buffers_ + b) * windows_;
+    }
+
+    uint64_t window_code(const std::vector<int>& w) const {
+        uint64_t c = 0, r = 1;
+        for (int x : w) {
+            c += (uint64_t)(x + 1) * r;
+            r *= parts_ + 1;
+        }
+        return c;
+    }
+
+    int next_unit(uint64_t mask, int part) const {
+        for (int u = first_[part]; u < first_[part] + quantity_[part]; ++u)
+            if (!(mask >> u & 1)) return u;
+        return -1;
+    }
+
+    uint64_t consistent_after(uint64_t mask, uint64_t cons, int unit) const {
+        uint64_t out = 0;
+        for (size_t s = 0; s < below_.size(); ++s)
+            if ((cons >> s & 1) && (below_[s][unit] & ~mask) == 0) out |= uint64_t(1) << s;
+        return out;
+    }
+
+    // Python's sum() of a generator of floats (started at the int 0)
+    struct Sum {
+        bool compensated, any = false;
+        double f = 0.0, c = 0.0;
+        void add(double x) {
+            if (!any) {
+                f = x;
+                any = true;
+                return;
+            }
+            double t = f + x;
+            if (compensated) {
+                if (std::fabs(f) >= std::fabs(x))
+                    c += (f - t) + x;
+                else
+                    c += (x - t) + f;
+            }
+            f = t;
+        }
+        double result() const { return (compensated && c != 0.0 && std::isfinite(c)) ? f + c : f; }
+    };
+
+    // PileSolver._look_distribution: units drawn one by one without replacement (weights all 1)
+    void draw(int depth, int k, double prob, std::vector<int>& counts, std::vector<int>& taken, std::vector<Look>& out) {
+        if (depth == k) {
+            std::vector<int> w(taken);
+            std::sort(w.begin(), w.end());
+            uint64_t code = window_code(w);
+            int& s = slot_[code];
+            if (s < 0) {
+                s = (int)out.size();
+                out.push_back({std::move(w), 0.0 + prob});
+            } else {
+                out[s].p = out[s].p + prob;
+            }
+            return;
+        }
+        double mass = 0.0;  // sum(c * 1.0): whole numbers, exact
+        for (int c : counts) mass += (double)c;
+        for (int i = 0; i < parts_; ++i) {
+            int c = counts[i];
+            if (!c) continue;
+            counts[i] -= 1;
+            taken.push_back(i);
+            draw(depth + 1, k, prob * (double)c * 1.0 / mass, counts, taken, out);
+            taken.pop_back();
+            counts[i] += 1;
+        }
+    }
+
+    std::vector<Look> looks(const std::vector<int>& bin) {
+        int total = 0;
+        for (int c : bin) total += c;
+        int k = std::min(visible_, total);
+        std::vector<Look> out;
+        std::vector<int> counts(bin), taken;
+        draw(0, k, 1.0, counts, taken, out);
+        for (auto& l : out) slot_[window_code(l.window)] = -1;
+        std::sort(out.begin(), out.end(), [](const Look& a, const Look& b) { return a.window < b.window; });
+        return out;
+    }
+
+    std::vector<int> bin_counts(uint64_t mask, const std::vector<int>& buf) const {
+        std::vector<int> bin(parts_);
+        for (int i = 0; i < parts_; ++i) bin[i] = quantity_[i] - __builtin_popcountll(mask & part_units_[i]) - buf[i];
+        return bin;
+    }
+
+    // ------------------------------------------------------------ the recursion
+
+    // V(s, W): the look at window W, the look's cost included
+    double V(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window) {
+        if (mask == full_) return 0.0;
+        uint64_t base = base_code(mask, cons, buf);
+        const double* v = table_.find(base + window_code(window));
+        if (v) return *v;
+        S(mask, cons, buf);  // stores every window's value of s
+        v = table_.find(base + window_code(window));
+        if (!v) throw std::invalid_argument("a window that the bin cannot show");
+        return *v;
+    }
+
+    // S(s): a freshly drawn window
+    double S(uint64_t mask, uint64_t cons, std::vector<int>& buf) {
+        uint64_t base = base_code(mask, cons, buf);
+        const double* cached = table_.find(base + windows_ - 1);
+        if (cached) return *cached;
+        // the clock at every new state: a state's work (its windows × moves × hidden units) is far more
+        if (timed_ && Clock::now() > deadline_) throw PileTimeout("the pile's programme passed its deadline");
+        std::vector<int> bin = bin_counts(mask, buf);
+        std::vector<Look> ls = looks(bin);
+        if (table_.size() + ls.size() + 1 > max_states_) throw PileTooLarge("over the state limit");
+        std::vector<double> m(ls.size());
+        for (size_t j = 0; j < ls.size(); ++j) m[j] = move_value(mask, cons, buf, bin, ls[j].window);
+        // OptimalSolver._solve_shake_loop over (m, p) sorted
+        std::vector<std::pair<double, double>> mp(ls.size());
+        for (size_t j = 0; j < ls.size(); ++j) mp[j] = {m[j], ls[j].p};
+        std::sort(mp.begin(), mp.end());
+        double acc_pm = 0.0, acc_p = 0.0, s = INF;
+        for (auto& [mj, pj] : mp) {
+            if (mj == INF) break;
+            acc_pm += pj * mj;
+            acc_p += pj;
+            s = std::min(s, (look_ + acc_pm + (1.0 - acc_p) * shake_) / acc_p);
+        }
+        if (s == INF) throw PileStuck("no look allows any action: the assembly cannot proceed");
+        // the state cap holds after the children too (they were stored since the check above)
+        if (table_.size() + ls.size() + 1 > max_states_) throw PileTooLarge("over the state limit");
+        double after_shake = shake_ + s;
+        for (size_t j = 0; j < ls.size(); ++j)
+            table_.put(base + window_code(ls[j].window), look_ + (m[j] == INF ? after_shake : std::min(m[j], after_shake)));
+        table_.put(base + windows_ - 1, s);
+        return s;
+    }
+
+    // m(s, W): the best move's cost to go (INF: no move)
+    double move_value(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
+                      const std::vector<int>& window) {
+        int used = 0;
+        for (int c : buf) used += c;
+        bool free = capacity_ < 0 || used < capacity_;
+        // the units of the bin that are not in the window
+        std::vector<int> hidden(bin);
+        for (int w : window) hidden[w] -= 1;
+        double best = INF;
+        for (size_t a = 0; a < window.size(); ++a) {
+            int i = window[a];
+            if (a && window[a - 1] == i) continue;
+            int u = next_unit(mask, i);
+            uint64_t after = consistent_after(mask, cons, u);
+            if (after) best = std::min(best, move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden));
+            if (free) {
+                buf[i] += 1;
+                double v = move_[i] + taken(mask, cons, buf, window, a, hidden);
+                buf[i] -= 1;
+                best = std::min(best, v);
+            }
+        }
+        for (int i = 0; i < parts_; ++i) {
+            if (!buf[i]) continue;
+            int u = next_unit(mask, i);
+            uint64_t after = consistent_after(mask, cons, u);
+            if (!after) continue;
+            buf[i] -= 1;
+            double v = move_[i] + V(mask | uint64_t(1) << u, after, buf, window);
+            buf[i] += 1;
+            best = std::min(best, v);
+        }
+        return best;
+    }
+
+    // PileSolver._after for a unit taken from the window (window[a]): a hidden unit replaces it
+    double taken(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window, size_t a,
+                 const std::vector<int>& hidden) {
+        std::vector<int> rest(window);
+        rest.erase(rest.begin() + a);
+        int total = 0;
+        for (int c : hidden) total += c;
+        if (total == 0) return V(mask, cons, buf, rest);
+        Sum sum{compensated_};
+        std::vector<int> next(rest.size() + 1);
+        for (int j = 0; j < parts_; ++j) {
+            int c = hidden[j];
+            if (!c) continue;
+            // sorted(rest + [j])
+            size_t k = 0, r = 0;
+            while (r < rest.size() && rest[r] <= j) next[k++] = rest[r++];
+            next[k++] = j;
+            while (r < rest.size()) next[k++] = rest[r++];
+            sum.add((double)c / (double)total * V(mask, cons, buf, next));
+        }
+        return sum.result();
+    }
+
+    int n_units_, parts_ = 0;
+    std::vector<int> first_, quantity_;
+    std::vector<std::vector<uint64_t>> below_;
+    std::vector<double> move_;
+    double look_, shake_;
+    int visible_, capacity_;
+    bool compensated_;
+    uint64_t full_ = 0, buffers_ = 1, windows_ = 1, max_pairs_ = 0;
+    std::vector<uint64_t> part_units_, radix_;
+    std::vector<int> slot_;  // window code -> index in a look list being built (-1: none)
+    std::unordered_map<std::pair<uint64_t, uint64_t>, uint64_t, PairHash> ids_;
+    std::vector<std::pair<uint64_t, uint64_t>> pairs_;
+    Table table_;
+    bool timed_ = false;
+    Clock::time_point deadline_;
+    size_t max_states_ = 0;
+};
+
+}  // namespace
+
+void bind_pile(py::module_& m) {
+    py::register_exception<PileTooLarge>(m, "PileTooLarge", PyExc_RuntimeError);
+    py::register_exception<PileTimeout>(m, "PileTimeout", PyExc_RuntimeError);
+    py::register_exception<PileStuck>(m, "PileStuck", PyExc_RuntimeError);
+    py::class_<PileCore>(m, "PileCore")
+        .def(py::init<int, std::vector<int>, std::vector<int>, std::vector<std::vector<uint64_t>>, std::vector<double>,
+                      double, double, int, int, bool>(),
+             py::arg("n_units"), py::arg("first"), py::arg("quantity"), py::arg("below"), py::arg("move"),
+             py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"), py::arg("compensated"))
+        .def("shake_value", &PileCore::shake_value, py::arg("mask"), py::arg("cons"), py::arg("buf"),
+             py::arg("seconds"), py::arg("max_states"))
+        .def("window_value", &PileCore::window_value, py::arg("mask"), py::arg("cons"), py::arg("buf"),
+             py::arg("window"), py::arg("seconds"), py::arg("max_states"))
+        .def("reserve", &PileCore::reserve, py::arg("states"))
+        .def_property_readonly("states", &PileCore::states)
+        .def_property_readonly("bytes", &PileCore::bytes);
+}
