@@ -26,16 +26,19 @@ if TYPE_CHECKING:
     from opportune.engine.schedule import CountResult, NotAdmissible, OrderEngine, Schedule
 
 
-def compiled_core() -> bool:
-    """True when the compiled counting core is loaded (False: the pure-Python fallback counts, as
-    with ``OPPORTUNE_PURE_PYTHON=1``).  What a report states; O(1) once the core was looked for.
+def compiled_core():
+    """The compiled core (the module ``opportune._native``: the counter, relaxation Monte Carlo, the
+    chains, the pile optimum), or None where it is missing or switched off with
+    ``OPPORTUNE_PURE_PYTHON=1`` (then the pure-Python fallbacks run).  The one way above the engine to
+    ask for it: what a report states, what the pile's optimum is built on.  O(1) once looked for.
 
-    >>> isinstance(compiled_core(), bool)
+    >>> core = compiled_core()
+    >>> core is None or hasattr(core, "PileCore")
     True
     """
     from opportune.engine import native
 
-    return native.available()
+    return native._native
 
 
 __getattr__, __dir__ = attach(globals(), _LAZY, __all__)

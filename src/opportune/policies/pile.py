@@ -30,9 +30,11 @@ from __future__ import annotations
 
 import sys
 
-from opportune.engine.native import _native
+from opportune.engine import compiled_core
 from opportune.policies.evaluate import BufferOrder, OutOfTime
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
+
+_native = compiled_core()   # None: the Python programme only
 
 __all__ = ["COMPILED_BYTES_PER_STATE", "CompiledPileSolver", "PileSolver", "compiled_pile_available", "pile_solver"]
 

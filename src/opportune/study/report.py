@@ -124,7 +124,7 @@ def provenance(result: StudyResult) -> dict:
         "schema_version": SCHEMA_VERSION,
         "opportune": __version__,
         "python": platform.python_version(),
-        "compiled_core": compiled_core(),
+        "compiled_core": compiled_core() is not None,
         "plan_sha256": plan_sha256(cfg.plan),
         "study_sha256": hash_config(cfg),
         "strategies": list(cfg.strategies),

@@ -93,7 +93,7 @@ def _machine() -> str:
     from opportune import __version__
     from opportune.engine import compiled_core
 
-    core = "compiled core" if compiled_core() else "pure Python"
+    core = "compiled core" if compiled_core() is not None else "pure Python"
     return (f"{platform.system()} {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}, "
             f"opportune {__version__} ({core})")
 
