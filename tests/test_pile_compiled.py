@@ -167,3 +167,26 @@ def test_a_budgeted_look_ahead_stops_the_compiled_optimum_at_its_deadline():
     whole = Lookahead(visible=3, bin="pile", max_states=1_000)
     whole.choose_at(GEAR, 0, GEAR.all_strategies, (), float("inf"), look)
     assert whole._evaluator.states == estimate_states(GEAR, visible=3, pile=True).states
+
+
+def test_the_lab_gives_the_same_results_with_the_compiled_optimum(tmp_path, capsys):
+    """benchmarks/policy_lab.py --only and --compiled-optimum: the named plans alone, the same optimum and gaps."""
+    import json
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    import policy_lab
+
+    runs = []
+    for extra in ([], ["--compiled-optimum"]):
+        out = tmp_path / f"lab{len(runs)}.jsonl"
+        assert policy_lab.main(["--plans", "3", "--only", "r2-8x2", "--bins", "pile", "--visible", "1",
+                                "--capacities", "1", "--policies", "slack,lookahead", "--paired", "",
+                                "--results", str(out), *extra]) in (0, None)
+        runs.append([json.loads(line) for line in out.read_text().splitlines()])
+    assert [r["plan"] for r in runs[0]] == ["r2-8x2"]
+    assert runs[0] == runs[1] and runs[0][0]["gaps"]["slack"] > runs[0][0]["gaps"]["lookahead"] - 1e-12
+    with pytest.raises(SystemExit):
+        policy_lab.main(["--plans", "3", "--only", "r99", "--paired", ""])
+    assert "no plan named r99" in capsys.readouterr().err

@@ -183,6 +183,26 @@ public:
         return V(mask, cons, buf, window);
     }
 
+    // PileSolver._after for a unit of `part` taken from `window` at (mask, cons, buf), leading to
+    // (nmask, ncons, nbuf): the expectation over the hidden unit that replaces it, in one call
+    double taken_value(uint64_t mask, uint64_t cons, std::vector<int> buf, std::vector<int> window, int part,
+                       uint64_t nmask, uint64_t ncons, std::vector<int> nbuf, double seconds, long long max_states) {
+        check_buffer(buf);
+        check_buffer(nbuf);
+        std::sort(window.begin(), window.end());
+        auto at = std::find(window.begin(), window.end(), part);
+        if (at == window.end()) throw std::invalid_argument("the part taken is not in the window");
+        std::vector<int> hidden = bin_counts(mask, buf);
+        for (int w : window) {
+            if (w < 0 || w >= parts_) throw std::invalid_argument("a window's part is out of range");
+            hidden[w] -= 1;
+        }
+        for (int c : hidden)
+            if (c < 0) throw std::invalid_argument("a window that the bin cannot show");
+        start(seconds, max_states);
+        return taken(nmask, ncons, nbuf, window, (size_t)(at - window.begin()), hidden);
+    }
+
     void reserve(size_t n) { table_.reserve(n); }
     size_t states() const { return table_.size(); }
     size_t bytes() const {
@@ -450,6 +470,9 @@ void bind_pile(py::module_& m) {
              py::arg("seconds"), py::arg("max_states"))
         .def("window_value", &PileCore::window_value, py::arg("mask"), py::arg("cons"), py::arg("buf"),
              py::arg("window"), py::arg("seconds"), py::arg("max_states"))
+        .def("taken_value", &PileCore::taken_value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("window"),
+             py::arg("part"), py::arg("nmask"), py::arg("ncons"), py::arg("nbuf"), py::arg("seconds"),
+             py::arg("max_states"))
         .def("reserve", &PileCore::reserve, py::arg("states"))
         .def_property_readonly("states", &PileCore::states)
         .def_property_readonly("bytes", &PileCore::bytes);

@@ -229,6 +229,13 @@ class CompiledPileSolver(PileSolver):
     def _window_value(self, key: tuple, window: tuple[int, ...]) -> float:
         return self._run(self._core.window_value, key[0], key[1], list(key[2]), list(window))
 
+    def _after(self, key: tuple, window: tuple[int, ...], move, nxt: tuple) -> float:
+        """As :meth:`PileSolver._after`, the expectation over the hidden unit in one call to the core."""
+        if move.kind == "install" and move.source == "buffer":
+            return self._window_value(nxt, window)
+        return self._run(self._core.taken_value, key[0], key[1], list(key[2]), list(window), self.plan.index(move.part),
+                         nxt[0], nxt[1], list(nxt[2]))
+
     def _run(self, solve, *args) -> float:
         try:
             return solve(*args, seconds=self._until.seconds(), max_states=self.max_states)
