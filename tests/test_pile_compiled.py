@@ -34,7 +34,7 @@ def _costs(plan, seed: int) -> TimeModel:
                      parts={p.id: rng.choice([1.0, 1.7, 0.35]) for p in plan.parts})
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(plan=random_plans(max_parts=5, max_units=7, max_strategies=2), seed=st.integers(0, 1000))
 def test_the_compiled_optimum_gives_the_same_doubles_as_python(plan, seed):
     """Every setting (1-3 visible, 1, 2 or unlimited buffer locations, one or two strategies, uneven
@@ -139,16 +139,16 @@ def test_the_look_ahead_uses_the_compiled_optimum_up_to_its_cap(monkeypatch):
     the optimum's; with the compiled cap under the count the step over slack decides instead."""
     from opportune.policies.lookahead import Lookahead
 
-    count = estimate_states(GEAR, visible=2, pile=True).states
-    ahead = Lookahead(visible=2, bin="pile", max_states=1_000)
+    count = estimate_states(GEAR, visible=2, capacity=2, pile=True).states
+    ahead = Lookahead(visible=2, capacity=2, bin="pile", max_states=1_000)
     assert 1_000 < count <= Lookahead.COMPILED_STATES
-    value = PileSolver(GEAR, ahead, visible=2, max_states=10 * count).value()
+    value = PileSolver(GEAR, ahead, visible=2, capacity=2, max_states=10 * count).value()
     assert type(ahead._evaluator) is CompiledPileSolver and ahead._evaluator.states == count
     assert ahead._evaluator.max_states == Lookahead.COMPILED_STATES
-    assert abs(value - CompiledPileSolver(GEAR, visible=2).value()) < 1e-9
+    assert abs(value - CompiledPileSolver(GEAR, visible=2, capacity=2).value()) < 1e-9
     monkeypatch.setattr(Lookahead, "COMPILED_STATES", count - 1)
-    step = Lookahead(visible=2, bin="pile", max_states=count - 1)
-    step.choose_at(GEAR, 0, GEAR.all_strategies, (), float("inf"), tuple(GEAR.plan.part_ids[:2]))
+    step = Lookahead(visible=2, capacity=2, bin="pile", max_states=count - 1)
+    step.choose_at(GEAR, 0, GEAR.all_strategies, (), 2, tuple(GEAR.plan.part_ids[:2]))
     assert type(step._evaluator) is PileSolver and step._evaluator.policy is step.base
 
 
