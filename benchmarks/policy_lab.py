@@ -323,10 +323,15 @@ def plot_settings(path: Path, settings, per_setting, names) -> None:
     ax.set_yticks(range(len(shown)), [f"{setting_name(*st)} ({len(per_setting[st][0])})" for st in shown], fontsize=7)
     ax.invert_yaxis()
     ax.set_xscale("symlog", linthresh=0.01)
-    ax.set_xlabel("gap to the optimum (%): mean (dot) to largest (line end)", fontsize=8)
+    ax.set_xlabel("gap to the optimum (%): mean (dot) to largest (line end); dashed: 0.3%", fontsize=8)
     ax.axvline(0, color="grey", lw=0.6)
     ax.tick_params(axis="x", labelsize=7)
-    ax.set_xlim(left=-0.002)   # gaps are never below 0 but by rounding
+    # gaps are never below 0 but by rounding; the right edge past the largest gap and the 0.3% mark
+    top = max([0.3] + [100 * summarise(per_setting[st][0])[n][2] for st in shown for n in names])
+    ax.axvline(0.3, color="grey", lw=0.6, ls="--")
+    ticks = [t for t in (0, 0.01, 0.1, 0.3, 1, 3, 10, 30, 100) if t <= top * 1.5]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ax.set_xlim(-0.002, top * 1.5)
     ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(names), frameon=False)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
