@@ -322,7 +322,6 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     if not 1 <= threads <= MAX_THREADS:
         raise ValueError(f"threads must be in 1..{MAX_THREADS}")
     end = as_deadline(deadline).within(seconds)
-    start = time.perf_counter()
     preds = [list(bits(poset.below[v])) for v in range(n)]
     hits_wanted = target_hits(rel_error, confidence)
     none = RelaxEstimate(math.nan, -math.inf, math.inf, confidence, math.nan, 0, 0, 0, "none")

@@ -60,7 +60,6 @@ from asyncua.server.internal_session import InternalSession
 
 from opportune.formats.problems import CONTROL_CHARS
 from opportune.policies.named import POLICIES
-from opportune.service import idempotency as idem
 from opportune.service.auth import Principal, ensure_cell
 from opportune.service.core import Core
 from opportune.service.errors import ApiError
