@@ -60,10 +60,6 @@ def plan_of(spec: str):
     return plan, True
 
 
-#: Memo entries of the offline exact engine (the budgeted one keeps the default, 2,000,000).
-EXACT_MEMO = 20_000_000
-
-
 def pct(xs, q):
     xs = sorted(xs)
     return xs[min(len(xs) - 1, int(q * len(xs)))] if xs else float("nan")
@@ -112,9 +108,8 @@ def run_plan(spec: str, args, visible: int, capacity: int | None = None, bin: st
     # Offline: the exact rule on the same states and looks (its own engine, no budget).  A decision
     # marked exact is the exact rule's (tests/test_decision_budget.py); the estimated ones are checked
     # here, as many as the time allows.
-    # The exact rule may need more memo entries than a budgeted engine keeps (ARC111's hard states):
-    # a larger cap here, and a trial that still does not fit ends the exact trials, said in the table.
-    exact_engine = OrderEngine(plan, max_memo=EXACT_MEMO)
+    # An exact trial whose counts do not fit the engine's memo ends the exact trials, said in the table.
+    exact_engine = OrderEngine(plan)
     limit = time.perf_counter() + args.offline_limit
     exact_n = sum(1 for r in records if r[1])
     same = checked = 0

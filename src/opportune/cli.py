@@ -781,8 +781,8 @@ def evaluate(
 
             # the optimum compiled where the core is built (the same values): the policy's programme in Python
             ev, optimum = PileSolver(engine, chosen, **settings), pile_solver(engine, **settings)
-            if estimate.exact and hasattr(optimum, "reserve"):
-                optimum.reserve(estimate.states)    # the compiled table sized at once: it never doubles
+            if estimate.exact:
+                optimum.reserve(estimate.states)    # a compiled table sized at once: it never doubles
         else:
             ev = PolicyEvaluator(engine, chosen, weights=config.weights if chosen_bin == "weighted" else None,
                                  **settings)

@@ -112,16 +112,11 @@ class Lookahead(DecidesOnMasks):
                 # the optimum's values where they fit (a policy of None), else the base's
                 base = None if self._optimum_fits(engine) else self.base
                 if self.pile:
-                    from opportune.policies.pile import (
-                        CompiledPileSolver,
-                        PileSolver,
-                        pile_solver,
-                    )
+                    from opportune.policies.pile import PileSolver, pile_solver
 
                     if base is None:
                         ev = pile_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
-                        if isinstance(ev, CompiledPileSolver):
-                            ev.reserve(self._optimum_states)    # no table doubling inside a decision
+                        ev.reserve(self._optimum_states)    # compiled: no table doubling inside a decision
                     else:
                         ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
                 elif base is None:
