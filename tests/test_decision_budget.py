@@ -90,7 +90,7 @@ def test_an_estimate_stops_early_when_no_candidate_is_better_by_more_than_the_ma
                                        time.perf_counter() + 60.0, stop_when_sure=True)
     assert cpu.seconds < 2.0                     # long before its deadline, however busy the machine
     assert action.kind == "buffer" and not how.exact
-    assert how.close and how.confidence < 0.999 and "stopped early" in how.note
+    assert how.close and how.confidence < 0.999   # the decision then states the near tie (test_dashboard_text.py)
     exact = Counter(engine.posets[0]).position_sums()
     assert exact[engine.next_unit(0, plan.index("a"))] == exact[engine.next_unit(0, plan.index("b"))]
 

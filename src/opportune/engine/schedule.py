@@ -210,6 +210,8 @@ def count_text(n: int, exact_digits: int = EXACT_DIGITS) -> str:
     '1.0000000000000000e+5000'
     >>> count_text(2 ** 20000, exact_digits=100)
     '3.9802768403379665e+6020'
+    >>> count_text(12345678901234567, exact_digits=15), count_text(1234567890123456, exact_digits=15)
+    ('1.2345678901234567e+16', '1.234567890123456e+15')
     """
     if n < 0:
         return "-" + count_text(-n, exact_digits)
@@ -228,7 +230,7 @@ def _count_text(n: int, exact_digits: int) -> str:
         e, p = e + 1, 10 * p
     if e < exact_digits:
         return decimal(n)
-    head = str(n // (p // 10 ** 16))   # the first 17 digits
+    head = str(n // (p // 10 ** 16)) if e >= 16 else str(n)   # the first 17 digits (all, if fewer)
     return f"{head[0]}.{head[1:]}e+{e}"
 
 

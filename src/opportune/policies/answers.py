@@ -63,7 +63,9 @@ from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.stats import prob_positive
 from opportune.policies.base import (
     DONE,
+    INDIFFERENT,
     SHAKE,
+    SURE,
     Action,
     Candidate,
     DecidesOnMasks,
@@ -81,27 +83,20 @@ if TYPE_CHECKING:
 
 MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
 EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
-SURE = 0.999           # an estimate this sure of its choice stops early, keeping the rest of the budget
+# SURE (0.999): an estimate this sure of its choice stops early, keeping the rest of the budget (policies.base)
 MIXED_STEPS = 20       # moves per chain, per step remaining, before an early stop is trusted
 EXACT_FIRST = 0.2      # exact attempts first while they have taken under this share of the budget
 PROBE_SHARE = 0.3      # else a first estimate gets this share (and ends the decision if it is sure)
 SLOW_WEIGHT = 0.3      # weight of the last exact attempt in the moving average of their time
 SLOW_DECAY = 0.97      # that average shrinks after each sure estimate, so exact counts are tried again
 SIZE_BAND = 5          # ... kept per band of this many steps remaining
-INDIFFERENT = 0.01     # estimates stop once no other candidate is better by more than this (see CLOSE)
+# INDIFFERENT (0.01): estimates stop once no other candidate is better by more than this (policies.base)
 FAILING = 0.4          # an average above this share of the budget: exact attempts have been failing there
 #: With a question after the rule (:meth:`CountBasedRule.then`): the share of the budget the rule gets,
 #: and the share the exact answer to the question may take before it is estimated with what is left.
 THEN_SHARES = (0.6, 0.3)
 
 MODES = ("order", "exact", "estimate", "then")
-
-CLOSE = (f"stopped early: with probability >= {SURE} no other candidate is better than this one by more than "
-         f"{100 * INDIFFERENT:g}% (of its share of options, or of the steps remaining for positions)")
-
-
-def _join(*notes: str) -> str:
-    return "; ".join(n for n in notes if n)
 
 
 class MustCount(Exception):
@@ -121,7 +116,7 @@ class How:
     estimates: tuple[Estimate, ...] = ()
     confidence: float = 1.0
     note: str = ""
-    close: bool = False     # estimated: no other candidate better by more than INDIFFERENT (see CLOSE)
+    close: bool = False     # estimated: no other candidate better by more than INDIFFERENT (Decision.certainty)
 
     @property
     def settled(self) -> bool:
@@ -381,7 +376,7 @@ class Answers:
                 est, "first", first, best, chains, remaining, higher=True, margin=INDIFFERENT * value[best]) >= SURE
             estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1] if part in first else 0.0,
                                        source) for part, source in ranked)
-            return How(False, "mcmc", estimates, conf, _join(note, CLOSE if close else ""), close)
+            return How(False, "mcmc", estimates, conf, note, close)
 
         self._record.update(how=how, ranked=None)
         return value
@@ -411,7 +406,7 @@ class Answers:
             close = conf < SURE and _confidence(est, "positions", at, best, chains, remaining, higher=False,
                                                 margin=margin) >= SURE
             estimates = tuple(Estimate(p, "position", value[p], est.positions[at[p]][1]) for p, _ in ranked)
-            return How(False, "mcmc", estimates, conf, _join(note, CLOSE if close else ""), close)
+            return How(False, "mcmc", estimates, conf, note, close)
 
         self._record.update(how=how, ranked=None)
         return value
@@ -454,7 +449,7 @@ class Answers:
             estimates = tuple(Estimate(p, "slack", value[p], est.positions[at[p]][1]) for p, _ in ranked)
             conf = confidence(est, best)
             close = conf < SURE and confidence(est, best, margin) >= SURE
-            return How(False, "mcmc", estimates, conf, _join(note, CLOSE if close else ""), close)
+            return How(False, "mcmc", estimates, conf, note, close)
 
         self._record.update(how=how, ranked=None)
         return value
@@ -661,7 +656,7 @@ class CountBasedRule(DecidesOnMasks):
         if not how.exact:
             rule = self.rule_install if action.kind == "install" else self.rule_buffer
             return Decision(action, rule, note=how.note, exact=False, method=how.method, estimates=how.estimates,
-                            confidence=how.confidence, seconds=time.perf_counter() - start)
+                            confidence=how.confidence, seconds=time.perf_counter() - start, close=how.close)
         if action.kind == "install":
             rule = self.rule_install
             try:   # options not needed to decide (a lone candidate, or settled by the order): count them if they fit

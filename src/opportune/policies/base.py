@@ -21,6 +21,17 @@ from typing import Any, Literal, Protocol, runtime_checkable
 State = Any
 
 ActionKind = Literal["install", "buffer", "shake", "done"]
+
+#: An estimated decision stops early, keeping the rest of its budget, once it is this sure of its choice,
+#: or this sure that no other candidate is better by more than :data:`INDIFFERENT` (a near tie: the
+#: samples would take the whole budget to settle it, for no measurable difference in the outcome).
+#: Used by :mod:`~opportune.policies.answers`; stated by :meth:`Decision.certainty`.
+SURE = 0.999
+#: The margin of a near tie: a share of the best candidate's share of completions, or of the steps
+#: remaining for an expected position.
+INDIFFERENT = 0.01
+# how earlier versions wrote a near tie into a decision's note (read back by Decision.recorded)
+_OLD_NEAR_TIE = "stopped early: with probability >= "
 Source = Literal["bin", "buffer"]
 
 
@@ -112,7 +123,10 @@ class Decision:
     numbers did not fit the decision budget, ``method`` names the estimate (e.g.
     ``"mcmc"``), ``estimates`` gives each candidate's estimated share of completions
     or expected position with its standard error, and ``confidence`` the estimated
-    probability that the action is the one the exact rule would choose.
+    probability that the action is the one the exact rule would choose.  ``close``: the estimate
+    stopped on a near tie, being at least :data:`SURE` sure that no other candidate is better by more
+    than :data:`INDIFFERENT`; that is then what the decision states (``confidence``, the chance of
+    matching the exact rule's pick among candidates that close, changes nothing measurable).
     ``seconds`` is the time the decision took.
     """
 
@@ -126,16 +140,43 @@ class Decision:
     estimates: tuple[Estimate, ...] = ()
     confidence: float = 1.0
     seconds: float = 0.0
+    close: bool = False
 
-    def explain(self) -> str:
-        """The reasons in words, as ``--explain`` prints them."""
+    def explain(self, count=None) -> str:
+        """The reasons in words, as ``--explain`` prints them.
+
+        Parameters
+        ----------
+        count : callable, optional
+            Writes a count (an int) as text: exactly (``str``, the default), or for people (the service
+            passes :func:`~opportune.policies.printable.count_label`: ``6.13e98``).  With it, an
+            expected position's exact fraction is given only where both its terms are written
+            exactly (no ``e`` in their text).
+
+        Returns
+        -------
+        str
+            One line for the action and its rule, one per candidate or visible part, and for an
+            estimated decision one saying how sure it is (:meth:`certainty`).
+
+        Examples
+        --------
+        >>> d = Decision(Action("install", "a", "bin"), "keep the most options",
+        ...              (Candidate("a", "bin", 40320, 10 ** 99, 1.0),))
+        >>> print(d.explain(count=lambda n: f"{n:,}" if n < 10 ** 15 else f"{n:.2e}".replace("+", "")))
+        install a: keep the most options
+          candidate a from bin: keeps 40,320 of 1.00e99 completions, cost 1
+        """
+        write = str if count is None else count
         lines = [f"{self.action}: {self.rule}" + (f" ({self.note})" if self.note else "")]
         for c in self.candidates:
             src = "bin" if c.source == "bin" else f"buffer #{c.buffered_at + 1}"
-            of = f" of {c.total}" if c.total is not None else ""
-            lines.append(f"  candidate {c.part} from {src}: keeps {c.options}{of} completions, cost {c.cost:g}")
+            of = f" of {write(c.total)}" if c.total is not None else ""
+            lines.append(f"  candidate {c.part} from {src}: keeps {write(c.options)}{of} completions, cost {c.cost:g}")
         for part, pos in self.positions:
-            lines.append(f"  visible {part}: expected position {float(pos):.3f} ({pos})")
+            exact = str(pos) if count is None else f"{count(pos.numerator)}/{count(pos.denominator)}"
+            shown = f" ({exact})" if count is None or "e" not in exact else ""
+            lines.append(f"  visible {part}: expected position {float(pos):.3f}{shown}")
         for e in self.estimates:
             if e.kind == "share":
                 lines.append(f"  candidate {e.part}" + (f" from {e.source}" if e.source else "")
@@ -146,8 +187,36 @@ class Decision:
                 lines.append(f"  visible {e.part}: expected position ~{e.value:.2f} ± {e.se:.2f} (estimated)")
         if not self.exact:
             lines.append(f"  estimated by {self.method} within the decision budget ({1000 * self.seconds:.0f} ms): "
-                         f"{100 * self.confidence:.1f}% sure this is the exact rule's choice")
+                         + self.certainty())
         return "\n".join(lines)
+
+    def certainty(self) -> str:
+        """How sure an estimated decision is, in one statement: the near tie it stopped on (``close``),
+        or the estimated probability that it is the exact rule's choice ("exact" for an exact decision).
+
+        Returns
+        -------
+        str
+            ``"93.0% sure this is the exact rule's choice"``, or for a near tie ``"a near tie: over 99.9%
+            sure that no other candidate is better by more than 1% of its share of completions"``.
+
+        Examples
+        --------
+        >>> Decision(Action("buffer", "a"), "buffer", exact=False, method="mcmc", confidence=0.93).certainty()
+        "93.0% sure this is the exact rule's choice"
+        >>> Decision(Action("buffer", "a"), "buffer", exact=False, method="mcmc", confidence=0.99997).certainty()
+        "over 99.9% sure this is the exact rule's choice"
+        """
+        if self.exact:
+            return "exact"
+        if self.close:
+            of = ("of its share of completions" if any(e.kind == "share" for e in self.estimates)
+                  else "of the steps remaining")
+            return (f"a near tie: at least {100 * SURE:g}% sure that no other candidate is better by more than "
+                    f"{100 * INDIFFERENT:g}% {of}")
+        # an estimate is never certain: past 99.9% it says so rather than rounding to 100.0%
+        sure = f"{100 * self.confidence:.1f}%" if self.confidence < 0.9995 else "over 99.9%"
+        return f"{sure} sure this is the exact rule's choice"
 
     def to_dict(self) -> dict:
         """The decision as JSON values.  An exact decision's dict depends only on the state and
@@ -163,18 +232,23 @@ class Decision:
         }
         if not self.exact:
             out.update(estimates=[e.to_dict() for e in self.estimates], confidence=self.confidence,
-                       seconds=round(self.seconds, 6))
+                       close=self.close, seconds=round(self.seconds, 6))
         return out
 
     @classmethod
     def recorded(cls, d: dict) -> "Decision":
         """An estimated decision as :meth:`to_dict` recorded it (its action, rule and estimates; the
-        exact candidates and positions, which such a decision never has, are not restored)."""
-        return cls(Action.from_dict(d["action"]), d.get("rule", ""), note=d.get("note", ""), exact=False,
+        exact candidates and positions, which such a decision never has, are not restored).  Earlier
+        versions wrote a near tie into the note (``stopped early: ...``): read as ``close``."""
+        note, close = d.get("note", ""), d.get("close", False)
+        if "close" not in d and _OLD_NEAR_TIE in note:
+            close = True
+            note = "; ".join(n for n in note.split("; ") if not n.startswith(_OLD_NEAR_TIE))
+        return cls(Action.from_dict(d["action"]), d.get("rule", ""), note=note, exact=False,
                    method=d.get("method", "estimate"),
                    estimates=tuple(Estimate(e["part"], e["kind"], e["value"], e["se"], e.get("source"))
                                    for e in d.get("estimates", ())),
-                   confidence=d.get("confidence", 0.0), seconds=d.get("seconds", 0.0))
+                   confidence=d.get("confidence", 0.0), seconds=d.get("seconds", 0.0), close=close)
 
 
 class DecidesOnMasks:

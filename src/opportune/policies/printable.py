@@ -1,10 +1,72 @@
-"""A decision's counts written as text at any size (Python's ``str()`` refuses ints of more than 4,300 digits)."""
+"""A decision's counts written as text at any size (Python's ``str()`` refuses ints of more than 4,300 digits),
+and counts written for people (:func:`count_label`: the dashboard's and the service's explanations)."""
 
 from __future__ import annotations
 
+import re
 from functools import lru_cache
 
 _BIG = 14_000  # bits: fewer than 4,215 decimal digits, which str() writes
+
+#: Counts of at most this many digits are written in full for people (``40,320``), longer ones as three
+#: significant digits and an exponent (``6.13e98``): 15 digits still read at a glance, grouped, and
+#: any count fits a dashboard's panel (the exponent of a count of 10,000 free parts has 5 digits).
+LABEL_DIGITS = 15
+
+_ROUNDED = re.compile(r"(\d)(?:\.(\d*))?e\+?(\d+)", re.IGNORECASE)
+
+
+def count_label(n: int | str) -> str:
+    """A count as people read it: in full with grouped digits up to :data:`LABEL_DIGITS` digits, else
+    three significant digits (rounded half up) and the exponent.  The one way the service writes counts
+    for people: the dashboard shows these texts (``Count.text``, a run summary's ``count_text``) and the
+    service's explanations (:func:`explain`) use them.
+
+    Parameters
+    ----------
+    n : int or str
+        A count (a non-negative int of any size), or the text the service keeps it as: decimal digits,
+        or :func:`~opportune.engine.schedule.count_text`'s rounded form (``2.8462596809170545e+35659``).
+
+    Returns
+    -------
+    str
+        ``"336"``, ``"40,320"``, ``"6.13e98"``.
+
+    Raises
+    ------
+    ValueError
+        If ``n`` is negative, or text that is not a count.
+
+    Examples
+    --------
+    >>> count_label(40320), count_label(10 ** 15 - 1), count_label(10 ** 15)
+    ('40,320', '999,999,999,999,999', '1.00e15')
+    >>> count_label(613 * 10 ** 96 + 4999), count_label(9996 * 10 ** 40), count_label("2.8462596809170545e+35659")
+    ('6.13e98', '1.00e44', '2.85e35659')
+    """
+    if isinstance(n, int):
+        if n < 0:
+            raise ValueError(f"a count is not negative: {n}")
+        from opportune.engine.schedule import count_text
+
+        text = count_text(n, exact_digits=LABEL_DIGITS)   # O(digits past the bound): never the whole number
+    else:
+        text = n
+    m = _ROUNDED.fullmatch(text)
+    if m:
+        digits, exponent = m[1] + (m[2] or ""), int(m[3])
+    elif text.isdigit() and text.isascii():
+        text = text.lstrip("0") or "0"
+        if len(text) <= LABEL_DIGITS:
+            return f"{int(text):,}"
+        digits, exponent = text, len(text) - 1
+    else:
+        raise ValueError(f"not a count: {text[:40]!r}")
+    head = int(digits[:3].ljust(3, "0")) + (len(digits) > 3 and digits[3] >= "5")   # the leading digits: exact
+    if head == 1000:                                                                  # 9.995e44 -> 1.00e45
+        head, exponent = 100, exponent + 1
+    return f"{head // 100}.{head % 100:02d}e{exponent}"
 
 
 @lru_cache(maxsize=1)

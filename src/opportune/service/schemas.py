@@ -182,6 +182,9 @@ class Decision(Model):
     estimates: list[Estimate] = Field(default_factory=list, description="Only when `exact` is false")
     confidence: float = absent("Only when `exact` is false: the estimated probability that the action is the one "
                                "the exact rule would choose", 1.0)
+    close: bool = absent("Only when `exact` is false: the estimate stopped on a near tie, at least 99.9% sure that "
+                         "no other candidate is better by more than 1%; that is what the decision then states "
+                         "(`explain`), and `confidence` changes nothing measurable", False)
     seconds: float = absent("Only when `exact` is false: the time the decision took", 0.0)
 
 
@@ -192,6 +195,9 @@ class Count(Model):
 
     value: str
     log10: float | None = Field(..., description="log10 of the value; null when the value is 0")
+    text: str = Field(..., description="The count as people read it, as the dashboard and `explain` write it: in full "
+                                       "with grouped digits up to 15 digits (`40,320`), else three significant "
+                                       "digits and the exponent (`6.13e98`)")
 
 
 Outcome = Literal["success", "failed", "defective"]
@@ -256,7 +262,7 @@ _DECISION = {
 }
 _ROW = {"n": 6, "visible": ["cl", "co"], "buffered": ["rl", "ml", "dr"], "installed": ["ca", "ba"],
         "action": _INSTALL_RL, "action_text": "install rl (from buffer)", "outcome": None,
-        "count": {"value": "228", "log10": 2.357935}, "reasons": _DECISION}
+        "count": {"value": "228", "log10": 2.357935, "text": "228"}, "reasons": _DECISION}
 RUN_EXAMPLE = {
     "id": 17, "cell": "cell-1", "label": "SN 1042",
     "plan": {"id": GEARBOX_PLAN_ID, "name": "gearbox"}, "status": "active", "policy": "paper", "buffer_capacity": 4,
@@ -266,8 +272,8 @@ RUN_EXAMPLE = {
               "in_bin": {"sm": 1, "ra": 1, "co": 1, "st": 1, "cl": 1}, "capacity": 4, "strategies": ["default"],
               "complete": False, "defects": 0},
     "installable": ["rl", "dr", "sm", "ra"], "progress": {"installed": 2, "units": 10},
-    "count": {"value": "228", "log10": 2.357935}, "pending": _ROW, "last_look": ["cl", "co"], "rows": 6,
-    "finished": False, "created_at": "2025-03-14T09:41:07.215+00:00", "updated_at": "2025-03-14T09:43:52.604+00:00",
+    "count": {"value": "228", "log10": 2.357935, "text": "228"}, "pending": _ROW, "last_look": ["cl", "co"], "rows": 6,
+    "finished": False, "totals": None, "created_at": "2025-03-14T09:41:07.215+00:00", "updated_at": "2025-03-14T09:43:52.604+00:00",
 }
 LOOK_EXAMPLE = {"run_id": 17, "seq": 11, "action": _INSTALL_RL, "decision": _DECISION, "row": _ROW,
                 "run": RUN_EXAMPLE}
@@ -310,6 +316,22 @@ class RunState(Model):
                                                              "part kinds and whether its product is complete")
 
 
+class Totals(Model):
+    """What a complete run took, in the paper's accounting (the trace's actions and their outcomes)."""
+
+    installed: int = Field(..., description="Units installed")
+    looks: int = Field(..., description="Looks answered (rows of the trace)")
+    motions: int = Field(..., description="Robot motions: installs and buffer moves reported, failed and defective "
+                                          "ones included (the robot moved)")
+    buffer_moves: int = Field(..., description="Buffer moves reported (bin to a buffer location)")
+    buffer_peak: int = Field(..., description="Most parts in the buffer at once")
+    shakes: int
+    failed: int = Field(..., description="Actions reported failed")
+    defects: int = Field(..., description="Parts found defective")
+    time: float = Field(..., description="Motions, shakes and looks at the plan's costs (`simulation.costs`; by "
+                                         "default a motion and a shake 1 each, a look 0): `simulate`'s time")
+
+
 class Run(Model):
     """A run's full state."""
 
@@ -333,6 +355,7 @@ class Run(Model):
     last_look: list[Part]
     rows: int = Field(..., description="Rows of the trace so far (the pending one included)")
     finished: bool
+    totals: Totals | None = Field(..., description="Once the run is complete: what it took; null until then")
     created_at: Timestamp
     updated_at: Timestamp
 
@@ -350,6 +373,7 @@ class RunSummary(Model):
     products: int = Field(1, description="Products built at once (fixtures fed from one bin)")
     progress: Progress
     count: str | None = Field(..., description="Admissible completions left (decimal text)")
+    count_text: str | None = Field(None, description="The same count as people read it (`Count.text`)")
     pending: str | None = Field(..., description="The pending action, as text")
     seq: int
     created_at: Timestamp

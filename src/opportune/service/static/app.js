@@ -63,29 +63,12 @@ function setupLogin(onReady) {
   };
 }
 
-const fmtList = (xs) => (xs || []).join(",");
+const fmtList = (xs) => (xs || []).join(", ");
 
-// A count at any magnitude: its decimal text (exact), or the rounded form the service writes past
-// 4,300 digits ("2.8462596809170545e+35659"); three significant digits past 15 digits.
-function fmtCount(c) {
-  if (!c) return "—";
-  const v = String(c.value);
-  const e = /^(\d+(?:\.\d+)?)e\+?(\d+)$/i.exec(v);
-  if (e) return fmtSci(Number(e[1]), Number(e[2]));
-  if (v.length <= 15) return Number(v).toLocaleString("en-US");
-  return fmtSci(Number(`${v[0]}.${v.slice(1, 17)}`), v.length - 1);
-}
-
-// A count from its log10 (an axis label), in the same form as fmtCount.
-function fmtLog10(l) {
-  if (l < 15) return Math.round(10 ** l).toLocaleString("en-US");
-  return fmtSci(10 ** (l - Math.floor(l)), Math.floor(l));
-}
-
-function fmtSci(m, e) {
-  if (Number(m.toFixed(2)) >= 10) { m /= 10; e += 1; }
-  return `${m.toFixed(2)}e${e}`;
-}
+// Counts are written by the service (Count.text, a listed run's count_text: opportune.policies.printable
+// .count_label), in full up to 15 digits and as 6.13e98 past that: the page never formats a count itself,
+// so the page and the explanations write every count alike.
+const countText = (c) => (c && c.text) || "—";
 
 // ------------------------------------------------------------------ runs list
 
@@ -121,7 +104,7 @@ function initIndex() {
           el("td", { text: r.label || "" }),
           el("td", {}, el("span", { class: `badge ${r.status}`, text: r.status })),
           el("td", { class: "progress-cell" }, bar, `${r.progress.installed}/${r.progress.units}`),
-          el("td", { text: r.count === null ? "—" : fmtCount({ value: r.count }) }),
+          el("td", { text: r.count_text || "—" }),
           el("td", { text: r.pending || "" }),
           el("td", { class: "muted small", text: new Date(r.updated_at).toLocaleTimeString() }));
         return tr;
@@ -145,12 +128,16 @@ function initRun() {
   const view = { run: null, rows: [], graph: [], strategy: 0, chosen: false, es: null, seq: -1, retry: null,
                  mode: location.hash === "#full" ? "full" : "frontier", cam: null, moved: false, found: null };
   setupGraphControls();
+  window.addEventListener("resize", () => { if (view.run) renderChart(); });  // the chart is drawn to its width
   const relogin = setupLogin(connect);
 
+  // Listening (on) or not (off: reconnecting, offline). A complete run has nothing more to listen for: the
+  // pill goes, and the run's status pill says it is complete.
   function setLive(on, text) {
     const live = document.getElementById("live");
     live.className = "live " + (on ? "on" : "off");
     live.textContent = text;
+    live.hidden = text === "complete";
   }
 
   async function connect() {
@@ -209,6 +196,7 @@ function initRun() {
       `run #${run.id} · cell ${run.cell} · plan ${run.plan.name}` + (run.label ? ` · ${run.label}` : "");
     const status = document.getElementById("status");
     status.textContent = run.status; status.className = "badge " + run.status;
+    renderSummary();
     renderGraph();
     renderCount();
     renderPending();
@@ -227,10 +215,15 @@ function initRun() {
   // graph. The SVG fills its panel; its viewBox is a camera (centre x, y and scale k in pixels per
   // layout unit) moved by fit, zoom, pan and find, so nothing is re-laid out to move around.
 
-  const NODE_H = 26, DX = 120, DY = 56, MARGIN = 40;
+  const NODE_H = 26, MARGIN = 40;
   const FIT_MAX = 1.6, ZOOM_MAX = 8;  // a fit never magnifies a small view past 1.6x
+  // The frontier's labels (12 layout units at size 1) are drawn at least LABEL_PX pixels high where the
+  // panel allows: the parts grow (up to SIZE_MAX times) while the gaps between them stay, so more of
+  // the panel is label. GAP: room for an arrow between two columns; ROW_GAP between two parts of a column.
+  const LABEL_PX = 11.5, SIZE_MAX = 2, GAP = 28, ROW_GAP = 30;
 
-  const nodeWidth = (id) => Math.min(110, Math.max(44, 12 + 7.2 * id.length));
+  // a part's box at size z (1: the full graph's)
+  const nodeWidth = (id, z = 1) => z * Math.min(110, Math.max(44, 12 + 7.2 * id.length));
   const shortId = (id) => (id.length > 14 ? id.slice(0, 13) + "…" : id);
 
   // The parts that matter now: installable now (from the run, or from this strategy's constraints when
@@ -254,58 +247,78 @@ function initRun() {
     return { shown, complete: !core.length };
   }
 
-  // The frontier laid out compactly: one column per layer that has a part shown (in the full layout's
-  // order within the column), a header naming the layer, "⋯" where layers are skipped. A layer taller
-  // than the panel allows wraps into several columns, at the number of rows that draws the frontier
-  // largest in the panel. O(parts shown x their tallest layer).
-  function frontierLayout(g, shown) {
-    const nodes = g.nodes.filter((n) => shown.has(n.id));
+  // The frontier laid out compactly at label size z: one column per layer that has a part shown (in the
+  // full layout's order within the column), a header naming the layer, "⋯" where layers are skipped. A
+  // layer taller than the panel allows wraps into several columns, at the number of rows that draws the
+  // frontier largest in the panel. O(parts shown x their tallest layer).
+  function frontierAt(g, nodes, ids, z) {
     const layers = [...new Set(nodes.map((n) => n.layer))].sort((a, b) => a - b);
     const column = new Map(layers.map((l, k) => [l, k]));
     const columns = layers.map(() => []);
     for (const n of nodes) columns[column.get(n.layer)].push(n);
     // columns as close as the widest part shown allows (room for an arrow between): more fit a screen
-    const dx = Math.min(DX, 52 + nodes.reduce((m, n) => Math.max(m, nodeWidth(n.id)), 0));
+    const dx = Math.max(z * 60, GAP + nodes.reduce((m, n) => Math.max(m, nodeWidth(n.id, z)), 0));
+    const dy = NODE_H * z + ROW_GAP, top = MARGIN * z;
     const tallest = columns.reduce((m, c) => Math.max(m, c.length), 1);
     const p = panelSize();
     let rows = tallest, best = 0;
     for (let r = tallest; r >= 1; r--) {
       const wide = columns.reduce((m, c) => m + Math.ceil(c.length / r), 0);
-      const k = Math.min(p.w / (wide * dx), p.h / (r * DY + 2 * MARGIN));
+      const k = Math.min(p.w / (wide * dx), p.h / (r * dy + 2 * top));
       if (k > best * 1.0001) { best = k; rows = r; }
     }
     const height = Math.min(rows, tallest);
     const placed = [], heads = [];
-    let x = MARGIN;
+    let x = top;
     columns.forEach((c, k) => {
       c.sort((a, b) => a.y - b.y || (a.id < b.id ? -1 : 1));
       heads.push({ x, layer: layers[k], skipped: k ? layers[k] - layers[k - 1] - 1 : 0 });
       for (let start = 0; start < c.length; start += rows) {
         const part = c.slice(start, start + rows);
-        const offset = (height - part.length) * DY / 2;
-        part.forEach((n, i) => placed.push(Object.assign({}, n, { x, y: MARGIN + offset + i * DY })));
+        const offset = (height - part.length) * dy / 2;
+        part.forEach((n, i) => placed.push(Object.assign({}, n, { x, y: top + offset + i * dy })));
         x += dx;
       }
     });
-    const edges = g.edges.filter((e) => shown.has(e.from) && shown.has(e.to)).map((e) => ({ from: e.from, to: e.to }));
-    return { nodes: placed, edges, heads, dx };
+    const edges = g.edges.filter((e) => ids.has(e.from) && ids.has(e.to)).map((e) => ({ from: e.from, to: e.to }));
+    return { nodes: placed, edges, heads, dx, z, headY: top - NODE_H * z / 2 - 10 * z };
+  }
+
+  // The frontier at the smallest label size that draws its labels LABEL_PX high when fitted to the
+  // panel, else at the size that draws them largest. O(sizes tried x frontierAt).
+  function frontierLayout(g, ids) {
+    const nodes = g.nodes.filter((n) => ids.has(n.id)), p = panelSize();
+    let best = null;
+    for (let z = 1; z <= SIZE_MAX + 1e-9; z += 1 / 12) {
+      const lay = frontierAt(g, nodes, ids, z), b = extent(lay);
+      lay.labelPx = 12 * z * Math.min(p.w / b.w, p.h / b.h, FIT_MAX);
+      if (!best || lay.labelPx > best.labelPx + 1e-6) best = lay;
+      if (lay.labelPx >= LABEL_PX) break;
+    }
+    return best;
   }
 
   function drawGraph(lay, s, curved) {
     const svg = el("svg:svg", { role: "img", "aria-label": "precedence graph", preserveAspectRatio: "xMidYMid meet" });
+    const z = lay.z || 1;
+    svg.style.setProperty("--z", z);  // the labels' size (app.css)
     svg.append(el("svg:defs", {}, el("svg:marker", { id: "arrow", viewBox: "0 0 10 10", refX: 10, refY: 5,
       markerWidth: 7, markerHeight: 7, orient: "auto-start-reverse" }, el("svg:path", { d: "M 0 0 L 10 5 L 0 10 z", fill: "#9aa3ad" }))));
     const at = new Map(lay.nodes.map((n) => [n.id, n]));
-    for (const h of lay.heads || []) {
-      svg.append(el("svg:text", { class: "layer", x: h.x, y: MARGIN - NODE_H, text: `layer ${h.layer + 1}` }));
-      if (h.skipped) svg.append(el("svg:text", { class: "layer", x: h.x - lay.dx / 2, y: MARGIN - NODE_H, text: "⋯" },
+    // each column's layer: "layer 7" where every header has room beside its neighbours and the "⋯" between
+    // them (about 6.6 units a character at size 1), else the number alone after the first column
+    const wide = (h) => 6.6 * z * `layer ${h.layer + 1}`.length;
+    const roomy = (lay.heads || []).every((h, i) => !i || (wide(h) + wide(lay.heads[i - 1])) / 2 + (h.skipped ? 16 : 6) * z <= lay.dx);
+    (lay.heads || []).forEach((h, i) => {
+      svg.append(el("svg:text", { class: "layer", x: h.x, y: lay.headY, text: (roomy || !i ? "layer " : "") + (h.layer + 1) }));
+      if (h.skipped) svg.append(el("svg:text", { class: "layer", x: h.x - lay.dx / 2, y: lay.headY, text: "⋯" },
                                    el("svg:title", { text: `${h.skipped} layer${h.skipped > 1 ? "s" : ""} not shown` })));
-    }
+    });
     for (const e of lay.edges) {
       const a = at.get(e.from), b = at.get(e.to);
       const done = (s.installed[e.from] || 0) >= a.quantity;
       const attrs = { class: "edge" + (done ? " done" : ""), "marker-end": "url(#arrow)", "data-edge": `${e.from}>${e.to}` };
-      const x1 = a.x + nodeWidth(a.id) / 2, x2 = b.x - nodeWidth(b.id) / 2;
+      const x1 = a.x + nodeWidth(a.id, z) / 2, x2 = b.x - nodeWidth(b.id, z) / 2;
       if (curved) {  // the frontier's columns are not the layout's: a curve from part to part
         const mx = (x1 + x2) / 2;
         svg.append(el("svg:path", Object.assign(attrs, { d: `M ${x1} ${a.y} C ${mx} ${a.y}, ${mx} ${b.y}, ${x2} ${b.y}` })));
@@ -315,12 +328,12 @@ function initRun() {
         svg.append(el("svg:polyline", Object.assign(attrs, { points: pts.map((p) => p.join(",")).join(" ") })));
       }
     }
-    for (const n of lay.nodes) svg.append(drawNode(n, s));
+    for (const n of lay.nodes) svg.append(drawNode(n, s, z));
     return svg;
   }
 
-  function drawNode(n, s) {
-    const k = s.installed[n.id] || 0, W = nodeWidth(n.id);
+  function drawNode(n, s, z) {
+    const k = s.installed[n.id] || 0, W = nodeWidth(n.id, z), H = NODE_H * z;
     const cls = ["node"];
     let state = "remaining";
     if (k >= n.quantity) { cls.push("installed"); state = "installed"; }
@@ -335,27 +348,28 @@ function initRun() {
     const title = (n.name ? `${n.id} (${n.name})` : n.id) + (n.quantity > 1 ? `: ${k} of ${n.quantity} installed` : `: ${state}`);
     const grp = el("svg:g", { class: cls.join(" "), "data-part": n.id, "data-state": state },
       el("svg:title", { text: title }),
-      view.found === n.id ? el("svg:rect", { class: "halo", x: n.x - W / 2 - 6, y: n.y - NODE_H / 2 - 6,
-                                             width: W + 12, height: NODE_H + 12, rx: 10 }) : null,
-      el("svg:rect", { x: n.x - W / 2, y: n.y - NODE_H / 2, width: W, height: NODE_H, rx: 6 }),
-      el("svg:text", { x: n.x, y: n.y - (n.quantity > 1 ? 4 : 0), text: shortId(n.id) }));
-    if (n.quantity > 1) grp.append(el("svg:text", { class: "units", x: n.x, y: n.y + 8, text: `${k}/${n.quantity}` }));
+      view.found === n.id ? el("svg:rect", { class: "halo", x: n.x - W / 2 - 6, y: n.y - H / 2 - 6,
+                                             width: W + 12, height: H + 12, rx: 10 }) : null,
+      el("svg:rect", { x: n.x - W / 2, y: n.y - H / 2, width: W, height: H, rx: 6 * z }),
+      el("svg:text", { x: n.x, y: n.y - (n.quantity > 1 ? 4 * z : 0), text: shortId(n.id) }));
+    if (n.quantity > 1) grp.append(el("svg:text", { class: "units", x: n.x, y: n.y + 8 * z, text: `${k}/${n.quantity}` }));
     return grp;
   }
 
   // The drawing's extent in layout units (parts, edges, the frontier's layer headers). O(parts + bends).
   function extent(lay) {
     let x0 = Infinity, y0 = Infinity, x1 = -Infinity, y1 = -Infinity;
+    const z = lay.z || 1;
     for (const n of lay.nodes) {
-      const w = nodeWidth(n.id) / 2;
+      const w = nodeWidth(n.id, z) / 2;
       x0 = Math.min(x0, n.x - w); x1 = Math.max(x1, n.x + w);
-      y0 = Math.min(y0, n.y - NODE_H / 2); y1 = Math.max(y1, n.y + NODE_H / 2);
+      y0 = Math.min(y0, n.y - NODE_H * z / 2); y1 = Math.max(y1, n.y + NODE_H * z / 2);
     }
     if (!lay.nodes.length) return { x: 0, y: 0, w: 100, h: 100 };
     for (const e of lay.edges) {  // the full layout's long edges bend through points beyond the parts
       for (const [x, y] of e.points || []) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
     }
-    if (lay.heads && lay.heads.length) y0 = Math.min(y0, MARGIN - NODE_H - 14);
+    if (lay.heads && lay.heads.length) y0 = Math.min(y0, lay.headY - 13 * z);  // the headers' text above them
     const pad = 12;
     return { x: x0 - pad, y: y0 - pad, w: x1 - x0 + 2 * pad, h: y1 - y0 + 2 * pad };
   }
@@ -530,36 +544,76 @@ function initRun() {
 
   function renderCount() {
     const run = view.run;
-    document.getElementById("count").textContent = fmtCount(run.count);
-    document.getElementById("count").dataset.value = run.count ? run.count.value : "";
+    const count = document.getElementById("count");
+    count.textContent = countText(run.count);
+    count.dataset.value = run.count ? run.count.value : "";
+    count.classList.toggle("long", count.textContent.length > 11);  // 15 grouped digits still fit the card
     document.getElementById("progress").textContent =
       `${run.progress.installed.toLocaleString("en-US")} of ${run.progress.units.toLocaleString("en-US")} installed` +
       ` · buffer ${run.state.buffered.length}` +
       (run.buffer_capacity === null ? " (unlimited)" : ` of ${run.buffer_capacity}`) +
       (run.state.defects ? ` · ${run.state.defects} defective` : "") +
       (view.graph.length > 1 ? ` · strategies still open: ${run.state.strategies.join(", ") || "none"}` : "");
-    // The count before each row, then now: it falls as the run proceeds.
-    const pts = view.rows.filter((r) => r.count).map((r) => [r.n, r.count.log10]);
-    if (run.count && !run.pending) pts.push([view.rows.length + 1, run.count.log10]);
-    const maxX = Math.max(2, ...pts.map((p) => p[0]));
-    const maxY = Math.max(0.3, ...pts.map((p) => p[1] === null ? 0 : p[1]));
-    const top = fmtLog10(maxY);
-    const W = 320, H = 150, L = Math.max(34, 8 + 6 * top.length), B = 18;  // the axis right of its top label
-    const svg = el("svg:svg", { viewBox: `0 0 ${W} ${H}`, preserveAspectRatio: "none", "aria-label": "sequences left per step" });
-    const x = (v) => L + (W - L - 6) * (v - 1) / (maxX - 1);
-    const y = (v) => (H - B) - (H - B - 8) * ((v === null ? 0 : v) / maxY);
-    svg.append(el("svg:line", { class: "axis", x1: L, y1: H - B, x2: W, y2: H - B }),
-               el("svg:line", { class: "axis", x1: L, y1: 4, x2: L, y2: H - B }),
-               el("svg:text", { x: 2, y: 12, class: "top-label", text: top }),
-               el("svg:text", { x: 2, y: H - B, text: "1" }),
-               el("svg:text", { x: L, y: H - 4, text: "step 1" }),
-               el("svg:text", { x: W - 40, y: H - 4, text: `step ${maxX}` }),
-               el("svg:text", { x: (L + W) / 2, y: H - 4, "text-anchor": "middle", text: "log scale" }));
-    if (pts.length) {
-      svg.append(el("svg:polyline", { class: "line", points: pts.map((p) => `${x(p[0])},${y(p[1])}`).join(" ") }));
-      for (const p of pts) svg.append(el("svg:circle", { class: "dot", cx: x(p[0]), cy: y(p[1]), r: 2.5 }));
-    }
-    document.getElementById("chart").replaceChildren(svg);
+    renderChart();
+  }
+
+  // The sequences left against the units installed, on a log scale relative to the start: log10 of the
+  // count over log10 of the first count, from 1 (the start, top) to 0 (one sequence left, the end). The
+  // x axis spans the whole plan, so the line moves down and right as units go in, at any plan size;
+  // a dashed line shows the way to the end. One point per number of units installed (buffer moves and
+  // shakes leave the count as it is). O(rows).
+  function renderChart() {
+    const run = view.run, box = document.getElementById("chart");
+    const byInstalled = new Map();
+    for (const r of view.rows) if (r.count) byInstalled.set(r.installed.length, r.count);
+    if (run.count) byInstalled.set(run.progress.installed, run.count);
+    const known = [...byInstalled.entries()].sort((p, q) => p[0] - q[0]);
+    const W = Math.max(200, Math.round(box.clientWidth || 300)), H = 150, L = 8, R = 10, T = 22, B = 20;
+    const units = Math.max(1, run.progress.units);
+    const svg = el("svg:svg", { viewBox: `0 0 ${W} ${H}`, width: W, height: H, role: "img",
+                                "aria-label": "admissible sequences left per unit installed, log scale" });
+    box.replaceChildren(svg);
+    if (!known.length) return;
+    const c0 = known[0][1];
+    const top = c0.log10 || 0;  // log10 of the first count known (null: a count of 0)
+    const x = (v) => L + (W - L - R) * v / units;
+    const y = (c) => (H - B) - (H - B - T) * (top > 0 ? Math.max(0, c.log10 || 0) / top : 0);
+    const pts = known.map(([n, c]) => [x(n), y(c)]);
+    const [lx, ly] = pts[pts.length - 1];
+    svg.dataset.series = JSON.stringify(known.map(([n, c]) => [n, top > 0 ? (c.log10 || 0) / top : 0]));
+    svg.append(el("svg:line", { class: "axis", x1: L, y1: H - B, x2: W - R, y2: H - B }),
+               el("svg:line", { class: "axis", x1: L, y1: T, x2: L, y2: H - B }),
+               el("svg:text", { x: L + 4, y: T - 8, class: "top-label", text: countText(c0) }),
+               el("svg:text", { x: W - R, y: H - 6, "text-anchor": "end", text: `${units.toLocaleString("en-US")} installed: 1 left` }),
+               el("svg:text", { x: L, y: H - 6, text: "units installed →" }));
+    if (lx < W - R - 1) svg.append(el("svg:line", { class: "to-come", x1: lx, y1: ly, x2: x(units), y2: H - B }));
+    svg.append(el("svg:polyline", { class: "line", points: pts.map((p) => p.join(",")).join(" ") }));
+    for (const [px, py] of pts) svg.append(el("svg:circle", { class: "dot", cx: px, cy: py, r: 2.5 }));
+    svg.append(el("svg:circle", { class: "now", cx: lx, cy: ly, r: 4 }));
+  }
+
+  // What a complete run took (run.totals, from the service), with its sequence and policy.
+  function renderSummary() {
+    const run = view.run, t = run.totals, card = document.getElementById("summary");
+    card.hidden = !t;
+    if (!t) return;
+    const took = (new Date(run.updated_at) - new Date(run.created_at)) / 1000;
+    const duration = took < 90 ? `${took.toFixed(0)} s` : took < 5400 ? `${(took / 60).toFixed(1)} min` : `${(took / 3600).toFixed(1)} h`;
+    const n = (v) => v.toLocaleString("en-US");
+    const tiles = [
+      ["parts installed", `${n(t.installed)} of ${n(run.progress.units)}`],
+      ["looks", n(t.looks)],
+      ["motions", n(t.motions)],
+      ["buffer moves", `${n(t.buffer_moves)} (peak ${n(t.buffer_peak)}${run.buffer_capacity === null ? "" : ` of ${run.buffer_capacity}`})`],
+      ["shakes", n(t.shakes)],
+      ["time (motions, shakes, looks)", Number(t.time.toFixed(2)).toLocaleString("en-US")],
+      ["failed · defective", `${n(t.failed)} · ${n(t.defects)}`],
+      ["policy", run.policy],
+      ["took", duration],
+    ];
+    document.getElementById("summary-tiles").replaceChildren(...tiles.map(([k, v]) =>
+      el("div", { class: "tile", "data-total": k }, el("span", { class: "k", text: k }), el("span", { class: "v", text: v }))));
+    document.getElementById("sequence").replaceChildren(...run.state.installed.map((p) => el("li", { text: p })));
   }
 
   function renderPending() {
@@ -570,6 +624,9 @@ function initRun() {
     document.getElementById("explain").textContent = p ? p.reasons.explain : "";
   }
 
+  // as Decision.certainty writes it: an estimate is never certain, so past 99.9% it says so
+  const sure = (c) => (c < 0.9995 ? `${(100 * c).toFixed(1)}%` : "over 99.9%");
+
   function renderTrace(fresh) {
     const tbody = document.querySelector("#trace tbody");
     const old = tbody.children.length;
@@ -579,9 +636,10 @@ function initRun() {
       el("td", { text: fmtList(r.visible) }),
       el("td", { text: fmtList(r.buffered) }),
       el("td", { text: fmtList(r.installed) }),
-      // An estimated decision (exact counts did not fit the decision budget) is marked, with how sure it is.
+      // An estimated decision (exact counts did not fit the decision budget) is marked with the one thing
+      // it states (its explanation's last line): a near tie, or how sure it is of the exact rule's choice.
       el("td", { text: r.action_text + (r.reasons && r.reasons.exact === false && r.reasons.method !== "replayed"
-                   ? ` (≈ ${(100 * r.reasons.confidence).toFixed(0)}% sure)` : ""),
+                   ? ` (≈ ${r.reasons.close ? "near tie" : `${sure(r.reasons.confidence)} sure`})` : ""),
                  title: r.reasons ? r.reasons.explain : "" }),
       el("td", { text: r.outcome === null ? (r.action.kind === "done" ? "" : "pending") : r.outcome })));
     tbody.replaceChildren(...rows);
