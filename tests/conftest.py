@@ -244,6 +244,7 @@ LONGEST_FIRST = (
     "tests/test_service_scaleout.py::test_two_processes_kill_9_under_load",
     "tests/test_service_plan_memory.py::test_the_servers_resident_memory_is_kept_under_its_cap",
     "tests/test_service_browser.py::test_dashboard_frontier_on_large_plans",
+    "tests/test_service_browser.py::test_arc111_is_legible_at_1280x800_and_its_progress_shows",
     "tests/test_pile_bin.py::test_lookahead_on_the_piles_own_programme",
     "tests/test_service_scaleout.py::test_serve_workers_2_replaces_a_killed_worker",
     "tests/test_memory_limit.py::test_a_long_run_stays_near_its_engines_limit",
