@@ -223,13 +223,14 @@ def test_an_untrusted_certificate_gets_no_session_and_one_line_in_the_log(server
 
     with caplog.at_level(logging.INFO):
         asyncio.run(probe())
-    ours = [r for r in caplog.records if r.name == "opportune.service.opcua" and r.levelno >= logging.WARNING]
+    ours = [r for r in caplog.records if r.name == "opportune.service.opcua_security" and r.levelno >= logging.WARNING]
     assert any("BadCertificateUntrusted" in r.getMessage() and "urn:opportune:stranger" in r.getMessage()
                for r in ours), [r.getMessage() for r in ours]
     served = [r for r in caplog.records if r.name.startswith(("asyncua.server", "opportune"))]
     assert all(r.exc_info is None and "\n" not in r.getMessage() for r in served), \
         [r.getMessage() for r in served if r.exc_info]
     assert len(ours) == 2, [r.getMessage() for r in ours]     # one line per refused channel
+    assert not [r for r in served if "BadCertificate" in r.getMessage() and r not in ours]   # and no other
 
 
 def test_a_session_must_name_the_certificate_of_its_channel(server, tmp_path):

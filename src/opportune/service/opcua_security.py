@@ -43,7 +43,7 @@ from asyncua.common.utils import ServiceError
 
 from opportune.formats.problems import CONTROL_CHARS
 
-log = logging.getLogger("opportune.service.opcua")
+log = logging.getLogger(__name__)
 
 #: Requests a channel serves before (or without) a session: discovery, and opening and closing sessions.
 DISCOVERY = frozenset(ua.NodeId(i) for i in (
@@ -378,6 +378,7 @@ class Guard:
             raise ServiceError(ua.StatusCodes.BadServiceUnsupported)
 
         iserver.register_server = iserver.register_server2 = unsupported
+        logging.getLogger("asyncua.server.uaprocessor").addFilter(_SAID)     # once: a filter is added once
 
     async def sweep(self) -> int:
         """Close the sessions whose token has been revoked (their subscriptions are deleted: no notification
@@ -406,6 +407,17 @@ class Guard:
                 raise
             except Exception:     # a database that does not answer now: the next round tries again
                 log.warning("OPC UA: checking the sessions' tokens failed; trying again in %.1f s", period)
+
+
+class _Said(logging.Filter):
+    """Drops asyncua's own line for a certificate refusal: :meth:`Guard.refused` has said it, with the certificate."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (str(record.msg).startswith("sending service fault response")
+                    and "BadCertificate" in str(record.args))
+
+
+_SAID = _Said()
 
 
 class GuardedServer(Server):
