@@ -12,6 +12,7 @@ is checked by moving the clock, not by waiting), and its sweep of revoked sessio
 * A revoked token: a new session is refused at once; an open session's reads are refused within the
   token cache time, and the sweep closes it (its subscriptions with it).
 * Refusals say what and what to do, where a generic client sees them (``Cells/<cell>/LastRefusal``).
+* A session touches its own subscriptions only, and writes nothing.
 """
 
 from __future__ import annotations
@@ -407,3 +408,51 @@ def test_opportune_opcua_cert_makes_a_certificate_a_generic_client_connects_with
     assert asyncio.run(connect())                               # trusted now, without a restart
     r = CliRunner().invoke(app, ["opcua", "cert", str(tmp_path / "bad"), "--app-uri", "no uri\x1b[2J"])
     assert r.exit_code == 1 and "\x1b" not in r.output and "not a URI" in r.output, r.output
+
+
+# ---------------------------------------------------------------- another session's subscriptions
+
+def test_a_session_cannot_touch_another_sessions_subscriptions(server):
+    """asyncua serves the subscription services by subscription id alone, and ids are small sequential
+    integers: another cell's session could take over (TransferSubscriptions), delete, watch through or
+    silence a subscription.  Every such request naming a subscription of another session is refused."""
+    _, mine = server.token()
+    _, theirs = server.token("cell-2")
+    subscriptions = server.front.server.iserver.subscription_service.subscriptions
+
+    async def probe():
+        async with server.cell(mine) as a, server.cell(theirs) as b:
+            run = await a.start_run(GEARBOX.read_text(), policy="paper")
+            sub = await a.client.create_subscription(20, Notifications())
+            await sub.subscribe_data_change(a.client.get_node(a.node_id(f"Runs/{run}/Seq")))
+            sid = sub.subscription_id
+            owner = subscriptions[sid].session_id
+            clock = ua.ReadValueId(NodeId=ua.NodeId(ua.ObjectIds.Server_ServerStatus_CurrentTime),
+                                   AttributeId=ua.AttributeIds.Value)
+            item = ua.MonitoredItemCreateRequest(ItemToMonitor=clock, MonitoringMode=ua.MonitoringMode.Reporting,
+                                                 RequestedParameters=ua.MonitoringParameters(ClientHandle=7))
+            uac = b.client.uaclient
+            for name, attempt in (
+                    ("transfer", uac.transfer_subscriptions(ua.TransferSubscriptionsParameters(SubscriptionIds=[sid]))),
+                    ("delete", uac.delete_subscriptions([sid])),
+                    ("add an item", uac.create_monitored_items(ua.CreateMonitoredItemsParameters(
+                        SubscriptionId=sid, ItemsToCreate=[item]))),
+                    ("delete an item", uac.delete_monitored_items(ua.DeleteMonitoredItemsParameters(
+                        SubscriptionId=sid, MonitoredItemIds=[1]))),
+                    ("silence", uac.set_publishing_mode(ua.SetPublishingModeParameters(
+                        PublishingEnabled=False, SubscriptionIds=[sid])))):
+                with pytest.raises(ua.UaStatusCodeError) as refused:
+                    await attempt
+                assert refused.value.code == ua.StatusCodes.BadSubscriptionIdInvalid, name
+            assert sid in subscriptions and subscriptions[sid].session_id == owner
+            await sub.delete()                     # its own session may
+            assert sid not in subscriptions
+            # nor may a session write what the server shows (a run's state is the service's, not the client's)
+            for session in (a, b):
+                with pytest.raises(ua.UaStatusCodeError) as refused:
+                    await session.client.get_node(session.node_id(f"Runs/{run}/State")).write_value(
+                        ua.DataValue(ua.Variant("Complete", ua.VariantType.String)))
+                assert refused.value.code in (ua.StatusCodes.BadUserAccessDenied, ua.StatusCodes.BadNotWritable)
+            assert await a.read(run, "State") == "Idle"
+
+    asyncio.run(probe())

@@ -324,6 +324,64 @@ class GuardedSession(InternalSession):
         return result
 
 
+    # asyncua serves the subscription services by subscription id alone (small sequential integers): a session
+    # may name its own subscriptions only, and take over (TransferSubscriptions) those of its own token's
+    # sessions only, as OPC UA requires; any other is answered as if it did not exist.
+
+    def _own(self, ids) -> None:
+        subscriptions = self.subscription_service.subscriptions
+        for sid in ids or ():
+            sub = subscriptions.get(sid)
+            if sub is not None and sub.session_id != self.session_id:
+                raise ServiceError(ua.StatusCodes.BadSubscriptionIdInvalid)
+
+    async def create_monitored_items(self, params):
+        self._own([params.SubscriptionId])
+        return await super().create_monitored_items(params)
+
+    async def modify_monitored_items(self, params):
+        self._own([params.SubscriptionId])
+        return await super().modify_monitored_items(params)
+
+    async def set_monitoring_mode(self, params):
+        self._own([params.SubscriptionId])
+        return await super().set_monitoring_mode(params)
+
+    async def set_publishing_mode(self, params):
+        self._own(params.SubscriptionIds)
+        return await super().set_publishing_mode(params)
+
+    def republish(self, params):
+        self._own([params.SubscriptionId])
+        return super().republish(params)
+
+    async def delete_subscriptions(self, ids):
+        self._own(ids)
+        return await super().delete_subscriptions(ids)
+
+    async def delete_monitored_items(self, params):
+        self._own([params.SubscriptionId])
+        return await super().delete_monitored_items(params)
+
+    def publish(self, acks=None):
+        self._own([a.SubscriptionId for a in acks or ()])
+        return super().publish(acks)
+
+    def modify_subscription(self, params):
+        self._own([params.SubscriptionId])
+        return super().modify_subscription(params)
+
+    async def transfer_subscriptions(self, params, callback):
+        mine = getattr(getattr(self, "user", None), "principal", None)
+        owners = {s.session_id: getattr(getattr(s, "user", None), "principal", None) for s in self.guard.sessions}
+        for sid in params.SubscriptionIds or ():
+            sub = self.subscription_service.subscriptions.get(sid)
+            owner = owners.get(sub.session_id) if sub is not None else None
+            if sub is not None and (mine is None or owner is None or owner.token_id != mine.token_id):
+                raise ServiceError(ua.StatusCodes.BadSubscriptionIdInvalid)
+        return await super().transfer_subscriptions(params, callback)
+
+
 class Guard:
     """The checks of one OPC UA server: its trust list, whether anonymous development sessions are on (a None
     channel may then carry them), and how tokens are checked (``auth``, an
