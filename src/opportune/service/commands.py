@@ -205,7 +205,7 @@ def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show
 
 def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from `opportune token list`"),
                  db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False)):
-    """Revoke a token (a running server stops accepting it within seconds)."""
+    """Revoke a token: a running server refuses it within 1 s (REVOCATION_SECONDS), on HTTP and OPC UA."""
     _require("sqlalchemy")
     from opportune.service.auth import TokenError, revoke_token
 

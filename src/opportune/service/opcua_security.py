@@ -17,7 +17,8 @@ touching the transport:
   session, and every request of a session whose token has been revoked (checked at most every
   :data:`~opportune.service.config.REVOCATION_SECONDS`);
 * :meth:`Guard.sweep` closes the sessions of revoked tokens (their subscriptions go with them),
-  every :data:`~opportune.service.config.REVOCATION_SECONDS`.
+  every :data:`~opportune.service.config.REVOCATION_SECONDS`;
+* a session names its own subscriptions only (asyncua serves the subscription services by id alone).
 
 The channel a request came on is known to the session through a context variable: asyncua serves
 each connection in a task of its own, and the channel's policy is made in that task.
