@@ -41,6 +41,7 @@ from opportune import load_plan
 from opportune.cli import app as cli_app
 from opportune.sequencer import Sequencer
 from opportune.service.auth import Principal, revoke_token
+from opportune.service.config import REVOCATION_SECONDS
 from opportune.service.plans import PlanBook
 from opportune.service.runs import RunManager
 from opportune.service.storage import Store, events, runs
@@ -48,7 +49,7 @@ from opportune.service.testing import ServiceProcess
 
 pytestmark = pytest.mark.slow
 
-TOKEN_CACHE_SECONDS = 10.0  # Settings.token_cache_seconds
+TOKEN_CACHE_SECONDS = REVOCATION_SECONDS  # Settings.token_cache_seconds
 
 
 def library_rows(looks):

@@ -55,7 +55,7 @@ from opportune.policies.named import DEFAULT_POLICY, POLICIES
 from opportune.service import idempotency as idem
 from opportune.formats.problems import CONTROL_CHARS
 from opportune.service.auth import Principal
-from opportune.service.config import Settings
+from opportune.service.config import MAX_BUFFER_CAPACITY, Settings
 from opportune.service.core import build as build_core
 from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, is_json,
                                       new_reference, plan_not_found, unauthorized, unsupported_media_type)
@@ -124,7 +124,7 @@ class RunIn(BaseModel):
         {"plan": GEARBOX_PLAN_ID}]})
     plan: Text = Field(..., min_length=1, max_length=64, description="A plan id returned by POST /plans")
     cell: Optional[Text] = Field(None, max_length=100, description="The cell; defaults to (and must be) the token's cell")
-    buffer_capacity: Optional[Annotated[int, Field(ge=0, le=1_000_000), BeforeValidator(_json_integer)]] = Field(
+    buffer_capacity: Optional[Annotated[int, Field(ge=0, le=MAX_BUFFER_CAPACITY), BeforeValidator(_json_integer)]] = Field(
         None, description="Buffer locations; null: unlimited")
     label: Text = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
     policy: Optional[Literal[POLICIES]] = Field(

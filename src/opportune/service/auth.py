@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 from sqlalchemy import insert, select, update
 
+from opportune.service.config import REVOCATION_SECONDS
 from opportune.service.storage import Store, cells, now, tokens
 
 TOKEN_PREFIX = "opp_"
@@ -116,13 +117,17 @@ def revoke_token(store: Store, token_id: str) -> None:
 
 
 class Authenticator:
-    """Checks bearer tokens and tickets against the store, trusting a checked token for a few seconds."""
+    """Checks bearer tokens and tickets against the store, trusting a checked token for ``cache_seconds``
+    (:data:`REVOCATION_SECONDS` by default); ``clock`` (monotonic seconds) is injectable for tests."""
 
-    def __init__(self, store: Store, *, cache_seconds: float = 10.0, ticket_seconds: float = 60.0):
+    def __init__(self, store: Store, *, cache_seconds: float = REVOCATION_SECONDS, ticket_seconds: float = 60.0,
+                 clock=time.monotonic):
         self.store = store
         self.cache_seconds = cache_seconds
         self.ticket_seconds = ticket_seconds
+        self.clock = clock
         self._cache: dict[str, tuple[Principal, float]] = {}
+        self._alive: dict[str, tuple[bool, float]] = {}
         self._lock = threading.Lock()
 
     def bearer(self, authorization: str | None) -> Principal | None:
@@ -134,12 +139,14 @@ class Authenticator:
             return None
         return self.token(token.strip())
 
-    def token(self, token: str) -> Principal | None:
+    def token(self, token: str, *, fresh: bool = False) -> Principal | None:
+        """The principal of a token, or None if it is unknown or revoked; from the cache if checked within
+        ``cache_seconds`` and not ``fresh`` (then the database is asked: an OPC UA session's activation)."""
         digest = hash_token(token)
-        t = time.monotonic()
+        t = self.clock()
         with self._lock:
             hit = self._cache.get(digest)
-        if hit and hit[1] > t:
+        if hit and hit[1] > t and not fresh:
             return hit[0]
         with self.store.read() as c:
             row = c.execute(select(tokens).where(tokens.c.hash == digest)).mappings().first()
@@ -158,6 +165,33 @@ class Authenticator:
         if row is None or row["revoked_at"] is not None:
             return None
         return Principal(row["id"], row["role"], row["cell"], row["label"])
+
+    def alive(self, token_id: str) -> bool:
+        """Whether the token ``token_id`` is still valid, asking the database at most every ``cache_seconds``
+        (an open OPC UA session's requests).  O(1) but for one indexed read per period."""
+        t = self.clock()
+        with self._lock:
+            hit = self._alive.get(token_id)
+        if hit and hit[1] > t:
+            return hit[0]
+        ok = self.by_id(token_id) is not None
+        with self._lock:
+            if len(self._alive) > 10_000:
+                self._alive.clear()
+            self._alive[token_id] = (ok, t + self.cache_seconds)
+        return ok
+
+    def revoked(self, token_ids) -> set[str]:
+        """Which of ``token_ids`` are revoked or gone (one read); they are no longer trusted from the cache."""
+        ids = set(token_ids)
+        with self.store.read() as c:
+            live = {r[0] for r in c.execute(select(tokens.c.id).where(tokens.c.id.in_(ids),
+                                                                      tokens.c.revoked_at.is_(None)))}
+        gone = ids - live
+        with self._lock:
+            for token_id in gone:
+                self._alive[token_id] = (False, float("inf"))   # a revocation is not undone
+        return gone
 
     # ------------------------------------------------------------ tickets for event streams
 

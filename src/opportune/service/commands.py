@@ -1,4 +1,4 @@
-"""``opportune serve`` and ``opportune token create|list|revoke``, added to the main command line by :func:`register`.
+"""``opportune serve``, ``opportune token create|list|revoke`` and ``opportune opcua cert``, added to the main command line by :func:`register`.
 
 Only typer is imported here at import time: FastAPI, uvicorn and SQLAlchemy
 (the ``service`` extra) load inside the commands, so the rest of the command
@@ -205,7 +205,7 @@ def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show
 
 def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from `opportune token list`"),
                  db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False)):
-    """Revoke a token (a running server stops accepting it within seconds)."""
+    """Revoke a token: a running server refuses it within 1 s (REVOCATION_SECONDS), on HTTP and OPC UA."""
     _require("sqlalchemy")
     from opportune.service.auth import TokenError, revoke_token
 
@@ -219,11 +219,46 @@ def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from 
     typer.echo(f"token {token_id} revoked", err=True)
 
 
+def opcua_cert(folder: str = typer.Argument(..., help="The folder to write the certificate and key into"),
+               app_uri: str = typer.Option("urn:opportune:client", "--app-uri",
+                                           help="The client's application URI (the client must connect with it)"),
+               trust_in: Optional[str] = typer.Option(None, "--trust-in",
+                                                      help="A server's PKI folder (--opcua-pki): copy the "
+                                                           "certificate into its trusted/ too")):
+    """Make an OPC UA client's certificate and key (for UaExpert, a PLC, ...) and say how the server trusts it."""
+    _require("asyncua")
+    from pathlib import Path
+
+    from opportune.service.opcua_security import client_certificate, client_files, shown
+
+    if not app_uri or len(app_uri) > 200 or not app_uri.isprintable() or ":" not in app_uri:
+        _fail(f"--app-uri {shown(app_uri)} is not a URI: give e.g. urn:my-company:cell-1")
+    cert, key = client_files(folder)
+    existed = cert.exists() and key.exists()
+    try:
+        cert, key = client_certificate(folder, app_uri, trust_in=trust_in)
+    except OSError as exc:
+        _fail(f"cannot write into {shown(folder)}: {exc.strerror or exc}: choose a folder you can write")
+    made = "kept (already made for this URI)" if existed else "wrote"
+    typer.echo(f"{made} {shown(cert)}: the client's certificate (DER)")
+    typer.echo(f"{made} {shown(key)}: its private key (PEM, readable by you only: keep it secret)")
+    typer.echo(f"the client connects with application URI {shown(app_uri)}, Basic256Sha256, Sign & Encrypt, "
+               "user name and password (the cell's token)")
+    if trust_in is not None:
+        typer.echo(f"trusted: copied into {shown(Path(trust_in) / 'trusted')} (no restart needed)")
+    else:
+        typer.echo(f"to trust it, copy {shown(cert)} into the server's trust list, the folder trusted/ in its "
+                   "--opcua-pki folder (default opcua-pki/trusted/); no restart needed")
+
+
 def register(app: typer.Typer) -> None:
-    """Add ``serve`` and ``token create|list|revoke`` to the main command line."""
+    """Add ``serve``, ``token create|list|revoke`` and ``opcua cert`` to the main command line."""
     app.command("serve")(serve)
     tokens = typer.Typer(help="Bearer tokens for cells and operators.", no_args_is_help=True)
     tokens.command("create")(token_create)
     tokens.command("list")(token_list)
     tokens.command("revoke")(token_revoke)
     app.add_typer(tokens, name="token")
+    opcua = typer.Typer(help="OPC UA clients' certificates.", no_args_is_help=True)
+    opcua.command("cert")(opcua_cert)
+    app.add_typer(opcua, name="opcua")

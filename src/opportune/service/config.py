@@ -9,6 +9,14 @@ from pathlib import Path
 DEFAULT_DB = "sqlite:///./opportune.db"
 DEFAULT_MAX_BODY = 1 << 20  # 1 MiB: a plan file of thousands of parts fits
 DB_ENV = "OPPORTUNE_DB"
+#: The longest a revoked token keeps working, on every protocol (``Settings.token_cache_seconds``'s default):
+#: a checked token is trusted this long without asking the database again (HTTP requests, an open event
+#: stream, an open OPC UA session's requests); every this often the OPC UA server closes the sessions of
+#: revoked tokens.  A new OPC UA session and a method call always ask the database.  One indexed read per
+#: token and period: 1 s costs nothing and keeps the window short.
+REVOCATION_SECONDS = 1.0
+#: The most buffer locations a run may have (HTTP's ``buffer_capacity``, OPC UA's ``BufferCapacity``).
+MAX_BUFFER_CAPACITY = 1_000_000
 
 
 def database_url(db: str | None) -> str:
@@ -28,7 +36,8 @@ class Settings:
 
     ``max_body`` bounds request bodies (bytes); ``token_cache_seconds`` is how
     long a checked token is trusted without asking the database again (a
-    revoked token stops working within that time); ``ticket_seconds`` is how
+    revoked token stops working within that time, over HTTP and OPC UA:
+    :data:`REVOCATION_SECONDS` by default); ``ticket_seconds`` is how
     long an SSE ticket can be used to open a stream; ``live_runs`` is how many
     runs keep their sequencer in memory (others are rebuilt from the event log
     on demand); ``count_seconds`` bounds one exact count (the policy's
@@ -59,7 +68,7 @@ class Settings:
 
     db_url: str = DEFAULT_DB
     max_body: int = DEFAULT_MAX_BODY
-    token_cache_seconds: float = 10.0
+    token_cache_seconds: float = REVOCATION_SECONDS
     ticket_seconds: float = 60.0
     live_runs: int = 512
     count_seconds: float = 10.0

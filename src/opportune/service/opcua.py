@@ -16,6 +16,7 @@ The address space (namespace :data:`NAMESPACE`, string node ids, so that a PLC c
       Cancel(RunId, RequestId) -> Seq, Answer, Replayed
       Cells/<cell>                            (its runs' RunChangedEventType events)
       Cells/<cell>/ActiveRuns                 the cell's active run ids
+      Cells/<cell>/LastRefusal                why the cell's last refused call was refused
       Runs/<id>/State, StateNumber, Seq, Cell, Plan, PlanId, Policy, PendingAction, Installed, Buffered,
                 AdmissibleCount, AdmissibleCountLog10, Explanation
 
@@ -29,15 +30,20 @@ A refused call answers a Bad status code (``BadInvalidArgument`` for a look that
 run, ``BadInvalidState`` for a call out of turn, ``BadNotFound``, ``BadUserAccessDenied``, ...)
 and changes nothing; the service's message and hint are in the diagnostic information of the
 argument at fault (``InputArgumentDiagnosticInfos[i].AdditionalInfo``, and its
-``InputArgumentResults[i]``).
+``InputArgumentResults[i]``; every argument's when none is at fault), and in the cell's ``LastRefusal``
+(for generic clients, which show a Bad status alone).
 
 Security: endpoints ``Basic256Sha256`` Sign & Encrypt only; the server's certificate is self-signed
 and generated on first start in ``PKI/own``; a client is trusted when its certificate is in
-``PKI/trusted`` (read again on every new secure channel).  Users authenticate with a user name (any,
+``PKI/trusted`` (read again at every check), checked when the channel opens and again at
+CreateSession and ActivateSession; a SecurityPolicy None channel serves discovery only
+(:mod:`opportune.service.opcua_security`).  Users authenticate with a user name (any,
 e.g. the cell's) and the service's token as password (``opportune token create``): a cell's token
 drives its cell's runs, an operator's reads; a cell reads the values of its own runs only
 (:class:`OwnCellOnly`).  Anonymous sessions are refused, unless the server listens on loopback only
-and ``anonymous_cell`` names the cell they act as (development).
+and ``anonymous_cell`` names the cell they act as (development).  A revoked token opens no session
+and calls nothing at once, and its open sessions are closed within
+:data:`~opportune.service.config.REVOCATION_SECONDS`.
 """
 
 from __future__ import annotations
@@ -56,13 +62,15 @@ from urllib.parse import urlparse
 
 from asyncua import Server, ua
 from asyncua.crypto.permission_rules import User, UserRole
-from asyncua.server.internal_session import InternalSession
 
 from opportune.formats.problems import CONTROL_CHARS
 from opportune.policies.named import POLICIES
 from opportune.service.auth import Principal, ensure_cell
+from opportune.service.config import MAX_BUFFER_CAPACITY
 from opportune.service.core import Core
 from opportune.service.errors import ApiError
+from opportune.service.opcua_security import Guard, GuardedServer, GuardedSession, TrustList, make_certificate, own_files
+from opportune.service.opcua_security import client_certificate, client_certificate_async  # noqa: F401 (its API)
 from opportune.service.plans import accept_upload
 
 log = logging.getLogger("opportune.service.opcua")
@@ -131,61 +139,6 @@ def loopback(host: str) -> bool:
         return False
 
 
-# ---------------------------------------------------------------- certificates
-
-def own_files(pki: Path) -> tuple[Path, Path]:
-    """The server's certificate (DER) and private key (PEM) in a PKI folder."""
-    return pki / "own" / "cert.der", pki / "own" / "key.pem"
-
-
-async def make_certificate(key: Path, cert: Path, app_uri: str, *, client: bool, host: str = "127.0.0.1") -> None:
-    """A self-signed application certificate (RSA 2048, a year) for ``app_uri`` with its key, unless both
-    exist and are valid for it; the key is readable by its owner only.  About 0.1-0.5 s to generate."""
-    from asyncua.crypto.cert_gen import setup_self_signed_certificate
-    from cryptography.x509.oid import ExtendedKeyUsageOID
-
-    key.parent.mkdir(parents=True, exist_ok=True)
-    cert.parent.mkdir(parents=True, exist_ok=True)
-    use = [ExtendedKeyUsageOID.CLIENT_AUTH if client else ExtendedKeyUsageOID.SERVER_AUTH]
-    await setup_self_signed_certificate(key, cert, app_uri, host, use, {"organizationName": "opportune"})
-    key.chmod(0o600)
-
-
-def client_certificate(folder: str | Path, app_uri: str = "urn:opportune:client", *,
-                       trust_in: str | Path | None = None) -> tuple[Path, Path]:
-    """A client's self-signed certificate and key in ``folder`` (made once), copied into the server's
-    trust list ``trust_in`` (a PKI folder) if given; ``(certificate, key)``.  The client must connect with
-    ``app_uri`` as its application URI.
-
-    >>> cert, key = client_certificate("cell-1-pki", trust_in="opcua-pki")        # doctest: +SKIP
-    """
-    folder = Path(folder)
-    cert, key = folder / "cert.der", folder / "key.pem"
-    asyncio.run(make_certificate(key, cert, app_uri, client=True))
-    if trust_in is not None:
-        trusted = Path(trust_in) / "trusted"
-        trusted.mkdir(parents=True, exist_ok=True)
-        (trusted / f"{re.sub(r'[^A-Za-z0-9._-]', '_', app_uri)}.der").write_bytes(cert.read_bytes())
-    return cert, key
-
-
-class TrustList:
-    """Certificate validation against the folder ``PKI/trusted`` (read again on each new secure channel, so
-    adding or removing a client's certificate needs no restart)."""
-
-    def __init__(self, folder: Path):
-        self.folder = folder
-
-    async def __call__(self, cert, app_description) -> None:
-        from asyncua.crypto.truststore import TrustStore
-        from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
-
-        store = TrustStore([self.folder], [])
-        await store.load()
-        options = CertificateValidatorOptions.TRUSTED_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
-        await CertificateValidator(options, store).validate(cert, app_description)
-
-
 # ---------------------------------------------------------------- who calls
 
 @dataclass
@@ -209,13 +162,13 @@ class Users:
             return Caller(role=UserRole.User, name=f"anonymous@{self.anonymous_cell}",
                           principal=Principal("anonymous", "cell", self.anonymous_cell, "anonymous"))
         token = password.decode("utf-8", "replace") if isinstance(password, bytes) else str(password)
-        principal = self.core.auth.token(token)
+        principal = self.core.auth.token(token, fresh=True)     # a revoked token: refused at once
         if principal is None:
             return None
         return Caller(role=UserRole.User, name=principal.cell or principal.label, principal=principal)
 
 
-class _Session(InternalSession):
+class _Session(GuardedSession):
     """A session that makes its user known to the method calls it makes (asyncua passes them only the object)."""
 
     async def call(self, params):
@@ -292,11 +245,18 @@ def _field(where: str | None) -> str:
     return re.split(r"[.\[]", where.removeprefix("body."), maxsplit=1)[0]
 
 
+def said(err: ApiError) -> str:
+    """A refusal as one line: its code, message and hint (what to do)."""
+    return f"{err.code}: {err.message}" + (f" ({err.hint})" if err.hint else "")
+
+
 def refusal(err: ApiError, names: list[str], fields: dict[str, str]) -> ua.CallMethodResult:
     """A Bad call result: the status, and the message and hint on the argument at fault (else on each)."""
     status = ua.StatusCode(status_of(err))
-    text = f"{err.code}: {err.message}" + (f" ({err.hint})" if err.hint else "")
+    text = said(err)
     at = fields.get(_field(err.where))
+    if at not in names:     # a field this method has no argument for: every argument carries the message
+        at = None
     res = ua.CallMethodResult(StatusCode=status)
     res.InputArgumentResults = [status if at in (None, n) else ua.StatusCode() for n in names]
     res.InputArgumentDiagnosticInfos = [ua.DiagnosticInfo(AdditionalInfo=text) if at in (None, n) else ua.DiagnosticInfo()
@@ -403,6 +363,8 @@ class OpcUaFront:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._changed: asyncio.Queue | None = None
         self._refresher: asyncio.Task | None = None
+        self._sweeper: asyncio.Task | None = None
+        self.guard: Guard | None = None
 
     # ------------------------------------------------------------ setting up
 
@@ -418,17 +380,17 @@ class OpcUaFront:
         (pki / "trusted").mkdir(parents=True, exist_ok=True)
         if self.options.anonymous_cell is not None:   # its runs belong to a cell like any other
             await asyncio.to_thread(ensure_cell, self.core.store, self.options.anonymous_cell)
-        server = Server(user_manager=Users(self.core, self.options.anonymous_cell))
+        trust = TrustList(pki / "trusted")
+        self.guard = guard = Guard(trust, self.core.auth, anonymous=self.options.anonymous_cell is not None)
+        server = GuardedServer(guard, user_manager=Users(self.core, self.options.anonymous_cell))
         await server.init()
-        iserver = server.iserver
-        iserver.create_session = lambda name, user=User(role=UserRole.Anonymous), external=False: _Session(
-            iserver, iserver.aspace, iserver.subscription_service, name, user=user, external=external)
+        guard.install(server.iserver, _Session)
         server.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
         server.set_server_name("opportune")
         await server.set_application_uri(APPLICATION_URI)
         await server.load_certificate(str(cert))
         await server.load_private_key(str(key))
-        server.set_certificate_validator(TrustList(pki / "trusted"))
+        server.set_certificate_validator(trust)
         policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
         tokens = [ua.UserNameIdentityToken]
         if self.options.anonymous_cell is not None:   # development, on loopback: no security at all
@@ -455,6 +417,7 @@ class OpcUaFront:
             quiet.disabled = False
         self.core.manager.watch(self._on_change)
         self._refresher = asyncio.create_task(self._refresh_loop())
+        self._sweeper = asyncio.create_task(guard.sweep_forever(self.core.auth.cache_seconds))
         for r in await asyncio.to_thread(self.core.manager.list, SYSTEM, status="active",
                                          limit=self.options.max_run_nodes):
             self._changed.put_nowait(r["id"])
@@ -474,8 +437,9 @@ class OpcUaFront:
             raise self._taken(exc) from None
 
     async def stop(self) -> None:
-        if self._refresher is not None:
-            self._refresher.cancel()
+        for task in (self._refresher, self._sweeper):
+            if task is not None:
+                task.cancel()
         if self.server is not None:
             await self.server.stop()
 
@@ -522,10 +486,10 @@ class OpcUaFront:
               _arg("Replayed", B, "A recorded answer")]),
         )
         for name, handler, inputs, outputs in methods:
-            await root.add_method(ua.NodeId(name, ns), ua.QualifiedName(name, ns), self._method(handler, inputs),
+            await root.add_method(ua.NodeId(name, ns), ua.QualifiedName(name, ns), self._method(handler, inputs, name),
                                   inputs, outputs)
 
-    def _method(self, handler, inputs: list[ua.Argument]):
+    def _method(self, handler, inputs: list[ua.Argument], method: str):
         names = [a.Name for a in inputs]
         fields = {"plan": "Plan", "policy": "Policy", "buffer_capacity": "BufferCapacity", "label": "Label",
                   "request_id": "RequestId", "run_id": "RunId", "visible": "Visible", "outcome": "Outcome",
@@ -549,7 +513,10 @@ class OpcUaFront:
                               "see the method's InputArguments", "body")
                 outputs = await handler(principal, *args)
             except ApiError as err:
-                return refusal(err, names, fields)
+                res = refusal(err, names, fields)
+                if principal is not None and principal.cell:     # where a generic client reads why
+                    await self._refused(principal.cell, f"{method}: {res.StatusCode.name}: {said(err)}")
+                return res
             return outputs
 
         return call
@@ -559,20 +526,21 @@ class OpcUaFront:
     async def _upload(self, principal: Principal, text) -> list[ua.Variant]:
         return [ua.Variant(await self._plan_id(principal, text), S)]
 
-    async def _plan_id(self, principal: Principal, text) -> str:
+    async def _plan_id(self, principal: Principal, text, name: str = "PlanText", where: str = "body.text") -> str:
+        """Check and store a plan's text (UploadPlan's ``PlanText``, or StartRun's ``Plan``); its id."""
         if not isinstance(text, str) or not text.strip():
-            raise bad("PlanText must be a plan file's text", "send the YAML, JSON or .IN2 text", "body.text")
+            raise bad(f"{name} must be a plan file's text", "send the YAML, JSON or .IN2 text", where)
         if principal.is_operator:
             raise ApiError(403, "forbidden", "an operator token reads plans and runs; only a cell's token can "
                            "upload a plan", "use the token of the cell that will assemble it")
         if _CONTROL.search(text):     # as over HTTP: no NUL or escape reaches the store or the logs
-            raise bad("PlanText holds a control character (such as U+0000 or ESC)", "send the plan file's text",
-                      "body.text")
+            raise bad(f"{name} holds a control character (such as U+0000 or ESC) at character "
+                      f"{_CONTROL.search(text).start() + 1}", "send the plan file's text as it is", where)
         raw = text.encode("utf-8", "surrogatepass")
         if len(raw) > self.core.settings.max_body:
             raise ApiError(413, "body_too_large", f"the plan is larger than the limit of {self.core.settings.max_body} "
                            "bytes", "send a smaller plan; the limit is set with `opportune serve --max-body`",
-                           where="body.text")
+                           where=where)
         _status, answer = await asyncio.to_thread(accept_upload, self.core.store, self.core.book, principal, raw, None)
         return answer["id"]
 
@@ -582,12 +550,14 @@ class OpcUaFront:
         if policy is not None and policy not in POLICIES:
             raise bad(f"unknown policy {policy!r}", f"use one of {', '.join(POLICIES)}, or empty for the default",
                       "body.policy")
-        if isinstance(capacity, bool) or not isinstance(capacity, int) or capacity > 1_000_000:
-            raise bad("BufferCapacity must be an integer up to 1,000,000 (-1: unlimited)", "e.g. 2", "body.buffer_capacity")
+        if isinstance(capacity, bool) or not isinstance(capacity, int) or not (
+                capacity == -1 or 0 <= capacity <= MAX_BUFFER_CAPACITY):    # HTTP's limits; -1 stands for its null
+            raise bad(f"BufferCapacity must be an integer from 0 to {MAX_BUFFER_CAPACITY:,}, or -1 for unlimited, not "
+                      f"{str(capacity)[:40]}", "e.g. 2 (buffer locations), or -1", "body.buffer_capacity")
         label = _text(label, "Label", "body.label", empty=True)
         if not isinstance(plan, str) or not plan:
             raise bad("Plan must be a plan id or a plan file's text", "use the PlanId UploadPlan answered", "body.plan")
-        plan_id = plan if PLAN_ID.match(plan) else await self._plan_id(principal, plan)
+        plan_id = plan if PLAN_ID.match(plan) else await self._plan_id(principal, plan, "Plan", "body.plan")
         # the body a POST /runs would send: the same RequestId answers the same over HTTP and OPC UA
         body = {"plan": plan_id, "cell": None, "buffer_capacity": None if capacity < 0 else capacity, "label": label,
                 "policy": policy}
@@ -752,17 +722,33 @@ class OpcUaFront:
 
     async def _cell_runs(self, cell: str) -> None:
         """The cell's ``ActiveRuns`` variable (its node made on the cell's first run)."""
+        await self._cell(cell)
+        var = self._cells[cell][0]
+        active = sorted(r for r, n in self._runs.items() if n.cell == cell and n.active)
+        await var.write_value(ua.Variant(active, I64))
+
+    async def _refused(self, cell: str, text: str) -> None:
+        """Write a refused call's status and message to ``Cells/<cell>/LastRefusal`` (a generic client shows a
+        method's Bad status only; it reads the why there)."""
+        try:
+            async with self._refreshing:
+                await self._cell(cell)
+                await self._cells[cell][2].write_value(ua.Variant(text[:2000], S))
+        except Exception:     # the refusal itself is answered; its copy for generic clients is a courtesy
+            log.warning("OPC UA: writing cell %s's LastRefusal failed", cell)
+
+    async def _cell(self, cell: str) -> None:
+        """The cell's object (made on its first run or refusal): its active runs, last refusal and runs' events."""
         ns = self.ns
-        if cell not in self._cells:    # the cell's object: its active runs, and its runs' events
+        if cell not in self._cells:
             obj = await self.cells.add_object(ua.NodeId(f"Cells/{cell}", ns), ua.QualifiedName(cell, ns))
             await obj.set_event_notifier([ua.EventNotifier.SubscribeToEvents])
             var = await obj.add_variable(ua.NodeId(f"Cells/{cell}/ActiveRuns", ns), ua.QualifiedName("ActiveRuns", ns),
                                          ua.Variant([], I64))
             await _one_dimension(var)
-            self._cells[cell] = (var, await self.server.get_event_generator(self.event_type, obj))
-        var = self._cells[cell][0]
-        active = sorted(r for r, n in self._runs.items() if n.cell == cell and n.active)
-        await var.write_value(ua.Variant(active, I64))
+            refused = await obj.add_variable(ua.NodeId(f"Cells/{cell}/LastRefusal", ns),
+                                             ua.QualifiedName("LastRefusal", ns), ua.Variant("", S))
+            self._cells[cell] = (var, await self.server.get_event_generator(self.event_type, obj), refused)
 
 
 # ---------------------------------------------------------------- running it
