@@ -2,7 +2,8 @@
 
 One server subprocess (OPC UA alone, loopback, default options); each probe is a raw TCP client speaking just
 enough OPC UA (HEL, then chunk headers that lie).  Per probe: the server's answer, the bytes the server process
-read (``/proc/PID/io`` ``rchar``: its socket reads, and the little else it reads meanwhile), its resident memory
+read from the probe's connections (as its log says when it closes one; an older server does not say), the CPU
+time it spent, its resident memory
 before, at its peak (sampled every 20 ms) and after, and how long the connection stayed open after the probe's
 last byte (or after it opened, for the probes about time).  Then a certificate-authenticated client drives a
 run, and the server's memory a minute after the last attack is compared with before the first.
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
+import re
 import socket
 import struct
 import tempfile
@@ -51,9 +53,11 @@ class Process:
         with open(f"/proc/{self.pid}/status") as f:
             return next(int(line.split()[1]) << 10 for line in f if line.startswith("VmRSS:"))
 
-    def read(self) -> int:
-        with open(f"/proc/{self.pid}/io") as f:
-            return next(int(line.split()[1]) for line in f if line.startswith("rchar:"))
+    def cpu(self) -> float:
+        """Seconds of CPU the server has used (user and system)."""
+        with open(f"/proc/{self.pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
     def _sample(self):
         while not self._stop.wait(0.02):
@@ -171,7 +175,7 @@ def huge_hello(endpoint, args):
     sock.sendall(hello(endpoint, 2 ** 32 - 1))
     got = answer(sock)
     sock.close()
-    return got, None
+    return got, "-"
 
 
 def trickle(endpoint, args):
@@ -205,7 +209,7 @@ def idle(endpoint, args):
 
 
 def crowd(endpoint, args):
-    socks, refused = [], 0
+    socks, refused, answers = [], 0, set()
     for _ in range(args.crowd):
         try:
             sock = connect(endpoint, 2.0)
@@ -216,16 +220,13 @@ def crowd(endpoint, args):
     time.sleep(0.5)
     for sock in socks:
         sock.settimeout(0.05)
-        try:
-            if not sock.recv(65536):
-                refused += 1
-        except (TimeoutError, BlockingIOError):
-            pass
-        except OSError:
+        got = answer(sock)        # an idle connection hears nothing
+        if got != "still open":
             refused += 1
+            answers.add(got)
     for sock in socks:
         sock.close()
-    return f"{args.crowd} idle connections: {args.crowd - refused} kept, {refused} refused", None
+    return f"{args.crowd - refused} kept, {refused} refused ({', '.join(sorted(answers)) or '-'})", "-"
 
 
 def parallel(endpoint, args):
@@ -280,11 +281,13 @@ def main() -> None:
         time.sleep(1.0)
         first = proc.rss()
         for name, probe in probes:
-            before, read = proc.rss(), proc.read()
+            before, cpu, log = proc.rss(), proc.cpu(), len(svc.log_text())
             proc.peak = before
             result, seconds = probe(svc.opcua_endpoint)
             time.sleep(0.5)
-            rows.append((name, result, proc.read() - read, before, proc.peak, proc.rss(), seconds))
+            said = [int(n) for n in re.findall(r"after (\d+) bytes read", svc.log_text()[log:])]
+            read = f"{sum(said):,} ({len(said)} closed)" if said else "not said"
+            rows.append((name, result, read, proc.cpu() - cpu, before, proc.peak, proc.rss(), seconds))
             print(f"{name}: {result}", flush=True)
         ok = normal_client(svc.opcua_endpoint, token, cert, key)
         time.sleep(args.settle)
@@ -292,11 +295,11 @@ def main() -> None:
         proc.stop()
     print(f"\nserver: opportune serve --opcua --no-http (pid {svc.proc.pid}); {os.cpu_count()} cores, "
           f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}\n")
-    print("| probe | result | bytes read by server | RSS before MB | peak MB | after MB | open for s |")
-    print("|---|---|---:|---:|---:|---:|---:|")
-    for name, result, read, before, peak, after, seconds in rows:
-        open_for = "still open" if seconds is None else f"{seconds:.2f}"
-        print(f"| {name} | {result} | {read:,} | {before / MB:.0f} | {peak / MB:.0f} | {after / MB:.0f} "
+    print("| probe | result | bytes read by server | server CPU s | RSS before MB | peak MB | after MB | open for s |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
+    for name, result, read, cpu, before, peak, after, seconds in rows:
+        open_for = "still open" if seconds is None else seconds if isinstance(seconds, str) else f"{seconds:.2f}"
+        print(f"| {name} | {result} | {read} | {cpu:.2f} | {before / MB:.0f} | {peak / MB:.0f} | {after / MB:.0f} "
               f"| {open_for} |")
     print(f"\nafter the attacks: {ok}; RSS before the first probe {first / MB:.0f} MB, "
           f"{args.settle:.0f} s after the last {last / MB:.0f} MB ({(last - first) / MB:+.0f} MB)")

@@ -125,6 +125,7 @@ class BoundedProtocol(OPCUAProtocol):
         super().__init__(*args, **kw)
         self.bounds, self.meter = bounds, meter
         self._pending = bytearray()      # bytes read, not yet handed to asyncua
+        self._received = 0               # bytes read from this connection
         self._chunk: int | None = None   # the size of the chunk being read (its header accepted)
         self._chunk_limit = HELLO_SIZE
         self._hello = False
@@ -148,8 +149,8 @@ class BoundedProtocol(OPCUAProtocol):
             _send_error(transport, ua.StatusCodes.BadTcpServerTooBusy, f"too many {which}: try again later")
             transport.close()
             meter.refused[f"too many {which}"] += 1
-            log.warning("OPC UA: refused a connection from %s: too many %s", transport.get_extra_info("peername"),
-                        which)
+            log.warning("OPC UA: closing the connection from %s after 0 bytes read: too many %s",
+                        transport.get_extra_info("peername"), which)
             return
         super().connection_made(transport)
         if self.transport is None:      # asyncua's own cap
@@ -181,15 +182,20 @@ class BoundedProtocol(OPCUAProtocol):
         if what == "hello" and not self._hello:
             self._refuse(_Refusal(ua.StatusCodes.BadTimeout, f"no HEL within {self.bounds.hello_seconds:g} s",
                                   "no HEL in time"))
-        elif what == "login" and not self.logged_in:
-            self._refuse(_Refusal(ua.StatusCodes.BadTimeout, "no activated session within "
-                                  f"{self.bounds.login_seconds:g} s", "no session in time"))
+        elif what == "login":
+            if not self.logged_in:
+                self._refuse(_Refusal(ua.StatusCodes.BadTimeout, "no activated session within "
+                                      f"{self.bounds.login_seconds:g} s", "no session in time"))
+            else:   # checked again: a connection whose session was closed does not stay open for ever
+                self._timers.append(asyncio.get_running_loop().call_later(self.bounds.login_seconds, self._expire,
+                                                                          "login"))
 
     def _refuse(self, refusal: _Refusal) -> None:
         """ERR with the refusal's status and reason, then close; nothing more is read."""
         self._done = True
         self.meter.refused[refusal.key] += 1
-        log.warning("OPC UA: closing the connection from %s: %s", self.peer_name, refusal.reason)
+        log.warning("OPC UA: closing the connection from %s after %d bytes read: %s", self.peer_name,
+                    self._received, refusal.reason)
         self._pending = bytearray()
         if self.transport is not None:
             _send_error(self.transport, refusal.code, refusal.reason)
@@ -199,6 +205,7 @@ class BoundedProtocol(OPCUAProtocol):
 
     def data_received(self, data: bytes) -> None:
         self.meter.received += len(data)
+        self._received += len(data)
         if self._done:
             return
         self._pending += data
@@ -289,6 +296,15 @@ class BoundedProtocol(OPCUAProtocol):
     async def _process_one_msg(self, header, buf) -> bool:
         try:
             return await super()._process_one_msg(header, buf)
+        except Exception as exc:
+            if self.logged_in:      # asyncua logs it and reads on
+                raise
+            # before login, a chunk asyncua cannot read (garbage, a failed security check) closes the connection:
+            # else a flood of tiny bad chunks is a flood of logged tracebacks
+            log.debug("OPC UA: a chunk from %s failed", self.peer_name, exc_info=True)
+            self._refuse(_Refusal(ua.StatusCodes.BadSecurityChecksFailed, "a chunk that cannot be read before "
+                                  f"login ({type(exc).__name__})", "bad chunk before login"))
+            return False
         finally:
             self._served(header)
 
