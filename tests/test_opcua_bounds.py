@@ -26,7 +26,7 @@ from asyncua.server.binary_server_asyncio import OPCUAProtocol  # noqa: E402
 from asyncua.server.internal_session import InternalSession  # noqa: E402
 from asyncua.ua.ua_binary import struct_from_binary, struct_to_binary, uatcp_to_binary  # noqa: E402
 
-from conftest import GEARBOX  # noqa: E402
+from conftest import GEARBOX, run_cli  # noqa: E402
 from opportune.service import opcua_transport as transport  # noqa: E402
 from opportune.service.auth import create_token  # noqa: E402
 from opportune.service.config import Settings  # noqa: E402
@@ -242,6 +242,7 @@ def test_a_hello_with_a_smaller_send_buffer_bounds_the_chunks_read(served, serve
     (header(b"HEL", BIG), codes.BadTcpMessageTooLarge),              # a HEL claiming 2 GiB
     (b"XYZF" + struct.pack("<I", 100), codes.BadTcpMessageTypeInvalid),
     (header(b"HEL", 4), codes.BadTcpMessageTypeInvalid),             # a size smaller than its header
+    (header(b"HEL", 17) + bytes(9), codes.BadTcpInternalError),      # a HEL that cannot be decoded
 ])
 def test_a_bad_first_header_is_refused(served, server, first, code):
     sock = connect(served[1])
@@ -330,6 +331,54 @@ def test_all_connections_together_hold_at_most_max_buffered(served, server):
     second.sendall(header(b"OPN", 60000, b"C"))
     refused_with(second, codes.BadTcpNotEnoughResources)
     first.close()
+
+
+class _Transport:
+    """What a protocol's transport is asked: pausing, resuming, writing, closing."""
+
+    def __init__(self):
+        self.paused, self.closed, self.written = False, False, b""
+
+    def pause_reading(self):
+        assert not self.paused
+        self.paused = True
+
+    def resume_reading(self):
+        assert self.paused
+        self.paused = False
+
+    def write(self, data):
+        self.written += data
+
+    def close(self):
+        self.closed = True
+
+
+class _IServer:
+    max_pending_messages_per_connection = 500
+
+
+def test_a_connection_is_not_read_while_its_waiting_chunks_pass_the_bound():
+    """Flow control, counted: chunks read faster than they are served stop the reading at QUEUED_BYTES (never
+    more than one chunk past it), and the reading resumes as they are served; nothing is refused or lost."""
+    bounds, meter = TransportBounds(), transport.TransportMeter()
+    protocol = transport.BoundedProtocol(_IServer(), [], [], [], bounds.limits(), bounds=bounds, meter=meter)
+    protocol.transport = link = _Transport()
+    size, n = transport.RECEIVE_BUFFER, 40
+    chunk = header(b"MSG", size) + bytes(size - 12)
+    protocol.data_received(hello("opc.tcp://x:1") + chunk * n)      # as if read at once
+    served, most = 0, 0
+    while not protocol.messages.empty():
+        most = max(most, protocol._queued)
+        assert meter.held == protocol._queued          # what is waiting is what is held
+        # not read while chunks read wait beyond the bound; read again once they are served
+        assert link.paused == (protocol._queued >= transport.QUEUED_BYTES)
+        assert link.paused or not protocol._pending
+        hdr, _buf = protocol.messages.get_nowait()
+        protocol._served(hdr)
+        served += 1
+    assert served == n + 1 and not link.paused and not link.closed and meter.held == 0
+    assert transport.QUEUED_BYTES <= most < transport.QUEUED_BYTES + size
 
 
 # ---------------------------------------------------------------- times and counts
@@ -457,6 +506,30 @@ def test_bounds_may_be_lowered_not_raised():
     with pytest.raises(ValueError, match="hello_seconds"):
         TransportBounds(hello_seconds=0)
     assert replace(bounds, login_seconds=1.5).login_seconds == 1.5
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--opcua-max-connections", "1000", "at most 100"), ("--opcua-login-seconds", "31", "at most 30"),
+    ("--opcua-login-seconds", "0", "above 0")])
+def test_serve_options_may_lower_the_bounds_not_raise_them(option, value, says):
+    result = run_cli("serve", "--opcua", option, value)
+    assert result.exit_code == 1 and option in result.output and says in result.output
+
+
+def test_serve_hands_the_lowered_bounds_to_the_server(tmp_path, monkeypatch):
+    """``opportune serve`` gives the OPC UA server the bounds asked (the tests above show the server keeps them);
+    HEL's time and the connections without a session are within them."""
+    import opportune.service.server
+
+    got = {}
+    monkeypatch.setattr(opportune.service.server, "serve", lambda **kw: got.update(kw))
+    result = run_cli("serve", "--db", tmp_path / "s.db", "--opcua", "--no-http", "--opcua-max-connections", "2",
+                     "--opcua-login-seconds", "3")
+    assert result.exit_code == 0, result.output
+    assert got["opcua"].transport == TransportBounds(max_connections=2, max_unauthenticated=2, login_seconds=3,
+                                                     hello_seconds=3)
+    run_cli("serve", "--db", tmp_path / "s.db", "--opcua", "--no-http")
+    assert got["opcua"].transport == TransportBounds()
 
 
 #: sha256 of asyncua 2.1's ``Server.start`` source (white space folded), which :meth:`BoundedServer.start` repeats

@@ -187,8 +187,8 @@ class BoundedProtocol(OPCUAProtocol):
                 self._refuse(_Refusal(ua.StatusCodes.BadTimeout, "no activated session within "
                                       f"{self.bounds.login_seconds:g} s", "no session in time"))
             else:   # checked again: a connection whose session was closed does not stay open for ever
-                self._timers.append(asyncio.get_running_loop().call_later(self.bounds.login_seconds, self._expire,
-                                                                          "login"))
+                self._timers[1] = asyncio.get_running_loop().call_later(self.bounds.login_seconds, self._expire,
+                                                                        "login")
 
     def _refuse(self, refusal: _Refusal) -> None:
         """ERR with the refusal's status and reason, then close; nothing more is read."""
