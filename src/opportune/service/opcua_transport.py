@@ -21,10 +21,13 @@ session whatever a connection does meanwhile.  :class:`BoundedProtocol` replaces
 * at most :data:`MAX_CONNECTIONS` connections, of which :data:`MAX_UNAUTHENTICATED` without an activated session:
   one more is answered ``Bad_TcpServerTooBusy`` and closed at once;
 * a connection without a whole HEL after :data:`HELLO_SECONDS`, or without an activated session after
-  :data:`LOGIN_SECONDS`, is answered ``Bad_Timeout`` and closed.
+  :data:`LOGIN_SECONDS` (and at each :data:`LOGIN_SECONDS` after), is answered ``Bad_Timeout`` and closed;
+* before login, a chunk asyncua cannot read (it would log a traceback and read on) is answered
+  ``Bad_SecurityChecksFailed`` and the connection closed.
 
 Memory a connection holds is therefore at most a message (before login :data:`LOGIN_MESSAGE`) plus
-:data:`QUEUED_BYTES` plus one read of the event loop (256 KiB), and is given back when it closes.
+:data:`QUEUED_BYTES` and a chunk waiting, plus one read of the event loop (256 KiB), and is given back when it
+closes.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ from asyncua.crypto import uacrypto
 from asyncua.server.binary_server_asyncio import BinaryServer, OPCUAProtocol
 from asyncua.ua.ua_binary import header_from_binary, struct_from_binary, uatcp_to_binary
 
-log = logging.getLogger("opportune.service.opcua")
+log = logging.getLogger(__name__)
 
 # ---------------------------------------------------------------- the limits (docs/opcua.md, "Bounded before login")
 
