@@ -9,7 +9,7 @@ last byte (or after it opened, for the probes about time).  Then a certificate-a
 run, and the server's memory a minute after the last attack is compared with before the first.
 
     .venv/bin/python benchmarks/probe_opcua.py                # the table, about 2 minutes
-    .venv/bin/python benchmarks/probe_opcua.py --stream-mb 10 --settle 5
+    .venv/bin/python benchmarks/probe_opcua.py --stream-mb 10 --settle 5 --only HEL
 
 It uses only the service's public pieces (no transport internals), so it also measures an older version.
 """
@@ -208,6 +208,21 @@ def idle(endpoint, args):
     return f"ACK, then {got}", None if closed is None else time.monotonic() - start
 
 
+def bad_chunks(endpoint, args):
+    sock = connect(endpoint, args.limit)
+    sock.sendall(hello(endpoint))
+    answer(sock)
+    tiny = (b"OPNF" + struct.pack("<I", 13) + struct.pack("<I", 0) + b"\0") * 10_000
+    try:
+        sock.sendall(tiny)
+    except OSError:
+        pass
+    start = time.monotonic()
+    got = answer(sock)
+    closed = wait_closed(sock, args.limit)
+    return f"{got}", None if closed is None else time.monotonic() - start
+
+
 def crowd(endpoint, args):
     socks, refused, answers = [], 0, set()
     for _ in range(args.crowd):
@@ -259,6 +274,7 @@ def main() -> None:
     ap.add_argument("--limit", type=float, default=45.0, help="most seconds a probe waits or streams")
     ap.add_argument("--crowd", type=int, default=200, help="idle connections opened at once")
     ap.add_argument("--settle", type=float, default=60.0, help="seconds after the attacks before the last RSS")
+    ap.add_argument("--only", default="", help="the probes whose name contains this")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="probe-opcua-"))
     cert, key = client_certificate(tmp / "client", APP, trust_in=tmp / "pki")
@@ -269,9 +285,11 @@ def main() -> None:
         ("HEL announcing 4 GiB buffers", lambda e: huge_hello(e, args)),
         ("HEL trickled, a byte a second", lambda e: trickle(e, args)),
         ("HEL, then no session", lambda e: idle(e, args)),
+        ("10,000 tiny bad OPN chunks after HEL", lambda e: bad_chunks(e, args)),
         (f"{args.crowd} idle connections", lambda e: crowd(e, args)),
         ("16 at once: MSG 2^31-1 + 10 MB each", lambda e: parallel(e, args)),
     ]
+    probes = [(name, probe) for name, probe in probes if args.only in name]
     rows = []
     with ServiceProcess(tmp / "probe.db", opcua=True, pki=tmp / "pki",
                         extra_args=("--no-http", "--no-access-log")) as svc:

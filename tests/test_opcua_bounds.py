@@ -381,6 +381,19 @@ def test_a_connection_is_not_read_while_its_waiting_chunks_pass_the_bound():
     assert transport.QUEUED_BYTES <= most < transport.QUEUED_BYTES + size
 
 
+def test_a_client_that_does_not_read_its_answers_is_not_read():
+    """asyncio says the answers waiting to be sent passed its high-water mark: nothing more is read (no more
+    answers made) until they have gone."""
+    bounds, meter = TransportBounds(), transport.TransportMeter()
+    protocol = transport.BoundedProtocol(_IServer(), [], [], [], bounds.limits(), bounds=bounds, meter=meter)
+    protocol.transport = link = _Transport()
+    protocol.pause_writing()
+    protocol.data_received(hello("opc.tcp://x:1") + header(b"MSG", 100) + bytes(88))
+    assert link.paused and protocol.messages.empty() and meter.held == 0
+    protocol.resume_writing()
+    assert not link.paused and protocol.messages.qsize() == 2
+
+
 # ---------------------------------------------------------------- times and counts
 
 def test_a_trickled_hello_is_closed_at_the_stated_time(served, server):

@@ -15,7 +15,8 @@ session whatever a connection does meanwhile.  :class:`BoundedProtocol` replaces
   is refused (``Bad_ConnectionRejected``), as is a second HEL or anything but HEL first
   (``Bad_TcpMessageTypeInvalid``);
 * a connection's chunks waiting to be served are at most :data:`QUEUED_BYTES` (or :data:`QUEUED_CHUNKS`): past
-  that the server stops reading it until they are served (TCP's own flow control: nothing is refused); all
+  that, or while its answers wait to be sent past the transport's high-water mark (a client that does not read
+  them), the server stops reading it (TCP's own flow control: nothing is refused); all
   connections together hold at most :data:`MAX_BUFFERED` bytes (chunks announced and not yet served, messages
   being assembled): a chunk that would pass it is refused (``Bad_TcpNotEnoughResources``);
 * at most :data:`MAX_CONNECTIONS` connections, of which :data:`MAX_UNAUTHENTICATED` without an activated session:
@@ -137,6 +138,7 @@ class BoundedProtocol(OPCUAProtocol):
         self._queued = 0                 # bytes of chunks handed to asyncua and not yet served
         self._reserved = 0               # this connection's share of meter.held
         self._paused = False
+        self._unsent = False             # answers not yet sent pass the transport's high-water mark
         self._done = False
         self._timers: list[asyncio.TimerHandle] = []
         self._queue_room = min(QUEUED_CHUNKS, (self.messages.maxsize or QUEUED_CHUNKS + 1) - 1)
@@ -212,6 +214,9 @@ class BoundedProtocol(OPCUAProtocol):
         if self._done:
             return
         self._pending += data
+        self._read_or_refuse()
+
+    def _read_or_refuse(self) -> None:
         try:
             self._read()
         except _Refusal as refusal:
@@ -222,7 +227,7 @@ class BoundedProtocol(OPCUAProtocol):
         here, before its body."""
         pending = self._pending
         while not self._done:
-            if self._queued >= QUEUED_BYTES or self.messages.qsize() >= self._queue_room:
+            if self._queued >= QUEUED_BYTES or self.messages.qsize() >= self._queue_room or self._unsent:
                 if not self._paused and self.transport is not None:
                     self._paused = True
                     self.transport.pause_reading()
@@ -311,6 +316,15 @@ class BoundedProtocol(OPCUAProtocol):
         finally:
             self._served(header)
 
+    def pause_writing(self) -> None:
+        """A client that does not read its answers is not read either (its answers would pile up in memory)."""
+        self._unsent = True
+
+    def resume_writing(self) -> None:
+        self._unsent = False
+        if self._paused and not self._done:
+            self._read_or_refuse()
+
     def _served(self, header) -> None:
         size = header.packet_size
         self._queued -= size
@@ -321,10 +335,7 @@ class BoundedProtocol(OPCUAProtocol):
             self._release(size + self._parts)
             self._parts = 0
         if self._paused and not self._done:
-            try:
-                self._read()
-            except _Refusal as refusal:
-                self._refuse(refusal)
+            self._read_or_refuse()
 
     def _release(self, size: int) -> None:
         size = min(size, self._reserved)
