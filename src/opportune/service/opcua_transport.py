@@ -88,7 +88,29 @@ class TransportBounds:
                                  f"not {value!r}")
 
     def lowered(self, **limits) -> "TransportBounds":
-        """These bounds with each of ``limits`` lowered to it (a higher value leaves the bound as it is)."""
+        """These bounds with each of ``limits`` lowered to it (a higher value leaves the bound as it is).
+
+        Parameters
+        ----------
+        **limits
+            Field names and values, e.g. ``max_connections=10``.
+
+        Returns
+        -------
+        TransportBounds
+            A new one; this one is unchanged.
+
+        Raises
+        ------
+        ValueError
+            A value of 0 or less (a bound cannot be switched off).
+
+        Examples
+        --------
+        >>> bounds = TransportBounds().lowered(max_connections=10, login_seconds=60)
+        >>> bounds.max_connections, bounds.login_seconds
+        (10, 30.0)
+        """
         return replace(self, **{name: min(value, getattr(self, name)) for name, value in limits.items()})
 
     @property
