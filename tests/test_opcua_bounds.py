@@ -325,8 +325,9 @@ def test_all_connections_together_hold_at_most_max_buffered(served, server):
     server.bounds = server.bounds.lowered(max_buffered=100_000)
     first, _ack = opened(endpoint)
     first.sendall(header(b"OPN", 60000, b"C"))      # announced, body not sent: 60,000 bytes reserved
-    settle(server, 0)
-    time.sleep(0.2)
+    deadline = time.monotonic() + 10
+    while server.meter.held < 60000 and time.monotonic() < deadline:
+        time.sleep(0.01)
     second, _ack = opened(endpoint)
     second.sendall(header(b"OPN", 60000, b"C"))
     refused_with(second, codes.BadTcpNotEnoughResources)
