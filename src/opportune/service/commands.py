@@ -85,10 +85,19 @@ def serve(
                                                   help="Development only, on a loopback endpoint: accept anonymous "
                                                        "OPC UA sessions without security, acting as cell CELL",
                                                   show_default=False),
+    opcua_max_connections: Optional[int] = typer.Option(
+        None, "--opcua-max-connections", metavar="N", show_default=False,
+        help="Lower the OPC UA server's cap on connections at once (default and most: 100; those without a "
+             "session at most 16 of them)"),
+    opcua_login_seconds: Optional[float] = typer.Option(
+        None, "--opcua-login-seconds", metavar="S", show_default=False,
+        help="Lower the seconds an OPC UA connection has to activate a session, else closed (default and most: "
+             "30; HEL within 10 of them)"),
 ):
     """Serve the sequencer over HTTP for robot cells, with the live dashboard at /; with --opcua, over OPC UA too."""
-    if not opcua and (not http or opcua_anonymous is not None):
-        _fail("--no-http and --opcua-anonymous are for OPC UA: add --opcua")
+    if not opcua and (not http or opcua_anonymous is not None or opcua_max_connections is not None
+                      or opcua_login_seconds is not None):
+        _fail("--no-http and the --opcua-... options are for OPC UA: add --opcua")
     _require("sqlalchemy", *(("fastapi", "uvicorn") if http else ()), *(("asyncua",) if opcua else ()))
     options = None
     if opcua:
@@ -98,7 +107,20 @@ def serve(
 
         from opportune.service.opcua import OpcUaError, OpcUaOptions
 
-        options = OpcUaOptions(endpoint=opcua_endpoint, pki=Path(opcua_pki), anonymous_cell=opcua_anonymous)
+        from opportune.service.opcua_transport import TransportBounds
+
+        lowered = {}
+        for name, value in (("max_connections", opcua_max_connections), ("login_seconds", opcua_login_seconds)):
+            if value is not None:
+                try:      # lower only: past a bound is refused, saying it
+                    lowered[name] = getattr(TransportBounds(**{name: value}), name)
+                except ValueError as exc:
+                    _fail(f"--opcua-{name.replace('_', '-')}: {exc}")
+        transport = TransportBounds(**lowered)
+        transport = transport.lowered(hello_seconds=transport.login_seconds,
+                                      max_unauthenticated=transport.max_connections)
+        options = OpcUaOptions(endpoint=opcua_endpoint, pki=Path(opcua_pki), anonymous_cell=opcua_anonymous,
+                               transport=transport)
         try:
             options.checked()
         except OpcUaError as exc:

@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import urlparse
 
-from asyncua import Server, ua
+from asyncua import ua
 from asyncua.crypto.permission_rules import User, UserRole
 
 from opportune.formats.problems import CONTROL_CHARS
@@ -71,6 +71,7 @@ from opportune.service.core import Core
 from opportune.service.errors import ApiError
 from opportune.service.opcua_security import Guard, GuardedServer, GuardedSession, TrustList, make_certificate, own_files
 from opportune.service.opcua_security import client_certificate, client_certificate_async  # noqa: F401 (its API)
+from opportune.service.opcua_transport import BoundedServer, TransportBounds
 from opportune.service.plans import accept_upload
 
 log = logging.getLogger("opportune.service.opcua")
@@ -106,6 +107,7 @@ class OpcUaOptions:
     pki: Path = Path("opcua-pki")
     anonymous_cell: str | None = None
     max_run_nodes: int = MAX_RUN_NODES
+    transport: TransportBounds = TransportBounds()   # sizes, counts and times before login (opcua_transport)
 
     def checked(self) -> tuple[str, int]:
         """The endpoint's host and port; :class:`OpcUaError` saying what to fix if it cannot be served."""
@@ -349,6 +351,10 @@ class _RunNodes:
     active: bool = True
 
 
+class _Server(GuardedServer, BoundedServer):
+    """asyncua's server with both: its channels guarded (opcua_security), its connections bounded (opcua_transport)."""
+
+
 class OpcUaFront:
     """The OPC UA server over a :class:`Core`; :meth:`start` and :meth:`stop` in one event loop."""
 
@@ -356,7 +362,7 @@ class OpcUaFront:
         self.core = core
         self.options = options
         self.host, self.port = options.checked()
-        self.server: Server | None = None
+        self.server: BoundedServer | None = None
         self.ns = 0
         self._runs: dict[int, _RunNodes] = {}
         self._cells: dict[str, object] = {}
@@ -382,7 +388,10 @@ class OpcUaFront:
             await asyncio.to_thread(ensure_cell, self.core.store, self.options.anonymous_cell)
         trust = TrustList(pki / "trusted")
         self.guard = guard = Guard(trust, self.core.auth, anonymous=self.options.anonymous_cell is not None)
-        server = GuardedServer(guard, user_manager=Users(self.core, self.options.anonymous_cell))
+        # every connection read within bounds, each chunk checked from its header (opcua_transport); a message
+        # bounded as HTTP bounds a body
+        bounds = self.options.transport.lowered(max_message=message_limit(self.core.settings.max_body))
+        server = _Server(guard, bounds=bounds, user_manager=Users(self.core, self.options.anonymous_cell))
         await server.init()
         guard.install(server.iserver, _Session)
         server.set_endpoint(f"opc.tcp://{self.host}:{self.port}")
@@ -396,13 +405,6 @@ class OpcUaFront:
         if self.options.anonymous_cell is not None:   # development, on loopback: no security at all
             policies.append(ua.SecurityPolicyType.NoSecurity)
             tokens.append(ua.AnonymousIdentityToken)
-        # A message is read whole before its method sees it: bounded, as HTTP bounds a body (the chunks are
-        # counted as they arrive, so a larger one is refused before it is all in memory).
-        from asyncua.common.connection import TransportLimits
-
-        size = message_limit(self.core.settings.max_body)
-        server.limits = TransportLimits(max_recv_buffer=65535, max_send_buffer=65535,
-                                        max_chunk_count=-(-size // 65535), max_message_size=size)
         server.set_security_policy(policies, permission_ruleset=OwnCellOnly(self))
         server.set_identity_tokens(tokens)
         self.server = server
