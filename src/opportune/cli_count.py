@@ -40,6 +40,12 @@ OPTIONS = {
 #: Threads the estimate may count and draw on, at most (``--threads``).
 MAX_THREADS = 256   # as opportune.engine.relaxmc.MAX_THREADS (not imported here: the help loads no engine)
 MIN_TIME_LIMIT = 0.1
+#: What the counts of this process built (their engines and memos), kept here instead of freed when
+#: :func:`opportune.launch.main` runs the command: freeing a long count's memos takes up to a second
+#: (a hub's tail distributions are millions of small allocations), so the process writes its answer
+#: and ends without freeing them.  None (a library or a test runs the command): freed as usual, after
+#: the answer is written.
+held: list | None = None
 
 
 class Refer(Exception):
@@ -130,7 +136,8 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
     seconds in all, reading the plan included.  ``load(path)`` gives the plan (or does not return),
     ``fail(message, as_json=...)`` reports a user's mistake (and does not return), ``write(line)``
     prints one line of the answer; ``threads``: threads that count and draw in an estimate (0: one per core).  See
-    :func:`opportune.engine.schedule.Schedule.count_result`."""
+    :func:`opportune.engine.schedule.Schedule.count_result`.  The engine is freed only after the answer is
+    written (or never: :data:`held`)."""
     from opportune.engine.deadline import Deadline
 
     # one deadline for the whole command: loading the engine, reading the plan and building its orders count too
@@ -166,6 +173,8 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
                 done = " ".join(prefix[:i]) or "nothing"
                 fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
         result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline, threads=threads)
+        if held is not None:
+            held.append(engine)
     interval = result.interval_log10
     if as_json:
         doc = {
