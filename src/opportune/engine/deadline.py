@@ -29,10 +29,12 @@ the deadline has passed: counting time
 
 from __future__ import annotations
 
+import gc
 import math
 import time
+from contextlib import contextmanager
 
-__all__ = ["BudgetExceeded", "Deadline", "as_deadline"]
+__all__ = ["BudgetExceeded", "Deadline", "as_deadline", "no_collection"]
 
 _perf = time.perf_counter
 _INF = math.inf
@@ -150,3 +152,26 @@ def as_deadline(value: "Deadline | float | None") -> Deadline:
     if isinstance(value, Deadline):
         return value
     return Deadline(value)
+
+
+@contextmanager
+def no_collection():
+    """Within the block, no automatic collection of reference cycles.
+
+    A full collection walks every container object of the whole process, not only what the block
+    made: 0.3 s for three million objects, a cost no deadline check inside the block can bound.  A
+    timed call holds it off (the engine's memos are tuples, ints and dicts without cycles, which
+    reference counting frees); the caller's next collection does that work, outside the call's time.
+    Blocks may nest (only the outermost one switches collection back on).  O(1).
+
+    >>> with no_collection():
+    ...     gc.isenabled()
+    False
+    """
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if collecting:
+            gc.enable()
