@@ -1357,14 +1357,13 @@ class Schedule:
             until = min(now + seconds, exact_end)
             if turn == FIRST_TURN and plain_only:
                 until = max(until, start + GRACE)
+            stop = False
             if not (plain_only and over_memo):
                 try:
                     return self._exact_by(terms, remaining, until, plain_only), early
                 except BudgetExceeded as exc:
                     if exc.reason != "time":        # each call may add max_memo entries: not one turn after another
-                        if not plain_only:
-                            return None, early
-                        over_memo = True
+                        stop, over_memo = not plain_only, True
                 if plain_only:
                     # the plain turn was the engine's probe of the plain count: its turn looks for a hub at once
                     for _, c in terms:
@@ -1382,6 +1381,8 @@ class Schedule:
                                             seed=seed, whole=False, count_share=EARLY_COUNT_SHARE,
                                             threads=threads, deadline=Deadline(min(exact_end, time.perf_counter()
                                                                                    + EARLY_SECONDS)))
+            if stop:
+                return None, early
             if not plain_only:
                 turn *= 2
             plain_only = not plain_only
