@@ -29,9 +29,9 @@ OPTIONS = {
     "after": ("--after", str, None, 'Parts installed first, in order: "ca ba" or "ca,ba"'),
     "as_json": ("--json", None, False, JSON_HELP),
     "time_limit": ("--time-limit", float, 10.0,
-                   ("Seconds in all, reading the plan included; the answer comes within them plus 0.25 s: a "
-                    "tenth for the plain exact count, then exact counting through a hub, then (only if still "
-                    "needed) an estimate with an interval")),
+                   ("Seconds in all, reading the plan included; the answer comes within them plus 0.25 s: "
+                    "about two thirds for the exact count (plainly and through a hub, in turns), then (only if "
+                    "still needed) an estimate with an interval")),
     "max_memo": ("--max-memo", int, 0, "Memo entries for an exact count before estimating (0: as many as "
                  "a quarter of the machine's memory holds)"),
     "threads": ("--threads", int, 0, "Threads that count and draw when the count is estimated (0: one per "
@@ -152,8 +152,8 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
 
     plan = load(plan_file)
     prefix = [p for p in (after or "").replace(",", " ").split() if p]
-    # A tenth of the time for the plain exact count; the rest for the hub split and, if needed, the estimate.
-    # Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
+    # The engine's time limit (a tenth) and count_result's (the rest) make the one deadline: the exact
+    # count takes turns until about two thirds of it, the estimate the rest (Schedule.count_result).  Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
     # take seconds); past it, the interval that holds without them.
     try:
         engine = OrderEngine(plan, max_memo=max_memo, time_limit=time_limit / 10, deadline=deadline.share(0.5))

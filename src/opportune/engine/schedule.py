@@ -1181,20 +1181,23 @@ class Schedule:
         seconds from the call, or ``deadline`` if sooner, where ``plain`` is the engine's own time
         limit, or a tenth of ``time_limit`` if it has none.  The call returns within that plus
         ``COUNT_MARGIN`` (0.25 s of CPU time, measured at most 0.1 s past it on orders of up to
-        10,000 elements: the granularity of the deadline checks and assembling the answer).  Phases:
+        10,000 elements: the granularity of the deadline checks and assembling the answer; no automatic
+        cycle collection runs inside it, see :func:`~opportune.engine.deadline.no_collection`).  Phases:
 
         (The phases' times below are scaled down if ``deadline`` leaves less than ``plain +
         time_limit``, and the exact phases end early enough to leave the estimate its pass over
         each order, ``ESTIMATE_RESERVE`` seconds per element.  A deadline already passed still
-        gives the plain count and the estimate ``GRACE`` seconds each: a small plan is exact.)
+        gives the first turn and the estimate ``GRACE`` seconds each: a small plan is exact.)
 
-        1. the plain exact count, until ``plain`` seconds: each counter by itself,
-           choosing a method per hard piece (see :class:`~opportune.engine.count.Counter`);
-        2. if that did not finish, the engine's exact count (which also looks
-           for a hub: :mod:`opportune.engine.hub`) continues for
-           ``exact_share`` of ``time_limit`` from where it stopped (the memos
-           and each piece's progress are kept);
-        3. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
+        1. the exact count until ``plain + exact_share * time_limit`` seconds (the memos and each
+           piece's progress kept from turn to turn): the plain count (each counter by itself, choosing a
+           method per hard piece: see :class:`~opportune.engine.count.Counter`) and the engine's count
+           (which looks for a hub and counts through it: :mod:`opportune.engine.hub`) in turns of
+           ``FIRST_TURN`` seconds, doubling every round, with relaxation Monte Carlo's go (at most
+           ``EARLY_SECONDS``) after the first round.  No turn's length depends on ``time_limit``, which
+           only cuts the turns short: an exact count that fits one limit comes at the same moment with
+           any longer one;
+        2. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
            gets the rest, shared between the inclusion–exclusion terms (without its own hub split
            if the exact phases looked for a hub already): certain bounds from each order and
            Knuth's estimator from its first path on, then sequential Monte Carlo runs where they
