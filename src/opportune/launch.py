@@ -70,21 +70,22 @@ def main() -> None:
 def end(code, held: list) -> None:
     """End the process now, without freeing what the count built, once its answer is out: freeing a long
     count's memos (millions of small allocations) took up to a second past ``--time-limit``.  Only when a
-    count built something (nothing else is skipped then: no exit handler runs on this path), and only if
-    the answer could be written; otherwise the usual exit."""
+    count built something; the exit handlers still run (``atexit``: a coverage tool's, a test's), only the
+    freeing of the interpreter's objects is skipped.  If the answer cannot be written (a closed pipe), or
+    the exit status is not a number, the usual exit."""
     if not any(x is not None for x in held):
-        return
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (OSError, ValueError):
         return
     if code is None:
         code = 0
     elif not isinstance(code, int):     # SystemExit("message"): as Python prints it
         return
+    import atexit
+
+    try:
+        sys.stdout.flush()
+        atexit._run_exitfuncs()
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        return
     os._exit(code)
-
-
-if __name__ == "__main__":
-    main()
