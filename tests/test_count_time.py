@@ -118,3 +118,35 @@ def test_a_timed_count_runs_no_collection_of_the_callers_heap(monkeypatch):
     assert not any(during for during, _ in started) and started, started
     assert gc.isenabled()
     assert not result.exact and result.interval_log10 is not None
+
+
+def test_collection_is_back_on_once_the_last_of_overlapping_timed_blocks_ends():
+    """Counts in several threads (a service): the first block to end must not switch collection back on
+    while another still runs, and the last one must."""
+    import threading
+
+    from opportune.engine.deadline import no_collection
+
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    seen = {}
+
+    def first():
+        with no_collection():
+            first_in.set()
+            second_in.wait(10)
+        first_out.set()
+
+    def second():
+        first_in.wait(10)
+        with no_collection():
+            second_in.set()
+            first_out.wait(10)
+            seen["after the first ended"] = gc.isenabled()
+
+    threads = [threading.Thread(target=first), threading.Thread(target=second)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(20)
+    assert seen == {"after the first ended": False}
+    assert gc.isenabled()

@@ -32,6 +32,7 @@ from __future__ import annotations
 import gc
 import math
 import time
+from _thread import allocate_lock     # threading.Lock without threading's import
 from contextlib import contextmanager
 
 __all__ = ["BudgetExceeded", "Deadline", "as_deadline", "no_collection"]
@@ -154,6 +155,10 @@ def as_deadline(value: "Deadline | float | None") -> Deadline:
     return Deadline(value)
 
 
+_held = [0, False]              # blocks of no_collection() open in any thread; whether the first switched it off
+_held_lock = allocate_lock()
+
+
 @contextmanager
 def no_collection():
     """Within the block, no automatic collection of reference cycles.
@@ -162,16 +167,22 @@ def no_collection():
     made: 0.3 s for three million objects, a cost no deadline check inside the block can bound.  A
     timed call holds it off (the engine's memos are tuples, ints and dicts without cycles, which
     reference counting frees); the caller's next collection does that work, outside the call's time.
-    Blocks may nest (only the outermost one switches collection back on).  O(1).
+    Blocks may nest and overlap in threads (a service counting for several requests): collection is
+    back on, if it was on before the first, once the last block ends.  O(1).
 
     >>> with no_collection():
     ...     gc.isenabled()
     False
     """
-    collecting = gc.isenabled()
-    gc.disable()
+    with _held_lock:
+        if _held[0] == 0:
+            _held[1] = gc.isenabled()
+            gc.disable()
+        _held[0] += 1
     try:
         yield
     finally:
-        if collecting:
-            gc.enable()
+        with _held_lock:
+            _held[0] -= 1
+            if _held[0] == 0 and _held[1]:
+                gc.enable()
