@@ -69,7 +69,7 @@ FIRST_TURN = 0.05
 #: The plain count's turn, as a share of the engine's, once the engine found a hub: ARC111's plain
 #: count never finishes, its hub count takes about 4 s (a quarter more: 5 s, within the default limit).
 PLAIN_SHARE = 0.25
-#: Most seconds relaxation Monte Carlo takes in count_result's exact phase, after the first round of
+#: Most seconds relaxation Monte Carlo takes in count_result's exact phase, after the second round of
 #: turns (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as soon as
 #: its interval is within EARLY_ERROR (a tenth of a second to two seconds on sparse orders of 64-100
 #: elements), and gives the time back at once where it cannot hit; the exact count has the rest.  A
@@ -1194,7 +1194,7 @@ class Schedule:
            method per hard piece: see :class:`~opportune.engine.count.Counter`) and the engine's count
            (which looks for a hub and counts through it: :mod:`opportune.engine.hub`) in turns of
            ``FIRST_TURN`` seconds, doubling every round, with relaxation Monte Carlo's go (at most
-           ``EARLY_SECONDS``) after the first round.  No turn's length depends on ``time_limit``, which
+           ``EARLY_SECONDS``) after the second round.  No turn's length depends on ``time_limit``, which
            only cuts the turns short: an exact count that fits one limit comes at the same moment with
            any longer one;
         2. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
@@ -1340,8 +1340,10 @@ class Schedule:
         The plain count (each term's counter by itself, its own method per hard piece) and the engine's
         count (which looks for a hub and counts through it: :meth:`OrderEngine.count`) take turns, each
         resuming from its memos: ``FIRST_TURN`` seconds each, then twice as long at every round, the
-        plain count a ``PLAIN_SHARE`` of the engine's turn once a hub is found.  After the first round,
-        relaxation Monte Carlo (one strategy) takes up to ``EARLY_SECONDS``.  No turn's length depends
+        plain count a ``PLAIN_SHARE`` of the engine's turn once a hub is found.  After the second round
+        (or when the memo budget ends the exact count), relaxation Monte Carlo (one strategy) takes up to
+        ``EARLY_SECONDS``.  The turns end on the clock: an exact count that needs about as long as a
+        round may come in that round or the next, whatever the limit.  No turn's length depends
         on the time limit, which only cuts the sequence short: a count that finishes within a limit
         finishes at the same moment within any longer one (a plain phase of a tenth of the limit made
         an order that its hub counts in 0.05 s exact in 1.4 s with 3 s and in 3.2 s with 20 s).
@@ -1373,7 +1375,7 @@ class Schedule:
                         self.engine._probe_left[c] = 0
             if time.perf_counter() >= exact_end:
                 return None, early
-            if not plain_only and not tried and len(terms) == 1:
+            if not plain_only and (turn > FIRST_TURN or stop) and not tried and len(terms) == 1:
                 # relaxation Monte Carlo gets its go now, while a narrow interval is still possible, to a
                 # looser error than asked (the estimate phase may narrow it, going on with its draws: its
                 # memos, at most relaxmc.MAX_BYTES, stay until count_result returns), for a fixed time
