@@ -1,5 +1,8 @@
 """`opportune count --time-limit T` keeps its limit plus COUNT_MARGIN, and a longer limit never makes an exact
-count slower (orders from the `pigs` Bayesian network, in tests/data).
+count slower.
+
+The orders: sub-DAGs of 128 and 100 nodes of the `pigs` Bayesian network (bnlearn repository, as shipped with
+linext's instances), in SALBP .IN2 form in tests/data.
 
 Time is asserted as CPU time (of the command's process, or of this thread), never wall time.
 """
