@@ -177,24 +177,27 @@ def test_schedule_count_result_is_exact_through_a_hub_when_the_plain_budget_is_t
     assert splits and all(v is not None for v in splits)      # it was the hub split that made it exact
 
 
-def test_count_result_gives_the_plain_count_a_tenth_of_its_time_unless_the_engine_has_a_limit(monkeypatch):
-    """Without this, a plan too large for the plain counter (ARC111) spent half a minute filling the memo
-    budget before the hub split or the estimate got their turn."""
-    from opportune.engine import OrderEngine, Schedule
+def test_count_result_gives_the_plain_count_turns_of_a_fixed_length_whatever_the_limit(monkeypatch):
+    """The plain count's first turn is FIRST_TURN seconds, with any time limit and any time limit of the
+    engine (it used to be a tenth of the limit: a plan that its hub counts at once waited for it, longer
+    the longer the limit), and no count's time limit is left changed."""
     from opportune import make_plan
+    from opportune.engine import OrderEngine, Schedule
+    from opportune.engine.schedule import FIRST_TURN
 
     plan = make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["b", "c"]})
-    given = []
-    real = OrderEngine.time_limited
+    turns = []
+    real = Schedule._exact_by
 
-    def recording(self, seconds):
-        given.append(seconds)
-        return real(self, seconds)
+    def recording(self, terms, remaining, until, plain_only):
+        turns.append((plain_only, until - time.perf_counter()))
+        return real(self, terms, remaining, until, plain_only)
 
-    monkeypatch.setattr(OrderEngine, "time_limited", recording)
-    engine = OrderEngine(plan)
-    assert Schedule(engine).count_result(time_limit=10).value == 3
-    assert given == [1.0] and engine.time_limit is None
-    assert engine.counter(engine.all_strategies).time_limit is None
-    assert Schedule(OrderEngine(plan, time_limit=4.0)).count_result(time_limit=10).value == 3
-    assert given == [1.0, 4.0]
+    monkeypatch.setattr(Schedule, "_exact_by", recording)
+    for limit, engine_limit in ((10, None), (100, None), (10, 4.0)):
+        engine = OrderEngine(plan, time_limit=engine_limit)
+        turns.clear()
+        assert Schedule(engine).count_result(time_limit=limit).value == 3
+        assert len(turns) == 1 and turns[0][0] and FIRST_TURN - 0.01 <= turns[0][1] <= FIRST_TURN
+        assert engine.time_limit == engine_limit
+        assert engine.counter(engine.all_strategies).time_limit == engine_limit

@@ -29,9 +29,9 @@ OPTIONS = {
     "after": ("--after", str, None, 'Parts installed first, in order: "ca ba" or "ca,ba"'),
     "as_json": ("--json", None, False, JSON_HELP),
     "time_limit": ("--time-limit", float, 10.0,
-                   ("Seconds in all, reading the plan included; the answer comes within them plus 0.25 s: a "
-                    "tenth for the plain exact count, then exact counting through a hub, then (only if still "
-                    "needed) an estimate with an interval")),
+                   ("Seconds in all, reading the plan included; the answer comes within them plus 0.25 s: "
+                    "about two thirds for the exact count (plainly and through a hub, in turns), then (only if "
+                    "still needed) an estimate with an interval")),
     "max_memo": ("--max-memo", int, 0, "Memo entries for an exact count before estimating (0: as many as "
                  "a quarter of the machine's memory holds)"),
     "threads": ("--threads", int, 0, "Threads that count and draw when the count is estimated (0: one per "
@@ -40,6 +40,12 @@ OPTIONS = {
 #: Threads the estimate may count and draw on, at most (``--threads``).
 MAX_THREADS = 256   # as opportune.engine.relaxmc.MAX_THREADS (not imported here: the help loads no engine)
 MIN_TIME_LIMIT = 0.1
+#: What the counts of this process built (their engines and memos), kept here instead of freed when
+#: :func:`opportune.launch.main` runs the command: freeing a long count's memos takes up to a second
+#: (a hub's tail distributions are millions of small allocations), so the process writes its answer
+#: and ends without freeing them.  None (a library or a test runs the command): freed as usual, after
+#: the answer is written.
+held: list | None = None
 
 
 class Refer(Exception):
@@ -130,7 +136,8 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
     seconds in all, reading the plan included.  ``load(path)`` gives the plan (or does not return),
     ``fail(message, as_json=...)`` reports a user's mistake (and does not return), ``write(line)``
     prints one line of the answer; ``threads``: threads that count and draw in an estimate (0: one per core).  See
-    :func:`opportune.engine.schedule.Schedule.count_result`."""
+    :func:`opportune.engine.schedule.Schedule.count_result`.  The engine is freed only after the answer is
+    written (or never: :data:`held`)."""
     from opportune.engine.deadline import Deadline
 
     # one deadline for the whole command: loading the engine, reading the plan and building its orders count too
@@ -145,8 +152,8 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
 
     plan = load(plan_file)
     prefix = [p for p in (after or "").replace(",", " ").split() if p]
-    # A tenth of the time for the plain exact count; the rest for the hub split and, if needed, the estimate.
-    # Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
+    # The engine's time limit (a tenth) and count_result's (the rest) make the one deadline: the exact
+    # count takes turns until about two thirds of it, the estimate the rest (Schedule.count_result).  Building the strategies' orders gets at most half of what is left (64 strategies over 10,000 parts
     # take seconds); past it, the interval that holds without them.
     try:
         engine = OrderEngine(plan, max_memo=max_memo, time_limit=time_limit / 10, deadline=deadline.share(0.5))
@@ -166,6 +173,8 @@ def run(plan_file, after: str | None, as_json: bool, time_limit: float, max_memo
                 done = " ".join(prefix[:i]) or "nothing"
                 fail(f"--after: {exc} (after installing {done}); the prefix is not admissible", as_json=as_json)
         result = sched.count_result(time_limit=time_limit * 9 / 10, deadline=deadline, threads=threads)
+        if held is not None:
+            held.append(engine)
     interval = result.interval_log10
     if as_json:
         doc = {

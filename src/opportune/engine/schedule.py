@@ -33,7 +33,7 @@ from functools import lru_cache
 from itertools import combinations
 
 from opportune.engine.count import MAX_TOTAL, Counter, entries_within
-from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, no_collection
 from opportune.engine.hub import HubPath
 from opportune.engine.memory import memory_total
 from opportune.engine.poset import CycleError, Poset, bits, byte_unions
@@ -62,12 +62,19 @@ HUB_PROBE = 100_000  # new memo entries a plain count may add before counting th
 COUNT_MARGIN = 0.25  # seconds Schedule.count_result may take past its deadline (checks' granularity, the answer)
 ESTIMATE_RESERVE = 3e-5  # seconds per element an estimate needs for its bounds and first path (~0.25 s for 10,000)
 GRACE = 0.05  # seconds the exact count and the estimate each get in count_result when its deadline has passed
-#: Share of count_result's exact phase that relaxation Monte Carlo may take first, when the plain count
-#: did not finish (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as
-#: soon as its interval is within EARLY_ERROR (a tenth of a second to a few seconds on sparse orders of
-#: 64-100 elements), and gives the time back at once where it cannot hit; the exact count has the rest.
-#: (A half left orders of 80-100 elements at ±12-23% within 3 s, and the exact count had no chance there.)
-EARLY_ESTIMATE = 0.9
+#: Seconds of the first turn of the plain count and of the engine's count in count_result's exact phase
+#: (each later round twice as long; see Schedule._exact_turns): small orders are exact within the
+#: first, and an order that its hub counts in a tenth of a second is not held up by the plain count.
+FIRST_TURN = 0.05
+#: The plain count's turn, as a share of the engine's, once the engine found a hub: ARC111's plain
+#: count never finishes, its hub count takes about 4 s (a quarter more: 5 s, within the default limit).
+PLAIN_SHARE = 0.25
+#: Most seconds relaxation Monte Carlo takes in count_result's exact phase, after the second round of
+#: turns (one strategy; :func:`~opportune.engine.estimate.relaxation_estimate`): it stops as soon as
+#: its interval is within EARLY_ERROR (a tenth of a second to two seconds on sparse orders of 64-100
+#: elements), and gives the time back at once where it cannot hit; the exact count has the rest.  A
+#: fixed time, not a share of the limit: a longer limit must not make an exact count later.
+EARLY_SECONDS = 2.0
 #: Share of that first estimate's time for counting its relaxations (their own time): where its draws
 #: never hit (ARC111), it is found hopeless after this, so that the exact count (through a hub there)
 #: loses little (ARC111 exact in about 6 s of the default 10); a quarter left sparse orders of 100
@@ -1176,20 +1183,23 @@ class Schedule:
         seconds from the call, or ``deadline`` if sooner, where ``plain`` is the engine's own time
         limit, or a tenth of ``time_limit`` if it has none.  The call returns within that plus
         ``COUNT_MARGIN`` (0.25 s of CPU time, measured at most 0.1 s past it on orders of up to
-        10,000 elements: the granularity of the deadline checks and assembling the answer).  Phases:
+        10,000 elements: the granularity of the deadline checks and assembling the answer; no automatic
+        cycle collection runs inside it, see :func:`~opportune.engine.deadline.no_collection`).  Phases:
 
         (The phases' times below are scaled down if ``deadline`` leaves less than ``plain +
         time_limit``, and the exact phases end early enough to leave the estimate its pass over
         each order, ``ESTIMATE_RESERVE`` seconds per element.  A deadline already passed still
-        gives the plain count and the estimate ``GRACE`` seconds each: a small plan is exact.)
+        gives the first turn and the estimate ``GRACE`` seconds each: a small plan is exact.)
 
-        1. the plain exact count, until ``plain`` seconds: each counter by itself,
-           choosing a method per hard piece (see :class:`~opportune.engine.count.Counter`);
-        2. if that did not finish, the engine's exact count (which also looks
-           for a hub: :mod:`opportune.engine.hub`) continues for
-           ``exact_share`` of ``time_limit`` from where it stopped (the memos
-           and each piece's progress are kept);
-        3. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
+        1. the exact count until ``plain + exact_share * time_limit`` seconds (the memos and each
+           piece's progress kept from turn to turn): the plain count (each counter by itself, choosing a
+           method per hard piece: see :class:`~opportune.engine.count.Counter`) and the engine's count
+           (which looks for a hub and counts through it: :mod:`opportune.engine.hub`) in turns of
+           ``FIRST_TURN`` seconds, doubling every round, with relaxation Monte Carlo's go (at most
+           ``EARLY_SECONDS``) after the second round.  No turn's length depends on ``time_limit``, which
+           only cuts the turns short: an exact count that fits one limit comes at the same moment with
+           any longer one;
+        2. if still not exact, the estimate (:func:`~opportune.engine.estimate.estimate_count`)
            gets the rest, shared between the inclusion–exclusion terms (without its own hub split
            if the exact phases looked for a hub already): certain bounds from each order and
            Knuth's estimator from its first path on, then sequential Monte Carlo runs where they
@@ -1213,39 +1223,24 @@ class Schedule:
         3
         """
 
-        from opportune.engine.deadline import Deadline, as_deadline
-
         if not estimate:
             if deadline is None:
                 return CountResult(self.engine.count(self.mask, self.consistent))
             with self.engine.deadline(as_deadline(deadline).at):
                 return CountResult(self.engine.count(self.mask, self.consistent))
+        with no_collection():       # a full collection of the caller's heap is no part of this call's time
+            return self._count_timed(rel_error, time_limit, seed, exact_share, as_deadline(deadline), threads)
+
+    def _count_timed(self, rel_error: float, time_limit: float, seed: int, exact_share: float, deadline: Deadline,
+                     threads: int) -> CountResult:
+        """:meth:`count_result` with an estimate (see there)."""
         start = time.perf_counter()
         plain = self.engine.time_limit if self.engine.time_limit is not None else time_limit / 10
-        end = as_deadline(deadline).within(plain + time_limit)
+        end = deadline.within(plain + time_limit)
         try:
             terms = list(self.engine._terms(self.consistent, end))
         except BudgetExceeded:
             terms = None
-
-        def exact_by(until: float, plain_only: bool) -> CountResult:
-            # every count of the engine stops at `until`: the engine's deadline sets each count's time
-            # limit when it starts, and the counters' own deadline holds whatever runs after that
-            saved = [(c, c.deadline) for _, c in terms]
-            for c, _ in saved:
-                c.deadline = until
-            try:
-                # the plain phase: each count its `plain` seconds; the engine's phase: only `until`
-                # (not the engine's time limit per count, which cut it short at `plain` from its start)
-                with self.engine.time_limited(plain if plain_only else None), self.engine.deadline(until):
-                    if plain_only:      # each term's counter by itself (its own choice of method per piece)
-                        remaining = self.engine.full & ~self.mask
-                        for _, c in terms:
-                            c.count(remaining)
-                    return CountResult(self.count())
-            finally:
-                for c, d in saved:
-                    c.deadline = d
 
         remaining = self.engine.full & ~self.mask
         n = remaining.bit_count()
@@ -1257,29 +1252,10 @@ class Schedule:
             avail = max(0.0, end.remaining())
             scale = min(1.0, avail / (plain + time_limit)) if plain + time_limit > 0 else 0.0
             last = end.at - min(avail / 2, ESTIMATE_RESERVE * n * len(terms))
-            for until, plain_only in ((start + plain * scale, True),
-                                      (start + (plain + exact_share * time_limit) * scale, False)):
-                # a deadline spent before the call (reading the plan) still leaves a small plan its
-                # exact count: GRACE seconds, within COUNT_MARGIN
-                until = min(until, last) if not plain_only else max(min(until, last), start + GRACE)
-                if not plain_only and len(terms) == 1:
-                    # the plain count did not finish: relaxation Monte Carlo gets its share now, while
-                    # a narrow interval is still possible, and the exact count the rest of its phase
-                    # (to a looser error than asked, so that an exact count that was about to finish
-                    # is not held up long; the estimate phase may narrow it, going on with its draws:
-                    # its memos, at most relaxmc.MAX_BYTES, stay until this call returns).  No one-piece
-                    # count of a small order first: the exact count goes on with it next.
-                    from opportune.engine.estimate import relaxation_estimate
-
-                    early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
-                                                seed=seed, whole=False, count_share=EARLY_COUNT_SHARE,
-                                                threads=threads,
-                                                deadline=Deadline.after(
-                                                    EARLY_ESTIMATE * max(0.0, until - time.perf_counter())))
-                try:
-                    return exact_by(until, plain_only)
-                except BudgetExceeded:
-                    pass
+            exact_end = min(start + (plain + exact_share * time_limit) * scale, last)
+            found, early = self._exact_turns(terms, start, exact_end, rel_error, seed, threads)
+            if found is not None:
+                return found
         from opportune.engine.estimate import estimate_count
 
         if end.remaining() < GRACE:         # and the estimate its pass over the orders, if they are small
@@ -1357,6 +1333,83 @@ class Schedule:
                            confidence=max(0.0, 1 - missed),
                            method=("union:" if union_only else "") + "+".join(sorted(methods)), log10_value=log10,
                            log10_low=lo, log10_high=hi)
+
+    def _exact_turns(self, terms: list, start: float, exact_end: float, rel_error: float, seed: int,
+                     threads: int) -> tuple[CountResult | None, object]:
+        """The exact phases of :meth:`count_result`, until ``exact_end`` (a ``time.perf_counter()`` moment):
+        ``(the exact count or None, the first relaxation estimate or None)``.
+
+        The plain count (each term's counter by itself, its own method per hard piece) and the engine's
+        count (which looks for a hub and counts through it: :meth:`OrderEngine.count`) take turns, each
+        resuming from its memos: ``FIRST_TURN`` seconds each, then twice as long at every round, the
+        plain count a ``PLAIN_SHARE`` of the engine's turn once a hub is found.  After the second round
+        (or when the memo budget ends the exact count), relaxation Monte Carlo (one strategy) takes up to
+        ``EARLY_SECONDS``.  The turns end on the clock: an exact count that needs about as long as a
+        round may come in that round or the next, whatever the limit.  No turn's length depends
+        on the time limit, which only cuts the sequence short: a count that finishes within a limit
+        finishes at the same moment within any longer one (a plain phase of a tenth of the limit made
+        an order that its hub counts in 0.05 s exact in 1.4 s with 3 s and in 3.2 s with 20 s).
+        """
+        remaining = self.engine.full & ~self.mask
+        early = None
+        tried = over_memo = False
+        turn = FIRST_TURN
+        plain_only = True
+        while True:
+            now = time.perf_counter()
+            hub = any(self.engine._hubs.get(c) is not None for _, c in terms)
+            seconds = turn * (PLAIN_SHARE if plain_only and hub else 1.0)
+            # a deadline spent before the call (reading the plan) still leaves a small plan its exact
+            # count: GRACE seconds, within COUNT_MARGIN
+            until = min(now + seconds, exact_end)
+            if turn == FIRST_TURN and plain_only:
+                until = max(until, start + GRACE)
+            stop = False
+            if not (plain_only and over_memo):
+                try:
+                    return self._exact_by(terms, remaining, until, plain_only), early
+                except BudgetExceeded as exc:
+                    if exc.reason != "time":        # each call may add max_memo entries: not one turn after another
+                        stop, over_memo = not plain_only, True
+                if plain_only:
+                    # the plain turn was the engine's probe of the plain count: its turn looks for a hub at once
+                    for _, c in terms:
+                        self.engine._probe_left[c] = 0
+            if time.perf_counter() >= exact_end:
+                return None, early
+            if not plain_only and (turn > FIRST_TURN or stop) and not tried and len(terms) == 1:
+                # relaxation Monte Carlo gets its go now, while a narrow interval is still possible, to a
+                # looser error than asked (the estimate phase may narrow it, going on with its draws: its
+                # memos, at most relaxmc.MAX_BYTES, stay until count_result returns), for a fixed time
+                from opportune.engine.estimate import relaxation_estimate
+
+                tried = True
+                early = relaxation_estimate(terms[0][1].poset, remaining, rel_error=max(rel_error, EARLY_ERROR),
+                                            seed=seed, whole=False, count_share=EARLY_COUNT_SHARE,
+                                            threads=threads, deadline=Deadline(min(exact_end, time.perf_counter()
+                                                                                   + EARLY_SECONDS)))
+            if stop:
+                return None, early
+            if not plain_only:
+                turn *= 2
+            plain_only = not plain_only
+
+    def _exact_by(self, terms: list, remaining: int, until: float, plain_only: bool) -> CountResult:
+        """One turn of :meth:`_exact_turns`: every count of the engine stops at ``until``."""
+        # the engine's deadline sets each count's time limit when it starts, and the counters' own
+        # deadline holds whatever runs after that
+        saved = [(c, c.deadline) for _, c in terms]
+        for c, _ in saved:
+            c.deadline = until
+        try:
+            with self.engine.time_limited(None), self.engine.deadline(until):
+                if plain_only:      # each term's counter by itself (its own choice of method per piece)
+                    for _, c in terms:
+                        c.count(remaining)
+                return CountResult(self.count())
+        finally:
+            for c, d in saved:
+                c.deadline = d
 
     def options(self) -> dict[str, int]:
         """For each installable part, how many admissible completions remain after installing it.
