@@ -98,6 +98,7 @@ class Contract:
                     for method, op in item.items()}
         self.registry = Registry().with_resource("urn:openapi", Resource.from_contents(spec, default_specification=DRAFT202012))
         self.seen: set[tuple[str, int]] = set()
+        self.codes: set[tuple[str, int, str]] = set()
 
     def check(self, op_id: str, response) -> None:
         _method, _path, op = self.ops[op_id]
@@ -116,6 +117,10 @@ class Contract:
             return self.check_events(op_id, content[media]["schema"], response.read().decode())
         ref = content[media]["schema"]["$ref"]  # every JSON answer is a named model
         self.validate({"$ref": "urn:openapi" + ref}, response.json(), (op_id, status))
+        if response.status_code >= 400:   # the error's code is one the document names for this status
+            code = response.json()["error"]["code"]
+            assert f"`{code}`" in documented["description"], (op_id, status, code, documented["description"])
+            self.codes.add((op_id, response.status_code, code))
 
     def validate(self, schema: dict, value, what) -> None:
         validator = Draft202012Validator(schema, registry=self.registry, format_checker=Draft202012Validator.FORMAT_CHECKER)
@@ -400,7 +405,7 @@ def test_the_request_examples_are_accepted_and_the_answer_examples_are_real(env,
     plans = {call("uploadPlan", a, headers={"Content-Type": media},
                   **({"json": value} if media == "application/json" else {"content": value.encode()})).json()["id"]
              for media, value in found["uploadPlan"]}
-    assert runs[0]["plan"] in plans and len(plans) == 2  # the gearbox, and a SALBP file
+    assert runs[0]["plan"] in plans and len(plans) == 3  # the gearbox, a SALBP file, and a shipped SALBP graph
     assert {call("startRun", a, json=body, expect=201).json()["plan"]["id"] for body in runs} == {runs[0]["plan"]}
     run = call("startRun", a, json=runs[0], expect=201).json()["id"]  # the paper's rule, 4 buffer locations
 

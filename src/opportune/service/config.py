@@ -6,8 +6,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from opportune.limits import DEFAULT_MAX_BODY, MAX_BODY, MIN_BODY, check_option
+
 DEFAULT_DB = "sqlite:///./opportune.db"
-DEFAULT_MAX_BODY = 1 << 20  # 1 MiB: a plan file of thousands of parts fits
 DB_ENV = "OPPORTUNE_DB"
 
 
@@ -26,7 +27,8 @@ def database_url(db: str | None) -> str:
 class Settings:
     """Everything :func:`opportune.service.app.create_app` needs.
 
-    ``max_body`` bounds request bodies (bytes); ``token_cache_seconds`` is how
+    ``max_body`` bounds request bodies (bytes; at most :data:`opportune.limits.MAX_BODY`, the largest plan
+    file the readers read: a larger value raises ValueError); ``token_cache_seconds`` is how
     long a checked token is trusted without asking the database again (a
     revoked token stops working within that time); ``ticket_seconds`` is how
     long an SSE ticket can be used to open a stream; ``live_runs`` is how many
@@ -71,3 +73,7 @@ class Settings:
     memory_cap: int | None = None
     plan_share: float = 0.5
     warm_up_seconds: float = 30.0
+
+    def __post_init__(self):
+        # a body larger than the readers' bound could only be refused after it was read
+        check_option("max_body", self.max_body, MAX_BODY, MIN_BODY)
