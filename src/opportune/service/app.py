@@ -107,7 +107,9 @@ def _unicode(text: str) -> str:
 
 #: Text of a request: printable (the schema states it; :class:`BodyLimit` refuses a control character anywhere
 #: in a request before it is read) and valid Unicode.
-Text = Annotated[str, Field(pattern=PRINTABLE), AfterValidator(_unicode)]
+#: (The pattern is the schema's statement only: the middleware refuses first, and Pydantic's own check of a
+#: pattern would read half of a surrogate pair as undecodable bytes rather than say what it is.)
+Text = Annotated[str, AfterValidator(_unicode), Field(json_schema_extra={"pattern": PRINTABLE})]
 
 
 def _json_integer(value):
