@@ -952,6 +952,8 @@ def convert(
     output: Path = typer.Argument(..., help="Output file: .yaml, .json, .graphml, .dot or .alb ('-' for standard "
                                             "output with --to)", show_default=False),
     to: Optional[str] = typer.Option(None, "--to", help="yaml, json, graphml, dot or alb (default: from the suffix)"),
+    as_json: bool = json_option("Machine-readable output: what was written, {plan, format, wrote}, or with -, "
+                                "the converted text as {plan, format, text} (errors too: {\"error\": {...}})"),
 ):
     """Write a plan in another format (a GraphML or DOT file holds one strategy per graph; .alb one strategy)."""
     import yaml
@@ -959,7 +961,7 @@ def convert(
     from opportune.formats.alb import alb_text
     from opportune.formats.graphfiles import to_dot_precedence, to_graphml
 
-    plan = load_or_exit(plan_file)
+    plan = load_or_exit(plan_file, json_errors=as_json)
     fmt = (to or output.suffix.lstrip(".")).lower().replace("yml", "yaml").replace("gv", "dot")
     writers = {"yaml": lambda: yaml.safe_dump(plan.to_dict(), sort_keys=False, allow_unicode=True),
                "json": lambda: json.dumps(plan.to_dict(), indent=2, ensure_ascii=False) + "\n",
@@ -974,20 +976,26 @@ def convert(
         text = writers[fmt]()
     except ValueError as exc:
         fail(str(exc))
-    if fmt == "alb":        # what the format cannot hold is said, not silently dropped
+    if fmt == "alb" and not as_json:        # what the format cannot hold is said, not silently dropped
         shown = ", ".join(f"{i} = {p}" for i, p in enumerate(plan.part_ids[:4], 1))
         more = ", ..." if len(plan.parts) > 4 else ""
         _err().print(_escape(f"note: an .alb file numbers its tasks: the parts are 1 to {len(plan.parts)} in their "
                              f"order in the plan ({shown}{more}); the plan's name and the parts' names are not "
                              "kept"))
     if str(output) == "-":
-        sys.stdout.write(text)
+        if as_json:
+            print(json.dumps({"plan": plan.name, "format": fmt, "text": text}, indent=2))
+        else:
+            sys.stdout.write(text)
         return
     try:
         output.write_text(text, encoding="utf-8")
     except OSError as exc:
         fail(f"cannot write {output}: {exc.strerror or exc}")
-    _out().print(f"wrote {_escape(str(output))}")
+    if as_json:
+        print(json.dumps({"plan": plan.name, "format": fmt, "wrote": str(output)}, indent=2))
+    else:
+        _out().print(f"wrote {_escape(str(output))}")
 
 @app.command()
 def schema():

@@ -221,7 +221,8 @@ def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show
 
 
 def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from `opportune token list`"),
-                 db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False)):
+                 db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
+                 as_json: bool = typer.Option(False, "--json", help="Print {id, revoked} as JSON")):
     """Revoke a token (a running server stops accepting it within seconds)."""
     _require("sqlalchemy")
     from opportune.service.auth import TokenError, revoke_token
@@ -233,6 +234,9 @@ def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from 
         _fail(str(exc))
     finally:
         store.dispose()
+    if as_json:
+        echo(json.dumps({"id": token_id, "revoked": True}))
+        return
     echo(f"token {token_id} revoked", err=True)
 
 
