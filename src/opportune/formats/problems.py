@@ -108,7 +108,7 @@ def listing(ids) -> str:
 
     Examples
     --------
-    >>> listing(["a", "b"]), listing(str(i) for i in range(25))[-22:]
+    >>> listing(["a", "b"]), listing(str(i) for i in range(25))[-21:]
     ('a, b', '18, 19, … (25 in all)')
     """
     ids = list(ids)
