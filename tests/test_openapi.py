@@ -250,6 +250,10 @@ def test_real_answers_match_the_document(env, spec):
                headers={"Content-Type": "application/yaml"}, expect=422).json()
     assert bad["error"]["code"] == "invalid_plan" and bad["error"]["problems"]
     call("uploadPlan", a, content=b"{not json", headers={"Content-Type": "application/json"}, expect=400)
+    # a shipped plan by name, and names that are not shipped (nothing else is opened)
+    assert call("uploadPlan", a, json={"shipped": "salbp:BOWMAN8"}).status_code in (200, 201)   # 200: stored
+    call("uploadPlan", a, json={"shipped": "salbp:../../etc/passwd"}, expect=422)
+    call("uploadPlan", a, json={"shipped": "example:gearbox-overconstrained"}, expect=422)   # invalid_plan
     call("uploadPlan", a, json={"text": yaml, "colour": "red"}, expect=422)
     call("uploadPlan", a, content=b"x" * (MAX_BODY + 1), headers={"Content-Type": "text/plain"}, expect=413)
     call("uploadPlan", op, content=yaml, headers={"Content-Type": "application/yaml"}, expect=403)
@@ -272,6 +276,8 @@ def test_real_answers_match_the_document(env, spec):
     call("startRun", a, json={"plan": plan}, key=False, expect=428)
     call("startRun", a, json={"plan": plan}, key="k" * 201, expect=400)
     call("startRun", a, json={"plan": "nope"}, expect=422)
+    call("startRun", a, json={"plan": "example:gearbox-overconstrained"}, expect=422)   # invalid_plan
+    call("startRun", a, json={"plan": "salbp:NOPE"}, expect=422)                       # unknown_plan
     call("startRun", a, json={"plan": plan, "buffer_capacity": -1}, expect=422)
     call("startRun", a, json={"plan": plan, "cell": "cell-b"}, expect=403)
     call("startRun", op, json={"plan": plan}, expect=403)
@@ -338,6 +344,8 @@ def test_real_answers_match_the_document(env, spec):
 
     successes = {op_id for op_id, status in call.seen if status < 300}
     assert successes == set(OPERATIONS.values())
+    assert {("uploadPlan", 422, "unknown_plan"), ("startRun", 422, "invalid_plan"), ("postLook", 428,
+            "idempotency_key_required"), ("postLook", 413, "body_too_large")} <= call.codes
 
 
 def test_an_estimated_decision_matches_the_document(spec):

@@ -466,7 +466,7 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                "links": PLAN_LINKS},
                          **errors({400: ["malformed_json", "malformed_body"], 401: ["unauthorized"],
                                    403: ["forbidden"], 413: ["body_too_large", "plan_too_large_for_memory"],
-                                   422: ["invalid_plan", "invalid_request"],
+                                   422: ["invalid_plan", "invalid_request", "unknown_plan"],
                                    500: ["internal_error"]})},
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/json": {"schema": {"anyOf": [
@@ -544,8 +544,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                               "createTicket")},
                          **errors({**write_errors,
                                    413: ["body_too_large", "plan_too_large_for_memory"],
-                                   422: ["invalid_request", "unknown_plan", "plan_too_large", "plan_refused",
-                                         "idempotency_key_reused"],
+                                   422: ["invalid_request", "unknown_plan", "invalid_plan", "plan_too_large",
+                                         "plan_refused", "idempotency_key_reused"],
                                    500: ["internal_error"], 503: ["plan_too_large"]})})
     def create_run(body: RunIn, request: Request, p: Principal = Depends(principal),
                    idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
