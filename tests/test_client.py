@@ -286,3 +286,14 @@ def test_a_path_given_as_a_string_is_read_as_a_file(cell, plan, tmp_path):
     assert cell.upload_plan(str(GEARBOX)).id == plan.id
     with pytest.raises(FileNotFoundError, match="no such plan file"):
         cell.upload_plan(str(tmp_path / "nope.yaml"))
+
+
+def test_a_shipped_plan_is_uploaded_and_run_by_its_name(cell):
+    """`salbp:ARC111` names the shipped graph, not a file to read here: the service reads it."""
+    up = cell.upload_plan("salbp:ARC111")
+    assert up.name == "ARC111" and up.format == "in2" and up.units == 111
+    run = cell.start_run("example:gearbox", policy="paper")
+    assert run.plan.name == "gearbox" and run.count.value == "336"
+    with pytest.raises(CellError) as info:
+        cell.upload_plan("salbp:NOPE")
+    assert info.value.code == "unknown_plan" and "salbp:ARC111" in info.value.hint

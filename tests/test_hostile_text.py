@@ -76,6 +76,68 @@ def test_no_escape_sequence_from_a_plan_reaches_the_terminal(tmp_path, where):
             assert out.returncode == 1 and "U+001B" in out.stdout + out.stderr, (command, out.stdout, out.stderr)
 
 
+EVIL = "op\x1b]0;T\x07\x9b2J\x1b[31m"   # ESC (an OSC title), BEL, CSI (C1) and ESC [ (a colour)
+
+
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def _escaped(out) -> str:
+    text = out.stdout + out.stderr
+    assert "Traceback" not in text and out.exception is None or isinstance(out.exception, SystemExit), text
+    assert not raw_controls(text), text
+    return text
+
+
+@pytest.mark.parametrize("command", [
+    ["check", "{evil}.yaml"], ["check", "{evil}.yaml", "--json"], ["count", "{evil}.yaml"],
+    ["graph", "{evil}.yaml"], ["graph", "{evil}.yaml", "--json"], ["replay", "example:gearbox", "{evil}.looks"],
+    ["replay", "{evil}.yaml", "x.looks"], ["convert", "{evil}.yaml", "out.json"],
+    ["convert", "example:gearbox", "{evil}/out.json"], ["graph", "example:gearbox", "-o", "{evil}/g.dot"],
+    ["simulate", "{evil}.yaml"], ["evaluate", "{evil}.yaml"], ["relax", "{evil}.yaml"], ["learn", "{evil}.seq"],
+    ["token", "create", "{evil}", "--db", "{db}"], ["token", "create", "--operator", "{evil}", "--db", "{db}"],
+    ["token", "revoke", "{evil}", "--db", "{db}"], ["token", "list", "--db", "{evil}://x"],
+    ["serve", "--db", "{evil}://x"],
+])
+def test_no_control_character_of_user_text_reaches_the_terminal_from_any_command(tmp_path, command):
+    """ESC, BEL and CSI in a file name, a cell or operator name, a token id or a database URL: every command
+    that prints it writes them as escapes (one escaping, :func:`opportune.cli_count.printable`)."""
+    pytest.importorskip("sqlalchemy")
+    args = [a.format(evil=str(tmp_path / EVIL) if a.startswith("{evil}.") or "/" in a else EVIL,
+                     db=tmp_path / "t.db") for a in command]
+    out = _cli(*args)
+    assert out.exit_code in (1, 2), (args, out.output)
+    text = _escaped(out)
+    assert "\\x1b" in text or "\\u001b" in text, text          # said, escaped
+
+
+def test_names_stored_with_control_characters_are_listed_escaped(tmp_path):
+    """An operator name is checked like a cell's (letters, digits, '.', '_', '-'); one stored before that (or
+    by hand) is listed with its control characters escaped, and so is its cell."""
+    pytest.importorskip("sqlalchemy")
+    import sqlite3
+
+    db = tmp_path / "t.db"
+    refused = _cli("token", "create", "--operator", EVIL, "--db", db)
+    assert refused.exit_code == 1 and "invalid operator name" in refused.output
+    for name in ("ops\n", "a b", "x" * 101, ""):
+        assert _cli("token", "create", "--operator", name, "--db", db).exit_code == 1, name
+        assert _cli("token", "create", name, "--db", db).exit_code == 1, name
+    assert _cli("token", "create", "--operator", "alice.b-1", "--db", db).exit_code == 0
+    with sqlite3.connect(db) as con:   # as an older version stored it
+        con.execute("UPDATE tokens SET label = ?", (EVIL,))
+    listed = _cli("token", "list", "--db", db)
+    assert listed.exit_code == 0
+    assert "operator op\\x1b]0;T\\x07\\x9b2J" in _escaped(listed)
+    as_json = _cli("token", "list", "--db", db, "--json")
+    assert json.loads(as_json.stdout)[0]["label"] == EVIL and not raw_controls(as_json.stdout)
+
+
 def test_printable_writes_controls_as_escapes_and_keeps_layout():
     from opportune.cli import printable
 

@@ -27,6 +27,8 @@ LAYERS = {
     "opportune.planning.learn": 2,
     # helpers every layer's package __init__ uses (lazy names) and that import nothing of opportune
     "opportune._lazy": 0,
+    # the one table of limits every reader and the service take their bounds from (imports nothing)
+    "opportune.limits": 0,
     # files in and out; the shipped data sets are files read through formats (a name → a path)
     "opportune.formats": 1,
     "opportune.datasets": 1,

@@ -30,7 +30,8 @@ from asyncua import ua  # noqa: E402
 
 from conftest import GEARBOX  # noqa: E402
 from opportune.service.auth import create_token, revoke_token  # noqa: E402
-from opportune.service.config import MAX_BUFFER_CAPACITY, Settings  # noqa: E402
+from opportune.limits import MAX_BUFFER as MAX_BUFFER_CAPACITY  # noqa: E402
+from opportune.service.config import Settings  # noqa: E402
 from opportune.service.core import build  # noqa: E402
 from opportune.service.opcua import OpcUaOptions, OpcUaThread  # noqa: E402
 from opportune.service.opcua_client import CellClient, Refused  # noqa: E402

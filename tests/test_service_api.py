@@ -300,6 +300,61 @@ def test_plan_upload_is_checked_like_opportune_check(a, plan_id):
     error_of(a.get("/plans/" + "f" * 64), 404)
 
 
+def test_shipped_plans_are_uploaded_and_run_by_name_and_nothing_else_is_opened(a, b, svc):
+    """The names the command line takes (`salbp:ARC111`, `salbp:kilbrid`, `example:gearbox`) upload a shipped
+    plan, or start a run of it, for the token's cell; any other name is a 422 naming what is shipped."""
+    from opportune import datasets
+
+    r = a.post("/plans", {"shipped": "salbp:ARC111"}, key=False)
+    assert r.status_code in (200, 201), r.text
+    arc = r.json()
+    assert arc["name"] == "ARC111" and arc["format"] == "in2" and arc["units"] == len(datasets.salbp("ARC111").parts)
+    assert arc["id"] in {p["id"] for p in a.get("/plans").json()["plans"]}
+    # a run by name: the same plan, stored for the cell that starts it (cell b had not uploaded it)
+    run = b.post("/runs", {"plan": "salbp:arc111", "policy": "paper"})
+    assert run.status_code == 201, run.text
+    assert run.json()["plan"] == {"id": arc["id"], "name": "ARC111"}
+    assert arc["id"] in {p["id"] for p in b.get("/plans").json()["plans"]}
+    gear = a.post("/runs", {"plan": "example:gearbox", "policy": "paper"})
+    assert gear.status_code == 201 and gear.json()["count"]["value"] == "336", gear.text
+    r = a.post(f"/runs/{gear.json()['id']}/looks", {"visible": ["ca", "rl"]})
+    assert r.json()["action"] == {"kind": "install", "part": "ca", "source": "bin"}
+    # only the shipped plans: not a path, not a looks file, not a misspelt name (which gets a suggestion)
+    for name, where in [("salbp:../../etc/passwd", "body.plan"), ("example:gearbox-table1", "body.plan"),
+                        ("salbp:ARC11", "body.plan"), ("example:/etc/passwd", "body.plan")]:
+        err = error_of(a.post("/runs", {"plan": name}), 422)
+        assert err["code"] == "unknown_plan" and err["where"] == where and "salbp:ARC111" in err["hint"], err
+    assert "did you mean 'salbp:ARC111'?" in error_of(a.post("/runs", {"plan": "salbp:ARC11"}), 422)["hint"]
+    err = error_of(a.post("/plans", {"shipped": "salbp:NOPE"}, key=False), 422)
+    assert err["code"] == "unknown_plan" and err["where"] == "body.shipped"
+    err = error_of(a.post("/plans", {"shipped": "salbp:ARC111", "text": "x"}, key=False), 422)
+    assert err["code"] == "invalid_request"
+    # a shipped example that is not a valid plan is refused as `opportune check` refuses it
+    err = error_of(a.post("/plans", {"shipped": "example:gearbox-overconstrained"}, key=False), 422)
+    assert err["code"] == "invalid_plan" and any(p["code"] == "cycle" for p in err["problems"])
+
+
+def test_an_unknown_part_in_a_look_gets_the_suggestion_the_command_line_gives(a, plan_id, tmp_path):
+    """One suggestion for a misspelt part, over HTTP and in `opportune replay` (case aside too)."""
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    run_id = new_run(a, plan_id)
+    looks = tmp_path / "typo.looks"
+    for typo, meant in [("RL", "rl"), ("rll", "rl"), ("cover", None)]:
+        err = error_of(a.post(f"/runs/{run_id}/looks", {"visible": ["ca", typo]}), 422)
+        assert err["code"] == "unknown_part" and err["where"] == "body.visible[1]"
+        looks.write_text(f"ca {typo}\n")
+        cli = CliRunner().invoke(app, ["replay", str(GEARBOX), str(looks)])
+        assert cli.exit_code == 1
+        if meant is None:
+            assert "did you mean" not in err["hint"] and "did you mean" not in cli.output
+        else:
+            assert err["hint"].startswith(f"did you mean '{meant}'? ") and f"did you mean '{meant}'?" in cli.output
+        assert err["hint"] in " ".join(cli.output.split()), (err["hint"], cli.output)
+
+
 # ---------------------------------------------------------------- access
 
 

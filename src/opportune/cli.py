@@ -17,6 +17,7 @@ import typer
 from typer.core import TyperGroup
 
 from opportune import cli_count
+from opportune.limits import MAX_BUFFER
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -200,7 +201,14 @@ def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
                           "problems": [p.to_dict() for p in result.problems]}, 1)
         else:
             _print_problems(CheckResult(None, result.errors), _err())
-            _err().print(f"{path}: {len(result.errors)} error(s); run `opportune check {path}` for details")
+            # `check` says more only when there are warnings too (it lists the same errors, and nothing
+            # more for a file it cannot read): the pointer to it is given only then
+            warnings = len(result.problems) - len(result.errors)
+            if warnings:
+                _err().print(_escape(f"{path}: {len(result.errors)} error(s); `opportune check {path}` lists its "
+                                     f"{warnings} warning(s) too"))
+            elif len(result.errors) > 1:
+                _err().print(_escape(f"{path}: {len(result.errors)} errors"))
         raise typer.Exit(1)
     return result.plan
 
@@ -308,33 +316,47 @@ def graph(
     dpi: int = typer.Option(300, "--dpi", min=36, max=1200, help="Resolution of PNG output"),
     orders: bool = typer.Option(False, "--orders", help="For an AND/OR plan (`assemblies`), draw the partial "
                                 "orders of its strategies instead of its AND/OR graph"),
+    as_json: bool = json_option("Machine-readable output: without -o, each strategy's layered layout (parts with "
+                                "their layer and x, y; edges with their points), as the service's dashboard draws it; "
+                                "with -o, what was written (errors too: {\"error\": {...}})"),
 ):
     """Draw each strategy as a layered precedence diagram (like the paper's Figure 2); an AND/OR plan
     as its AND/OR graph (assemblies, their alternative ways and what each way joins)."""
     from opportune.formats.draw import DotMissing, render, to_dot
 
-    plan = load_or_exit(plan_file)
+    plan = load_or_exit(plan_file, json_errors=as_json)
     andor = plan.andor is not None and not orders
+    if as_json and output is None and fmt is None:
+        from opportune.formats.summary import summarize
+        from opportune.service.graph import layouts
+
+        print(json.dumps({"plan": plan.name, "strategies": layouts(plan, summarize(plan))}, indent=2))
+        return
     fmt = (fmt or (output.suffix.lstrip(".") if output else "dot")).lower()
     if fmt not in {"svg", "png", "pdf", "dot"}:
         fail(f"unknown format '{fmt}': use svg, png, pdf or dot", 2)
-    if fmt == "dot":
-        source = to_dot(plan, names=names, andor=andor)
-        if output:
-            output.write_text(source)
-            _out().print(f"wrote {output}")
+    if fmt == "dot" and output is None:
+        if as_json:
+            print(json.dumps({"plan": plan.name, "format": "dot", "dot": to_dot(plan, names=names, andor=andor)},
+                             indent=2))
         else:
-            sys.stdout.write(source)
+            sys.stdout.write(to_dot(plan, names=names, andor=andor))
         return
     if output is None:
         fail(f"give an output file with -o FILE.{fmt}", 2)
     try:
-        render(plan, output, fmt, names=names, dpi=dpi if fmt == "png" else None, andor=andor)
+        if fmt == "dot":
+            output.write_text(to_dot(plan, names=names, andor=andor))
+        else:
+            render(plan, output, fmt, names=names, dpi=dpi if fmt == "png" else None, andor=andor)
     except DotMissing as exc:
         fail(str(exc))
     except OSError as exc:
         fail(f"cannot write {output}: {exc.strerror or exc}")
-    _out().print(f"wrote {output}")
+    if as_json:
+        print(json.dumps({"plan": plan.name, "format": fmt, "wrote": str(output)}, indent=2))
+    else:
+        _out().print(f"wrote {_escape(str(output))}")
 
 
 # ---------------------------------------------------------------- replay
@@ -346,7 +368,7 @@ def replay(
     looks_file: Path = typer.Argument(..., help="Looks file: one look per line ('-' for none), or JSON list of lists"),
     as_json: bool = json_option(),
     explain: bool = typer.Option(False, "--explain", help="Print the reasons of every decision"),
-    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,
+    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, max=MAX_BUFFER,
                                                   help="Buffer locations (default: unlimited)"),
     decision_budget: Optional[float] = typer.Option(
         None, "--decision-budget", min=1e-6, show_default=False,
@@ -485,7 +507,7 @@ def simulate(
         None, "--bin", help="uniform, weighted, pile, conveyor or physics (MuJoCo: parts heaped in a bin, seen through "
                             "occlusion; pip install 'opportune[physics]') (default: plan, else uniform)"),
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
-    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, help="Buffer locations (default: unlimited)"),
+    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, max=MAX_BUFFER, help="Buffer locations (default: unlimited)"),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Local worker processes (default: all cores)"),
     dask: Optional[str] = typer.Option(None, "--dask", help="Address of a Dask distributed scheduler"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="Write results.json, trials.csv and plots here"),
@@ -708,7 +730,7 @@ def evaluate(
                                     "(the paper's rule), bin-first, slack, rollout, buffer, shake or quantify"),
     bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform, weighted or pile (default: plan, else uniform)"),
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
-    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0,
+    buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, max=MAX_BUFFER,
                                                   help="Buffer locations (default: plan, else unlimited)"),
     max_states: int = typer.Option(
         EVALUATE_MAX_STATES, "--max-states", min=1,
@@ -930,6 +952,8 @@ def convert(
     output: Path = typer.Argument(..., help="Output file: .yaml, .json, .graphml, .dot or .alb ('-' for standard "
                                             "output with --to)", show_default=False),
     to: Optional[str] = typer.Option(None, "--to", help="yaml, json, graphml, dot or alb (default: from the suffix)"),
+    as_json: bool = json_option("Machine-readable output: what was written, {plan, format, wrote}, or with -, "
+                                "the converted text as {plan, format, text} (errors too: {\"error\": {...}})"),
 ):
     """Write a plan in another format (a GraphML or DOT file holds one strategy per graph; .alb one strategy)."""
     import yaml
@@ -937,7 +961,7 @@ def convert(
     from opportune.formats.alb import alb_text
     from opportune.formats.graphfiles import to_dot_precedence, to_graphml
 
-    plan = load_or_exit(plan_file)
+    plan = load_or_exit(plan_file, json_errors=as_json)
     fmt = (to or output.suffix.lstrip(".")).lower().replace("yml", "yaml").replace("gv", "dot")
     writers = {"yaml": lambda: yaml.safe_dump(plan.to_dict(), sort_keys=False, allow_unicode=True),
                "json": lambda: json.dumps(plan.to_dict(), indent=2, ensure_ascii=False) + "\n",
@@ -952,20 +976,26 @@ def convert(
         text = writers[fmt]()
     except ValueError as exc:
         fail(str(exc))
-    if fmt == "alb":        # what the format cannot hold is said, not silently dropped
+    if fmt == "alb" and not as_json:        # what the format cannot hold is said, not silently dropped
         shown = ", ".join(f"{i} = {p}" for i, p in enumerate(plan.part_ids[:4], 1))
         more = ", ..." if len(plan.parts) > 4 else ""
         _err().print(_escape(f"note: an .alb file numbers its tasks: the parts are 1 to {len(plan.parts)} in their "
                              f"order in the plan ({shown}{more}); the plan's name and the parts' names are not "
                              "kept"))
     if str(output) == "-":
-        sys.stdout.write(text)
+        if as_json:
+            print(json.dumps({"plan": plan.name, "format": fmt, "text": text}, indent=2))
+        else:
+            sys.stdout.write(text)
         return
     try:
         output.write_text(text, encoding="utf-8")
     except OSError as exc:
         fail(f"cannot write {output}: {exc.strerror or exc}")
-    _out().print(f"wrote {_escape(str(output))}")
+    if as_json:
+        print(json.dumps({"plan": plan.name, "format": fmt, "wrote": str(output)}, indent=2))
+    else:
+        _out().print(f"wrote {_escape(str(output))}")
 
 @app.command()
 def schema():

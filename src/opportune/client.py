@@ -47,6 +47,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Generic, Literal, ParamSpec, TypeVar, overload
 
+from opportune.formats.shipped import EXAMPLE_PREFIX, PREFIX
+
 try:
     import httpx
     from pydantic import BaseModel, ValidationError
@@ -59,6 +61,8 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
 
 #: Suffixes of plan files: a one-line ``str`` ending in one is taken for a path by ``upload_plan``.
 PLAN_SUFFIXES = (".yaml", ".yml", ".json", ".in2", ".alb", ".graphml", ".dot", ".gv")
+#: The names of plans shipped with the package (the service reads them; nothing but the name is sent).
+SHIPPED_PREFIXES = (PREFIX, EXAMPLE_PREFIX)
 
 __all__ = [
     "Cell", "AsyncCell", "CellError", "BadRequest", "Unauthorized", "Forbidden", "NotFound", "Conflict", "LookContradictsState",
@@ -357,14 +361,19 @@ class _Client:
                     filename: str | None = None) -> _Call[PlanUploaded]:
         """Upload a plan, validated as ``opportune check`` does; its ``id`` starts runs.
 
-        ``plan`` is a file (a path, or a one-line ``str`` naming an existing file), the file's text
-        (``str`` or ``bytes``: YAML, JSON or SALBP .IN2, detected, or ``format``), or a plan in the JSON
-        file schema (a ``dict``).  An invalid plan raises :class:`InvalidPlan`, whose ``problems`` say
-        what and where; a one-line ``str`` ending in a plan file's suffix that names no file raises
-        ``FileNotFoundError``.
+        ``plan`` is a file (a path, or a one-line ``str`` naming an existing file), a plan shipped with the
+        package by name (``"salbp:ARC111"``, ``"example:gearbox"``: read by the service, nothing is sent but
+        the name), the file's text (``str`` or ``bytes``: YAML, JSON or SALBP .IN2, detected, or ``format``),
+        or a plan in the JSON file schema (a ``dict``).  An invalid plan raises :class:`InvalidPlan`, whose
+        ``problems`` say what and where; an unknown shipped name raises :class:`CellError` (``unknown_plan``,
+        its hint naming what is shipped); a one-line ``str`` ending in a plan file's suffix that names no
+        file raises ``FileNotFoundError``.
         """
         if isinstance(plan, dict):
             body: dict[str, Any] = {"json": plan}
+        elif isinstance(plan, str) and "\n" not in plan and plan.lower().startswith(SHIPPED_PREFIXES) \
+                and not os.path.isfile(plan):
+            body = {"json": {"shipped": plan}}
         else:
             if isinstance(plan, str) and "\n" not in plan and len(plan) < 4096:
                 if os.path.isfile(plan):
@@ -391,7 +400,8 @@ class _Client:
     @_Method
     def start_run(plan: str | PlanUploaded, *, buffer_capacity: int | None = None, label: str = "",
                   policy: str | None = None, products: int | None = None) -> _Call[Run]:
-        """Start a run of a stored plan in this token's cell (``buffer_capacity`` None: unlimited; ``policy``
+        """Start a run of a stored plan (its id, or a shipped plan's name such as ``"salbp:ARC111"``, stored for
+        this cell as the run starts) in this token's cell (``buffer_capacity`` None: unlimited; ``policy``
         None: the service's default, the exact look-ahead; ``"paper"``: the paper's rule; ``products``: build
         that many copies at once on as many fixtures fed from one bin, 1–16)."""
         plan_id = plan.id if isinstance(plan, PlanUploaded) else plan

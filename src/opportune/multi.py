@@ -159,9 +159,13 @@ def check_kinds(state: CellState, visible: Iterable[str]) -> tuple[str, ...]:
     lay = state.layout
     for part in visible:
         if part not in lay.units:
-            hint = (f" (the bin holds part kinds: say '{split_unit(part)[0]}', not the fixture's unit)"
-                    if part in lay.kind else "")
-            raise LookError(f"unknown part '{part}' in the look{hint}: the products have {', '.join(lay.units)}")
+            from opportune.formats.problems import unknown_part_hint
+
+            if part in lay.kind:
+                raise LookError(f"unknown part '{part}' in the look (the bin holds part kinds: say "
+                                f"'{split_unit(part)[0]}', not the fixture's unit)")
+            hint = unknown_part_hint(part, lay.units, "the products' part kinds")
+            raise LookError(f"unknown part '{part}' in the look: {hint}")
     if state.is_complete and visible:
         raise LookError("every product is complete: no part should be left to see")
     in_bin = state.in_bin

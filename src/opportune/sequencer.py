@@ -155,7 +155,9 @@ def check_look(state: State, visible: Iterable[str]) -> tuple[str, ...]:
     plan = state.plan
     for part in visible:
         if part not in plan:
-            raise LookError(f"unknown part '{part}' in the look: the plan has {', '.join(plan.part_ids)}")
+            from opportune.formats.problems import unknown_part_hint
+
+            raise LookError(f"unknown part '{part}' in the look: {unknown_part_hint(part, plan.part_ids)}")
     if state.is_complete and visible:
         raise LookError("the assembly is complete: no part should be left to see")
     in_bin = state.in_bin

@@ -57,13 +57,12 @@ exactly up to 12 strategies (inclusion–exclusion), and estimates beyond.
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from itertools import permutations
 from typing import TYPE_CHECKING, Any
 
-from opportune.formats.problems import Problem
+from opportune.formats.problems import Problem, did_you_mean
 from opportune.planning.plan import MAX_STRATEGIES, PlanError, Strategy
 
 if TYPE_CHECKING:
@@ -200,9 +199,8 @@ def check_assemblies(data: dict, doc: Document, part_ids: list[str]) -> tuple[li
     choices = sorted(known)
 
     def unknown(name: str, what: str, line) -> Problem:
-        guess = difflib.get_close_matches(name, choices, n=1)
         return Problem(f"unknown name '{name}' {what}",
-                       (f"did you mean '{guess[0]}'? " if guess else "")
+                       did_you_mean(name, choices)
                        + "declare it under `parts` or as an assembly under `assemblies`",
                        file=file, line=line, parts=(name,), code="unknown-part")
 

@@ -14,6 +14,7 @@ import re
 from dataclasses import dataclass, field
 
 from opportune.formats.problems import Problem
+from opportune.limits import MAX_ALIAS_VALUES, MAX_ALIASES, MAX_DEPTH, MAX_FILE_BYTES, MAX_VALUES  # noqa: F401 (their home: the one table of limits)
 
 # not typing.TYPE_CHECKING: importing typing (and pathlib) costs 10 ms of a count's start-up
 TYPE_CHECKING = False
@@ -23,11 +24,6 @@ if TYPE_CHECKING:
 
     from opportune.planning.plan import Plan
 
-MAX_FILE_BYTES = 32 << 20   # a plan file (32 MiB)
-MAX_DEPTH = 64              # nesting of values (a plan needs 6)
-MAX_ALIASES = 1_000         # YAML aliases (*name) in one file
-MAX_VALUES = 150_000        # values of a document (keys included), aliases expanded: 10,000 parts, ~130,000 constraints
-MAX_ALIAS_VALUES = 50_000   # values that aliases add to a YAML document by repeating what they name
 
 YAML_SUFFIXES = {".yaml", ".yml"}
 JSON_SUFFIXES = {".json"}

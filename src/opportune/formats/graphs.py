@@ -16,15 +16,11 @@ from typing import Sequence
 
 from opportune.formats.documents import CheckResult, file_stem  # noqa: F401 (file_stem: its former home)
 from opportune.formats.problems import Problem
-from opportune.planning.plan import MAX_UNITS
-
-# Limits of the graph readers (.IN2, .alb, DOT, GraphML), checked while reading, before anything
-# is built from the file; each keeps the largest file accepted loaded within 5 s of CPU time and
-# 500 MB.  A graph read is then a plan like any other, limited to MAX_UNITS tasks (opportune.planning.plan).
-MAX_TASKS = 2 * MAX_UNITS   # tasks (nodes): past MAX_UNITS the plan's own check says what to do
-MAX_PAIRS = 120_000         # precedence lines (edges), repeats included
-MAX_LINES = 4 * (MAX_TASKS + MAX_PAIRS)  # lines of a line-based graph file, blank ones and comments included
-MAX_LINE_CHARS = 10_000     # characters of one line of an .IN2 or .alb file (a value or a pair is short)
+# Limits of the graph readers (.IN2, .alb, DOT, GraphML; their values in the one table, opportune.limits),
+# checked while reading, before anything is built from the file; each keeps the largest file accepted
+# loaded within 5 s of CPU time and 500 MB.  A graph read is then a plan like any other, limited to
+# MAX_UNITS tasks (opportune.planning.plan).
+from opportune.limits import MAX_LINE_CHARS, MAX_LINES, MAX_PAIRS, MAX_TASKS  # noqa: F401,E402
 # A garbage file could give a problem per line; past this many of one kind, one line sums up the rest.
 MAX_PER_KIND = 50
 INT = re.compile(r"[+-]?[0-9]{1,18}")  # ASCII digits only: str.isdigit() would accept '²'

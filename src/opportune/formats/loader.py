@@ -80,9 +80,7 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
             with open(path, "rb") as f:  # read at most the limit (and one byte more, to know): /dev/zero is a file too
                 raw = f.read(MAX_FILE_BYTES + 1)
         if len(raw) > MAX_FILE_BYTES:
-            return CheckResult(None, [Problem(f"{name} is larger than {MAX_FILE_BYTES:,} bytes; plan files of at most "
-                                              f"{MAX_FILE_BYTES:,} bytes are read", "split the plan into smaller ones",
-                                              file=name, code="limit")])
+            return CheckResult(None, [_too_large(name)])
     except FileNotFoundError:
         return CheckResult(None, [Problem(f"no such file: {name}", "check the path", code="io")])
     except IsADirectoryError:
@@ -127,8 +125,16 @@ def load_plan(path: str | Path) -> Plan:
     return result.plan
 
 
+def _too_large(name: str) -> Problem:
+    return Problem(f"{name} is larger than {MAX_FILE_BYTES:,} bytes; plan files of at most {MAX_FILE_BYTES:,} bytes "
+                   "are read", "split the plan into smaller ones", file=name, code="limit")
+
+
 def check_text(text: str, *, fmt: str = "yaml", file: str | None = None, allow_cycles: bool = False) -> CheckResult:
-    """Parse and check plan text in ``fmt`` (``"yaml"`` or ``"json"``); ``allow_cycles`` as in :func:`read_plan`."""
+    """Parse and check plan text in ``fmt`` (``"yaml"`` or ``"json"``); ``allow_cycles`` as in :func:`read_plan`.
+    Text of more than :data:`MAX_FILE_BYTES` bytes (as UTF-8) is refused as a file of that size is."""
+    if len(text) > MAX_FILE_BYTES // 4 and len(text.encode("utf-8", "surrogatepass")) > MAX_FILE_BYTES:
+        return CheckResult(None, [_too_large(file or "the plan")])
     doc = parse_json(text, file) if fmt == "json" else parse_yaml(text, file)
     if doc.problems:
         return CheckResult(None, doc.problems)

@@ -20,11 +20,9 @@ import re
 from pathlib import Path
 
 from opportune.formats.problems import Problem
+from opportune.limits import MAX_LOOK_PARTS, MAX_LOOKS, MAX_LOOKS_BYTES  # noqa: F401 (their home: the one table of limits)
 
 
-MAX_LOOKS_BYTES = 32 << 20      # a looks file (32 MiB)
-MAX_LOOKS = 1_000_000           # looks in one file (a cell's week at one look a second)
-MAX_LOOK_PARTS = 2_000_000      # part ids in all the looks of one file
 MAX_LOOK_LINES = 2 * MAX_LOOKS  # lines of a text looks file, comments and blank lines included
 MAX_LOOK_LINE_CHARS = 200_000   # characters of one line (a look of 10,000 parts of 19 characters)
 # What str.splitlines splits on: counted before any line is built.

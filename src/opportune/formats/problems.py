@@ -8,6 +8,9 @@ from dataclasses import dataclass, field
 #: regular-expression class: C0 but tab, line feed and carriage return, DEL, and C1 (an ESC sequence would
 #: act on a terminal; PostgreSQL refuses U+0000).
 CONTROL_CHARS = "\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f"
+#: Text without those characters, as a regular expression's source (JSON Schema's ``pattern``, Python's
+#: ``re`` and Pydantic's engine read it alike): what the JSON Schema and the OpenAPI document state.
+PRINTABLE = "^[^\\x00-\\x08\\x0b\\x0c\\x0e-\\x1f\\x7f-\\x9f]*$"
 
 
 @dataclass(frozen=True)
@@ -48,3 +51,78 @@ class Problem:
             "line": self.line,
             "parts": list(self.parts),
         }
+
+
+def closest(word: str, choices) -> str | None:
+    """The one of ``choices`` a misspelt ``word`` most likely meant, or None: the same text but for case
+    first, else the closest by :func:`difflib.get_close_matches` (case folded).  The command line's and the
+    service's "did you mean" both come from here.
+
+    Parameters
+    ----------
+    word : str
+        What was given.
+    choices : iterable of str
+        What it could have been.
+
+    Returns
+    -------
+    str or None
+        The choice, as it is spelt among ``choices``; None when nothing is close.
+
+    Examples
+    --------
+    >>> closest("RL", ["ca", "rl"]), closest("cace", ["ca", "ba"]), closest("zz", ["ca"])
+    ('rl', 'ca', None)
+    """
+    import difflib     # loaded only when there is a mistake to suggest a correction for
+
+    folded: dict[str, str] = {}
+    for choice in choices:
+        folded.setdefault(choice.casefold(), choice)
+    key = word.casefold()
+    if key in folded:
+        return folded[key]
+    guess = difflib.get_close_matches(key, list(folded), n=1)
+    return folded[guess[0]] if guess else None
+
+
+def did_you_mean(word: str, choices, quote: str = "'") -> str:
+    """``"did you mean 'x'? "`` for :func:`closest`, or ``""`` when nothing is close.
+
+    Examples
+    --------
+    >>> did_you_mean("rll", ["ca", "rl"]) + "declare it"
+    "did you mean 'rl'? declare it"
+    """
+    guess = closest(word, choices)
+    return f"did you mean {quote}{guess}{quote}? " if guess is not None else ""
+
+
+#: Ids a message lists at most (a plan has up to 10,000 parts: a message names the first of them).
+LISTED = 20
+
+
+def listing(ids) -> str:
+    """``"a, b, c"``: at most :data:`LISTED` ids, then how many more.
+
+    Examples
+    --------
+    >>> listing(["a", "b"]), listing(str(i) for i in range(25))[-21:]
+    ('a, b', '18, 19, … (25 in all)')
+    """
+    ids = list(ids)
+    more = f", … ({len(ids):,} in all)" if len(ids) > LISTED else ""
+    return ", ".join(ids[:LISTED]) + more
+
+
+def unknown_part_hint(part: str, known, what: str = "the plan's parts") -> str:
+    """What to say about an unknown part id: the part it most likely meant, and the ids there are.
+
+    Examples
+    --------
+    >>> unknown_part_hint("rll", ["ca", "rl"])
+    "did you mean 'rl'? the plan's parts are ca, rl"
+    """
+    known = list(known)
+    return did_you_mean(part, known) + f"{what} are {listing(known)}"

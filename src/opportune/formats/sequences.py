@@ -29,14 +29,12 @@ from typing import Iterable
 
 from opportune.formats.problems import CONTROL_CHARS, Problem
 from opportune.planning.plan import MAX_PARTS, MAX_UNITS
+from opportune.limits import MAX_SEQUENCE_BYTES, MAX_SEQUENCE_ITEMS, MAX_SEQUENCES  # noqa: F401 (their home: the one table of limits)
 
 __all__ = ["MAX_SEQUENCE_BYTES", "MAX_SEQUENCE_ITEMS", "MAX_SEQUENCE_LINE_CHARS", "MAX_SEQUENCE_LINES", "MAX_SEQUENCES",
            "SequenceError", "Sequences", "parse_sequences",
            "read_sequences", "sequences_from"]
 
-MAX_SEQUENCE_BYTES = 32 << 20   # one sequences file (32 MiB)
-MAX_SEQUENCES = 100_000         # sequences in one file
-MAX_SEQUENCE_ITEMS = 2_000_000  # installations in all the sequences of one file (about 2 s to read)
 MAX_SEQUENCE_LINES = 1_000_000  # lines of one file, comments and blank lines included
 MAX_SEQUENCE_LINE_CHARS = 1_000_000  # characters of one line (10,000 installations of ids up to 99 characters)
 # What str.splitlines splits on: counted before any line is built.

@@ -80,6 +80,16 @@ def example_path(name: str) -> Path:
     raise KeyError(f"no example named '{name}': the package ships {names}")
 
 
+def plan_names() -> tuple[str, ...]:
+    """The shipped plans by the names the readers take: ``salbp:NAME`` for each graph, ``example:NAME`` for
+    each example plan (not the looks and sequences).
+
+    >>> plan_names()[0], "example:gearbox" in plan_names()
+    ('salbp:MERTENS', True)
+    """
+    return tuple(PREFIX + n for n in SALBP) + tuple(EXAMPLE_PREFIX + n for n, kind, _ in examples() if kind == "plan")
+
+
 def resolve(path: str | Path) -> Path:
     """``salbp:NAME`` and ``example:NAME`` as the shipped files they name; any other path as it is.
 

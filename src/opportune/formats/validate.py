@@ -14,9 +14,10 @@ from collections import Counter
 from functools import lru_cache
 
 from opportune.formats.documents import CheckResult, Document, file_stem
-from opportune.formats.problems import CONTROL_CHARS, Problem
+from opportune.formats.problems import CONTROL_CHARS, Problem, closest
 from opportune.planning.plan import (MAX_CONSTRAINTS, MAX_DIMENSION, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS,
                             MAX_WEIGHT, MIN_DIMENSION, SHAPES, Part, Plan, Strategy)
+from opportune.limits import MAX_ID, MAX_TEXT  # noqa: F401 (their home: the one table of limits)
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
@@ -28,7 +29,6 @@ if TYPE_CHECKING:
 DEFAULT_STRATEGY = "default"
 # A file can hold a problem on every line: past this many of one kind, one problem sums up the rest.
 MAX_PER_KIND = 100
-MAX_TEXT = 100_000  # characters of one string (an id, a name, a description)
 #: Characters no text of a plan may hold: lone UTF-16 surrogates (not Unicode text), C0 controls but tab,
 #: line feed and carriage return, DEL and C1 controls (an ESC sequence in a part id would reach the
 #: terminal of everyone who checks the plan; U+0000 cannot be stored in PostgreSQL).
@@ -37,9 +37,8 @@ _BAD_CHAR = re.compile(f"[\ud800-\udfff{CONTROL_CHARS}]")
 
 def _close(word: str, choices) -> list[str]:
     """The closest of ``choices`` to a misspelt ``word`` (a list of at most one): for a suggestion."""
-    import difflib     # loaded only when a plan has a mistake to suggest a correction for
-
-    return difflib.get_close_matches(word, choices, n=1)
+    guess = closest(word, choices)
+    return [] if guess is None else [guess]
 
 
 @lru_cache(maxsize=1)
@@ -132,6 +131,12 @@ def _size_problems(data: dict, doc: Document) -> list[Problem]:
                            "keep the strategies that add sequences (check warns of those that do not)",
                            file=doc.file, line=doc.line(("strategies",)), code="limit"))
         return out
+    for i, item in enumerate(parts if isinstance(parts, list) else ()):
+        pid = item.get("id") if isinstance(item, dict) else item
+        if isinstance(pid, str) and len(pid) > MAX_ID:    # a look names parts by id: ids are short
+            out.append(Problem(f"parts[{i}]: a part id of {len(pid):,} characters; at most {MAX_ID:,} are accepted",
+                               "shorten the id, and put a longer text under the part's `name`", file=doc.file,
+                               line=doc.line(("parts", i)), parts=(pid[:40] + "…",), code="limit"))
     declared = 0
     for req in [data.get("requires")] + [s.get("requires") for s in (strategies if isinstance(strategies, list) else ())
                                          if isinstance(s, dict)]:

@@ -17,17 +17,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
+from opportune.limits import (MAX_CONSTRAINTS, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS,  # noqa: F401
+                              MAX_WEIGHT)
+
 
 # Limits on every plan, whatever its format (YAML, JSON, .IN2, .alb), enforced by
 # :func:`opportune.formats.validate.check_document` before anything is counted, so that the command
 # line and the service refuse the same plans with the same message.  The engine's tables grow with
-# the square of the number of units: 10,000 units (a 10,000-step chain) take about 0.5 GB.
-MAX_PARTS = 10_000          # parts declared
-MAX_QUANTITY = 10_000       # identical units of one part
-MAX_UNITS = 10_000          # install operations in all (the sum of the quantities)
-MAX_STRATEGIES = 64         # alternative strategies (checking compares every pair of them)
-MAX_CONSTRAINTS = 1_000_000  # declared constraints, over all strategies
-MAX_WEIGHT = 1_000_000      # a constraint's weight (the price of dropping it; > 0, default 1)
+# the square of the number of units: 10,000 units (a 10,000-step chain) take about 0.5 GB.  The values
+# are in the one table of limits, :mod:`opportune.limits` (imported above).
 # A part's shape in the physical bin (``geometry``), in metres: every dimension within these bounds,
 # so that a MuJoCo model built from any valid plan is neither degenerate nor larger than a cell.
 MIN_DIMENSION = 0.005

@@ -52,12 +52,12 @@ from opportune.planning.plan import (
     Strategy,
     _plain,
 )
+from opportune.limits import MAX_PRODUCTS  # noqa: F401 (their home: the one table of limits)
 
 __all__ = ["MAX_PRODUCTS", "ProductsError", "check_products", "combine_products", "fixtures_of", "kind_of",
            "kinds_in_bin", "several_products", "split_unit", "unit_id"]
 
 #: Fixtures (products in progress at once) a cell may have.
-MAX_PRODUCTS = 16
 SEPARATOR = "@"
 
 

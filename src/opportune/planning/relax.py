@@ -607,12 +607,10 @@ def check_installed(plan: Plan, installed: Sequence[str]) -> None:
     seen: dict[str, int] = {}
     for i, p in enumerate(installed):
         if p not in plan:
-            import difflib
+            from opportune.formats.problems import unknown_part_hint
 
-            guess = difflib.get_close_matches(p, list(plan.part_ids), n=1)
-            raise ValueError(f"--installed: unknown part '{p}' (position {i + 1})"
-                             + (f"; did you mean '{guess[0]}'?" if guess else f"; the plan's parts are "
-                                f"{', '.join(plan.part_ids[:20])}{', …' if len(plan.parts) > 20 else ''}"))
+            raise ValueError(f"--installed: unknown part '{p}' (position {i + 1}); "
+                             + unknown_part_hint(p, plan.part_ids))
         seen[p] = seen.get(p, 0) + 1
         if seen[p] > plan.part(p).quantity:
             raise ValueError(f"--installed: part '{p}' is installed {seen[p]} times (position {i + 1}) but the plan "

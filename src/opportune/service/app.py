@@ -53,9 +53,11 @@ from starlette.routing import Match
 from opportune import __version__
 from opportune.policies.named import DEFAULT_POLICY, POLICIES
 from opportune.service import idempotency as idem
-from opportune.formats.problems import CONTROL_CHARS
+from opportune.formats.problems import CONTROL_CHARS, PRINTABLE
+from opportune.limits import (MAX_BUFFER, MAX_FILE_BYTES, MAX_FILENAME, MAX_ID, MAX_KEY, MAX_LABEL, MAX_LOOK,
+                              MAX_NAME, MAX_PAGE, MAX_PRODUCTS)
 from opportune.service.auth import Principal
-from opportune.service.config import MAX_BUFFER_CAPACITY, Settings
+from opportune.service.config import Settings
 from opportune.service.core import build as build_core
 from opportune.service.errors import (ApiError, error_response, forbidden, from_validation, internal, is_json,
                                       new_reference, plan_not_found, unauthorized, unsupported_media_type)
@@ -78,7 +80,7 @@ IDEMPOTENCY_KEY = {"parameters": [{
     "name": idem.HEADER, "in": "header", "required": True,
     "description": "A fresh random string (e.g. a UUID) for every new request, reused when retrying it: a retry "
                    "gets the stored answer, byte for byte, and changes nothing",
-    "schema": {"type": "string", "minLength": 1, "maxLength": idem.MAX_KEY}}]}
+    "schema": {"type": "string", "minLength": 1, "maxLength": MAX_KEY, "pattern": idem.KEY_PATTERN}}]}
 
 
 def links(run_id: str, *op_ids: str) -> dict:
@@ -86,6 +88,9 @@ def links(run_id: str, *op_ids: str) -> dict:
     return {op: {"operationId": op, "parameters": {"run_id": run_id}} for op in op_ids}
 
 
+#: A plan file's text as a raw body: printable (tabs and line ends, no other control character), and no
+#: larger than the readers read.
+PLAN_TEXT = {"pattern": PRINTABLE, "maxLength": MAX_FILE_BYTES}
 PLAN_LINKS = {"startRun": {"operationId": "startRun", "requestBody": {"plan": "$response.body#/id"}},
               "getPlan": {"operationId": "getPlan", "parameters": {"plan_id": "$response.body#/id"}}}
 REPLAYED = {"Idempotent-Replayed": {"description": "`true` when this is the stored answer of an earlier request "
@@ -100,7 +105,11 @@ def _unicode(text: str) -> str:
     return text
 
 
-Text = Annotated[str, AfterValidator(_unicode)]
+#: Text of a request: printable (the schema states it; :class:`BodyLimit` refuses a control character anywhere
+#: in a request before it is read) and valid Unicode.
+#: (The pattern is the schema's statement only: the middleware refuses first, and Pydantic's own check of a
+#: pattern would read half of a surrogate pair as undecodable bytes rather than say what it is.)
+Text = Annotated[str, AfterValidator(_unicode), Field(json_schema_extra={"pattern": PRINTABLE})]
 
 
 def _json_integer(value):
@@ -122,15 +131,19 @@ class RunIn(BaseModel):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
         {"plan": GEARBOX_PLAN_ID, "label": "SN 1042", "buffer_capacity": 4, "policy": "paper"},
         {"plan": GEARBOX_PLAN_ID}]})
-    plan: Text = Field(..., min_length=1, max_length=64, description="A plan id returned by POST /plans")
-    cell: Optional[Text] = Field(None, max_length=100, description="The cell; defaults to (and must be) the token's cell")
-    buffer_capacity: Optional[Annotated[int, Field(ge=0, le=MAX_BUFFER_CAPACITY), BeforeValidator(_json_integer)]] = Field(
+    plan: Text = Field(..., min_length=1, max_length=64,
+                       description="A plan id returned by POST /plans, or a plan shipped with the package by name "
+                                   "(`salbp:ARC111`, `example:gearbox`, as `opportune examples` lists them), "
+                                   "stored for the token's cell as it starts")
+    cell: Optional[Text] = Field(None, max_length=MAX_NAME,
+                                 description="The cell; defaults to (and must be) the token's cell")
+    buffer_capacity: Optional[Annotated[int, Field(ge=0, le=MAX_BUFFER), BeforeValidator(_json_integer)]] = Field(
         None, description="Buffer locations; null: unlimited")
-    label: Text = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
+    label: Text = Field("", max_length=MAX_LABEL, description="Free text shown on the dashboard (e.g. a serial number)")
     policy: Optional[Literal[POLICIES]] = Field(
         None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper' or "
                           "'opportunistic': the paper's rule)")
-    products: Optional[Annotated[int, Field(ge=1, le=16), BeforeValidator(_json_integer)]] = Field(
+    products: Optional[Annotated[int, Field(ge=1, le=MAX_PRODUCTS), BeforeValidator(_json_integer)]] = Field(
         None, description="Build this many copies of the plan at once on as many fixtures fed from one bin (1–16; "
                           "default 1): looks then name part kinds, and each install says its fixture")
 
@@ -138,8 +151,8 @@ class RunIn(BaseModel):
 class LookIn(BaseModel):
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
         {"visible": ["rl", "ra"]}, {"visible": []}]})
-    visible: list[Annotated[Text, Field(max_length=200)]] = Field(
-        ..., max_length=100_000, description="Part ids seen in the bin now, repeated for several units; [] for nothing")
+    visible: list[Annotated[Text, Field(min_length=1, max_length=MAX_ID)]] = Field(
+        ..., max_length=MAX_LOOK, description="Part ids seen in the bin now, repeated for several units; [] for nothing")
 
 
 class OutcomeIn(BaseModel):
@@ -453,24 +466,30 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                "links": PLAN_LINKS},
                          **errors({400: ["malformed_json", "malformed_body"], 401: ["unauthorized"],
                                    403: ["forbidden"], 413: ["body_too_large", "plan_too_large_for_memory"],
-                                   422: ["invalid_plan", "invalid_request"],
+                                   422: ["invalid_plan", "invalid_request", "unknown_plan"],
                                    500: ["internal_error"]})},
               openapi_extra={"requestBody": {"required": True, "content": {
                   "application/json": {"schema": {"anyOf": [
                       {"$ref": "#/components/schemas/PlanDocument"},
-                      {"$ref": "#/components/schemas/PlanUploadWrapper"}]}, "examples": {
+                      {"$ref": "#/components/schemas/PlanUploadWrapper"},
+                      {"$ref": "#/components/schemas/PlanShipped"}]}, "examples": {
                       "document": {"summary": "The gearbox as a plan document", "value": GEARBOX_PLAN},
                       "wrapped": {"summary": "The gearbox's plan file, wrapped",
-                                  "value": {"text": GEARBOX_YAML, "format": "yaml", "filename": "gearbox.yaml"}}}},
-                  "application/yaml": {"schema": {"type": "string", "description": "A plan file in YAML"},
+                                  "value": {"text": GEARBOX_YAML, "format": "yaml", "filename": "gearbox.yaml"}},
+                      "shipped": {"summary": "A plan shipped with the package, by name",
+                                  "value": {"shipped": "salbp:ARC111"}}}},
+                  "application/yaml": {"schema": {"type": "string", "description": "A plan file in YAML",
+                                                  **PLAN_TEXT},
                                        "examples": {"gearbox": {"summary": "The gearbox", "value": GEARBOX_YAML}}},
-                  "text/plain": {"schema": {"type": "string", "description": "YAML, JSON or SALBP .IN2, detected"},
+                  "text/plain": {"schema": {"type": "string", "description": "YAML, JSON or SALBP .IN2, detected",
+                                            **PLAN_TEXT},
                                  "examples": {"gearbox": {"summary": "The gearbox, in YAML", "value": GEARBOX_YAML},
                                               "in2": {"summary": "A SALBP .IN2 file (BOWMAN8)",
                                                       "value": BOWMAN8_IN2}}}}}})
     async def upload_plan(request: Request, p: Principal = Depends(principal),
                           format: Optional[Literal["yaml", "json", "in2"]] = Query(None, description="Format of a raw body"),
-                          filename: Optional[str] = Query(None, max_length=200, description="Name used in problems")):
+                          filename: Optional[str] = Query(None, min_length=1, max_length=MAX_FILENAME, pattern=PRINTABLE,
+                                                          description="Name used in problems")):
         if p.is_operator:
             raise forbidden("an operator token reads plans and runs; only a cell's token can upload a plan",
                             "upload the plan with the token of the cell that will assemble it")
@@ -494,7 +513,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
              responses={200: {"model": PlanDetail},
                         **errors({401: ["unauthorized"], 404: ["plan_not_found"],
                                   422: ["plan_refused", "invalid_request"], 500: ["internal_error"]})})
-    def get_plan(plan_id: str = PathParam(..., description="A plan id returned by POST /plans"),
+    def get_plan(plan_id: str = PathParam(..., max_length=64, pattern=PRINTABLE,
+                                          description="A plan id returned by POST /plans"),
                  p: Principal = Depends(principal)):
         if not may_see(store, p, plan_id):    # another cell's plan: not found, as one that does not exist
             raise plan_not_found(plan_id)
@@ -524,8 +544,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                               "createTicket")},
                          **errors({**write_errors,
                                    413: ["body_too_large", "plan_too_large_for_memory"],
-                                   422: ["invalid_request", "unknown_plan", "plan_too_large", "plan_refused",
-                                         "idempotency_key_reused"],
+                                   422: ["invalid_request", "unknown_plan", "invalid_plan", "plan_too_large",
+                                         "plan_refused", "idempotency_key_reused"],
                                    500: ["internal_error"], 503: ["plan_too_large"]})})
     def create_run(body: RunIn, request: Request, p: Principal = Depends(principal),
                    idempotency_key: Optional[str] = Header(None, alias=idem.HEADER, include_in_schema=False)):
@@ -538,9 +558,9 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
              summary="Runs this token may see, newest first",
              responses={200: {"model": RunList},
                         **errors({401: ["unauthorized"], 422: ["invalid_request"], 500: ["internal_error"]})})
-    def list_runs(p: Principal = Depends(principal), cell: Optional[str] = Query(None, max_length=100),
+    def list_runs(p: Principal = Depends(principal), cell: Optional[str] = Query(None, max_length=MAX_NAME, pattern=PRINTABLE),
                   status: Optional[Literal["active", "complete"]] = None,
-                  limit: int = Query(200, ge=1, le=1000, description="At most this many runs (1–1,000)"),
+                  limit: int = Query(200, ge=1, le=MAX_PAGE, description=f"At most this many runs (1–{MAX_PAGE:,})"),
                   offset: int = Query(0, ge=0, le=MAX_OFFSET, description="Skip this many runs (0–1,000,000,000)")):
         return {"runs": manager.list(p, cell=cell, status=status, limit=limit, offset=offset)}
 
@@ -630,7 +650,8 @@ def create_app(settings: Settings | None = None, store: Store | None = None) -> 
                                   422: ["invalid_request", "plan_refused"],
                                   500: ["internal_error", "run_replay_mismatch"]})})
     async def get_events(run_id: int = RUN_ID, creds: Optional[HTTPAuthorizationCredentials] = Depends(bearer),
-                         ticket: Optional[str] = Query(None, max_length=200, description="From POST /runs/{id}/ticket")):
+                         ticket: Optional[str] = Query(None, max_length=200, pattern=PRINTABLE,
+                                                       description="From POST /runs/{id}/ticket")):
         def who() -> Principal:
             p = auth.token(creds.credentials) if creds and creds.credentials else None
             if p is None and ticket:

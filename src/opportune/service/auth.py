@@ -26,11 +26,13 @@ from dataclasses import dataclass
 
 from sqlalchemy import insert, select, update
 
+from opportune.limits import MAX_NAME
 from opportune.service.config import REVOCATION_SECONDS
 from opportune.service.storage import Store, cells, now, tokens
 
 TOKEN_PREFIX = "opp_"
-CELL_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,99}$")
+#: A cell's or an operator's name (matched whole: ``$`` alone would let a final line feed through).
+CELL_NAME = re.compile(rf"[A-Za-z0-9][A-Za-z0-9._-]{{0,{MAX_NAME - 1}}}")
 
 
 @dataclass(frozen=True)
@@ -63,10 +65,12 @@ class TokenError(ValueError):
     """A token command that cannot be carried out (bad cell name, unknown token id)."""
 
 
-def check_cell_name(cell: str) -> str:
-    if not CELL_NAME.match(cell or ""):
-        raise TokenError(f"invalid cell name {cell!r}: use letters, digits, '.', '_' or '-' (at most 100, "
-                         "starting with a letter or digit)")
+def check_cell_name(cell: str, what: str = "cell") -> str:
+    """``cell``, if it is a valid name of a cell (or, ``what="operator"``, of an operator); else
+    :class:`TokenError` saying what a name may hold (the name shown with its control characters escaped)."""
+    if not isinstance(cell, str) or not CELL_NAME.fullmatch(cell):
+        raise TokenError(f"invalid {what} name {ascii(cell)[:120]}: use letters, digits, '.', '_' or '-' (at most "
+                         f"{MAX_NAME}, starting with a letter or digit)")
     return cell
 
 
@@ -77,6 +81,8 @@ def create_token(store: Store, *, cell: str | None = None, operator: str | None 
     """
     if (cell is None) == (operator is None):
         raise TokenError("give either a cell or an operator name")
+    if operator is not None:    # shown by `token list` and in the dashboard, as a cell's name is
+        check_cell_name(operator, "operator")
     token = TOKEN_PREFIX + secrets.token_urlsafe(32)
     token_id = secrets.token_hex(4)
     t = now()

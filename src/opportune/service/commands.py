@@ -12,12 +12,23 @@ from typing import Optional
 
 import typer
 
+from opportune.limits import DEFAULT_MAX_BODY, MAX_BODY, MIN_BODY, check_option
+
 DB_HELP = "Database: a SQLAlchemy URL (sqlite:///path, postgresql+psycopg://...) or a SQLite file path " \
           "[default: $OPPORTUNE_DB or ./opportune.db]"
 
 
+def echo(text: str, err: bool = False) -> None:
+    """Print a line as every command does: control characters written as escapes (a name or a label
+    stored by an older version, a database URL or a token id from the command line never reach the
+    terminal raw); :func:`opportune.cli_count.printable_line` is the one escaping of the command line."""
+    from opportune.cli_count import printable_line
+
+    typer.echo(printable_line(text), err=err)
+
+
 def _fail(message: str) -> None:
-    typer.echo(f"error: {message}", err=True)
+    echo(f"error: {message}", err=True)
     raise typer.Exit(1)
 
 
@@ -54,7 +65,9 @@ def serve(
     db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on"),
     port: int = typer.Option(8700, "--port", min=0, max=65535, help="TCP port"),
-    max_body: int = typer.Option(1 << 20, "--max-body", min=1024, help="Largest request body accepted, in bytes"),
+    max_body: int = typer.Option(DEFAULT_MAX_BODY, "--max-body",
+                                 help=f"Largest request body accepted, in bytes ({MIN_BODY}–{MAX_BODY}: at most the "
+                                      "largest plan file the readers read)"),
     access_log: bool = typer.Option(True, "--access-log/--no-access-log", help="Log every request (credentials redacted)"),
     workers: int = typer.Option(1, "--workers", min=1, max=64,
                                 help="Server processes sharing the port and the database (more than 1: PostgreSQL only)"),
@@ -95,6 +108,10 @@ def serve(
              "30; HEL within 10 of them)"),
 ):
     """Serve the sequencer over HTTP for robot cells, with the live dashboard at /; with --opcua, over OPC UA too."""
+    try:
+        check_option("--max-body", max_body, MAX_BODY, MIN_BODY)
+    except ValueError as exc:
+        _fail(str(exc))
     if not opcua and (not http or opcua_anonymous is not None or opcua_max_connections is not None
                       or opcua_login_seconds is not None):
         _fail("--no-http and the --opcua-... options are for OPC UA: add --opcua")
@@ -146,10 +163,10 @@ def serve(
 
     procs = f"; {workers} processes" if workers > 1 else ""
     if http:
-        typer.echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)}{procs})",
+        echo(f"opportune service on http://{host}:{port}/  (API docs /docs; database {safe_url(store.url)}{procs})",
                    err=True)
     if options is not None:
-        typer.echo(f"opportune OPC UA server on {options.endpoint}  (certificates in {options.pki}; namespace "
+        echo(f"opportune OPC UA server on {options.endpoint}  (certificates in {options.pki}; namespace "
                    "urn:opportune:sequencer)", err=True)
     try:
         run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers,
@@ -185,9 +202,9 @@ def token_create(
         store.dispose()
     role = "operator" if operator else "cell"
     if as_json:
-        typer.echo(json.dumps({"id": token_id, "token": token, "role": role, "cell": cell, "label": operator or ""}))
+        echo(json.dumps({"id": token_id, "token": token, "role": role, "cell": cell, "label": operator or ""}))
         return
-    typer.echo(token)
+    echo(token)
     who = f"operator {operator!r}" if operator else f"cell {cell!r}"
     where = ""
     if db is not None:      # the same database (a password in a URL is not repeated: `***`)
@@ -196,7 +213,7 @@ def token_create(
         from opportune.service.server import safe_url
 
         where = f" --db {shlex.quote(safe_url(db) if '://' in db else db)}"
-    typer.echo(f"token {token_id} for {who}: shown once, keep it secret "
+    echo(f"token {token_id} for {who}: shown once, keep it secret "
                f"(revoke with `opportune token revoke {token_id}{where}`)", err=True)
 
 
@@ -215,18 +232,19 @@ def token_list(db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show
     for r in rows:
         r["created_at"], r["revoked_at"] = iso(r["created_at"]), iso(r["revoked_at"])
     if as_json:
-        typer.echo(json.dumps(rows, indent=2))
+        echo(json.dumps(rows, indent=2))
         return
     if not rows:
-        typer.echo("no tokens: create one with `opportune token create CELL`")
+        echo("no tokens: create one with `opportune token create CELL`")
     for r in rows:
         who = f"cell {r['cell']}" if r["role"] == "cell" else f"operator {r['label']}"
         state = f"revoked {r['revoked_at']}" if r["revoked_at"] else "active"
-        typer.echo(f"{r['id']}  {who:<30} created {r['created_at']}  {state}")
+        echo(f"{r['id']}  {who:<30} created {r['created_at']}  {state}")
 
 
 def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from `opportune token list`"),
-                 db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False)):
+                 db: Optional[str] = typer.Option(None, "--db", help=DB_HELP, show_default=False),
+                 as_json: bool = typer.Option(False, "--json", help="Print {id, revoked} as JSON")):
     """Revoke a token: a running server refuses it within 1 s (REVOCATION_SECONDS), on HTTP and OPC UA."""
     _require("sqlalchemy")
     from opportune.service.auth import TokenError, revoke_token
@@ -238,7 +256,10 @@ def token_revoke(token_id: str = typer.Argument(..., help="The token's id, from 
         _fail(str(exc))
     finally:
         store.dispose()
-    typer.echo(f"token {token_id} revoked", err=True)
+    if as_json:
+        echo(json.dumps({"id": token_id, "revoked": True}))
+        return
+    echo(f"token {token_id} revoked", err=True)
 
 
 def opcua_cert(folder: str = typer.Argument(..., help="The folder to write the certificate and key into"),
@@ -262,15 +283,15 @@ def opcua_cert(folder: str = typer.Argument(..., help="The folder to write the c
     except OSError as exc:
         _fail(f"cannot write into {shown(folder)}: {exc.strerror or exc}: choose a folder you can write")
     made = "kept (already made for this URI)" if existed else "wrote"
-    typer.echo(f"{made} {shown(cert)}: the client's certificate (DER)")
-    typer.echo(f"{made} {shown(key)}: its private key (PEM, readable by you only: keep it secret)")
-    typer.echo(f"the client connects with application URI {shown(app_uri)}, Basic256Sha256, Sign & Encrypt, "
-               "user name and password (the cell's token)")
+    echo(f"{made} {shown(cert)}: the client's certificate (DER)")
+    echo(f"{made} {shown(key)}: its private key (PEM, readable by you only: keep it secret)")
+    echo(f"the client connects with application URI {shown(app_uri)}, Basic256Sha256, Sign & Encrypt, "
+         "user name and password (the cell's token)")
     if trust_in is not None:
-        typer.echo(f"trusted: copied into {shown(Path(trust_in) / 'trusted')} (no restart needed)")
+        echo(f"trusted: copied into {shown(Path(trust_in) / 'trusted')} (no restart needed)")
     else:
-        typer.echo(f"to trust it, copy {shown(cert)} into the server's trust list, the folder trusted/ in its "
-                   "--opcua-pki folder (default opcua-pki/trusted/); no restart needed")
+        echo(f"to trust it, copy {shown(cert)} into the server's trust list, the folder trusted/ in its "
+             "--opcua-pki folder (default opcua-pki/trusted/); no restart needed")
 
 
 def register(app: typer.Typer) -> None:

@@ -6,8 +6,9 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from opportune.limits import DEFAULT_MAX_BODY, MAX_BODY, MIN_BODY, check_option
+
 DEFAULT_DB = "sqlite:///./opportune.db"
-DEFAULT_MAX_BODY = 1 << 20  # 1 MiB: a plan file of thousands of parts fits
 DB_ENV = "OPPORTUNE_DB"
 #: The longest a revoked token keeps working, on every protocol (``Settings.token_cache_seconds``'s default):
 #: a checked token is trusted this long without asking the database again (HTTP requests, an open event
@@ -15,8 +16,6 @@ DB_ENV = "OPPORTUNE_DB"
 #: revoked tokens.  A new OPC UA session and a method call always ask the database.  One indexed read per
 #: token and period: 1 s costs nothing and keeps the window short.
 REVOCATION_SECONDS = 1.0
-#: The most buffer locations a run may have (HTTP's ``buffer_capacity``, OPC UA's ``BufferCapacity``).
-MAX_BUFFER_CAPACITY = 1_000_000
 
 
 def database_url(db: str | None) -> str:
@@ -34,7 +33,8 @@ def database_url(db: str | None) -> str:
 class Settings:
     """Everything :func:`opportune.service.app.create_app` needs.
 
-    ``max_body`` bounds request bodies (bytes); ``token_cache_seconds`` is how
+    ``max_body`` bounds request bodies (bytes; at most :data:`opportune.limits.MAX_BODY`, the largest plan
+    file the readers read: a larger value raises ValueError); ``token_cache_seconds`` is how
     long a checked token is trusted without asking the database again (a
     revoked token stops working within that time, over HTTP and OPC UA:
     :data:`REVOCATION_SECONDS` by default); ``ticket_seconds`` is how
@@ -80,3 +80,7 @@ class Settings:
     memory_cap: int | None = None
     plan_share: float = 0.5
     warm_up_seconds: float = 30.0
+
+    def __post_init__(self):
+        # a body larger than the readers' bound could only be refused after it was read
+        check_option("max_body", self.max_body, MAX_BODY, MIN_BODY)

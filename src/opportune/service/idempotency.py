@@ -30,9 +30,12 @@ from sqlalchemy.engine import Connection
 
 from opportune.service.errors import ApiError
 from opportune.service.storage import dumps, events, idempotency, now
+from opportune.limits import MAX_KEY  # noqa: F401 (their home: the one table of limits)
 
 HEADER = "Idempotency-Key"
-MAX_KEY = 200
+#: A key as :func:`check_key` accepts it, as the OpenAPI document states it: printable characters of ISO 8859-1
+#: (what an HTTP header carries), not starting or ending with a space (a server strips those).
+KEY_PATTERN = "^[!-~\\xa1-\\xac\\xae-\\xff]([ -~\\xa1-\\xac\\xae-\\xff]*[!-~\\xa1-\\xac\\xae-\\xff])?$"
 KEEP_SECONDS = 7 * 24 * 3600.0  # how long a stored answer is kept (the default of Settings.idempotency_seconds)
 
 

@@ -64,9 +64,9 @@ from asyncua import ua
 from asyncua.crypto.permission_rules import User, UserRole
 
 from opportune.formats.problems import CONTROL_CHARS
+from opportune.limits import MAX_BUFFER, MAX_ID, MAX_KEY, MAX_LABEL
 from opportune.policies.named import POLICIES
 from opportune.service.auth import Principal, ensure_cell
-from opportune.service.config import MAX_BUFFER_CAPACITY
 from opportune.service.core import Core
 from opportune.service.errors import ApiError
 from opportune.service.opcua_security import Guard, GuardedServer, GuardedSession, TrustList, make_certificate, own_files
@@ -81,7 +81,7 @@ APPLICATION_URI = "urn:opportune:server"
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
 MAX_RUN_NODES = 1000      # runs with nodes in the address space (active ones first; the oldest go first)
 MAX_VISIBLE = 100_000     # parts in one look (as over HTTP)
-MAX_TEXT = 200            # characters of a part id, a label, a request id
+MAX_TEXT = max(MAX_ID, MAX_LABEL, MAX_KEY)  # characters of a part id, a label, a request id (opportune.limits)
 EVENTS_AT_ONCE = 200      # committed events read at once to emit their OPC UA events
 PLAN_ID = re.compile(r"^[0-9a-f]{64}$")
 _CONTROL = re.compile(f"[{CONTROL_CHARS}]")
@@ -553,8 +553,8 @@ class OpcUaFront:
             raise bad(f"unknown policy {policy!r}", f"use one of {', '.join(POLICIES)}, or empty for the default",
                       "body.policy")
         if isinstance(capacity, bool) or not isinstance(capacity, int) or not (
-                capacity == -1 or 0 <= capacity <= MAX_BUFFER_CAPACITY):    # HTTP's limits; -1 stands for its null
-            raise bad(f"BufferCapacity must be an integer from 0 to {MAX_BUFFER_CAPACITY:,}, or -1 for unlimited, not "
+                capacity == -1 or 0 <= capacity <= MAX_BUFFER):    # HTTP's limits; -1 stands for its null
+            raise bad(f"BufferCapacity must be an integer from 0 to {MAX_BUFFER:,}, or -1 for unlimited, not "
                       f"{str(capacity)[:40]}", "e.g. 2 (buffer locations), or -1", "body.buffer_capacity")
         label = _text(label, "Label", "body.label", empty=True)
         if not isinstance(plan, str) or not plan:

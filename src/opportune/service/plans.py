@@ -31,9 +31,9 @@ from opportune.formats.loader import detect_format, not_utf8
 from opportune.planning.plan import Plan, PlanError
 from opportune.service.errors import ApiError, plan_not_found
 from opportune.service.storage import Store, dumps, now, plan_owners, plans
+from opportune.limits import MAX_FILENAME  # noqa: F401 (their home: the one table of limits)
 
 FORMATS = ("yaml", "json", "in2")
-MAX_FILENAME = 200  # characters of an upload's file name (the name used in problems)
 _SURROGATE = re.compile("[\ud800-\udfff]")
 
 
@@ -76,6 +76,12 @@ def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt
             # Nested deeper than the parser goes, or a number too long to read: a plan in JSON, whose
             # check below says what and where.
             data = None
+        if isinstance(data, dict) and "shipped" in data:
+            extra = set(data) - {"shipped"}
+            if extra:
+                raise ApiError(422, "invalid_request", f"unknown field {ascii(sorted(map(str, extra))[0])[:60]} "
+                               "beside `shipped`", "send {\"shipped\": \"salbp:ARC111\"} alone", where="body")
+            return shipped_plan(data["shipped"], "body.shipped")
         if isinstance(data, dict) and "text" in data:
             text = data.get("text")
             if not isinstance(text, str) or _SURROGATE.search(text):
@@ -112,6 +118,34 @@ def check_upload(raw: bytes, content_type: str | None, filename: str | None, fmt
     return check_text(text, fmt=fmt, file=name), fmt, text
 
 
+def shipped_plan(name, where: str) -> tuple[CheckResult, str, str]:
+    """A plan shipped with the package, by the name the command line takes (``salbp:ARC111``,
+    ``example:gearbox``; case aside): its check, format and text.  Any other name is a 422 ``unknown_plan``
+    saying which names there are: nothing but the shipped files is ever opened."""
+    from opportune.formats.loader import read_plan
+    from opportune.formats.problems import did_you_mean, listing
+    from opportune.formats.shipped import plan_names, resolve
+
+    names = plan_names()
+    known = {n.casefold(): n for n in names}
+    if not isinstance(name, str) or name.casefold() not in known:
+        shown = ascii(name)[:80] if isinstance(name, str) else "that is not a string"
+        raise ApiError(422, "unknown_plan", f"no plan is shipped as {shown}",
+                       (did_you_mean(name, names) if isinstance(name, str) else "")
+                       + f"the package ships {listing(names)} ({len(names)} plans)", where=where)
+    name = known[name.casefold()]
+    path = resolve(name)
+    fmt = "in2" if path.suffix.lower() == ".in2" else "yaml"
+    return read_plan(name), fmt, path.read_text(encoding="latin-1" if fmt == "in2" else "utf-8")
+
+
+def is_shipped_name(plan: str) -> bool:
+    """Whether a run's ``plan`` names a shipped plan (``salbp:...``, ``example:...``) rather than giving an id."""
+    from opportune.formats.shipped import EXAMPLE_PREFIX, PREFIX
+
+    return plan.lower().startswith((PREFIX, EXAMPLE_PREFIX))
+
+
 def store_plan(store: Store, result: CheckResult, fmt: str, source: str, owner: str) -> tuple[str, bool]:
     """Store a valid plan (its content once) and make the cell ``owner`` one of its owners; return its id
     and whether it is new to this cell (another cell's upload of the same plan says nothing to this one)."""
@@ -140,7 +174,13 @@ def accept_upload(store: Store, book: "PlanBook", principal, raw: bytes, content
     """Check an uploaded plan as ``opportune check`` does, and store it for the principal's cell if it is
     valid and fits its share of the server's memory; ``(201 if new to this cell else 200, the answer)``.
     A plan with errors raises 422 ``invalid_plan`` listing every problem.  O(size of the plan)."""
-    result, fmt, source = check_upload(raw, content_type, filename, fmt)
+    return accept_checked(store, book, principal, *check_upload(raw, content_type, filename, fmt))
+
+
+def accept_checked(store: Store, book: "PlanBook", principal, result: CheckResult, fmt: str,
+                   source: str) -> tuple[int, dict]:
+    """:func:`accept_upload` after the check: a plan with errors raises 422 ``invalid_plan``; a valid one
+    that fits its share of memory is stored for the principal's cell."""
     problems = [pr.to_dict() for pr in result.problems]
     if not result.ok:
         first = result.errors[0] if result.errors else None

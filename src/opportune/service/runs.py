@@ -346,8 +346,11 @@ class RunManager:
             stored = idem.lookup(c, principal.scope, key, h)
         if stored:
             return stored.status, stored.text, True
-        from opportune.service.plans import may_see
+        from opportune.service.plans import accept_checked, is_shipped_name, may_see, shipped_plan
 
+        if is_shipped_name(body["plan"]):   # a shipped plan by name: stored for this cell, then run by its id
+            body = {**body, "plan": accept_checked(self.store, self.book, principal,
+                                                   *shipped_plan(body["plan"], "body.plan"))[1]["id"]}
         if not may_see(self.store, principal, body["plan"]):    # another cell's plan is not known here either
             raise ApiError(422, "unknown_plan", f"no plan {body['plan']!r} for cell {principal.cell!r}",
                            "upload it first with POST /plans (with this cell's token) and use the `id` it returns",
@@ -549,12 +552,11 @@ class RunManager:
             known = list(seq.layout.units) if live.products > 1 else plan.part_ids
             for i, part in enumerate(request["visible"]):
                 if part not in (seq.layout.units if live.products > 1 else plan):
-                    from difflib import get_close_matches
+                    from opportune.formats.problems import unknown_part_hint
 
-                    close = get_close_matches(part, known, n=1)
                     raise ApiError(422, "unknown_part", f"unknown part {part!r} in the look",
-                                   (f"did you mean {close[0]!r}? " if close else "")
-                                   + f"the plan's parts are {', '.join(known)}", where=f"body.visible[{i}]")
+                                   unknown_part_hint(part, known, "the plan's parts" if live.products == 1
+                                                     else "the products' part kinds"), where=f"body.visible[{i}]")
             if run_complete(seq):    # its last part is installed: nothing more to look at
                 raise ApiError(409, "run_complete", f"run {live.id} is complete: its last part is installed",
                                "start a new run (POST /runs) for the next assembly", where="path")

@@ -27,6 +27,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, WithJsonSchema
 
+from opportune.formats.problems import PRINTABLE
+from opportune.limits import MAX_BODY, MAX_FILENAME
+
 
 class Model(BaseModel):
     """A JSON object of an answer: closed in the schema, tolerant when read."""
@@ -95,7 +98,7 @@ STATUS_TEXT = {
     403: "The token may not do this",
     404: "Not found (another cell's run is not found either)",
     409: "Refused in the run's present state; nothing changed",
-    413: "The body is larger than `opportune serve --max-body`",
+    413: f"The body is larger than `opportune serve --max-body` (at most {MAX_BODY:,} bytes)",
     415: "The body is not JSON (`Content-Type: application/json`)",
     422: "Invalid request; nothing changed",
     428: "The `Idempotency-Key` header is missing",
@@ -590,9 +593,21 @@ class PlanUploadWrapper(BaseModel):
     """A plan file's text in JSON (any format; ``format`` and ``filename`` as the query parameters)."""
 
     model_config = ConfigDict(extra="forbid")
-    text: str = Field(..., description="The plan file's text")
+    text: str = Field(..., pattern=PRINTABLE, description="The plan file's text (printable: tabs and line ends "
+                                                           "but no other control character)")
     format: Literal["yaml", "json", "in2"] | None = Field(None, description="Detected when absent")
-    filename: str | None = Field(None, min_length=1, max_length=200, description="Name used in problems")
+    filename: str | None = Field(None, min_length=1, max_length=MAX_FILENAME, pattern=PRINTABLE,
+                                 description="Name used in problems")
+
+
+def shipped_schema() -> dict:
+    """The upload of a plan shipped with the package, by name: ``{"shipped": "salbp:ARC111"}``."""
+    from opportune.formats.shipped import plan_names
+
+    return {"type": "object", "title": "PlanShipped", "required": ["shipped"], "additionalProperties": False,
+            "description": "A plan shipped with the package, by the name the command line takes "
+                           "(`opportune examples` lists them)",
+            "properties": {"shipped": {"type": "string", "enum": list(plan_names())}}}
 
 
 def complete_openapi(doc: dict) -> dict:
@@ -602,6 +617,7 @@ def complete_openapi(doc: dict) -> dict:
 
     schemas = doc.setdefault("components", {}).setdefault("schemas", {})
     schemas.update(plan_document_schemas())
+    schemas["PlanShipped"] = shipped_schema()
     _, defs = models_json_schema([(PlanUploadWrapper, "validation")] + [(m, "serialization") for m in EVENTS.values()],
                                  ref_template="#/components/schemas/{model}")
     for name, schema in defs.get("$defs", {}).items():
