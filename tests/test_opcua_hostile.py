@@ -18,6 +18,7 @@ is checked by moving the clock, not by waiting), and its sweep of revoked sessio
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import time
 
@@ -407,6 +408,10 @@ def test_opportune_opcua_cert_makes_a_certificate_a_generic_client_connects_with
                                  "--trust-in", str(server.pki)])
     assert r.exit_code == 0 and "kept" in r.output and "trusted" in r.output, r.output
     assert asyncio.run(connect())                               # trusted now, without a restart
+    r = CliRunner().invoke(app, ["opcua", "cert", str(folder), "--app-uri", "urn:example:uaexpert", "--json"])
+    doc = json.loads(r.stdout)
+    assert doc == {"certificate": str(cert), "key": str(key), "made": False, "app_uri": "urn:example:uaexpert",
+                   "trusted": None}, r.output
     r = CliRunner().invoke(app, ["opcua", "cert", str(tmp_path / "bad"), "--app-uri", "no uri\x1b[2J"])
     assert r.exit_code == 1 and "\x1b" not in r.output and "not a URI" in r.output, r.output
 

@@ -267,7 +267,9 @@ def opcua_cert(folder: str = typer.Argument(..., help="The folder to write the c
                                            help="The client's application URI (the client must connect with it)"),
                trust_in: Optional[str] = typer.Option(None, "--trust-in",
                                                       help="A server's PKI folder (--opcua-pki): copy the "
-                                                           "certificate into its trusted/ too")):
+                                                           "certificate into its trusted/ too"),
+               as_json: bool = typer.Option(False, "--json", help="Print {certificate, key, made, app_uri, "
+                                                                  "trusted} as JSON")):
     """Make an OPC UA client's certificate and key (for UaExpert, a PLC, ...) and say how the server trusts it."""
     _require("asyncua")
     from pathlib import Path
@@ -282,6 +284,10 @@ def opcua_cert(folder: str = typer.Argument(..., help="The folder to write the c
         cert, key = client_certificate(folder, app_uri, trust_in=trust_in)
     except OSError as exc:
         _fail(f"cannot write into {shown(folder)}: {exc.strerror or exc}: choose a folder you can write")
+    if as_json:
+        echo(json.dumps({"certificate": str(cert), "key": str(key), "made": not existed, "app_uri": app_uri,
+                         "trusted": None if trust_in is None else str(Path(trust_in) / "trusted")}))
+        return
     made = "kept (already made for this URI)" if existed else "wrote"
     echo(f"{made} {shown(cert)}: the client's certificate (DER)")
     echo(f"{made} {shown(key)}: its private key (PEM, readable by you only: keep it secret)")
