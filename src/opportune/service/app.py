@@ -51,7 +51,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from opportune import __version__
-from opportune.policies.named import DEFAULT_POLICY, POLICIES
+from opportune.policies.named import DEFAULT_POLICY, FORMER_NAMES, POLICIES
 from opportune.service import idempotency as idem
 from opportune.formats.problems import CONTROL_CHARS
 from opportune.service.auth import Principal
@@ -127,9 +127,9 @@ class RunIn(BaseModel):
     buffer_capacity: Optional[Annotated[int, Field(ge=0, le=1_000_000), BeforeValidator(_json_integer)]] = Field(
         None, description="Buffer locations; null: unlimited")
     label: Text = Field("", max_length=200, description="Free text shown on the dashboard (e.g. a serial number)")
-    policy: Optional[Literal[POLICIES]] = Field(
-        None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper' or "
-                          "'opportunistic': the paper's rule)")
+    policy: Optional[Literal[POLICIES + tuple(FORMER_NAMES)]] = Field(
+        None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper': the "
+                          "paper's rule; 'opportunistic', its former name, runs it with a `note` in the answer)")
     products: Optional[Annotated[int, Field(ge=1, le=16), BeforeValidator(_json_integer)]] = Field(
         None, description="Build this many copies of the plan at once on as many fixtures fed from one bin (1–16; "
                           "default 1): looks then name part kinds, and each install says its fixture")

@@ -335,6 +335,8 @@ class Run(Model):
     finished: bool
     created_at: Timestamp
     updated_at: Timestamp
+    note: str = absent("Only in the answer of a run started under a policy's former name ('opportunistic'): what "
+                       "to write instead")
 
 
 class RunSummary(Model):
