@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
 import random
 import time
 from collections import Counter
@@ -211,7 +212,12 @@ def test_a_large_plan_gets_a_bound_above_its_motions():
 def test_simulate_prints_the_bound_beside_the_policies():
     out = run_cli("simulate", GEARBOX, "--strategies", "lookahead,paper", "--trials", "200", "--bound")
     assert out.exit_code == 0, out.output
-    assert "lower bound on any online policy's expected time" in out.output and "paper +" in out.output
+    text = " ".join(out.output.split())
+    assert "lower bound on any online policy's expected time" in text and re.search(r"paper \d+\.\d% above", text)
+    # the look-ahead is the optimum here: its mean of 200 trials is below the bound (the optimum itself), and
+    # the line calls it below, and noise, not "above" with a minus sign
+    assert re.search(r"lookahead \d+\.\d% below", text) and "lookahead below the bound is sampling noise" in text
+    assert "-" not in text.split("each policy's mean against it:")[1].split(".")[0]
     doc = json.loads(run_cli("simulate", GEARBOX, "--strategies", "paper", "--trials", "50", "--bound",
                              "--json").output)
     assert doc["bound"]["penalty"] == "optimal" and doc["bound"]["mean"] == pytest.approx(13.5711, abs=1e-4)
@@ -259,7 +265,6 @@ def test_simulate_offers_every_penalty_of_the_bound():
 
 def test_the_readme_bound_is_what_its_command_prints():
     """The README quotes the bound its own command line prints (the command, run as written)."""
-    import re
     import shlex
 
     from pathlib import Path

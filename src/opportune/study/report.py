@@ -315,6 +315,8 @@ def _difference(mean: float, ci: tuple[float, float], optimum: float) -> str:
 def _draw_means(ax, names, means, cis, optimum, xlim, marker_pt: float, enlarged=()) -> None:
     """One panel of the mean-time figure: a row per strategy, its 95% interval drawn over a hollow marker
     (but for the rows in ``enlarged``, whose intervals the zoom panel draws)."""
+    from matplotlib.ticker import MaxNLocator
+
     n = len(names)
     ys = list(range(n))
     if optimum:
@@ -331,6 +333,7 @@ def _draw_means(ax, names, means, cis, optimum, xlim, marker_pt: float, enlarged
     ax.set_yticks(ys, [_plain(label(name)) for name in names])
     ax.set_ylim(n - 0.5, -0.5)   # best at the top
     ax.set_xlim(*xlim)
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5))   # a few ticks: none whose label spills past the column
     ax.ticklabel_format(axis="x", useOffset=False)
     ax.grid(axis="x", alpha=0.35)
     if optimum:
