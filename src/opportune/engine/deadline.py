@@ -30,6 +30,7 @@ the deadline has passed: counting time
 from __future__ import annotations
 
 import math
+import sys
 import time
 
 __all__ = ["BudgetExceeded", "Deadline", "as_deadline"]
@@ -150,3 +151,38 @@ def as_deadline(value: "Deadline | float | None") -> Deadline:
     if isinstance(value, Deadline):
         return value
     return Deadline(value)
+
+
+class recursion_room:
+    """Within the block, room for ``depth`` nested Python calls: the interpreter's recursion limit is
+    raised for the block where it is lower, and put back after.  A deep recursion (a count over
+    thousands of elements) must not leave the process's limit changed for good: the caller did not
+    ask for it, and a test runner that manages the limit (Hypothesis) warns of it.  Re-entrant.
+
+    >>> import sys
+    >>> before = sys.getrecursionlimit()
+    >>> with recursion_room(before + 5_000):
+    ...     sys.getrecursionlimit() == before + 5_000
+    True
+    >>> sys.getrecursionlimit() == before
+    True
+    """
+
+    __slots__ = ("depth", "_old")
+
+    def __init__(self, depth: int):
+        self.depth = depth
+        self._old: list[int] = []
+
+    def __enter__(self) -> "recursion_room":
+        old = sys.getrecursionlimit()
+        self._old.append(old)
+        if old < self.depth:
+            sys.setrecursionlimit(self.depth)
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        old = self._old.pop()
+        if sys.getrecursionlimit() != old:
+            sys.setrecursionlimit(old)
+        return False
