@@ -128,9 +128,9 @@ def run_plan(spec: str, args, visible: int, capacity: int | None = None, bin: st
         same += exact == action
     out["identical"] = (exact_n + same, exact_n + checked, same, checked)
     if args.exact_trials:
-        exact_config = StudyConfig(plan, strategies=("opportunistic",), trials=args.exact_trials, seed=args.seed,
+        exact_config = StudyConfig(plan, strategies=("paper",), trials=args.exact_trials, seed=args.seed,
                                    visible=visible)
-        exact_runner = TrialRunner("opportunistic", exact_engine, exact_config, prepared)
+        exact_runner = TrialRunner("paper", exact_engine, exact_config, prepared)
         n = min(args.exact_trials, args.trials)
         costs = []
         t2 = time.perf_counter()
@@ -153,8 +153,8 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--plans", default=",".join(DEFAULT_PLANS), help="comma-separated plan specs")
     ap.add_argument("--trials", type=int, default=3)
-    ap.add_argument("--policy", default="opportunistic",
-                    help="the policy timed: opportunistic (the paper's rule, with the offline checks), bin-first, "
+    ap.add_argument("--policy", default="paper",
+                    help="the policy timed: paper (the paper's rule, with the offline checks), bin-first, "
                          "slack or lookahead (latency only)")
     ap.add_argument("--budget", type=float, default=0.05, help="seconds per decision")
     ap.add_argument("--visible", type=int, default=2)

@@ -147,11 +147,11 @@ def paired(spec: str, args) -> None:
         per = result.seconds.get(name, 0.0) / max(1, s["trials"])
         print(f"  {name:<10} {s['time']['mean']:>10.3f}  {text:>32}  {per:>8.3f}")
     if args.bound:      # the best any online policy can do is at least this (opportune.study.bounds)
-        from opportune.study.bounds import lower_bound
+        from opportune.study.bounds import describe_gaps, lower_bound, policy_gaps
 
         b = lower_bound(plan, visible=args.paired_visible, trials=min(args.paired_trials, 100), seed=args.seed)
-        print(f"  lower bound on any online policy: {b.mean:.3f} ± {b.half_width:.3f} (95%; {b.method}); each mean "
-              "above it: " + ", ".join(f"{n} {100 * (doc[n]['time']['mean'] / b.mean - 1):+.1f}%" for n in PAIRED))
+        print(f"  lower bound on any online policy: {b.mean:.3f} ± {b.half_width:.3f} (95%; {b.method}); each "
+              "mean against it: " + describe_gaps(policy_gaps(b, {n: doc[n]["time"] for n in PAIRED})))
 
 
 def setting_name(visible: int, capacity: int | None, bin: str) -> str:

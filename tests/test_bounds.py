@@ -6,6 +6,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
 import random
 import time
 from collections import Counter
@@ -18,7 +19,8 @@ from conftest import GEARBOX, random_plans, run_cli
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver
-from opportune.study.bounds import BoundError, Keys, lower_bound
+from opportune.study.bounds import (DEFECT_SE, PENALTIES, Z95, BoundError, BoundResult, Keys, describe_gaps,
+                                    lower_bound, policy_gaps)
 from opportune.planning.costs import TimeModel
 
 
@@ -210,11 +212,71 @@ def test_a_large_plan_gets_a_bound_above_its_motions():
 def test_simulate_prints_the_bound_beside_the_policies():
     out = run_cli("simulate", GEARBOX, "--strategies", "lookahead,paper", "--trials", "200", "--bound")
     assert out.exit_code == 0, out.output
-    assert "lower bound on any online policy's expected time" in out.output and "paper +" in out.output
+    text = " ".join(out.output.split())
+    assert "lower bound on any online policy's expected time" in text and re.search(r"paper \d+\.\d% above", text)
+    # the look-ahead is the optimum here: its mean of 200 trials is below the bound (the optimum itself), and
+    # the line calls it below, and noise, not "above" with a minus sign
+    assert re.search(r"lookahead \d+\.\d% below", text) and "lookahead below the bound is sampling noise" in text
+    assert "-" not in text.split("each policy's mean against it:")[1].split(".")[0]
     doc = json.loads(run_cli("simulate", GEARBOX, "--strategies", "paper", "--trials", "50", "--bound",
                              "--json").output)
     assert doc["bound"]["penalty"] == "optimal" and doc["bound"]["mean"] == pytest.approx(13.5711, abs=1e-4)
-    assert doc["bound"]["above"]["paper"] > -0.1
+    assert doc["bound"]["policies"]["paper"]["gap"] > -0.1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(5, 20), st.floats(0, 0.5), st.floats(5, 20), st.floats(0.001, 0.5))
+def test_each_gap_is_worded_by_its_sign_and_a_mean_below_the_bound_is_explained(bound, bound_half, mean, half):
+    """A mean above the bound is called above, one below it below (never "above" with a minus sign), and one
+    below it is sampling noise within the 95% intervals, rarer noise up to DEFECT_SE standard errors, a
+    defect beyond: each said in words."""
+    r = BoundResult(bound, bound_half, 200, "m", "motions", 200, 0, 0.0, bound)
+    gaps = policy_gaps(r, {"p": {"mean": mean, "ci95": [mean - half, mean + half]}})
+    g = gaps["p"]
+    assert g["gap"] == pytest.approx(mean / bound - 1)
+    words = describe_gaps(gaps)
+    assert ("below" in words.split(";")[0]) == (mean < bound) and ("above" in words.split(";")[0]) == (mean >= bound)
+    assert "-" not in words.split("%")[0], words     # the sign is the word, not a minus
+    if mean >= bound:
+        assert g["below"] is None and "noise" not in words and "defect" not in words
+    else:
+        z = (bound - mean) / (math.hypot(half, bound_half) / Z95)
+        assert g["z"] == pytest.approx(z)
+        expected = "noise" if z <= Z95 else "rare" if z <= DEFECT_SE else "defect"
+        assert g["below"] == expected
+        assert {"noise": "is sampling noise", "rare": "once in 40 studies", "defect": "a defect"}[expected] in words
+
+
+def test_simulate_offers_every_penalty_of_the_bound():
+    """--penalty NAME: each of the bound's penalties from the command line (the README's number is the
+    'motions' penalty's), a wrong name or --penalty without --bound refused before the study."""
+    for penalty in PENALTIES:
+        out = run_cli("simulate", GEARBOX, "--strategies", "paper", "--trials", "20", "--bound", "--penalty", penalty,
+                      "--json")
+        assert out.exit_code == 0, out.output
+        bound = json.loads(out.output)["bound"]
+        assert bound["penalty"] == {"auto": "optimal"}.get(penalty, penalty) and bound["trials"] == 20
+        assert bound["mean"] <= 13.5711 + 1e-4 + 2 * bound["half_width"]
+    wrong = run_cli("simulate", GEARBOX, "--trials", "100000", "--bound", "--penalty", "motion")
+    assert wrong.exit_code == 2 and "choose from auto, none, motions, optimal" in wrong.output
+    alone = run_cli("simulate", GEARBOX, "--trials", "100000", "--penalty", "motions")
+    assert alone.exit_code == 2 and "give --bound too" in alone.output
+
+
+def test_the_readme_bound_is_what_its_command_prints():
+    """The README quotes the bound its own command line prints (the command, run as written)."""
+    import shlex
+
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    found = re.search(r"`(opportune simulate [^`]*--bound[^`]*)`\s+prints ([0-9.]+ ± [0-9.]+)", readme)
+    assert found, "the README's --bound example: a command in backticks, then 'prints MEAN ± HALF'"
+    command, quoted = found.groups()
+    out = run_cli(*shlex.split(command)[1:])
+    assert out.exit_code == 0, out.output
+    assert "lower bound on any online policy's expected time" in out.output
+    assert f": {quoted} (95%)" in " ".join(out.output.split()), (quoted, out.output)
 
 
 def test_simulate_bound_in_the_pile_is_refused_before_the_study():

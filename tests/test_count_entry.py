@@ -183,7 +183,7 @@ def test_callers_count_through_the_entry_at_run_time(counts_from):
             decision = seq.decide(visible=list(looks))
             seq.report("success" if decision.action.kind != "shake" else "failed")
     assert Opportunistic().buffer_ties_at(engine, 0, engine.all_strategies) is not None
-    result = run_study(StudyConfig(plan=plan, strategies=("opportunistic",), trials=3, seed=2), workers=1)
+    result = run_study(StudyConfig(plan=plan, strategies=("paper",), trials=3, seed=2), workers=1)
     assert result is not None
     assert counts_from, "the run made no count at all: the watch is broken"
     outside = {m: n for m, n in counts_from.items() if not m.startswith("opportune.engine")}

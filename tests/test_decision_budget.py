@@ -286,7 +286,7 @@ def test_a_budget_must_be_positive():
         Sequencer(make_plan(["a"]), budget=-1)
 
 
-@pytest.mark.parametrize("policy", ["opportunistic", "lookahead"])
+@pytest.mark.parametrize("policy", ["paper", "lookahead"])
 def test_a_budgeted_simulation_keeps_memo_upkeep_out_of_its_decisions(policy, monkeypatch):
     """As the sequencer does, a budgeted study's decisions never evict, double or restart a memo (that
     upkeep once took a 50 ms decision to 163 ms); the upkeep runs between decisions."""

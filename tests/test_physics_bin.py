@@ -116,7 +116,7 @@ def test_shaking_changes_what_is_visible():
 
 
 def test_the_same_seed_gives_the_same_trial():
-    config = StudyConfig(GEARBOX, strategies=("opportunistic", "buffer"), trials=4, bin="physics", seed=7)
+    config = StudyConfig(GEARBOX, strategies=("paper", "buffer"), trials=4, bin="physics", seed=7)
     one = run_study(config, workers=1)
     physics._HEAPS.clear()   # the heaps dropped again, not taken from the cache, in other chunks
     two = run_study(config, workers=1, chunk_size=1)
@@ -150,20 +150,20 @@ def test_the_bounds_are_checked_before_a_model_is_built(monkeypatch):
     monkeypatch.setattr(physics, "_model_xml", no_model)
     many = plan_from_dict({"name": "many", "parts": [{"id": "screw", "quantity": physics.MAX_BIN_UNITS + 1}]})
     with pytest.raises(StudyError, match=f"at most {physics.MAX_BIN_UNITS} parts"):
-        StudyConfig(many, strategies=("opportunistic",), bin="physics").validate()
+        StudyConfig(many, strategies=("paper",), bin="physics").validate()
     big = plan_from_dict({"name": "big", "parts": [{"id": "plate", "geometry": {"box": [0.3, 0.3, 0.2]}}]})
     with pytest.raises(StudyError, match="cannot lie flat in a bin"):
-        StudyConfig(big, strategies=("opportunistic",), bin="physics").validate()
+        StudyConfig(big, strategies=("paper",), bin="physics").validate()
     for geometry in ({"box": [0.01, 0.2, 0.01]}, {"cylinder": [0.005, 0.3]}):   # a rod longer than the bin
         rod = plan_from_dict({"name": "rod", "parts": [{"id": "rod", "geometry": geometry}]})
         with pytest.raises(StudyError, match="cannot lie flat in a bin"):
-            StudyConfig(rod, strategies=("opportunistic",), bin="physics").validate()
+            StudyConfig(rod, strategies=("paper",), bin="physics").validate()
     fits = plan_from_dict({"name": "fits", "parts": [{"id": "bar", "geometry": {"box": [0.15, 0.01, 0.11]}}]})
-    StudyConfig(fits, strategies=("opportunistic",), bin="physics").validate()   # on its side: 0.15 × 0.11
+    StudyConfig(fits, strategies=("paper",), bin="physics").validate()   # on its side: 0.15 × 0.11
     full = plan_from_dict({"name": "full", "parts": [{"id": "block", "quantity": 30,
                                                        "geometry": {"box": [0.05, 0.05, 0.05]}}]})
     with pytest.raises(StudyError, match="volume"):
-        StudyConfig(full, strategies=("opportunistic",), bin="physics").validate()
+        StudyConfig(full, strategies=("paper",), bin="physics").validate()
     for settings, message in (({"settle_steps": physics.MAX_SETTLE_STEPS + 1}, "settle_steps"),
                               ({"bin_size": (0.16, 0.12, 5.0)}, "bin's inside")):
         with pytest.raises(PhysicsError, match=message):
@@ -196,7 +196,7 @@ def test_a_geometry_is_accepted_exactly_within_its_bounds(shape, dims):
 
 def test_simulate_runs_the_physical_bin_from_the_command_line(tmp_path):
     result = CliRunner().invoke(app, ["simulate", "example:gearbox", "--bin", "physics", "--trials", "2",
-                                      "--strategies", "opportunistic,buffer", "--workers", "1", "--json"])
+                                      "--strategies", "paper,buffer", "--workers", "1", "--json"])
     assert result.exit_code == 0, result.output
     doc = json.loads(result.output)
     assert doc["bin"] == "physics" and doc["cell"] == CellModel().to_dict()
@@ -214,7 +214,7 @@ def test_simulate_runs_the_physical_bin_from_the_command_line(tmp_path):
 def test_seconds_are_the_cell_model_applied_to_the_trial(bin_model):
     """Recomputed from the trial's counts: every buffered part is installed from the buffer once."""
     cell = CellModel(speed=0.8, install=1.5, camera=0.25, shake=4.0)
-    config = StudyConfig(GEARBOX, strategies=("opportunistic", "shake", "kitting"), trials=50, bin=bin_model,
+    config = StudyConfig(GEARBOX, strategies=("paper", "shake", "kitting"), trials=50, bin=bin_model,
                          cell=cell)
     result = run_study(config, workers=1)
     for s, trials in result.trials.items():
@@ -228,7 +228,7 @@ def test_seconds_are_the_cell_model_applied_to_the_trial(bin_model):
 
 def test_cell_settings_are_recorded_read_and_checked():
     cell = CellModel(parts={"co": {"install": 6.0}})
-    config = StudyConfig(GEARBOX, strategies=("opportunistic",), trials=5, cell=cell)
+    config = StudyConfig(GEARBOX, strategies=("paper",), trials=5, cell=cell)
     assert StudyConfig.from_settings(GEARBOX, config.settings()).cell == cell
     old = {k: v for k, v in config.settings().items() if k != "cell"}   # recorded before seconds existed
     assert StudyConfig.from_settings(GEARBOX, old).cell == CellModel()
@@ -236,8 +236,8 @@ def test_cell_settings_are_recorded_read_and_checked():
                 {"warp": 1}):
         with pytest.raises(StudyError):
             StudyConfig.from_settings(GEARBOX, {**config.settings(), "cell": {**cell.to_dict(), **bad}})
-    slow = run_study(config, workers=1).trials["opportunistic"]
-    fast = run_study(StudyConfig(GEARBOX, strategies=("opportunistic",), trials=5), workers=1).trials["opportunistic"]
+    slow = run_study(config, workers=1).trials["paper"]
+    fast = run_study(StudyConfig(GEARBOX, strategies=("paper",), trials=5), workers=1).trials["paper"]
     assert [t.cycle_seconds - f.cycle_seconds for t, f in zip(slow, fast)] == pytest.approx([4.0] * 5)   # co installed once
 
 
@@ -256,12 +256,12 @@ def test_a_plan_cell_section_gives_the_command_line_its_seconds(tmp_path):
 def test_a_dask_cluster_gives_the_same_physical_trials():
     from distributed import LocalCluster
 
-    config = StudyConfig(GEARBOX, strategies=("opportunistic",), trials=4, bin="physics", seed=3)
+    config = StudyConfig(GEARBOX, strategies=("paper",), trials=4, bin="physics", seed=3)
     local = run_study(config, workers=1)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                       host="127.0.0.1") as cluster:
         remote = run_study(config, dask_address=cluster.scheduler_address, chunk_size=2)
-    assert [t.row() for t in local.trials["opportunistic"]] == [t.row() for t in remote.trials["opportunistic"]]
+    assert [t.row() for t in local.trials["paper"]] == [t.row() for t in remote.trials["paper"]]
 
 
 def test_the_other_bins_never_load_mujoco():
@@ -270,7 +270,7 @@ def test_the_other_bins_never_load_mujoco():
     import sys
 
     code = ("import sys; from opportune import load_plan; from opportune.study.simulate import StudyConfig, run_study; "
-            "run_study(StudyConfig(load_plan('example:gearbox'), strategies=('opportunistic',), trials=5, bin='pile'), "
+            "run_study(StudyConfig(load_plan('example:gearbox'), strategies=('paper',), trials=5, bin='pile'), "
             "workers=1); print('mujoco' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr

@@ -58,7 +58,7 @@ def test_two_runs_of_the_demo_write_the_same_files(tmp_path):
 
 def test_a_recorded_study_runs_again_from_its_results(tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
-    assert run("simulate", GEARBOX, "--trials", 200, "--seed", 7, "--strategies", "opportunistic,random,buffer",
+    assert run("simulate", GEARBOX, "--trials", 200, "--seed", 7, "--strategies", "paper,random,buffer",
                "--buffer-capacity", 1, "--shake-cost", 2, "--out", a).exit_code == 0
     assert run("simulate", "--from", a / "results.json", "--out", b).exit_code == 0
     first, again = (json.loads((d / "results.json").read_text()) for d in (a, b))
@@ -127,7 +127,7 @@ def test_trials_as_a_data_frame_are_the_rows_of_trials_csv(tmp_path):
     from opportune import load_plan
     from opportune.study.report import write_outputs
 
-    result = run_study(StudyConfig(load_plan(GEARBOX), strategies=("opportunistic", "random"), trials=60), workers=1)
+    result = run_study(StudyConfig(load_plan(GEARBOX), strategies=("paper", "random"), trials=60), workers=1)
     frame = result.to_frame()
     assert list(frame.columns) == ["strategy", "trial", *METRICS, "complete"]
     assert len(frame) == 120
@@ -136,7 +136,7 @@ def test_trials_as_a_data_frame_are_the_rows_of_trials_csv(tmp_path):
     assert (frame["time"].to_numpy() == csv["time"].to_numpy()).all()
     assert (frame["trial"].to_numpy() == csv["trial"].to_numpy()).all()
     paired = frame.pivot(index="trial", columns="strategy", values="time")
-    difference = (paired["random"] - paired["opportunistic"]).mean()
+    difference = (paired["random"] - paired["paper"]).mean()
     from opportune.study.report import summary
 
     assert difference == pytest.approx(summary(result)["strategies"]["random"]["paired"]["mean_difference"])

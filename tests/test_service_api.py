@@ -614,6 +614,12 @@ def test_a_run_takes_its_policy_by_name_and_the_default_is_the_lookahead(svc, a,
     assert listed[run["id"]] == "lookahead"
     slack = new_run(a, plan_id, policy="slack")
     assert a.get(f"/runs/{slack}").json()["policy"] == "slack"
+    # the paper's rule's former name runs it, under its name now, and the answer says what to write
+    former = a.post("/runs", {"plan": plan_id, "policy": "opportunistic"})
+    assert former.status_code == 201, former.text
+    assert former.json()["policy"] == "paper" and "write 'paper'" in former.json()["note"]
+    assert a.get(f"/runs/{former.json()['id']}").json()["policy"] == "paper"
+    assert "note" not in run
     before = len(a.get("/runs").json()["runs"])
     err = error_of(a.post("/runs", {"plan": plan_id, "policy": "teleport"}), 422)
     assert "policy" in json.dumps(err)

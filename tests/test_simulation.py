@@ -122,15 +122,15 @@ def test_buffer_strategy_buffers_only_when_the_next_part_is_missing():
 
 
 def test_opportunistic_never_shakes_with_an_unlimited_buffer_in_a_uniform_bin():
-    r = study(strategies=("opportunistic",), trials=300)
-    assert {t.shakes for t in r.trials["opportunistic"]} == {0}
-    assert all(t.motions == 10 + t.buffer_moves for t in r.trials["opportunistic"])
+    r = study(strategies=("paper",), trials=300)
+    assert {t.shakes for t in r.trials["paper"]} == {0}
+    assert all(t.motions == 10 + t.buffer_moves for t in r.trials["paper"])
 
 
 def test_finite_buffer_makes_the_hybrid_shake():
-    r = study(strategies=("opportunistic",), buffer_capacity=0, trials=300)
-    assert {t.buffer_peak for t in r.trials["opportunistic"]} == {0}
-    assert mean(t.shakes for t in r.trials["opportunistic"]) > 0
+    r = study(strategies=("paper",), buffer_capacity=0, trials=300)
+    assert {t.buffer_peak for t in r.trials["paper"]} == {0}
+    assert mean(t.shakes for t in r.trials["paper"]) > 0
 
 
 def test_quantify_learns_the_weighted_order():
@@ -246,19 +246,19 @@ def test_no_strategy_beats_the_optimum_beyond_monte_carlo_error():
 
 
 def test_gearbox_opportunistic_beats_buffer_kitting_and_shake():
-    r = study(strategies=("opportunistic", "buffer", "kitting", "shake", "optimal"), trials=1500)
+    r = study(strategies=("paper", "buffer", "kitting", "shake", "optimal"), trials=1500)
     doc = summary(r)["strategies"]
-    opp = doc["opportunistic"]["time"]
+    opp = doc["paper"]["time"]
     for other in ("buffer", "kitting", "shake"):
         assert opp["ci95"][1] < doc[other]["time"]["ci95"][0], other
-    assert doc["opportunistic"]["ratio_to_optimal"] >= 1 - 0.02
+    assert doc["paper"]["ratio_to_optimal"] >= 1 - 0.02
 
 
 # ---------------------------------------------------------------- reproducibility and scale
 
 
 def test_same_seed_same_numbers_on_any_number_of_workers():
-    cfg = StudyConfig(plan=GEAR, strategies=("opportunistic", "random", "shake"), trials=300, seed=11)
+    cfg = StudyConfig(plan=GEAR, strategies=("paper", "random", "shake"), trials=300, seed=11)
     one = run_study(cfg, workers=1, chunk_size=37)
     two = run_study(cfg, workers=2, chunk_size=50)
     for s in cfg.strategies:
@@ -270,7 +270,7 @@ def test_same_seed_same_numbers_on_any_number_of_workers():
 def test_dask_local_cluster_gives_the_same_numbers():
     from distributed import Client, LocalCluster
 
-    cfg = StudyConfig(plan=GEAR, strategies=("opportunistic", "quantify", "optimal"), trials=200, seed=5,
+    cfg = StudyConfig(plan=GEAR, strategies=("paper", "quantify", "optimal"), trials=200, seed=5,
                       training_runs=30)
     local = run_study(cfg, workers=1)
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
@@ -281,7 +281,7 @@ def test_dask_local_cluster_gives_the_same_numbers():
 
 
 def test_interrupt_reports_what_finished():
-    cfg = StudyConfig(plan=GEAR, strategies=("opportunistic",), trials=1000)
+    cfg = StudyConfig(plan=GEAR, strategies=("paper",), trials=1000)
     calls = []
 
     def progress(strategy, n):
@@ -290,25 +290,25 @@ def test_interrupt_reports_what_finished():
             raise KeyboardInterrupt
 
     r = run_study(cfg, workers=1, chunk_size=100, progress=progress)
-    assert r.interrupted and len(r.trials["opportunistic"]) == 300
+    assert r.interrupted and len(r.trials["paper"]) == 300
 
 
 def test_interrupted_before_a_strategy_finished_a_trial_still_reports(tmp_path):
-    cfg = StudyConfig(plan=GEAR, strategies=("opportunistic", "shake"), trials=400)
+    cfg = StudyConfig(plan=GEAR, strategies=("paper", "shake"), trials=400)
 
     def progress(strategy, n):
         raise KeyboardInterrupt  # at the first finished chunk: shake has none
 
     r = run_study(cfg, workers=1, chunk_size=100, progress=progress)
-    assert r.interrupted and len(r.trials["opportunistic"]) == 100 and not r.trials["shake"]
+    assert r.interrupted and len(r.trials["paper"]) == 100 and not r.trials["shake"]
     rows = {row[0]: row for row in table_rows(summary(r))}
-    assert rows["shake"][1] == "no trial finished" and float(rows["opportunistic"][1].split(" ± ")[0]) > 10
-    assert list(rows) == ["opportunistic", "shake"]  # strategies without trials last
+    assert rows["shake"][1] == "no trial finished" and float(rows["paper"][1].split(" ± ")[0]) > 10
+    assert list(rows) == ["paper", "shake"]  # strategies without trials last
     files = {p.name for p in write_outputs(r, tmp_path)}
     assert "mean_time.png" in files
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["strategies"]["shake"]["time"]["n"] == 0
-    r.trials["opportunistic"].clear()  # nothing finished at all: the files, without plots
+    r.trials["paper"].clear()  # nothing finished at all: the files, without plots
     assert {p.name for p in write_outputs(r, tmp_path / "empty")} == {"results.json", "trials.csv"}
 
 
@@ -334,7 +334,7 @@ def test_describe_matches_numpy():
 
 
 def test_outputs_are_written(tmp_path):
-    r = study(strategies=("opportunistic", "shake", "optimal"), trials=200)
+    r = study(strategies=("paper", "shake", "optimal"), trials=200)
     files = {p.name for p in write_outputs(r, tmp_path)}
     assert {"results.json", "trials.csv", "time_distribution.png", "time_distribution.svg",
             "mean_time.png", "mean_time.svg"} <= files
@@ -349,11 +349,11 @@ def test_simulate_cli_json_shape(tmp_path):
     from opportune.cli import app
 
     r = CliRunner().invoke(app, ["simulate", str(GEARBOX), "--trials", "300", "--workers", "1", "--json",
-                                 "--strategies", "opportunistic,shake,optimal", "--out", str(tmp_path)])
+                                 "--strategies", "paper,shake,optimal", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
     doc = json.loads(r.output)
     assert doc["plan"] == "gearbox" and doc["bin"] == "uniform" and doc["trials"] == 300 and doc["seed"] == 0
-    for name in ("opportunistic", "shake", "optimal"):
+    for name in ("paper", "shake", "optimal"):
         s = doc["strategies"][name]
         for metric in ("motions", "shakes", "time", "buffer_peak"):
             assert set(s[metric]) >= {"mean", "sd", "p5", "p50", "p95", "max", "ci95"}
@@ -384,27 +384,27 @@ def test_a_plan_too_large_for_exact_counts_runs_the_strategies_that_need_none():
 
     arc = salbp_dir() / "ARC111.IN2"
     plan = load_plan(arc)
-    cfg = StudyConfig(plan=plan, strategies=("shake", "opportunistic"), trials=3, count_time_limit=0.3)
-    with pytest.raises(StrategyUnavailable, match="'opportunistic' ranks the candidates by exact counts") as info:
+    cfg = StudyConfig(plan=plan, strategies=("shake", "paper"), trials=3, count_time_limit=0.3)
+    with pytest.raises(StrategyUnavailable, match="'paper' ranks the candidates by exact counts") as info:
         prepare(cfg)
-    assert info.value.strategy == "opportunistic" and "--strategies" in str(info.value)
+    assert info.value.strategy == "paper" and "--strategies" in str(info.value)
     r = run_study(StudyConfig(plan=plan, strategies=("kitting", "buffer"), trials=3), workers=1)
     assert [t.motions for t in r.trials["kitting"]] == [2 * plan.n_units] * 3
     assert all(t.complete for t in r.trials["buffer"])
 
     args = ["simulate", str(arc), "--trials", "2", "--workers", "1", "--count-time-limit", "0.3"]
-    out = CliRunner().invoke(app, [*args, "--strategies", "opportunistic,kitting", "--json"])
+    out = CliRunner().invoke(app, [*args, "--strategies", "paper,kitting", "--json"])
     assert out.exit_code == 0, out.output
     doc = json.loads(out.stdout)
-    assert {"opportunistic", "kitting"} <= set(doc["strategies"])
+    assert {"paper", "kitting"} <= set(doc["strategies"])
     assert "decide within 50 ms per decision" in out.stderr and doc["provenance"]["study"]["decision_budget"] == 0.05
     out = CliRunner().invoke(app, [*args, "--strategies", "kitting,pallet"])
     assert out.exit_code == 0 and "kitting" in out.output
     out = CliRunner().invoke(app, [*args, "--json"])
     assert out.exit_code == 0, out.output
     doc = json.loads(out.stdout)
-    assert {"opportunistic", "kitting", "buffer", "shake"} <= set(doc["strategies"])
-    assert "leaving 'opportunistic' out" not in out.stderr and "decide within 50 ms" in out.stderr
+    assert {"paper", "kitting", "buffer", "shake"} <= set(doc["strategies"])
+    assert "leaving 'paper' out" not in out.stderr and "decide within 50 ms" in out.stderr
 
 
 def test_time_limited_counts_give_up_and_restore_the_limits():
@@ -458,7 +458,7 @@ def test_opportunistic_is_refused_when_the_first_looks_positions_do_not_fit(monk
 
     monkeypatch.setattr(OrderEngine, "position_sums_for", too_slow)
     with pytest.raises(StrategyUnavailable) as info:
-        prepare(StudyConfig(plan=GEAR, strategies=("opportunistic",), trials=1, count_time_limit=1.0))
+        prepare(StudyConfig(plan=GEAR, strategies=("paper",), trials=1, count_time_limit=1.0))
     assert "expected positions" in str(info.value) and "--decision-budget" in str(info.value)
 
 
@@ -466,14 +466,14 @@ def test_results_carry_their_provenance(tmp_path):
     from opportune import __version__
     from opportune.study.simulate import hash_config
 
-    one = study(strategies=("opportunistic",), trials=50)
+    one = study(strategies=("paper",), trials=50)
     doc = summary(one)["provenance"]
     assert doc["opportune"] == __version__ and doc["schema_version"] >= 1
-    assert doc["study_sha256"] == hash_config(one.config) and doc["strategies"] == ["opportunistic"]
-    other = study(plan=make_plan(["a", "b"], {"b": ["a"]}), strategies=("opportunistic",), trials=50)
+    assert doc["study_sha256"] == hash_config(one.config) and doc["strategies"] == ["paper"]
+    other = study(plan=make_plan(["a", "b"], {"b": ["a"]}), strategies=("paper",), trials=50)
     assert summary(other)["provenance"]["plan_sha256"] != doc["plan_sha256"]
     # the same study on more workers: the same provenance (nothing in it depends on the machine or the run)
-    again = run_study(StudyConfig(plan=GEAR, strategies=("opportunistic",), trials=50), workers=2)
+    again = run_study(StudyConfig(plan=GEAR, strategies=("paper",), trials=50), workers=2)
     assert summary(again)["provenance"] == doc
     write_outputs(one, tmp_path)
     assert json.loads((tmp_path / "results.json").read_text())["provenance"]["plan_sha256"] == doc["plan_sha256"]
@@ -481,8 +481,8 @@ def test_results_carry_their_provenance(tmp_path):
 
 def test_figures_are_paper_ready_and_byte_identical_for_the_same_study(tmp_path):
     """PNG at 300 dpi, SVG with its text as text, PDF; no dates: the same study writes the same bytes."""
-    one = study(strategies=("opportunistic", "random", "buffer"), trials=60)
-    again = study(strategies=("opportunistic", "random", "buffer"), trials=60)
+    one = study(strategies=("paper", "random", "buffer"), trials=60)
+    again = study(strategies=("paper", "random", "buffer"), trials=60)
     a, b = tmp_path / "a", tmp_path / "b"
     write_outputs(one, a)
     write_outputs(again, b)
@@ -490,7 +490,7 @@ def test_figures_are_paper_ready_and_byte_identical_for_the_same_study(tmp_path)
         for ext in ("png", "svg", "pdf"):
             assert (a / f"{stem}.{ext}").read_bytes() == (b / f"{stem}.{ext}").read_bytes(), f"{stem}.{ext}"
         svg = (a / f"{stem}.svg").read_text()
-        assert "<text" in svg and "opportunistic" in svg and "<dc:date>" not in svg
+        assert "<text" in svg and "paper" in svg and "<dc:date>" not in svg
         assert (a / f"{stem}.pdf").read_bytes()[:4] == b"%PDF"
     import struct
     png = (a / "mean_time.png").read_bytes()
@@ -504,15 +504,15 @@ def test_paired_differences_use_the_same_bins_and_are_tighter():
     pairs, with an interval much narrower than the two means' (and that contains their difference)."""
     from opportune.study.report import paired_difference
 
-    r = study(strategies=("opportunistic", "random"), trials=1500)
+    r = study(strategies=("paper", "random"), trials=1500)
     doc = summary(r)["strategies"]
     paired = doc["random"]["paired"]
-    assert paired["with"] == "opportunistic"
-    diff = doc["random"]["time"]["mean"] - doc["opportunistic"]["time"]["mean"]
+    assert paired["with"] == "paper"
+    diff = doc["random"]["time"]["mean"] - doc["paper"]["time"]["mean"]
     assert abs(paired["mean_difference"] - diff) < 1e-9 and paired["n"] == 1500
     lo, hi = paired["ci95"]
     assert lo <= diff <= hi
     unpaired = doc["random"]["time"]["ci95"][1] - doc["random"]["time"]["ci95"][0]
     assert hi - lo < unpaired / 2
-    assert paired_difference(r.trials["random"][:1], r.trials["opportunistic"]) is None
-    assert "paired" not in doc["opportunistic"]
+    assert paired_difference(r.trials["random"][:1], r.trials["paper"]) is None
+    assert "paired" not in doc["paper"]

@@ -190,6 +190,17 @@ def _escape(text: str) -> str:
     return escape(text.encode("utf-8", "backslashreplace").decode("utf-8"))
 
 
+def _current_names(names) -> list[str]:
+    """Policy names with each former one (``opportunistic``) replaced by its name now, each name once; the
+    former names get one note on standard error (the command line's deprecation notice)."""
+    from opportune.policies.named import current_names, deprecation_note
+
+    now, former = current_names(list(names), warn=False)
+    if former:
+        _err().print("note: " + _escape("; ".join(deprecation_note(n) for n in former)))
+    return list(now)
+
+
 def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
     """Load a plan, or print every error and exit 1."""
     from opportune.formats.loader import CheckResult, read_plan
@@ -375,9 +386,9 @@ def replay(
         help="Seconds per decision, as a cell would give: exact when the counts fit, else estimated and marked so "
              "(default: every decision exact)"),
     policy: str = typer.Option("paper", "--policy",
-                               help="paper (the paper's rule, also 'opportunistic'), bin-first, slack, lookahead or rollout"),
+                               help="paper (the paper's rule), bin-first, slack, lookahead or rollout"),
 ):
-    """Run a policy (the paper's opportunistic rule by default) over a file of looks and print the trace
+    """Run a policy (the paper's rule by default) over a file of looks and print the trace
     like the paper's Table 1."""
     from rich.table import Table
 
@@ -391,6 +402,7 @@ def replay(
         fail_problem(exc.problem)
     from opportune.policies.named import UnknownPolicy, make_policy
 
+    policy = _current_names([policy])[0]
     try:
         chosen = make_policy(policy, budget=decision_budget, visible=plan.simulation.get("visible", 2),
                              capacity=buffer_capacity)
@@ -403,7 +415,7 @@ def replay(
             seq.step(look)
         except SequencerError as exc:
             stopped = f"{looks_file}: look {i} ({' '.join(look) or '-'}): {exc}"
-            if chosen.name != "opportunistic":
+            if chosen.name != "paper":
                 stopped += ("; looks recorded under another policy fit only that policy's actions: replay them "
                             "with it (the paper's Table 1: --policy paper)")
             break
@@ -422,7 +434,8 @@ def replay(
             raise typer.Exit(1)
         print(json.dumps(doc, indent=2))
         return
-    table = Table(title=f"{plan.name}: {chosen.name} schedule" + (f" (stopped after {len(rows)} looks)"
+    title = "the paper's rule" if chosen.name == "paper" else f"{chosen.name} schedule"
+    table = Table(title=f"{plan.name}: {title}" + (f" (stopped after {len(rows)} looks)"
                                                                  if stopped else ""))
     if explain:
         table.add_column("#", justify="right")
@@ -541,10 +554,16 @@ def simulate(
         False, "--bound", help="Also a certified lower bound on the expected time of every online policy, with its "
                                "95% interval, beside each policy's mean (information relaxation; uniform and "
                                "weighted bins; on min(--trials, 200) bins)"),
+    penalty: Optional[str] = typer.Option(
+        None, "--penalty", show_default=False,
+        help="The bound's penalty (with --bound): auto (the default: the optimum's values where they fit, else "
+             "motions), motions (the motions still needed), none (the clairvoyant bound) or optimal (the "
+             "optimum's values: the bound is the optimum)"),
 ):
     """Run the paper's comparison by simulation: every strategy, a bin model, Monte Carlo trials."""
     if report_file is not None:   # checked before any work: a study of minutes must not end in "cannot write"
         _check_report_path(report_file, products, out_dir, as_json)
+    _check_penalty(bound, penalty, as_json)
     if products is not None:   # several products at once (issue 15): its own study, below
         return _simulate_products(ctx, plan_file, products, strategies=strategies, trials=trials, seed=seed,
                                   bin_model=bin_model, visible=visible, buffer_capacity=buffer_capacity,
@@ -578,6 +597,7 @@ def simulate(
                      f"beyond the default ({OPTIMAL_DEFAULT_UNITS}); ask for it with --strategies to try anyway")
     if explicit and not names:
         fail("--strategies is empty: name at least one of " + ", ".join(STRATEGIES), 2)
+    names = _current_names(names)
     try:
         if from_results is not None:
             # The recorded study, with what this command line says instead where it says something.
@@ -640,7 +660,7 @@ def simulate(
         fail(str(exc))
     doc = summary(result)
     if bound:
-        doc["bound"] = _study_bound(config, doc)
+        doc["bound"] = _study_bound(config, doc, penalty or "auto", as_json)
     if out_dir:
         try:
             written = write_outputs(result, out_dir)
@@ -694,23 +714,41 @@ BOUND_BINS = ("uniform", "weighted")
 BOUND_TRIALS = 200   # bins of simulate's lower bound, at most
 
 
-def _study_bound(config, doc: dict) -> dict:
-    """``simulate --bound``: the certified lower bound on the study's world, and each policy's mean above it."""
-    from opportune.study.bounds import lower_bound
+def _check_penalty(bound: bool, penalty: Optional[str], as_json: bool) -> None:
+    """Exit with what to do when ``--penalty`` is not one of the bound's, or is given without ``--bound``."""
+    from opportune.study.bounds import PENALTIES
 
-    r = lower_bound(config.plan, visible=config.visible, capacity=config.buffer_capacity, bin=config.bin,
-                    trials=max(2, min(config.trials, BOUND_TRIALS)), seed=config.seed, costs=config.costs,
-                    weights=config.weights if config.bin == "weighted" else None)
+    if penalty is None:
+        return
+    if penalty not in PENALTIES:
+        fail(f"--penalty {penalty!r} is not a penalty of the bound: choose from {', '.join(PENALTIES)}", 2,
+             as_json=as_json)
+    if not bound:
+        fail("--penalty chooses the penalty of the lower bound: give --bound too", 2, as_json=as_json)
+
+
+def _study_bound(config, doc: dict, penalty: str, as_json: bool) -> dict:
+    """``simulate --bound``: the certified lower bound on the study's world, and each policy's mean against it."""
+    from opportune.study.bounds import BoundError, lower_bound, policy_gaps
+
+    try:
+        r = lower_bound(config.plan, visible=config.visible, capacity=config.buffer_capacity, bin=config.bin,
+                        trials=max(2, min(config.trials, BOUND_TRIALS)), seed=config.seed, costs=config.costs,
+                        weights=config.weights if config.bin == "weighted" else None, penalty=penalty)
+    except BoundError as exc:
+        fail(f"--bound: {exc}", 2, as_json=as_json)
     out = r.to_dict()
-    out["above"] = {name: s["time"]["mean"] / r.mean - 1 for name, s in doc["strategies"].items()
-                    if s.get("time", {}).get("mean") is not None and r.mean > 0}
+    out["policies"] = policy_gaps(r, {name: s["time"] for name, s in doc["strategies"].items()})
     return out
 
 
 def _bound_line(b: dict) -> str:
-    above = "; ".join(f"{name} {100 * gap:+.1f}%" for name, gap in b["above"].items())
+    """The bound, each policy's mean against it (a signed gap in words), and what a mean below it means."""
+    from opportune.study.bounds import describe_gaps
+
     return (f"lower bound on any online policy's expected time (certified: {b['method']}): "
-            f"{b['mean']:.3f} ± {b['half_width']:.3f} (95%); each mean above it: {above}")
+            f"{b['mean']:.3f} ± {b['half_width']:.3f} (95%); each policy's mean against it: "
+            + describe_gaps(b["policies"]))
 
 
 # The programmes' speed, measured in CPU time on a 2-core machine: the optimum's states (as estimated
@@ -726,7 +764,7 @@ EVALUATE_MAX_STATES = 30_000
 def evaluate(
     plan_file: Path = PLAN_ARG,
     policy: str = typer.Option("lookahead", "--policy",
-                               help="The policy to evaluate: lookahead (the default policy), opportunistic or paper "
+                               help="The policy to evaluate: lookahead (the default policy), paper "
                                     "(the paper's rule), bin-first, slack, rollout, buffer, shake or quantify"),
     bin_model: Optional[str] = typer.Option(None, "--bin", help="uniform, weighted or pile (default: plan, else uniform)"),
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
@@ -764,6 +802,7 @@ def evaluate(
         fail(f"exact evaluation is defined for the uniform, weighted and pile bins, not '{chosen_bin}': use "
              f"`opportune simulate --bin {chosen_bin}` for a Monte Carlo estimate", 2)
     unsuitable = ("optimal", "random", "pallet", "kitting")
+    policy = _current_names([policy])[0]
     if policy not in ALL_STRATEGIES or policy in unsuitable:
         fail(f"unknown or unsuitable policy '{policy}': choose from "
              f"{', '.join(s for s in ALL_STRATEGIES if s not in unsuitable)} (the optimum is printed beside it; "
@@ -1038,7 +1077,7 @@ def _simulate_products(ctx: typer.Context, plan_file: Optional[Path], products: 
 
     plan = load_or_exit(plan_file, json_errors=as_json)
     sim = plan.simulation
-    policies = tuple(dict.fromkeys(s.strip() for s in (strategies or "paper,lookahead").split(",") if s.strip()))
+    policies = tuple(_current_names(s.strip() for s in (strategies or "paper,lookahead").split(",") if s.strip()))
     if not policies:
         fail("--strategies is empty: name at least one policy, e.g. paper,lookahead", 2, as_json=as_json)
     try:

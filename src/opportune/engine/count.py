@@ -70,7 +70,7 @@ import time
 from itertools import islice
 from math import factorial
 
-from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline  # noqa: F401 (BudgetExceeded: its documented import)
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, recursion_room  # noqa: F401 (BudgetExceeded: its documented import)
 from opportune.engine.poset import LazyMeet as _LazyMeet
 from opportune.engine.poset import LazyUnion as _LazyUnion
 from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain, split_components
@@ -194,6 +194,7 @@ class Counter:
         # [new-entry limit, deadline, new entries in this call]
         self._budget: list = [sys.maxsize, float("inf"), 0]
         self._depth = 3 * poset.n + 200          # recursion depth a count may need
+        self._room = recursion_room(self._depth)   # given to each top-level count, and put back after
         # Chunk tables (see _narrow_tables) take about as long to build as 2^c / 16 memo entries take
         # to compute with byte tables (KILBRID: ~8 ms): switch to them once the memo is that large, so
         # one-shot counters never pay for them.
@@ -278,14 +279,15 @@ class Counter:
         width = self._width
         v = self._vec.get(mask)
         if v is None:
-            self._start_budget(deadline)
-            es = self._memo.get(mask)
-            if es is None:
-                es = self._f(mask) if mask & (mask - 1) else 1
-            if self._g is None or self._need_width(es) > width:
-                self._set_width(self._need_width(es))
-                width = self._width
-            v = self._g(mask)
+            with self._room:
+                self._start_budget(deadline)
+                es = self._memo.get(mask)
+                if es is None:
+                    es = self._f(mask) if mask & (mask - 1) else 1
+                if self._g is None or self._need_width(es) > width:
+                    self._set_width(self._need_width(es))
+                    width = self._width
+                v = self._g(mask)
         # fields cut from the bytes once (fields are whole bytes): a shift of the whole vector per
         # element is quadratic, a large share of a second on an order of 1,000 elements
         wb = width // 8
@@ -477,8 +479,6 @@ class Counter:
         if not self.hold_upkeep:
             self.maintain(b[1])
         self._maybe_narrow()
-        if sys.getrecursionlimit() < self._depth:   # Python 3.11 frames do not use the C stack
-            sys.setrecursionlimit(self._depth)
 
     def _maybe_narrow(self) -> None:
         """Switch to chunk-table scans once the memo is large enough for them to pay."""
@@ -542,6 +542,11 @@ class Counter:
             self._check_mask(mask)
         if mask & (mask - 1) == 0:
             return 1
+        with self._room:
+            return self._count_deep(mask, deadline)
+
+    def _count_deep(self, mask: int, deadline: Deadline | float | None) -> int:
+        """:meth:`_count_miss` past its look-ups (within the recursion's room)."""
         self._start_budget(deadline)
         b = self._budget
         limit = b[0]

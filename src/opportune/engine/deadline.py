@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import gc
 import math
+import sys
 import time
 from _thread import allocate_lock     # threading.Lock without threading's import
 from contextlib import contextmanager
 
-__all__ = ["BudgetExceeded", "Deadline", "as_deadline", "no_collection"]
+__all__ = ["BudgetExceeded", "Deadline", "as_deadline", "no_collection", "recursion_room"]
 
 _perf = time.perf_counter
 _INF = math.inf
@@ -186,3 +187,38 @@ def no_collection():
             _held[0] -= 1
             if _held[0] == 0 and _held[1]:
                 gc.enable()
+
+
+class recursion_room:
+    """Within the block, room for ``depth`` nested Python calls: the interpreter's recursion limit is
+    raised for the block where it is lower, and put back after.  A deep recursion (a count over
+    thousands of elements) must not leave the process's limit changed for good: the caller did not
+    ask for it, and a test runner that manages the limit (Hypothesis) warns of it.  Re-entrant.
+
+    >>> import sys
+    >>> before = sys.getrecursionlimit()
+    >>> with recursion_room(before + 5_000):
+    ...     sys.getrecursionlimit() == before + 5_000
+    True
+    >>> sys.getrecursionlimit() == before
+    True
+    """
+
+    __slots__ = ("depth", "_old")
+
+    def __init__(self, depth: int):
+        self.depth = depth
+        self._old: list[int] = []
+
+    def __enter__(self) -> "recursion_room":
+        old = sys.getrecursionlimit()
+        self._old.append(old)
+        if old < self.depth:
+            sys.setrecursionlimit(self.depth)
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        old = self._old.pop()
+        if sys.getrecursionlimit() != old:
+            sys.setrecursionlimit(old)
+        return False

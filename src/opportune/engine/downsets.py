@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 
-from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, recursion_room
 from opportune.engine.poset import LazyUnion, Poset, bits
 
 __all__ = ["count_by_downsets", "position_sums_by_downsets", "count_downsets"]
@@ -231,11 +231,8 @@ def count_downsets_bounded(poset: Poset, mask: int | None = None, *, limit: int 
             memo[s] = r
         return r
 
-    import sys
-
-    if sys.getrecursionlimit() < 3 * mask.bit_count() + 200:
-        sys.setrecursionlimit(3 * mask.bit_count() + 200)
-    return f(mask)
+    with recursion_room(3 * mask.bit_count() + 200):
+        return f(mask)
 
 
 def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,

@@ -41,7 +41,7 @@ from math import comb
 from operator import add, mul
 
 from opportune.engine.count import EVICT_CHUNK, Counter
-from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, recursion_room
 from opportune.engine.poset import (
     CycleError,
     Poset,
@@ -169,7 +169,8 @@ class TailCounter:
             return self._compiled(s)
         if self._rec is None:
             self._rec = self._make_recursion()
-        return self._rec(s)
+        with recursion_room(3 * s.bit_count() + 200):
+            return self._rec(s)
 
     def _compiled(self, s: int) -> list[int]:
         """The recursion in the compiled core, under this counter's deadline and the counter's budget."""

@@ -122,7 +122,7 @@ class Opportunistic(CountBasedRule):
     ``Opportunistic(0.05)``: within 50 ms a decision (see :class:`~opportune.policies.answers.CountBasedRule`).
     """
 
-    name = "opportunistic"
+    name = "paper"   # the paper's rule (formerly also "opportunistic": policies/named.py)
     #: Among buffered candidates equal in options and cost, the one buffered longest: the order decides.
     uses_buffer_order = True
     #: The rules in words, as the decisions give them (variants say theirs).

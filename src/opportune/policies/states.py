@@ -41,7 +41,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
-from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.deadline import Deadline, as_deadline, recursion_room
 from opportune.engine.poset import bits
 
 __all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states",
@@ -433,11 +433,8 @@ def downset_profile(poset, deadline: Deadline | float | None = None, *, limit: i
         memo[s] = r
         return r
 
-    import sys
-
-    if sys.getrecursionlimit() < 3 * n + 200:
-        sys.setrecursionlimit(3 * n + 200)
-    packed = f(poset.full)
+    with recursion_room(3 * n + 200):
+        packed = f(poset.full)
     if packed is None:
         return None
     return [(packed >> width * r) & slot_mask for r in range(n + 1)]

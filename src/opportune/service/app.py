@@ -51,7 +51,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from opportune import __version__
-from opportune.policies.named import DEFAULT_POLICY, POLICIES
+from opportune.policies.named import DEFAULT_POLICY, FORMER_NAMES, POLICIES
 from opportune.service import idempotency as idem
 from opportune.formats.problems import CONTROL_CHARS, PRINTABLE
 from opportune.limits import (MAX_BUFFER, MAX_FILE_BYTES, MAX_FILENAME, MAX_ID, MAX_KEY, MAX_LABEL, MAX_LOOK,
@@ -140,9 +140,9 @@ class RunIn(BaseModel):
     buffer_capacity: Optional[Annotated[int, Field(ge=0, le=MAX_BUFFER), BeforeValidator(_json_integer)]] = Field(
         None, description="Buffer locations; null: unlimited")
     label: Text = Field("", max_length=MAX_LABEL, description="Free text shown on the dashboard (e.g. a serial number)")
-    policy: Optional[Literal[POLICIES]] = Field(
-        None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper' or "
-                          "'opportunistic': the paper's rule)")
+    policy: Optional[Literal[POLICIES + tuple(FORMER_NAMES)]] = Field(
+        None, description=f"The decision policy (default: {DEFAULT_POLICY}, the exact look-ahead; 'paper': the "
+                          "paper's rule; 'opportunistic', its former name, runs it with a `note` in the answer)")
     products: Optional[Annotated[int, Field(ge=1, le=MAX_PRODUCTS), BeforeValidator(_json_integer)]] = Field(
         None, description="Build this many copies of the plan at once on as many fixtures fed from one bin (1–16; "
                           "default 1): looks then name part kinds, and each install says its fixture")

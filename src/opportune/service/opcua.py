@@ -65,7 +65,7 @@ from asyncua.crypto.permission_rules import User, UserRole
 
 from opportune.formats.problems import CONTROL_CHARS
 from opportune.limits import MAX_BUFFER, MAX_ID, MAX_KEY, MAX_LABEL
-from opportune.policies.named import POLICIES
+from opportune.policies.named import FORMER_NAMES, POLICIES
 from opportune.service.auth import Principal, ensure_cell
 from opportune.service.core import Core
 from opportune.service.errors import ApiError
@@ -549,7 +549,7 @@ class OpcUaFront:
     async def _start_run(self, principal: Principal, plan, policy, capacity, label, request_id) -> list[ua.Variant]:
         key = _request_id(request_id)
         policy = _text(policy, "Policy", "body.policy", empty=True) or None
-        if policy is not None and policy not in POLICIES:
+        if policy is not None and policy not in POLICIES and policy not in FORMER_NAMES:
             raise bad(f"unknown policy {policy!r}", f"use one of {', '.join(POLICIES)}, or empty for the default",
                       "body.policy")
         if isinstance(capacity, bool) or not isinstance(capacity, int) or not (

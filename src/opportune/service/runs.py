@@ -57,7 +57,7 @@ from sqlalchemy.exc import IntegrityError
 
 from opportune.engine.deadline import BudgetExceeded
 from opportune.policies.base import Action, Decision, collector_paused
-from opportune.policies.named import DEFAULT_POLICY, make_policy
+from opportune.policies.named import DEFAULT_POLICY, current_name, deprecation_note, make_policy
 from opportune.sequencer import LookError, OutcomeError, Sequencer
 from opportune.service import idempotency as idem
 from opportune.service.auth import Principal
@@ -105,7 +105,7 @@ class LiveRun:
     label: str
     capacity: int | None
     created_at: float
-    policy: str = "opportunistic"     # its name (policies/named.py); runs from before policies were chosen: the paper's
+    policy: str = "paper"             # its name (policies/named.py); runs from before policies were chosen: the paper's
     products: int = 1                 # fixtures fed from one bin (its plan is then the joint plan: opportune.planning.products)
     lock: threading.RLock = field(default_factory=threading.RLock)
     sequencer: Sequencer | None = None
@@ -204,7 +204,7 @@ class RunManager:
             live = self._live.get(r["id"])
             if live is None:
                 live = LiveRun(r["id"], r["cell"], r["plan_id"], r["label"], r["buffer_capacity"], r["created_at"],
-                               r["policy"], r.get("products") or 1)
+                               current_name(r["policy"], warn=False), r.get("products") or 1)
                 self._live[r["id"]] = live
             self._live.move_to_end(r["id"])
             if len(self._live) > self.size:
@@ -371,7 +371,8 @@ class RunManager:
         until = (time.perf_counter() + (START_COUNT_SECONDS if loaded.warm == "done" else 0.0)
                  if self.budget is not None else None)
         with loaded.lock, loaded.engine.deadline(until):
-            policy = body.get("policy") or DEFAULT_POLICY
+            asked = body.get("policy") or DEFAULT_POLICY
+            policy = current_name(asked, warn=False)   # a former name runs its policy, under the name now
             sequencer = self._sequencer(loaded, body.get("buffer_capacity"), policy, products)
             if self.budget is None:
                 try:  # the policy needs exact counts: find out now, not at the robot's first look
@@ -396,6 +397,8 @@ class RunManager:
                                policy, products, sequencer=sequencer)
                 with loaded.lock, loaded.engine.deadline(until):   # the same bound as the count above
                     answer = run_view(live, loaded, t)
+                if asked != policy:
+                    answer["note"] = deprecation_note(asked)
                 text = dumps(answer)
                 self._remember(c, principal.scope, key, h, 201, text)
         except IntegrityError:  # the same key, concurrently, in another process

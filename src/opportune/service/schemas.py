@@ -361,6 +361,8 @@ class Run(Model):
     totals: Totals | None = Field(..., description="Once the run is complete: what it took; null until then")
     created_at: Timestamp
     updated_at: Timestamp
+    note: str = absent("Only in the answer of a run started under a policy's former name ('opportunistic'): what "
+                       "to write instead")
 
 
 class RunSummary(Model):

@@ -80,7 +80,7 @@ from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 from opportune.planning.costs import TimeModel
 
-__all__ = ["BoundError", "BoundResult", "PENALTIES", "lower_bound"]
+__all__ = ["BoundError", "BoundResult", "PENALTIES", "describe_gaps", "lower_bound", "policy_gaps"]
 
 PENALTIES = ("auto", "none", "motions", "optimal")
 BINS = ("uniform", "weighted")
@@ -474,3 +474,75 @@ def _choose_penalty(name: str, solver: OptimalSolver) -> _Penalty:
     except OptimalTooLarge as exc:
         raise BoundError(f"{exc}") from None
     return _Optimal(solver)
+
+
+# ---------------------------------------------------------------- policies against the bound
+
+
+#: Standard errors of a mean below the bound beyond which it is called a defect, not noise (one study in
+#: about 30,000 goes that far by chance); within the 95% intervals (1.96) it is plain noise.
+DEFECT_SE = 4.0
+
+
+def policy_gaps(bound: BoundResult, times: dict[str, dict]) -> dict[str, dict]:
+    """Each policy's mean time against the bound: the signed gap and, for a mean below it, why.
+
+    ``times`` maps a policy's name to its time's statistics (``mean`` and ``ci95``, the normal 95%
+    interval, as in ``simulate --json``).  ``gap`` is ``mean / bound − 1``: positive above the bound,
+    negative below.  No online policy's *expected* time is below the bound, so a *mean* below it is
+    sampling noise or a defect: ``z`` is how many standard errors (the mean's and the bound's, combined)
+    it lies below, and ``below`` says ``"noise"`` (z ≤ 1.96: the 95% intervals overlap), ``"rare"`` (up to
+    :data:`DEFECT_SE`: noise a 95% interval shows about once in 40 studies) or ``"defect"`` (beyond).
+    Policies without a mean are left out.
+
+    >>> r = BoundResult(10.0, 0.1, 200, "m", "motions", 200, 0, 0.0, 9.0)
+    >>> gaps = policy_gaps(r, {"a": {"mean": 11.0, "ci95": [10.9, 11.1]}, "b": {"mean": 9.95, "ci95": [9.8, 10.1]},
+    ...                        "c": {"mean": 9.5, "ci95": [9.45, 9.55]}})
+    >>> [(name, round(g["gap"], 3), g["below"]) for name, g in gaps.items()]
+    [('a', 0.1, None), ('b', -0.005, 'noise'), ('c', -0.05, 'defect')]
+    """
+    out = {}
+    for name, t in times.items():
+        mean = t.get("mean")
+        if mean is None or not bound.mean > 0:
+            continue
+        gap = mean / bound.mean - 1
+        below = z = None
+        if mean < bound.mean:
+            low, high = t.get("ci95") or [mean, mean]
+            se = math.hypot((high - low) / 2, bound.half_width) / Z95
+            z = math.inf if se == 0 else (bound.mean - mean) / se
+            below = "noise" if z <= Z95 else "rare" if z <= DEFECT_SE else "defect"
+        out[name] = {"mean": mean, "gap": gap, "below": below, "z": z}
+    return out
+
+
+def describe_gaps(gaps: dict[str, dict]) -> str:
+    """:func:`policy_gaps` in words: ``lookahead 0.2% below; paper 1.0% above``, then what each mean below
+    the bound means (one sentence per kind).
+
+    >>> print(describe_gaps({"a": {"gap": 0.1, "below": None, "z": None},
+    ...                      "b": {"gap": -0.002, "below": "noise", "z": 0.5}}))
+    a 10.0% above; b 0.2% below. b below the bound is sampling noise: no online policy's expected time is below it, and b's 95% interval reaches the bound's
+    """
+    words = "; ".join(f"{name} {abs(100 * g['gap']):.1f}% {'below' if g['gap'] < 0 else 'above'}"
+                      for name, g in gaps.items())
+    kinds = {kind: [name for name, g in gaps.items() if g["below"] == kind] for kind in ("noise", "rare", "defect")}
+    if kinds["noise"]:
+        owners = _names([name + "'s" for name in kinds["noise"]])
+        words += (f". {_names(kinds['noise'])} below the bound is sampling noise: no online policy's expected time "
+                  f"is below it, and {owners} 95% interval reaches the bound's")
+    if kinds["rare"]:
+        z = max(gaps[n]["z"] for n in kinds["rare"])
+        by = f"{'up to ' if len(kinds['rare']) > 1 else ''}{z:.1f}"
+        words += (f". {_names(kinds['rare'])} below the bound by {by} standard errors: sampling noise of a "
+                  "kind a 95% interval shows about once in 40 studies (more --trials or another --seed tells; beyond "
+                  f"{DEFECT_SE:g} it would be a defect)")
+    if kinds["defect"]:
+        words += (f". {_names(kinds['defect'])} below the bound by more than {DEFECT_SE:g} standard errors: not "
+                  "noise but a defect of the bound or of the simulation; please report it with this command line")
+    return words
+
+
+def _names(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]

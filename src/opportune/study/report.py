@@ -27,7 +27,6 @@ LABELS = {
     "kitting": "kitting (all parts laid out)",
     "buffer": "fixed sequence + buffer",
     "quantify": "quantify (learned order)",
-    "opportunistic": "opportunistic (paper's rule)",
     "paper": "paper's rule",
     "lookahead": "look-ahead (default)",
     "random": "random choice (ablation)",
@@ -76,7 +75,7 @@ def summary(result: StudyResult) -> dict:
         if name == "quantify":
             doc["training_runs"] = cfg.training_runs
         strategies[name] = doc
-    reference = next((r for r in ("opportunistic", "paper") if result.trials.get(r)), None)
+    reference = "paper" if result.trials.get("paper") else None
     if reference is not None:
         for name, trials in result.trials.items():
             paired = paired_difference(trials, result.trials[reference]) if name != reference and trials else None
@@ -234,7 +233,7 @@ def _plain(text: str, limit: int = 60) -> str:
 
 
 def label(name: str) -> str:
-    """The descriptive row label of a strategy (``look-ahead (default)``, ``opportunistic (paper's rule)``)."""
+    """The descriptive row label of a strategy (``look-ahead (default)``, ``paper's rule``)."""
     return LABELS.get(name, name)
 
 
@@ -246,7 +245,7 @@ def make_figures(result: StudyResult, doc: dict | None = None) -> list[Figure]:
     Strategies appear in one order in both, best mean first.  Cost: O(trials) to draw.
 
     >>> import matplotlib; from opportune import load_plan; from opportune.study.simulate import StudyConfig, run_study
-    >>> r = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("opportunistic",), trials=20), workers=1)
+    >>> r = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=20), workers=1)
     >>> with matplotlib.rc_context(figure_style()):
     ...     [(f.stem, f.width, float(f.figure.get_size_inches()[0])) for f in make_figures(r)]
     [('mean_time', 'single', 3.5), ('time_distribution', 'double', 7.2)]
@@ -260,15 +259,18 @@ def make_figures(result: StudyResult, doc: dict | None = None) -> list[Figure]:
     return [_mean_figure(result, doc, names, cis), _distribution_figure(result, doc, names)]
 
 
-def _new_figure(width: float, height: float):
-    """A figure of that print size with one axes, outside pyplot: no backend is switched and no global
-    figure list grows (a notebook that calls this keeps its own)."""
+def _new_figure(width: float, height: float, rows: tuple[float, ...] = (1.0,)):
+    """A figure of that print size with one axes per entry of ``rows`` (their relative heights), stacked,
+    outside pyplot: no backend is switched and no global figure list grows (a notebook that calls this
+    keeps its own).  One axes is returned as it is, several as a list."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure as MatplotlibFigure
 
     fig = MatplotlibFigure(figsize=(width, height), layout="constrained")
     FigureCanvasAgg(fig)
-    return fig, fig.subplots()
+    if len(rows) == 1:
+        return fig, fig.subplots()
+    return fig, list(fig.subplots(len(rows), 1, height_ratios=list(rows)))
 
 
 def _percent(x: float, digits: int = 1) -> str:
@@ -281,53 +283,124 @@ def _setting(doc: dict) -> str:
     return f"{doc['bin']} bin, {doc['visible']} visible, buffer {cap}, {doc['trials']:,} trials, seed {doc['seed']}"
 
 
+#: The mean-time figure's zoom: the rows whose mean is within this fraction of the optimum (or, without
+#: one, of the best mean of a policy that draws from the bin) get a second panel of their own when their
+#: intervals are squeezed in the first (all of them span less than :data:`ZOOM_WHEN` of its axis): on the
+#: gearbox the intervals of ±0.03 sit on an axis of 10 to 28, and only the zoom shows them.
+ZOOM_SPAN = 0.05
+ZOOM_WHEN = 0.15
+#: Marks a difference from the optimum that is sampling noise (the optimum inside the mean's interval).
+NOISE_MARK = "\u2020"
+
+
+def _near_rows(names: list[str], means: list[float], cis: list[tuple[float, float]], optimum) -> list[int]:
+    """The rows of the zoom panel (indices into ``names``), or none when the first panel shows them well."""
+    reference = optimum or min((m for n, m in zip(names, means) if n not in ("pallet", "kitting")), default=None)
+    if not reference:
+        return []
+    near = [i for i, m in enumerate(means) if abs(m / reference - 1) <= ZOOM_SPAN]
+    if len(near) < 2:
+        return []
+    span = max(cis[i][1] for i in near) - min(cis[i][0] for i in near)
+    whole = max(c[1] for c in cis) - min(c[0] for c in cis)
+    return near if span < ZOOM_WHEN * whole else []
+
+
+def _difference(mean: float, ci: tuple[float, float], optimum: float) -> str:
+    """The right-hand column: the mean's difference from the optimum, marked when it is sampling noise."""
+    noise = ci[0] <= optimum <= ci[1] and ci[0] < ci[1]
+    return _percent(mean / optimum - 1) + (NOISE_MARK if noise else "\u2007")
+
+
+def _draw_means(ax, names, means, cis, optimum, xlim, marker_pt: float, enlarged=()) -> None:
+    """One panel of the mean-time figure: a row per strategy, its 95% interval drawn over a hollow marker
+    (but for the rows in ``enlarged``, whose intervals the zoom panel draws)."""
+    from matplotlib.ticker import MaxNLocator
+
+    n = len(names)
+    ys = list(range(n))
+    if optimum:
+        ax.axvline(optimum, color=OPTIMUM_COLOUR, linestyle="--", linewidth=0.9, zorder=1)
+    for y, name, mean, (low, high) in zip(ys, names, means, cis):
+        _, colour, marker = GROUPS[GROUP_OF.get(name, "opportunistic")]
+        # the interval above a hollow marker: it shows through, with caps, wherever it is wider than a line
+        ax.plot([mean], [y], linestyle="none", marker=marker, ms=marker_pt, mfc="white", mec=colour, mew=0.8,
+                zorder=3)
+        if name in enlarged or high == low:   # drawn in the zoom panel, or no spread (pallet, kitting)
+            continue
+        ax.errorbar([mean], [y], xerr=[[mean - low], [high - mean]], fmt="none", ecolor="black", elinewidth=0.9,
+                    capsize=2.5, capthick=0.9, zorder=4)
+    ax.set_yticks(ys, [_plain(label(name)) for name in names])
+    ax.set_ylim(n - 0.5, -0.5)   # best at the top
+    ax.set_xlim(*xlim)
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=5))   # a few ticks: none whose label spills past the column
+    ax.ticklabel_format(axis="x", useOffset=False)
+    ax.grid(axis="x", alpha=0.35)
+    if optimum:
+        right = ax.secondary_yaxis("right")
+        right.set_yticks(ys, [_difference(m, c, optimum) for m, c in zip(means, cis)])
+        right.tick_params(length=0)
+
+
+def _limits(values: list[float]) -> tuple[float, float]:
+    low, high = min(values), max(values)
+    pad = max(0.04 * (high - low), 0.01 * max(abs(high), 1.0))   # equal means (nothing to decide) too
+    return low - pad, high + pad
+
+
 def _mean_figure(result: StudyResult, doc: dict, names: list[str], cis: list[tuple[float, float]]) -> Figure:
     from matplotlib.lines import Line2D
 
     n = len(names)
     optimum = result.prepared.optimal_start
     means = [doc["strategies"][name]["time"]["mean"] for name in names]
-    fig, ax = _new_figure(COLUMN_WIDTHS["single"], 1.15 + 0.19 * n)
-    ys = list(range(n))
+    near = _near_rows(names, means, cis, optimum)
+    extra = [optimum] if optimum else []
+    rows = (n + 0.6, len(near) + 1.2) if near else (1.0,)
+    fig, axes = _new_figure(COLUMN_WIDTHS["single"], 1.25 + 0.19 * n + (0.3 + 0.19 * len(near) if near else 0),
+                            rows)
+    ax, zoom = (axes[0], axes[1]) if near else (axes, None)
+    _draw_means(ax, names, means, cis, optimum, _limits([c[0] for c in cis] + [c[1] for c in cis] + extra), MARKER_PT,
+                [names[i] for i in near])
+    if near:
+        sub = [names[i] for i in near]
+        sub_cis = [cis[i] for i in near]
+        zlim = _limits([c[0] for c in sub_cis] + [c[1] for c in sub_cis] + extra)
+        ax.axvspan(*zlim, color="#000000", alpha=0.12, linewidth=0, zorder=0)
+        _draw_means(zoom, sub, [means[i] for i in near], sub_cis, optimum, zlim, MARKER_PT)
+        zoom.set_title("the shaded band, enlarged", loc="left", fontsize=MIN_FONT_PT, pad=3)
     if optimum:
-        ax.axvline(optimum, color=OPTIMUM_COLOUR, linestyle="--", linewidth=0.9, zorder=1)
-    for y, name, mean, (low, high) in zip(ys, names, means, cis):
-        _, colour, marker = GROUPS[GROUP_OF.get(name, "opportunistic")]
-        # hollow markers: an interval shows through one as soon as it is wider than a line
-        ax.errorbar([mean], [y], xerr=[[mean - low], [high - mean]], fmt=marker, ms=MARKER_PT, mfc="none",
-                    mec=colour, mew=0.9, ecolor=colour, elinewidth=1.0, capsize=2.5, capthick=1.0, zorder=3)
-    ax.set_yticks(ys, [_plain(label(name)) for name in names])
-    ax.set_ylim(n - 0.5, -0.5)   # best at the top
-    low = min([c[0] for c in cis] + ([optimum] if optimum else []))
-    high = max([c[1] for c in cis] + ([optimum] if optimum else []))
-    pad = max(0.04 * (high - low), 0.01 * max(abs(high), 1.0))   # equal means (nothing to decide) too
-    ax.set_xlim(low - pad, high + pad)
-    ax.ticklabel_format(axis="x", useOffset=False)
-    if optimum:
-        right = ax.secondary_yaxis("right")
-        right.set_yticks(ys, [_percent(m / optimum - 1) for m in means])
-        right.tick_params(length=0)
         ax.annotate("vs optimum", xy=(1, 1), xycoords="axes fraction", xytext=(3, 2), textcoords="offset points",
                     ha="left", va="bottom")
-    ax.set_xlabel("mean time per assembly, 95% interval")
-    ax.grid(axis="x", alpha=0.35)
+    (zoom or ax).set_xlabel("mean time per assembly, with its 95% interval")
     cap = "unlimited" if doc["buffer_capacity"] is None else doc["buffer_capacity"]
     # on the figure, not the axes: the whole column's width for it
     fig.suptitle(f"{_plain(doc['plan'], 30)}: {doc['trials']:,} trials, seed {doc['seed']}\n"
                  f"{doc['bin']} bin, {doc['visible']} visible, buffer {cap}", x=0.02, ha="left")
-    handles = [Line2D([], [], linestyle="none", marker=GROUPS[g][2], mfc="none", mec=GROUPS[g][1], ms=MARKER_PT,
+    handles = [Line2D([], [], linestyle="none", marker=GROUPS[g][2], mfc="white", mec=GROUPS[g][1], ms=MARKER_PT,
                       label=GROUPS[g][0])
                for g in GROUPS if any(GROUP_OF.get(name, "opportunistic") == g for name in names)]
     if optimum:
         handles.append(Line2D([], [], color=OPTIMUM_COLOUR, linestyle="--", label=f"exact optimum, {optimum:.4f}"))
-    fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False, handletextpad=0.4,
-               columnspacing=1.0)
+    legend = fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False, handletextpad=0.4,
+                        columnspacing=1.0)
+    noisy = optimum and any(c[0] <= optimum <= c[1] and c[0] < c[1] for c in cis)
+    if noisy:   # said on the figure itself: a PNG travels without its caption
+        legend.set_title(f"{NOISE_MARK} within sampling noise: the optimum lies inside\nthis mean's 95% interval",
+                         prop={"size": MIN_FONT_PT})
+        legend.set_alignment("left")
     fig.canvas.draw()   # lay it out: the caption says which intervals the markers hide
+    enlarged = {names[i] for i in near}
+    hidden = [name for name, (lo, hi) in zip(names, cis)
+              if hi - lo < _marker_width(fig, zoom if name in enlarged else ax)]
+    return Figure("mean_time", fig, "single", mean_caption(result, doc, names, cis, hidden, zoomed=bool(near)))
+
+
+def _marker_width(fig, ax) -> float:
+    """A marker's width in the data units of the axes' x (after the figure is laid out)."""
     box = ax.get_window_extent()
     x0, x1 = ax.get_xlim()
-    marker_width = MARKER_PT / 72 * (x1 - x0) / (box.width / fig.dpi)
-    hidden = [name for name, (lo, hi) in zip(names, cis) if hi - lo < marker_width]
-    return Figure("mean_time", fig, "single", mean_caption(result, doc, names, cis, hidden))
+    return MARKER_PT / 72 * (x1 - x0) / (box.width / fig.dpi)
 
 
 def _distribution_figure(result: StudyResult, doc: dict, names: list[str]) -> Figure:
@@ -373,15 +446,25 @@ def _distribution_figure(result: StudyResult, doc: dict, names: list[str]) -> Fi
 
 
 def mean_caption(result: StudyResult, doc: dict, names: list[str], cis: list[tuple[float, float]],
-                 hidden: list[str]) -> str:
-    """The caption of the mean-time figure: what is drawn, the optimum's noise, the hidden intervals, the pallet."""
+                 hidden: list[str], zoomed: bool = False) -> str:
+    """The caption of the mean-time figure: what is drawn, the zoom, the optimum's noise, the hidden
+    intervals, the pallet."""
     optimum = result.prepared.optimal_start
-    out = [f"Mean time per assembly of each strategy over {doc['trials']:,} trials, with its 95% interval "
-           "(Student's t), best first."]
+    out = [f"Mean time per assembly of each strategy over {doc['trials']:,} trials (hollow marker), with its 95% "
+           "interval (Student's t; black bar with caps), best first."]
+    if zoomed:
+        out.append("The lower panel enlarges the shaded band of the upper one, where the strategies closest to the "
+                   "best lie: there the intervals are wide enough to see.")
     if optimum:
         out.append(f"The dashed line is the exact optimum, {optimum:.4f}: the least expected time any policy can "
                    f"achieve, from a dynamic programme over {result.prepared.optimal_states:,} states, with no "
                    "Monte Carlo error. The right-hand column is each mean's difference from it.")
+        noisy = [n for n, (lo, hi) in zip(names, cis) if lo <= optimum <= hi and lo < hi]
+        if noisy:
+            quoted = ", ".join(f"'{label(n)}'" for n in noisy)
+            out.append(f"A difference marked {NOISE_MARK} ({quoted}) is within sampling noise: the optimum lies "
+                       "inside that mean's interval. No policy's expected time is below the optimum, so a mean below "
+                       "it (the simulated optimum's own, for one) only says the sampled bins were kind.")
         if "optimal" in names:
             mean = doc["strategies"]["optimal"]["time"]["mean"]
             low, high = cis[names.index("optimal")]

@@ -11,9 +11,9 @@ are in ``results.json``'s ``timing``).
 
 >>> from opportune import load_plan
 >>> from opportune.study.simulate import StudyConfig, run_study
->>> page = render_report(run_study(StudyConfig(load_plan("example:gearbox"), strategies=("opportunistic",),
+>>> page = render_report(run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",),
 ...                                            trials=20), workers=1))
->>> page.startswith("<!DOCTYPE html>"), '<tr data-strategy="opportunistic">' in page, "://" in page
+>>> page.startswith("<!DOCTYPE html>"), '<tr data-strategy="paper">' in page, "://" in page
 (True, True, False)
 """
 
@@ -72,9 +72,12 @@ h1 { font-size: 1.5rem; margin-bottom: .2rem; } h2 { font-size: 1.15rem; margin-
 .sub { color: #555; margin-top: 0; }
 table { border-collapse: collapse; font-variant-numeric: tabular-nums; }
 th, td { padding: .25rem .5rem; border-bottom: 1px solid #ddd; vertical-align: top; }
-table.results { font-size: .9rem; } table.results td.num { text-align: right; white-space: nowrap; }
-table.results th[scope=row] { text-align: left; min-width: 15rem; font-weight: 500; }
-table.results th { text-align: right; font-weight: 600; } table.results th:first-child { text-align: left; }
+table.results { font-size: .8rem; } table.results td.num { text-align: right; white-space: nowrap; }
+table.results th, table.results td { padding: .2rem .3rem; }
+table.results th[scope=row] { text-align: left; width: 10rem; font-weight: 500; }
+table.results th[scope=row] .name { display: block; }
+table.results thead th { text-align: right; font-weight: 600; vertical-align: bottom; hyphens: auto; }
+table.results th:first-child { text-align: left; }
 table.setup th { text-align: left; font-weight: 600; white-space: nowrap; }
 code { font-size: .92em; } .name { color: #555; font-size: .85em; }
 figure { margin: 1.5rem 0; } figure img { max-width: 100%; height: auto; border: 1px solid #eee; }
@@ -173,8 +176,8 @@ def _notes(result: StudyResult, doc: dict) -> list[str]:
                "<code>opportune evaluate</code> and the service use by default: one step of exact policy improvement "
                "over the paper's rule (every legal action scored by its cost plus the exact expected cost of "
                "finishing), on plans of up to 16 parts; on larger ones it decides by least slack.")
-    out.append(f"<i>{_t(LABELS['opportunistic'])}</i> is <code>opportunistic</code>"
-               f"{absent('opportunistic') if 'paper' not in names else ''} (also named <code>paper</code>), Fox and "
+    out.append(f"<i>{_t(LABELS['paper'])}</i> is <code>paper</code>{absent('paper')} (formerly also named "
+               "<code>opportunistic</code>), Fox and "
                "Kempf's rule: install the visible part that keeps the most admissible completions; when none can go "
                "in, buffer the visible part needed earliest; shake only when nothing else helps. "
                "<code>replay</code> and the library's <code>Sequencer</code> use it by default, so the paper's "

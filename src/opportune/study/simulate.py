@@ -29,17 +29,16 @@ from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.schedule import Schedule
 from opportune.planning.plan import Plan
 from opportune.policies.base import Action
-from opportune.policies.named import DEFAULT_POLICY, POLICIES
+from opportune.policies.named import DEFAULT_POLICY, FORMER_NAMES, POLICIES, current_names
 from opportune.policies.named import make_policy as make_named_policy
 from opportune.sequencer import State
 from opportune.worlds import BIN_NAMES, CellModel, PalletWorld, TimeModel, World, make_world
 
 #: The study's default strategies: the paper's comparison, and the default policy beside the paper's rule.
-STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "opportunistic", DEFAULT_POLICY, "random",
-              "optimal")
-#: Policies beyond the paper's (policies/variants.py, rollout.py), run when asked for by name; "paper" is
-#: the paper's rule under the name issue 13 gives it (the same as "opportunistic").
-MORE_STRATEGIES = ("paper", "bin-first", "slack", "rollout")
+STRATEGIES = ("pallet", "shake", "kitting", "buffer", "quantify", "paper", DEFAULT_POLICY, "random", "optimal")
+#: Policies beyond the paper's (policies/variants.py, rollout.py), run when asked for by name.  A former
+#: name (``opportunistic``, the paper's rule: policies/named.py) is accepted with a DeprecationWarning.
+MORE_STRATEGIES = ("bin-first", "slack", "rollout")
 ALL_STRATEGIES = STRATEGIES + MORE_STRATEGIES
 MARKOV_BINS = ("uniform", "weighted")
 OPTIMAL_BINS = MARKOV_BINS + ("pile",)   # bins whose exact optimum is computed (policies/optimal.py, pile.py)
@@ -57,7 +56,7 @@ class StrategyUnavailable(StudyError):
         super().__init__(message)
 
 
-COUNTING_STRATEGIES = ("opportunistic", "paper", "bin-first", "slack", "lookahead")  # decide by exact counts of the admissible completions, at every look
+COUNTING_STRATEGIES = ("paper", "bin-first", "slack", "lookahead")  # decide by exact counts of the admissible completions, at every look
 
 
 @dataclass(frozen=True)
@@ -78,6 +77,11 @@ class StudyConfig:
     max_steps: int | None = None
     decision_budget: float | None = None  # seconds per opportunistic decision (None: exact, reproducible)
     cell: CellModel = field(default_factory=CellModel)  # the cell's times: cycle time in seconds
+
+    def __post_init__(self):
+        # a former name is its policy's name now, each once: never two rows of one policy
+        if any(s in FORMER_NAMES for s in self.strategies) or len(set(self.strategies)) < len(self.strategies):
+            object.__setattr__(self, "strategies", current_names(self.strategies)[0])
 
     def validate(self) -> "StudyConfig":
         unknown = [s for s in self.strategies if s not in ALL_STRATEGIES]
@@ -138,7 +142,8 @@ class StudyConfig:
             values["costs"] = TimeModel(motion=float(costs["motion"]), shake=float(costs["shake"]),
                                         look=float(costs["look"]),
                                         parts={str(k): float(v) for k, v in dict(costs.get("parts") or {}).items()})
-            values["strategies"] = tuple(str(s) for s in values["strategies"])
+            # a study recorded under a former name runs under the name now (the record is not the user's writing)
+            values["strategies"] = current_names([str(s) for s in values["strategies"]], warn=False)[0]
             if "cell" in values:   # (a study recorded before cycle times in seconds has none: the defaults)
                 values["cell"] = CellModel.from_dict(values["cell"], plan.part_ids)
             unknown = set(values) - {f.name for f in fields(cls)}
@@ -635,10 +640,10 @@ class StudyResult:
 
         >>> from opportune.datasets import example_path
         >>> from opportune.formats import load_plan
-        >>> config = StudyConfig(load_plan(example_path("gearbox")), strategies=("opportunistic", "random"), trials=100)
+        >>> config = StudyConfig(load_plan(example_path("gearbox")), strategies=("paper", "random"), trials=100)
         >>> df = run_study(config, workers=1).to_frame()
         >>> len(df), sorted(df["strategy"].unique())
-        (200, ['opportunistic', 'random'])
+        (200, ['paper', 'random'])
         """
         try:
             import pandas as pd

@@ -40,7 +40,7 @@ from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.schedule import MAX_STRATEGIES_EXACT
 from opportune.multi import Layout, fit_policy
 from opportune.planning.plan import Plan
-from opportune.policies.named import POLICIES
+from opportune.policies.named import FORMER_NAMES, POLICIES, current_names
 from opportune.policies.named import make_policy as make_named_policy
 from opportune.planning.products import (
     ProductsError,
@@ -83,6 +83,11 @@ class ProductsConfig:
     buffer_capacity: int | None = None
     costs: TimeModel = field(default_factory=TimeModel)
     decision_budget: float | None = None
+
+    def __post_init__(self):
+        # a former name is its policy's name now, each once: never two rows of one policy
+        if any(p in FORMER_NAMES for p in self.policies) or len(set(self.policies)) < len(self.policies):
+            object.__setattr__(self, "policies", current_names(self.policies)[0])
 
     @property
     def n(self) -> int:
