@@ -28,6 +28,8 @@
 #include <utility>
 #include <vector>
 
+#include "memo_table.hpp"
+
 namespace py = pybind11;
 
 namespace {
@@ -46,77 +48,9 @@ struct PileStuck : std::runtime_error {
 
 constexpr double INF = std::numeric_limits<double>::infinity();
 
-inline uint64_t mix(uint64_t x) {  // the splitmix64 finaliser: a well-spread slot for every code
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ULL;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebULL;
-    return x ^ (x >> 31);
-}
-
-// Values by code: linear probing, power-of-two capacity, at most half full.  The slots come zeroed
-// from calloc (a large block is mapped lazily by the system: reserving is immediate, a page is paid for
-// when first written), so a code is kept as code + 1 and 0 marks an empty slot.
-class Table {
-public:
-    struct Slot {
-        uint64_t key;
-        double val;
-    };
-    Table() { rehash(1024); }
-    ~Table() { std::free(slots_); }
-    Table(const Table&) = delete;
-    Table& operator=(const Table&) = delete;
-    const double* find(uint64_t code) const {
-        uint64_t key = code + 1;
-        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
-            if (slots_[i].key == key) return &slots_[i].val;
-            if (slots_[i].key == 0) return nullptr;
-        }
-    }
-    void put(uint64_t code, double v) {
-        if (2 * (size_ + 1) > cap_) rehash(cap_ * 2);
-        uint64_t key = code + 1;
-        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
-            if (slots_[i].key == key || slots_[i].key == 0) {
-                size_ += slots_[i].key == 0;
-                slots_[i].key = key;
-                slots_[i].val = v;
-                return;
-            }
-        }
-    }
-    void reserve(size_t n) {
-        size_t cap = cap_;
-        while (cap < 2 * n) cap *= 2;
-        if (cap > cap_) rehash(cap);
-    }
-    size_t size() const { return size_; }
-    size_t bytes() const { return cap_ * sizeof(Slot); }
-
-private:
-    void rehash(size_t cap) {
-        Slot* slots = static_cast<Slot*>(std::calloc(cap, sizeof(Slot)));
-        if (!slots) throw std::bad_alloc();
-        size_t m = cap - 1;
-        for (size_t j = 0; j < cap_; ++j) {
-            if (slots_[j].key == 0) continue;
-            size_t i = mix(slots_[j].key) & m;
-            while (slots[i].key != 0) i = (i + 1) & m;
-            slots[i] = slots_[j];
-        }
-        std::free(slots_);
-        slots_ = slots;
-        cap_ = cap;
-        mask_ = m;
-    }
-    Slot* slots_ = nullptr;
-    size_t cap_ = 0, mask_ = 0, size_ = 0;
-};
-
-struct PairHash {
-    size_t operator()(const std::pair<uint64_t, uint64_t>& k) const { return mix(k.first ^ mix(k.second)); }
-};
+using opportune_memo::mix;
+using opportune_memo::PairHash;
+using opportune_memo::Table;
 
 struct Look {
     std::vector<int> window;  // sorted part indices

@@ -20,7 +20,7 @@ from opportune.policies.base import (
     resume_collector,
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, same_action
+from opportune.policies.optimal import OptimalTooLarge, compiled_optimal_available, optimal_solver, optimum_bytes, same_action
 from opportune.policies.variants import Slack
 
 __all__ = ["Lookahead"]
@@ -52,14 +52,16 @@ class Lookahead(DecidesOnMasks):
     #: What the decisions say where the optimum's programme decides.
     OPTIMAL_RULE = "the action with the least expected cost of finishing (the exact optimum)"
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
-    #: Plans of more units than this decide as the base does (the programme would take too long).
-    MAX_UNITS = 16
-    #: On the pile bin the compiled optimum decides on plans of up to this many states (counted before it
-    #: starts; ``max_states`` if larger): its table is reserved for the count at once, at most
-    #: :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` (64) bytes a state, so at most 320 MB.
-    #: Without a budget it is solved whole in the first decision on the plan (a warm-up: 0.6-1 million
-    #: states a second) and shared by the look-aheads of the same settings; with one, each decision
-    #: goes on with it within its share of the budget (the clock is read at every new state).
+    #: The compiled optimum (of the uniform bin, :class:`~opportune.policies.optimal.CompiledOptimalSolver`, or
+    #: of the pile, :class:`~opportune.policies.pile.CompiledPileSolver`) decides on plans of up to this many
+    #: states (counted before it starts; ``max_states`` if larger), whatever their units, where its bytes
+    #: (known before it starts too: at most 64 a state and the pairs it interns, so about 350 MB at most)
+    #: are granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.reserve_programme`, within
+    #: half its ``memory_limit``); its table is reserved for the count at once.  Without a budget it is
+    #: solved whole in the first decision on the plan (a warm-up: about a million states a second) and
+    #: shared by the look-aheads of the same settings; with one, each decision goes on with it within its
+    #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
+    #: core, or a weighted bin) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
@@ -87,6 +89,8 @@ class Lookahead(DecidesOnMasks):
         self._evaluator = None
         self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
         self._too_large = False
+        #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
+        self.refusal: str | None = None
         self.last_cost: float | None = None
 
     @property
@@ -116,44 +120,70 @@ class Lookahead(DecidesOnMasks):
 
                     if base is None:
                         ev = pile_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
-                        ev.reserve(self._optimum_states)    # compiled: no table doubling inside a decision
                     else:
                         ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
                 elif base is None:
-                    ev = OptimalSolver(engine, max_states=self.max_states, **self.settings)
+                    ev = optimal_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
                 else:
                     ev = PolicyEvaluator(engine, base, max_states=self.max_states, **self.settings)
+                if base is None:
+                    ev.reserve(self._optimum_states)    # compiled: no table doubling inside a decision
                 if key is not None:
                     shared[key] = ev
             self._evaluator = ev
             self._too_large = False
         return self._evaluator
 
-    def _optimum_cap(self, engine) -> int:
-        """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for the compiled
-        pile optimum, else ``max_states``.  O(1)."""
+    def _compiled(self, engine) -> bool:
+        """Whether the optimum's programme for this plan and bin is the compiled one.  O(parts)."""
         if self.pile:
             from opportune.policies.pile import compiled_pile_available
 
-            if compiled_pile_available(engine):
-                return max(self.max_states, self.COMPILED_STATES)
-        return self.max_states
+            return compiled_pile_available(engine)
+        return compiled_optimal_available(engine, self.settings.get("weights"))
+
+    def _optimum_cap(self, engine) -> int:
+        """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for a compiled
+        optimum, else ``max_states``.  O(parts)."""
+        return max(self.max_states, self.COMPILED_STATES) if self._compiled(engine) else self.max_states
+
+    def _optimum_bytes(self, engine, estimate) -> int:
+        """The bytes the optimum's programme holds, from its state count: the compiled uniform table and
+        its pairs (:func:`~opportune.policies.optimal.optimum_bytes`), the compiled pile's
+        :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` a value, or the Python programme's
+        :data:`~opportune.policies.states.BYTES_PER_STATE`.  O(log states)."""
+        compiled = self._compiled(engine)
+        if self.pile and compiled:
+            from opportune.policies.pile import COMPILED_BYTES_PER_STATE
+
+            return COMPILED_BYTES_PER_STATE * estimate.states
+        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile)
 
     def _optimum_fits(self, engine) -> bool:
-        """Whether the optimum's programme holds at most its cap (:meth:`_optimum_cap`) of states, listed before it starts
-        within a second, or within a third of the decision budget where there is one (it runs inside the
-        first decision on the plan, within the programme's share: up to 0.3 s on plans of 15-16 units);
-        where the listing cannot tell in that time, it does not fit, and the step over the base decides."""
-        if not self.optimal or engine.n_units > self.MAX_UNITS:
+        """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,
+        listed before it starts within a second (or a third of the decision budget where there is one: it
+        runs inside the first decision on the plan), at most its cap (:meth:`_optimum_cap`), and its bytes
+        (:meth:`_optimum_bytes`) granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.
+        reserve_programme`).  Where the listing cannot tell in that time, it does not fit, and the step
+        over the base decides."""
+        self.refusal = None
+        if not self.optimal:
             return False
-        from opportune.policies.states import estimate_states
+        from opportune.policies.states import big, estimate_states
 
         seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
         cap = self._optimum_cap(engine)
         est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
         self._optimum_states = est.states
-        return est.exact and est.states <= cap
+        if not est.exact or est.states > cap:
+            self.refusal = f"its optimum needs {est.describe()} states, more than {cap:,}"
+            return False
+        need = self._optimum_bytes(engine, est)
+        if not engine.reserve_programme(("lookahead optimum", self._share_key() or id(self)), need):
+            self.refusal = f"its optimum needs {big(need)} bytes, more than the plan's memory share grants"
+            return False
+        return True
 
     @property
     def deciding_rule(self) -> str:
@@ -199,8 +229,6 @@ class Lookahead(DecidesOnMasks):
     def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
         self.last_cost = None
-        if engine.n_units > self.MAX_UNITS:
-            self._too_large = True
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
             ev = self._values(engine)
@@ -224,6 +252,11 @@ class Lookahead(DecidesOnMasks):
             finally:
                 ev.deadline = None
         return None
+
+    def _why_too_large(self) -> str:
+        """Why the programmes do not fit, in words: the optimum's refusal (states or bytes) and the base's cap."""
+        base = f"the base rule's needs more than {self.max_states:,} states"
+        return f"{self.refusal}; {base}" if self.refusal else base
 
     def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):
         """``(action, its expected cost)``: the least of cost plus the base's cost to go after it."""
@@ -255,8 +288,8 @@ class Lookahead(DecidesOnMasks):
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
             # its exactness and any estimates, and why the look-ahead did not decide
             base = self._fallback().decide(state, visible)
-            why = (f"the plan is too large for the look-ahead's exact programme (more than {self.MAX_UNITS} units "
-                   f"or {self.max_states:,} states)" if self._too_large else
+            why = (f"the plan is too large for the look-ahead's exact programme ({self._why_too_large()})"
+                   if self._too_large else
                    "the look-ahead's programme did not finish within the decision budget (it goes on at the next look)")
             exact = base.exact and self._too_large
             return replace(base, rule=f"as the base rule ({self.base.name}), because {why}: {base.rule}",

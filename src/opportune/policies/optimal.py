@@ -31,7 +31,7 @@ import sys
 from functools import lru_cache
 from math import comb
 
-from opportune.engine import OrderEngine
+from opportune.engine import OrderEngine, compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.policies.base import DONE, SHAKE, Action, Decision
 from opportune.planning.costs import TimeModel
@@ -39,6 +39,12 @@ from opportune.planning.costs import TimeModel
 #: Looks (with their probabilities) the look cache keeps, over all the bin contents it holds: about
 #: 150 bytes each, so at most about 30 MB whatever the plan (it used to grow with the states × looks).
 LOOK_CACHE_LOOKS = 200_000
+
+_native = compiled_core()   # None: the Python programme only
+
+#: Bytes of an (installed, strategies) pair the compiled optimum interns: the pair in a vector and a
+#: node of the hash map that finds it (what ``OptimalCore.bytes`` counts).
+COMPILED_PAIR_BYTES = 64
 
 
 class OptimalTooLarge(RuntimeError):
@@ -69,6 +75,8 @@ class OptimalSolver:
         self.quantity = [p.quantity for p in self.plan.parts]
         self.ids = self.plan.part_ids
         self.move = [self.costs.move(p) for p in self.ids]
+        #: Every unit in the bin equally likely to be seen: the looks' values are order statistics, not enumerated.
+        self.uniform = len(set(self.weights)) <= 1
         self._values: dict[tuple, float] = {}
         # the looks of a bin: cached for the states that share it (most do, nearby in the recursion),
         # within a bound on the looks kept, not on the entries: a large plan has many looks per bin
@@ -102,6 +110,11 @@ class OptimalSolver:
         if self.progress is not None and stored >= self._next_report:
             self._next_report = stored + 64
             self.progress(self)
+
+    def reserve(self, states: int) -> None:
+        """Make room for ``states`` values before the work (the count from
+        :func:`~opportune.policies.states.estimate_states`).  The Python programme's dictionary grows
+        as it goes: nothing to do here (the compiled programmes size their tables).  O(1)."""
 
     # ------------------------------------------------------------ states
 
@@ -256,17 +269,75 @@ class OptimalSolver:
             raise OptimalTooLarge(
                 f"the optimum needs more than {self.max_states:,} states for this plan; "
                 "raise --optimal-states, or leave 'optimal' out of the strategies")
-        best_per_look = []
-        for look, p in self._looks(self._bin_counts(key)):
-            m = min((c + self._value(nxt) for c, nxt, _ in self._moves(key, look)), default=float("inf"))
-            best_per_look.append((m, p))
-        v = self._solve_shake_loop(best_per_look)
+        if self.uniform:
+            v = self._shake_loop(self._order_statistics(key))
+        else:
+            best_per_look = []
+            for look, p in self._looks(self._bin_counts(key)):
+                m = min((c + self._value(nxt) for c, nxt, _ in self._moves(key, look)), default=float("inf"))
+                best_per_look.append((m, p))
+            v = self._solve_shake_loop(best_per_look)
         self._values[key] = v
         return v
 
+    def _order_statistics(self, key: tuple) -> list[tuple[float, float]]:
+        """``(m, p)`` in increasing ``m``: the best move's value on a look, and the chance of a look
+        with that best move, in a uniform bin, with no look enumerated (see the module's docstring).
+
+        The best move on a look is the least of the visible parts' own best moves (install from the bin
+        or buffer) and of the buffer's best installation, which every look shares.  With the bin's units
+        ranked by their part's best move (ties by declaration order), the part whose ``c`` units hold
+        ranks ``r + 1 .. r + c`` of ``n`` is the best visible one with probability
+        ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` for ``k`` visible.  The compiled programme
+        (``src/native/optimal.cpp``) does the same operations in the same order.  O(parts) values."""
+        mask, cons, buf = key
+        engine, move, value = self.engine, self.move, self._value
+        free = self.capacity is None or sum(buf) < self.capacity
+        inf = float("inf")
+        ranked = []         # (best move, part, units in the bin)
+        n = 0
+        for i, c in enumerate(self._bin_counts(key)):
+            if c <= 0:
+                continue
+            n += c
+            best = inf
+            u = engine.next_unit(mask, i)
+            after = engine.consistent_after(mask, cons, u)
+            if after:
+                best = move[i] + value((mask | 1 << u, after, buf))
+            if free:
+                nb = list(buf)
+                nb[i] += 1
+                best = min(best, move[i] + value((mask, cons, tuple(nb))))
+            ranked.append((best, i, c))
+        from_buffer = inf
+        for i, c in enumerate(buf):
+            if c:
+                u = engine.next_unit(mask, i)
+                after = engine.consistent_after(mask, cons, u)
+                if after:
+                    nb = list(buf)
+                    nb[i] -= 1
+                    from_buffer = min(from_buffer, move[i] + value((mask | 1 << u, after, tuple(nb))))
+        if n == 0:          # every unit left is in the buffer: no part is seen
+            return [(from_buffer, 1.0)]
+        ranked.sort()
+        k = min(self.visible, n)
+        total = float(comb(n, k))
+        out, rank = [], 0
+        for best, _, c in ranked:
+            out.append((min(best, from_buffer), float(comb(n - rank, k) - comb(n - rank - c, k)) / total))
+            rank += c
+        return out
+
     def _solve_shake_loop(self, best_per_look) -> float:
-        c_look, c_shake = self.costs.look, self.costs.shake
+        """The shake loop over ``(m, p)`` pairs in any order (sorted here)."""
         best_per_look.sort()
+        return self._shake_loop(best_per_look)
+
+    def _shake_loop(self, best_per_look) -> float:
+        """The least over prefixes of ``(m, p)`` pairs in increasing ``m`` (see the module's docstring)."""
+        c_look, c_shake = self.costs.look, self.costs.shake
         acc_pm, acc_p, v = 0.0, 0.0, float("inf")
         for m, p in best_per_look:
             if m == float("inf"):
@@ -330,3 +401,109 @@ class Optimal:
         look = tuple(sorted(self.solver.plan.index(p) for p in visible))
         action, cost = self.solver.best_action(key, look)
         return Decision(action, "least expected remaining cost", note=f"expected remaining cost {cost:.4f}")
+
+
+def compiled_optimal_available(engine, weights: dict[str, float] | None = None) -> bool:
+    """Whether the compiled optimum takes this plan: the core is built (and not switched off with
+    ``OPPORTUNE_PURE_PYTHON=1``), the bin is uniform (no weights, or all equal), the plan has at most
+    64 units and 64 strategies.  O(parts).
+
+    >>> from opportune import make_plan
+    >>> compiled_optimal_available(OrderEngine(make_plan(["a", "b"], {})), {"a": 2.0})
+    False
+    """
+    uniform = len({float((weights or {}).get(p.id, 1.0)) for p in engine.plan.parts}) <= 1
+    return (_native is not None and hasattr(_native, "OptimalCore") and uniform and 1 <= engine.n_units <= 64
+            and engine.k <= 64)
+
+
+def optimum_bytes(states: int, keys: int, *, compiled: bool) -> int:
+    """The bytes the optimum's programme holds for ``states`` states over ``keys`` (installed,
+    strategies) pairs, known before it starts: the compiled table reserved for the count (16-byte
+    slots, a power of two at least twice the states, at least 1,024) and the pairs it interns, or
+    :data:`~opportune.policies.states.BYTES_PER_STATE` a state in Python (plus the bounded look cache).
+    O(log states).
+
+    >>> optimum_bytes(3_000, 100, compiled=True)
+    137472
+    """
+    if not compiled:
+        from opportune.policies.states import BYTES_PER_STATE
+
+        return states * BYTES_PER_STATE
+    slots = 1024
+    while slots < 2 * states:
+        slots *= 2
+    return 16 * slots + COMPILED_PAIR_BYTES * keys
+
+
+def optimal_solver(engine: OrderEngine, **settings) -> OptimalSolver:
+    """The optimum's programme: :class:`CompiledOptimalSolver` where the compiled core takes the plan
+    and bin (see :func:`compiled_optimal_available`), else :class:`OptimalSolver`; the same values
+    either way.  O(parts) before the work.
+
+    >>> from opportune import make_plan
+    >>> round(optimal_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
+    2.5
+    """
+    if compiled_optimal_available(engine, settings.get("weights")):
+        try:
+            return CompiledOptimalSolver(engine, **settings)
+        except ValueError:          # buffer contents over 64-bit codes: the Python programme
+            pass
+    return OptimalSolver(engine, **settings)
+
+
+class CompiledOptimalSolver(OptimalSolver):
+    """The uniform bin's optimum computed by the compiled core (``_native.OptimalCore``,
+    ``src/native/optimal.cpp``): the recursion of :meth:`OptimalSolver._value` with the looks as order
+    statistics, the same floating-point operations in the same order, so the same doubles.
+
+    The same settings and methods; ``max_states`` bounds the stored values (:class:`OptimalTooLarge`),
+    the ``deadline`` is read at every new state (:class:`OutOfTime`; what was finished stays).
+    Memory: :func:`optimum_bytes` (32-64 bytes a state once :meth:`reserve` d, and the pairs).  A
+    ``ValueError`` where the core does not take the plan (:func:`compiled_optimal_available`).
+    Complexity: O(states × parts × strategies).
+    """
+
+    def __init__(self, engine: OrderEngine, **settings):
+        super().__init__(engine, **settings)
+        if not self.uniform or not compiled_optimal_available(engine):
+            raise ValueError("the compiled optimum needs the compiled core, a uniform bin and a plan of 1 to 64 "
+                             "units and at most 64 strategies")
+        below = [[int(b) for b in poset.below] for poset in engine.posets]
+        self._core = _native.OptimalCore(
+            engine.n_units, list(engine.first), list(self.quantity), below, list(self.move),
+            float(self.costs.look), float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity)
+
+    def reserve(self, states: int) -> None:
+        """Make room for ``states`` values at once (the count from
+        :func:`~opportune.policies.states.estimate_states`): no table doubling during the work."""
+        self._core.reserve(int(states))
+
+    @property
+    def states(self) -> int:
+        return self._core.states
+
+    @property
+    def bytes(self) -> int:
+        """The memory the compiled programme holds (its table and interned pairs)."""
+        return self._core.bytes
+
+    def _value(self, key: tuple) -> float:
+        try:
+            return self._core.value(key[0], key[1], list(key[2]), seconds=self._until.seconds(),
+                                    max_states=self.max_states)
+        except _native.OptimalCoreTimeout:
+            raise OutOfTime("the optimum's programme passed its deadline") from None
+        except _native.OptimalCoreTooLarge:
+            raise OptimalTooLarge(
+                f"the optimum needs more than {self.max_states:,} states for this plan; "
+                "raise --optimal-states, or leave 'optimal' out of the strategies") from None
+        except _native.OptimalCoreStuck as exc:
+            raise RuntimeError(str(exc)) from None
+        finally:
+            # the progress report as the Python programme's: once per 64 more states (a call stores many)
+            if self.progress is not None and self._core.states >= self._next_report:
+                self._next_report = self._core.states + 64
+                self.progress(self)

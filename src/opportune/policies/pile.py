@@ -74,11 +74,6 @@ class PileSolver(BufferOrder, OptimalSolver):
         the policy's if one was given."""
         return self._deep(self._shake_value, self.policy_start() if key is None else key)
 
-    def reserve(self, states: int) -> None:
-        """Make room for ``states`` values before the work (the count from
-        :func:`~opportune.policies.states.estimate_states`).  The Python programme's dictionary grows
-        as it goes: nothing to do here (:class:`CompiledPileSolver` sizes its table).  O(1)."""
-
     def _bin_counts(self, key: tuple) -> tuple[int, ...]:
         return super()._bin_counts(self._counts_key(key))
 
