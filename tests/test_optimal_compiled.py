@@ -70,7 +70,7 @@ def brute_force(solver: OptimalSolver) -> float:
     return value(solver.start_key())
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(plan=random_plans(max_parts=4, max_units=6, max_strategies=2), seed=st.integers(0, 1000))
 def test_the_order_statistics_are_the_enumerated_looks(plan, seed):
     """The Python programme's looks as order statistics against every visible set enumerated, and against
@@ -190,3 +190,23 @@ def test_the_sizing_refuses_before_starting():
     small = Lookahead(visible=2, capacity=2, max_states=10)
     small.choose_at(engine, 0, engine.all_strategies, (), 2, ("p05", "p01"))
     assert "bytes" in small.refusal and not small._optimum and engine.programmes == {}
+
+
+@pytest.mark.parametrize("capacity", [1, None])
+def test_a_policy_deciding_by_the_optimum_is_worth_the_optimum(capacity):
+    """The look-ahead deciding by the optimum: its value taken as the optimum's is its value evaluated look
+    by look (every look of every state it reaches asks it), to the last ulps; with another world, or its step
+    over slack, it is evaluated look by look."""
+    from opportune.policies.evaluate import PolicyEvaluator
+
+    engine = OrderEngine(_chains(8))
+    quick = PolicyEvaluator(engine, Lookahead(visible=2, capacity=capacity), visible=2, capacity=capacity)
+    value = quick.value()
+    assert quick.by_optimum and quick.policy_states == 0
+    slow = PolicyEvaluator(engine, Lookahead(visible=2, capacity=capacity), visible=2, capacity=capacity)
+    slow.OPTIMUM_SHORTCUT = False
+    assert slow.value() == pytest.approx(value, rel=1e-12) and slow.policy_states > 0 and not slow.by_optimum
+    other = PolicyEvaluator(engine, Lookahead(visible=1, capacity=capacity), visible=2, capacity=capacity)
+    step = PolicyEvaluator(engine, Lookahead(visible=2, capacity=capacity, optimal=False), visible=2, capacity=capacity)
+    assert other.value() >= value - 1e-12 and step.value() >= value - 1e-12
+    assert not other.by_optimum and not step.by_optimum

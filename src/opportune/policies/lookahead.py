@@ -185,6 +185,23 @@ class Lookahead(DecidesOnMasks):
             return False
         return True
 
+    def decides_by_optimum(self, engine, visible: int, capacity: int | None, costs) -> bool:
+        """Whether on ``engine`` every decision of this look-ahead is an action of least expected cost in
+        the uniform bin of ``visible`` parts, ``capacity`` locations and ``costs``: its world is that one,
+        without a budget, and the programme that decides is the optimum's (prepared here, as its first
+        decision would).  Its expected cost there is then the optimum's (ties within 1e-12 a move).
+        O(1) once prepared."""
+        from opportune.planning.costs import TimeModel
+
+        world = (self.settings.get("visible", 2), self.settings.get("capacity"), self.settings.get("costs") or TimeModel())
+        weights = self.settings.get("weights")
+        if self.pile or self.lookahead_budget is not None or world != (visible, capacity, costs or TimeModel()):
+            return False
+        if weights and len({weights.get(p.id, 1.0) for p in engine.plan.parts}) > 1:
+            return False
+        self._values(engine)
+        return self._optimum
+
     @property
     def deciding_rule(self) -> str:
         """The rule of the programme that decides (after the first decision on a plan)."""

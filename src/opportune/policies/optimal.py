@@ -59,8 +59,12 @@ class OptimalSolver:
     """Exact minimum expected cost of assembling ``engine.plan`` from a Markov bin.
 
     ``weights`` gives per-part visibility weights (``None``: uniform bin).
-    Complexity: O(states × looks × actions), states ≤ down-sets × buffer contents.
+    Complexity: O(states × parts) in a uniform bin (the looks as order statistics), else
+    O(states × looks × actions); states ≤ down-sets × buffer contents.
     """
+
+    #: The policy whose value a subclass computes (None: the optimum).
+    policy = None
 
     def __init__(self, engine: OrderEngine, *, visible: int = 2, capacity: int | None = None,
                  costs: TimeModel | None = None, weights: dict[str, float] | None = None,
