@@ -63,6 +63,10 @@ class Lookahead(DecidesOnMasks):
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
     #: core, or a weighted bin) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
+    #: Where the optimum does not fit, plans of more units than this decide as the base does: the step over
+    #: the base evaluates the base look by look in Python (every look of every state asks the base rule), hours
+    #: on a 45-part plan.  The optimum itself is never refused by units, only by its states and bytes.
+    STEP_UNITS = 16
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
@@ -115,6 +119,8 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 # the optimum's values where they fit (a policy of None), else the base's
                 base = None if self._optimum_fits(engine) else self.base
+                if base is not None and engine.n_units > self.STEP_UNITS:
+                    return None         # the step over the base is out of reach: the base decides
                 if self.pile:
                     from opportune.policies.pile import PileSolver, pile_solver
 
@@ -249,6 +255,9 @@ class Lookahead(DecidesOnMasks):
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
             ev = self._values(engine)
+            if ev is None:
+                self._too_large = True
+                return None
             if self.lookahead_budget is not None:
                 ev.deadline = start + 0.7 * self.lookahead_budget
             elif self.deadline is not None:
@@ -272,7 +281,8 @@ class Lookahead(DecidesOnMasks):
 
     def _why_too_large(self) -> str:
         """Why the programmes do not fit, in words: the optimum's refusal (states or bytes) and the base's cap."""
-        base = f"the base rule's needs more than {self.max_states:,} states"
+        base = (f"the step over the base rule is evaluated on plans of at most {self.STEP_UNITS} units"
+                if self._evaluator is None else f"the base rule's needs more than {self.max_states:,} states")
         return f"{self.refusal}; {base}" if self.refusal else base
 
     def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):

@@ -77,8 +77,6 @@ class Rollout(DecidesOnMasks):
         self.costs = costs if costs is not None else TimeModel()
         self.deterministic = budget is None
         # small plans: the exact look-ahead (an expectation, not a sample)
-        from opportune.policies.lookahead import Lookahead
-
         self.exact_below = self.EXACT_UNITS if exact_below is None else exact_below
         self.exact = exact
         self._tables = None
