@@ -37,7 +37,8 @@ namespace py = pybind11;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-using opportune_memo::PairHash;
+using opportune_memo::PairIds;
+using opportune_memo::PlanUnits;
 using opportune_memo::Table;
 
 struct OptimalTooLarge : std::runtime_error {
@@ -51,41 +52,16 @@ struct OptimalStuck : std::runtime_error {
 };
 
 constexpr double INF = std::numeric_limits<double>::infinity();
-// bytes an interned (installed, strategies) pair takes: the vector's entry and the hash map's node
-constexpr size_t PAIR_BYTES = sizeof(std::pair<uint64_t, uint64_t>) + 48;
 
-class OptimalCore {
+class OptimalCore : private PlanUnits {
 public:
-    // `first[i]`, `quantity[i]`: part i's units first .. first+quantity-1; `below[s][u]`: the units
-    // below unit u in strategy s; `move[i]`: the cost of moving a unit of part i; `capacity` < 0: none.
     OptimalCore(int n_units, std::vector<int> first, std::vector<int> quantity,
                 std::vector<std::vector<uint64_t>> below, std::vector<double> move, double look, double shake,
                 int visible, int capacity)
-        : n_units_(n_units), first_(std::move(first)), quantity_(std::move(quantity)), below_(std::move(below)),
-          move_(std::move(move)), look_(look), shake_(shake), visible_(visible), capacity_(capacity) {
-        parts_ = (int)first_.size();
-        if (n_units_ < 1 || n_units_ > 64) throw std::invalid_argument("the compiled optimum takes 1 to 64 units");
-        if (below_.empty() || below_.size() > 64) throw std::invalid_argument("between 1 and 64 strategies");
-        if ((int)quantity_.size() != parts_ || (int)move_.size() != parts_ || parts_ == 0)
-            throw std::invalid_argument("first, quantity and move need one entry per part");
-        if (visible_ < 1) throw std::invalid_argument("at least one unit must be visible");
-        for (auto& b : below_)
-            if ((int)b.size() != n_units_) throw std::invalid_argument("below needs one mask per unit");
-        full_ = n_units_ == 64 ? ~uint64_t(0) : (uint64_t(1) << n_units_) - 1;
-        long double buffers = 1;
-        part_units_.resize(parts_);
-        radix_.resize(parts_);
-        for (int i = 0; i < parts_; ++i) {
-            if (quantity_[i] < 1 || first_[i] < 0 || first_[i] + quantity_[i] > n_units_)
-                throw std::invalid_argument("a part's units are out of range");
-            radix_[i] = (uint64_t)buffers;
-            buffers *= quantity_[i] + 1;
-            uint64_t units = quantity_[i] == 64 ? ~uint64_t(0) : ((uint64_t(1) << quantity_[i]) - 1);
-            part_units_[i] = units << first_[i];
-        }
-        if (buffers > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
-        buffers_ = (uint64_t)buffers;
-        max_pairs_ = (~uint64_t(0) - 1) / buffers_;
+        : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
+                    visible, capacity) {
+        if (buffers_ > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
+        max_pairs_ = (~uint64_t(0) - 1) / (uint64_t)buffers_;
         // C(n, k) for n <= 64: at most C(64, 32) < 2^61, exact in 64 bits
         for (int n = 0; n <= 64; ++n) {
             binom_[n][0] = 1;
@@ -109,38 +85,15 @@ public:
 
     void reserve(size_t n) { table_.reserve(n); }
     size_t states() const { return table_.size(); }
-    size_t bytes() const { return table_.bytes() + pairs_.size() * PAIR_BYTES; }
+    size_t bytes() const { return table_.bytes() + pairs_.bytes(); }
     // the bytes a programme of `states` states over `pairs` (installed, strategies) pairs holds once reserved
-    static size_t bytes_for(size_t states, size_t pairs) { return Table::bytes_for(states) + pairs * PAIR_BYTES; }
+    static size_t bytes_for(size_t states, size_t pairs) { return Table::bytes_for(states) + pairs * PairIds::PAIR_BYTES; }
 
 private:
-    uint64_t pair_id(uint64_t mask, uint64_t cons) {
-        auto it = ids_.find({mask, cons});
-        if (it != ids_.end()) return it->second;
-        uint64_t id = pairs_.size();
-        if (id >= max_pairs_) throw OptimalTooLarge("too many states for 64-bit codes");
-        ids_.emplace(std::make_pair(mask, cons), id);
-        pairs_.emplace_back(mask, cons);
-        return id;
-    }
-
     uint64_t code(uint64_t mask, uint64_t cons, const std::vector<int>& buf) {
-        uint64_t b = 0;
-        for (int i = 0; i < parts_; ++i) b += (uint64_t)buf[i] * radix_[i];
-        return pair_id(mask, cons) * buffers_ + b;
-    }
-
-    int next_unit(uint64_t mask, int part) const {
-        for (int u = first_[part]; u < first_[part] + quantity_[part]; ++u)
-            if (!(mask >> u & 1)) return u;
-        return -1;
-    }
-
-    uint64_t consistent_after(uint64_t mask, uint64_t cons, int unit) const {
-        uint64_t out = 0;
-        for (size_t s = 0; s < below_.size(); ++s)
-            if ((cons >> s & 1) && (below_[s][unit] & ~mask) == 0) out |= uint64_t(1) << s;
-        return out;
+        uint64_t id = pairs_.id(mask, cons, max_pairs_);
+        if (id == ~uint64_t(0)) throw OptimalTooLarge("too many states for 64-bit codes");
+        return id * (uint64_t)buffers_ + buffer_code(buf);
     }
 
     // OptimalSolver._value: V(s), the look's cost included
@@ -162,9 +115,9 @@ private:
         std::vector<std::tuple<double, int, int>> ranked;  // (best move, part, units in the bin)
         int n = 0;
         for (int i = 0; i < parts_; ++i) {
-            int in_bin = quantity_[i] - __builtin_popcountll(mask & part_units_[i]) - buf[i];
-            if (in_bin <= 0) continue;
-            n += in_bin;
+            int units = in_bin(mask, buf, i);
+            if (units <= 0) continue;
+            n += units;
             double best = INF;
             int u = next_unit(mask, i);
             uint64_t after = consistent_after(mask, cons, u);
@@ -175,7 +128,7 @@ private:
                 buf[i] -= 1;
                 best = std::min(best, v);
             }
-            ranked.emplace_back(best, i, in_bin);
+            ranked.emplace_back(best, i, units);
         }
         // the buffer's best installation (the same on every look)
         double from_buffer = INF;
@@ -224,17 +177,9 @@ private:
         return s;
     }
 
-    int n_units_, parts_ = 0;
-    std::vector<int> first_, quantity_;
-    std::vector<std::vector<uint64_t>> below_;
-    std::vector<double> move_;
-    double look_, shake_;
-    int visible_, capacity_;
-    uint64_t full_ = 0, buffers_ = 1, max_pairs_ = 0;
-    std::vector<uint64_t> part_units_, radix_;
+    uint64_t max_pairs_ = 0;
     uint64_t binom_[65][65] = {};
-    std::unordered_map<std::pair<uint64_t, uint64_t>, uint64_t, PairHash> ids_;
-    std::vector<std::pair<uint64_t, uint64_t>> pairs_;
+    PairIds pairs_;
     Table table_;
     bool timed_ = false;
     Clock::time_point deadline_;

@@ -205,6 +205,12 @@ class OptimalSolver:
                 nb = list(buf)
                 nb[i] += 1
                 yield self.move[i], (mask, cons, tuple(nb)), Action("buffer", self.ids[i])
+        for i, nxt in self._buffer_installs(mask, cons, buf):
+            yield self.move[i], nxt, Action("install", self.ids[i], "buffer")
+
+    def _buffer_installs(self, mask: int, cons: int, buf: tuple[int, ...]):
+        """``(part, next key)`` of every installation from the buffer that keeps a strategy.  O(parts)."""
+        engine = self.engine
         for i, c in enumerate(buf):
             if c:
                 u = engine.next_unit(mask, i)
@@ -212,7 +218,7 @@ class OptimalSolver:
                 if after:
                     nb = list(buf)
                     nb[i] -= 1
-                    yield self.move[i], (mask | 1 << u, after, tuple(nb)), Action("install", self.ids[i], "buffer")
+                    yield i, (mask | 1 << u, after, tuple(nb))
 
     def _policy_move(self, policy, key: tuple, look: tuple[int, ...]):
         """The move ``policy`` makes at ``key`` on ``look``, as ``(cost, next key, action)`` of
@@ -315,14 +321,8 @@ class OptimalSolver:
                 best = min(best, move[i] + value((mask, cons, tuple(nb))))
             ranked.append((best, i, c))
         from_buffer = inf
-        for i, c in enumerate(buf):
-            if c:
-                u = engine.next_unit(mask, i)
-                after = engine.consistent_after(mask, cons, u)
-                if after:
-                    nb = list(buf)
-                    nb[i] -= 1
-                    from_buffer = min(from_buffer, move[i] + value((mask | 1 << u, after, tuple(nb))))
+        for i, nxt in self._buffer_installs(mask, cons, buf):
+            from_buffer = min(from_buffer, move[i] + value(nxt))
         if n == 0:          # every unit left is in the buffer: no part is seen
             return [(from_buffer, 1.0)]
         ranked.sort()
@@ -458,7 +458,41 @@ def optimal_solver(engine: OrderEngine, **settings) -> OptimalSolver:
     return OptimalSolver(engine, **settings)
 
 
-class CompiledOptimalSolver(OptimalSolver):
+class CompiledCore:
+    """What the compiled optimum programmes share (:class:`CompiledOptimalSolver`, the pile's
+    :class:`~opportune.policies.pile.CompiledPileSolver`): the plan in the core's terms, and the core's
+    table (``self._core``) sized, counted and measured.  A mixin before an :class:`OptimalSolver`."""
+
+    def _core_args(self) -> tuple:
+        """The arguments every core takes first: units, parts' first units and quantities, the units below
+        each unit per strategy, move costs, the look's and the shake's costs, visible, capacity (-1: none)."""
+        engine = self.engine
+        below = [[int(b) for b in poset.below] for poset in engine.posets]
+        return (engine.n_units, list(engine.first), list(self.quantity), below, list(self.move),
+                float(self.costs.look), float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity)
+
+    def reserve(self, states: int) -> None:
+        """Make room for ``states`` values at once (the count from
+        :func:`~opportune.policies.states.estimate_states`): no table doubling during the work."""
+        self._core.reserve(int(states))
+
+    @property
+    def states(self) -> int:
+        return self._core.states
+
+    @property
+    def bytes(self) -> int:
+        """The memory the compiled programme holds (its table and interned pairs)."""
+        return self._core.bytes
+
+    def _report(self) -> None:
+        """The progress report as the Python programme's: once per 64 more states (a call stores many)."""
+        if self.progress is not None and self._core.states >= self._next_report:
+            self._next_report = self._core.states + 64
+            self.progress(self)
+
+
+class CompiledOptimalSolver(CompiledCore, OptimalSolver):
     """The uniform bin's optimum computed by the compiled core (``_native.OptimalCore``,
     ``src/native/optimal.cpp``): the recursion of :meth:`OptimalSolver._value` with the looks as order
     statistics, the same floating-point operations in the same order, so the same doubles.
@@ -475,24 +509,7 @@ class CompiledOptimalSolver(OptimalSolver):
         if not self.uniform or not compiled_optimal_available(engine):
             raise ValueError("the compiled optimum needs the compiled core, a uniform bin and a plan of 1 to 64 "
                              "units and at most 64 strategies")
-        below = [[int(b) for b in poset.below] for poset in engine.posets]
-        self._core = _native.OptimalCore(
-            engine.n_units, list(engine.first), list(self.quantity), below, list(self.move),
-            float(self.costs.look), float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity)
-
-    def reserve(self, states: int) -> None:
-        """Make room for ``states`` values at once (the count from
-        :func:`~opportune.policies.states.estimate_states`): no table doubling during the work."""
-        self._core.reserve(int(states))
-
-    @property
-    def states(self) -> int:
-        return self._core.states
-
-    @property
-    def bytes(self) -> int:
-        """The memory the compiled programme holds (its table and interned pairs)."""
-        return self._core.bytes
+        self._core = _native.OptimalCore(*self._core_args())
 
     def _value(self, key: tuple) -> float:
         try:
@@ -507,7 +524,4 @@ class CompiledOptimalSolver(OptimalSolver):
         except _native.OptimalCoreStuck as exc:
             raise RuntimeError(str(exc)) from None
         finally:
-            # the progress report as the Python programme's: once per 64 more states (a call stores many)
-            if self.progress is not None and self._core.states >= self._next_report:
-                self._next_report = self._core.states + 64
-                self.progress(self)
+            self._report()
