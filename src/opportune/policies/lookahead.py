@@ -42,9 +42,12 @@ class Lookahead(DecidesOnMasks):
     after each action make the improvement step).  ``optimal=False`` keeps to the improvement step.
     (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
     where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
-    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state); there the
-    optimum's programme is the compiled one where the core is built
-    (:class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states.
+    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).  In either bin
+    the optimum's programme is the compiled one where the core is built
+    (:class:`~opportune.policies.optimal.CompiledOptimalSolver`,
+    :class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states
+    and within the bytes the engine grants, whatever the plan's units; the step over the base is tried
+    on plans of up to :attr:`STEP_UNITS` units.
     """
 
     name = "lookahead"
