@@ -151,6 +151,9 @@ def test_the_factory_falls_back_to_python(monkeypatch):
     engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
     assert type(optimal_solver(engine, weights={"a": 2.0})) is OptimalSolver
     assert optimal_solver(engine, weights={"a": 2.0, "b": 2.0, "c": 2.0}).uniform
+    # 63 parts of one unit: 2^63 buffer contents, past the core's 64-bit codes
+    wide = OrderEngine(make_plan([f"p{i}" for i in range(63)], {}))
+    assert not compiled_optimal_available(wide) and type(optimal_solver(wide)) is OptimalSolver
     monkeypatch.setattr(optimal, "_native", None)
     assert not compiled_optimal_available(engine)
     assert type(optimal_solver(engine)) is OptimalSolver

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import sys
 from functools import lru_cache
-from math import comb
+from math import comb, prod
 
 from opportune.engine import OrderEngine, compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
@@ -419,15 +419,18 @@ class Optimal:
 def compiled_optimal_available(engine, weights: dict[str, float] | None = None) -> bool:
     """Whether the compiled optimum takes this plan: the core is built (and not switched off with
     ``OPPORTUNE_PURE_PYTHON=1``), the bin is uniform (no weights, or all equal), the plan has at most
-    64 units and 64 strategies.  O(parts).
+    64 units and 64 strategies, and at most 2^62 buffer contents (the product of the quantities plus
+    one: up to 62 parts of one unit).  O(parts).
 
     >>> from opportune import make_plan
     >>> compiled_optimal_available(OrderEngine(make_plan(["a", "b"], {})), {"a": 2.0})
     False
     """
     uniform = len({float((weights or {}).get(p.id, 1.0)) for p in engine.plan.parts}) <= 1
+    # a state's code is (installed, strategies) × buffer contents + contents: at most 2^62 contents
+    contents = prod(p.quantity + 1 for p in engine.plan.parts)
     return (_native is not None and hasattr(_native, "OptimalCore") and uniform and 1 <= engine.n_units <= 64
-            and engine.k <= 64)
+            and engine.k <= 64 and contents <= 1 << 62)
 
 
 def optimum_bytes(states: int, keys: int, *, compiled: bool) -> int:
