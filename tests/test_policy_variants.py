@@ -24,6 +24,7 @@ GEAR = load_plan(GEARBOX)
 
 def gap(engine, policy, capacity=None, visible=2) -> float:
     ev = PolicyEvaluator(engine, policy, visible=visible, capacity=capacity)
+    ev.OPTIMUM_SHORTCUT = False         # the look-ahead evaluated look by look, not taken as the optimum
     return ev.value() / ev.optimal() - 1
 
 
@@ -35,7 +36,8 @@ def test_bin_first_on_the_gearbox_matches_the_independent_value():
 @pytest.mark.parametrize("capacity,bound", [(None, 0.0005), (1, 0.005), (2, 0.005)])
 def test_lookahead_is_within_the_targets_on_the_gearbox(capacity, bound):
     engine = OrderEngine(GEAR)
-    assert 0 <= gap(engine, Lookahead(visible=2, capacity=capacity), capacity) <= bound
+    # the policy's value sums over the looks, the optimum's over order statistics: equal to the last ulps
+    assert -1e-12 <= gap(engine, Lookahead(visible=2, capacity=capacity), capacity) <= bound
     # and each variant improves on the paper's rule there
     paper = gap(engine, Opportunistic(), capacity)
     assert gap(engine, Slack(), capacity) < paper and gap(engine, BinFirst(), capacity) < paper

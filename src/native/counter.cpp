@@ -1154,6 +1154,7 @@ void bind(py::module_& m, const char* name) {
 void bind_chains(py::module_& m);  // chains.cpp
 void bind_relax(py::module_& m);   // relax.cpp
 void bind_pile(py::module_& m);    // pile.cpp
+void bind_optimal(py::module_& m); // optimal.cpp
 
 PYBIND11_MODULE(_native, m) {
     m.doc() = "Compiled core of opportune's order engine (see opportune.engine.native)";
@@ -1165,4 +1166,5 @@ PYBIND11_MODULE(_native, m) {
     bind_chains(m);
     bind_relax(m);
     bind_pile(m);
+    bind_optimal(m);
 }

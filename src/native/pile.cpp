@@ -28,6 +28,8 @@
 #include <utility>
 #include <vector>
 
+#include "memo_table.hpp"
+
 namespace py = pybind11;
 
 namespace {
@@ -46,121 +48,33 @@ struct PileStuck : std::runtime_error {
 
 constexpr double INF = std::numeric_limits<double>::infinity();
 
-inline uint64_t mix(uint64_t x) {  // the splitmix64 finaliser: a well-spread slot for every code
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ULL;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebULL;
-    return x ^ (x >> 31);
-}
-
-// Values by code: linear probing, power-of-two capacity, at most half full.  The slots come zeroed
-// from calloc (a large block is mapped lazily by the system: reserving is immediate, a page is paid for
-// when first written), so a code is kept as code + 1 and 0 marks an empty slot.
-class Table {
-public:
-    struct Slot {
-        uint64_t key;
-        double val;
-    };
-    Table() { rehash(1024); }
-    ~Table() { std::free(slots_); }
-    Table(const Table&) = delete;
-    Table& operator=(const Table&) = delete;
-    const double* find(uint64_t code) const {
-        uint64_t key = code + 1;
-        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
-            if (slots_[i].key == key) return &slots_[i].val;
-            if (slots_[i].key == 0) return nullptr;
-        }
-    }
-    void put(uint64_t code, double v) {
-        if (2 * (size_ + 1) > cap_) rehash(cap_ * 2);
-        uint64_t key = code + 1;
-        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
-            if (slots_[i].key == key || slots_[i].key == 0) {
-                size_ += slots_[i].key == 0;
-                slots_[i].key = key;
-                slots_[i].val = v;
-                return;
-            }
-        }
-    }
-    void reserve(size_t n) {
-        size_t cap = cap_;
-        while (cap < 2 * n) cap *= 2;
-        if (cap > cap_) rehash(cap);
-    }
-    size_t size() const { return size_; }
-    size_t bytes() const { return cap_ * sizeof(Slot); }
-
-private:
-    void rehash(size_t cap) {
-        Slot* slots = static_cast<Slot*>(std::calloc(cap, sizeof(Slot)));
-        if (!slots) throw std::bad_alloc();
-        size_t m = cap - 1;
-        for (size_t j = 0; j < cap_; ++j) {
-            if (slots_[j].key == 0) continue;
-            size_t i = mix(slots_[j].key) & m;
-            while (slots[i].key != 0) i = (i + 1) & m;
-            slots[i] = slots_[j];
-        }
-        std::free(slots_);
-        slots_ = slots;
-        cap_ = cap;
-        mask_ = m;
-    }
-    Slot* slots_ = nullptr;
-    size_t cap_ = 0, mask_ = 0, size_ = 0;
-};
-
-struct PairHash {
-    size_t operator()(const std::pair<uint64_t, uint64_t>& k) const { return mix(k.first ^ mix(k.second)); }
-};
+using opportune_memo::PairIds;
+using opportune_memo::PlanUnits;
+using opportune_memo::Table;
 
 struct Look {
     std::vector<int> window;  // sorted part indices
     double p;
 };
 
-class PileCore {
+class PileCore : private PlanUnits {
 public:
-    // `first[i]`, `quantity[i]`: part i's units first .. first+quantity-1; `below[s][u]`: the units
-    // below unit u in strategy s; `move[i]`: the cost of moving a unit of part i; `capacity` < 0: none;
-    // `compensated`: the interpreter's sum() of floats is Neumaier's (Python 3.12 on), else plain.
+    // The plan as PlanUnits takes it; `compensated`: the interpreter's sum() of floats is Neumaier's
+    // (Python 3.12 on), else plain.
     PileCore(int n_units, std::vector<int> first, std::vector<int> quantity, std::vector<std::vector<uint64_t>> below,
              std::vector<double> move, double look, double shake, int visible, int capacity, bool compensated)
-        : n_units_(n_units), first_(std::move(first)), quantity_(std::move(quantity)), below_(std::move(below)),
-          move_(std::move(move)), look_(look), shake_(shake), visible_(visible), capacity_(capacity),
+        : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
+                    visible, capacity),
           compensated_(compensated) {
-        parts_ = (int)first_.size();
-        if (n_units_ < 0 || n_units_ > 64) throw std::invalid_argument("the compiled pile optimum takes up to 64 units");
-        if (below_.empty() || below_.size() > 64) throw std::invalid_argument("between 1 and 64 strategies");
-        if ((int)quantity_.size() != parts_ || (int)move_.size() != parts_ || parts_ == 0)
-            throw std::invalid_argument("first, quantity and move need one entry per part");
-        if (visible_ < 1) throw std::invalid_argument("at least one unit must be visible");
-        for (auto& b : below_)
-            if ((int)b.size() != n_units_) throw std::invalid_argument("below needs one mask per unit");
-        full_ = n_units_ == 64 ? ~uint64_t(0) : (uint64_t(1) << n_units_) - 1;
         // codes: ((pair id × buffers) + buffer) × windows + window, the last window code for S
-        long double buffers = 1, windows = 1;
-        part_units_.resize(parts_);
-        radix_.resize(parts_);
-        for (int i = 0; i < parts_; ++i) {
-            if (quantity_[i] < 1 || first_[i] < 0 || first_[i] + quantity_[i] > n_units_)
-                throw std::invalid_argument("a part's units are out of range");
-            radix_[i] = (uint64_t)buffers;
-            buffers *= quantity_[i] + 1;
-            uint64_t units = quantity_[i] == 64 ? ~uint64_t(0) : ((uint64_t(1) << quantity_[i]) - 1);
-            part_units_[i] = units << first_[i];
-        }
+        long double windows = 1;
         for (int j = 0; j < visible_; ++j) windows *= parts_ + 1;
         windows += 1;
-        if (buffers * windows > (long double)(uint64_t(1) << 62))
+        if (buffers_ * windows > (long double)(uint64_t(1) << 62))
             throw std::invalid_argument("too many buffer contents and windows for 64-bit codes");
-        buffers_ = (uint64_t)buffers;
+        nbuffers_ = (uint64_t)buffers_;
         windows_ = (uint64_t)windows;
-        max_pairs_ = (~uint64_t(0) - 1) / (buffers_ * windows_);
+        max_pairs_ = (~uint64_t(0) - 1) / (nbuffers_ * windows_);
         slot_.assign(windows_, -1);
     }
 
@@ -206,7 +120,7 @@ public:
     void reserve(size_t n) { table_.reserve(n); }
     size_t states() const { return table_.size(); }
     size_t bytes() const {
-        return table_.bytes() + pairs_.size() * (sizeof(std::pair<uint64_t, uint64_t>) + 48) + slot_.size() * sizeof(int);
+        return table_.bytes() + pairs_.bytes() + slot_.size() * sizeof(int);
     }
 
 private:
@@ -225,20 +139,10 @@ private:
         max_states_ = max_states < 0 ? std::numeric_limits<size_t>::max() : (size_t)max_states;
     }
 
-    uint64_t pair_id(uint64_t mask, uint64_t cons) {
-        auto it = ids_.find({mask, cons});
-        if (it != ids_.end()) return it->second;
-        uint64_t id = pairs_.size();
-        if (id >= max_pairs_) throw PileTooLarge("too many states for 64-bit codes");
-        ids_.emplace(std::make_pair(mask, cons), id);
-        pairs_.emplace_back(mask, cons);
-        return id;
-    }
-
     uint64_t base_code(uint64_t mask, uint64_t cons, const std::vector<int>& buf) {
-        uint64_t b = 0;
-        for (int i = 0; i < parts_; ++i) b += (uint64_t)buf[i] * radix_[i];
-        return (pair_id(mask, cons) * buffers_ + b) * windows_;
+        uint64_t id = pairs_.id(mask, cons, max_pairs_);
+        if (id == ~uint64_t(0)) throw PileTooLarge("too many states for 64-bit codes");
+        return (id * nbuffers_ + buffer_code(buf)) * windows_;
     }
 
     uint64_t window_code(const std::vector<int>& w) const {
@@ -248,19 +152,6 @@ private:
             r *= parts_ + 1;
         }
         return c;
-    }
-
-    int next_unit(uint64_t mask, int part) const {
-        for (int u = first_[part]; u < first_[part] + quantity_[part]; ++u)
-            if (!(mask >> u & 1)) return u;
-        return -1;
-    }
-
-    uint64_t consistent_after(uint64_t mask, uint64_t cons, int unit) const {
-        uint64_t out = 0;
-        for (size_t s = 0; s < below_.size(); ++s)
-            if ((cons >> s & 1) && (below_[s][unit] & ~mask) == 0) out |= uint64_t(1) << s;
-        return out;
     }
 
     // Python's sum() of a generator of floats (started at the int 0)
@@ -327,7 +218,7 @@ private:
 
     std::vector<int> bin_counts(uint64_t mask, const std::vector<int>& buf) const {
         std::vector<int> bin(parts_);
-        for (int i = 0; i < parts_; ++i) bin[i] = quantity_[i] - __builtin_popcountll(mask & part_units_[i]) - buf[i];
+        for (int i = 0; i < parts_; ++i) bin[i] = in_bin(mask, buf, i);
         return bin;
     }
 
@@ -437,18 +328,10 @@ private:
         return sum.result();
     }
 
-    int n_units_, parts_ = 0;
-    std::vector<int> first_, quantity_;
-    std::vector<std::vector<uint64_t>> below_;
-    std::vector<double> move_;
-    double look_, shake_;
-    int visible_, capacity_;
     bool compensated_;
-    uint64_t full_ = 0, buffers_ = 1, windows_ = 1, max_pairs_ = 0;
-    std::vector<uint64_t> part_units_, radix_;
+    uint64_t nbuffers_ = 1, windows_ = 1, max_pairs_ = 0;
     std::vector<int> slot_;  // window code -> index in a look list being built (-1: none)
-    std::unordered_map<std::pair<uint64_t, uint64_t>, uint64_t, PairHash> ids_;
-    std::vector<std::pair<uint64_t, uint64_t>> pairs_;
+    PairIds pairs_;
     Table table_;
     bool timed_ = false;
     Clock::time_point deadline_;

@@ -889,7 +889,8 @@ def evaluate(
            "buffer_capacity": config.buffer_capacity, "expected_time": value, "optimal": best,
            "ratio": value / best if best else None, "states": states, "policy_states": policy_states,
            "estimated_states": estimate.states, "estimate_exact": estimate.exact,
-           "estimated_policy_states": policy_bound, "buffer_order_kept": ordered}
+           "estimated_policy_states": policy_bound, "buffer_order_kept": ordered,
+           "policy_by_optimum": bool(getattr(ev, "by_optimum", False))}
     if as_json:
         print(json.dumps(doc, indent=2))
         return
@@ -897,8 +898,10 @@ def evaluate(
     _out().print(f"{plan.name}: {chosen_bin} bin, {config.visible} visible, buffer {cap}")
     _out().print(f"  {policy}: expected time {value:.4f}")
     _out().print(f"  optimum: expected time {best:.4f}")
+    reached = ("the policy decides by the optimum's values, so its value is the optimum's"
+               if doc["policy_by_optimum"] else f"{policy_states:,} reached by the policy")
     _out().print(f"  ratio {value / best:.5f} ({100 * (value / best - 1):+.2f}%); "
-                 f"{states:,} states for the optimum, {policy_states:,} reached by the policy")
+                 f"{states:,} states for the optimum, {reached}")
 
 
 def _duration(seconds: float) -> str:

@@ -56,6 +56,9 @@ DEFAULT_MEMORY = memory_total() // 4
 MEASURE_EVERY = 0.5
 #: Memos over ``memory_limit`` are shrunk to this share of it (room for hours before the next shrink).
 SHRINK_TO = 0.5
+#: Share of an engine's ``memory_limit`` that programmes kept beside it (a policy's exact optimum,
+#: :meth:`OrderEngine.reserve_programme`) may hold in all; the memos keep the rest.
+PROGRAMME_SHARE = 0.5
 #: Most seconds one :meth:`OrderEngine.maintain` spends shrinking (the rest waits for the next one).
 SHRINK_SECONDS = 0.02
 HUB_PROBE = 100_000  # new memo entries a plain count may add before counting through a hub is tried
@@ -283,6 +286,8 @@ class OrderEngine:
         self.measure_every = MEASURE_EVERY
         self._measured = (float("-inf"), 0)     # (time.monotonic(), bytes) of the last measurement
         self._pass = None   # a shrink under way: (keep share, [(memo, entries to keep)]) left to do
+        #: Bytes granted to programmes kept beside the engine, by name (:meth:`reserve_programme`).
+        self.programmes: dict[object, int] = {}
         # Units: part i owns units first[i] .. first[i] + quantity - 1, installed in that order.
         self.first: list[int] = []
         self.unit_part: list[int] = []
@@ -428,7 +433,26 @@ class OrderEngine:
         for cache in (self._count_cache, self._options_cache, self._positions_cache, self._option_cache,
                       self._installable_cache):
             total += nbytes(cache)
-        return total + nbytes(self._above, depth=3)
+        return total + nbytes(self._above, depth=3) + sum(self.programmes.values())
+
+    def reserve_programme(self, name, nbytes: int) -> bool:
+        """Grant ``nbytes`` to a programme kept beside this engine (a policy's exact optimum, sized
+        before it starts), under ``name`` (a second grant under a name replaces the first): True
+        where the programmes' bytes stay within :data:`PROGRAMME_SHARE` of ``memory_limit`` (always
+        without a limit), else False and nothing is granted.  Granted bytes count in :meth:`nbytes`
+        (what a service accounts per plan) and are not shrunk: :meth:`maintain` keeps the memos within
+        the rest of the limit.  O(programmes).
+
+        >>> from opportune import make_plan
+        >>> e = OrderEngine(make_plan(["a"], {}), memory_limit=1000)
+        >>> e.reserve_programme("optimum", 400), e.reserve_programme("other", 400), e.nbytes() > 400
+        (True, False, True)
+        """
+        others = sum(b for n, b in self.programmes.items() if n != name)
+        if self.memory_limit is not None and others + nbytes > PROGRAMME_SHARE * self.memory_limit:
+            return False
+        self.programmes[name] = int(nbytes)
+        return True
 
     def clear_state_caches(self) -> None:
         """Forget the per-state caches (options, positions, installable sets; not the counters' memos):
@@ -622,7 +646,9 @@ class OrderEngine:
         if used <= limit:
             return False
         self.shrunk += 1
-        self._drop(SHRINK_TO * limit / used, Deadline.after(SHRINK_SECONDS), fresh=True)
+        # the programmes' grants are not shrunk: the memos keep within the rest
+        kept = sum(self.programmes.values())
+        self._drop(SHRINK_TO * max(0, limit - kept) / max(1, used - kept), Deadline.after(SHRINK_SECONDS), fresh=True)
         if self._pass is None:
             self._measured = (now, self.nbytes())
         return True

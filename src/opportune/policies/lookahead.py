@@ -20,7 +20,7 @@ from opportune.policies.base import (
     resume_collector,
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, same_action
+from opportune.policies.optimal import OptimalTooLarge, compiled_optimal_available, optimal_solver, optimum_bytes, same_action
 from opportune.policies.variants import Slack
 
 __all__ = ["Lookahead"]
@@ -42,9 +42,12 @@ class Lookahead(DecidesOnMasks):
     after each action make the improvement step).  ``optimal=False`` keeps to the improvement step.
     (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
     where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
-    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state); there the
-    optimum's programme is the compiled one where the core is built
-    (:class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states.
+    (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).  In either bin
+    the optimum's programme is the compiled one where the core is built
+    (:class:`~opportune.policies.optimal.CompiledOptimalSolver`,
+    :class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states
+    and within the bytes the engine grants, whatever the plan's units; the step over the base is tried
+    on plans of up to :attr:`STEP_UNITS` units.
     """
 
     name = "lookahead"
@@ -52,15 +55,21 @@ class Lookahead(DecidesOnMasks):
     #: What the decisions say where the optimum's programme decides.
     OPTIMAL_RULE = "the action with the least expected cost of finishing (the exact optimum)"
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
-    #: Plans of more units than this decide as the base does (the programme would take too long).
-    MAX_UNITS = 16
-    #: On the pile bin the compiled optimum decides on plans of up to this many states (counted before it
-    #: starts; ``max_states`` if larger): its table is reserved for the count at once, at most
-    #: :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` (64) bytes a state, so at most 320 MB.
-    #: Without a budget it is solved whole in the first decision on the plan (a warm-up: 0.6-1 million
-    #: states a second) and shared by the look-aheads of the same settings; with one, each decision
-    #: goes on with it within its share of the budget (the clock is read at every new state).
+    #: The compiled optimum (of the uniform bin, :class:`~opportune.policies.optimal.CompiledOptimalSolver`, or
+    #: of the pile, :class:`~opportune.policies.pile.CompiledPileSolver`) decides on plans of up to this many
+    #: states (counted before it starts; ``max_states`` if larger), whatever their units, where its bytes
+    #: (known before it starts too: at most 64 a state and the pairs it interns, so about 350 MB at most)
+    #: are granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.reserve_programme`, within
+    #: half its ``memory_limit``); its table is reserved for the count at once.  Without a budget it is
+    #: solved whole in the first decision on the plan (a warm-up: about a million states a second) and
+    #: shared by the look-aheads of the same settings; with one, each decision goes on with it within its
+    #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
+    #: core, or a weighted bin) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
+    #: Where the optimum does not fit, plans of more units than this decide as the base does: the step over
+    #: the base evaluates the base look by look in Python (every look of every state asks the base rule), hours
+    #: on a 45-part plan.  The optimum itself is never refused by units, only by its states and bytes.
+    STEP_UNITS = 16
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
@@ -87,6 +96,8 @@ class Lookahead(DecidesOnMasks):
         self._evaluator = None
         self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
         self._too_large = False
+        #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
+        self.refusal: str | None = None
         self.last_cost: float | None = None
 
     @property
@@ -111,49 +122,94 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 # the optimum's values where they fit (a policy of None), else the base's
                 base = None if self._optimum_fits(engine) else self.base
+                if base is not None and engine.n_units > self.STEP_UNITS:
+                    return None         # the step over the base is out of reach: the base decides
                 if self.pile:
                     from opportune.policies.pile import PileSolver, pile_solver
 
                     if base is None:
                         ev = pile_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
-                        ev.reserve(self._optimum_states)    # compiled: no table doubling inside a decision
                     else:
                         ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
                 elif base is None:
-                    ev = OptimalSolver(engine, max_states=self.max_states, **self.settings)
+                    ev = optimal_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
                 else:
                     ev = PolicyEvaluator(engine, base, max_states=self.max_states, **self.settings)
+                if base is None:
+                    ev.reserve(self._optimum_states)    # compiled: no table doubling inside a decision
                 if key is not None:
                     shared[key] = ev
             self._evaluator = ev
             self._too_large = False
         return self._evaluator
 
-    def _optimum_cap(self, engine) -> int:
-        """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for the compiled
-        pile optimum, else ``max_states``.  O(1)."""
+    def _compiled(self, engine) -> bool:
+        """Whether the optimum's programme for this plan and bin is the compiled one.  O(parts)."""
         if self.pile:
             from opportune.policies.pile import compiled_pile_available
 
-            if compiled_pile_available(engine):
-                return max(self.max_states, self.COMPILED_STATES)
-        return self.max_states
+            return compiled_pile_available(engine)
+        return compiled_optimal_available(engine, self.settings.get("weights"))
+
+    def _optimum_cap(self, engine) -> int:
+        """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for a compiled
+        optimum, else ``max_states``.  O(parts)."""
+        return max(self.max_states, self.COMPILED_STATES) if self._compiled(engine) else self.max_states
+
+    def _optimum_bytes(self, engine, estimate) -> int:
+        """The bytes the optimum's programme holds, from its state count: the compiled uniform table and
+        its pairs (:func:`~opportune.policies.optimal.optimum_bytes`), the compiled pile's
+        :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` a value, or the Python programme's
+        :data:`~opportune.policies.states.BYTES_PER_STATE`.  O(log states)."""
+        compiled = self._compiled(engine)
+        if self.pile and compiled:
+            from opportune.policies.pile import COMPILED_BYTES_PER_STATE
+
+            return COMPILED_BYTES_PER_STATE * estimate.states
+        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile)
 
     def _optimum_fits(self, engine) -> bool:
-        """Whether the optimum's programme holds at most its cap (:meth:`_optimum_cap`) of states, listed before it starts
-        within a second, or within a third of the decision budget where there is one (it runs inside the
-        first decision on the plan, within the programme's share: up to 0.3 s on plans of 15-16 units);
-        where the listing cannot tell in that time, it does not fit, and the step over the base decides."""
-        if not self.optimal or engine.n_units > self.MAX_UNITS:
+        """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,
+        listed before it starts within a second (or a third of the decision budget where there is one: it
+        runs inside the first decision on the plan), at most its cap (:meth:`_optimum_cap`), and its bytes
+        (:meth:`_optimum_bytes`) granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.
+        reserve_programme`).  Where the listing cannot tell in that time, it does not fit, and the step
+        over the base decides."""
+        self.refusal = None
+        if not self.optimal:
             return False
-        from opportune.policies.states import estimate_states
+        from opportune.policies.states import big, estimate_states
 
         seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
         cap = self._optimum_cap(engine)
         est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
         self._optimum_states = est.states
-        return est.exact and est.states <= cap
+        if not est.exact or est.states > cap:
+            self.refusal = f"its optimum needs {est.describe()} states, more than {cap:,}"
+            return False
+        need = self._optimum_bytes(engine, est)
+        if not engine.reserve_programme(("lookahead optimum", self._share_key() or id(self)), need):
+            self.refusal = f"its optimum needs {big(need)} bytes, more than the plan's memory share grants"
+            return False
+        return True
+
+    def decides_by_optimum(self, engine, visible: int, capacity: int | None, costs) -> bool:
+        """Whether on ``engine`` every decision of this look-ahead is an action of least expected cost in
+        the uniform bin of ``visible`` parts, ``capacity`` locations and ``costs``: its world is that one,
+        without a budget, and the programme that decides is the optimum's (prepared here, as its first
+        decision would).  Its expected cost there is then the optimum's (ties within 1e-12 a move).
+        O(1) once prepared."""
+        from opportune.planning.costs import TimeModel
+
+        world = (self.settings.get("visible", 2), self.settings.get("capacity"), self.settings.get("costs") or TimeModel())
+        weights = self.settings.get("weights")
+        if self.pile or self.lookahead_budget is not None or world != (visible, capacity, costs or TimeModel()):
+            return False
+        if weights and len({weights.get(p.id, 1.0) for p in engine.plan.parts}) > 1:
+            return False
+        self._values(engine)
+        return self._optimum
 
     @property
     def deciding_rule(self) -> str:
@@ -199,11 +255,12 @@ class Lookahead(DecidesOnMasks):
     def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
         self.last_cost = None
-        if engine.n_units > self.MAX_UNITS:
-            self._too_large = True
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
             ev = self._values(engine)
+            if ev is None:
+                self._too_large = True
+                return None
             if self.lookahead_budget is not None:
                 ev.deadline = start + 0.7 * self.lookahead_budget
             elif self.deadline is not None:
@@ -224,6 +281,12 @@ class Lookahead(DecidesOnMasks):
             finally:
                 ev.deadline = None
         return None
+
+    def _why_too_large(self) -> str:
+        """Why the programmes do not fit, in words: the optimum's refusal (states or bytes) and the base's cap."""
+        base = (f"the step over the base rule is evaluated on plans of at most {self.STEP_UNITS} units"
+                if self._evaluator is None else f"the base rule's needs more than {self.max_states:,} states")
+        return f"{self.refusal}; {base}" if self.refusal else base
 
     def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):
         """``(action, its expected cost)``: the least of cost plus the base's cost to go after it."""
@@ -255,8 +318,8 @@ class Lookahead(DecidesOnMasks):
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
             # its exactness and any estimates, and why the look-ahead did not decide
             base = self._fallback().decide(state, visible)
-            why = (f"the plan is too large for the look-ahead's exact programme (more than {self.MAX_UNITS} units "
-                   f"or {self.max_states:,} states)" if self._too_large else
+            why = (f"the plan is too large for the look-ahead's exact programme ({self._why_too_large()})"
+                   if self._too_large else
                    "the look-ahead's programme did not finish within the decision budget (it goes on at the next look)")
             exact = base.exact and self._too_large
             return replace(base, rule=f"as the base rule ({self.base.name}), because {why}: {base.rule}",

@@ -32,7 +32,7 @@ import sys
 
 from opportune.engine import compiled_core
 from opportune.policies.evaluate import BufferOrder, OutOfTime
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, check_evaluable
+from opportune.policies.optimal import CompiledCore, OptimalSolver, OptimalTooLarge, check_evaluable
 
 _native = compiled_core()   # None: the Python programme only
 
@@ -73,11 +73,6 @@ class PileSolver(BufferOrder, OptimalSolver):
         """Expected cost from a freshly shaken pile at ``key`` (default: the start): the optimum, or
         the policy's if one was given."""
         return self._deep(self._shake_value, self.policy_start() if key is None else key)
-
-    def reserve(self, states: int) -> None:
-        """Make room for ``states`` values before the work (the count from
-        :func:`~opportune.policies.states.estimate_states`).  The Python programme's dictionary grows
-        as it goes: nothing to do here (:class:`CompiledPileSolver` sizes its table).  O(1)."""
 
     def _bin_counts(self, key: tuple) -> tuple[int, ...]:
         return super()._bin_counts(self._counts_key(key))
@@ -191,7 +186,7 @@ def pile_solver(engine, policy=None, **settings) -> PileSolver:
     return PileSolver(engine, policy, **settings)
 
 
-class CompiledPileSolver(PileSolver):
+class CompiledPileSolver(CompiledCore, PileSolver):
     """The pile's optimum (:class:`PileSolver` with no policy), computed by the compiled core.
 
     The same settings, methods and values (the same doubles); ``max_states`` bounds the stored values
@@ -208,25 +203,8 @@ class CompiledPileSolver(PileSolver):
             raise ValueError("the compiled pile optimum needs the compiled core and a plan of at most 64 units "
                              "and 64 strategies")
         super().__init__(engine, **settings)
-        below = [[int(b) for b in poset.below] for poset in engine.posets]
-        self._core = _native.PileCore(
-            engine.n_units, list(engine.first), list(self.quantity), below, list(self.move), float(self.costs.look),
-            float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity,
-            sys.version_info >= (3, 12))   # sum() of floats is compensated from Python 3.12 on
-
-    def reserve(self, states: int) -> None:
-        """Make room for ``states`` values at once (the count from
-        :func:`~opportune.policies.states.estimate_states`): no table doubling during the work."""
-        self._core.reserve(int(states))
-
-    @property
-    def states(self) -> int:
-        return self._core.states
-
-    @property
-    def bytes(self) -> int:
-        """The memory the compiled programme holds (its table and interned pairs)."""
-        return self._core.bytes
+        self._core = _native.PileCore(*self._core_args(),
+                                      sys.version_info >= (3, 12))   # sum() of floats is compensated from Python 3.12 on
 
     def _shake_value(self, key: tuple) -> float:
         return self._run(self._core.shake_value, key[0], key[1], list(key[2]))
@@ -252,10 +230,7 @@ class CompiledPileSolver(PileSolver):
         except _native.PileStuck as exc:
             raise RuntimeError(str(exc)) from None
         finally:
-            # the progress report as the Python programme's: once per 64 more states (a call stores many)
-            if self.progress is not None and self._core.states >= self._next_report:
-                self._next_report = self._core.states + 64
-                self.progress(self)
+            self._report()
 
 
 class _Prefixed:

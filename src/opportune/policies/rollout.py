@@ -21,7 +21,7 @@ for the same state and seed, on any machine).  With ``budget`` seconds, rounds o
 80% of it is spent (at least ``min_samples`` rounds, else the decision is the base rule's, said so
 in its reasons); the number of rounds, and so the decision, then depends on the machine's speed.
 
-Plans of at most :attr:`Lookahead.MAX_UNITS` units are decided by the exact look-ahead instead:
+Plans of at most :attr:`Rollout.EXACT_UNITS` units are decided by the exact look-ahead instead:
 there the expectation is computed, not sampled.
 """
 
@@ -48,6 +48,9 @@ class Rollout(DecidesOnMasks):
     name = "rollout"
     rule = "the action with the least mean cost of finishing, over sampled futures (common random numbers)"
     decision_key = None
+    #: Plans of at most this many units are decided by the exact look-ahead (an expectation, not a sample):
+    #: its programme (the optimum's where it fits) finishes within seconds on them.
+    EXACT_UNITS = 16
     #: The futures' seed is drawn from the state with its buffer in order (and small plans decide as the
     #: look-ahead, which keeps it too).
     uses_buffer_order = True
@@ -74,9 +77,7 @@ class Rollout(DecidesOnMasks):
         self.costs = costs if costs is not None else TimeModel()
         self.deterministic = budget is None
         # small plans: the exact look-ahead (an expectation, not a sample)
-        from opportune.policies.lookahead import Lookahead
-
-        self.exact_below = Lookahead.MAX_UNITS if exact_below is None else exact_below
+        self.exact_below = self.EXACT_UNITS if exact_below is None else exact_below
         self.exact = exact
         self._tables = None
         self.last: dict | None = None

@@ -1,0 +1,183 @@
+// What the compiled optimum programmes (pile.cpp, optimal.cpp) share: an open-addressing table of
+// doubles by 64-bit code (16-byte slots, linear probing, at most half full), the plan in their terms,
+// and the (installed, strategies) pairs interned once.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <new>
+#include <stdexcept>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+namespace opportune_memo {
+
+inline uint64_t mix(uint64_t x) {  // the splitmix64 finaliser: a well-spread slot for every code
+    x ^= x >> 30;
+    x *= 0xbf58476d1ce4e5b9ULL;
+    x ^= x >> 27;
+    x *= 0x94d049bb133111ebULL;
+    return x ^ (x >> 31);
+}
+
+// Values by code: linear probing, power-of-two capacity, at most half full.  The slots come zeroed
+// from calloc (a large block is mapped lazily by the system: reserving is immediate, a page is paid for
+// when first written), so a code is kept as code + 1 and 0 marks an empty slot.
+class Table {
+public:
+    struct Slot {
+        uint64_t key;
+        double val;
+    };
+    Table() { rehash(1024); }
+    ~Table() { std::free(slots_); }
+    Table(const Table&) = delete;
+    Table& operator=(const Table&) = delete;
+    const double* find(uint64_t code) const {
+        uint64_t key = code + 1;
+        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
+            if (slots_[i].key == key) return &slots_[i].val;
+            if (slots_[i].key == 0) return nullptr;
+        }
+    }
+    void put(uint64_t code, double v) {
+        if (2 * (size_ + 1) > cap_) rehash(cap_ * 2);
+        uint64_t key = code + 1;
+        for (size_t i = mix(key) & mask_;; i = (i + 1) & mask_) {
+            if (slots_[i].key == key || slots_[i].key == 0) {
+                size_ += slots_[i].key == 0;
+                slots_[i].key = key;
+                slots_[i].val = v;
+                return;
+            }
+        }
+    }
+    void reserve(size_t n) {
+        size_t cap = cap_;
+        while (cap < 2 * n) cap *= 2;
+        if (cap > cap_) rehash(cap);
+    }
+    size_t size() const { return size_; }
+    // the bytes of a table reserved for n values (what reserve(n) allocates on a new table)
+    static size_t bytes_for(size_t n) {
+        size_t cap = 1024;
+        while (cap < 2 * n) cap *= 2;
+        return cap * sizeof(Slot);
+    }
+    size_t bytes() const { return cap_ * sizeof(Slot); }
+
+private:
+    void rehash(size_t cap) {
+        Slot* slots = static_cast<Slot*>(std::calloc(cap, sizeof(Slot)));
+        if (!slots) throw std::bad_alloc();
+        size_t m = cap - 1;
+        for (size_t j = 0; j < cap_; ++j) {
+            if (slots_[j].key == 0) continue;
+            size_t i = mix(slots_[j].key) & m;
+            while (slots[i].key != 0) i = (i + 1) & m;
+            slots[i] = slots_[j];
+        }
+        std::free(slots_);
+        slots_ = slots;
+        cap_ = cap;
+        mask_ = m;
+    }
+    Slot* slots_ = nullptr;
+    size_t cap_ = 0, mask_ = 0, size_ = 0;
+};
+
+struct PairHash {
+    size_t operator()(const std::pair<uint64_t, uint64_t>& k) const { return mix(k.first ^ mix(k.second)); }
+};
+
+// The plan as the programmes see it.  `first[i]`, `quantity[i]`: part i's units first ..
+// first+quantity-1; `below[s][u]`: the units below unit u in strategy s; `move[i]`: the cost of moving
+// a unit of part i; `capacity` < 0: none.  A buffer is a count per part, coded in the radix of the
+// quantities (`radix_`; `buffers_` codes in all, as a long double for the callers' overflow checks).
+struct PlanUnits {
+    PlanUnits(int n_units, std::vector<int> first, std::vector<int> quantity, std::vector<std::vector<uint64_t>> below,
+              std::vector<double> move, double look, double shake, int visible, int capacity)
+        : n_units_(n_units), first_(std::move(first)), quantity_(std::move(quantity)), below_(std::move(below)),
+          move_(std::move(move)), look_(look), shake_(shake), visible_(visible), capacity_(capacity) {
+        parts_ = (int)first_.size();
+        if (n_units_ < 1 || n_units_ > 64) throw std::invalid_argument("the compiled optimum takes 1 to 64 units");
+        if (below_.empty() || below_.size() > 64) throw std::invalid_argument("between 1 and 64 strategies");
+        if ((int)quantity_.size() != parts_ || (int)move_.size() != parts_ || parts_ == 0)
+            throw std::invalid_argument("first, quantity and move need one entry per part");
+        if (visible_ < 1) throw std::invalid_argument("at least one unit must be visible");
+        for (auto& b : below_)
+            if ((int)b.size() != n_units_) throw std::invalid_argument("below needs one mask per unit");
+        full_ = n_units_ == 64 ? ~uint64_t(0) : (uint64_t(1) << n_units_) - 1;
+        part_units_.resize(parts_);
+        radix_.resize(parts_);
+        for (int i = 0; i < parts_; ++i) {
+            if (quantity_[i] < 1 || first_[i] < 0 || first_[i] + quantity_[i] > n_units_)
+                throw std::invalid_argument("a part's units are out of range");
+            radix_[i] = (uint64_t)buffers_;
+            buffers_ *= quantity_[i] + 1;
+            uint64_t units = quantity_[i] == 64 ? ~uint64_t(0) : ((uint64_t(1) << quantity_[i]) - 1);
+            part_units_[i] = units << first_[i];
+        }
+    }
+
+    int next_unit(uint64_t mask, int part) const {
+        for (int u = first_[part]; u < first_[part] + quantity_[part]; ++u)
+            if (!(mask >> u & 1)) return u;
+        return -1;
+    }
+
+    uint64_t consistent_after(uint64_t mask, uint64_t cons, int unit) const {
+        uint64_t out = 0;
+        for (size_t s = 0; s < below_.size(); ++s)
+            if ((cons >> s & 1) && (below_[s][unit] & ~mask) == 0) out |= uint64_t(1) << s;
+        return out;
+    }
+
+    uint64_t buffer_code(const std::vector<int>& buf) const {
+        uint64_t b = 0;
+        for (int i = 0; i < parts_; ++i) b += (uint64_t)buf[i] * radix_[i];
+        return b;
+    }
+
+    // units of part i in the bin: neither installed nor buffered
+    int in_bin(uint64_t mask, const std::vector<int>& buf, int i) const {
+        return quantity_[i] - __builtin_popcountll(mask & part_units_[i]) - buf[i];
+    }
+
+    int n_units_, parts_ = 0;
+    std::vector<int> first_, quantity_;
+    std::vector<std::vector<uint64_t>> below_;
+    std::vector<double> move_;
+    double look_, shake_;
+    int visible_, capacity_;
+    uint64_t full_ = 0;
+    long double buffers_ = 1;
+    std::vector<uint64_t> part_units_, radix_;
+};
+
+// The (installed, strategies) pairs, numbered in the order first seen.
+class PairIds {
+public:
+    // the pair's number, or ~0 where it would be the `most`-th or later
+    uint64_t id(uint64_t mask, uint64_t cons, uint64_t most) {
+        auto it = ids_.find({mask, cons});
+        if (it != ids_.end()) return it->second;
+        uint64_t id = pairs_.size();
+        if (id >= most) return ~uint64_t(0);
+        ids_.emplace(std::make_pair(mask, cons), id);
+        pairs_.emplace_back(mask, cons);
+        return id;
+    }
+    size_t size() const { return pairs_.size(); }
+    // bytes a pair takes: the vector's entry and the hash map's node
+    static constexpr size_t PAIR_BYTES = sizeof(std::pair<uint64_t, uint64_t>) + 48;
+    size_t bytes() const { return pairs_.size() * PAIR_BYTES; }
+
+private:
+    std::unordered_map<std::pair<uint64_t, uint64_t>, uint64_t, PairHash> ids_;
+    std::vector<std::pair<uint64_t, uint64_t>> pairs_;
+};
+
+}  // namespace opportune_memo

@@ -1,0 +1,206 @@
+// The exact optimum of the uniform bin (opportune.policies.optimal), compiled.
+//
+// The same recursion as the pure-Python OptimalSolver in a uniform bin, with the same floating-point
+// operations in the same order, so both give the same doubles.  A state is (installed units,
+// consistent strategies, buffer counts per part); the bin holds the rest.  A look is `visible` units
+// drawn uniformly without replacement, and the robot's best non-shake move on it is the best of
+// the visible parts' own best moves (install or buffer) and the buffer's best installation.  So no
+// look is enumerated: with the bin's units ranked by their part's best move (ties by declaration
+// order), the best visible unit is the j-th of n with probability C(n - j, k - 1) / C(n, k), and a
+// part whose c units hold ranks r + 1 .. r + c is the best visible one with probability
+// (C(n - r, k) - C(n - r - c, k)) / C(n, k).  The shake loop then runs over the parts in rank order:
+//
+//   V(s) = min over prefixes A of (c_look + sum_A p m + (1 - P_A) c_shake) / P_A.
+//
+// Every value is memoised in one open-addressing table of 16-byte slots (a 64-bit code of the
+// state, the value), at most half full: 32-64 bytes per state when reserved for the count known
+// before the work, plus the (installed, strategies) pairs interned once.  A value goes into the
+// table only once it is known, so a stop (the deadline, the state cap) leaves a table a later call
+// goes on from.
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+#include <tuple>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "memo_table.hpp"
+
+namespace py = pybind11;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using opportune_memo::PairIds;
+using opportune_memo::PlanUnits;
+using opportune_memo::Table;
+
+struct OptimalTooLarge : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+struct OptimalTimeout : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+struct OptimalStuck : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+constexpr double INF = std::numeric_limits<double>::infinity();
+
+class OptimalCore : private PlanUnits {
+public:
+    OptimalCore(int n_units, std::vector<int> first, std::vector<int> quantity,
+                std::vector<std::vector<uint64_t>> below, std::vector<double> move, double look, double shake,
+                int visible, int capacity)
+        : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
+                    visible, capacity) {
+        if (buffers_ > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
+        max_pairs_ = (~uint64_t(0) - 1) / (uint64_t)buffers_;
+        // C(n, k) for n <= 64: at most C(64, 32) < 2^61, exact in 64 bits
+        for (int n = 0; n <= 64; ++n) {
+            binom_[n][0] = 1;
+            for (int k = 1; k <= 64; ++k) binom_[n][k] = n == 0 ? 0 : binom_[n - 1][k - 1] + binom_[n - 1][k];
+        }
+    }
+
+    double value(uint64_t mask, uint64_t cons, std::vector<int> buf, double seconds, long long max_states) {
+        if ((int)buf.size() != parts_) throw std::invalid_argument("the buffer needs one count per part");
+        for (int i = 0; i < parts_; ++i) {
+            if (buf[i] < 0 || buf[i] + __builtin_popcountll(mask & part_units_[i]) > quantity_[i])
+                throw std::invalid_argument("a buffer count is out of range");
+        }
+        if (mask & ~full_) throw std::invalid_argument("an installed unit is out of range");
+        timed_ = seconds >= 0;
+        if (timed_)
+            deadline_ = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
+        max_states_ = max_states < 0 ? std::numeric_limits<size_t>::max() : (size_t)max_states;
+        return V(mask, cons, buf);
+    }
+
+    void reserve(size_t n) { table_.reserve(n); }
+    size_t states() const { return table_.size(); }
+    size_t bytes() const { return table_.bytes() + pairs_.bytes(); }
+    // the bytes a programme of `states` states over `pairs` (installed, strategies) pairs holds once reserved
+    static size_t bytes_for(size_t states, size_t pairs) { return Table::bytes_for(states) + pairs * PairIds::PAIR_BYTES; }
+
+private:
+    uint64_t code(uint64_t mask, uint64_t cons, const std::vector<int>& buf) {
+        uint64_t id = pairs_.id(mask, cons, max_pairs_);
+        if (id == ~uint64_t(0)) throw OptimalTooLarge("too many states for 64-bit codes");
+        return id * (uint64_t)buffers_ + buffer_code(buf);
+    }
+
+    // OptimalSolver._value: V(s), the look's cost included
+    double V(uint64_t mask, uint64_t cons, std::vector<int>& buf) {
+        uint64_t c = code(mask, cons, buf);
+        const double* cached = table_.find(c);
+        if (cached) return *cached;
+        if (mask == full_) {
+            table_.put(c, 0.0);
+            return 0.0;
+        }
+        // the clock and the cap at every new state, before its children (a descent stores many)
+        if (timed_ && Clock::now() > deadline_) throw OptimalTimeout("the optimum's programme passed its deadline");
+        if (table_.size() >= max_states_) throw OptimalTooLarge("over the state limit");
+        int used = 0;
+        for (int x : buf) used += x;
+        bool free = capacity_ < 0 || used < capacity_;
+        // each part in the bin: its best move (install from the bin, or buffer), in declaration order
+        std::vector<std::tuple<double, int, int>> ranked;  // (best move, part, units in the bin)
+        int n = 0;
+        for (int i = 0; i < parts_; ++i) {
+            int units = in_bin(mask, buf, i);
+            if (units <= 0) continue;
+            n += units;
+            double best = INF;
+            int u = next_unit(mask, i);
+            uint64_t after = consistent_after(mask, cons, u);
+            if (after) best = move_[i] + V(mask | uint64_t(1) << u, after, buf);
+            if (free) {
+                buf[i] += 1;
+                double v = move_[i] + V(mask, cons, buf);
+                buf[i] -= 1;
+                best = std::min(best, v);
+            }
+            ranked.emplace_back(best, i, units);
+        }
+        // the buffer's best installation (the same on every look)
+        double from_buffer = INF;
+        for (int i = 0; i < parts_; ++i) {
+            if (!buf[i]) continue;
+            int u = next_unit(mask, i);
+            uint64_t after = consistent_after(mask, cons, u);
+            if (!after) continue;
+            buf[i] -= 1;
+            double v = move_[i] + V(mask | uint64_t(1) << u, after, buf);
+            buf[i] += 1;
+            from_buffer = std::min(from_buffer, v);
+        }
+        double s = shake_loop(ranked, n, from_buffer);
+        if (s == INF) throw OptimalStuck("no look allows any action: the assembly cannot proceed");
+        if (table_.size() >= max_states_) throw OptimalTooLarge("over the state limit");
+        table_.put(c, s);
+        return s;
+    }
+
+    // OptimalSolver._order_statistics and _shake_loop: the parts by rank, their chances of being the
+    // best visible one, the least over the prefixes
+    double shake_loop(std::vector<std::tuple<double, int, int>>& ranked, int n, double from_buffer) const {
+        double acc_pm = 0.0, acc_p = 0.0, s = INF;
+        auto step = [&](double m, double p) {
+            if (m == INF) return false;
+            acc_pm += p * m;
+            acc_p += p;
+            s = std::min(s, (look_ + acc_pm + (1.0 - acc_p) * shake_) / acc_p);
+            return true;
+        };
+        if (n == 0) {  // every unit left is in the buffer: no part is seen
+            step(from_buffer, 1.0);
+            return s;
+        }
+        std::sort(ranked.begin(), ranked.end());
+        int k = std::min(visible_, n);
+        double total = (double)(int64_t)binom_[n][k];
+        int rank = 0;
+        for (auto& [best, part, units] : ranked) {
+            (void)part;
+            uint64_t hits = binom_[n - rank][k] - binom_[n - rank - units][k];
+            rank += units;
+            if (!step(std::min(best, from_buffer), (double)(int64_t)hits / total)) break;
+        }
+        return s;
+    }
+
+    uint64_t max_pairs_ = 0;
+    uint64_t binom_[65][65] = {};
+    PairIds pairs_;
+    Table table_;
+    bool timed_ = false;
+    Clock::time_point deadline_;
+    size_t max_states_ = 0;
+};
+
+}  // namespace
+
+void bind_optimal(py::module_& m) {
+    py::register_exception<OptimalTooLarge>(m, "OptimalCoreTooLarge", PyExc_RuntimeError);
+    py::register_exception<OptimalTimeout>(m, "OptimalCoreTimeout", PyExc_RuntimeError);
+    py::register_exception<OptimalStuck>(m, "OptimalCoreStuck", PyExc_RuntimeError);
+    py::class_<OptimalCore>(m, "OptimalCore")
+        .def(py::init<int, std::vector<int>, std::vector<int>, std::vector<std::vector<uint64_t>>, std::vector<double>,
+                      double, double, int, int>(),
+             py::arg("n_units"), py::arg("first"), py::arg("quantity"), py::arg("below"), py::arg("move"),
+             py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"))
+        .def("value", &OptimalCore::value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("seconds"),
+             py::arg("max_states"))
+        .def("reserve", &OptimalCore::reserve, py::arg("states"))
+        .def_static("bytes_for", &OptimalCore::bytes_for, py::arg("states"), py::arg("pairs"))
+        .def_property_readonly("states", &OptimalCore::states)
+        .def_property_readonly("bytes", &OptimalCore::bytes);
+}
