@@ -546,6 +546,22 @@ class OrderEngine:
         if now > self._until:
             raise BudgetExceeded("the deadline has passed", reason="time", elapsed=0.0)
 
+    @property
+    def decision_deadline(self) -> Deadline:
+        """The deadline :meth:`deadline` set for the decision under way (``Deadline.NEVER`` outside one):
+        programmes beside the engine that count nothing through it (a compiled optimum) keep it too.
+        O(1).
+
+        >>> from opportune import make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> engine.decision_deadline.finite
+        False
+        >>> with engine.deadline(0.0):
+        ...     engine.decision_deadline.at
+        0.0
+        """
+        return as_deadline(self._until)
+
     @contextmanager
     def deadline(self, until: float | None):
         """Within the block, every exact count of this engine stops at ``until`` (a

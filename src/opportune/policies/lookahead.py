@@ -9,7 +9,7 @@ import time
 import weakref
 from dataclasses import replace
 
-from opportune.engine.deadline import BudgetExceeded
+from opportune.engine.deadline import BudgetExceeded, as_deadline
 from opportune.policies.base import (
     DONE,
     SHAKE,
@@ -261,16 +261,18 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 self._too_large = True
                 return None
-            if self.lookahead_budget is not None:
-                ev.deadline = start + 0.7 * self.lookahead_budget
-            elif self.deadline is not None:
-                ev.deadline = self.deadline
+            own = as_deadline(start + 0.7 * self.lookahead_budget if self.lookahead_budget is not None
+                              else self.deadline)
+            # the decision's deadline on the engine (a service look's) binds the programme too, as it binds
+            # the engine's counts: past it the base decides, budget or not
+            engine_stops = engine.decision_deadline.at < own.at
+            ev.deadline = own.sooner(engine.decision_deadline)
             try:
                 action, self.last_cost = ev._deep(
                     lambda key: self._best(ev, engine, key, buffer, visible), ev.policy_key(mask, consistent, buffer))
                 return action
             except OutOfTime:
-                if self.lookahead_budget is None:
+                if self.lookahead_budget is None and not engine_stops:
                     raise                   # exact: never the base's decision in its place; the caller stops
                 # this decision is the base's; the next one goes on from here
             except BudgetExceeded as exc:   # a count of the programme past the engine's deadline (a service
