@@ -462,3 +462,36 @@ def test_a_session_cannot_touch_another_sessions_subscriptions(server):
             assert await a.read(run, "State") == "Idle"
 
     asyncio.run(probe())
+
+
+# ---------------------------------------------------------------- the log: one line a failed request
+
+def test_a_request_that_fails_in_asyncuas_processor_is_one_line_in_the_log():
+    """asyncua logs any exception of a request with its traceback ("Error while processing message"),
+    e.g. a client signature that does not verify at ActivateSession: a client could fill the log at will.
+    Through the server's filter it is one escaped line with the exception's type, at WARNING."""
+    import io
+    import logging
+
+    from cryptography.exceptions import InvalidSignature
+
+    from opportune.service import opcua_security
+
+    logger = logging.getLogger("asyncua.server.uaprocessor")
+    logger.addFilter(opcua_security._SAID)
+    out = io.StringIO()
+    handler = logging.StreamHandler(out)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
+    logger.addHandler(handler)
+    try:
+        for exc in (InvalidSignature(), ValueError("bad \x1b[2J thing")):
+            try:
+                raise exc
+            except Exception:
+                logger.exception("Error while processing message")
+    finally:
+        logger.removeHandler(handler)
+    lines = out.getvalue().splitlines()
+    assert lines == ["WARNING OPC UA: a request failed (InvalidSignature: ); answered BadInternalError",
+                     "WARNING OPC UA: a request failed (ValueError: bad \\x1b[2J thing); answered BadInternalError"]
+    assert "Traceback" not in out.getvalue() and "\x1b" not in out.getvalue()

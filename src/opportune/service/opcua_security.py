@@ -477,11 +477,22 @@ class Guard:
 
 
 class _Said(logging.Filter):
-    """Drops asyncua's own line for a certificate refusal: :meth:`Guard.refused` has said it, with the certificate."""
+    """Drops asyncua's own line for a certificate refusal (:meth:`Guard.refused` has said it, with the
+    certificate), and makes its "Error while processing message" one line without a traceback: a client
+    can provoke it at will (a signature that does not verify, a request the processor cannot read), so a
+    traceback per request would let any client fill the log.  The line keeps the exception's type and
+    its message, escaped."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not (str(record.msg).startswith("sending service fault response")
-                    and "BadCertificate" in str(record.args))
+        if str(record.msg).startswith("sending service fault response") and "BadCertificate" in str(record.args):
+            return False
+        if record.exc_info and str(record.msg).startswith("Error while processing message"):
+            exc = record.exc_info[1]
+            record.msg = "OPC UA: a request failed (%s: %s); answered BadInternalError"
+            record.args = (type(exc).__name__, shown(str(exc))[:300])
+            record.exc_info = record.exc_text = None
+            record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
 
 
 _SAID = _Said()
