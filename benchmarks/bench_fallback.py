@@ -8,7 +8,7 @@ holds at most ``--max-optimum-states`` states (counted first; plans over it are 
 policy's exact expected time is divided by the optimum's, in the uniform bin:
 
     python benchmarks/bench_fallback.py                         # 3 plans each of 16, 20, 25, 30 parts
-    python benchmarks/bench_fallback.py --sizes 20 --plans 5 --policies fallback,paper
+    python benchmarks/bench_fallback.py --sizes 20 --plans 5 --policies fallback,paper --settings 1x1,2x2
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from policy_lab import POLICIES, gaps, random_plan  # noqa: E402
 SETTINGS = ((1, 1), (2, 2), (3, 2))      # (visible, buffer locations)
 
 
-def draw_plans(n: int, count: int, seed: int, max_states: int) -> list:
+def draw_plans(n: int, count: int, seed: int, max_states: int, settings=SETTINGS) -> list:
     """``count`` plans of ``n`` parts whose optimum holds at most ``max_states`` states in every setting."""
     rng = random.Random(seed * 1000 + n)
     plans = []
@@ -37,7 +37,7 @@ def draw_plans(n: int, count: int, seed: int, max_states: int) -> list:
         plan = random_plan(rng, n, 1, rng.uniform(0.2, 0.35), label=f"s{seed}-{len(plans)}")
         engine = OrderEngine(plan)
         if all(estimate_states(engine, visible=v, capacity=c, stop_above=max_states, time_limit=5.0).states
-               <= max_states for v, c in SETTINGS):
+               <= max_states for v, c in settings):
             plans.append(plan)
     return plans
 
@@ -49,13 +49,15 @@ def main(argv=None) -> int:
     ap.add_argument("--policies", default="fallback", help=f"comma-separated, from {', '.join(POLICIES)}")
     ap.add_argument("--max-optimum-states", type=int, default=60_000)
     ap.add_argument("--task-seconds", type=float, default=300.0, help="one plan in one setting, at most")
+    ap.add_argument("--settings", default="1x1,2x2,3x2", help="VISIBLExLOCATIONS, comma-separated")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     names = [p for p in args.policies.split(",") if p]
+    settings = [tuple(map(int, s.split("x"))) for s in args.settings.split(",")]
     rows = []
     for n in map(int, args.sizes.split(",")):
-        for plan in draw_plans(n, args.plans, args.seed, args.max_optimum_states):
-            for visible, capacity in SETTINGS:
+        for plan in draw_plans(n, args.plans, args.seed, args.max_optimum_states, settings):
+            for visible, capacity in settings:
                 start = time.process_time()
                 try:
                     g, best, states = gaps(plan, visible, capacity, only=names, seconds=args.task_seconds,

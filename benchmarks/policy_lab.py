@@ -270,7 +270,9 @@ def markdown(settings, per_setting, gear, names, n_plans: int, brief: bool = Fal
                      + " | ".join(f"{pct(s[n][0])} | {pct(s[n][2])}" for n in names) + " |")
     out = [f"Gap of each policy's exact expected time to the optimum's, over {n_plans} plans "
            "(mean and largest); a plan is skipped when its optimum's programme is over the lab's "
-           "state cap or time, or was not run, and then listed below.", "", *lines]
+           "state cap or time, or was not run, and then listed below."
+           + (" `fallback` is the default (`lookahead`) with its exact optimum switched off (`--without-optimum`): "
+              "what decides where the optimum's programme does not fit." if "fallback" in names else ""), "", *lines]
     skips = [(setting_name(*st), per_setting[st][1]) for st in settings if per_setting[st][1]]
     if brief:
         n_skip = sum(len(s) for _, s in skips)

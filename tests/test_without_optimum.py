@@ -102,3 +102,22 @@ def test_without_optimum_is_refused_for_a_policy_without_one(tmp_path):
 
     out = runner.invoke(app, ["evaluate", _plan_file(tmp_path, _chains(6)), "--policy", "paper", "--without-optimum"])
     assert out.exit_code == 2 and "'paper' has none" in " ".join(out.output.split()) and "Traceback" not in out.output
+
+
+def test_the_lab_measures_the_fallback_beside_the_default(capsys):
+    """benchmarks/policy_lab.py --without-optimum: a column 'fallback', never below the optimum, beside
+    the default's (the optimum itself on plans where it fits)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+    import policy_lab
+
+    assert policy_lab.main(["--plans", "1", "--min-parts", "7", "--max-parts", "7", "--only", "r0-7", "--bins", "uniform",
+                            "--visible", "1", "--capacities", "1", "--policies", "lookahead", "--without-optimum",
+                            "--paired", ""]) == 0
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if line.startswith("uniform, 1 visible, buffer 1: r0-7"))
+    gaps = dict(part.strip().rsplit(" ", 1) for part in row.split("; ", 1)[1].split(","))
+    assert set(gaps) == {"lookahead", "fallback"} and float(gaps["lookahead"].rstrip("%")) == 0.0
+    assert float(gaps["fallback"].rstrip("%")) >= 0.0
