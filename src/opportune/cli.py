@@ -780,6 +780,10 @@ def evaluate(
     time_limit: Optional[float] = typer.Option(None, "--time-limit", min=0.0,
                                                help="Stop the programme after this many seconds and say how far it "
                                                     "got (default: none; --max-states bounds the work)"),
+    without_optimum: bool = typer.Option(False, "--without-optimum",
+                                         help="The default policy (lookahead) with its exact optimum switched off: "
+                                              "it decides by its fallback (one step over slack, or slack on plans "
+                                              "of more than 16 units), measured against the optimum"),
     as_json: bool = json_option(),
 ):
     """Exact expected cost of a policy and of the optimum (a dynamic programme, no Monte Carlo error).
@@ -807,6 +811,9 @@ def evaluate(
         fail(f"unknown or unsuitable policy '{policy}': choose from "
              f"{', '.join(s for s in ALL_STRATEGIES if s not in unsuitable)} (the optimum is printed beside it; "
              "random has no single decision rule; pallet and kitting do not draw from the bin)", 2)
+    if without_optimum and policy != "lookahead":
+        fail(f"--without-optimum switches off the exact optimum of the default policy (lookahead); '{policy}' has "
+             "none: drop the option, or use --policy lookahead", 2, as_json=as_json)
     simulate_hint = f"`opportune simulate{' --bin pile' if chosen_bin == 'pile' else ''}`"
     try:
         config = StudyConfig(plan=plan, strategies=(policy,), trials=1, bin=chosen_bin,
@@ -832,9 +839,11 @@ def evaluate(
              f"--visible, or estimate it by Monte Carlo with {simulate_hint}")
     until = Deadline.after(time_limit)
     ev = optimum = None
-    policy_bound, ordered = estimate.states, False
+    policy_bound, ordered, by_optimum = estimate.states, False, False
     try:
         chosen = make_policy(policy, engine, config, prepare(config, engine))
+        if without_optimum:
+            chosen.optimal = False      # the look-ahead's own setting: its fallback decides
         settings = dict(visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
                         max_states=max_states)
         if chosen_bin == "pile":
@@ -848,9 +857,14 @@ def evaluate(
             ev = PolicyEvaluator(engine, chosen, weights=config.weights if chosen_bin == "weighted" else None,
                                  **settings)
         ev.deadline = until         # finding where the buffer's order decides counts options: within it too
-        policy_bound, ordered = ev.states_bound(estimate.states), ev.ordered
+        # a policy deciding by the optimum is worth the optimum: none of its own states are evaluated
+        by_optimum = chosen_bin != "pile" and ev.takes_optimum()
+        policy_bound, ordered = (0, False) if by_optimum else (ev.states_bound(estimate.states), ev.ordered)
         kept = " (its buffer kept in the order of buffering)" if ordered else ""
-        if not as_json:
+        if not as_json and by_optimum:
+            _out().print(f"states: {estimate.describe()} for the optimum; none for the policy (it decides by the "
+                         "optimum's values: its value is the optimum's)")
+        elif not as_json:
             # a bound, not a count: the policy reaches a part of these states (it stops at --max-states if not)
             _out().print(f"states: {estimate.describe()} for the optimum, at most {big(policy_bound)} for the "
                          f"policy{kept}" + (f"; it stops if it passes --max-states {max_states:,}"
@@ -874,7 +888,8 @@ def evaluate(
     except (OptimalTooLarge, OutOfTime) as exc:
         why = (f"passed --time-limit {time_limit:g} s" if isinstance(exc, OutOfTime)
                else f"needed more than --max-states {max_states:,} states")
-        bound = f", at most {big(policy_bound)} for the policy" if policy_bound != estimate.states else ""
+        bound = (f", at most {big(policy_bound)} for the policy" if policy_bound not in (0, estimate.states)
+                 else "")
         fail(f"the exact evaluation of {plan.name} {why}: it stopped after {_how_far(ev, optimum, chosen_bin)} of "
              f"{estimate.describe()} expected for the optimum{bound}; raise the limit, or estimate it by Monte Carlo "
              f"with {simulate_hint}")
@@ -890,13 +905,13 @@ def evaluate(
            "ratio": value / best if best else None, "states": states, "policy_states": policy_states,
            "estimated_states": estimate.states, "estimate_exact": estimate.exact,
            "estimated_policy_states": policy_bound, "buffer_order_kept": ordered,
-           "policy_by_optimum": bool(getattr(ev, "by_optimum", False))}
+           "policy_by_optimum": bool(getattr(ev, "by_optimum", False)), "without_optimum": without_optimum}
     if as_json:
         print(json.dumps(doc, indent=2))
         return
     cap = "unlimited" if config.buffer_capacity is None else config.buffer_capacity
     _out().print(f"{plan.name}: {chosen_bin} bin, {config.visible} visible, buffer {cap}")
-    _out().print(f"  {policy}: expected time {value:.4f}")
+    _out().print(f"  {policy}{' (its exact optimum switched off)' * without_optimum}: expected time {value:.4f}")
     _out().print(f"  optimum: expected time {best:.4f}")
     reached = ("the policy decides by the optimum's values, so its value is the optimum's"
                if doc["policy_by_optimum"] else f"{policy_states:,} reached by the policy")

@@ -228,12 +228,18 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
 
     def value(self, key: tuple | None = None) -> float:
         """Expected remaining cost of the policy from a state (a :meth:`policy_key`; default: the start)."""
-        decides_by = getattr(self.policy, "decides_by_optimum", None)
-        if (key is None and self.OPTIMUM_SHORTCUT and self.uniform and decides_by is not None
-                and decides_by(self.engine, self.visible, self.capacity, self.costs)):
+        if key is None and self.takes_optimum():
             self.by_optimum = True
             return self.optimal()
         return self._deep(self._policy_value, self.policy_start() if key is None else key)
+
+    def takes_optimum(self) -> bool:
+        """Whether :meth:`value` from the start takes the optimum's value (:attr:`OPTIMUM_SHORTCUT`): the
+        policy says it decides by the optimum in this bin (the look-ahead prepares its programme to tell, as
+        its first decision would).  Then the policy reaches none of :meth:`states_bound`'s states."""
+        decides_by = getattr(self.policy, "decides_by_optimum", None)
+        return bool(self.OPTIMUM_SHORTCUT and self.uniform and decides_by is not None
+                    and decides_by(self.engine, self.visible, self.capacity, self.costs))
 
     def optimal(self) -> float:
         """The optimum from the start, for comparison (see :class:`OptimalSolver`): by the compiled

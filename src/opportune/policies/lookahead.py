@@ -39,7 +39,8 @@ class Lookahead(DecidesOnMasks):
     (:class:`~opportune.policies.optimal.OptimalSolver`, every state any policy reaches, counted
     before it starts by :func:`~opportune.policies.states.estimate_states`) is used when it holds
     at most that many states, else the base policy's (the states the base reaches, fewer: its values
-    after each action make the improvement step).  ``optimal=False`` keeps to the improvement step.
+    after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
+    ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its fallback: the improvement step, or the base past :attr:`STEP_UNITS` units.
     (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
     where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
     (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).  In either bin
@@ -74,6 +75,8 @@ class Lookahead(DecidesOnMasks):
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
     deadline = None
+    #: Why the optimum did not decide when :attr:`optimal` is False (the decisions quote it).
+    SWITCHED_OFF = "its exact optimum is switched off"
 
     def __init__(self, base=None, *, budget: float | None = None, max_states: int = 200_000, optimal: bool = True,
                  **solver_settings):
@@ -87,18 +90,27 @@ class Lookahead(DecidesOnMasks):
         self.fallback = self.base if budget is None else Slack(budget=budget / 4)
         self.fallback_alone = self.base if budget is None else Slack(budget=budget)
         self.max_states = max_states
-        self.optimal = optimal
         # the pile bin has its own programme (policies/pile.py): the window is part of the state
         self.pile = solver_settings.pop("bin", "uniform") == "pile"
         if self.pile:
             solver_settings.pop("weights", None)
         self.settings = solver_settings
-        self._evaluator = None
+        self.optimal = optimal
         self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
-        self._too_large = False
         #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
         self.refusal: str | None = None
         self.last_cost: float | None = None
+
+    @property
+    def optimal(self) -> bool:
+        """Whether its exact optimum may decide (where it fits); False: it decides by its fallback alone.
+        Setting it drops the programme chosen so far: the next decision chooses again."""
+        return self._optimal
+
+    @optimal.setter
+    def optimal(self, value: bool) -> None:
+        self._optimal = bool(value)
+        self._evaluator, self._too_large = None, False
 
     @property
     def uses_buffer_order(self) -> bool:
@@ -177,6 +189,7 @@ class Lookahead(DecidesOnMasks):
         over the base decides."""
         self.refusal = None
         if not self.optimal:
+            self.refusal = self.SWITCHED_OFF
             return False
         from opportune.policies.states import big, estimate_states
 
@@ -320,7 +333,8 @@ class Lookahead(DecidesOnMasks):
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
             # its exactness and any estimates, and why the look-ahead did not decide
             base = self._fallback().decide(state, visible)
-            why = (f"the plan is too large for the look-ahead's exact programme ({self._why_too_large()})"
+            why = (self._why_too_large() if self._too_large and not self.optimal else
+                   f"the plan is too large for the look-ahead's exact programme ({self._why_too_large()})"
                    if self._too_large else
                    "the look-ahead's programme did not finish within the decision budget (it goes on at the next look)")
             exact = base.exact and self._too_large

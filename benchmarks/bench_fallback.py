@@ -1,0 +1,84 @@
+"""The default policy's fallback against the optimum on plans of 16-30 parts, where the optimum is known.
+
+The look-ahead decides by the exact optimum wherever its programme fits; elsewhere by its fallback (one
+step over slack on plans of at most 16 units, slack beyond).  Here its exact optimum is switched off
+(``Lookahead(optimal=False)``, the lab's ``fallback``, ``evaluate --without-optimum``) on random plans built
+by the policy lab's generator (one strategy, edge probability 0.2-0.35, seeded), whose optimum's programme
+holds at most ``--max-optimum-states`` states (counted first; plans over it are drawn again), and each
+policy's exact expected time is divided by the optimum's, in the uniform bin:
+
+    python benchmarks/bench_fallback.py                         # 3 plans each of 16, 20, 25, 30 parts
+    python benchmarks/bench_fallback.py --sizes 20 --plans 5 --policies fallback,paper --settings 1x1,2x2
+"""
+
+from __future__ import annotations
+
+import argparse
+import random
+import statistics
+import sys
+import time
+from pathlib import Path
+
+from opportune.engine import OrderEngine
+from opportune.policies.states import estimate_states
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from policy_lab import POLICIES, gaps, random_plan  # noqa: E402
+
+SETTINGS = ((1, 1), (2, 2), (3, 2))      # (visible, buffer locations)
+
+
+def draw_plans(n: int, count: int, seed: int, max_states: int, settings=SETTINGS) -> list:
+    """``count`` plans of ``n`` parts whose optimum holds at most ``max_states`` states in every setting."""
+    rng = random.Random(seed * 1000 + n)
+    plans = []
+    while len(plans) < count:
+        plan = random_plan(rng, n, 1, rng.uniform(0.2, 0.35), label=f"s{seed}-{len(plans)}")
+        engine = OrderEngine(plan)
+        if all(estimate_states(engine, visible=v, capacity=c, stop_above=max_states, time_limit=5.0).states
+               <= max_states for v, c in settings):
+            plans.append(plan)
+    return plans
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="16,20,25,30", help="parts per plan, comma-separated")
+    ap.add_argument("--plans", type=int, default=3, help="plans per size")
+    ap.add_argument("--policies", default="fallback", help=f"comma-separated, from {', '.join(POLICIES)}")
+    ap.add_argument("--max-optimum-states", type=int, default=60_000)
+    ap.add_argument("--task-seconds", type=float, default=300.0, help="one plan in one setting, at most")
+    ap.add_argument("--settings", default="1x1,2x2,3x2", help="VISIBLExLOCATIONS, comma-separated")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    names = [p for p in args.policies.split(",") if p]
+    settings = [tuple(map(int, s.split("x"))) for s in args.settings.split(",")]
+    rows = []
+    for n in map(int, args.sizes.split(",")):
+        for plan in draw_plans(n, args.plans, args.seed, args.max_optimum_states, settings):
+            for visible, capacity in settings:
+                start = time.process_time()
+                try:
+                    g, best, states = gaps(plan, visible, capacity, only=names, seconds=args.task_seconds,
+                                           max_states=10 * args.max_optimum_states)
+                except Exception as exc:        # said, never hidden: a row with why
+                    print(f"{n} parts, {plan.name}, {visible} visible, {capacity} locations: skipped ({exc})")
+                    continue
+                cpu = time.process_time() - start
+                rows.append((n, visible, capacity, g))
+                print(f"{n} parts, {plan.name}, {visible} visible, {capacity} locations: optimum {best:.4f} "
+                      f"({states:,} states); " + ", ".join(f"{k} {100 * v:+.3f}%" for k, v in g.items())
+                      + f" ({cpu:.1f} s CPU)", flush=True)
+    print("\n| parts | setting | plans | " + " | ".join(f"{k} mean | {k} max" for k in names) + " |")
+    print("| ---: | --- | ---: | " + " | ".join("---: | ---:" for _ in names) + " |")
+    for key in sorted({r[:3] for r in rows}):
+        got = [r[3] for r in rows if r[:3] == key]
+        cells = " | ".join(f"{100 * statistics.mean(g[k] for g in got):+.2f}% | {100 * max(g[k] for g in got):+.2f}%"
+                           for k in names)
+        print(f"| {key[0]} | {key[1]} visible, {key[2]} location{'s' * (key[2] != 1)} | {len(got)} | {cells} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
