@@ -82,9 +82,20 @@ def hello(url: str, receive=65535, send=65535, message=0, chunks=0) -> bytes:
                                                           MaxChunkCount=chunks, EndpointUrl=url))
 
 
+_OPEN: list[socket.socket] = []     # every raw connection a test opened: closed after it, whatever it did
+
+
+@pytest.fixture(autouse=True)
+def _close_raw_connections():
+    yield
+    while _OPEN:
+        _OPEN.pop().close()
+
+
 def connect(endpoint: str) -> socket.socket:
     host, port = endpoint.removeprefix("opc.tcp://").split(":")
     sock = socket.create_connection((host, int(port)), timeout=20)
+    _OPEN.append(sock)
     return sock
 
 
