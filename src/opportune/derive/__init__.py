@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from opportune.derive.blocking import AXES, Blocking, blocking
+from opportune.derive.blocking import AXES, Blocking, find_blocking
 from opportune.derive.geometry import GeometryError, read_assembly
 from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies
 from opportune.planning.plan import Plan
@@ -86,7 +86,7 @@ def derive(path: str | Path, *, directions: str = "axes", tolerance: float | Non
         raise GeometryError(f"directions {directions!r}: give one of {', '.join(DIRECTION_SETS)}")
     start = time.process_time()
     assembly = read_assembly(path, units=units, tolerance=tolerance)
-    block = blocking(assembly, DIRECTION_SETS[directions])
+    block = find_blocking(assembly, DIRECTION_SETS[directions])
     strategies = exact_strategies(block)
     plan = _plan(block, strategies, name or Path(path).resolve().name or "assembly", directions)
     return Derivation(plan, block, tuple(strategies), time.process_time() - start)

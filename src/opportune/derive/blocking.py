@@ -95,7 +95,7 @@ def _crosses(e: np.ndarray, f: np.ndarray) -> np.ndarray:
     return c[keep] / n[keep, None]
 
 
-def blocking(assembly: Assembly, directions: dict[str, tuple[float, float, float]] | None = None) -> Blocking:
+def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, float]] | None = None) -> Blocking:
     """For each part and each direction, the parts that block its insertion along that direction.
 
     Parameters
@@ -122,7 +122,7 @@ def blocking(assembly: Assembly, directions: dict[str, tuple[float, float, float
     >>> def cube(x):
     ...     v = np.array([[x + i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     ...     return PartShape(str(x), None, (Body(v, np.eye(3), np.eye(3)),), 12)
-    >>> b = blocking(Assembly((cube(0), cube(1)), 1e-9, "m"))
+    >>> b = find_blocking(Assembly((cube(0), cube(1)), 1e-9, "m"))
     >>> sorted(d for d, q in b.blockers["0"].items() if q)    # 0 cannot come in moving -x: 1 is in its way
     ['-x']
     """

@@ -75,6 +75,17 @@ def locked(block: Blocking) -> dict[str, dict[str, frozenset[str]]]:
 def options(block: Blocking) -> dict[str, list[tuple[str, frozenset[str]]]]:
     """Per part, its directions whose blocker sets are minimal under inclusion (one direction per set).
 
+    Parameters
+    ----------
+    block : Blocking
+        The blocking relation.
+
+    Returns
+    -------
+    dict
+        For each part, ``(direction, blockers)`` pairs in the directions' order: a direction blocked by a
+        superset of another's blockers, or by the same set as an earlier one, is left out.
+
     Examples
     --------
     >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0), "-x": (-1, 0, 0)},
