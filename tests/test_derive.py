@@ -322,3 +322,17 @@ def test_units_and_a_missing_folder(tmp_path):
     assert r.exit_code == 1 and "not a folder" in r.output
     r = run_cli("derive", folder, "--units", "inch")
     assert r.exit_code == 1 and "units 'inch'" in r.output
+
+
+def test_an_exact_plan_larger_than_a_plan_holds_is_refused_not_approximated(tmp_path, monkeypatch):
+    from opportune.derive import plan as derive_plan
+
+    folder = write_assembly(tmp_path / "eight", partition((3, 3, 3), 8, seed=0))     # 4 strategies exactly
+    monkeypatch.setattr(derive_plan, "MAX_STRATEGIES", 3)
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "more than 3 strategies" in r.output and "no approximation" in r.output
+    monkeypatch.setattr(derive_plan, "MAX_STRATEGIES", 4)
+    assert run_cli("derive", folder).exit_code == 0
+    monkeypatch.setattr(derive_plan, "MAX_CHOICES", 8)
+    r = run_cli("derive", folder, "--json")
+    assert r.exit_code == 1 and "combinations of insertion directions" in json.loads(r.output)["error"]["message"]

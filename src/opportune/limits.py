@@ -57,7 +57,7 @@ MAX_SEQUENCE_ITEMS = 2_000_000   # installations in all the sequences of one fil
 MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before it is read
 MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
 MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
-MAX_CHOICES = 1_000_000          # combinations of insertion directions examined when writing the strategies
+MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
 
 # ---------------------------------------------------------------- requests to the service
 MAX_BODY = MAX_FILE_BYTES        # a request body: no more than the largest plan file the readers read
@@ -118,7 +118,7 @@ LIMITS = {limit.key: limit for limit in (
     Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
-    Limit("choices", MAX_CHOICES, "combinations", "combinations of insertion directions examined (`derive`)",
+    Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
           "command line"),
     Limit("body", MAX_BODY, "bytes", f"a request body (default {DEFAULT_MAX_BODY:,}, at least {MIN_BODY:,})",
           SERVICE, "--max-body"),

@@ -122,7 +122,7 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
     ------
     DeriveError
         No feasible sequence (the locked parts named, with what blocks each), more than
-        :data:`~opportune.limits.MAX_CHOICES` direction choices to examine, or more than
+        :data:`~opportune.limits.MAX_CHOICES` direction choices × parts to examine, or more than
         :data:`~opportune.limits.MAX_STRATEGIES` strategies in the exact plan.
 
     Examples
@@ -144,9 +144,11 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
     combos = 1
     for p in free:
         combos *= len(opts[p])
-    if combos > MAX_CHOICES:
+    # each combination examined keeps its order's closure (a mask per part): bounded before the work
+    if combos * len(ids) > MAX_CHOICES:
         raise DeriveError(f"{combos:,} combinations of insertion directions to examine ({len(free)} parts have "
-                          f"several); at most {MAX_CHOICES:,} are: give fewer directions, or derive subassemblies")
+                          f"several), times {len(ids)} parts, is over {MAX_CHOICES:,}: give fewer directions, or "
+                          "derive subassemblies; no approximation is written")
     base = _edges({p: opts[p][0][1] for p in fixed}, index)
     closures: dict[tuple[int, ...], tuple[dict[str, str], tuple[int, ...]]] = {}
     for choice in itertools.product(*(opts[p] for p in free)):
@@ -158,11 +160,11 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
         if key not in closures:
             dirs = {p: opts[p][0][0] for p in fixed} | {p: d for p, (d, _) in zip(free, choice)}
             closures[key] = (dirs, key)
-    kept = _undominated(list(closures.values()))
-    if len(kept) > MAX_STRATEGIES:
-        raise DeriveError(f"the exact plan needs {len(kept):,} strategies (no one's sequences contain another's); a "
-                          f"plan holds at most {MAX_STRATEGIES}: give fewer directions, or derive subassemblies; "
-                          "no approximation is written")
+    kept = _undominated(list(closures.values()), MAX_STRATEGIES)
+    if kept is None:
+        raise DeriveError(f"the exact plan needs more than {MAX_STRATEGIES} strategies (no one's sequences contain "
+                          f"another's); a plan holds at most {MAX_STRATEGIES}: give fewer directions, or derive "
+                          "subassemblies; no approximation is written")
     return [DerivedStrategy(dict(sorted(dirs.items(), key=lambda kv: index[kv[0]])), _reduction(ids, closure))
             for dirs, closure in kept]
 
@@ -204,15 +206,19 @@ def _bits(mask: int):
         mask ^= low
 
 
-def _undominated(found: list[tuple[dict[str, str], tuple[int, ...]]]) -> list:
-    """Drop each strategy whose closure contains another's (its sequences are a subset); fewest
-    constraints first, so the survivors keep their order of discovery among equals."""
+def _undominated(found: list[tuple[dict[str, str], tuple[int, ...]]], most: int) -> list | None:
+    """Drop each strategy whose closure contains another's (its sequences are a subset), or None as soon
+    as more than ``most`` are kept.  Fewest constraints first: a strategy kept is never dominated by a
+    later one (as many constraints or more, and a different closure), so the kept list only grows and
+    the work is O(found × most)."""
     found.sort(key=lambda item: sum(bin(m).count("1") for m in item[1]))
     kept: list = []
     for dirs, closure in found:
         if any(all(k & c == k for k, c in zip(other, closure)) for _, other in kept):
             continue
         kept.append((dirs, closure))
+        if len(kept) > most:
+            return None
     return kept
 
 
