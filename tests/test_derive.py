@@ -336,3 +336,23 @@ def test_an_exact_plan_larger_than_a_plan_holds_is_refused_not_approximated(tmp_
     monkeypatch.setattr(derive_plan, "MAX_CHOICES", 8)
     r = run_cli("derive", folder, "--json")
     assert r.exit_code == 1 and "combinations of insertion directions" in json.loads(r.output)["error"]["message"]
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply"])
+def test_stl_and_ply_read_as_obj(tmp_path, suffix):
+    """Parts of one cube each, exported by trimesh as STL (no shared vertices) or PLY, in millimetres:
+    the same blockers and the same count as the OBJ files in metres."""
+    import trimesh
+
+    cells = {f"c{i}": [c] for i, c in enumerate(itertools.product(range(2), range(2), range(2)))}
+    cells["c8"] = [(2, 0, 0)]
+    obj = derive(write_assembly(tmp_path / "obj", cells))
+    other = tmp_path / "other"
+    other.mkdir()
+    for f in (tmp_path / "obj").iterdir():
+        mesh = trimesh.load(str(f), force="mesh", process=False)
+        mesh.apply_scale(1000.0)
+        mesh.export(str(other / (f.stem + suffix)))
+    derived = derive(other, units="mm")
+    assert derived.blocking.blockers == obj.blocking.blockers
+    assert Schedule(derived.plan).count() == Schedule(obj.plan).count() == BruteForce(cells, (3, 2, 2)).count()
