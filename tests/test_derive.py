@@ -15,6 +15,7 @@ import random
 from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -356,3 +357,54 @@ def test_stl_and_ply_read_as_obj(tmp_path, suffix):
     derived = derive(other, units="mm")
     assert derived.blocking.blockers == obj.blocking.blockers
     assert Schedule(derived.plan).count() == Schedule(obj.plan).count() == BruteForce(cells, (3, 2, 2)).count()
+
+
+# ---------------------------------------------------------------- the separating-axis test off the grid
+
+
+def hull_body(points):
+    """A Body of the convex hull of ``points`` (scipy), with its facets' outward normals and edge directions."""
+    from scipy.spatial import ConvexHull
+
+    from opportune.derive.geometry import Body
+
+    hull = ConvexHull(points)
+    simplices = hull.simplices
+    edges = points[simplices[:, [1, 2, 0]]] - points[simplices]
+    edges = edges.reshape(-1, 3)
+    edges /= np.linalg.norm(edges, axis=1)[:, None]
+    return Body(points[hull.vertices], hull.equations[:, :3], edges), hull.equations
+
+
+def lp_overlap(eq_a, eq_b, sweep) -> float:
+    """An independent measure: the largest margin s with x inside A and x + t·sweep inside B (t ≥ 0), both
+    by s (linear programming); positive iff the swept A and B share interior points."""
+    from scipy.optimize import linprog
+
+    na, oa, nb, ob = eq_a[:, :3], eq_a[:, 3], eq_b[:, :3], eq_b[:, 3]
+    # variables x (3), t, s: maximise s
+    rows = np.vstack([np.hstack([na, np.zeros((len(na), 1)), np.ones((len(na), 1))]),
+                      np.hstack([nb, (nb @ sweep)[:, None], np.ones((len(nb), 1))])])
+    res = linprog([0, 0, 0, 0, -1], A_ub=rows, b_ub=np.concatenate([-oa, -ob]),
+                  bounds=[(None, None)] * 3 + [(0, None), (None, 1)], method="highs")
+    assert res.status == 0, res.message
+    return -res.fun
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), axis=st.sampled_from(list(AXES)))
+def test_the_swept_overlap_of_random_convex_bodies_agrees_with_linear_programming(seed, axis):
+    """Random tilted polytopes (hulls of random points): the separating-axis depth is positive exactly
+    when a linear programme finds a common interior point of the swept body and the other."""
+    pytest.importorskip("scipy")
+    rng = np.random.default_rng(seed)
+    a, eq_a = hull_body(rng.normal(size=(8, 3)))
+    b, eq_b = hull_body(rng.normal(size=(8, 3)) + rng.uniform(-3, 3, size=3))
+    sweep = -np.array(AXES[axis], float)
+    from opportune.derive.blocking import depth
+
+    deep, margin = depth(a, b, sweep), lp_overlap(eq_a, eq_b, sweep)
+    if abs(deep) > 1e-7 and abs(margin) > 1e-7:
+        assert (deep > 0) == (margin > 0), (deep, margin)
+    if margin > 0:       # a ball of radius s inside both: on every axis their projections share 2s at least
+        assert deep >= 2 * margin - 1e-9
