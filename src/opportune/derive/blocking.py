@@ -131,6 +131,8 @@ def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, 
     parts = assembly.parts
     tol = assembly.tolerance
     boxes = np.array([p.bounds for p in parts])          # n × 2 × 3
+    # each body's box too: a part's box overlapping another's says little when parts are long or bent
+    body_boxes = [np.array([[b.vertices.min(axis=0), b.vertices.max(axis=0)] for b in p.bodies]) for p in parts]
     checks = 0
     _check_apart(assembly, boxes)
     blockers: dict[str, dict[str, frozenset[str]]] = {p.id: {} for p in parts}
@@ -143,19 +145,32 @@ def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, 
             overlap = np.minimum(hi, boxes[:, 1]) - np.maximum(lo, boxes[:, 0])
             near = np.nonzero((overlap > tol).all(axis=1))[0]
             found = set()
+            swept = _swept_boxes(body_boxes[i], sweep)
             for j in near.tolist():
                 if j == i:
                     continue
-                for a in p.bodies:
-                    for b in parts[j].bodies:
-                        checks += 1
-                        if depth(a, b, sweep) > tol:
-                            found.add(parts[j].id)
-                            break
-                    if parts[j].id in found:
+                for a, b in _box_pairs(swept, body_boxes[j], tol):
+                    checks += 1
+                    if depth(p.bodies[a], parts[j].bodies[b], sweep) > tol:
+                        found.add(parts[j].id)
                         break
             blockers[p.id][d] = frozenset(found)
     return Blocking(tuple(p.id for p in parts), directions, blockers, tol, checks)
+
+
+def _swept_boxes(boxes: np.ndarray, sweep: np.ndarray) -> np.ndarray:
+    """Boxes (k × 2 × 3) stretched to infinity along the ray's direction."""
+    out = boxes.copy()
+    out[:, 1, sweep > _PARALLEL] = np.inf
+    out[:, 0, sweep < -_PARALLEL] = -np.inf
+    return out
+
+
+def _box_pairs(a: np.ndarray, b: np.ndarray, tol: float) -> list[tuple[int, int]]:
+    """The pairs of boxes of ``a`` and ``b`` that overlap by more than ``tol`` on every axis (a box's
+    overlap on an axis is at least the bodies' penetration depth, so no other pair can block)."""
+    overlap = np.minimum(a[:, None, 1], b[None, :, 1]) - np.maximum(a[:, None, 0], b[None, :, 0])
+    return list(zip(*(k.tolist() for k in np.nonzero((overlap > tol).all(axis=2)))))
 
 
 def _check_apart(assembly: Assembly, boxes: np.ndarray) -> None:
