@@ -7,6 +7,19 @@ seconds of the blocking relation and of the whole derivation, the strategies of 
 its count (``Schedule.count_result``, exact or marked estimated), or why it was refused.
 
 Usage: ``python benchmarks/bench_derive.py [--sizes 10,30,100,300] [--seed 0]``
+
+Reference (2-core machine shared with other jobs, load about 4; CPU seconds):
+
+    parts    block dirs    checks  block_s  total_s strat  count
+       10    3x3x4    6        82     0.92     0.12     1  10^6.56
+       30    4x4x6    6       416     0.28     2.99  refused: the exact plan needs more than 64 strategies
+      100    7x7x7    6     2,458     1.43     1.40  refused: 1.1e23 combinations of insertion directions
+      300  10x10x9    6    10,456     4.68     4.61  refused: 1.7e75 combinations of insertion directions
+
+(``block_s`` includes importing trimesh on the first row.)  The blocking relation scales (300 parts
+in under 5 s); the exact union of direction choices does not: random voxel blocks of 30 parts and more
+have too many incomparable choices for one plan of at most 64 strategies, and are refused, never
+approximated.
 """
 
 from __future__ import annotations
