@@ -408,3 +408,13 @@ def test_the_swept_overlap_of_random_convex_bodies_agrees_with_linear_programmin
         assert (deep > 0) == (margin > 0), (deep, margin)
     if margin > 0:       # a ball of radius s inside both: on every axis their projections share 2s at least
         assert deep >= 2 * margin - 1e-9
+
+
+def test_a_file_name_the_plan_refuses_as_a_part_id_is_refused_escaped(tmp_path):
+    """Part ids are the files' stems: one with a control character is refused by the plan's own check,
+    with exit 1 and the character escaped (never sent raw to the terminal)."""
+    folder = write_assembly(tmp_path / "names", {"x\x1b[31my": [(0, 0, 0)], "b": [(1, 0, 0)]})
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "\x1b" not in r.output and "rename the files" in " ".join(r.output.split())
+    with pytest.raises(DeriveError, match="control character"):
+        derive(folder)

@@ -16,7 +16,7 @@ from pathlib import Path
 from opportune.derive.blocking import AXES, Blocking, find_blocking
 from opportune.derive.geometry import GeometryError, read_assembly
 from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies
-from opportune.planning.plan import Plan
+from opportune.planning.plan import Plan, PlanError
 
 __all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "DIRECTION_SETS"]
 
@@ -108,4 +108,8 @@ def _plan(block: Blocking, strategies: list[DerivedStrategy], name: str, directi
             requires.setdefault(after, []).append(before)
         doc["strategies"].append({"name": f"s{k}: " + " ".join(f"{p} {d}" for p, d in s.directions.items())
                                   if len(s.directions) <= 12 else f"s{k}", "requires": requires})
-    return plan_from_dict(doc)
+    try:
+        return plan_from_dict(doc)
+    except PlanError as exc:   # the files' names are the part ids: one the plan refuses is the user's to rename
+        raise DeriveError(f"the derived plan is not valid ({exc}); part ids are the files' stems: rename the "
+                          "files") from None
