@@ -1,4 +1,4 @@
-"""Imports run one way: planning → formats → engine → policies → sequencer → worlds/study → service/cli.
+"""Imports run one way: planning → formats → engine → policies → sequencer → worlds/study/derive → service/cli.
 
 The package's import graph is read from its source with :mod:`ast` (every ``import`` and ``from ...
 import`` at module level or inside a function, relative ones resolved, ``importlib.import_module``
@@ -41,6 +41,8 @@ LAYERS = {
     # service's live runs as much as by studies
     "opportune.multi": 4,
     "opportune.worlds": 5,
+    # plans from the product's geometry: meshes read, blocking found, the plan written through formats
+    "opportune.derive": 5,
     "opportune.study": 5,
     "opportune.service": 6,
     "opportune.cli": 6,

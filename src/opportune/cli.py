@@ -1330,6 +1330,54 @@ def learn(
 
 
 @app.command()
+def derive(
+    assembly: Path = typer.Argument(..., help="The product in its assembled pose: a folder of meshes, one file a part "
+                                              "(.obj, .stl, .ply; the part id is the file's stem)", show_default=False),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="Write the plan (YAML) here instead of "
+                                                                       "standard output"),
+    directions: str = typer.Option("axes", "--directions", help="Insertion directions: axes (the six axis "
+                                                                "directions)"),
+    tolerance: Optional[float] = typer.Option(None, "--tolerance", min=0.0,
+                                              help="Penetration tolerance in the files' units: parts may overlap by "
+                                                   "this much (default: a millionth of the assembly's size)"),
+    units: str = typer.Option("m", "--units", help="The files' unit of length: m or mm"),
+    as_json: bool = json_option("Machine-readable output: {\"parts\", \"directions\", \"blocking_checks\", "
+                                "\"strategies\", \"blockers\", ...} on standard output (errors too)"),
+):
+    """Derive the plan of an assembly from its parts' shapes: exactly the sequences in which each part can go in
+    by one straight translation along one of the directions, never through another part.
+
+    Refuses (exit 1) an unusable mesh (naming the part), an assembly with no feasible sequence (naming the parts
+    that lock each other) and one whose exact plan needs more strategies than a plan holds.
+    """
+    try:
+        from opportune.derive import DeriveError, GeometryError
+        from opportune.derive import derive as derive_plan
+    except ImportError as exc:   # trimesh missing: the geometry extra
+        fail(f"opportune derive needs the geometry extra: pip install 'opportune[geometry]' ({exc})")
+    try:
+        derived = derive_plan(assembly, directions=directions, tolerance=tolerance, units=units)
+    except (GeometryError, DeriveError) as exc:
+        fail(str(exc))
+    text = _plan_yaml(derived.plan.to_dict())
+    if output is not None:
+        try:
+            output.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            fail(f"cannot write {output}: {exc.strerror or exc}")
+    if as_json:
+        print(json.dumps({"plan": derived.plan.to_dict(), **derived.to_dict()}, indent=2, ensure_ascii=False))
+        return
+    if output is None:
+        sys.stdout.write(text)
+    d = derived.to_dict()
+    _err().print(_escape(f"{derived.plan.name}: {d['parts']} parts, {len(d['directions'])} directions, "
+                         f"{d['blocking_checks']:,} blocking checks, {d['strategies']} strateg"
+                         f"{'y' if d['strategies'] == 1 else 'ies'}, {d['constraints']} constraints, "
+                         f"{d['cpu_seconds']:.2f} s CPU" + (f"; wrote {output}" if output is not None else "")))
+
+
+@app.command()
 def completion(shell: str = typer.Argument(..., help="bash, zsh, fish or powershell", show_default=False)):
     """Print the shell's completion script: add `eval "$(opportune completion bash)"` to ~/.bashrc (zsh: the
     same in ~/.zshrc; fish: `opportune completion fish > ~/.config/fish/completions/opportune.fish`)."""

@@ -53,6 +53,12 @@ MAX_SEQUENCE_BYTES = 32 << 20    # one sequences file (32 MiB)
 MAX_SEQUENCES = 100_000          # sequences in one file
 MAX_SEQUENCE_ITEMS = 2_000_000   # installations in all the sequences of one file (about 2 s to read)
 
+# ---------------------------------------------------------------- geometry (`opportune derive`)
+MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before it is read
+MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
+MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
+MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
+
 # ---------------------------------------------------------------- requests to the service
 MAX_BODY = MAX_FILE_BYTES        # a request body: no more than the largest plan file the readers read
 DEFAULT_MAX_BODY = 1 << 20       # `serve --max-body` when not given (1 MiB: a plan of thousands of parts fits)
@@ -108,6 +114,11 @@ LIMITS = {limit.key: limit for limit in (
     Limit("sequence_bytes", MAX_SEQUENCE_BYTES, "bytes", "a sequences file", "command line"),
     Limit("sequences", MAX_SEQUENCES, "sequences", "sequences in one file", "command line"),
     Limit("sequence_items", MAX_SEQUENCE_ITEMS, "installations", "installations in all the sequences of one file",
+          "command line"),
+    Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
+    Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
+    Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
+    Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
           "command line"),
     Limit("body", MAX_BODY, "bytes", f"a request body (default {DEFAULT_MAX_BODY:,}, at least {MIN_BODY:,})",
           SERVICE, "--max-body"),

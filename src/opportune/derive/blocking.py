@@ -1,0 +1,188 @@
+"""Which parts block a part's straight insertion along each direction.
+
+The motion model: a part goes in by one straight translation from far away, along one direction of a
+set; it may slide along faces it touches but never pass through another part's interior.  A part
+``p`` inserted along ``d`` (moving along ``d`` into place, from far away on the ``-d`` side) sweeps
+``p ⊕ {-t·d : t ≥ 0}``, the Minkowski sum of the part with a ray; ``q`` blocks ``p`` along ``d`` when
+that swept volume and ``q`` overlap by more than the penetration tolerance.
+
+The test is exact for convex bodies (every part is a union of them, :mod:`opportune.derive.geometry`):
+the swept volume of a convex body is a convex polyhedron (unbounded along ``-d``) whose faces are the
+body's faces and the planes through its edges and ``d``, so by the separating axis theorem two bodies
+overlap iff their projections overlap on every axis among the faces' normals of both, the cross
+products of the body's edges with ``d``, and of the two bodies' edges.  The least of those overlaps is
+the penetration depth (the shortest move that separates them), compared with the tolerance: touching
+faces (overlap 0) never block, and a part slides along them.  Bounding boxes filter the pairs first,
+with the same rule (a box's overlap on an axis is at least the depth).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from opportune.derive.geometry import Assembly, Body, GeometryError
+
+#: The six axis directions, ``--directions axes``: a name and a unit vector each.
+AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),
+        "+z": (0.0, 0.0, 1.0), "-z": (0.0, 0.0, -1.0)}
+#: Cross products shorter than this (of unit vectors: nearly parallel edges) give no axis.
+_PARALLEL = 1e-9
+
+
+@dataclass(frozen=True)
+class Blocking:
+    """The blocking relation of an assembly.
+
+    ``blockers[p][d]`` is the set of parts in ``p``'s way when it is inserted along direction ``d``
+    (a name of ``directions``); ``checks`` counts the body-pair tests run (after the bounding boxes).
+    """
+
+    parts: tuple[str, ...]
+    directions: dict[str, tuple[float, float, float]]
+    blockers: dict[str, dict[str, frozenset[str]]]
+    tolerance: float
+    checks: int
+
+
+def depth(a: Body, b: Body, sweep: np.ndarray | None = None) -> float:
+    """How deep body ``a`` (swept along the ray ``sweep``, if given) and body ``b`` overlap: the least
+    overlap of their projections over the separating axes; 0 or less when they do not overlap.
+
+    Parameters
+    ----------
+    a, b : Body
+        Convex bodies.
+    sweep : numpy.ndarray, optional
+        A unit vector: ``a`` is swept along ``{t·sweep : t ≥ 0}`` (``-d`` for insertion along ``d``).
+
+    Returns
+    -------
+    float
+        The penetration depth (metres), ``inf`` never (a swept body overlaps on a bounded range).
+
+    Examples
+    --------
+    >>> from opportune.derive.geometry import Body
+    >>> import numpy as np
+    >>> cube = lambda x: Body(np.array([[x + i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float),
+    ...                       np.eye(3), np.eye(3))
+    >>> depth(cube(0), cube(1))                              # touching faces: no overlap
+    0.0
+    >>> depth(cube(0), cube(3), np.array([1.0, 0.0, 0.0]))   # swept along +x, into the other: 1 deep
+    1.0
+    """
+    axes = [a.normals, b.normals, _crosses(a.edges, b.edges)]
+    if sweep is not None:
+        axes += [_crosses(a.edges, sweep[None, :]), _crosses(sweep[None, :], b.edges)]
+    axes = np.vstack([x for x in axes if len(x)])
+    pa, pb = a.vertices @ axes.T, b.vertices @ axes.T
+    lo_a, hi_a = pa.min(axis=0), pa.max(axis=0)
+    if sweep is not None:
+        along = axes @ sweep
+        hi_a = np.where(along > _PARALLEL, np.inf, hi_a)
+        lo_a = np.where(along < -_PARALLEL, -np.inf, lo_a)
+    overlap = np.minimum(hi_a, pb.max(axis=0)) - np.maximum(lo_a, pb.min(axis=0))
+    return float(overlap.min())
+
+
+def _crosses(e: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """The unit cross products of every vector of ``e`` with every one of ``f`` (parallel pairs left out)."""
+    c = np.cross(e[:, None, :], f[None, :, :]).reshape(-1, 3)
+    n = np.linalg.norm(c, axis=1)
+    keep = n > _PARALLEL
+    return c[keep] / n[keep, None]
+
+
+def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, float]] | None = None) -> Blocking:
+    """For each part and each direction, the parts that block its insertion along that direction.
+
+    Parameters
+    ----------
+    assembly : Assembly
+        The parts in the assembled pose (:func:`opportune.derive.geometry.read_assembly`).
+    directions : dict, optional
+        Direction names and vectors (normalised here); default :data:`AXES`.
+
+    Returns
+    -------
+    Blocking
+        ``blockers[p][d]``, and the number of body-pair tests run.
+
+    Raises
+    ------
+    GeometryError
+        Two parts that overlap in the assembled pose by more than the tolerance (both named, with the depth).
+
+    Examples
+    --------
+    >>> from opportune.derive.geometry import Assembly, Body, PartShape
+    >>> import numpy as np
+    >>> def cube(x):
+    ...     v = np.array([[x + i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    ...     return PartShape(str(x), None, (Body(v, np.eye(3), np.eye(3)),), 12)
+    >>> b = find_blocking(Assembly((cube(0), cube(1)), 1e-9, "m"))
+    >>> sorted(d for d, q in b.blockers["0"].items() if q)    # 0 cannot come in moving -x: 1 is in its way
+    ['-x']
+    """
+    directions = dict(AXES if directions is None else directions)
+    unit = {d: np.asarray(v, float) / np.linalg.norm(v) for d, v in directions.items()}
+    parts = assembly.parts
+    tol = assembly.tolerance
+    boxes = np.array([p.bounds for p in parts])          # n × 2 × 3
+    # each body's box too: a part's box overlapping another's says little when parts are long or bent
+    body_boxes = [np.array([[b.vertices.min(axis=0), b.vertices.max(axis=0)] for b in p.bodies]) for p in parts]
+    checks = 0
+    _check_apart(assembly, boxes)
+    blockers: dict[str, dict[str, frozenset[str]]] = {p.id: {} for p in parts}
+    for i, p in enumerate(parts):
+        for d, v in unit.items():
+            sweep = -v
+            lo, hi = boxes[i, 0].copy(), boxes[i, 1].copy()
+            hi[sweep > _PARALLEL] = np.inf
+            lo[sweep < -_PARALLEL] = -np.inf
+            overlap = np.minimum(hi, boxes[:, 1]) - np.maximum(lo, boxes[:, 0])
+            near = np.nonzero((overlap > tol).all(axis=1))[0]
+            found = set()
+            swept = _swept_boxes(body_boxes[i], sweep)
+            for j in near.tolist():
+                if j == i:
+                    continue
+                for a, b in _box_pairs(swept, body_boxes[j], tol):
+                    checks += 1
+                    if depth(p.bodies[a], parts[j].bodies[b], sweep) > tol:
+                        found.add(parts[j].id)
+                        break
+            blockers[p.id][d] = frozenset(found)
+    return Blocking(tuple(p.id for p in parts), directions, blockers, tol, checks)
+
+
+def _swept_boxes(boxes: np.ndarray, sweep: np.ndarray) -> np.ndarray:
+    """Boxes (k × 2 × 3) stretched to infinity along the ray's direction."""
+    out = boxes.copy()
+    out[:, 1, sweep > _PARALLEL] = np.inf
+    out[:, 0, sweep < -_PARALLEL] = -np.inf
+    return out
+
+
+def _box_pairs(a: np.ndarray, b: np.ndarray, tol: float) -> list[tuple[int, int]]:
+    """The pairs of boxes of ``a`` and ``b`` that overlap by more than ``tol`` on every axis (a box's
+    overlap on an axis is at least the bodies' penetration depth, so no other pair can block)."""
+    overlap = np.minimum(a[:, None, 1], b[None, :, 1]) - np.maximum(a[:, None, 0], b[None, :, 0])
+    return list(zip(*(k.tolist() for k in np.nonzero((overlap > tol).all(axis=2)))))
+
+
+def _check_apart(assembly: Assembly, boxes: np.ndarray) -> None:
+    """Refuse parts that overlap in the assembled pose by more than the tolerance."""
+    parts, tol = assembly.parts, assembly.tolerance
+    for i, p in enumerate(parts):
+        overlap = np.minimum(boxes[i, 1], boxes[i + 1:, 1]) - np.maximum(boxes[i, 0], boxes[i + 1:, 0])
+        for j in (i + 1 + np.nonzero((overlap > tol).all(axis=1))[0]).tolist():
+            for a in p.bodies:
+                for b in parts[j].bodies:
+                    deep = depth(a, b)
+                    if deep > tol:
+                        raise GeometryError(
+                            f"parts {p.id!r} and {parts[j].id!r} overlap by {deep:.6g} m in the assembled pose "
+                            f"(the tolerance is {tol:.6g} m): move them apart, or give a larger --tolerance")

@@ -1,0 +1,420 @@
+"""Plans from geometry (`opportune derive`): the derived plan admits exactly the feasible sequences.
+
+Random voxel assemblies (parts are unions of unit cubes partitioning a small block, written as OBJ
+meshes, one closed cube a body) are derived and compared with an independent brute force: a dynamic
+programme over subsets that sweeps each part's cubes along each axis on the voxel grid.  Counts are
+equal, and sampled sequences are in the plan iff the brute force finds them feasible.  Touching faces
+are everywhere in these assemblies: sliding along them must be allowed.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import random
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("trimesh", reason="the geometry extra, which make test installs")
+
+from conftest import run_cli  # noqa: E402
+from opportune.derive import DeriveError, GeometryError, derive  # noqa: E402
+from opportune.engine import Schedule  # noqa: E402
+from opportune.formats import load_plan  # noqa: E402
+
+AXES = {"+x": (1, 0, 0), "-x": (-1, 0, 0), "+y": (0, 1, 0), "-y": (0, -1, 0), "+z": (0, 0, 1), "-z": (0, 0, -1)}
+BLOCKS = [(2, 2, 3), (3, 3, 2), (2, 3, 2), (3, 2, 2), (2, 2, 2), (3, 3, 3)]
+
+
+# ---------------------------------------------------------------- voxel assemblies
+
+
+def cube_lines(cells, first: int = 1) -> list[str]:
+    """OBJ lines of closed unit cubes, one body each (its own 8 vertices), outward triangles."""
+    lines = []
+    for n, (x, y, z) in enumerate(cells):
+        lines += [f"v {x + i} {y + j} {z + k}" for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+
+        def v(i, j, k, base=first + 8 * n):
+            return base + 4 * i + 2 * j + k
+
+        quads = [(v(0, 0, 0), v(0, 0, 1), v(0, 1, 1), v(0, 1, 0)), (v(1, 0, 0), v(1, 1, 0), v(1, 1, 1), v(1, 0, 1)),
+                 (v(0, 0, 0), v(1, 0, 0), v(1, 0, 1), v(0, 0, 1)), (v(0, 1, 0), v(0, 1, 1), v(1, 1, 1), v(1, 1, 0)),
+                 (v(0, 0, 0), v(0, 1, 0), v(1, 1, 0), v(1, 0, 0)), (v(0, 0, 1), v(1, 0, 1), v(1, 1, 1), v(0, 1, 1))]
+        for a, b, c, d in quads:
+            lines += [f"f {a} {b} {c}", f"f {a} {c} {d}"]
+    return lines
+
+
+def write_assembly(folder: Path, parts: dict[str, list[tuple[int, int, int]]]) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, cells in parts.items():
+        (folder / f"{name}.obj").write_text("\n".join(cube_lines(cells)) + "\n")
+    return folder
+
+
+def partition(block: tuple[int, int, int], k: int, seed: int) -> dict[str, list[tuple[int, int, int]]]:
+    """The block's cells cut into ``k`` connected parts, grown from random seeds (deterministic)."""
+    rng = random.Random(seed)
+    cells = list(itertools.product(*(range(n) for n in block)))
+    owner = {c: i for i, c in enumerate(rng.sample(cells, k))}
+    while len(owner) < len(cells):
+        c, p = rng.choice(sorted(owner.items()))
+        x, y, z = c
+        nxt = [(x + dx, y + dy, z + dz) for dx, dy, dz in AXES.values()]
+        free = [n for n in nxt if n in set(cells) and n not in owner]
+        if free:
+            owner[rng.choice(free)] = p
+    parts: dict[str, list] = {}
+    for c, p in sorted(owner.items()):
+        parts.setdefault(f"p{p:02d}", []).append(c)
+    return parts
+
+
+class BruteForce:
+    """Feasible sequences on the voxel grid: a part goes in along d iff no cell it sweeps (its cells
+    moved by -t·d, t ≥ 1, within the block) belongs to a part already in."""
+
+    def __init__(self, parts, block):
+        self.ids = sorted(parts)
+        owner = {c: self.ids.index(p) for p, cells in parts.items() for c in cells}
+        self.swept = []          # per part, per direction: the mask of parts its sweep meets
+        for p in self.ids:
+            masks = []
+            for d in AXES.values():
+                mask = 0
+                for c in parts[p]:
+                    t = 1
+                    while True:
+                        cell = tuple(c[i] - t * d[i] for i in range(3))
+                        if not all(0 <= cell[i] < block[i] for i in range(3)):
+                            break
+                        if cell in owner:       # a block with empty cells (the free cube's row)
+                            mask |= 1 << owner[cell]
+                        t += 1
+                masks.append(mask & ~(1 << self.ids.index(p)))
+            self.swept.append(masks)
+
+    def fits(self, i: int, built: int) -> bool:
+        return any(not (m & built) for m in self.swept[i])
+
+    def count(self) -> int:
+        n = len(self.ids)
+
+        @lru_cache(maxsize=None)
+        def f(built: int) -> int:
+            if built == (1 << n) - 1:
+                return 1
+            return sum(f(built | 1 << i) for i in range(n) if not built >> i & 1 and self.fits(i, built))
+        return f(0)
+
+    def feasible(self, sequence) -> bool:
+        built = 0
+        for p in sequence:
+            i = self.ids.index(p)
+            if not self.fits(i, built):
+                return False
+            built |= 1 << i
+        return True
+
+
+def admits(plan, sequence) -> bool:
+    s = Schedule(plan)
+    for p in sequence:
+        if p not in s.installable():
+            return False
+        s = s.install(p)
+    return True
+
+
+def closure(pairs) -> set[tuple[str, str]]:
+    """All pairs an order implies (a plain fixed point: the orders here are small)."""
+    closed = set(pairs)
+    while True:
+        more = {(a, d) for a, b in closed for c, d in closed if b == c} - closed
+        if not more:
+            return closed
+        closed |= more
+
+
+def assert_minimal(strategies) -> None:
+    """No strategy's sequences contain another's (no closure inside another), no redundant constraint."""
+    closures = [closure(p) for p in strategies]
+    for i, ci in enumerate(closures):
+        assert all(not (cj <= ci) for j, cj in enumerate(closures) if j != i), "a dominated strategy"
+        for pair in strategies[i]:
+            assert pair not in closure(set(strategies[i]) - {pair}), f"redundant constraint {pair}"
+
+
+# ---------------------------------------------------------------- the exact plan
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(block=st.sampled_from(BLOCKS), k=st.integers(2, 12), seed=st.integers(0, 2**32 - 1))
+def test_random_voxel_assemblies_admit_exactly_the_feasible_sequences(tmp_path_factory, block, k, seed):
+    k = min(k, block[0] * block[1] * block[2])
+    parts = partition(block, k, seed)
+    folder = write_assembly(tmp_path_factory.mktemp("voxels"), parts)
+    brute = BruteForce(parts, block)
+    try:
+        derived = derive(folder)
+    except DeriveError as exc:
+        # refused: either nothing is feasible, or the exact plan is larger than a plan holds
+        if brute.count() == 0:
+            assert "lock each other" in str(exc)
+        else:
+            assert "strategies" in str(exc) or "combinations" in str(exc), str(exc)
+        return
+    plan = derived.plan
+    assert Schedule(plan).count() == brute.count() > 0
+    assert_minimal([s.pairs for s in derived.strategies])
+    rng = random.Random(seed)
+    for k in range(30):                     # sequences of the plan are feasible ...
+        seq = Schedule(plan).sample(seed=k)
+        assert brute.feasible(seq), seq
+    for _ in range(60):                     # ... and a random order is in the plan iff it is feasible
+        seq = list(brute.ids)
+        rng.shuffle(seq)
+        assert admits(plan, seq) == brute.feasible(seq), seq
+
+
+def test_sliding_along_touching_faces_is_allowed(tmp_path):
+    """Two slabs, one on the other, and a cube set into the top one: every part slides out sideways
+    along the faces it touches, so no order is forced."""
+    parts = {"base": [(x, y, 0) for x in range(2) for y in range(2)], "left": [(0, 0, 1), (0, 1, 1)],
+             "right": [(1, 0, 1), (1, 1, 1)]}
+    derived = derive(write_assembly(tmp_path / "slabs", parts))
+    assert Schedule(derived.plan).count() == 6 == BruteForce(parts, (2, 2, 2)).count()
+    # but the base cannot come in from above once a slab is on it: blocked along -z by both slabs
+    assert derived.blocking.blockers["base"]["-z"] == {"left", "right"}
+    assert derived.blocking.blockers["base"]["+x"] == set()
+
+
+def test_a_peg_in_a_hole_goes_in_one_way(tmp_path):
+    """A ring of 8 cubes around a peg: the peg goes in along ±z only, and the ring blocks nothing of its own."""
+    ring = [(x, y, 0) for x in range(3) for y in range(3) if (x, y) != (1, 1)]
+    derived = derive(write_assembly(tmp_path / "peg", {"ring": ring, "peg": [(1, 1, 0)]}))
+    peg = derived.blocking.blockers["peg"]
+    assert {d for d, q in peg.items() if not q} == {"+z", "-z"}
+    assert Schedule(derived.plan).count() == 2
+
+
+# Two parts of a 3 × 3 × 2 block hooked into each other (found by the brute force among random
+# partitions): neither can go in last along any axis.
+LOCKED = {"hook": [(0, 0, 0), (1, 0, 0), (1, 1, 0), (1, 1, 1), (2, 0, 0), (2, 0, 1), (2, 1, 1), (2, 2, 1)],
+          "eye": [(0, 0, 1), (0, 1, 0), (0, 1, 1), (0, 2, 0), (0, 2, 1), (1, 0, 1), (1, 2, 0), (1, 2, 1), (2, 1, 0),
+                  (2, 2, 0)]}
+
+
+def test_an_interlocked_assembly_is_refused_naming_the_parts(tmp_path):
+    """The locked pair plus a free cube beside it: refused, naming the pair and not the cube."""
+    parts = {**LOCKED, "free": [(3, 0, 0)]}
+    assert BruteForce(parts, (4, 3, 2)).count() == 0
+    r = run_cli("derive", write_assembly(tmp_path / "lock", parts))
+    assert r.exit_code == 1
+    text = " ".join(r.output.split())
+    assert "lock each other" in text and "eye, hook" in text and "free" not in text.split(":")[-1].split("lock")[0]
+    with pytest.raises(DeriveError, match="parts eye, hook lock each other"):
+        derive(tmp_path / "lock")
+
+
+def test_the_derived_plan_checks_and_counts_on_the_command_line(tmp_path):
+    parts = partition((2, 2, 3), 6, seed=7)
+    folder = write_assembly(tmp_path / "six", parts)
+    out = tmp_path / "six.yaml"
+    r = run_cli("derive", folder, "-o", out)
+    assert r.exit_code == 0, r.output
+    assert run_cli("check", out).exit_code == 0
+    counted = run_cli("count", out, "--json")
+    assert json.loads(counted.output)["sequences"] == str(BruteForce(parts, (2, 2, 3)).count())
+    doc = json.loads(run_cli("derive", folder, "--json").output)
+    assert doc["parts"] == 6 and doc["directions"] == list(AXES) and doc["blocking_checks"] > 0
+    assert load_plan(out).part_ids == tuple(sorted(parts))
+
+
+def test_several_strategies_each_one_direction_choice(tmp_path):
+    """A 3 × 3 × 3 block cut in 8 parts whose exact plan needs 4 strategies (none containing another)."""
+    parts = partition((3, 3, 3), 8, seed=0)
+    derived = derive(write_assembly(tmp_path / "eight", parts))
+    assert len(derived.strategies) == len(derived.plan.strategies) == 4
+    assert_minimal([s.pairs for s in derived.strategies])
+    assert Schedule(derived.plan).count() == BruteForce(parts, (3, 3, 3)).count()
+    # each strategy's order is the one its directions force: p before every part blocking p along its direction
+    for s in derived.strategies:
+        forced = {(p, q) for p, d in s.directions.items() for q in derived.blocking.blockers[p][d]}
+        assert closure(forced) == closure(s.pairs)
+
+
+# ---------------------------------------------------------------- hostile meshes: exit 1, a message, no traceback
+
+
+def cube_text(x=0) -> str:
+    return "\n".join(cube_lines([(x, 0, 0)])) + "\n"
+
+
+HOSTILE = {
+    "nan": ("v nan 0 0\n" + cube_text().split("\n", 1)[1], "not a finite number"),
+    "inf": (cube_text().replace("v 1 1 1", "v inf 1 1"), "not a finite number"),
+    "empty": ("", "part 'bad'"),
+    "not a mesh": ("\x00\x01garbage \xff\xfe" * 50, "part 'bad'"),
+    "degenerate": (cube_text() + "v 5 5 5\nv 6 6 6\nv 7 7 7\nf 9 10 11\n", "degenerate"),
+    "open": ("\n".join(cube_text().splitlines()[:-2]) + "\n", "not a closed surface"),
+    "not convex": (cube_text().replace("v 1 1 1", "v 0.6 0.6 0.6"), "not convex"),   # a corner pushed in
+}
+
+
+@pytest.mark.parametrize("case", sorted(HOSTILE))
+def test_a_hostile_mesh_is_refused_naming_the_part(tmp_path, case):
+    text, expected = HOSTILE[case]
+    folder = tmp_path / "hostile"
+    write_assembly(folder, {"good": [(3, 0, 0)]})
+    (folder / "bad.obj").write_bytes(text.encode("utf-8", "surrogateescape") if isinstance(text, str) else text)
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1, r.output
+    out = " ".join(r.output.split())
+    assert "error:" in out and "'bad'" in out and expected in out, out
+    with pytest.raises(GeometryError):
+        derive(folder)
+
+
+def test_a_binary_stl_that_is_noise_is_refused(tmp_path):
+    folder = tmp_path / "stl"
+    folder.mkdir()
+    (folder / "noise.stl").write_bytes(bytes(random.Random(3).randrange(256) for _ in range(600)))
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "'noise'" in r.output
+
+
+def test_parts_that_interpenetrate_are_refused_naming_both(tmp_path):
+    folder = write_assembly(tmp_path / "overlap", {"a": [(0, 0, 0)]})
+    (folder / "b.obj").write_text(cube_text().replace("v 0 ", "v 0.5 ").replace("v 1 ", "v 1.5 "))
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "'a' and 'b' overlap by 0.5" in " ".join(r.output.split())
+    # within a tolerance larger than the overlap they are accepted
+    assert run_cli("derive", folder, "--tolerance", "0.6").exit_code == 0
+
+
+def test_the_limits_are_checked_before_the_work(tmp_path, monkeypatch):
+    from opportune.derive import geometry
+
+    folder = write_assembly(tmp_path / "many", {f"c{i}": [(i, 0, 0)] for i in range(4)})
+    monkeypatch.setattr(geometry, "MAX_MESH_PARTS", 3)
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "at most 3 parts" in r.output
+    monkeypatch.setattr(geometry, "MAX_MESH_PARTS", 300)
+    monkeypatch.setattr(geometry, "MAX_TRIANGLES", 11)
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "12 triangles" in r.output and "at most 11" in r.output
+    monkeypatch.setattr(geometry, "MAX_MESH_BYTES", 100)
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "'c0'" in r.output and "at most 100 bytes" in r.output
+
+
+def test_units_and_a_missing_folder(tmp_path):
+    folder = write_assembly(tmp_path / "mm", {"a": [(0, 0, 0)], "b": [(1, 0, 0)]})
+    doc = json.loads(run_cli("derive", folder, "--units", "mm", "--json").output)
+    assert doc["tolerance_m"] == pytest.approx(1e-6 * 3 ** 0.5 * 2 ** 0.5 * 1e-3, rel=0.01) or doc["tolerance_m"] > 0
+    r = run_cli("derive", tmp_path / "nowhere")
+    assert r.exit_code == 1 and "not a folder" in r.output
+    r = run_cli("derive", folder, "--units", "inch")
+    assert r.exit_code == 1 and "units 'inch'" in r.output
+
+
+def test_an_exact_plan_larger_than_a_plan_holds_is_refused_not_approximated(tmp_path, monkeypatch):
+    from opportune.derive import plan as derive_plan
+
+    folder = write_assembly(tmp_path / "eight", partition((3, 3, 3), 8, seed=0))     # 4 strategies exactly
+    monkeypatch.setattr(derive_plan, "MAX_STRATEGIES", 3)
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "more than 3 strategies" in r.output and "no approximation" in r.output
+    monkeypatch.setattr(derive_plan, "MAX_STRATEGIES", 4)
+    assert run_cli("derive", folder).exit_code == 0
+    monkeypatch.setattr(derive_plan, "MAX_CHOICES", 8)
+    r = run_cli("derive", folder, "--json")
+    assert r.exit_code == 1 and "combinations of insertion directions" in json.loads(r.output)["error"]["message"]
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".ply"])
+def test_stl_and_ply_read_as_obj(tmp_path, suffix):
+    """Parts of one cube each, exported by trimesh as STL (no shared vertices) or PLY, in millimetres:
+    the same blockers and the same count as the OBJ files in metres."""
+    import trimesh
+
+    cells = {f"c{i}": [c] for i, c in enumerate(itertools.product(range(2), range(2), range(2)))}
+    cells["c8"] = [(2, 0, 0)]
+    obj = derive(write_assembly(tmp_path / "obj", cells))
+    other = tmp_path / "other"
+    other.mkdir()
+    for f in (tmp_path / "obj").iterdir():
+        mesh = trimesh.load(str(f), force="mesh", process=False)
+        mesh.apply_scale(1000.0)
+        mesh.export(str(other / (f.stem + suffix)))
+    derived = derive(other, units="mm")
+    assert derived.blocking.blockers == obj.blocking.blockers
+    assert Schedule(derived.plan).count() == Schedule(obj.plan).count() == BruteForce(cells, (3, 2, 2)).count()
+
+
+# ---------------------------------------------------------------- the separating-axis test off the grid
+
+
+def hull_body(points):
+    """A Body of the convex hull of ``points`` (scipy), with its facets' outward normals and edge directions."""
+    from scipy.spatial import ConvexHull
+
+    from opportune.derive.geometry import Body
+
+    hull = ConvexHull(points)
+    simplices = hull.simplices
+    edges = points[simplices[:, [1, 2, 0]]] - points[simplices]
+    edges = edges.reshape(-1, 3)
+    edges /= np.linalg.norm(edges, axis=1)[:, None]
+    return Body(points[hull.vertices], hull.equations[:, :3], edges), hull.equations
+
+
+def lp_overlap(eq_a, eq_b, sweep) -> float:
+    """An independent measure: the largest margin s with x inside A and x + t·sweep inside B (t ≥ 0), both
+    by s (linear programming); positive iff the swept A and B share interior points."""
+    from scipy.optimize import linprog
+
+    na, oa, nb, ob = eq_a[:, :3], eq_a[:, 3], eq_b[:, :3], eq_b[:, 3]
+    # variables x (3), t, s: maximise s
+    rows = np.vstack([np.hstack([na, np.zeros((len(na), 1)), np.ones((len(na), 1))]),
+                      np.hstack([nb, (nb @ sweep)[:, None], np.ones((len(nb), 1))])])
+    res = linprog([0, 0, 0, 0, -1], A_ub=rows, b_ub=np.concatenate([-oa, -ob]),
+                  bounds=[(None, None)] * 3 + [(0, None), (None, 1)], method="highs")
+    assert res.status == 0, res.message
+    return -res.fun
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), axis=st.sampled_from(list(AXES)))
+def test_the_swept_overlap_of_random_convex_bodies_agrees_with_linear_programming(seed, axis):
+    """Random tilted polytopes (hulls of random points): the separating-axis depth is positive exactly
+    when a linear programme finds a common interior point of the swept body and the other."""
+    pytest.importorskip("scipy")
+    rng = np.random.default_rng(seed)
+    a, eq_a = hull_body(rng.normal(size=(8, 3)))
+    b, eq_b = hull_body(rng.normal(size=(8, 3)) + rng.uniform(-3, 3, size=3))
+    sweep = -np.array(AXES[axis], float)
+    from opportune.derive.blocking import depth
+
+    deep, margin = depth(a, b, sweep), lp_overlap(eq_a, eq_b, sweep)
+    if abs(deep) > 1e-7 and abs(margin) > 1e-7:
+        assert (deep > 0) == (margin > 0), (deep, margin)
+    if margin > 0:       # a ball of radius s inside both: on every axis their projections share 2s at least
+        assert deep >= 2 * margin - 1e-9
+
+
+def test_a_file_name_the_plan_refuses_as_a_part_id_is_refused_escaped(tmp_path):
+    """Part ids are the files' stems: one with a control character is refused by the plan's own check,
+    with exit 1 and the character escaped (never sent raw to the terminal)."""
+    folder = write_assembly(tmp_path / "names", {"x\x1b[31my": [(0, 0, 0)], "b": [(1, 0, 0)]})
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "\x1b" not in r.output and "rename the files" in " ".join(r.output.split())
+    with pytest.raises(DeriveError, match="control character"):
+        derive(folder)
