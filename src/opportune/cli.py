@@ -1045,10 +1045,7 @@ def convert(
         else:
             sys.stdout.write(text)
         return
-    try:
-        output.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        fail(f"cannot write {output}: {exc.strerror or exc}")
+    _write_text(output, text)
     if as_json:
         print(json.dumps({"plan": plan.name, "format": fmt, "wrote": str(output)}, indent=2))
     else:
@@ -1188,10 +1185,7 @@ def relax(
         fail(str(exc))
     text = _plan_yaml(relaxation.plan.to_dict())
     if output is not None:
-        try:
-            output.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            fail(f"cannot write {output}: {exc.strerror or exc}")
+        _write_text(output, text)
     if as_json:
         print(json.dumps(relaxation.to_dict(), indent=2))
     elif output is None:
@@ -1221,6 +1215,14 @@ def relax(
         err.print(f"strategy '{_escape(name)}' removed: relaxed, it admits exactly the sequences of '{_escape(same)}'")
     if output is not None:
         err.print(f"wrote {_escape(str(output))}")
+
+
+def _write_text(output: Path, text: str) -> None:
+    """Write a command's text file, or exit 1 saying why it cannot be written."""
+    try:
+        output.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        fail(f"cannot write {output}: {exc.strerror or exc}")
 
 
 def _plan_yaml(doc: dict) -> str:
@@ -1288,10 +1290,7 @@ def learn(
         fail(f"the learned plan is not valid: {exc}")
     text = learned.to_yaml(repaired=split)
     if output is not None:
-        try:
-            output.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            fail(f"cannot write {output}: {exc.strerror or exc}")
+        _write_text(output, text)
     if as_json:
         doc = learned.to_json()
         if split and learned.repair is not None:
@@ -1361,10 +1360,7 @@ def derive(
         fail(str(exc))
     text = _plan_yaml(derived.plan.to_dict())
     if output is not None:
-        try:
-            output.write_text(text, encoding="utf-8")
-        except OSError as exc:
-            fail(f"cannot write {output}: {exc.strerror or exc}")
+        _write_text(output, text)
     if as_json:
         print(json.dumps({"plan": derived.plan.to_dict(), **derived.to_dict()}, indent=2, ensure_ascii=False))
         return
