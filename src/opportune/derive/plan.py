@@ -21,6 +21,7 @@ import itertools
 from dataclasses import dataclass
 
 from opportune.derive.blocking import Blocking
+from opportune.engine.poset import CycleError, Poset, bits
 from opportune.limits import MAX_CHOICES, MAX_STRATEGIES
 
 
@@ -153,10 +154,10 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
     closures: dict[tuple[int, ...], tuple[dict[str, str], tuple[int, ...]]] = {}
     for choice in itertools.product(*(opts[p] for p in free)):
         edges = base | _edges({p: q for p, (_, q) in zip(free, choice)}, index)
-        closure = _closure(len(ids), edges)
-        if closure is None:
+        try:
+            key = tuple(Poset.from_pairs(len(ids), edges).above)    # the closure: each part's successors
+        except CycleError:
             continue
-        key = tuple(closure)
         if key not in closures:
             dirs = {p: opts[p][0][0] for p in fixed} | {p: d for p, (d, _) in zip(free, choice)}
             closures[key] = (dirs, key)
@@ -172,38 +173,6 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
 def _edges(chosen: dict[str, frozenset[str]], index: dict[str, int]) -> set[tuple[int, int]]:
     """The order's edges ``p -> q`` (p before q) for each part's chosen blockers."""
     return {(index[p], index[q]) for p, qs in chosen.items() for q in qs}
-
-
-def _closure(n: int, edges: set[tuple[int, int]]) -> list[int] | None:
-    """The transitive closure as bitmasks of successors (index order), or None on a cycle."""
-    succ = [0] * n
-    indeg = [0] * n
-    for a, b in edges:
-        succ[a] |= 1 << b
-    for a, b in edges:
-        indeg[b] += 1
-    order, stack = [], [i for i in range(n) if indeg[i] == 0]
-    while stack:
-        i = stack.pop()
-        order.append(i)
-        for j in _bits(succ[i]):
-            indeg[j] -= 1
-            if indeg[j] == 0:
-                stack.append(j)
-    if len(order) < n:
-        return None
-    reach = list(succ)
-    for i in reversed(order):
-        for j in _bits(succ[i]):
-            reach[i] |= reach[j]
-    return reach
-
-
-def _bits(mask: int):
-    while mask:
-        low = mask & -mask
-        yield low.bit_length() - 1
-        mask ^= low
 
 
 def _undominated(found: list[tuple[dict[str, str], tuple[int, ...]]], most: int) -> list | None:
@@ -227,9 +196,9 @@ def _reduction(ids: tuple[str, ...], reach: tuple[int, ...]) -> tuple[tuple[str,
     pairs = []
     for a, succ in enumerate(reach):
         via = 0
-        for c in _bits(succ):
+        for c in bits(succ):
             via |= reach[c]
-        pairs.extend((ids[a], ids[b]) for b in _bits(succ & ~via))
+        pairs.extend((ids[a], ids[b]) for b in bits(succ & ~via))
     return tuple(pairs)
 
 
