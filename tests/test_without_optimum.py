@@ -121,3 +121,24 @@ def test_the_lab_measures_the_fallback_beside_the_default(capsys):
     gaps = dict(part.strip().rsplit(" ", 1) for part in row.split("; ", 1)[1].split(","))
     assert set(gaps) == {"lookahead", "fallback"} and float(gaps["lookahead"].rstrip("%")) == 0.0
     assert float(gaps["fallback"].rstrip("%")) >= 0.0
+
+
+def test_the_choice_of_the_optimum_does_not_depend_on_the_clock(monkeypatch):
+    """Without a budget the states are listed by counted work: a clock that races (a loaded machine)
+    changes nothing; with a budget the listing cut by the clock says so, not "more than the cap"."""
+    import random
+
+    from opportune.engine import deadline as deadline_module
+
+    rng = random.Random(7)
+    ids = [f"p{i}" for i in range(22)]
+    plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.3] for j, b in enumerate(ids)})
+    calm = Lookahead(visible=1, capacity=1)
+    assert calm._optimum_fits(OrderEngine(plan)), calm.refusal
+    clock = iter(range(0, 10 ** 9, 1000))           # a thousand seconds pass at every reading
+    monkeypatch.setattr(deadline_module, "_perf", lambda: float(next(clock)))
+    raced = Lookahead(visible=1, capacity=1)
+    assert raced._optimum_fits(OrderEngine(plan)), raced.refusal
+    budgeted = Lookahead(visible=1, capacity=1, budget=0.05)
+    assert not budgeted._optimum_fits(OrderEngine(plan))
+    assert "could not be listed" in budgeted.refusal and "more than" not in budgeted.refusal

@@ -182,24 +182,32 @@ class Lookahead(DecidesOnMasks):
 
     def _optimum_fits(self, engine) -> bool:
         """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,
-        listed before it starts within a second (or a third of the decision budget where there is one: it
-        runs inside the first decision on the plan), at most its cap (:meth:`_optimum_cap`), and its bytes
+        listed before it starts, at most its cap (:meth:`_optimum_cap`), and its bytes
         (:meth:`_optimum_bytes`) granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.
-        reserve_programme`).  Where the listing cannot tell in that time, it does not fit, and the step
-        over the base decides."""
+        reserve_programme`).  Without a budget the listing is bounded by counted work only (it stops once
+        the states pass the cap: about 3 CPU seconds at most on the SALBP graphs), so the choice is the
+        same on a loaded machine as on an idle one; with a budget it gets a third of it (it runs inside
+        the first decision on the plan), and where it cannot tell in that time the optimum does not fit
+        and the fallback decides."""
         self.refusal = None
         if not self.optimal:
             self.refusal = self.SWITCHED_OFF
             return False
         from opportune.policies.states import big, estimate_states
 
-        seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
+        seconds = None if self.lookahead_budget is None else self.lookahead_budget / 3
         cap = self._optimum_cap(engine)
         est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
         self._optimum_states = est.states
-        if not est.exact or est.states > cap:
+        if est.exact and est.states <= cap:
+            pass
+        elif est.low > cap or est.states > cap:
             self.refusal = f"its optimum needs {est.describe()} states, more than {cap:,}"
+            return False
+        else:       # only with a budget: the listing was cut by the clock, not by the cap
+            self.refusal = (f"its states could not be listed within a third of the decision budget "
+                            f"({est.describe()} so far; the cap is {cap:,})")
             return False
         need = self._optimum_bytes(engine, est)
         if not engine.reserve_programme(("lookahead optimum", self._share_key() or id(self)), need):

@@ -104,11 +104,11 @@ def big(n: int) -> str:
 
 def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pile: bool = False,
                     stop_above: int | None = None, deadline: Deadline | float | None = None,
-                    time_limit: float = 2.0) -> StateEstimate:
+                    time_limit: float | None = 2.0) -> StateEstimate:
     """The number of states the exact optimum's programme stores for ``engine.plan``.
 
     ``stop_above``: stop listing once the count passes it (the answer is then "at least");
-    ``deadline`` / ``time_limit`` (seconds, default 2): the sooner ends the work, and the answer is
+    ``deadline`` / ``time_limit`` (seconds, default 2; None: none): the sooner ends the work, and the answer is
     then a lower bound or the down-set estimate.  Complexity: O(keys × units) for the listing, at
     most O(stop_above) keys; the estimate O(decomposition pieces × units²) bit operations.
 
