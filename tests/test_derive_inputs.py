@@ -1,0 +1,480 @@
+"""What `opportune derive` reads: glTF/GLB scenes, MuJoCo MJCF models and the assembly's manifest.
+
+One voxel assembly written three ways (a folder of OBJ files, a GLB scene of named nodes with transformed
+unnamed children, an MJCF model of box geoms) derives one plan, and its count is the brute force's of
+tests/test_derive.py.  The GLB reader (this project's own) is checked against trimesh's on transformed
+nodes.  Quantities are checked exhaustively against the brute force over distinct instances, projected
+to part ids; process constraints against the brute force filtered by them.  Every new door is given
+hostile input: exit 1, a message naming the file and what to do, no traceback.
+"""
+
+from __future__ import annotations
+
+import base64
+import itertools
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("trimesh", reason="the geometry extra, which make test installs")
+
+from conftest import run_cli  # noqa: E402
+from opportune.derive import DeriveError, GeometryError, ManifestError, derive  # noqa: E402
+from opportune.engine import Schedule  # noqa: E402
+from test_derive import BruteForce, admits, closure, cube_lines, partition, write_assembly  # noqa: E402
+
+# one unit cube centred on the origin: vertices and outward triangles (0-based), from the OBJ writer's
+_LINES = cube_lines([(0, 0, 0)])
+CUBE_V = np.array([[float(x) - 0.5 for x in ln.split()[1:]] for ln in _LINES if ln.startswith("v ")])
+CUBE_F = np.array([[int(x) - 1 for x in ln.split()[1:]] for ln in _LINES if ln.startswith("f ")])
+
+
+# ---------------------------------------------------------------- writers: GLB and MJCF
+
+
+def glb_bytes(doc: dict, binary: bytes) -> bytes:
+    """A GLB file: the JSON chunk and the binary chunk, each padded to 4 bytes."""
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    total = 12 + 8 + len(js) + 8 + len(binary)
+    return (struct.pack("<4sII", b"glTF", 2, total) + struct.pack("<I4s", len(js), b"JSON") + js
+            + struct.pack("<I4s", len(binary), b"BIN\0") + binary)
+
+
+def cube_doc(nodes: list[dict], roots: list[int]) -> tuple[dict, bytes]:
+    """A glTF document whose mesh 0 is the unit cube centred on the origin (positions, then indices)."""
+    pos, idx = CUBE_V.astype("<f4").tobytes(), CUBE_F.astype("<u2").tobytes()
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": roots}], "nodes": nodes,
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3"},
+                         {"bufferView": 1, "componentType": 5123, "count": 36, "type": "SCALAR"}],
+           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(pos)},
+                           {"buffer": 0, "byteOffset": len(pos), "byteLength": len(idx)}],
+           "buffers": [{"byteLength": len(pos) + len(idx)}]}
+    return doc, pos + idx
+
+
+def write_glb(path: Path, parts: dict[str, list[tuple[int, int, int]]]) -> Path:
+    """The parts as a GLB scene: a named root scaled by 2, each part a named node scaled by 1/2, each cell
+    an unnamed child turned 90° about z and moved to the cell's centre (one cube mesh, instanced)."""
+    nodes = [{"name": "product", "scale": [2, 2, 2], "children": []}]
+    quarter = [0, 0, np.sin(np.pi / 4), np.cos(np.pi / 4)]
+    for name, cells in parts.items():
+        part = {"name": name, "scale": [0.5, 0.5, 0.5], "children": []}
+        nodes[0]["children"].append(len(nodes))
+        nodes.append(part)
+        for c in cells:
+            part["children"].append(len(nodes))
+            nodes.append({"mesh": 0, "translation": [x + 0.5 for x in c], "rotation": quarter})
+    path.write_bytes(glb_bytes(*cube_doc(nodes, [0])))
+    return path
+
+
+def write_mjcf(path: Path, parts: dict[str, list[tuple[int, int, int]]], extra: str = "") -> Path:
+    """The parts as an MJCF model: each a body (moved by one unit, its geoms moved back) of box geoms, a
+    floor plane and a drawn-only sphere that the reader leaves out."""
+    body = []
+    for name, cells in parts.items():
+        geoms = "".join(f'<geom type="box" size=".5 .5 .5" pos="{x - 0.5} {y - 0.5} {z - 0.5}"/>' for x, y, z in cells)
+        body.append(f'<body name="{name}" pos="1 1 1">{geoms}<geom type="sphere" size="9" contype="0" '
+                    f'conaffinity="0"/></body>')
+    path.write_text(f'<mujoco model="voxels">{extra}<worldbody><geom type="plane" size="9 9 .1" pos="0 0 -3"/>'
+                    + "".join(body) + "</worldbody></mujoco>")
+    return path
+
+
+def requires_of(derived) -> set:
+    doc = derived.plan.to_dict()
+    strategies = doc.get("strategies") or [{"requires": doc.get("requires", {})}]
+    return {frozenset((b, a) for a, bs in s["requires"].items() for b in bs) for s in strategies}
+
+
+def fail_text(*args) -> str:
+    r = run_cli("derive", *args)
+    assert r.exit_code == 1, r.output
+    assert "error:" in r.output
+    return " ".join(r.output.split())
+
+
+# ---------------------------------------------------------------- one assembly, three formats
+
+
+@pytest.mark.parametrize("block,k,seed", [((2, 2, 3), 5, 1), ((3, 3, 2), 7, 4), ((2, 3, 2), 6, 9)])
+def test_one_assembly_as_obj_glb_and_mjcf_derives_one_plan(tmp_path, block, k, seed):
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    parts = partition(block, k, seed)
+    brute = BruteForce(parts, block)
+    got = []
+    for where in (write_assembly(tmp_path / "obj", parts), write_glb(tmp_path / "a.glb", parts),
+                  write_mjcf(tmp_path / "a.xml", parts)):
+        try:
+            got.append(derive(where))
+        except DeriveError as exc:
+            got.append(str(exc).split(":")[0])
+    if isinstance(got[0], str):
+        assert got[1] == got[2] == got[0]
+        return
+    assert got[0].blocking.blockers == got[1].blocking.blockers == got[2].blocking.blockers
+    assert requires_of(got[0]) == requires_of(got[1]) == requires_of(got[2])
+    assert Schedule(got[1].plan).count() == Schedule(got[2].plan).count() == brute.count() > 0
+
+
+def test_the_glb_reader_agrees_with_trimesh_on_turned_and_scaled_nodes(tmp_path):
+    """Named nodes with rotations, scales and translations, exported by trimesh: each part's vertices as
+    this project's reader places them are trimesh's own scene graph's, transformed."""
+    import trimesh
+    from trimesh import transformations as tf
+
+    from opportune.derive.scene import read_scene
+
+    scene = trimesh.Scene()
+    rng = np.random.default_rng(5)
+    for i in range(4):
+        turn = tf.rotation_matrix(rng.uniform(0, np.pi), rng.normal(size=3))
+        move = tf.translation_matrix([3.0 * i, rng.uniform(-1, 1), 0])
+        scene.add_geometry(trimesh.creation.box(extents=rng.uniform(0.5, 1.5, size=3)), node_name=f"part{i}",
+                           transform=move @ turn @ np.diag([1.0, 1.0, 2.0, 1.0]))
+    path = tmp_path / "turned.glb"
+    path.write_bytes(scene.export(file_type="glb"))
+    ours = {p.id: p for p in read_scene(path, 1.0)}
+    theirs = trimesh.load(str(path), process=False)
+    assert sorted(ours) == sorted(theirs.graph.nodes_geometry)
+    for node in theirs.graph.nodes_geometry:
+        matrix, geometry = theirs.graph[node]
+        expected = trimesh.transform_points(theirs.geometry[geometry].vertices, matrix)
+        got = np.vstack([b.vertices for b in ours[node].bodies])
+        assert np.allclose(np.sort(got, axis=0), np.sort(np.unique(expected.round(9), axis=0), axis=0), atol=1e-6)
+
+
+def test_a_gltf_with_its_buffer_beside_it_is_read_and_one_elsewhere_is_refused(tmp_path):
+    parts = {"a": [(0, 0, 0)], "b": [(1, 0, 0)]}
+    doc, binary = cube_doc([{"name": "a", "mesh": 0}, {"name": "b", "mesh": 0, "translation": [1, 0, 0]}], [0, 1])
+    (tmp_path / "cube.bin").write_bytes(binary)
+    doc["buffers"][0]["uri"] = "cube.bin"
+    (tmp_path / "two.gltf").write_text(json.dumps(doc))
+    assert Schedule(derive(tmp_path / "two.gltf").plan).count() == BruteForce(parts, (2, 1, 1)).count() == 2
+    doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(binary).decode()
+    (tmp_path / "inline.gltf").write_text(json.dumps(doc))
+    assert Schedule(derive(tmp_path / "inline.gltf").plan).count() == 2
+    for uri in ("../cube.bin", "/etc/passwd", "sub/cube.bin", "file:cube.bin"):
+        doc["buffers"][0]["uri"] = uri
+        (tmp_path / "away.gltf").write_text(json.dumps(doc))
+        assert "not a file beside the scene" in fail_text(tmp_path / "away.gltf")
+
+
+def test_mjcf_primitives_and_meshes_in_world_pose(tmp_path):
+    """A cylinder peg in a ring of boxes goes in along ±z only; a sphere and a capsule resting on the ring
+    are meshed; a mesh geom (an OBJ cube, in a turned body) reads as the box it is."""
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    (tmp_path / "cube.obj").write_text("\n".join(cube_lines([(0, 0, 0)])) + "\n")
+    ring = "".join(f'<geom type="box" size=".5 .5 .5" pos="{x} {y} 0"/>'
+                   for x in (-1, 0, 1) for y in (-1, 0, 1) if (x, y) != (0, 0))
+    (tmp_path / "peg.xml").write_text(
+        '<mujoco><asset><mesh name="cube" file="cube.obj"/></asset><worldbody>'
+        f'<body name="ring">{ring}</body>'
+        '<body name="peg"><geom type="cylinder" size=".5 .5"/></body>'
+        '<body name="ball" pos="0 0 1"><geom type="sphere" size=".5"/></body>'
+        '<body name="pill" pos="3 0 0"><geom type="capsule" size=".3 .2"/></body>'
+        '<body name="block" pos="0 3 .5" euler="0 0 90"><geom type="mesh" mesh="cube"/></body>'
+        '</worldbody></mujoco>')
+    derived = derive(tmp_path / "peg.xml")
+    peg = derived.blocking.blockers["peg"]
+    assert {d for d, q in peg.items() if not q} == {"+z"}      # from below; from above the ball is in the way
+    assert peg["-z"] == {"ball"} and all("ring" in q for d, q in peg.items() if "z" not in d)
+    from opportune.derive.scene import read_scene_assembly
+
+    shapes = {p.id: p for p in read_scene_assembly(tmp_path / "peg.xml").parts}
+    # the OBJ's cube [0, 1]^3 in the body's frame, turned a quarter about z and moved to (0, 3, 0.5)
+    assert np.allclose(shapes["block"].bounds, [[-1.0, 3.0, 0.5], [0.0, 4.0, 1.5]], atol=1e-9)
+    assert np.allclose(shapes["peg"].bounds[:, 2], [-0.5, 0.5]) and shapes["peg"].bounds[1, 0] <= 0.5
+    assert np.allclose(shapes["pill"].bounds[:, 2], [-0.5, 0.5])
+
+
+# ---------------------------------------------------------------- hostile scenes
+
+
+def glb_case(tmp_path: Path, case: str) -> Path:
+    """A GLB file broken one way."""
+    nodes = [{"name": "a", "mesh": 0}, {"name": "b", "mesh": 0, "translation": [1, 0, 0]}]
+    doc, binary = cube_doc(nodes, [0, 1])
+    if case == "deep":
+        doc["nodes"] = [{"name": "a", "children": [1]}] + [{"children": [i + 1]} for i in range(1, 80)] + [{"mesh": 0}]
+    elif case == "cycle":
+        doc["nodes"][0]["children"] = [0]
+    elif case == "unnamed":
+        del doc["nodes"][1]["name"]
+    elif case == "twice":
+        doc["nodes"][1]["name"] = "a"
+    elif case == "nan":
+        doc["nodes"][1]["translation"] = [float("nan"), 0, 0]
+    elif case == "huge count":
+        doc["accessors"][0]["count"] = 70_000
+    elif case == "past the buffer":
+        doc["accessors"][1]["byteOffset"] = 64
+    elif case == "draco":
+        doc["meshes"][0]["primitives"][0]["extensions"] = {"KHR_draco_mesh_compression": {}}
+    elif case == "lines":
+        doc["meshes"][0]["primitives"][0]["mode"] = 1
+    elif case == "control":
+        doc["nodes"][1]["name"] = "b\x1b[31m"
+    elif case == "many nodes":
+        doc["nodes"] += [{"name": f"n{i}"} for i in range(10_001)]
+    path = tmp_path / "bad.glb"
+    if case == "not json":
+        path.write_bytes(glb_bytes(doc, binary).replace(b'"asset"', b'"asset"}}}', 1))
+    elif case == "cut short":
+        path.write_bytes(glb_bytes(doc, binary)[:18])
+    elif case == "deep json":
+        path.write_bytes(b"[" * 200_000 + b"]" * 200_000)
+    else:
+        path.write_bytes(glb_bytes(doc, binary))
+    return path
+
+
+GLB_CASES = {"deep": "nested more than 64 levels", "cycle": "two parents", "unnamed": "has a name",
+             "twice": "two nodes (0 and 1) are named 'a'", "nan": "not finite", "huge count": "at most 60,000",
+             "past the buffer": "reaches past", "draco": "without compression", "lines": "not triangles",
+             "control": "'b\\x1b[31m' holds a control character", "many nodes": "at most 10,000", "not json": "not glTF JSON",
+             "cut short": "cut short", "deep json": "not glTF JSON"}
+
+
+@pytest.mark.parametrize("case", sorted(GLB_CASES))
+def test_a_hostile_glb_is_refused_naming_the_file(tmp_path, case):
+    text = fail_text(glb_case(tmp_path, case))
+    assert "bad.glb" in text and GLB_CASES[case] in text, text
+    assert "\x1b" not in text
+
+
+def test_the_scene_limits_are_checked_before_the_work(tmp_path, monkeypatch):
+    from opportune.derive import scene
+
+    path = write_glb(tmp_path / "two.glb", {"a": [(0, 0, 0), (1, 0, 0)], "b": [(0, 1, 0)]})
+    monkeypatch.setattr(scene, "MAX_TRIANGLES", 23)
+    assert "part 'a' has 24 triangles" in fail_text(path)
+    monkeypatch.setattr(scene, "MAX_TRIANGLES", 20_000)
+    monkeypatch.setattr(scene, "MAX_SCENE_BYTES", 100)
+    assert "at most 100 bytes" in fail_text(path)
+    monkeypatch.setattr(scene, "MAX_SCENE_BYTES", 1 << 20)
+    monkeypatch.setattr(scene, "MAX_MESH_PARTS", 1)
+    assert "more than 1 parts" in fail_text(path)
+
+
+MJCF_CASES = {
+    "entities": ('<?xml version="1.0"?><!DOCTYPE m [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;">]>'
+                 '<mujoco><worldbody><body name="&b;"><geom type="box" size="1 1 1"/></body></worldbody></mujoco>',
+                 "DTD or entities"),
+    "self include": ('<mujoco><include file="bad.xml"/></mujoco>', "includes nested more than 8"),
+    "replicate": ('<mujoco><worldbody><replicate count="100000" offset="1 0 0"><body name="a"><geom type="box" '
+                  'size="1 1 1"/></body></replicate></worldbody></mujoco>', "<replicate> is not read"),
+    "deep": ("<mujoco><worldbody>" + "<body>" * 70 + '<geom type="box" size="1 1 1"/>' + "</body>" * 70
+             + "</worldbody></mujoco>", "nested more than 64 deep"),
+    "world geom": ('<mujoco><worldbody><geom type="box" size="1 1 1"/></worldbody></mujoco>', "named body"),
+    "zero mesh": ('<mujoco><asset><mesh name="z" file="/dev/zero"/></asset><worldbody><body name="a"><geom '
+                  'type="mesh" mesh="z"/></body></worldbody></mujoco>', "not a regular file"),
+    "mujoco refuses": ('<mujoco><worldbody><body name="a"><geom type="box" size="1 1 1" bogus="2"/></body>'
+                       '</worldbody></mujoco>', "MuJoCo refuses the model"),
+    "not xml": ("<mujoco><worldbody>", "not XML"),
+    "control": ('<mujoco><worldbody><body name="a&#155;[31m"><geom type="box" size="1 1 1"/></body><body name="b">'
+                '<geom type="box" size="1 1 1" pos="0.5 0 0"/></body></worldbody></mujoco>', "holds a control character"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MJCF_CASES))
+def test_a_hostile_mjcf_is_refused_naming_the_file(tmp_path, case):
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    xml, expected = MJCF_CASES[case]
+    (tmp_path / "bad.xml").write_text(xml)
+    text = fail_text(tmp_path / "bad.xml")
+    assert expected in text and "\x1b" not in text, text
+    assert "bad.xml" in text
+
+
+def test_the_mjcf_limits_are_checked_before_mujoco_reads_the_model(tmp_path, monkeypatch):
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    from opportune.derive import scene
+
+    path = write_mjcf(tmp_path / "m.xml", {"a": [(0, 0, 0), (1, 0, 0)], "b": [(0, 1, 0)]})
+    for name, value, expected in [("MAX_MJCF_BODIES", 1, "more than 1 <body>"), ("MAX_GEOMS", 3, "more than 3 <geom>"),
+                                  ("MAX_XML_BYTES", 100, "at most 100 bytes"),
+                                  ("MAX_XML_ELEMENTS", 5, "more than 5 elements")]:
+        with monkeypatch.context() as m:
+            m.setattr(scene, name, value)
+            assert expected in fail_text(path), name
+
+
+def test_an_mjcf_texture_of_any_size_is_never_built(tmp_path):
+    """A builtin texture of 10^10 pixels (40 GB) and a texture file that does not exist: only geometry is
+    compiled, so the model reads at once."""
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    path = write_mjcf(tmp_path / "t.xml", {"a": [(0, 0, 0)], "b": [(1, 0, 0)]},
+                      '<asset><texture name="t" type="2d" builtin="checker" width="100000" height="100000"/>'
+                      '<texture name="s" type="skybox" file="nowhere.png"/><material name="m" texture="t"/></asset>')
+    assert Schedule(derive(path).plan).count() == 2
+
+
+# ---------------------------------------------------------------- the manifest
+
+
+BOLTS = {"plate": [(0, 0, 0), (1, 0, 0), (2, 0, 0)], "b1": [(0, 0, 1)], "spacer": [(1, 0, 1)], "b2": [(2, 0, 1)],
+         "cover": [(0, 0, 2), (1, 0, 2), (2, 0, 2)]}
+
+
+def projected(brute: BruteForce, groups: dict[str, list[str]]) -> set[tuple[str, ...]]:
+    """The feasible sequences of part ids: each feasible sequence of instances with an instance replaced by
+    its part's id (every permutation examined: the assemblies here have at most 6 instances)."""
+    part_of = {i: p for p, g in groups.items() for i in g}
+    return {tuple(part_of.get(i, i) for i in seq) for seq in itertools.permutations(brute.ids) if brute.feasible(seq)}
+
+
+@pytest.mark.parametrize("directions", [None, ["+z", "-z"]])
+def test_identical_parts_are_one_part_of_quantity_n_and_the_count_is_the_brute_forces(tmp_path, directions):
+    """Two bolts between a plate and a cover: with the axes every part has a free way (no order); along
+    ±z only each bolt goes in after the plate or before the cover."""
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    brute = BruteForce(BOLTS, (3, 1, 3))
+    if directions:
+        brute.swept = [m[4:] for m in brute.swept]
+    distinct = derive(folder, directions=directions)
+    assert Schedule(distinct.plan).count() == brute.count()
+    (folder / "assembly.yaml").write_text("quantities:\n  bolt: [b1, b2]\nnames: {bolt: hex bolt M6, plate: base plate}\n")
+    merged = derive(folder, directions=directions)
+    parts = {p.id: p for p in merged.plan.parts}
+    assert parts["bolt"].quantity == 2 and parts["bolt"].name == "hex bolt M6" and "b1" not in parts
+    # two interchangeable instances: each sequence of part ids is 2! sequences of instances
+    assert Schedule(merged.plan).count() * 2 == brute.count() > 0
+    feasible = projected(brute, {"bolt": ["b1", "b2"]})
+    everything = set(itertools.permutations(["plate", "bolt", "spacer", "bolt", "cover"]))
+    assert {s for s in everything if admits(merged.plan, s)} == feasible
+    assert (len(feasible) < len(everything)) == bool(directions)
+    r = run_cli("derive", folder, "-o", tmp_path / "plan.yaml")
+    assert r.exit_code == 0 and "quantity: 2" in (tmp_path / "plan.yaml").read_text()
+
+
+def test_instances_the_geometry_tells_apart_are_refused(tmp_path):
+    """Along ±z, a clip above b2 only: b2 has the clip in its way from above, b1 does not."""
+    parts = dict(BOLTS, clip=[(2, 0, 3)])
+    folder = write_assembly(tmp_path / "clip", parts)
+    (folder / "assembly.yaml").write_text("directions: [+z, -z]\nquantities:\n  bolt: [b1, b2]\n")
+    text = fail_text(folder)
+    assert "assembly.yaml:3" in text and "'b1' and 'b2' are not interchangeable" in text and "separate parts" in text
+
+
+def test_a_part_between_two_instances_is_refused(tmp_path):
+    """b1, x, b2 in a row, inserted along ±x only: x must come before one of the bolts, so some sequences
+    put it between them, which a quantity cannot say."""
+    parts = {"b1": [(0, 0, 0)], "x": [(1, 0, 0)], "b2": [(2, 0, 0)]}
+    folder = write_assembly(tmp_path / "row", parts)
+    (folder / "assembly.yaml").write_text("directions: [+x, -x]\n")
+    brute = BruteForce(parts, (3, 1, 1))
+    brute.swept = [m[:2] for m in brute.swept]
+    assert Schedule(derive(folder).plan).count() == brute.count() == 4
+    (folder / "assembly.yaml").write_text("directions: [+x, -x]\nquantities: {bolt: [b1, b2]}\n")
+    assert "'x' goes in between two instances of 'bolt'" in fail_text(folder)
+
+
+@pytest.mark.parametrize("seed", [2, 5])
+def test_process_constraints_are_in_every_strategy_and_the_count_is_the_brute_forces(tmp_path, seed):
+    parts = partition((2, 2, 2), 6, seed)
+    brute = BruteForce(parts, (2, 2, 2))
+    sequence = next(s for s in itertools.permutations(brute.ids) if brute.feasible(s))
+    wanted = [(sequence[1], sequence[4]), (sequence[0], sequence[2])]
+    folder = write_assembly(tmp_path / "voxels", parts)
+    req = {}
+    for b, a in wanted:
+        req.setdefault(a, []).append(b)
+    (tmp_path / "process.yaml").write_text(json.dumps({"requires": req}))
+    derived = derive(folder, manifest=tmp_path / "process.yaml")
+    for pairs in requires_of(derived):
+        assert set(wanted) <= closure(pairs)
+    keeps = [s for s in itertools.permutations(brute.ids) if brute.feasible(s)
+             and all(s.index(b) < s.index(a) for b, a in wanted)]
+    assert Schedule(derived.plan).count() == len(keeps) > 0
+    assert run_cli("derive", folder, "--manifest", tmp_path / "process.yaml").exit_code == 0
+
+
+def test_base_and_fixture(tmp_path):
+    """The plate as base: first in every sequence.  The plate as fixture: no part of the plan, and a
+    direction it blocks is none (the bolts cannot come from below)."""
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    brute = BruteForce(BOLTS, (3, 1, 3))
+    based = derive(folder, base="plate")
+    assert Schedule(based.plan).count() == sum(1 for s in itertools.permutations(brute.ids)
+                                               if brute.feasible(s) and s[0] == "plate")
+    fixed = derive(folder, fixture="plate")
+    assert "plate" not in fixed.plan.part_ids
+    assert Schedule(fixed.plan).count() == sum(1 for s in itertools.permutations(brute.ids)
+                                               if brute.feasible(s) and s[0] == "plate")
+    assert all("plate" not in q for dirs in fixed.blocking.blockers.values() for q in dirs.values())
+
+
+MANIFEST_CASES = {
+    "unknown key": ("quantity:\n  bolt: [b1, b2]\n", "assembly.yaml:1: error: unknown key 'quantity'",
+                    "did you mean 'quantities'?"),
+    "unknown instance": ("quantities:\n  bolt: [b1, b3]\n", "assembly.yaml:2: error: quantities.bolt: unknown instance 'b3'",
+                         "the assembly's parts are b1, b2, cover, plate, spacer"),
+    "unknown part": ("names:\n  cover: lid\n  spaser: ring\n", "assembly.yaml:3: error: names.spaser: unknown part",
+                     "did you mean 'spacer'?"),
+    "cycle": ("requires:\n  cover: [spacer]\n  spacer: [cover]\n", "process constraints in a cycle",
+              "drop one of them"),
+    "two parts": ("quantities:\n  bolt: [b1, b2]\n  pin: [b2, spacer]\n", "'b2' is an instance of 'bolt' and of 'pin'",
+                  "under one part"),
+    "one instance": ("quantities:\n  bolt: [b1]\n", "is not a list of 2 to 300 instance ids", "assembly.yaml:2"),
+    "control": ("names:\n  cover: \"lid\\e[31m\"\n", "is not a display name", "assembly.yaml:2"),
+    "direction": ("directions: [+x, up]\n", "directions.1: 'up' is not a direction", "[x, y, z]"),
+    "zero direction": ("directions: [[0, 0, 0]]\n", "is not a direction", "assembly.yaml:1"),
+    "many directions": ("directions: [" + ", ".join(f"[1, {i}, 0]" for i in range(27)) + "]\n",
+                        "27 directions; a manifest lists at most 26", "assembly.yaml:1"),
+    "not yaml": ("names: [a\n", "YAML syntax error", "assembly.yaml"),
+    "aliases": ("a: &a [x, x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+                "c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\nd: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]\n"
+                "e: [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]\n", "alias", "assembly.yaml"),
+    "fixture constrained": ("fixture: plate\nrequires: {cover: [plate]}\n", "the fixture is in place from the start",
+                            "assembly.yaml:1"),
+    "list": ("- names\n", "not a mapping of keys", "assembly.yaml"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MANIFEST_CASES))
+def test_a_bad_manifest_is_refused_saying_where_and_what_to_do(tmp_path, case):
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    text, *expected = MANIFEST_CASES[case]
+    (folder / "assembly.yaml").write_text(text)
+    out = fail_text(folder)
+    assert all(e in out for e in expected), out
+    assert "\x1b" not in out
+    with pytest.raises(ManifestError):
+        derive(folder)
+
+
+def test_the_manifest_limits(tmp_path, monkeypatch):
+    from opportune.derive import manifest
+
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    (folder / "assembly.yaml").write_text("# " + "x" * 200 + "\n")
+    monkeypatch.setattr(manifest, "MAX_MANIFEST_BYTES", 100)
+    assert "203 bytes; a manifest has at most 100" in fail_text(folder)
+    monkeypatch.setattr(manifest, "MAX_MANIFEST_BYTES", 1 << 20)
+    monkeypatch.setattr(manifest, "MAX_PROCESS", 1)
+    (folder / "assembly.yaml").write_text("requires: {cover: [b1, b2]}\n")
+    assert "2 process constraints; a manifest has at most 1" in fail_text(folder)
+    assert "no such file" in fail_text(folder, "--manifest", tmp_path / "nowhere.yaml")
+
+
+def test_keywords_replace_the_manifest_and_are_checked_alike(tmp_path):
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    brute = BruteForce(BOLTS, (3, 1, 3))
+    (folder / "assembly.yaml").write_text("base: spacre\n")
+    with pytest.raises(ManifestError, match="assembly.yaml:1: error: base: unknown part 'spacre'"):
+        derive(folder)
+    assert Schedule(derive(folder, base="cover").plan).count() == sum(
+        1 for s in itertools.permutations(brute.ids) if brute.feasible(s) and s[0] == "cover")
+    with pytest.raises(ManifestError, match="unknown part 'plat'"):
+        derive(folder, base="plat")
+    with pytest.raises(GeometryError, match="directions 'diagonals'"):
+        derive(folder, directions="diagonals")
+    with pytest.raises(ManifestError, match="not a direction"):
+        derive(folder, directions=["+x", "+w"])
