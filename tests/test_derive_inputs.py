@@ -478,3 +478,33 @@ def test_keywords_replace_the_manifest_and_are_checked_alike(tmp_path):
         derive(folder, directions="diagonals")
     with pytest.raises(ManifestError, match="not a direction"):
         derive(folder, directions=["+x", "+w"])
+
+
+# ---------------------------------------------------------------- STEP (the step extra)
+
+STEP = Path(__file__).parent / "data" / "three_boxes.step"   # made with gmsh's OpenCASCADE kernel, in mm
+
+
+def test_a_step_file_derives_the_plan_of_its_products(tmp_path):
+    """Three boxes in millimetres (a base of 2 x 1 x 1, two cubes on it), products named base, left,
+    right: the same blockers as the OBJ files of the same boxes in millimetres."""
+    pytest.importorskip("cascadio", reason="the step extra, which make test installs")
+    step = derive(STEP)
+    obj = derive(write_assembly(tmp_path / "obj", {"base": [(0, 0, 0), (1, 0, 0)], "left": [(0, 0, 1)],
+                                                   "right": [(1, 0, 1)]}), units="mm")
+    assert step.plan.part_ids == ("base", "left", "right")
+    assert step.blocking.blockers == obj.blocking.blockers
+    assert Schedule(step.plan).count() == Schedule(obj.plan).count() == 6
+
+
+def test_a_hostile_step_file_is_refused(tmp_path, monkeypatch):
+    pytest.importorskip("cascadio", reason="the step extra, which make test installs")
+    from opportune.derive import scene
+
+    (tmp_path / "bad.step").write_text("ISO-10303-21;\nHEADER;garbage\n")
+    assert "bad.step: Open CASCADE could not mesh the STEP file" in fail_text(tmp_path / "bad.step")
+    monkeypatch.setattr(scene, "MAX_STEP_BYTES", 1000)
+    assert "at most 1,000 bytes" in fail_text(STEP)
+    monkeypatch.setattr(scene, "MAX_STEP_BYTES", 1 << 20)
+    monkeypatch.setattr(scene, "STEP_SECONDS", 0.01)      # the child is ended: exit 1, saying so
+    assert "took over 0.01 s" in fail_text(STEP)

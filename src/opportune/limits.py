@@ -66,6 +66,9 @@ MAX_XML_ELEMENTS = 100_000       # elements of an MJCF model, its includes' coun
 MAX_INCLUDE_DEPTH = 8            # <include> within <include> in an MJCF model
 MAX_MJCF_BODIES = 3_000          # <body> elements of an MJCF model (a part may be several unnamed bodies)
 MAX_GEOMS = 10_000               # <geom> elements of an MJCF model
+MAX_STEP_BYTES = 64 << 20        # a STEP file (64 MiB), checked before Open CASCADE reads it
+STEP_SECONDS = 120               # meshing a STEP file (a child process, ended past this)
+STEP_MEMORY = 4 << 30            # the address space of the child process that meshes a STEP file (4 GiB)
 MAX_MANIFEST_BYTES = 1 << 20     # an assembly's manifest (assembly.yaml, 1 MiB)
 MAX_DIRECTIONS = 26              # insertion directions a manifest lists (the axes and the diagonals are 26)
 MAX_PROCESS = 10_000             # process constraints ("this before that") of a manifest
@@ -143,6 +146,10 @@ LIMITS = {limit.key: limit for limit in (
           "command line"),
     Limit("mjcf_bodies", MAX_MJCF_BODIES, "bodies", "bodies of an MJCF model (`derive`)", "command line"),
     Limit("geoms", MAX_GEOMS, "geoms", "geoms of an MJCF model (`derive`)", "command line"),
+    Limit("step_bytes", MAX_STEP_BYTES, "bytes", "a STEP file (`derive`)", "command line"),
+    Limit("step_seconds", STEP_SECONDS, "s", "meshing a STEP file (`derive`)", "command line"),
+    Limit("step_memory", STEP_MEMORY, "bytes", "memory of the process that meshes a STEP file (`derive`)",
+          "command line"),
     Limit("manifest_bytes", MAX_MANIFEST_BYTES, "bytes", "an assembly's manifest (`derive`)", "command line"),
     Limit("directions", MAX_DIRECTIONS, "directions", "insertion directions a manifest lists (`derive`)",
           "command line"),

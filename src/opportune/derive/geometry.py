@@ -21,8 +21,8 @@ from opportune.limits import MAX_ID, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_TRIANGL
 
 #: The mesh formats read, by file suffix.
 SUFFIXES = (".obj", ".stl", ".ply")
-#: The scene files read as a whole assembly (:mod:`opportune.derive.scene`): glTF, GLB and MuJoCo's MJCF.
-SCENE_SUFFIXES = (".glb", ".gltf", ".xml", ".mjcf")
+#: The scene files read as a whole assembly (:mod:`opportune.derive.scene`): glTF, GLB, MuJoCo's MJCF, STEP.
+SCENE_SUFFIXES = (".glb", ".gltf", ".xml", ".mjcf", ".step", ".stp")
 #: Units the files may be in, and their length in metres.
 UNITS = {"m": 1.0, "mm": 0.001}
 #: The default penetration tolerance, as a share of the assembly's size (its bounding box's diagonal):

@@ -1,4 +1,4 @@
-"""An assembly read from one scene file: a glTF/GLB scene or a MuJoCo MJCF model.
+"""An assembly read from one scene file: a glTF/GLB scene, a MuJoCo MJCF model or a STEP file.
 
 * **glTF / GLB**: each named node that carries a mesh is a part (its id the node's name); nodes without
   a name join their nearest named ancestor (a part drawn as several meshes); world transforms are
@@ -10,6 +10,9 @@
   meshed (:data:`CYLINDER_SECTIONS`).  The XML is checked first with expat (no DTD or entity, bounded
   bytes, elements, depth, includes, bodies and geoms; mesh files sized), then compiled by MuJoCo
   (``mujoco.MjSpec``) with textures replaced by one pixel, so that only geometry is built.
+* **STEP** (the ``step`` extra): meshed by Open CASCADE through cascadio in a child process bounded in
+  time and memory (:data:`~opportune.limits.STEP_SECONDS`, :data:`~opportune.limits.STEP_MEMORY`), then
+  read as a GLB scene whose parts are the STEP products.
 
 A mesh's vertices at one position are joined (exporters repeat them along sharp edges), then each
 connected piece is a closed convex body (:func:`opportune.derive.geometry.mesh_bodies`): a part that is
@@ -29,8 +32,8 @@ import numpy as np
 
 from opportune.derive.geometry import UNITS, Assembly, GeometryError, PartShape, assembly_of, check_units, mesh_bodies
 from opportune.limits import (MAX_GEOMS, MAX_ID, MAX_INCLUDE_DEPTH, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_MJCF_BODIES,
-                              MAX_SCENE_BYTES, MAX_SCENE_DEPTH, MAX_SCENE_NODES, MAX_TRIANGLES, MAX_XML_BYTES,
-                              MAX_XML_ELEMENTS)
+                              MAX_SCENE_BYTES, MAX_SCENE_DEPTH, MAX_SCENE_NODES, MAX_STEP_BYTES, MAX_TRIANGLES,
+                              MAX_XML_BYTES, MAX_XML_ELEMENTS, STEP_MEMORY, STEP_SECONDS)
 
 #: A cylinder or a capsule of an MJCF file is meshed as a prism (a capsule: with hemispheres) of this many
 #: sides, inscribed in the true shape: 32 sides stay within 0.5 % of the radius.
@@ -79,14 +82,14 @@ def read_scene_assembly(path: str | Path, *, units: str = "m", tolerance: float 
 
 
 def read_scene(path: Path, scale: float) -> tuple[PartShape, ...]:
-    """The parts of a glTF/GLB scene or an MJCF model, sorted by id, in metres.
+    """The parts of a glTF/GLB scene, an MJCF model or a STEP file, sorted by id, in metres.
 
     Parameters
     ----------
     path : Path
-        A ``.glb``, ``.gltf``, ``.xml`` or ``.mjcf`` file.
+        A ``.glb``, ``.gltf``, ``.xml``, ``.mjcf``, ``.step`` or ``.stp`` file.
     scale : float
-        Metres per unit of the file's coordinates.
+        Metres per unit of the file's coordinates (not used for STEP, whose files carry their unit).
 
     Returns
     -------
@@ -110,6 +113,8 @@ def read_scene(path: Path, scale: float) -> tuple[PartShape, ...]:
         raise GeometryError(f"{_shown(path.name)}: not a file; give a glTF/GLB scene or an MJCF model")
     if path.suffix.lower() in (".glb", ".gltf"):
         parts = _read_gltf(path, scale)
+    elif path.suffix.lower() in (".step", ".stp"):
+        parts = _read_step(path)
     else:
         parts = _read_mjcf(path, scale)
     if not parts:
@@ -157,9 +162,9 @@ def _bytes(path: Path, most: int, what: str, source: Path | None = None) -> byte
 class _Gltf:
     """A glTF document being read: its JSON, the binary chunk of a GLB, the buffers decoded so far."""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, raw: bytes | None = None):
         self.path, self.name = path, _shown(path.name)
-        raw = _bytes(path, MAX_SCENE_BYTES, "a scene file")
+        raw = _bytes(path, MAX_SCENE_BYTES, "a scene file") if raw is None else raw
         self.bin = b""
         if raw[:4] == b"glTF":
             raw = self._glb(raw)
@@ -262,9 +267,9 @@ def _int(value) -> int:
     return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else -1
 
 
-def _read_gltf(path: Path, scale: float) -> list[PartShape]:
+def _read_gltf(path: Path, scale: float, g: _Gltf | None = None) -> list[PartShape]:
     """The parts of a glTF or GLB scene: everything counted and bounded before any vertex is decoded."""
-    g = _Gltf(path)
+    g = _Gltf(path) if g is None else g
     owned = _gltf_parts(g)
     meshes = g.items("meshes", MAX_SCENE_NODES)
     for part, items in owned.items():
@@ -389,6 +394,72 @@ def _triangles(g: _Gltf, prim: dict) -> int:
     if not isinstance(k, int) or not 0 <= k < len(accessors) or _int(accessors[k].get("count")) < 0:
         g.fail(f"accessor {_brief(k)} does not exist or has no count", "export the scene again")
     return accessors[k]["count"] // 3
+
+
+# ---------------------------------------------------------------- STEP
+
+
+def _read_step(path: Path) -> list[PartShape]:
+    """A STEP file's parts: meshed by Open CASCADE (cascadio, the ``step`` extra) into a GLB in metres, in a
+    child process bounded in time and memory (a CAD kernel's failure or hang never takes the command
+    with it), then read as a scene whose parts are the STEP products (a product used several times:
+    ``name.1``, ``name.2``, ...)."""
+    import importlib.util
+    import subprocess
+    import sys
+    import tempfile
+
+    _bytes(path, MAX_STEP_BYTES, "a STEP file")
+    if importlib.util.find_spec("cascadio") is None:
+        raise GeometryError(f"{_shown(path.name)}: reading STEP needs the step extra: pip install "
+                            "'opportune[geometry,step]' (or convert the file to GLB: docs/derive.md)")
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "step.glb"
+        try:
+            done = subprocess.run([sys.executable, "-c", _STEP_SCRIPT, str(path), str(out)], capture_output=True,
+                                  timeout=STEP_SECONDS, preexec_fn=_step_bounds, stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            raise GeometryError(f"{_shown(path.name)}: meshing the STEP file took over {STEP_SECONDS} s; simplify "
+                                "it, or mesh it yourself and give a GLB") from None
+        if done.returncode != 0 or not out.is_file():
+            why = " ".join(done.stderr.decode("utf-8", "replace").split()[-30:])
+            raise GeometryError(f"{_shown(path.name)}: Open CASCADE could not mesh the STEP file "
+                                f"({_shown(why[-300:]) or 'exit ' + str(done.returncode)}); export it again")
+        g = _Gltf(path, _bytes(out, MAX_SCENE_BYTES, "a STEP file's meshes", path))
+    _name_by_product(g)
+    return _read_gltf(path, 1.0, g)
+
+
+#: The child process that meshes a STEP file: one thread, cascadio's default deflections.
+_STEP_SCRIPT = ("import sys, cascadio\n"
+                "sys.exit(0 if cascadio.step_to_glb(sys.argv[1], sys.argv[2], use_parallel=False) == 0 else 1)\n")
+
+
+def _step_bounds() -> None:   # pragma: no cover (runs in the child, before it starts)
+    """The child's memory: at most :data:`STEP_MEMORY` bytes of address space."""
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (STEP_MEMORY, STEP_MEMORY))
+
+
+def _name_by_product(g: _Gltf) -> None:
+    """Name each mesh node of a converted STEP file by its product (its mesh's name): cascadio numbers the
+    nodes and names the meshes."""
+    nodes, meshes = g.items("nodes", MAX_SCENE_NODES), g.items("meshes", MAX_SCENE_NODES)
+    names = [m.get("name") if isinstance(m.get("name"), str) and m.get("name") else f"part{k}"
+             for k, m in enumerate(meshes)]
+    uses: dict[int, int] = {}
+    for node in nodes:
+        if isinstance(node.get("mesh"), int) and 0 <= node["mesh"] < len(meshes):
+            uses[node["mesh"]] = uses.get(node["mesh"], 0) + 1
+    seen: dict[int, int] = {}
+    for node in nodes:
+        m = node.get("mesh")
+        if m in uses:
+            seen[m] = seen.get(m, 0) + 1
+            node["name"] = names[m] + (f".{seen[m]}" if uses[m] > 1 else "")
+        elif "name" in node:
+            del node["name"]     # assemblies are groups: a part is a product
 
 
 # ---------------------------------------------------------------- MJCF
