@@ -508,3 +508,82 @@ def test_a_hostile_step_file_is_refused(tmp_path, monkeypatch):
     monkeypatch.setattr(scene, "MAX_STEP_BYTES", 1 << 20)
     monkeypatch.setattr(scene, "STEP_SECONDS", 0.01)      # the child is ended: exit 1, saying so
     assert "took over 0.01 s" in fail_text(STEP)
+
+
+def _paths(value, path=()):
+    """Every place in a JSON document (its keys' and items' paths)."""
+    yield path
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _paths(v, path + (k,))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _paths(v, path + (i,))
+
+
+def test_a_glb_changed_anywhere_reads_or_is_refused_never_a_crash(tmp_path):
+    """Every value of a valid scene's JSON replaced by junk of each kind, and bytes of its binary chunk
+    flipped: each file reads, or is refused with a GeometryError (never another exception)."""
+    import random
+
+    from opportune.derive.scene import read_scene
+
+    parts = {"a": [(0, 0, 0), (1, 0, 0)], "b": [(0, 1, 0)]}
+    doc, binary = cube_doc([{"name": "product", "children": [1, 2]}, {"name": "a", "mesh": 0},
+                            {"name": "b", "mesh": 0, "translation": [0, 1, 0], "scale": [1, 1, 1]}], [0])
+    junk = [None, -1, 2**40, 1.5, 1e300, "x", [], {}, [0, 0], [1e300] * 4, True, float("inf")]
+    places = [p for p in _paths(doc) if p]
+    rng = random.Random(7)
+    path = tmp_path / "fuzz.glb"
+    for k in range(300):
+        changed = json.loads(json.dumps(doc))
+        where = rng.choice(places)
+        target = changed
+        for key in where[:-1]:
+            target = target[key]
+        target[where[-1]] = rng.choice(junk)
+        data = bytearray(binary)
+        if k % 3 == 0:
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        path.write_bytes(glb_bytes(changed, bytes(data)))
+        try:
+            read_scene(path, 1.0)
+        except GeometryError:
+            pass
+    assert sorted(p.id for p in read_scene(write_glb(tmp_path / "ok.glb", parts), 1.0)) == ["a", "b"]
+
+
+@pytest.mark.parametrize("scale", [1e300, 1e5])
+def test_a_vertex_far_from_the_origin_is_refused_in_every_format(tmp_path, scale):
+    """Coordinates of 1e300 (squares overflow) or 100 km: refused, naming the part and the units, without
+    a warning on the way (the suite turns warnings into errors)."""
+    folder = write_assembly(tmp_path / "far", {"a": [(0, 0, 0)]})
+    (folder / "b.obj").write_text("\n".join(cube_lines([(0, 0, 0)])).replace("v 1", f"v {scale}") + "\n")
+    assert "part 'b': vertex 5" in fail_text(folder) and "within 10,000 m" in fail_text(folder)
+    nodes = [{"name": "a", "mesh": 0}, {"name": "b", "mesh": 0, "scale": [scale, 1, 1]}]
+    (tmp_path / "far.glb").write_bytes(glb_bytes(*cube_doc(nodes, [0, 1])))
+    assert "part 'b'" in fail_text(tmp_path / "far.glb") and "check the units" in fail_text(tmp_path / "far.glb")
+
+
+def test_a_manifest_changed_anywhere_is_read_or_refused_never_a_crash():
+    """Every value of a valid manifest replaced by junk of each kind: read, or a ManifestError."""
+    import random
+
+    from opportune.derive.manifest import check_parts, manifest_from
+
+    doc = {"names": {"bolt": "M6", "cover": "lid"}, "quantities": {"bolt": ["b1", "b2"]}, "base": "plate",
+           "directions": ["+x", [0, 1, -1]], "requires": {"cover": ["bolt", "spacer"]}}
+    junk = [None, -1, 1e300, float("nan"), "x", "", "\x1b", [], {}, [[0]], [None], {"a": []}, True, "y" * 300]
+    places = [p for p in _paths(doc) if p]
+    rng = random.Random(11)
+    for _ in range(400):
+        changed = json.loads(json.dumps(doc))
+        where = rng.choice(places)
+        target = changed
+        for key in where[:-1]:
+            target = target[key]
+        target[where[-1]] = rng.choice(junk)
+        try:
+            check_parts(manifest_from(changed), ["plate", "b1", "b2", "spacer", "cover"])
+        except ManifestError as exc:
+            assert "\x1b" not in str(exc)

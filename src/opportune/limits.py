@@ -58,6 +58,7 @@ MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before
 MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
 MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
 MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
+MAX_COORDINATE = 10_000          # metres from the origin, any vertex (beyond, squares of lengths lose their digits)
 MAX_SCENE_BYTES = 256 << 20      # a glTF/GLB scene file, and its buffers in all (256 MiB: 300 parts of 20,000 triangles)
 MAX_SCENE_NODES = 10_000         # entries of each list of a glTF file (nodes, meshes, accessors, buffers, ...)
 MAX_SCENE_DEPTH = 64             # nesting of a scene's nodes, and of an MJCF file's elements
@@ -133,6 +134,8 @@ LIMITS = {limit.key: limit for limit in (
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
     Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
+          "command line"),
+    Limit("coordinate", MAX_COORDINATE, "m", "a vertex's distance from the origin along each axis (`derive`)",
           "command line"),
     Limit("scene_bytes", MAX_SCENE_BYTES, "bytes", "a glTF/GLB scene with its buffers (`derive`)", "command line"),
     Limit("scene_nodes", MAX_SCENE_NODES, "entries", "each list of a glTF file: nodes, meshes, accessors, ... "

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opportune.limits import MAX_ID, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_TRIANGLES
+from opportune.limits import MAX_COORDINATE, MAX_ID, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_TRIANGLES
 
 #: The mesh formats read, by file suffix.
 SUFFIXES = (".obj", ".stl", ".ply")
@@ -245,7 +245,7 @@ def mesh_bodies(part: str, vertices: np.ndarray, faces: np.ndarray, *, scale: fl
     ------
     GeometryError
         No triangle, over :data:`~opportune.limits.MAX_TRIANGLES`, an index out of range, a coordinate not
-        finite, a degenerate triangle, or a body open or not convex: the message names the part.
+        finite or farther than :data:`~opportune.limits.MAX_COORDINATE` from the origin, a degenerate triangle, or a body open or not convex: the message names the part.
 
     Examples
     --------
@@ -264,7 +264,14 @@ def mesh_bodies(part: str, vertices: np.ndarray, faces: np.ndarray, *, scale: fl
     if not np.isfinite(vertices).all():
         row = int(np.nonzero(~np.isfinite(vertices).all(axis=1))[0][0])
         raise GeometryError(f"part {part!r}: vertex {row + 1} has a coordinate that is not a finite number")
-    return _bodies(part, vertices * scale, faces, join)
+    vertices = vertices * scale
+    far = np.abs(vertices).max(axis=1) > MAX_COORDINATE
+    if far.any():
+        row = int(np.nonzero(far)[0][0])
+        raise GeometryError(f"part {part!r}: vertex {row + 1} is {float(np.abs(vertices[row]).max()):.3g} m from the "
+                            f"origin along an axis; an assembly lies within {MAX_COORDINATE:,} m of it: check the "
+                            "units (--units) or move the model")
+    return _bodies(part, vertices, faces, join)
 
 
 def _bodies(part: str, vertices: np.ndarray, faces: np.ndarray, stl: bool) -> tuple[Body, ...]:

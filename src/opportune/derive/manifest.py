@@ -26,6 +26,7 @@ does not treat alike, or a strategy that would put another part between two of t
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -33,7 +34,7 @@ from typing import Mapping, Sequence
 from opportune.derive.blocking import AXES, Blocking
 from opportune.derive.plan import DeriveError, DerivedStrategy, reduction
 from opportune.engine.poset import Poset, bits
-from opportune.formats.problems import Problem, did_you_mean, unknown_part_hint
+from opportune.formats.problems import CONTROL_CHARS, Problem, did_you_mean, unknown_part_hint
 from opportune.limits import (MAX_DIRECTIONS, MAX_ID, MAX_MANIFEST_BYTES, MAX_MESH_PARTS, MAX_PROCESS, MAX_TEXT)
 
 #: The manifest's file name in an assembly's folder.
@@ -42,7 +43,8 @@ MANIFEST = "assembly.yaml"
 KEYS = {"names": "part id: display name", "quantities": "part id: [instance, ...]", "base": "a part id",
         "fixture": "a part id", "directions": "axes, or a list of +x, -x, ... or [x, y, z]",
         "requires": "part id: [parts before it, ...]"}
-_CONTROL = frozenset(chr(c) for c in range(0x110000) if c < 0x20 and c not in (9, 10, 13) or 0x7f <= c <= 0x9f)
+#: Characters no text of a manifest may hold: as a plan's (control characters, lone surrogates).
+_BAD_CHAR = re.compile(f"[\ud800-\udfff{CONTROL_CHARS}]")
 
 
 class ManifestError(ValueError):
@@ -190,7 +192,7 @@ def manifest_from(data, *, file: str | None = None, lines: dict | None = None) -
 
 
 def _mapping(data: dict, key: str, bad, ok, what: str) -> dict:
-    """``data[key]``, a mapping of part ids to values each ``ok``; problems for the rest."""
+    """``data[key]``'s entries whose key is a part id and whose value is ``ok``; problems for the rest."""
     value = data.get(key)
     if value is None:
         return {}
@@ -201,21 +203,24 @@ def _mapping(data: dict, key: str, bad, ok, what: str) -> dict:
         bad((key,), f"{len(value):,} entries; an assembly has at most {MAX_MESH_PARTS:,} parts",
             "derive subassemblies separately", "limit")
         return {}
+    good = {}
     for k, v in value.items():
         if not _text(k, MAX_ID):
             bad((key, k), f"{_describe(k)} is not a part id", f"give part ids of 1 to {MAX_ID} characters")
         elif not ok(v):
             bad((key, k), f"{_describe(v)} is not {what}", f"give {what}")
-    return value
+        else:
+            good[k] = v
+    return good
 
 
 def _text(value, most: int) -> bool:
     """Text of 1 to ``most`` characters without control characters."""
-    return isinstance(value, str) and 0 < len(value) <= most and not (_CONTROL & set(value))
+    return isinstance(value, str) and 0 < len(value) <= most and not _BAD_CHAR.search(value)
 
 
 def _id_list(value) -> bool:
-    return isinstance(value, list) and len(value) <= MAX_PROCESS and all(_text(v, MAX_ID) for v in value)
+    return isinstance(value, list) and all(_text(v, MAX_ID) for v in value)
 
 
 def _instances(value) -> bool:

@@ -112,7 +112,14 @@ def read_scene(path: Path, scale: float) -> tuple[PartShape, ...]:
     if not path.is_file():
         raise GeometryError(f"{_shown(path.name)}: not a file; give a glTF/GLB scene or an MJCF model")
     if path.suffix.lower() in (".glb", ".gltf"):
-        parts = _read_gltf(path, scale)
+        try:
+            parts = _read_gltf(path, scale)
+        except GeometryError:
+            raise
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
+            # the JSON is the file's: a value of a kind no check above foresaw is the same refusal
+            raise GeometryError(f"{_shown(path.name)}: not a glTF scene this reader follows ({type(exc).__name__}: "
+                                f"{_shown(str(exc)[:120])}); export the scene again") from None
     elif path.suffix.lower() in (".step", ".stp"):
         parts = _read_step(path)
     else:
@@ -238,7 +245,7 @@ class _Gltf:
             self.fail(f"accessor {_brief(k)} does not exist", "export the scene again")
         a = accessors[k]
         width = 3 if kind == "position" else 1
-        dtype = _COMPONENTS.get(a.get("componentType"))
+        dtype = _COMPONENTS.get(_int(a.get("componentType")))
         if ("sparse" in a or a.get("normalized") or a.get("type") != ("VEC3" if width == 3 else "SCALAR")
                 or dtype is None or (kind == "position") != (dtype.kind == "f")):
             self.fail(f"accessor {k} ({kind}s) is sparse, normalized, compressed or of a type not read",
@@ -250,13 +257,16 @@ class _Gltf:
             self.fail(f"accessor {k} has {count:,} {kind}s; a part's mesh has at most {3 * MAX_TRIANGLES:,}",
                       "simplify the mesh")
         view = views[v]
-        start = _int(view.get("byteOffset", 0)) + _int(a.get("byteOffset", 0))
         item = dtype.itemsize * width
-        stride = _int(view.get("byteStride", item)) or item
-        need = start + stride * max(count - 1, 0) + item * (count > 0)
-        data = self.buffer(_int(view.get("buffer", -1)))
-        end = _int(view.get("byteOffset", 0)) + _int(view.get("byteLength", -1))
-        if stride < item or need > end or end > len(data) or start < 0:
+        numbers = [_int(view.get("byteOffset", 0)), _int(a.get("byteOffset", 0)), _int(view.get("byteLength", -1)),
+                   _int(view.get("byteStride", item)), _int(view.get("buffer", -1))]
+        if min(numbers) < 0:
+            self.fail(f"accessor {k}'s buffer view has an offset, length, stride or buffer that is not a whole "
+                      "number of 0 or more", "export the scene again")
+        view_start, offset, length, stride, buffer = numbers
+        start, end = view_start + offset, view_start + length
+        data = self.buffer(buffer)
+        if stride < item or start + stride * max(count - 1, 0) + item * (count > 0) > end or end > len(data):
             self.fail(f"accessor {k} reaches past its buffer view or buffer", "export the scene again")
         rows = np.ndarray((count, width), dtype=dtype, buffer=data, offset=start, strides=(stride, dtype.itemsize))
         return np.array(rows, dtype=np.float64 if kind == "position" else np.int64)
@@ -288,7 +298,8 @@ def _read_gltf(path: Path, scale: float, g: _Gltf | None = None) -> list[PartSha
                 vertices = g.accessor(prim["attributes"].get("POSITION"), "position")
                 faces = (g.accessor(prim["indices"], "index") if "indices" in prim
                          else np.arange(len(vertices), dtype=np.int64)).reshape(-1, 3)
-                world_vertices = vertices @ world[:3, :3].T + world[:3, 3]
+                with np.errstate(all="ignore"):
+                    world_vertices = vertices @ world[:3, :3].T + world[:3, 3]
                 bodies.extend(mesh_bodies(part, world_vertices, faces, scale=scale, join=True))
         parts.append(PartShape(part, path, tuple(bodies), sum(_triangles(g, p) for m, _ in items
                                                              for p in _primitives(g, meshes, m))))
@@ -318,7 +329,8 @@ def _gltf_parts(g: _Gltf) -> dict[str, list[tuple[int, np.ndarray]]]:
             g.fail(f"nodes nested more than {MAX_SCENE_DEPTH} levels deep", "flatten the scene's hierarchy")
         seen.add(n)
         node = nodes[n]
-        world = parent @ _local(g, n, node)
+        with np.errstate(all="ignore"):   # huge scales overflow: the vertices' bound refuses them, once
+            world = parent @ _local(g, n, node)
         if isinstance(node.get("name"), str) and node["name"]:
             owner, named = node["name"], n
         if "mesh" in node:
@@ -350,22 +362,22 @@ def _own(g: _Gltf, n: int, owner: str | None, named: int, owner_node: dict[str, 
 def _local(g: _Gltf, n: int, node: dict) -> np.ndarray:
     """A node's transform from its parent: its ``matrix``, or translation · rotation · scale."""
     try:
-        if "matrix" in node:
-            m = np.array(node["matrix"], dtype=float).reshape(4, 4).T   # glTF stores columns
-        else:
-            t = np.array(node.get("translation", [0, 0, 0]), dtype=float).reshape(3)
-            x, y, z, w = np.array(node.get("rotation", [0, 0, 0, 1]), dtype=float).reshape(4)
-            s = np.array(node.get("scale", [1, 1, 1]), dtype=float).reshape(3)
-            r = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                          [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                          [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-            m = np.eye(4)
-            m[:3, :3] = r * s[None, :]
-            m[:3, 3] = t
+        given = [np.array(node[k], dtype=float).reshape(size) for k, size in
+                 (("matrix", 16), ("translation", 3), ("rotation", 4), ("scale", 3)) if k in node]
     except (TypeError, ValueError):
         g.fail(f"node {n}'s transform is not numbers of the right shape", "export the scene again")
-    if not np.isfinite(m).all():
+    if not all(np.isfinite(v).all() for v in given):
         g.fail(f"node {n}'s transform has a number that is not finite", "fix the node's transform")
+    if "matrix" in node:
+        return given[0].reshape(4, 4).T   # glTF stores columns
+    t = np.array(node.get("translation", [0, 0, 0]), dtype=float).reshape(3)
+    x, y, z, w = np.array(node.get("rotation", [0, 0, 0, 1]), dtype=float).reshape(4)
+    s = np.array(node.get("scale", [1, 1, 1]), dtype=float).reshape(3)
+    m = np.eye(4)
+    m[:3, :3] = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                          [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                          [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]) * s[None, :]
+    m[:3, 3] = t
     return m
 
 
