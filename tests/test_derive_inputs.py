@@ -587,3 +587,34 @@ def test_a_manifest_changed_anywhere_is_read_or_refused_never_a_crash():
             check_parts(manifest_from(changed), ["plate", "b1", "b2", "spacer", "cover"])
         except ManifestError as exc:
             assert "\x1b" not in str(exc)
+
+
+def test_a_glb_with_every_triangle_on_its_own_vertices_and_no_indices(tmp_path):
+    """Exporters repeat vertices along sharp edges (and may give no indices at all): vertices at one
+    position are joined, so each cube is still one closed convex body."""
+    parts = {"a": [(0, 0, 0)], "b": [(1, 0, 0)], "c": [(0, 0, 1)]}
+    soup = CUBE_V[CUBE_F].reshape(-1, 3).astype("<f4").tobytes()
+    nodes = [{"name": p, "mesh": 0, "translation": [x + 0.5 for x in cells[0]]} for p, cells in parts.items()]
+    doc = {"asset": {"version": "2.0"}, "scenes": [{"nodes": [0, 1, 2]}], "nodes": nodes,
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 36, "type": "VEC3"}],
+           "bufferViews": [{"buffer": 0, "byteLength": len(soup)}], "buffers": [{"byteLength": len(soup)}]}
+    (tmp_path / "soup.glb").write_bytes(glb_bytes(doc, soup))
+    derived = derive(tmp_path / "soup.glb")
+    assert Schedule(derived.plan).count() == BruteForce(parts, (2, 1, 2)).count()
+    assert derived.blocking.blockers == derive(write_assembly(tmp_path / "obj", parts)).blocking.blockers
+
+
+def test_an_mjcf_model_with_includes_and_a_mesh_folder(tmp_path):
+    """Bodies in an included file, a mesh found through the compiler's meshdir: read as MuJoCo reads them."""
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "cube.obj").write_text("\n".join(cube_lines([(0, 0, 0)])) + "\n")
+    (tmp_path / "parts.xml").write_text(
+        '<mujoco><worldbody><body name="a"><geom type="mesh" mesh="cube"/></body>'
+        '<body name="b" pos="1 0 0"><geom type="box" size=".5 .5 .5" pos=".5 .5 .5"/></body></worldbody></mujoco>')
+    (tmp_path / "main.xml").write_text('<mujoco><compiler meshdir="meshes"/><asset><mesh name="cube" file="cube.obj"/>'
+                                       '</asset><include file="parts.xml"/></mujoco>')
+    derived = derive(tmp_path / "main.xml")
+    parts = {"a": [(0, 0, 0)], "b": [(1, 0, 0)]}
+    assert derived.blocking.blockers == derive(write_assembly(tmp_path / "obj", parts)).blocking.blockers
