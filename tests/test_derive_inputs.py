@@ -185,9 +185,9 @@ def test_mjcf_primitives_and_meshes_in_world_pose(tmp_path):
     peg = derived.blocking.blockers["peg"]
     assert {d for d, q in peg.items() if not q} == {"+z"}      # from below; from above the ball is in the way
     assert peg["-z"] == {"ball"} and all("ring" in q for d, q in peg.items() if "z" not in d)
-    from opportune.derive.scene import read_scene_assembly
+    from opportune.derive.mjcf import read_mjcf_assembly
 
-    shapes = {p.id: p for p in read_scene_assembly(tmp_path / "peg.xml").parts}
+    shapes = {p.id: p for p in read_mjcf_assembly(tmp_path / "peg.xml").parts}
     # the OBJ's cube [0, 1]^3 in the body's frame, turned a quarter about z and moved to (0, 3, 0.5)
     assert np.allclose(shapes["block"].bounds, [[-1.0, 3.0, 0.5], [0.0, 4.0, 1.5]], atol=1e-9)
     assert np.allclose(shapes["peg"].bounds[:, 2], [-0.5, 0.5]) and shapes["peg"].bounds[1, 0] <= 0.5
@@ -295,14 +295,14 @@ def test_a_hostile_mjcf_is_refused_naming_the_file(tmp_path, case):
 
 def test_the_mjcf_limits_are_checked_before_mujoco_reads_the_model(tmp_path, monkeypatch):
     pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
-    from opportune.derive import scene
+    from opportune.derive import mjcf
 
     path = write_mjcf(tmp_path / "m.xml", {"a": [(0, 0, 0), (1, 0, 0)], "b": [(0, 1, 0)]})
     for name, value, expected in [("MAX_MJCF_BODIES", 1, "more than 1 <body>"), ("MAX_GEOMS", 3, "more than 3 <geom>"),
                                   ("MAX_XML_BYTES", 100, "at most 100 bytes"),
                                   ("MAX_XML_ELEMENTS", 5, "more than 5 elements")]:
         with monkeypatch.context() as m:
-            m.setattr(scene, name, value)
+            m.setattr(mjcf, name, value)
             assert expected in fail_text(path), name
 
 
@@ -618,3 +618,69 @@ def test_an_mjcf_model_with_includes_and_a_mesh_folder(tmp_path):
     derived = derive(tmp_path / "main.xml")
     parts = {"a": [(0, 0, 0)], "b": [(1, 0, 0)]}
     assert derived.blocking.blockers == derive(write_assembly(tmp_path / "obj", parts)).blocking.blockers
+
+
+def random_model(rng) -> str:
+    """An MJCF model of two named bodies (one nested under an unnamed body) with primitive geoms, each
+    frame turned by one of the five ways MJCF writes an orientation, under a random compiler."""
+    angle = rng.choice(["degree", "radian"])
+    seq = "".join(rng.choice(["xyz", "zyx", "XYZ", "zxz", "xYz"]))
+    turn = 180 if angle == "degree" else np.pi
+
+    def frame() -> str:
+        pos = " ".join(f"{x:.4f}" for x in rng.uniform(-2, 2, 3))
+        kind = rng.choice(["none", "quat", "axisangle", "euler", "xyaxes", "zaxis"])
+        numbers = {"quat": rng.normal(size=4), "axisangle": list(rng.normal(size=3)) + [rng.uniform(-turn, turn)],
+                   "euler": rng.uniform(-turn, turn, 3), "xyaxes": rng.normal(size=6), "zaxis": rng.normal(size=3)}
+        extra = "" if kind == "none" else f' {kind}="{" ".join(f"{x:.4f}" for x in numbers[kind])}"'
+        return f'pos="{pos}"{extra}'
+
+    def geom() -> str:
+        kind = rng.choice(["box", "cylinder", "capsule", "sphere", "ellipsoid"])
+        size = " ".join(f"{x:.3f}" for x in rng.uniform(0.1, 0.5, 3 if kind in ("box", "ellipsoid") else 2))
+        if kind in ("cylinder", "capsule") and rng.random() < 0.5:
+            ends = " ".join(f"{x:.3f}" for x in rng.uniform(-1, 1, 6))
+            return f'<geom type="{kind}" size="{size.split()[0]}" fromto="{ends}"/>'
+        return f'<geom type="{kind}" size="{size}" {frame()}/>'
+
+    return (f'<mujoco><compiler angle="{angle}" eulerseq="{seq}"/><worldbody>'
+            f'<body name="a" {frame()}>{geom()}<body {frame()}>{geom()}{geom()}</body>{geom()}</body>'
+            f'<body {frame()}><body name="b" {frame()}>{geom()}</body></body></worldbody></mujoco>')
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_mjcf_reader_without_mujoco_places_every_geom_where_mujoco_does(tmp_path, seed):
+    """Two independent readings of one model: MuJoCo's compiler, and this project's reading of the XML
+    (orientations as quat, axisangle, euler under any sequence and unit, xyaxes, zaxis; fromto)."""
+    pytest.importorskip("mujoco", reason="the physics extra, which make test installs")
+    from opportune.derive.mjcf import read_mjcf_assembly
+
+    rng = np.random.default_rng(seed)
+    (tmp_path / "m.xml").write_text(random_model(rng))
+    ours = read_mjcf_assembly(tmp_path / "m.xml", use_mujoco=False, tolerance=0)
+    theirs = read_mjcf_assembly(tmp_path / "m.xml", use_mujoco=True, tolerance=0)
+    assert [p.id for p in ours.parts] == [p.id for p in theirs.parts] == ["a", "b"]
+    for a, b in zip(ours.parts, theirs.parts):
+        va, vb = (np.vstack([body.vertices for body in p.bodies]) for p in (a, b))
+        va, vb = (v[np.lexsort(np.round(v, 6).T[::-1])] for v in (va, vb))
+        assert va.shape == vb.shape and np.allclose(va, vb, atol=1e-7), a.id
+
+
+def test_what_the_reader_without_mujoco_does_not_follow_is_refused_saying_so(tmp_path):
+    from opportune.derive.mjcf import read_mjcf_assembly
+
+    for xml, expected in [
+        ('<mujoco><default><geom size="1"/></default><worldbody><body name="a"><geom/></body></worldbody></mujoco>',
+         "needs MuJoCo's compiler"),
+        ('<mujoco><worldbody><body name="a"><geom type="mesh" mesh="m"/></body></worldbody></mujoco>',
+         "needs MuJoCo's compiler"),
+        ('<mujoco><worldbody><body name="a"><geom size="x"/></body></worldbody></mujoco>', "is not 3 finite numbers"),
+        ('<mujoco><worldbody><body name="a" quat="1 0 0 0" euler="0 0 1"><geom size="1"/></body></worldbody>'
+         '</mujoco>', "keep one"),
+        ('<mujoco><worldbody><geom type="box" size="1 1 1"/></worldbody></mujoco>', "named body"),
+        ('<mujoco><worldbody><body name="a" quat="0 0 0 0"><geom size="1"/></body></worldbody></mujoco>', "degenerate"),
+        ('<mujoco><worldbody><body name="a"><geom type="capsule" size="1" fromto="1 1 1 1 1 1"/></body></worldbody>'
+         '</mujoco>', "degenerate")]:
+        (tmp_path / "m.xml").write_text(xml)
+        with pytest.raises(GeometryError, match=expected):
+            read_mjcf_assembly(tmp_path / "m.xml", use_mujoco=False)

@@ -1,7 +1,8 @@
 """Plans from the product's geometry: every feasible assembly sequence, derived from the parts' shapes.
 
 :func:`derive` reads an assembly in its assembled pose (a folder of meshes, one file a part:
-:mod:`opportune.derive.geometry`; a glTF/GLB scene or an MJCF model: :mod:`opportune.derive.scene`) and
+:mod:`opportune.derive.geometry`; a glTF/GLB scene or a STEP file: :mod:`opportune.derive.scene`; an MJCF
+model: :mod:`opportune.derive.mjcf`) and
 its manifest (:mod:`opportune.derive.manifest`), finds which parts block each part's straight insertion along each
 direction (:mod:`opportune.derive.blocking`) and writes the plan that admits exactly the feasible
 sequences (:mod:`opportune.derive.plan`).  Needs the ``geometry`` extra (``pip install
@@ -22,6 +23,7 @@ from opportune.derive.manifest import (MANIFEST, Manifest, ManifestError, check_
                                        manifest_from, merge_units, part_ids, read_manifest, unit_pairs,
                                        without_fixture)
 from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies, options
+from opportune.derive.mjcf import read_mjcf_assembly
 from opportune.derive.scene import read_scene_assembly
 from opportune.planning.plan import Plan, PlanError
 
@@ -107,8 +109,7 @@ def derive(path: str | Path, *, directions: str | Sequence | None = None, tolera
     man = _manifest(path, manifest, {"names": names, "quantities": quantities, "base": base, "fixture": fixture,
                                      "requires": requires, "directions": directions})
     label, vectors = _direction_set(directions, man)
-    scene = Path(path).suffix.lower() in SCENE_SUFFIXES and not Path(path).is_dir()
-    assembly = (read_scene_assembly if scene else read_assembly)(path, units=units, tolerance=tolerance)
+    assembly = _reader(path)(path, units=units, tolerance=tolerance)
     check_parts(man, [p.id for p in assembly.parts])
     block = find_blocking(assembly, vectors)
     if man.fixture is not None:
@@ -118,6 +119,14 @@ def derive(path: str | Path, *, directions: str | Sequence | None = None, tolera
     written = merge_units(man, block.parts, strategies)
     plan = _plan(block, written, man, name or Path(path).resolve().name or "assembly", label)
     return Derivation(plan, block, tuple(strategies), time.process_time() - start)
+
+
+def _reader(path):
+    """The reader of an assembly: a folder of meshes, a glTF/GLB or STEP scene, or an MJCF model."""
+    suffix = Path(path).suffix.lower()
+    if Path(path).is_dir() or suffix not in SCENE_SUFFIXES:
+        return read_assembly
+    return read_mjcf_assembly if suffix in (".xml", ".mjcf") else read_scene_assembly
 
 
 def _manifest(path, file, keywords: dict) -> Manifest:

@@ -1,15 +1,10 @@
-"""An assembly read from one scene file: a glTF/GLB scene, a MuJoCo MJCF model or a STEP file.
+"""An assembly read from one scene file: a glTF/GLB scene or a STEP file (MJCF: :mod:`opportune.derive.mjcf`).
 
 * **glTF / GLB**: each named node that carries a mesh is a part (its id the node's name); nodes without
   a name join their nearest named ancestor (a part drawn as several meshes); world transforms are
   applied.  The file is read by this module, not handed to a loader whole: its JSON is checked first
   (nodes, depth, buffers' bytes, each part's triangles, all against :mod:`opportune.limits`), then only
   the positions and indices of the parts' triangles are decoded.  Materials and images are never read.
-* **MJCF**: each named body with geoms is a part (unnamed bodies join their nearest named ancestor);
-  its geoms in their world pose: meshes as they are, boxes, cylinders, spheres, ellipsoids and capsules
-  meshed (:data:`CYLINDER_SECTIONS`).  The XML is checked first with expat (no DTD or entity, bounded
-  bytes, elements, depth, includes, bodies and geoms; mesh files sized), then compiled by MuJoCo
-  (``mujoco.MjSpec``) with textures replaced by one pixel, so that only geometry is built.
 * **STEP** (the ``step`` extra): meshed by Open CASCADE through cascadio in a child process bounded in
   time and memory (:data:`~opportune.limits.STEP_SECONDS`, :data:`~opportune.limits.STEP_MEMORY`), then
   read as a GLB scene whose parts are the STEP products.
@@ -26,35 +21,25 @@ import json
 import os
 import struct
 from pathlib import Path
-from xml.parsers import expat
 
 import numpy as np
 
 from opportune.derive.geometry import UNITS, Assembly, GeometryError, PartShape, assembly_of, check_units, mesh_bodies
-from opportune.limits import (MAX_GEOMS, MAX_ID, MAX_INCLUDE_DEPTH, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_MJCF_BODIES,
-                              MAX_SCENE_BYTES, MAX_SCENE_DEPTH, MAX_SCENE_NODES, MAX_STEP_BYTES, MAX_TRIANGLES,
-                              MAX_XML_BYTES, MAX_XML_ELEMENTS, STEP_MEMORY, STEP_SECONDS)
+from opportune.limits import (MAX_ID, MAX_MESH_PARTS, MAX_SCENE_BYTES, MAX_SCENE_DEPTH, MAX_SCENE_NODES, MAX_STEP_BYTES,
+                              MAX_TRIANGLES, STEP_MEMORY, STEP_SECONDS)
 
-#: A cylinder or a capsule of an MJCF file is meshed as a prism (a capsule: with hemispheres) of this many
-#: sides, inscribed in the true shape: 32 sides stay within 0.5 % of the radius.
-CYLINDER_SECTIONS = 32
-#: Spheres and ellipsoids are meshed as an icosphere subdivided this many times (320 triangles).
-SPHERE_SUBDIVISIONS = 2
 #: glTF accessor component types read: for positions ``float32``; for indices unsigned integers.
 _COMPONENTS = {5126: np.dtype("<f4"), 5121: np.dtype("u1"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4")}
-#: MJCF elements refused: they multiply bodies after the count (replicate, composite, flexcomp), or load
-#: data no geometry needs (height fields, skins, flexes, other models, plugins).
-_MJCF_REFUSED = frozenset({"replicate", "composite", "flexcomp", "flex", "hfield", "skin", "attach", "model",
-                           "plugin", "extension", "instance"})
+
 
 
 def read_scene_assembly(path: str | Path, *, units: str = "m", tolerance: float | None = None) -> Assembly:
-    """Read a glTF/GLB scene or an MJCF model in the assembled pose.
+    """Read a glTF/GLB scene or a STEP file in the assembled pose.
 
     Parameters
     ----------
     path : str or Path
-        A ``.glb``, ``.gltf``, ``.xml`` or ``.mjcf`` file.
+        A ``.glb``, ``.gltf``, ``.step`` or ``.stp`` file.
     units : str
         ``"m"`` (default) or ``"mm"``: the file's unit of length.
     tolerance : float, optional
@@ -72,7 +57,7 @@ def read_scene_assembly(path: str | Path, *, units: str = "m", tolerance: float 
 
     Examples
     --------
-    >>> read_scene_assembly("missing.xml", units="inch")
+    >>> read_scene_assembly("missing.glb", units="inch")
     Traceback (most recent call last):
     ...
     opportune.derive.geometry.GeometryError: units 'inch': give one of m, mm
@@ -82,12 +67,12 @@ def read_scene_assembly(path: str | Path, *, units: str = "m", tolerance: float 
 
 
 def read_scene(path: Path, scale: float) -> tuple[PartShape, ...]:
-    """The parts of a glTF/GLB scene, an MJCF model or a STEP file, sorted by id, in metres.
+    """The parts of a glTF/GLB scene or a STEP file, sorted by id, in metres.
 
     Parameters
     ----------
     path : Path
-        A ``.glb``, ``.gltf``, ``.xml``, ``.mjcf``, ``.step`` or ``.stp`` file.
+        A ``.glb``, ``.gltf``, ``.step`` or ``.stp`` file.
     scale : float
         Metres per unit of the file's coordinates (not used for STEP, whose files carry their unit).
 
@@ -107,10 +92,10 @@ def read_scene(path: Path, scale: float) -> tuple[PartShape, ...]:
     >>> read_scene(Path("missing.glb"), 1.0)
     Traceback (most recent call last):
     ...
-    opportune.derive.geometry.GeometryError: missing.glb: not a file; give a glTF/GLB scene or an MJCF model
+    opportune.derive.geometry.GeometryError: missing.glb: not a file; give a glTF/GLB scene or a STEP file
     """
     if not path.is_file():
-        raise GeometryError(f"{_shown(path.name)}: not a file; give a glTF/GLB scene or an MJCF model")
+        raise GeometryError(f"{shown(path.name)}: not a file; give a glTF/GLB scene or a STEP file")
     if path.suffix.lower() in (".glb", ".gltf"):
         try:
             parts = _read_gltf(path, scale)
@@ -118,21 +103,35 @@ def read_scene(path: Path, scale: float) -> tuple[PartShape, ...]:
             raise
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             # the JSON is the file's: a value of a kind no check above foresaw is the same refusal
-            raise GeometryError(f"{_shown(path.name)}: not a glTF scene this reader follows ({type(exc).__name__}: "
-                                f"{_shown(str(exc)[:120])}); export the scene again") from None
-    elif path.suffix.lower() in (".step", ".stp"):
-        parts = _read_step(path)
+            raise GeometryError(f"{shown(path.name)}: not a glTF scene this reader follows ({type(exc).__name__}: "
+                                f"{shown(str(exc)[:120])}); export the scene again") from None
     else:
-        parts = _read_mjcf(path, scale)
+        parts = _read_step(path)
     if not parts:
-        raise GeometryError(f"{_shown(path.name)}: no part (no named node or body with a mesh or geom); name "
-                            "each part's node or body")
+        raise GeometryError(f"{shown(path.name)}: no part (no named node with a mesh); name "
+                            "each part's node")
     return tuple(sorted(parts, key=lambda p: p.id))
 
 
-def _bad_id(name: str) -> str:
+def id_problem(name: str) -> str:
     """What is wrong with a node's or body's name as a part id: too long or holding a control character
-    (a part id reaches terminals and plan files); ``""`` when nothing is."""
+    (a part id reaches terminals and plan files).
+
+    Parameters
+    ----------
+    name : str
+        The name.
+
+    Returns
+    -------
+    str
+        The problem, to follow the name in a message; ``""`` when there is none.
+
+    Examples
+    --------
+    >>> id_problem("bolt"), id_problem("b\x1b")
+    ('', "'b\\x1b' holds a control character; a part id is printable text")
+    """
     if len(name) > MAX_ID:
         return f"has {len(name):,} characters; a part id has at most {MAX_ID}"
     if not name.isprintable():
@@ -146,19 +145,64 @@ def _brief(value) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _shown(text: str) -> str:
-    """User text for a message: control characters escaped (never sent raw to a terminal)."""
+def shown(text: str) -> str:
+    """User text for a message: control characters escaped (never sent raw to a terminal).
+
+    Parameters
+    ----------
+    text : str
+        A name or path from the user's files.
+
+    Returns
+    -------
+    str
+        The text, or its escaped form if it holds a character that is not printable.
+
+    Examples
+    --------
+    >>> shown("a.glb"), shown("a\x1b.glb")
+    ('a.glb', 'a\\x1b.glb')
+    """
     return text if text.isprintable() else repr(text)[1:-1]
 
 
-def _bytes(path: Path, most: int, what: str, source: Path | None = None) -> bytes:
-    """A regular file's bytes, its size checked before it is read (``source``: the file that names it)."""
-    head = f"{_shown(source.name)}: " if source is not None else ""
+def file_bytes(path: Path, most: int, what: str, source: Path | None = None) -> bytes:
+    """A regular file's bytes, its size checked before it is read.
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    most : int
+        The most bytes it may have.
+    what : str
+        What the file is, for the message ("a scene file").
+    source : Path, optional
+        The file that names it (a scene's buffer, a model's mesh), named first in the message.
+
+    Returns
+    -------
+    bytes
+        Its content.
+
+    Raises
+    ------
+    GeometryError
+        Not a regular file (a folder, a device, missing), or over ``most`` bytes.
+
+    Examples
+    --------
+    >>> file_bytes(Path("/dev/zero"), 10, "a mesh")
+    Traceback (most recent call last):
+    ...
+    opportune.derive.geometry.GeometryError: /dev/zero is not a regular file; give a mesh as a file
+    """
+    head = f"{shown(source.name)}: " if source is not None else ""
     if not path.is_file():
-        raise GeometryError(f"{head}{_shown(str(path))} is not a regular file; give {what} as a file")
+        raise GeometryError(f"{head}{shown(str(path))} is not a regular file; give {what} as a file")
     size = path.stat().st_size
     if size > most:
-        raise GeometryError(f"{head}{_shown(path.name)}: {size:,} bytes; {what} has at most {most:,} bytes: split "
+        raise GeometryError(f"{head}{shown(path.name)}: {size:,} bytes; {what} has at most {most:,} bytes: split "
                             "the assembly or simplify its meshes")
     return path.read_bytes()
 
@@ -170,15 +214,15 @@ class _Gltf:
     """A glTF document being read: its JSON, the binary chunk of a GLB, the buffers decoded so far."""
 
     def __init__(self, path: Path, raw: bytes | None = None):
-        self.path, self.name = path, _shown(path.name)
-        raw = _bytes(path, MAX_SCENE_BYTES, "a scene file") if raw is None else raw
+        self.path, self.name = path, shown(path.name)
+        raw = file_bytes(path, MAX_SCENE_BYTES, "a scene file") if raw is None else raw
         self.bin = b""
         if raw[:4] == b"glTF":
             raw = self._glb(raw)
         try:
             self.doc = json.loads(raw)
         except (ValueError, RecursionError) as exc:
-            self.fail(f"not glTF JSON ({type(exc).__name__}: {_shown(str(exc)[:120])})", "export the scene again")
+            self.fail(f"not glTF JSON ({type(exc).__name__}: {shown(str(exc)[:120])})", "export the scene again")
         if not isinstance(self.doc, dict):
             self.fail("not glTF JSON (no object at the top)", "export the scene again")
         self.buffers: dict[int, bytes] = {}
@@ -230,7 +274,7 @@ class _Gltf:
             if os.path.basename(uri) != uri or uri in (".", "..") or "%" in uri or ":" in uri:
                 self.fail(f"buffer {k} names {uri[:100]!r}, not a file beside the scene",
                           "keep the scene's .bin files in its folder, or export a single .glb")
-            data = _bytes(self.path.parent / uri, MAX_SCENE_BYTES - self.read, "a scene's buffers in all", self.path)
+            data = file_bytes(self.path.parent / uri, MAX_SCENE_BYTES - self.read, "a scene's buffers in all", self.path)
         self.read += len(data) if uri is not None else 0
         if self.read > MAX_SCENE_BYTES:
             self.fail(f"buffers of more than {MAX_SCENE_BYTES:,} bytes in all", "split the assembly")
@@ -350,7 +394,7 @@ def _own(g: _Gltf, n: int, owner: str | None, named: int, owner_node: dict[str, 
     if owner is None:
         g.fail(f"node {n} carries a mesh but neither it nor an ancestor has a name",
                "name the node: its name is the part's id")
-    bad = _bad_id(owner)
+    bad = id_problem(owner)
     if bad:
         g.fail(f"node {named}'s name {bad}", "rename the node")
     first = owner_node.setdefault(owner, named)
@@ -421,9 +465,9 @@ def _read_step(path: Path) -> list[PartShape]:
     import sys
     import tempfile
 
-    _bytes(path, MAX_STEP_BYTES, "a STEP file")
+    file_bytes(path, MAX_STEP_BYTES, "a STEP file")
     if importlib.util.find_spec("cascadio") is None:
-        raise GeometryError(f"{_shown(path.name)}: reading STEP needs the step extra: pip install "
+        raise GeometryError(f"{shown(path.name)}: reading STEP needs the step extra: pip install "
                             "'opportune[geometry,step]' (or convert the file to GLB: docs/derive.md)")
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "step.glb"
@@ -431,13 +475,13 @@ def _read_step(path: Path) -> list[PartShape]:
             done = subprocess.run([sys.executable, "-c", _STEP_SCRIPT, str(path), str(out)], capture_output=True,
                                   timeout=STEP_SECONDS, preexec_fn=_step_bounds, stdin=subprocess.DEVNULL)
         except subprocess.TimeoutExpired:
-            raise GeometryError(f"{_shown(path.name)}: meshing the STEP file took over {STEP_SECONDS} s; simplify "
+            raise GeometryError(f"{shown(path.name)}: meshing the STEP file took over {STEP_SECONDS} s; simplify "
                                 "it, or mesh it yourself and give a GLB") from None
         if done.returncode != 0 or not out.is_file():
             why = " ".join(done.stderr.decode("utf-8", "replace").split()[-30:])
-            raise GeometryError(f"{_shown(path.name)}: Open CASCADE could not mesh the STEP file "
-                                f"({_shown(why[-300:]) or 'exit ' + str(done.returncode)}); export it again")
-        g = _Gltf(path, _bytes(out, MAX_SCENE_BYTES, "a STEP file's meshes", path))
+            raise GeometryError(f"{shown(path.name)}: Open CASCADE could not mesh the STEP file "
+                                f"({shown(why[-300:]) or 'exit ' + str(done.returncode)}); export it again")
+        g = _Gltf(path, file_bytes(out, MAX_SCENE_BYTES, "a STEP file's meshes", path))
     _name_by_product(g)
     return _read_gltf(path, 1.0, g)
 
@@ -472,159 +516,3 @@ def _name_by_product(g: _Gltf) -> None:
             node["name"] = names[m] + (f".{seen[m]}" if uses[m] > 1 else "")
         elif "name" in node:
             del node["name"]     # assemblies are groups: a part is a product
-
-
-# ---------------------------------------------------------------- MJCF
-
-
-def _read_mjcf(path: Path, scale: float) -> list[PartShape]:
-    """The parts of an MJCF model: checked with expat, compiled by MuJoCo, geoms meshed in world pose."""
-    _scan_mjcf(path)
-    try:
-        import mujoco
-    except ImportError:
-        raise GeometryError(f"{_shown(path.name)}: reading an MJCF model needs MuJoCo: pip install "
-                            "'opportune[geometry,physics]'") from None
-    try:
-        spec = mujoco.MjSpec.from_file(str(path))
-        for t in spec.textures:    # only geometry is wanted: a texture's pixels (a file, or a huge builtin) never
-            t.file, t.content_type, t.cubefiles = "", "", [""] * 6
-            t.builtin, t.type, t.width, t.height = mujoco.mjtBuiltin.mjBUILTIN_FLAT, mujoco.mjtTexture.mjTEXTURE_2D, 1, 1
-        model = spec.compile()
-    except Exception as exc:   # MuJoCo reports every problem of a model as one kind of error, with its line
-        raise GeometryError(f"{_shown(path.name)}: MuJoCo refuses the model: "
-                            f"{_shown(' '.join(str(exc).split())[:300])}; fix the model") from None
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    owner = _body_owners(model, _shown(path.name))
-    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-    for k in range(model.ngeom):
-        kind = int(model.geom_type[k])
-        if kind == mujoco.mjtGeom.mjGEOM_PLANE or not (model.geom_contype[k] or model.geom_conaffinity[k]):
-            continue   # an infinite floor is no part; a geom that collides with nothing is only drawn
-        body = int(model.geom_bodyid[k])
-        part = owner[body]
-        if part is None:
-            raise GeometryError(f"{_shown(path.name)}: geom {_geom_label(model, k)} is in the worldbody or an "
-                                "unnamed body under it; put it in a named body (a part)")
-        local, faces = _geom_mesh(mujoco, model, k, part, path)
-        world = local @ data.geom_xmat[k].reshape(3, 3).T + data.geom_xpos[k]
-        pieces.setdefault(part, []).append((world, faces))
-    parts = []
-    for part, items in pieces.items():
-        triangles = sum(len(f) for _, f in items)
-        if triangles > MAX_TRIANGLES:
-            raise GeometryError(f"{_shown(path.name)}: body {part!r} has {triangles:,} triangles; a part has at "
-                                f"most {MAX_TRIANGLES:,}: simplify its meshes")
-        bodies = [b for v, f in items for b in mesh_bodies(part, v, f, scale=scale, join=True)]
-        parts.append(PartShape(part, path, tuple(bodies), triangles))
-    return parts
-
-
-def _body_owners(model, file: str) -> list[str | None]:
-    """For each body, its part: its name, or its nearest named ancestor's; None in the worldbody."""
-    owner: list[str | None] = [None]
-    for b in range(1, model.nbody):
-        name = model.body(b).name
-        if name and _bad_id(name):
-            raise GeometryError(f"{file}: body {b}'s name {_bad_id(name)}; rename the body")
-        owner.append(name if name else owner[int(model.body_parentid[b])])
-    return owner
-
-
-def _geom_label(model, k: int) -> str:
-    name = model.geom(k).name
-    return repr(name) if name else str(k)
-
-
-def _geom_mesh(mujoco, model, k: int, part: str, path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """A geom's surface in its own frame: a mesh's vertices and faces, or a primitive meshed."""
-    import trimesh.creation as make
-
-    kind, size = int(model.geom_type[k]), np.array(model.geom_size[k], dtype=float)
-    g = mujoco.mjtGeom
-    if kind == g.mjGEOM_MESH:
-        m = int(model.geom_dataid[k])
-        va, vn = int(model.mesh_vertadr[m]), int(model.mesh_vertnum[m])
-        fa, fn = int(model.mesh_faceadr[m]), int(model.mesh_facenum[m])
-        return np.array(model.mesh_vert[va:va + vn], dtype=float), np.array(model.mesh_face[fa:fa + fn], dtype=np.int64)
-    if kind == g.mjGEOM_BOX:
-        mesh = make.box(extents=2 * size)
-    elif kind == g.mjGEOM_CYLINDER:
-        mesh = make.cylinder(radius=size[0], height=2 * size[1], sections=CYLINDER_SECTIONS)
-    elif kind == g.mjGEOM_CAPSULE:
-        mesh = make.capsule(height=2 * size[1], radius=size[0], count=[CYLINDER_SECTIONS // 2] * 2)
-    elif kind in (g.mjGEOM_SPHERE, g.mjGEOM_ELLIPSOID):
-        mesh = make.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=1.0)
-        mesh.apply_scale(size if kind == g.mjGEOM_ELLIPSOID else size[0])
-    else:
-        raise GeometryError(f"{_shown(path.name)}: body {part!r}: geom {_geom_label(model, k)} is of a type not "
-                            "read (height field or SDF); give it as a mesh")
-    return np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64)
-
-
-def _scan_mjcf(path: Path) -> None:
-    """Check an MJCF file and its includes before MuJoCo reads them: each file's bytes, no DTD or entity,
-    the elements, their depth, the includes' depth, the bodies and geoms, no element that multiplies
-    bodies, and every mesh file a regular file within :data:`~opportune.limits.MAX_MESH_BYTES`."""
-    counts = {"element": 0, "body": 0, "geom": 0}
-    meshdirs: list[str] = []
-    meshes: list[str] = []
-    _scan_xml(path, path.parent, 0, counts, meshdirs, meshes)
-    for name in meshes:
-        base = path.parent / (meshdirs[-1] if meshdirs else "")
-        _bytes(base / name, MAX_MESH_BYTES, "a part's mesh file", path)
-
-
-def _scan_xml(path: Path, home: Path, depth: int, counts: dict, meshdirs: list, meshes: list,
-              source: Path | None = None) -> None:
-    """One XML file of the model (``depth`` includes down), scanned with expat."""
-    name = _shown(path.name)
-    raw = _bytes(path, MAX_XML_BYTES, "an MJCF file", source)
-    counts["bytes"] = counts.get("bytes", 0) + len(raw)
-    if counts["bytes"] > MAX_XML_BYTES:
-        raise GeometryError(f"{name}: the model and its includes have more than {MAX_XML_BYTES:,} bytes in all; "
-                            "split the assembly")
-    parser = expat.ParserCreate()
-    open_tags: list[str] = []
-    includes: list[str] = []
-
-    def refuse(*_args):
-        raise GeometryError(f"{name}: line {parser.CurrentLineNumber}: the file declares a DTD or entities; remove "
-                            "the <!DOCTYPE ...> and <!ENTITY ...> declarations: MJCF needs none")
-
-    def start(tag, attrs):
-        counts["element"] += 1
-        if counts["element"] > MAX_XML_ELEMENTS or len(open_tags) >= MAX_SCENE_DEPTH:
-            raise GeometryError(f"{name}: line {parser.CurrentLineNumber}: more than {MAX_XML_ELEMENTS:,} elements "
-                                f"or nested more than {MAX_SCENE_DEPTH} deep; split the assembly")
-        if tag in _MJCF_REFUSED:
-            raise GeometryError(f"{name}: line {parser.CurrentLineNumber}: <{_shown(tag)}> is not read (it multiplies "
-                                "bodies or loads data no part's shape needs); expand or remove it")
-        if tag in ("body", "geom"):
-            counts[tag] += 1
-            most = MAX_MJCF_BODIES if tag == "body" else MAX_GEOMS
-            if counts[tag] > most:
-                raise GeometryError(f"{name}: more than {most:,} <{tag}> elements; an MJCF assembly has at most "
-                                    f"{most:,}: derive subassemblies separately")
-        if tag == "include":
-            includes.append(attrs.get("file", ""))
-        elif tag == "mesh" and "file" in attrs:
-            meshes.append(attrs["file"])
-        elif tag == "compiler" and ("meshdir" in attrs or "assetdir" in attrs):
-            meshdirs.append(attrs.get("meshdir", attrs.get("assetdir")))
-        open_tags.append(tag)
-
-    parser.StartElementHandler = start
-    parser.EndElementHandler = lambda tag: open_tags.pop()
-    parser.StartDoctypeDeclHandler = refuse
-    parser.EntityDeclHandler = refuse
-    try:
-        parser.Parse(raw, True)
-    except expat.ExpatError as exc:
-        raise GeometryError(f"{name}: not XML ({_shown(str(exc))}); fix the file") from None
-    for file in includes:
-        if depth + 1 > MAX_INCLUDE_DEPTH:
-            raise GeometryError(f"{name}: includes nested more than {MAX_INCLUDE_DEPTH} deep (or an include of "
-                                "itself); flatten the includes")
-        _scan_xml(home / file, home, depth + 1, counts, meshdirs, meshes, path)
