@@ -412,18 +412,20 @@ def test_base_and_fixture(tmp_path):
 
 
 MANIFEST_CASES = {
-    "unknown key": ("quantity:\n  bolt: [b1, b2]\n", "assembly.yaml:1: error: unknown key 'quantity'",
+    "unknown key": ("quantity:\n  bolt: [b1, b2]\n", "assembly.yaml:1: unknown key 'quantity'",
                     "did you mean 'quantities'?"),
-    "unknown instance": ("quantities:\n  bolt: [b1, b3]\n", "assembly.yaml:2: error: quantities.bolt: unknown instance 'b3'",
+    "unknown instance": ("quantities:\n  bolt: [b1, b3]\n", "assembly.yaml:2: quantities.bolt: unknown instance 'b3'",
                          "the assembly's parts are b1, b2, cover, plate, spacer"),
-    "unknown part": ("names:\n  cover: lid\n  spaser: ring\n", "assembly.yaml:3: error: names.spaser: unknown part",
+    "unknown part": ("names:\n  cover: lid\n  spaser: ring\n", "assembly.yaml:3: names.spaser: unknown part",
                      "did you mean 'spacer'?"),
     "cycle": ("requires:\n  cover: [spacer]\n  spacer: [cover]\n", "process constraints in a cycle",
               "drop one of them"),
     "two parts": ("quantities:\n  bolt: [b1, b2]\n  pin: [b2, spacer]\n", "'b2' is an instance of 'bolt' and of 'pin'",
                   "under one part"),
     "one instance": ("quantities:\n  bolt: [b1]\n", "is not a list of 2 to 300 instance ids", "assembly.yaml:2"),
-    "control": ("names:\n  cover: \"lid\\e[31m\"\n", "is not a display name", "assembly.yaml:2"),
+    "control": ("names:\n  cover: \"lid\\e[31m\"\n", "is not a display name (text): it holds a control character",
+                "assembly.yaml:2"),
+    "self": ("requires: {cover: [cover]}\n", "process constraints in a cycle: cover before cover", "assembly.yaml:1"),
     "direction": ("directions: [+x, up]\n", "directions.1: 'up' is not a direction", "[x, y, z]"),
     "zero direction": ("directions: [[0, 0, 0]]\n", "is not a direction", "assembly.yaml:1"),
     "many directions": ("directions: [" + ", ".join(f"[1, {i}, 0]" for i in range(27)) + "]\n",
@@ -468,7 +470,7 @@ def test_keywords_replace_the_manifest_and_are_checked_alike(tmp_path):
     folder = write_assembly(tmp_path / "bolts", BOLTS)
     brute = BruteForce(BOLTS, (3, 1, 3))
     (folder / "assembly.yaml").write_text("base: spacre\n")
-    with pytest.raises(ManifestError, match="assembly.yaml:1: error: base: unknown part 'spacre'"):
+    with pytest.raises(ManifestError, match="assembly.yaml:1: base: unknown part 'spacre'"):
         derive(folder)
     assert Schedule(derive(folder, base="cover").plan).count() == sum(
         1 for s in itertools.permutations(brute.ids) if brute.feasible(s) and s[0] == "cover")

@@ -33,6 +33,7 @@ from typing import Mapping, Sequence
 
 from opportune.derive.blocking import AXES, Blocking
 from opportune.derive.plan import DeriveError, DerivedStrategy, reduction
+from opportune.derive.scene import shown
 from opportune.engine.poset import Poset, bits
 from opportune.formats.problems import CONTROL_CHARS, Problem, did_you_mean, unknown_part_hint
 from opportune.limits import (MAX_DIRECTIONS, MAX_ID, MAX_MANIFEST_BYTES, MAX_MESH_PARTS, MAX_PROCESS, MAX_TEXT)
@@ -52,7 +53,8 @@ class ManifestError(ValueError):
 
     def __init__(self, problems: Sequence[Problem]):
         self.problems = list(problems)
-        super().__init__("\n".join(str(p) for p in self.problems))
+        super().__init__("\n".join(f"{p.where + ': ' if p.where else ''}{p.message}" + (f" — {p.hint}" if p.hint else "")
+                                   for p in self.problems))
 
 
 @dataclass(frozen=True)
@@ -103,12 +105,12 @@ def read_manifest(path: str | Path) -> dict:
     >>> read_manifest("no-such.yaml")
     Traceback (most recent call last):
     ...
-    opportune.derive.manifest.ManifestError: no-such.yaml: error: no such file — give the assembly's manifest (YAML)
+    opportune.derive.manifest.ManifestError: no-such.yaml: no such file — give the assembly's manifest (YAML)
     """
     from opportune.formats.loader import parse_yaml
 
     path = Path(path)
-    name = _shown(str(path))
+    name = shown(str(path))
     if not path.is_file():
         raise ManifestError([Problem("no such file", "give the assembly's manifest (YAML)", file=name)])
     size = path.stat().st_size
@@ -156,7 +158,7 @@ def manifest_from(data, *, file: str | None = None, lines: dict | None = None) -
     >>> manifest_from({"name": "x"}, file="assembly.yaml")
     Traceback (most recent call last):
     ...
-    opportune.derive.manifest.ManifestError: assembly.yaml: error: unknown key 'name' — did you mean 'names'? the keys are names, quantities, base, fixture, directions, requires
+    opportune.derive.manifest.ManifestError: assembly.yaml: unknown key 'name' — did you mean 'names'? the keys are names, quantities, base, fixture, directions, requires
     """
     found: list[Problem] = []
     man = Manifest(file=file, lines=lines or {})
@@ -177,7 +179,8 @@ def manifest_from(data, *, file: str | None = None, lines: dict | None = None) -
     single = {k: data[k] for k in ("base", "fixture") if k in data and data[k] is not None}
     for k, v in single.items():
         if not _text(v, MAX_ID):
-            bad((k,), f"{_describe(v)} is not a part id", f"give one part id of 1 to {MAX_ID} characters")
+            bad((k,), f"{_describe(v)} is not a part id{_why(v, MAX_ID)}", f"give one part id of 1 to {MAX_ID} "
+                "printable characters")
     directions = _directions(data.get("directions"), bad) if data.get("directions") is not None else None
     pairs = tuple((b, a) for a, bs in requires.items() for b in bs)
     if len(pairs) > MAX_PROCESS:
@@ -206,12 +209,24 @@ def _mapping(data: dict, key: str, bad, ok, what: str) -> dict:
     good = {}
     for k, v in value.items():
         if not _text(k, MAX_ID):
-            bad((key, k), f"{_describe(k)} is not a part id", f"give part ids of 1 to {MAX_ID} characters")
+            bad((key, k), f"{_describe(k)} is not a part id{_why(k, MAX_ID)}", f"give part ids of 1 to {MAX_ID} "
+                "printable characters")
         elif not ok(v):
-            bad((key, k), f"{_describe(v)} is not {what}", f"give {what}")
+            bad((key, k), f"{_describe(v)} is not {what}{_why(v, MAX_TEXT)}", f"give {what}")
         else:
             good[k] = v
     return good
+
+
+def _why(value, most: int) -> str:
+    """Why a string is not text a manifest takes (``""`` for other values: the kind says it)."""
+    if not isinstance(value, str):
+        return ""
+    if _BAD_CHAR.search(value):
+        return ": it holds a control character (a terminal would act on it)"
+    if len(value) > most:
+        return f": {len(value):,} characters, over {most:,}"
+    return ": it is empty" if not value else ""
 
 
 def _text(value, most: int) -> bool:
@@ -266,8 +281,12 @@ def _cycle(pairs, bad) -> None:
     req: dict[str, list[str]] = {}
     for b, a in pairs:
         req.setdefault(a, []).append(b)
+    for b, a in pairs:
+        if a == b:
+            bad(("requires", a), f"process constraints in a cycle: {shown(a)} before {shown(a)}",
+                "drop it: a part cannot go in before itself")
     for cycle in find_cycles(ids, req):
-        bad(("requires", cycle[1]), "process constraints in a cycle: " + " before ".join(map(_shown, cycle)),
+        bad(("requires", cycle[1]), "process constraints in a cycle: " + " before ".join(map(shown, cycle)),
             "drop one of them: no sequence can keep a cycle")
 
 
@@ -293,7 +312,7 @@ def check_parts(man: Manifest, instances: Sequence[str]) -> None:
     >>> check_parts(manifest_from({"base": "cx"}), ["ca", "co"])
     Traceback (most recent call last):
     ...
-    opportune.derive.manifest.ManifestError: error: base: unknown part 'cx' — the assembly's parts are ca, co
+    opportune.derive.manifest.ManifestError: base: unknown part 'cx' — the assembly's parts are ca, co
     """
     found: list[Problem] = []
     known = set(instances)
@@ -329,21 +348,16 @@ def check_parts(man: Manifest, instances: Sequence[str]) -> None:
 
 def _unknown(man: Manifest, path: tuple, pid: str, known, what: str) -> Problem:
     return Problem(f"{_path(path)}: unknown {what} {pid!r}",
-                   unknown_part_hint(_shown(pid), sorted(known), "the assembly's parts"), **man.where(*path))
+                   unknown_part_hint(shown(pid), sorted(known), "the assembly's parts"), **man.where(*path))
 
 
 def _path(path: tuple) -> str:
-    return ".".join(_shown(str(p)) for p in path)
+    return ".".join(shown(str(p)) for p in path)
 
 
 def _describe(value) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _shown(text: str) -> str:
-    """User text for a message: control characters escaped (never sent raw to a terminal)."""
-    return text if text.isprintable() else repr(text)[1:-1]
 
 
 # ---------------------------------------------------------------- the units of identical parts
@@ -406,7 +420,7 @@ def check_interchangeable(man: Manifest, options: Mapping[str, list[tuple[str, f
     >>> check_interchangeable(manifest_from({"quantities": {"b": ["b1", "b2"]}}), opts)
     Traceback (most recent call last):
     ...
-    opportune.derive.manifest.ManifestError: error: quantities.b: instances 'b1' and 'b2' are not interchangeable in the assembly (part 'b1' goes in with other parts in its way than 'b2' would) — list them as separate parts
+    opportune.derive.manifest.ManifestError: quantities.b: instances 'b1' and 'b2' are not interchangeable in the assembly (part 'b1' goes in with other parts in its way than 'b2' would) — list them as separate parts
     """
     sets = {p: {q for _, q in opts} for p, opts in options.items()}
     for part, group in man.quantities.items():
@@ -416,7 +430,7 @@ def check_interchangeable(man: Manifest, options: Mapping[str, list[tuple[str, f
                 image = {frozenset(swap.get(x, x) for x in q) for q in family}
                 if image != sets.get(swap.get(p, p)):
                     raise ManifestError([Problem(
-                        f"quantities.{_shown(part)}: instances {a!r} and {b!r} are not interchangeable "
+                        f"quantities.{shown(part)}: instances {a!r} and {b!r} are not interchangeable "
                         f"in the assembly (part {p!r} goes in with other parts in its way than "
                         f"{swap.get(p, p)!r} would)", "list them as separate parts",
                         **man.where("quantities", part))])
@@ -465,7 +479,7 @@ def merge_units(man: Manifest, ids: Sequence[str], strategies: Sequence[DerivedS
             if between:
                 x = ids[next(bits(between))]
                 raise ManifestError([Problem(
-                    f"quantities.{_shown(part)}: in some feasible sequences part {group_of.get(x, x)!r} goes "
+                    f"quantities.{shown(part)}: in some feasible sequences part {group_of.get(x, x)!r} goes "
                     f"in between two instances of {part!r}: a quantity cannot say that",
                     "list the instances as separate parts", **man.where("quantities", part))])
         # a before b iff a's last unit is before b's first (a closed order: last(a) < first(b) <= last(b) < ...)
@@ -531,7 +545,7 @@ def without_fixture(block: Blocking, fixture: str) -> Blocking:
                 for p, dirs in block.blockers.items() if p != fixture}
     stuck = [p for p, dirs in blockers.items() if not dirs]
     if stuck:
-        raise DeriveError(f"part{'s' if len(stuck) > 1 else ''} {', '.join(map(_shown, stuck[:20]))} cannot go in with "
+        raise DeriveError(f"part{'s' if len(stuck) > 1 else ''} {', '.join(map(shown, stuck[:20]))} cannot go in with "
                           f"the fixture {fixture!r} in place: it is in the way along every direction; give "
                           "more directions, or make the fixture a part (base) installed first")
     return Blocking(tuple(p for p in block.parts if p != fixture), block.directions, blockers, block.tolerance,

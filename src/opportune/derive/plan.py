@@ -165,8 +165,8 @@ def exact_strategies(block: Blocking, before: Sequence[tuple[str, str]] = ()) ->
             dirs = {p: opts[p][0][0] for p in fixed} | {p: d for p, (d, _) in zip(free, choice)}
             closures[key] = (dirs, key)
     if not closures:    # every choice of directions is in a cycle with the added orders
-        raise DeriveError(f"no feasible sequence keeps the process constraints ({len(before)} orders, the base and "
-                          "identical parts' included): every choice of insertion directions contradicts them; drop or "
+        raise DeriveError(f"no feasible sequence keeps the process constraints ({len(before)} order"
+                          f"{'' if len(before) == 1 else 's'}, the base and identical parts' included): every choice of insertion directions contradicts them; drop or "
                           "change a constraint")
     kept = _undominated(list(closures.values()), MAX_STRATEGIES)
     if kept is None:

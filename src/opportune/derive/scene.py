@@ -129,8 +129,10 @@ def id_problem(name: str) -> str:
 
     Examples
     --------
-    >>> id_problem("bolt"), id_problem("b\x1b")
-    ('', "'b\\x1b' holds a control character; a part id is printable text")
+    >>> id_problem("bolt")
+    ''
+    >>> print(id_problem("b" + chr(27)))
+    'b\\x1b' holds a control character; a part id is printable text
     """
     if len(name) > MAX_ID:
         return f"has {len(name):,} characters; a part id has at most {MAX_ID}"
@@ -160,8 +162,8 @@ def shown(text: str) -> str:
 
     Examples
     --------
-    >>> shown("a.glb"), shown("a\x1b.glb")
-    ('a.glb', 'a\\x1b.glb')
+    >>> print(shown("a.glb"), shown("a" + chr(27) + ".glb"))
+    a.glb a\\x1b.glb
     """
     return text if text.isprintable() else repr(text)[1:-1]
 
