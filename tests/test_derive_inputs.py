@@ -689,3 +689,17 @@ def test_what_the_reader_without_mujoco_does_not_follow_is_refused_saying_so(tmp
         (tmp_path / "m.xml").write_text(xml)
         with pytest.raises(GeometryError, match=expected):
             read_mjcf_assembly(tmp_path / "m.xml", use_mujoco=False)
+
+
+def test_three_identical_parts_count_a_sixth_of_their_instances_orders(tmp_path):
+    """Three bolts in a row between a plate and a cover, along ±z: every sequence of part ids stands for
+    3! sequences of instances, and the plan admits exactly the projections of the feasible ones."""
+    parts = {"plate": [(x, 0, 0) for x in range(3)], "b1": [(0, 0, 1)], "b2": [(1, 0, 1)], "b3": [(2, 0, 1)],
+             "cover": [(x, 0, 2) for x in range(3)]}
+    brute = BruteForce(parts, (3, 1, 3))
+    brute.swept = [m[4:] for m in brute.swept]
+    merged = derive(write_assembly(tmp_path / "row", parts), directions=["+z", "-z"],
+                    quantities={"bolt": ["b1", "b2", "b3"]})
+    assert Schedule(merged.plan).count() * 6 == brute.count() == 48
+    everything = set(itertools.permutations(["plate", "bolt", "bolt", "bolt", "cover"]))
+    assert {s for s in everything if admits(merged.plan, s)} == projected(brute, {"bolt": ["b1", "b2", "b3"]})
