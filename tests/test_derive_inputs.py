@@ -467,6 +467,12 @@ def test_the_manifest_limits(tmp_path, monkeypatch):
     (folder / "assembly.yaml").write_text("requires: {cover: [b1, b2]}\n")
     assert "2 process constraints; a manifest has at most 1" in fail_text(folder)
     assert "no such file" in fail_text(folder, "--manifest", tmp_path / "nowhere.yaml")
+    # a problem on each of 300 lines: every one kept, twenty shown, the rest counted
+    (folder / "assembly.yaml").write_text("names:\n" + "".join(f"  p{i}: {i}\n" for i in range(300)))
+    with pytest.raises(ManifestError) as caught:
+        derive(folder)
+    assert len(caught.value.problems) == 300 and str(caught.value).endswith("… 280 more problems")
+    assert len(str(caught.value).splitlines()) == 21
 
 
 def test_keywords_replace_the_manifest_and_are_checked_alike(tmp_path):

@@ -38,6 +38,8 @@ from opportune.engine.poset import Poset, bits
 from opportune.formats.problems import CONTROL_CHARS, Problem, did_you_mean, unknown_part_hint
 from opportune.limits import (MAX_DIRECTIONS, MAX_ID, MAX_MANIFEST_BYTES, MAX_MESH_PARTS, MAX_PROCESS, MAX_TEXT)
 
+#: Problems a message lists at most (a manifest may hold one on each of thousands of lines).
+SHOWN = 20
 #: The manifest's file name in an assembly's folder.
 MANIFEST = "assembly.yaml"
 #: The manifest's keys, and what each holds (for the message on an unknown key).
@@ -53,8 +55,11 @@ class ManifestError(ValueError):
 
     def __init__(self, problems: Sequence[Problem]):
         self.problems = list(problems)
-        super().__init__("\n".join(f"{p.where + ': ' if p.where else ''}{p.message}" + (f" — {p.hint}" if p.hint else "")
-                                   for p in self.problems))
+        lines = [f"{p.where + ': ' if p.where else ''}{p.message}" + (f" — {p.hint}" if p.hint else "")
+                 for p in self.problems[:SHOWN]]
+        if len(self.problems) > SHOWN:
+            lines.append(f"… {len(self.problems) - SHOWN:,} more problems")
+        super().__init__("\n".join(lines))
 
 
 @dataclass(frozen=True)
@@ -328,7 +333,7 @@ def check_parts(man: Manifest, instances: Sequence[str]) -> None:
             grouped.setdefault(inst, part)
     parts = [i for i in instances if i not in grouped] + list(man.quantities)
     for part in man.quantities:
-        if part in known and part not in grouped:
+        if part in known and grouped.get(part) != part:
             found.append(Problem(f"quantities: part id {part!r} is also another part's id",
                                  "give the identical parts an id of their own", **man.where("quantities", part)))
     named = [(("names", k), k) for k in man.names] + [(("base",), man.base)] * (man.base is not None)
