@@ -1332,7 +1332,8 @@ def learn(
 def derive(
     assembly: Path = typer.Argument(..., help="The product in its assembled pose: a folder of meshes, one file a part "
                                               "(.obj, .stl, .ply; the part id is the file's stem), a glTF/GLB scene "
-                                              "(named nodes) or a MuJoCo MJCF model (named bodies)",
+                                              "(named nodes), a MuJoCo MJCF model (named bodies) or a STEP file "
+                                              "(products; the step extra)",
                                     show_default=False),
     manifest: Optional[Path] = typer.Option(None, "--manifest", help="The assembly's manifest (YAML: names, "
                                                                      "quantities, base, fixture, directions, "

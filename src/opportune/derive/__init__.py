@@ -117,7 +117,8 @@ def derive(path: str | Path, *, directions: str | Sequence | None = None, tolera
     check_interchangeable(man, options(block))
     strategies = exact_strategies(block, unit_pairs(man, block.parts))
     written = merge_units(man, block.parts, strategies)
-    plan = _plan(block, written, man, name or Path(path).resolve().name or "assembly", label)
+    whole = Path(path).resolve()
+    plan = _plan(block, written, man, name or (whole.name if whole.is_dir() else whole.stem) or "assembly", label)
     return Derivation(plan, block, tuple(strategies), time.process_time() - start)
 
 
