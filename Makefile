@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 # The demo needs only the package itself (its compiled core and its dependencies, matplotlib
 # included): no extra, no system package.  `setup` builds on it, so the core is compiled once.
 CORE_STAMP := $(VENV)/.installed-core
-EXTRAS := service,postgres,scale,dev,docs,physics,geometry
+EXTRAS := service,postgres,scale,dev,docs,physics,geometry,step
 SOURCES := pyproject.toml CMakeLists.txt $(wildcard src/native/*.cpp src/native/*.hpp)
 
 .PHONY: demo test docs setup core system-deps pg-deps bench bench-service clean

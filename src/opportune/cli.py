@@ -1331,11 +1331,18 @@ def learn(
 @app.command()
 def derive(
     assembly: Path = typer.Argument(..., help="The product in its assembled pose: a folder of meshes, one file a part "
-                                              "(.obj, .stl, .ply; the part id is the file's stem)", show_default=False),
+                                              "(.obj, .stl, .ply; the part id is the file's stem), a glTF/GLB scene "
+                                              "(named nodes), a MuJoCo MJCF model (named bodies) or a STEP file "
+                                              "(products; the step extra)",
+                                    show_default=False),
+    manifest: Optional[Path] = typer.Option(None, "--manifest", help="The assembly's manifest (YAML: names, "
+                                                                     "quantities, base, fixture, directions, "
+                                                                     "requires); default: assembly.yaml in the folder"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Write the plan (YAML) here instead of "
                                                                        "standard output"),
-    directions: str = typer.Option("axes", "--directions", help="Insertion directions: axes (the six axis "
-                                                                "directions)"),
+    directions: Optional[str] = typer.Option(None, "--directions", help="Insertion directions: axes (the six axis "
+                                                                        "directions); default: the manifest's, else "
+                                                                        "axes"),
     tolerance: Optional[float] = typer.Option(None, "--tolerance", min=0.0,
                                               help="Penetration tolerance in the files' units: parts may overlap by "
                                                    "this much (default: a millionth of the assembly's size)"),
@@ -1350,13 +1357,13 @@ def derive(
     that lock each other) and one whose exact plan needs more strategies than a plan holds.
     """
     try:
-        from opportune.derive import DeriveError, GeometryError
+        from opportune.derive import DeriveError, GeometryError, ManifestError
         from opportune.derive import derive as derive_plan
     except ImportError as exc:   # trimesh missing: the geometry extra
         fail(f"opportune derive needs the geometry extra: pip install 'opportune[geometry]' ({exc})")
     try:
-        derived = derive_plan(assembly, directions=directions, tolerance=tolerance, units=units)
-    except (GeometryError, DeriveError) as exc:
+        derived = derive_plan(assembly, directions=directions, tolerance=tolerance, units=units, manifest=manifest)
+    except (GeometryError, DeriveError, ManifestError) as exc:
         fail(str(exc))
     text = _plan_yaml(derived.plan.to_dict())
     if output is not None:

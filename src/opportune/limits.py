@@ -58,6 +58,21 @@ MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before
 MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
 MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
 MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
+MAX_COORDINATE = 10_000          # metres from the origin, any vertex (beyond, squares of lengths lose their digits)
+MAX_SCENE_BYTES = 256 << 20      # a glTF/GLB scene file, and its buffers in all (256 MiB: 300 parts of 20,000 triangles)
+MAX_SCENE_NODES = 10_000         # entries of each list of a glTF file (nodes, meshes, accessors, buffers, ...)
+MAX_SCENE_DEPTH = 64             # nesting of a scene's nodes, and of an MJCF file's elements
+MAX_XML_BYTES = 8 << 20          # an MJCF model with its included files, in all (8 MiB)
+MAX_XML_ELEMENTS = 100_000       # elements of an MJCF model, its includes' counted
+MAX_INCLUDE_DEPTH = 8            # <include> within <include> in an MJCF model
+MAX_MJCF_BODIES = 3_000          # <body> elements of an MJCF model (a part may be several unnamed bodies)
+MAX_GEOMS = 10_000               # <geom> elements of an MJCF model
+MAX_STEP_BYTES = 64 << 20        # a STEP file (64 MiB), checked before Open CASCADE reads it
+STEP_SECONDS = 120               # meshing a STEP file (a child process, ended past this)
+STEP_MEMORY = 4 << 30            # the address space of the child process that meshes a STEP file (4 GiB)
+MAX_MANIFEST_BYTES = 1 << 20     # an assembly's manifest (assembly.yaml, 1 MiB)
+MAX_DIRECTIONS = 26              # insertion directions a manifest lists (the axes and the diagonals are 26)
+MAX_PROCESS = 10_000             # process constraints ("this before that") of a manifest
 
 # ---------------------------------------------------------------- requests to the service
 MAX_BODY = MAX_FILE_BYTES        # a request body: no more than the largest plan file the readers read
@@ -120,6 +135,28 @@ LIMITS = {limit.key: limit for limit in (
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
     Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
           "command line"),
+    Limit("coordinate", MAX_COORDINATE, "m", "a vertex's distance from the origin along each axis (`derive`)",
+          "command line"),
+    Limit("scene_bytes", MAX_SCENE_BYTES, "bytes", "a glTF/GLB scene with its buffers (`derive`)", "command line"),
+    Limit("scene_nodes", MAX_SCENE_NODES, "entries", "each list of a glTF file: nodes, meshes, accessors, ... "
+          "(`derive`)", "command line"),
+    Limit("scene_depth", MAX_SCENE_DEPTH, "levels", "nesting of a scene's nodes or an MJCF file's elements "
+          "(`derive`)", "command line"),
+    Limit("xml_bytes", MAX_XML_BYTES, "bytes", "an MJCF model with its includes (`derive`)", "command line"),
+    Limit("xml_elements", MAX_XML_ELEMENTS, "elements", "elements of an MJCF model with its includes (`derive`)",
+          "command line"),
+    Limit("include_depth", MAX_INCLUDE_DEPTH, "levels", "includes within includes of an MJCF model (`derive`)",
+          "command line"),
+    Limit("mjcf_bodies", MAX_MJCF_BODIES, "bodies", "bodies of an MJCF model (`derive`)", "command line"),
+    Limit("geoms", MAX_GEOMS, "geoms", "geoms of an MJCF model (`derive`)", "command line"),
+    Limit("step_bytes", MAX_STEP_BYTES, "bytes", "a STEP file (`derive`)", "command line"),
+    Limit("step_seconds", STEP_SECONDS, "s", "meshing a STEP file (`derive`)", "command line"),
+    Limit("step_memory", STEP_MEMORY, "bytes", "memory of the process that meshes a STEP file (`derive`)",
+          "command line"),
+    Limit("manifest_bytes", MAX_MANIFEST_BYTES, "bytes", "an assembly's manifest (`derive`)", "command line"),
+    Limit("directions", MAX_DIRECTIONS, "directions", "insertion directions a manifest lists (`derive`)",
+          "command line"),
+    Limit("process", MAX_PROCESS, "constraints", "process constraints of a manifest (`derive`)", "command line"),
     Limit("body", MAX_BODY, "bytes", f"a request body (default {DEFAULT_MAX_BODY:,}, at least {MIN_BODY:,})",
           SERVICE, "--max-body"),
     Limit("look", MAX_LOOK, "part ids", "part ids in one look (`POST /runs/{id}/looks`)", SERVICE),

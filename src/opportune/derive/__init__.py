@@ -1,7 +1,9 @@
 """Plans from the product's geometry: every feasible assembly sequence, derived from the parts' shapes.
 
 :func:`derive` reads an assembly in its assembled pose (a folder of meshes, one file a part:
-:mod:`opportune.derive.geometry`), finds which parts block each part's straight insertion along each
+:mod:`opportune.derive.geometry`; a glTF/GLB scene or a STEP file: :mod:`opportune.derive.scene`; an MJCF
+model: :mod:`opportune.derive.mjcf`) and
+its manifest (:mod:`opportune.derive.manifest`), finds which parts block each part's straight insertion along each
 direction (:mod:`opportune.derive.blocking`) and writes the plan that admits exactly the feasible
 sequences (:mod:`opportune.derive.plan`).  Needs the ``geometry`` extra (``pip install
 'opportune[geometry]'``: trimesh reads the meshes).
@@ -13,12 +15,19 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from typing import Mapping, Sequence
+
 from opportune.derive.blocking import AXES, Blocking, find_blocking
-from opportune.derive.geometry import GeometryError, read_assembly
-from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies
+from opportune.derive.geometry import SCENE_SUFFIXES, GeometryError, read_assembly
+from opportune.derive.manifest import (MANIFEST, Manifest, ManifestError, check_interchangeable, check_parts,
+                                       manifest_from, merge_units, part_ids, read_manifest, unit_pairs,
+                                       without_fixture)
+from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies, options
+from opportune.derive.mjcf import read_mjcf_assembly
+from opportune.derive.scene import read_scene_assembly
 from opportune.planning.plan import Plan, PlanError
 
-__all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "DIRECTION_SETS"]
+__all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "ManifestError", "DIRECTION_SETS"]
 
 #: The direction sets ``--directions`` names.
 DIRECTION_SETS = {"axes": AXES}
@@ -44,23 +53,35 @@ class Derivation:
                 "directions_by_strategy": [s.directions for s in self.strategies]}
 
 
-def derive(path: str | Path, *, directions: str = "axes", tolerance: float | None = None, units: str = "m",
-           name: str | None = None) -> Derivation:
+def derive(path: str | Path, *, directions: str | Sequence | None = None, tolerance: float | None = None,
+           units: str = "m", name: str | None = None, manifest: str | Path | None = None,
+           names: Mapping[str, str] | None = None, quantities: Mapping[str, Sequence[str]] | None = None,
+           base: str | None = None, fixture: str | None = None,
+           requires: Mapping[str, Sequence[str]] | None = None) -> Derivation:
     """Derive the plan of an assembly: exactly the sequences feasible under the motion model.
 
     Parameters
     ----------
     path : str or Path
-        A folder of meshes in the assembled pose, one file a part (``.obj``, ``.stl``, ``.ply``; the id
-        is the file's stem).
-    directions : str
-        The insertion directions: ``"axes"`` (the six axis directions).
+        The assembly in its assembled pose: a folder of meshes, one file a part (``.obj``, ``.stl``,
+        ``.ply``; the id is the file's stem), a glTF/GLB scene (each named node with a mesh a part) or a
+        MuJoCo MJCF model (each named body with geoms a part).
+    directions : str or list, optional
+        The insertion directions: ``"axes"`` (the six axis directions), or a list of axis names and
+        ``[x, y, z]`` vectors.  Default: the manifest's, else ``"axes"``.
     tolerance : float, optional
         Penetration tolerance in the files' units (default: a millionth of the assembly's size).
     units : str
         ``"m"`` or ``"mm"``: the files' unit of length.
     name : str, optional
-        The plan's name (default: the folder's name).
+        The plan's name (default: the folder's or file's name).
+    manifest : str or Path, optional
+        The assembly's manifest (:mod:`opportune.derive.manifest`); default ``assembly.yaml`` in the folder,
+        if there is one.
+    names, quantities, base, fixture, requires : optional
+        As the manifest's keys, replacing them: display names; identical parts (a part id: its instances);
+        the part installed first; the part in place from the start (not installed); process constraints
+        (a part id: the parts before it), added to every strategy.
 
     Returns
     -------
@@ -71,7 +92,9 @@ def derive(path: str | Path, *, directions: str = "axes", tolerance: float | Non
     Raises
     ------
     GeometryError
-        A folder or mesh that cannot be used (the message names the part).
+        A folder, scene or mesh that cannot be used (the message names the file and the part).
+    ManifestError
+        A manifest (or keyword) that cannot be used: every problem, with its file, line and key.
     DeriveError
         No feasible sequence (the parts that lock each other named), or an exact plan larger than a plan holds.
 
@@ -82,29 +105,76 @@ def derive(path: str | Path, *, directions: str = "axes", tolerance: float | Non
     ...
     opportune.derive.geometry.GeometryError: no-such-folder: not a folder; give a folder of meshes, one file a part (.obj, .stl, .ply)
     """
-    if directions not in DIRECTION_SETS:
-        raise GeometryError(f"directions {directions!r}: give one of {', '.join(DIRECTION_SETS)}")
     start = time.process_time()
-    assembly = read_assembly(path, units=units, tolerance=tolerance)
-    block = find_blocking(assembly, DIRECTION_SETS[directions])
-    strategies = exact_strategies(block)
-    plan = _plan(block, strategies, name or Path(path).resolve().name or "assembly", directions)
+    man = _manifest(path, manifest, {"names": names, "quantities": quantities, "base": base, "fixture": fixture,
+                                     "requires": requires, "directions": directions})
+    label, vectors = _direction_set(directions, man)
+    assembly = _reader(path)(path, units=units, tolerance=tolerance)
+    check_parts(man, [p.id for p in assembly.parts])
+    block = find_blocking(assembly, vectors)
+    if man.fixture is not None:
+        block = without_fixture(block, man.fixture)
+    check_interchangeable(man, options(block))
+    strategies = exact_strategies(block, unit_pairs(man, block.parts))
+    written = merge_units(man, block.parts, strategies)
+    whole = Path(path).resolve()
+    plan = _plan(block, written, man, name or (whole.name if whole.is_dir() else whole.stem) or "assembly", label)
     return Derivation(plan, block, tuple(strategies), time.process_time() - start)
 
 
-def _plan(block: Blocking, strategies: list[DerivedStrategy], name: str, directions: str) -> Plan:
+def _reader(path):
+    """The reader of an assembly: a folder of meshes, a glTF/GLB or STEP scene, or an MJCF model."""
+    suffix = Path(path).suffix.lower()
+    if Path(path).is_dir() or suffix not in SCENE_SUFFIXES:
+        return read_assembly
+    return read_mjcf_assembly if suffix in (".xml", ".mjcf") else read_scene_assembly
+
+
+def _manifest(path, file, keywords: dict) -> Manifest:
+    """The manifest: the file's (given, or ``assembly.yaml`` in the folder), its keys replaced by the keywords given."""
+    if file is None and Path(path).is_dir() and (Path(path) / MANIFEST).is_file():
+        file = Path(path) / MANIFEST
+    doc = read_manifest(file) if file is not None else {"data": {}, "lines": {}, "file": None}
+    if not isinstance(doc["data"], dict):
+        return manifest_from(doc["data"], file=doc["file"])     # refused, saying what a manifest is
+    data = doc["data"]
+    given = {k: v for k, v in keywords.items() if v is not None and not (k == "directions" and isinstance(v, str))}
+    lines = {k: v for k, v in doc["lines"].items() if not (k and k[0] in given)}
+    return manifest_from({**data, **given}, file=doc["file"], lines=lines)
+
+
+def _direction_set(directions, man: Manifest) -> tuple[str, dict]:
+    """The directions' label (for the plan's description) and vectors: a named set, or the manifest's list."""
+    if isinstance(directions, str):
+        if directions not in DIRECTION_SETS:
+            raise GeometryError(f"directions {directions!r}: give one of {', '.join(DIRECTION_SETS)}, or a list")
+        return directions, DIRECTION_SETS[directions]
+    if man.directions:
+        return "listed", man.directions
+    return "axes", DIRECTION_SETS["axes"]
+
+
+def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: str) -> Plan:
     """The strategies as a plan, through the plan checker (what ``opportune check`` reads back)."""
     from opportune.formats.loader import plan_from_dict
 
+    extra = "".join([f" {man.fixture} is in place from the start (the fixture)." if man.fixture else "",
+                     f" {man.base} is installed first (the base)." if man.base else "",
+                     f" {len(man.requires)} process constraints are in every strategy." if man.requires else ""])
     doc = {"name": name, "description": (
         f"Derived from the parts' geometry (opportune derive): each part goes in by one straight translation "
         f"from far away along one of the directions {directions} ({', '.join(block.directions)}), sliding along "
         f"faces it touches, never through another part (penetration tolerance {block.tolerance:.6g} m). "
-        "Each strategy is one choice of a direction per part; the plan admits exactly the feasible sequences."),
-        "parts": list(block.parts), "strategies": []}
-    for k, s in enumerate(strategies, 1):
+        "Each strategy is one choice of a direction per part; the plan admits exactly the feasible sequences."
+        + extra), "parts": [], "strategies": []}
+    for pid in part_ids(man, block.parts):
+        quantity = len(man.quantities.get(pid, (pid,)))
+        entry = {"id": pid, **({"name": man.names[pid]} if pid in man.names else {}),
+                 **({"quantity": quantity} if quantity > 1 else {})}
+        doc["parts"].append(entry if len(entry) > 1 else pid)
+    for k, (s, pairs) in enumerate(written, 1):
         requires: dict[str, list[str]] = {}
-        for before, after in s.pairs:
+        for before, after in pairs:
             requires.setdefault(after, []).append(before)
         doc["strategies"].append({"name": f"s{k}: " + " ".join(f"{p} {d}" for p, d in s.directions.items())
                                   if len(s.directions) <= 12 else f"s{k}", "requires": requires})

@@ -1,4 +1,5 @@
-"""An assembly in its assembled pose, read from a folder of meshes: one file a part.
+"""An assembly in its assembled pose, read from a folder of meshes: one file a part (or from a scene:
+:mod:`opportune.derive.scene`).
 
 Each ``.obj``, ``.stl`` or ``.ply`` file of the folder is one part, its id the file's stem; other
 files are left alone.  Coordinates are metres, or millimetres with ``units="mm"`` (scaled to metres
@@ -16,10 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from opportune.limits import MAX_ID, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_TRIANGLES
+from opportune.limits import MAX_COORDINATE, MAX_ID, MAX_MESH_BYTES, MAX_MESH_PARTS, MAX_TRIANGLES
 
 #: The mesh formats read, by file suffix.
 SUFFIXES = (".obj", ".stl", ".ply")
+#: The scene files read as a whole assembly (:mod:`opportune.derive.scene`): glTF, GLB, MuJoCo's MJCF, STEP.
+SCENE_SUFFIXES = (".glb", ".gltf", ".xml", ".mjcf", ".step", ".stp")
 #: Units the files may be in, and their length in metres.
 UNITS = {"m": 1.0, "mm": 0.001}
 #: The default penetration tolerance, as a share of the assembly's size (its bounding box's diagonal):
@@ -105,18 +108,74 @@ def read_assembly(path: str | Path, *, units: str = "m", tolerance: float | None
     ...
     opportune.derive.geometry.GeometryError: no-such-folder: not a folder; give a folder of meshes, one file a part (.obj, .stl, .ply)
     """
+    check_units(units, tolerance)
+    parts = tuple(_read_part(stem, file, UNITS[units]) for stem, file in _mesh_files(Path(path)))
+    return assembly_of(parts, units, tolerance)
+
+
+def check_units(units: str, tolerance: float | None) -> None:
+    """Refuse units not known and a tolerance that is not a finite length of 0 or more.
+
+    Parameters
+    ----------
+    units : str
+        A key of :data:`UNITS`.
+    tolerance : float, optional
+        The penetration tolerance, in ``units``.
+
+    Raises
+    ------
+    GeometryError
+        Saying what to give.
+
+    Examples
+    --------
+    >>> check_units("mm", -1.0)
+    Traceback (most recent call last):
+    ...
+    opportune.derive.geometry.GeometryError: tolerance -1.0: give a finite length of 0 or more, in the files' units
+    """
     if units not in UNITS:
         raise GeometryError(f"units {units!r}: give one of {', '.join(UNITS)}")
     if tolerance is not None and not (np.isfinite(tolerance) and tolerance >= 0):
         raise GeometryError(f"tolerance {tolerance}: give a finite length of 0 or more, in the files' units")
-    files = _mesh_files(Path(path))
-    scale = UNITS[units]
-    parts = tuple(_read_part(stem, file, scale) for stem, file in files)
+
+
+def assembly_of(parts: tuple[PartShape, ...], units: str, tolerance: float | None) -> Assembly:
+    """The parts as an assembly, with the penetration tolerance in metres (``tolerance`` in ``units``).
+
+    Parameters
+    ----------
+    parts : tuple of PartShape
+        The parts, in metres.
+    units : str
+        The files' unit of length (a key of :data:`UNITS`).
+    tolerance : float, optional
+        The penetration tolerance in ``units``; default: :data:`TOLERANCE_SHARE` of the assembly's size.
+
+    Returns
+    -------
+    Assembly
+        The assembly.
+
+    Raises
+    ------
+    GeometryError
+        Units not known, or a tolerance that is not a finite length of 0 or more.
+
+    Examples
+    --------
+    >>> assembly_of((), "inch", None)
+    Traceback (most recent call last):
+    ...
+    opportune.derive.geometry.GeometryError: units 'inch': give one of m, mm
+    """
+    check_units(units, tolerance)
     if tolerance is None:
         boxes = np.vstack([p.bounds for p in parts])
         tol = TOLERANCE_SHARE * float(np.linalg.norm(boxes.max(axis=0) - boxes.min(axis=0)))
     else:
-        tol = tolerance * scale
+        tol = tolerance * UNITS[units]
     return Assembly(parts, tol, units)
 
 
@@ -156,9 +215,47 @@ def _read_part(part: str, file: Path, scale: float) -> PartShape:
         faces = np.asarray(mesh.faces, dtype=np.int64)
     except Exception as exc:   # the readers raise many kinds on a bad file: each is the same refusal
         raise GeometryError(f"part {part!r}: {file.name} is not a readable mesh ({type(exc).__name__}: "
-                            f"{str(exc)[:200]}); export it again as OBJ, STL or PLY") from None
+                            f"{str(exc)[:200]!r}); export it again as OBJ, STL or PLY") from None
+    bodies = mesh_bodies(part, vertices, faces, scale=scale, join=file.suffix.lower() == ".stl")
+    return PartShape(part, file, bodies, len(faces))
+
+
+def mesh_bodies(part: str, vertices: np.ndarray, faces: np.ndarray, *, scale: float = 1.0,
+                join: bool = False) -> tuple[Body, ...]:
+    """A mesh's closed convex bodies, checked: triangles, bounds, finite coordinates, then each body.
+
+    Parameters
+    ----------
+    part : str
+        The part's id (for the messages).
+    vertices, faces : numpy.ndarray
+        The mesh: ``(n, 3)`` coordinates and ``(m, 3)`` vertex indices.
+    scale : float
+        Metres per unit of the coordinates.
+    join : bool
+        Join vertices at one position before the bodies are found (STL, glTF and MJCF meshes repeat
+        them); else a body is a piece whose triangles share vertices.
+
+    Returns
+    -------
+    tuple of Body
+        The bodies, in metres.
+
+    Raises
+    ------
+    GeometryError
+        No triangle, over :data:`~opportune.limits.MAX_TRIANGLES`, an index out of range, a coordinate not
+        finite or farther than :data:`~opportune.limits.MAX_COORDINATE` from the origin, a degenerate triangle, or a body open or not convex: the message names the part.
+
+    Examples
+    --------
+    >>> mesh_bodies("p", np.zeros((3, 3)), np.zeros((0, 3), int))
+    Traceback (most recent call last):
+    ...
+    opportune.derive.geometry.GeometryError: part 'p': no triangle; give the part's closed surface
+    """
     if faces.ndim != 2 or len(faces) == 0 or faces.shape[1] != 3:
-        raise GeometryError(f"part {part!r}: {file.name} has no triangle; give the part's closed surface")
+        raise GeometryError(f"part {part!r}: no triangle; give the part's closed surface")
     if len(faces) > MAX_TRIANGLES:
         raise GeometryError(f"part {part!r}: {len(faces):,} triangles; a part has at most {MAX_TRIANGLES:,}: "
                             "simplify the mesh")
@@ -168,7 +265,13 @@ def _read_part(part: str, file: Path, scale: float) -> PartShape:
         row = int(np.nonzero(~np.isfinite(vertices).all(axis=1))[0][0])
         raise GeometryError(f"part {part!r}: vertex {row + 1} has a coordinate that is not a finite number")
     vertices = vertices * scale
-    return PartShape(part, file, _bodies(part, vertices, faces, file.suffix.lower() == ".stl"), len(faces))
+    far = np.abs(vertices).max(axis=1) > MAX_COORDINATE
+    if far.any():
+        row = int(np.nonzero(far)[0][0])
+        raise GeometryError(f"part {part!r}: vertex {row + 1} is {float(np.abs(vertices[row]).max()):.3g} m from the "
+                            f"origin along an axis; an assembly lies within {MAX_COORDINATE:,} m of it: check the "
+                            "units (--units) or move the model")
+    return _bodies(part, vertices, faces, join)
 
 
 def _bodies(part: str, vertices: np.ndarray, faces: np.ndarray, stl: bool) -> tuple[Body, ...]:

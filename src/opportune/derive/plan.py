@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from typing import Sequence
 
 from opportune.derive.blocking import Blocking
 from opportune.engine.poset import CycleError, Poset, bits
@@ -106,13 +107,15 @@ def options(block: Blocking) -> dict[str, list[tuple[str, frozenset[str]]]]:
     return out
 
 
-def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
+def exact_strategies(block: Blocking, before: Sequence[tuple[str, str]] = ()) -> list[DerivedStrategy]:
     """The minimal strategies whose union admits exactly the feasible sequences.
 
     Parameters
     ----------
     block : Blocking
         The blocking relation.
+    before : sequence of (str, str)
+        Orders added to every strategy (process constraints: ``(a, b)``, a before b).
 
     Returns
     -------
@@ -122,7 +125,7 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
     Raises
     ------
     DeriveError
-        No feasible sequence (the locked parts named, with what blocks each), more than
+        No feasible sequence (the locked parts named, with what blocks each; or none that keeps ``before``), more than
         :data:`~opportune.limits.MAX_CHOICES` direction choices × parts to examine, or more than
         :data:`~opportune.limits.MAX_STRATEGIES` strategies in the exact plan.
 
@@ -150,7 +153,7 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
         raise DeriveError(f"{combos:,} combinations of insertion directions to examine ({len(free)} parts have "
                           f"several), times {len(ids)} parts, is over {MAX_CHOICES:,}: give fewer directions, or "
                           "derive subassemblies; no approximation is written")
-    base = _edges({p: opts[p][0][1] for p in fixed}, index)
+    base = _edges({p: opts[p][0][1] for p in fixed}, index) | {(index[a], index[b]) for a, b in before}
     closures: dict[tuple[int, ...], tuple[dict[str, str], tuple[int, ...]]] = {}
     for choice in itertools.product(*(opts[p] for p in free)):
         edges = base | _edges({p: q for p, (_, q) in zip(free, choice)}, index)
@@ -161,12 +164,16 @@ def exact_strategies(block: Blocking) -> list[DerivedStrategy]:
         if key not in closures:
             dirs = {p: opts[p][0][0] for p in fixed} | {p: d for p, (d, _) in zip(free, choice)}
             closures[key] = (dirs, key)
+    if not closures:    # every choice of directions is in a cycle with the added orders
+        raise DeriveError(f"no feasible sequence keeps the process constraints ({len(before)} order"
+                          f"{'' if len(before) == 1 else 's'}, the base and identical parts' included): every choice of insertion directions contradicts them; drop or "
+                          "change a constraint")
     kept = _undominated(list(closures.values()), MAX_STRATEGIES)
     if kept is None:
         raise DeriveError(f"the exact plan needs more than {MAX_STRATEGIES} strategies (no one's sequences contain "
                           f"another's); a plan holds at most {MAX_STRATEGIES}: give fewer directions, or derive "
                           "subassemblies; no approximation is written")
-    return [DerivedStrategy(dict(sorted(dirs.items(), key=lambda kv: index[kv[0]])), _reduction(ids, closure))
+    return [DerivedStrategy(dict(sorted(dirs.items(), key=lambda kv: index[kv[0]])), reduction(ids, closure))
             for dirs, closure in kept]
 
 
@@ -191,8 +198,26 @@ def _undominated(found: list[tuple[dict[str, str], tuple[int, ...]]], most: int)
     return kept
 
 
-def _reduction(ids: tuple[str, ...], reach: tuple[int, ...]) -> tuple[tuple[str, str], ...]:
-    """The transitive reduction of a closed order: ``a -> b`` kept unless some ``c`` lies between."""
+def reduction(ids: tuple[str, ...], reach: tuple[int, ...]) -> tuple[tuple[str, str], ...]:
+    """The transitive reduction of a closed order: ``a -> b`` kept unless some ``c`` lies between.
+
+    Parameters
+    ----------
+    ids : tuple of str
+        The elements' names.
+    reach : tuple of int
+        Each element's successors, a bit mask (transitively closed).
+
+    Returns
+    -------
+    tuple of (str, str)
+        The cover pairs ``(before, after)``.
+
+    Examples
+    --------
+    >>> reduction(("a", "b", "c"), (0b110, 0b100, 0))
+    (('a', 'b'), ('b', 'c'))
+    """
     pairs = []
     for a, succ in enumerate(reach):
         via = 0
