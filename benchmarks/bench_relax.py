@@ -4,7 +4,7 @@ Each SALBP graph shipped with the package gets ``extra`` contradictory constrain
 where the plan already puts ``a`` before ``b`` (directly or through other tasks), drawn with a seed,
 each added as ``b -> a``.  Every constraint weighs 1.  One row per (graph, extra, seed): the largest
 knot (strongly connected component) to solve, the weight of the cheapest relaxation, whether it is
-proven minimal, and the seconds :func:`opportune.planning.relax.min_feedback_arc_set` took.  Then the
+proven minimal, and the seconds :func:`opportune.derive.relax.min_feedback_arc_set` took.  Then the
 same for dense random knots (each arc present with probability 1/2, weights 1 to 9), where the
 subset DP does the work.
 
@@ -23,7 +23,7 @@ import time
 
 from opportune import datasets
 from opportune.engine.poset import Poset
-from opportune.planning.relax import RelaxTimeout, min_feedback_arc_set, strongly_connected_components
+from opportune.derive.relax import RelaxTimeout, min_feedback_arc_set, strongly_connected_components
 
 
 def largest_knot(ids, arcs) -> int:

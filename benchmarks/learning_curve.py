@@ -2,7 +2,7 @@
 
 Each repetition draws ``--max-k`` uniformly random admissible sequences of the true plan (exactly
 uniform: :meth:`opportune.engine.count.Counter.sample`, seeded per repetition) and, for every
-``k = 1 .. --max-k``, learns a plan from the first ``k`` of them (:func:`opportune.planning.learn.learn_plan`).
+``k = 1 .. --max-k``, learns a plan from the first ``k`` of them (:func:`opportune.derive.learn.learn_plan`).
 The sequences of one repetition are nested (its ``k + 1`` sequences are its ``k`` plus one), so a
 repetition recovers the plan from some ``k`` on.  Per ``k``, over the repetitions:
 
@@ -30,7 +30,7 @@ from pathlib import Path
 
 from opportune.engine import OrderEngine
 from opportune.formats.loader import read_plan
-from opportune.planning.learn import learn_plan, learned_order
+from opportune.derive.learn import learn_plan, learned_order
 
 
 def closure_pairs(plan) -> set[tuple[str, str]]:

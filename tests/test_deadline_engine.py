@@ -40,7 +40,7 @@ from opportune.engine.hub import (
     hub_split,
 )
 from opportune.engine.poset import Poset, bits
-from opportune.planning.relax import RelaxRefused, RelaxTimeout, min_feedback_arc_set
+from opportune.derive.relax import RelaxRefused, RelaxTimeout, min_feedback_arc_set
 
 #: CPU seconds an entry point may use past its deadline: the longest step between two readings of
 #: the clock (a big-integer product or a scan of a 3,000-element set: milliseconds) with room for

@@ -1,5 +1,9 @@
 """Imports run one way: planning → formats → engine → policies → sequencer → worlds/study/derive → service/cli.
 
+Every module has its floor and no module is an exception: no old module path, no tool that lives on a
+lower floor than what it imports.  The package's root is the front door (its lazy names point at every
+floor), so it sits on the top one.
+
 The package's import graph is read from its source with :mod:`ast` (every ``import`` and ``from ...
 import`` at module level or inside a function, relative ones resolved, ``importlib.import_module``
 and ``__import__`` calls on a literal, and string literals naming a module, as the packages' lazy
@@ -21,10 +25,6 @@ LAYERS = {
     # planning: the plan, several products in one plan, a strategy's order, the cell's costs (no file
     # format, no counting) ...
     "opportune.planning": 0,
-    # ... and the planning tools that build a plan with the engine's orders and counts and the file
-    # readers: they live with the plan but sit on the engine (only the command line imports them)
-    "opportune.planning.relax": 2,
-    "opportune.planning.learn": 2,
     # helpers every layer's package __init__ uses (lazy names) and that import nothing of opportune
     "opportune._lazy": 0,
     # the one table of limits every reader and the service take their bounds from (imports nothing)
@@ -41,7 +41,9 @@ LAYERS = {
     # service's live runs as much as by studies
     "opportune.multi": 4,
     "opportune.worlds": 5,
-    # plans from the product's geometry: meshes read, blocking found, the plan written through formats
+    # where plans come from when no one writes them by hand: learnt from observed sequences, relaxed
+    # from an over-constrained plan, derived from the product's geometry; all three build a plan with
+    # the file readers and the order engine
     "opportune.derive": 5,
     "opportune.study": 5,
     "opportune.service": 6,
@@ -53,21 +55,10 @@ LAYERS = {
     "opportune.__main__": 6,
 }
 
-# Facades: the package's lazy names, and the old module paths users import, each a few lines
-# re-exporting from the new place.  They are outside the layers (they may name any layer) and no
-# module of the package imports them: internal code uses the new paths.
-FACADES = {
-    "opportune",
-    "opportune.plan",
-    "opportune.products",
-    "opportune.learn",
-    "opportune.simulate",
-    "opportune.simulate_products",
-    "opportune.report",
-    "opportune.report_html",
-    "opportune.engine.relax",
-    "opportune.worlds.costs",
-}
+# The package's root: its lazy names (``opportune.Plan``, ``opportune.Sequencer``, ...) point at several
+# floors, so it sits on the top one.  Only the root itself takes this floor: a module it does not list
+# has no floor (see ``layer``).
+ROOT = ("opportune", 6)
 
 # Compiled modules: not in the source tree, importable all the same.
 COMPILED = {"opportune._native"}
@@ -145,6 +136,8 @@ def import_graph(typing: bool = True) -> dict[str, set[str]]:
 
 
 def layer(module: str) -> int | None:
+    if module == ROOT[0]:
+        return ROOT[1]
     best = None
     for prefix, level in LAYERS.items():
         if module == prefix or module.startswith(prefix + "."):
@@ -165,43 +158,30 @@ def graph() -> dict[str, set[str]]:
     return import_graph()
 
 
-def test_every_module_has_a_layer_or_is_a_facade(graph):
-    homeless = sorted(m for m in graph if m not in FACADES and layer(m) is None)
+def test_every_module_has_a_layer(graph):
+    homeless = sorted(m for m in graph if layer(m) is None)
     assert not homeless, f"give these modules a layer in tests/test_layers.py's LAYERS: {homeless}"
-    for facade in FACADES:
-        assert facade in graph, f"{facade} is listed as a facade but is no module"
 
 
 def test_no_import_goes_up_a_layer(graph):
     upward = sorted(
         f"{source} ({layer(source)}) imports {target} ({layer(target)})"
-        for source, targets in graph.items() if source not in FACADES
-        for target in targets if target not in FACADES and layer(target) > layer(source)
+        for source, targets in graph.items() for target in targets if layer(target) > layer(source)
     )
     assert not upward, f"{len(upward)} imports go up a layer:\n" + "\n".join(upward)
 
 
-def test_the_package_imports_no_facade(graph):
-    """Internal code imports the new paths; the old ones are for users (and the package's lazy names)."""
-    inward = sorted(f"{source} imports {target}" for source, targets in graph.items() if source not in FACADES
-                    for target in targets if target in FACADES)
-    assert not inward, f"{len(inward)} imports of a facade inside the package:\n" + "\n".join(inward)
-
-
-def test_facades_are_thin(graph):
-    """An old module path is a few lines of re-exports: no logic of its own."""
-    modules = source_modules()
-    for facade in FACADES - {"opportune"}:
-        tree = ast.parse(modules[facade].read_text(encoding="utf-8"))
-        kinds = {type(node).__name__ for node in tree.body}
-        assert kinds <= {"Expr", "ImportFrom", "Import", "Assign"}, (facade, kinds)
-        assert len(modules[facade].read_text(encoding="utf-8").splitlines()) <= 40, facade
+def test_a_layer_is_named_by_its_prefix():
+    """A module takes the floor of the longest prefix naming it; the root's floor is its own alone."""
+    assert layer("opportune") == 6
+    assert layer("opportune.derive.learn") == layer("opportune.derive") == 5
+    assert layer("opportune.engine.schedule") == 2
+    assert layer("opportune.nothing_listed") is None
+    assert layer("opportune_other") is None
 
 
 def test_no_import_circle():
-    graph = import_graph(typing=False)
-    inner = {m: {t for t in targets if t not in FACADES} for m, targets in graph.items() if m not in FACADES}
-    found = cycles(inner)
+    found = cycles(import_graph(typing=False))
     assert not found, f"{len(found)} import circles:\n" + "\n".join(" ↔ ".join(c) for c in found)
 
 

@@ -16,7 +16,7 @@ from opportune.engine.poset import Poset
 from opportune.formats import load_plan, plan_from_dict
 from opportune.formats import sequences as seqfmt
 from opportune.formats.sequences import SequenceError, parse_sequences, read_sequences
-from opportune.planning.learn import learn_plan, learned_order
+from opportune.derive.learn import learn_plan, learned_order
 
 FAST = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -322,7 +322,7 @@ def test_the_yaml_round_trips_any_part_ids(tmp_path_factory, ids, rnd):
 
 
 def test_docstring_examples():
-    from opportune.planning import learn
+    from opportune.derive import learn
     from opportune.formats import sequences
 
     for module in (learn, sequences):
@@ -338,7 +338,7 @@ def test_read_sequences_takes_text_paths_and_examples(tmp_path):
 
 
 def test_the_repair_search_is_bounded(monkeypatch):
-    from opportune.planning import learn
+    from opportune.derive import learn
 
     monkeypatch.setattr(learn, "MAX_REPAIR_WORK", 10)
     learned = learn_plan(["a b c d", "b a d c"], ["a b d c"])

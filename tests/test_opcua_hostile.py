@@ -304,7 +304,7 @@ def test_a_revoked_token_loses_new_sessions_at_once_and_open_ones_within_the_bou
 # ---------------------------------------------------------------- refusals a generic client can read
 
 def test_start_run_checks_as_http_does_and_says_why_where_a_generic_client_reads(server):
-    from opportune.service.app import RunIn
+    from opportune.service.bodies import RunIn
 
     _, token = server.token()
     # HTTP's limits: the same constant, refused below 0 and above it

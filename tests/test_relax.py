@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from conftest import CpuTime, run_cli
-from opportune.planning.relax import (MAX_COMPONENT_ARCS, RelaxRefused, RelaxTimeout, min_feedback_arc_set,
+from opportune.derive.relax import (MAX_COMPONENT_ARCS, RelaxRefused, RelaxTimeout, min_feedback_arc_set,
                                     prefix_violations, relax)
 from opportune.formats.loader import check_text, read_plan
 from opportune.planning.plan import Plan, Strategy

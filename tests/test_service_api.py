@@ -544,9 +544,8 @@ def test_pages_docs_and_openapi_are_served_from_the_package(svc):
             assert "default-src 'self'" in r.headers["content-security-policy"]
         for name in ("app.js", "app.css", "docs.js"):
             assert h.get(f"/static/{name}").status_code == 200
-    from opportune.service import app as app_module
+    from opportune.service.routers.dashboard import STATIC as static
 
-    static = app_module.STATIC
     for f in static.iterdir():
         text = f.read_text()
         hosts = set(re.findall(r"(?:https?:)?//([\w-]+(?:\.[\w-]+)+)", text))

@@ -1157,8 +1157,8 @@ def relax(
     Reads a plan whose strategies have cycles (YAML or JSON), or that contradicts --installed; writes
     the relaxed plan as YAML and lists the constraints dropped on standard error.
     """
-    from opportune.planning.relax import RelaxRefused, constraint_lines
-    from opportune.planning.relax import relax as relax_plan
+    from opportune.derive.relax import RelaxRefused, constraint_lines
+    from opportune.derive.relax import relax as relax_plan
     from opportune.formats.loader import CheckResult, read_plan
 
     result = read_plan(plan_file, allow_cycles=True)
@@ -1271,7 +1271,7 @@ def learn(
     """Learn a plan from observed successful sequences: the constraints every sequence satisfies (minimal set),
     each with its support and the probability that it is an accident of too few observations."""
     from opportune.formats.sequences import SequenceError, read_sequences
-    from opportune.planning.learn import learn_plan
+    from opportune.derive.learn import learn_plan
     from opportune.planning.plan import PlanError
 
     if name is not None and not name.strip():

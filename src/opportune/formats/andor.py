@@ -224,43 +224,8 @@ def check_assemblies(data: dict, doc: Document, part_ids: list[str]) -> tuple[li
                 problems.append(Problem(f"assembly '{a}' has two ways named '{wname}'", "give each way its own name",
                                         file=file, line=line, code="andor-way"))
             seen[wname] = i
-            join = tuple(str(c) for c in item["join"])
-            then = tuple(str(t) for t in item.get("then") or ())
-            before = tuple((str(x), str(y)) for x, y in item.get("before") or ())
-            where = f"in way '{wname}' of '{a}'"
-            for j, c in enumerate(join):
-                if c not in known:
-                    problems.append(unknown(c, where, at(key, i, "join", j)))
-            for j, t in enumerate(then):
-                if t not in known:
-                    problems.append(unknown(t, where, at(key, i, "then", j)))
-                elif t not in parts:
-                    problems.append(Problem(f"`then` of way '{wname}' of '{a}' names the assembly '{t}'; `then` "
-                                            "lists parts", f"put '{t}' under `join`", file=file,
-                                            line=at(key, i, "then", j), parts=(t,), code="andor-then"))
-            if len(join) + len(then) < 2:
-                problems.append(Problem(f"way '{wname}' of '{a}' makes it from a single "
-                                        f"{'component' if join else 'step'}: a way joins two or more components, "
-                                        "or adds a `then` step", "add the other components, or use the component "
-                                        "itself instead of this assembly", file=file, line=line, code="andor-way"))
-            members = set(join)
-            for k, (x, y) in enumerate(before):
-                bline = at(key, i, "before", k)
-                if x == y:
-                    problems.append(Problem(f"way '{wname}' of '{a}': `before` pair [{x}, {y}] orders '{x}' before "
-                                            "itself", "remove the pair", file=file, line=bline, code="andor-before"))
-                elif not ({x, y} <= members or {x, y} <= set(then)):
-                    problems.append(Problem(
-                        f"way '{wname}' of '{a}': `before` pair [{x}, {y}] must name two components (`join`) or "
-                        "two `then` steps of this way",
-                        "`then` steps already follow every component; order parts inside a component in that "
-                        "component's own ways", file=file, line=bline, parts=(x, y), code="andor-before"))
-            cycle = _cycle(before)
-            if cycle:
-                problems.append(Problem(f"way '{wname}' of '{a}': its `before` pairs make a cycle: "
-                                        + " -> ".join(cycle), "remove one of the pairs", file=file,
-                                        line=at(key, i, "before"), parts=tuple(cycle[:-1]), code="cycle"))
-            ways.append(Way(wname, join, then, before))
+            ways.append(_read_way(item, wname, a, parts, known, lambda *path: at(key, i, *path), unknown, file,
+                                  problems))
         table.append((a, tuple(ways)))
     if problems:
         return [], None, problems
@@ -278,6 +243,50 @@ def check_assemblies(data: dict, doc: Document, part_ids: list[str]) -> tuple[li
             problems.append(Problem(p.message, p.hint, file=file, line=at(product), code=p.code))
         return [], None, problems
     return strategies, graph, problems
+
+
+def _read_way(item: dict, wname: str, a: str, parts: set[str], known: set[str], at_way, unknown, file: str | None,
+              problems: list[Problem]) -> Way:
+    """Way ``wname`` of assembly ``a`` as a :class:`Way` (:func:`check_assemblies`); what is wrong with it is
+    appended to ``problems``.  ``at_way(*path)``: the line of a path inside the way; ``unknown(name, what,
+    line)``: the problem of a name that is neither a part nor an assembly."""
+    join = tuple(str(c) for c in item["join"])
+    then = tuple(str(t) for t in item.get("then") or ())
+    before = tuple((str(x), str(y)) for x, y in item.get("before") or ())
+    where = f"in way '{wname}' of '{a}'"
+    for j, c in enumerate(join):
+        if c not in known:
+            problems.append(unknown(c, where, at_way("join", j)))
+    for j, t in enumerate(then):
+        if t not in known:
+            problems.append(unknown(t, where, at_way("then", j)))
+        elif t not in parts:
+            problems.append(Problem(f"`then` of way '{wname}' of '{a}' names the assembly '{t}'; `then` "
+                                    "lists parts", f"put '{t}' under `join`", file=file,
+                                    line=at_way("then", j), parts=(t,), code="andor-then"))
+    if len(join) + len(then) < 2:
+        problems.append(Problem(f"way '{wname}' of '{a}' makes it from a single "
+                                f"{'component' if join else 'step'}: a way joins two or more components, "
+                                "or adds a `then` step", "add the other components, or use the component "
+                                "itself instead of this assembly", file=file, line=at_way(), code="andor-way"))
+    members = set(join)
+    for k, (x, y) in enumerate(before):
+        bline = at_way("before", k)
+        if x == y:
+            problems.append(Problem(f"way '{wname}' of '{a}': `before` pair [{x}, {y}] orders '{x}' before "
+                                    "itself", "remove the pair", file=file, line=bline, code="andor-before"))
+        elif not ({x, y} <= members or {x, y} <= set(then)):
+            problems.append(Problem(
+                f"way '{wname}' of '{a}': `before` pair [{x}, {y}] must name two components (`join`) or "
+                "two `then` steps of this way",
+                "`then` steps already follow every component; order parts inside a component in that "
+                "component's own ways", file=file, line=bline, parts=(x, y), code="andor-before"))
+    cycle = _cycle(before)
+    if cycle:
+        problems.append(Problem(f"way '{wname}' of '{a}': its `before` pairs make a cycle: "
+                                + " -> ".join(cycle), "remove one of the pairs", file=file,
+                                line=at_way("before"), parts=tuple(cycle[:-1]), code="cycle"))
+    return Way(wname, join, then, before)
 
 
 _WAY_KEYS = frozenset({"name", "description", "join", "then", "before"})

@@ -136,28 +136,84 @@ _XML_ENCODING = re.compile(rb'^(?:\xef\xbb\xbf)?<\?xml[^>]*?\bencoding\s*=\s*["\
 
 def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     """Read a GraphML file as a plan (one strategy per ``<graph>``), checked like any plan."""
-    keys: dict[str, str] = {}          # key id -> attribute name
-    nodes: dict[str, dict] = {}
-    node_lines: dict[str, int] = {}
-    graphs: list[tuple[str, list[tuple[str, str, int]]]] = []
-    stack: list[str] = []               # the tags of the open elements
-    text: list[str] = []
+    declared = _XML_ENCODING.match(raw[:200])
+    if declared and declared.group(1).decode("ascii").lower().replace("_", "-") not in _XML_ENCODINGS:
+        name = declared.group(1).decode("ascii")[:40]
+        return CheckResult(None, [Problem(f"the XML declaration names the encoding {name!r}; GraphML files are read "
+                                          "in UTF-8 (or US-ASCII, ISO-8859-1, UTF-16)",
+                                          'write the file as UTF-8 (encoding="UTF-8")', file=file, line=1,
+                                          code="syntax")])
     parser = expat.ParserCreate()
+    found = _GraphMLFound()
+    characters = _graphml_characters(parser, found)
+    parser.StartElementHandler = _graphml_start(parser, found, characters)
+    parser.EndElementHandler = _graphml_end(parser, found)
+    parser.buffer_text = True  # one call per run of text, not one per line of it
+    parser.StartDoctypeDeclHandler = parser.EntityDeclHandler = _refuse_dtd(parser)
+    try:
+        parser.Parse(raw, True)
+    except _Bad as exc:
+        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code=exc.code)])
+    except (LookupError, ValueError, UnicodeError) as exc:    # an encoding the codecs refuse midway
+        return CheckResult(None, [Problem(f"the file cannot be decoded: {ascii(str(exc))[1:-1][:200]}",
+                                          'write the file as UTF-8 (encoding="UTF-8")', file=file,
+                                          line=parser.CurrentLineNumber, code="syntax")])
+    except expat.ExpatError as exc:
+        return CheckResult(None, [Problem(f"XML syntax error: {expat.ErrorString(exc.code)}",
+                                          "fix the XML at this line", file=file, line=exc.lineno, code="syntax")])
+    graphs, nodes, node_lines = found.graphs, found.nodes, found.node_lines
+    if not graphs:
+        return CheckResult(None, [Problem("no <graph> element", "a GraphML file holds its nodes and edges in a "
+                                          "<graph edgedefault=\"directed\">", file=file, line=1, code="syntax")])
+    for _, edges in graphs:
+        for a, b, line in edges:     # an edge may name a node declared nowhere: it is a part too
+            for pid in (a, b):
+                if pid not in nodes:
+                    nodes[pid] = {}
+                    node_lines[pid] = line
+    name = found.plan_name[0] or (file_stem(file) if file else "graphml")
+    return _build(name, "GraphML precedence graph", nodes, node_lines, graphs, file)
 
+
+# The handlers run once per element (a million at most; Python's calls alone cost 1 µs per
+# element): closures over the reader's containers, not methods (an attribute read per use made them
+# 5 to 25% slower); the common elements (node, edge) are tested first, the stack holds tags only, the line
+# is asked for only where it is kept, and text is collected only inside a node's <data> (the
+# handler is set there and removed after: whitespace between elements would cost a call each).
+
+class _GraphMLFound:
+    """What :func:`check_graphml_bytes`' handlers gather and share as they read."""
+
+    def __init__(self):
+        self.keys: dict[str, str] = {}          # key id -> attribute name
+        self.nodes: dict[str, dict] = {}
+        self.node_lines: dict[str, int] = {}
+        self.graphs: list[tuple[str, list[tuple[str, str, int]]]] = []
+        self.stack: list[str] = []              # the tags of the open elements
+        self.text: list[str] = []
+        self.node_ids: list = []     # the ids of the open <node> elements (a node may hold a graph of nodes)
+        self.data_key: list = [None]   # the key of the node's <data> being read
+        self.plan_name: list = [""]    # a <data> of the <graphml> element keyed "name": the plan's name
+        self.collecting: list = []     # inside a <data> of a node: its text is kept (and only there)
+
+
+def _refuse_dtd(parser):
     def refuse_dtd(*_args):
         raise _Bad("the file declares a DTD or entities", "remove the <!DOCTYPE ...> and <!ENTITY ...> "
                    "declarations: GraphML needs none", parser.CurrentLineNumber)
 
-    counts = {"element": 0, "edge": 0}
-    collecting = []  # inside a <data> of a node: its text is kept (and only there)
+    return refuse_dtd
 
-    def count(what, limit, line, hint="split the graph into smaller ones"):
-        counts[what] += 1
-        if counts[what] > limit:
-            kind = "elements" if what == "element" else f"<{what}> elements"
-            raise _Bad(f"more than {limit:,} {kind}; GraphML files of at most {limit:,} are read", hint, line, "limit")
 
+def _graphml_start(parser, found: _GraphMLFound, characters):
+    """The handler of an element's start: bounds checked, nodes, edges, keys and graphs gathered into
+    ``found``; inside a node's ``<data>``, ``characters`` collects the text."""
+    keys, nodes, node_lines, graphs = found.keys, found.nodes, found.node_lines, found.graphs
+    stack, text, node_ids, data_key, collecting = found.stack, found.text, found.node_ids, found.data_key, \
+        found.collecting
     ids: set[str] = set()  # every node id met, declared or named by an edge
+    elements = 0
+    edge_count = 0
 
     def named(pid, line):
         if pid not in ids:
@@ -166,21 +222,12 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                            "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line, "limit")
             ids.add(pid)
 
-    # The handlers run once per element (a million at most; Python's calls alone cost 1 µs per
-    # element): the common elements (node, edge) are tested first, the stack holds tags only, the line
-    # is asked for only where it is kept, and text is collected only inside a node's <data> (the
-    # handler is set there and removed after: whitespace between elements would cost a call each).
-    elements = 0
-    node_ids: list = []          # the ids of the open <node> elements (a node may hold a graph of nodes)
-    data_key: list = [None]      # the key of the node's <data> being read
-    plan_name: list = [""]       # a <data> of the <graphml> element keyed "name": the plan's name
-
     def start(tag, attrs):
-        nonlocal elements
+        nonlocal elements, edge_count
         elements += 1
         if elements > MAX_ELEMENTS:
-            counts["element"] = elements - 1
-            count("element", MAX_ELEMENTS, parser.CurrentLineNumber)
+            raise _Bad(f"more than {MAX_ELEMENTS:,} elements; GraphML files of at most {MAX_ELEMENTS:,} are read",
+                       "split the graph into smaller ones", parser.CurrentLineNumber, "limit")
         if len(stack) >= MAX_DEPTH:
             raise _Bad(f"elements nested more than {MAX_DEPTH} levels deep", "GraphML nests 4 levels: "
                        "graphml, graph, node, data", parser.CurrentLineNumber, "limit")
@@ -204,8 +251,11 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                 raise _Bad("an edge lacks its source or target", "write <edge source=\"a\" target=\"b\"/>", line)
             if not graphs:
                 raise _Bad("an edge outside any <graph>", "put edges inside a <graph> element", line)
-            count("edge", MAX_PAIRS, line, "split the graph into smaller ones, or list only the covering edges "
-                  "(opportune convert writes those)")
+            edge_count += 1
+            if edge_count > MAX_PAIRS:
+                raise _Bad(f"more than {MAX_PAIRS:,} <edge> elements; GraphML files of at most {MAX_PAIRS:,} are "
+                           "read", "split the graph into smaller ones, or list only the covering edges (opportune "
+                           "convert writes those)", line, "limit")
             for pid in (a, b):  # an edge may name a node declared nowhere: it is a node too (added at the end)
                 if pid not in ids:
                     named(pid, line)
@@ -213,20 +263,32 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         elif tag == "key":
             keys[attrs.get("id", "")] = attrs.get("attr.name", attrs.get("id", ""))
         elif tag == "graph":
-            line = parser.CurrentLineNumber
-            if attrs.get("edgedefault", "directed") != "directed" and "graph" not in stack[:-1]:
-                raise _Bad("the graph is undirected", "a precedence graph is directed: edgedefault=\"directed\"",
-                           line)
-            if len(graphs) >= MAX_STRATEGIES:
-                raise _Bad(f"more than {MAX_STRATEGIES} <graph> elements; a plan holds at most {MAX_STRATEGIES} "
-                           "strategies", "keep the strategies that add sequences", line, "limit")
-            graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
+            _graph_element(attrs, graphs, stack, parser.CurrentLineNumber)
         elif tag == "data":
             text.clear()
             collecting[:] = [len(stack) > 1 and stack[-2] in ("node", "graphml")]
             if collecting[0]:
                 data_key[0] = attrs.get("key", "")
                 parser.CharacterDataHandler = characters
+
+    return start
+
+
+def _graph_element(attrs, graphs: list, stack: list[str], line: int) -> None:
+    """A ``<graph>``: a strategy (refused if undirected at the top, or past the strategies a plan holds)."""
+    if attrs.get("edgedefault", "directed") != "directed" and "graph" not in stack[:-1]:
+        raise _Bad("the graph is undirected", "a precedence graph is directed: edgedefault=\"directed\"", line)
+    if len(graphs) >= MAX_STRATEGIES:
+        raise _Bad(f"more than {MAX_STRATEGIES} <graph> elements; a plan holds at most {MAX_STRATEGIES} "
+                   "strategies", "keep the strategies that add sequences", line, "limit")
+    graphs.append((attrs.get("id") or f"strategy {len(graphs) + 1}", []))
+
+
+def _graphml_end(parser, found: _GraphMLFound):
+    """The handler of an element's end: a node's ``<data>`` becomes its name or a number; the
+    ``<graphml>`` element's ``name`` data, the plan's name."""
+    keys, nodes, stack, text = found.keys, found.nodes, found.stack, found.text
+    node_ids, data_key, plan_name, collecting = found.node_ids, found.data_key, found.plan_name, found.collecting
 
     def end(_tag):
         tag = stack.pop()
@@ -248,6 +310,12 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         elif stack and stack[-1] == "graphml" and keys.get(data_key[0], data_key[0]) == "name":
             plan_name[0] = "".join(text).strip()    # the plan's name (as convert writes it)
 
+    return end
+
+
+def _graphml_characters(parser, found: _GraphMLFound):
+    """The handler of text, set only inside a node's ``<data>``: kept, at most :data:`MAX_TEXT` characters."""
+    text, collecting = found.text, found.collecting
     kept = [0]  # characters of the <data> being read
 
     def characters(data):
@@ -258,41 +326,7 @@ def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                            "shorten it: names and numbers are short", parser.CurrentLineNumber, "limit")
             text.append(data)
 
-    parser.StartElementHandler = start
-    parser.EndElementHandler = end
-    parser.buffer_text = True  # one call per run of text, not one per line of it
-    parser.StartDoctypeDeclHandler = refuse_dtd
-    parser.EntityDeclHandler = refuse_dtd
-    declared = _XML_ENCODING.match(raw[:200])
-    if declared and declared.group(1).decode("ascii").lower().replace("_", "-") not in _XML_ENCODINGS:
-        name = declared.group(1).decode("ascii")[:40]
-        return CheckResult(None, [Problem(f"the XML declaration names the encoding {name!r}; GraphML files are read "
-                                          "in UTF-8 (or US-ASCII, ISO-8859-1, UTF-16)",
-                                          'write the file as UTF-8 (encoding="UTF-8")', file=file, line=1,
-                                          code="syntax")])
-    try:
-        parser.Parse(raw, True)
-    except _Bad as exc:
-        return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code=exc.code)])
-    except (LookupError, ValueError, UnicodeError) as exc:    # an encoding the codecs refuse midway
-        return CheckResult(None, [Problem(f"the file cannot be decoded: {ascii(str(exc))[1:-1][:200]}",
-                                          'write the file as UTF-8 (encoding="UTF-8")', file=file,
-                                          line=parser.CurrentLineNumber, code="syntax")])
-    except expat.ExpatError as exc:
-        return CheckResult(None, [Problem(f"XML syntax error: {expat.ErrorString(exc.code)}",
-                                          "fix the XML at this line", file=file, line=exc.lineno, code="syntax")])
-    if not graphs:
-        return CheckResult(None, [Problem("no <graph> element", "a GraphML file holds its nodes and edges in a "
-                                          "<graph edgedefault=\"directed\">", file=file, line=1, code="syntax")])
-    for _, edges in graphs:
-        for a, b, line in edges:     # an edge may name a node declared nowhere: it is a part too
-            for pid in (a, b):
-                if pid not in nodes:
-                    nodes[pid] = {}
-                    node_lines[pid] = line
-    name = plan_name[0] or (file_stem(file) if file else "graphml")
-    return _build(name, "GraphML precedence graph", nodes, node_lines, graphs, file)
-
+    return characters
 
 def to_graphml(plan) -> str:
     """The plan as GraphML: one directed ``<graph>`` per strategy, its cover relations as edges."""
@@ -398,109 +432,7 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     node_lines: dict[str, int] = {}
     edges: list[tuple[str, str, int]] = []
     try:
-        stream = _tokens(text)
-        ahead: deque = deque()  # the next tokens, read as the parser looks ahead (two at most)
-        end: list = []          # the eof token, once read
-
-        def peek(k=0):
-            if len(ahead) > k:  # the common case: the token is read already
-                return ahead[k]
-            while len(ahead) <= k and not end:
-                tok = next(stream)
-                (end if tok[0] == "eof" else ahead).append(tok)
-            return ahead[k] if k < len(ahead) else end[0]
-
-        def take(kind=None, value=None):
-            tok = peek()
-            if (kind and tok[0] != kind) or (value is not None and tok[1] != value):
-                want = value or kind
-                raise _Bad(f"expected {want!r} but found {tok[1] or 'the end of the file'!r}",
-                           "check the DOT syntax here", tok[2])
-            if tok[0] != "eof":
-                ahead.popleft()
-            return tok
-
-        def attrs() -> dict[str, str]:
-            out: dict[str, str] = {}
-            while peek()[1] == "[":
-                take(value="[")
-                while peek()[1] != "]":
-                    key = take("id")
-                    take(value="=")
-                    out[key[1]] = take("id")[1]
-                    if peek()[1] in (",", ";"):
-                        take()
-                take(value="]")
-            return out
-
-        def node(pid: str, line: int, given: dict | None = None) -> None:
-            entry = nodes.get(pid)
-            if entry is None:
-                if len(nodes) >= MAX_TASKS:
-                    raise _Bad(f"more than {MAX_TASKS:,} nodes; graph files of at most {MAX_TASKS:,} are read "
-                               "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line,
-                               "limit")
-                entry = nodes[pid] = {}
-                node_lines[pid] = line
-            if not given:
-                return
-            for key, value in given.items():
-                if key in ("label", "name"):
-                    entry["name"] = value
-                elif key in _NUMERIC:
-                    entry[key] = _number(value, f"node {pid}'s {key}", line)
-
-        def statements(depth: int) -> None:
-            if depth > MAX_DEPTH:
-                raise _Bad(f"subgraphs nested more than {MAX_DEPTH} levels deep", "flatten the subgraphs", peek()[2],
-                           "limit")
-            # Each statement peeks at its first token once (800,000 tokens at most: the parser's own
-            # steps are most of the time spent on a large file).
-            while True:
-                tok = peek()
-                value = tok[1]
-                if value == "}":
-                    break
-                if tok[0] == "eof":
-                    raise _Bad("the file ends before the closing '}'", "close the digraph with '}'", tok[2])
-                if value == "subgraph" or value == "{":
-                    if value == "subgraph":
-                        take()
-                        if peek()[0] == "id":
-                            take()
-                    take(value="{")
-                    statements(depth + 1)
-                    take(value="}")
-                elif tok[0] != "id":
-                    raise _Bad(f"unexpected {value!r}", "check the DOT syntax here", tok[2])
-                elif (after := peek(1)[1]) == "[" and value in ("graph", "node", "edge"):
-                    take()
-                    attrs()
-                elif after == "=":
-                    take(), take(), take("id")
-                else:
-                    ahead.popleft()   # tok, an id (peeked above)
-                    chain = [tok]
-                    while peek()[0] == "arrow":
-                        ahead.popleft()
-                        if peek()[1] in ("{", "subgraph"):
-                            raise _Bad("an edge to a subgraph", "write one edge per pair: a -> b; a -> c", peek()[2])
-                        chain.append(take("id"))
-                    given = attrs() if peek()[1] == "[" else None
-                    if len(chain) == 1:
-                        node(chain[0][1], chain[0][2], given)
-                    for (_, a, la), (_, b, _) in zip(chain, chain[1:]):
-                        node(a, la)
-                        node(b, la)
-                        if len(edges) >= MAX_PAIRS:
-                            raise _Bad(f"more than {MAX_PAIRS:,} edges; graph files of at most {MAX_PAIRS:,} are read",
-                                       "split the graph into smaller ones, or list only the covering edges "
-                                       "(opportune convert writes those)", la, "limit")
-                        edges.append((a, b, la))
-                sep = peek()[1]
-                if sep == ";" or sep == ",":
-                    ahead.popleft()
-
+        peek, take, ahead = _dot_lookahead(text)
         if peek()[1] == "strict":
             take()
         head = take("id")
@@ -512,7 +444,7 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
                        head[2])
         name = take("id")[1] if peek()[0] == "id" else (file_stem(file) if file else "dot")
         take(value="{")
-        statements(0)
+        _dot_statements(peek, take, ahead, nodes, node_lines, edges)(0)
         take(value="}")
         if peek()[0] != "eof":
             raise _Bad("more after the digraph's closing '}'", "one digraph per file", peek()[2])
@@ -520,6 +452,124 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
         return CheckResult(None, [Problem(*exc.problem[:2], file=file, line=exc.problem[2], code=exc.code)])
     return _build(name, "DOT precedence graph", nodes, node_lines, [(name, edges)], file)
 
+
+def _dot_lookahead(text: str):
+    """``(peek, take, ahead)`` over the DOT tokens of ``text`` (:func:`check_dot_bytes`): ``peek(k)`` the
+    token ``k`` ahead (the eof token past the end), ``take(kind, value)`` the next one, refused with its
+    line unless of that kind and value; ``ahead``, the tokens read but not taken (two at most)."""
+    stream = _tokens(text)
+    ahead: deque = deque()  # the next tokens, read as the parser looks ahead (two at most)
+    end: list = []          # the eof token, once read
+
+    def peek(k=0):
+        if len(ahead) > k:  # the common case: the token is read already
+            return ahead[k]
+        while len(ahead) <= k and not end:
+            tok = next(stream)
+            (end if tok[0] == "eof" else ahead).append(tok)
+        return ahead[k] if k < len(ahead) else end[0]
+
+    def take(kind=None, value=None):
+        tok = peek()
+        if (kind and tok[0] != kind) or (value is not None and tok[1] != value):
+            want = value or kind
+            raise _Bad(f"expected {want!r} but found {tok[1] or 'the end of the file'!r}",
+                       "check the DOT syntax here", tok[2])
+        if tok[0] != "eof":
+            ahead.popleft()
+        return tok
+
+    return peek, take, ahead
+
+
+def _dot_statements(peek, take, ahead: deque, nodes: dict[str, dict], node_lines: dict[str, int],
+                    edges: list[tuple[str, str, int]]):
+    """The reader of a DOT block's statements (:func:`check_dot_bytes`), ``statements(depth)``: it reads
+    up to the block's closing ``}`` through ``peek``, ``take`` and ``ahead`` (:func:`_dot_lookahead`),
+    adding the nodes (with their data and first lines) and the edges it meets."""
+
+    def attrs() -> dict[str, str]:
+        out: dict[str, str] = {}
+        while peek()[1] == "[":
+            take(value="[")
+            while peek()[1] != "]":
+                key = take("id")
+                take(value="=")
+                out[key[1]] = take("id")[1]
+                if peek()[1] in (",", ";"):
+                    take()
+            take(value="]")
+        return out
+
+    def node(pid: str, line: int, given: dict | None = None) -> None:
+        entry = nodes.get(pid)
+        if entry is None:
+            if len(nodes) >= MAX_TASKS:
+                raise _Bad(f"more than {MAX_TASKS:,} nodes; graph files of at most {MAX_TASKS:,} are read "
+                           "(a plan holds at most 10,000 parts)", "split the graph into smaller ones", line,
+                           "limit")
+            entry = nodes[pid] = {}
+            node_lines[pid] = line
+        if not given:
+            return
+        for key, value in given.items():
+            if key in ("label", "name"):
+                entry["name"] = value
+            elif key in _NUMERIC:
+                entry[key] = _number(value, f"node {pid}'s {key}", line)
+
+    def statements(depth: int) -> None:
+        if depth > MAX_DEPTH:
+            raise _Bad(f"subgraphs nested more than {MAX_DEPTH} levels deep", "flatten the subgraphs", peek()[2],
+                       "limit")
+        # Each statement peeks at its first token once (800,000 tokens at most: the parser's own
+        # steps are most of the time spent on a large file).
+        while True:
+            tok = peek()
+            value = tok[1]
+            if value == "}":
+                break
+            if tok[0] == "eof":
+                raise _Bad("the file ends before the closing '}'", "close the digraph with '}'", tok[2])
+            if value == "subgraph" or value == "{":
+                if value == "subgraph":
+                    take()
+                    if peek()[0] == "id":
+                        take()
+                take(value="{")
+                statements(depth + 1)
+                take(value="}")
+            elif tok[0] != "id":
+                raise _Bad(f"unexpected {value!r}", "check the DOT syntax here", tok[2])
+            elif (after := peek(1)[1]) == "[" and value in ("graph", "node", "edge"):
+                take()
+                attrs()
+            elif after == "=":
+                take(), take(), take("id")
+            else:
+                ahead.popleft()   # tok, an id (peeked above)
+                chain = [tok]
+                while peek()[0] == "arrow":
+                    ahead.popleft()
+                    if peek()[1] in ("{", "subgraph"):
+                        raise _Bad("an edge to a subgraph", "write one edge per pair: a -> b; a -> c", peek()[2])
+                    chain.append(take("id"))
+                given = attrs() if peek()[1] == "[" else None
+                if len(chain) == 1:
+                    node(chain[0][1], chain[0][2], given)
+                for (_, a, la), (_, b, _) in zip(chain, chain[1:]):
+                    node(a, la)
+                    node(b, la)
+                    if len(edges) >= MAX_PAIRS:
+                        raise _Bad(f"more than {MAX_PAIRS:,} edges; graph files of at most {MAX_PAIRS:,} are read",
+                                   "split the graph into smaller ones, or list only the covering edges "
+                                   "(opportune convert writes those)", la, "limit")
+                    edges.append((a, b, la))
+            sep = peek()[1]
+            if sep == ";" or sep == ",":
+                ahead.popleft()
+
+    return statements
 
 def _dot_id(s: str) -> str:
     return s if re.fullmatch(r"[A-Za-z_][A-Za-z_0-9]*", s) else '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import os
 import re
+from functools import partial
 
 from opportune.formats.documents import (IN2_SUFFIXES, JSON_SUFFIXES, MAX_ALIAS_VALUES, MAX_ALIASES, MAX_DEPTH,  # noqa: F401
                                          MAX_FILE_BYTES, MAX_VALUES, YAML_SUFFIXES, CheckResult, Document, file_suffix,
@@ -537,6 +538,14 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
             _measure(node, yaml)  # before anything is built: aliases could make it huge, or endless
         except _Refused as exc:
             return refused(exc)
+    doc.data = _build_nodes(node, doc, yaml)
+    return doc
+
+
+def _build_nodes(node, doc: Document, yaml):
+    """The value of a composed YAML document (:func:`parse_yaml`'s path for what the event reader leaves):
+    each value's line noted in ``doc.lines``; a duplicate key, a key that is a collection or a value the
+    safe constructor refuses is a problem in ``doc.problems`` (the first value kept)."""
     constructor = yaml.SafeLoader("")
     mapping, sequence = yaml.MappingNode, yaml.SequenceNode
 
@@ -554,7 +563,7 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
         except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of more than 4,300 digits
             message = exc.args[0] if isinstance(exc, ValueError) and exc.args else exc
             doc.problems.append(Problem(f"cannot read value: {message}", "write a plain string or number",
-                                        file=file, line=line, code="type"))
+                                        file=doc.file, line=line, code="type"))
             return None
 
     def build_mapping(n, path):
@@ -564,7 +573,7 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
             if isinstance(key, (dict, list)):
                 doc.problems.append(
                     Problem("a mapping key must be a plain value", "use a part id or field name as key",
-                            file=file, line=knode.start_mark.line + 1, code="type")
+                            file=doc.file, line=knode.start_mark.line + 1, code="type")
                 )
                 continue
             if key in out:
@@ -572,7 +581,7 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
                     Problem(
                         f"duplicate key {key!r}",
                         "each key may appear once per mapping: merge the two entries",
-                        file=file,
+                        file=doc.file,
                         line=knode.start_mark.line + 1,
                         parts=(str(key),),
                         code="duplicate-key",
@@ -583,8 +592,7 @@ def parse_yaml(text: str, file: str | None = None) -> Document:
             doc.lines[path + (key,)] = knode.start_mark.line + 1
         return out
 
-    doc.data = build(node, ())
-    return doc
+    return build(node, ())
 
 
 class _Fallback(Exception):
@@ -609,9 +617,26 @@ def _build_from_events(text: str, doc: Document, yaml) -> Document:
     :class:`_Refused` past a bound; PyYAML's errors for bad syntax.
     """
     loader = yaml.CSafeLoader(text)
+    try:
+        root, documents = _read_events(loader, doc, yaml)
+    except (_Refused, yaml.YAMLError):
+        doc.lines.clear()  # a refused or broken document is only that problem, as when the pre-scan finds it
+        doc.problems.clear()
+        raise
+    finally:
+        loader.dispose()
+    if root is None and not documents:
+        doc.problems.append(Problem("the file is empty", "write a plan with at least `parts:`", file=doc.file, line=1,
+                                code="empty"))
+        return doc
+    doc.data = root
+    return doc
+
+def _read_events(loader, doc: Document, yaml) -> tuple:
+    """:func:`_build_from_events`' pass over the events: ``(root value, number of documents)``, with
+    ``doc``'s lines and problems filled on the way."""
     constructor = yaml.SafeLoader("")
     resolve = loader.resolve
-    scalar_node = yaml.ScalarNode
     scalar_event, alias_event = yaml.ScalarEvent, yaml.AliasEvent
     seq_start, map_start = yaml.SequenceStartEvent, yaml.MappingStartEvent
     ends = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
@@ -624,101 +649,94 @@ def _build_from_events(text: str, doc: Document, yaml) -> Document:
     first_doc_mark = None
     values = 0
 
-    def scalar(event):
-        tag = event.tag
-        if tag is None or tag == "!":
-            tag = resolve(scalar_node, event.value, event.implicit)
-        if tag == _STR_TAG:
-            return event.value, tag
-        node = scalar_node(tag, event.value, event.start_mark, event.end_mark, style=event.style)
-        try:
-            return constructor.construct_object(node, deep=True), tag
-        except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of more than 4,300 digits
-            message = exc.args[0] if isinstance(exc, ValueError) and exc.args else exc
-            problems.append(Problem(f"cannot read value: {message}", "write a plain string or number",
-                                    file=file, line=event.start_mark.line + 1, code="type"))
-            return None, tag
+    scalar = partial(_event_scalar, resolve, constructor, yaml, problems, file)
 
-    try:
-        while loader.check_event():
-            event = loader.get_event()
-            kind = event.__class__
-            if kind in ends:
-                stack.pop()
-                continue
-            if kind is alias_event:
-                raise _Fallback
-            if kind is not scalar_event and kind is not seq_start and kind is not map_start:
-                if kind is doc_start:
-                    documents += 1
-                    if documents > 1:
-                        raise yaml.composer.ComposerError("expected a single document in the stream", first_doc_mark,
-                                                          "but found another document", event.start_mark)
-                    first_doc_mark = event.start_mark
-                continue  # stream and document events
-            line = event.start_mark.line + 1
-            values += 1
-            if values > MAX_VALUES:
-                raise _Refused(*_too_many_values(), line)
-            if len(stack) + 1 > MAX_DEPTH:
-                raise _Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT, line)
-            top = stack[-1] if stack else None
-            if top is not None and top[2] and top[4]:       # a mapping's key
-                if kind is not scalar_event:
-                    raise _Fallback
-                key, tag = scalar(event)
-                if tag == _MERGE_TAG:
-                    raise _Fallback
-                top[3], top[4], top[5] = key, False, line
-                continue
-            if kind is scalar_event:
-                value = scalar(event)[0]
-            else:
-                tag = event.tag
-                if tag is not None and tag != "!" and tag != (_SEQ_TAG if kind is seq_start else _MAP_TAG):
-                    raise _Fallback
-                value = [] if kind is seq_start else {}
-            attached = True
-            if top is None:
-                path: tuple = ()
-                root = value
-                lines[path] = line
-            elif top[2]:
-                key = top[3]
-                top[4] = True
-                container = top[0]
-                if key in container or not top[6]:
-                    # a repeated key (PyYAML would keep the last) is a problem; its value is read, not kept
-                    if top[6]:
-                        problems.append(Problem(f"duplicate key {key!r}",
-                                                "each key may appear once per mapping: merge the two entries",
-                                                file=file, line=top[5], parts=(str(key),), code="duplicate-key"))
-                    path, attached = (), False
-                else:
-                    path = top[1] + (key,)
-                    container[key] = value
-                    lines[path] = top[5]
-            else:
-                container = top[0]
-                path = top[1] + (len(container),)
-                if top[6]:
-                    lines[path] = line
-                container.append(value)
-                attached = top[6]
+    while loader.check_event():
+        event = loader.get_event()
+        kind = event.__class__
+        if kind in ends:
+            stack.pop()
+            continue
+        if kind is alias_event:
+            raise _Fallback
+        if kind is not scalar_event and kind is not seq_start and kind is not map_start:
+            if kind is doc_start:
+                documents += 1
+                if documents > 1:
+                    raise yaml.composer.ComposerError("expected a single document in the stream", first_doc_mark,
+                                                      "but found another document", event.start_mark)
+                first_doc_mark = event.start_mark
+            continue  # stream and document events
+        line = event.start_mark.line + 1
+        values += 1
+        if values > MAX_VALUES:
+            raise _Refused(*_too_many_values(), line)
+        if len(stack) + 1 > MAX_DEPTH:
+            raise _Refused(f"values nested more than {MAX_DEPTH} levels deep", _DEPTH_HINT, line)
+        top = stack[-1] if stack else None
+        if top is not None and top[2] and top[4]:       # a mapping's key
             if kind is not scalar_event:
-                stack.append([value, path, kind is map_start, None, True, line, attached])
-    except (_Refused, yaml.YAMLError):
-        lines.clear()  # a refused or broken document is only that problem, as when the pre-scan finds it
-        problems.clear()
-        raise
-    finally:
-        loader.dispose()
-    if root is None and not documents:
-        problems.append(Problem("the file is empty", "write a plan with at least `parts:`", file=file, line=1,
-                                code="empty"))
-        return doc
-    doc.data = root
-    return doc
+                raise _Fallback
+            key, tag = scalar(event)
+            if tag == _MERGE_TAG:
+                raise _Fallback
+            top[3], top[4], top[5] = key, False, line
+            continue
+        if kind is scalar_event:
+            value = scalar(event)[0]
+        else:
+            tag = event.tag
+            if tag is not None and tag != "!" and tag != (_SEQ_TAG if kind is seq_start else _MAP_TAG):
+                raise _Fallback
+            value = [] if kind is seq_start else {}
+        attached = True
+        if top is None:
+            path: tuple = ()
+            root = value
+            lines[path] = line
+        elif top[2]:
+            key = top[3]
+            top[4] = True
+            container = top[0]
+            if key in container or not top[6]:
+                # a repeated key (PyYAML would keep the last) is a problem; its value is read, not kept
+                if top[6]:
+                    problems.append(Problem(f"duplicate key {key!r}",
+                                            "each key may appear once per mapping: merge the two entries",
+                                            file=file, line=top[5], parts=(str(key),), code="duplicate-key"))
+                path, attached = (), False
+            else:
+                path = top[1] + (key,)
+                container[key] = value
+                lines[path] = top[5]
+        else:
+            container = top[0]
+            path = top[1] + (len(container),)
+            if top[6]:
+                lines[path] = line
+            container.append(value)
+            attached = top[6]
+        if kind is not scalar_event:
+            stack.append([value, path, kind is map_start, None, True, line, attached])
+    return root, documents
+
+
+def _event_scalar(resolve, constructor, yaml, problems: list[Problem], file: str | None, event) -> tuple:
+    """A scalar event's ``(value, tag)`` (:func:`_read_events`): a plain string as it is, any other value
+    built by PyYAML's safe constructor; a value it refuses is a problem, and None."""
+    tag = event.tag
+    if tag is None or tag == "!":
+        tag = resolve(yaml.ScalarNode, event.value, event.implicit)
+    if tag == _STR_TAG:
+        return event.value, tag
+    node = yaml.ScalarNode(tag, event.value, event.start_mark, event.end_mark, style=event.style)
+    try:
+        return constructor.construct_object(node, deep=True), tag
+    except (yaml.YAMLError, ValueError) as exc:  # ValueError: e.g. an integer of more than 4,300 digits
+        message = exc.args[0] if isinstance(exc, ValueError) and exc.args else exc
+        problems.append(Problem(f"cannot read value: {message}", "write a plain string or number",
+                                file=file, line=event.start_mark.line + 1, code="type"))
+        return None, tag
 
 
 def _measure(root, yaml) -> None:

@@ -55,7 +55,7 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
 
     Returns the plan (``None`` if there is any error) and all problems,
     errors and warnings, in file order where lines are known.  ``allow_cycles``
-    (for :mod:`opportune.planning.relax` only) leaves cyclic strategies in the plan
+    (for :mod:`opportune.derive.relax` only) leaves cyclic strategies in the plan
     instead of refusing it: such a plan has no admissible sequence.
     """
     problems: list[Problem] = []

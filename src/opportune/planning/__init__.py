@@ -1,7 +1,7 @@
 """Planning: the plan (parts, strategies, constraints), several products in one plan, a strategy's order,
-the cheapest relaxation of an over-constrained plan, and a plan learnt from observed sequences.
+and the cell's costs: the bottom layer (nothing of files, nothing of counting).
 
-:mod:`~opportune.planning.plan` and :mod:`~opportune.planning.products` are the bottom layer (nothing of
-files, nothing of counting); :mod:`~opportune.planning.relax` and :mod:`~opportune.planning.learn` build
-plans with the order engine and the file readers, so they import those and nothing below imports them.
+Plans made by a tool rather than written by hand (learnt from observed sequences, relaxed from an
+over-constrained plan, derived from the product's geometry) come from :mod:`opportune.derive`, which
+sits above the file readers and the order engine.
 """

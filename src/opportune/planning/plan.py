@@ -82,7 +82,7 @@ class Strategy:
     The mapping holds the constraints as declared (direct, possibly redundant);
     parts with no requirements may be absent from it.  ``weights`` maps a
     constraint ``(before, after)`` to the price of dropping it when the plan is
-    over-constrained (:mod:`opportune.planning.relax`); constraints absent from it
+    over-constrained (:mod:`opportune.derive.relax`); constraints absent from it
     weigh 1, and only weights other than 1 are kept.
     """
 

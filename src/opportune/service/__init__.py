@@ -18,7 +18,10 @@ Modules, one job each:
 * :mod:`~opportune.service.graph` — a layered layout of the precedence graph for the dashboard;
 * :mod:`~opportune.service.events` — server-sent events;
 * :mod:`~opportune.service.errors` — JSON errors that say where and what to do;
-* :mod:`~opportune.service.app` — the FastAPI application and its routes;
+* :mod:`~opportune.service.app` — the FastAPI application, put together from:
+  :mod:`~opportune.service.routers` (the routes, one module a resource), :mod:`~opportune.service.bodies`
+  (the request bodies), :mod:`~opportune.service.middleware` (limits, headers, timing, the last-resort
+  500) and :mod:`~opportune.service.handlers` (refusals as JSON errors);
 * :mod:`~opportune.service.server` — uvicorn with logs that never show a credential;
 * :mod:`~opportune.service.commands` — ``opportune serve`` and ``opportune token ...``;
 * :mod:`~opportune.service.testing` — a real server on a loopback port, for integration tests.

@@ -116,47 +116,10 @@ def serve(
                       or opcua_login_seconds is not None):
         _fail("--no-http and the --opcua-... options are for OPC UA: add --opcua")
     _require("sqlalchemy", *(("fastapi", "uvicorn") if http else ()), *(("asyncua",) if opcua else ()))
-    options = None
-    if opcua:
-        if workers > 1:
-            _fail("--opcua serves from one process: use --workers 1 (several OPC UA servers cannot share a port)")
-        from pathlib import Path
-
-        from opportune.service.opcua import OpcUaError, OpcUaOptions
-
-        from opportune.service.opcua_transport import TransportBounds
-
-        lowered = {}
-        for name, value in (("max_connections", opcua_max_connections), ("login_seconds", opcua_login_seconds)):
-            if value is not None:
-                try:      # lower only: past a bound is refused, saying it
-                    lowered[name] = getattr(TransportBounds(**{name: value}), name)
-                except ValueError as exc:
-                    _fail(f"--opcua-{name.replace('_', '-')}: {exc}")
-        transport = TransportBounds(**lowered)
-        transport = transport.lowered(hello_seconds=transport.login_seconds,
-                                      max_unauthenticated=transport.max_connections)
-        options = OpcUaOptions(endpoint=opcua_endpoint, pki=Path(opcua_pki), anonymous_cell=opcua_anonymous,
-                               transport=transport)
-        try:
-            options.checked()
-        except OpcUaError as exc:
-            _fail(str(exc))
-        if opcua_anonymous is not None:
-            from opportune.service.auth import TokenError, check_cell_name
-
-            try:
-                check_cell_name(opcua_anonymous)
-            except TokenError as exc:
-                _fail(f"--opcua-anonymous: {exc}")
+    options = _opcua_options(opcua_endpoint, opcua_pki, opcua_anonymous, opcua_max_connections, opcua_login_seconds,
+                             workers) if opcua else None
     if workers > 1:
-        from opportune.service.config import database_url
-
-        url = database_url(db)
-        if not url.startswith("postgresql"):
-            _fail(f"--workers {workers} needs PostgreSQL (--db postgresql+psycopg://user@host/db): several "
-                  "processes share one database, and a SQLite file takes one writer at a time (they would only "
-                  "queue behind each other). Serve SQLite with one process (--workers 1).")
+        _check_workers(db, workers)
     store = _store(db)  # fail early, with a clear message, on a bad database (and create the schema once)
     store.dispose()
     from opportune.service.server import safe_url, serve as run
@@ -179,6 +142,53 @@ def serve(
         if isinstance(exc, OpcUaError):
             _fail(str(exc))
         raise
+
+
+def _opcua_options(endpoint: str, pki: str, anonymous: Optional[str], max_connections: Optional[int],
+                   login_seconds: Optional[float], workers: int):
+    """``serve --opcua``'s options, checked (one process; bounds only lowered; the anonymous cell's name);
+    exits with one line saying what to change."""
+    if workers > 1:
+        _fail("--opcua serves from one process: use --workers 1 (several OPC UA servers cannot share a port)")
+    from pathlib import Path
+
+    from opportune.service.opcua import OpcUaError, OpcUaOptions
+    from opportune.service.opcua_transport import TransportBounds
+
+    lowered = {}
+    for name, value in (("max_connections", max_connections), ("login_seconds", login_seconds)):
+        if value is not None:
+            try:      # lower only: past a bound is refused, saying it
+                lowered[name] = getattr(TransportBounds(**{name: value}), name)
+            except ValueError as exc:
+                _fail(f"--opcua-{name.replace('_', '-')}: {exc}")
+    transport = TransportBounds(**lowered)
+    transport = transport.lowered(hello_seconds=transport.login_seconds,
+                                  max_unauthenticated=transport.max_connections)
+    options = OpcUaOptions(endpoint=endpoint, pki=Path(pki), anonymous_cell=anonymous, transport=transport)
+    try:
+        options.checked()
+    except OpcUaError as exc:
+        _fail(str(exc))
+    if anonymous is not None:
+        from opportune.service.auth import TokenError, check_cell_name
+
+        try:
+            check_cell_name(anonymous)
+        except TokenError as exc:
+            _fail(f"--opcua-anonymous: {exc}")
+    return options
+
+
+def _check_workers(db: Optional[str], workers: int) -> None:
+    """Several server processes share one database: PostgreSQL only (exits saying so otherwise)."""
+    from opportune.service.config import database_url
+
+    url = database_url(db)
+    if not url.startswith("postgresql"):
+        _fail(f"--workers {workers} needs PostgreSQL (--db postgresql+psycopg://user@host/db): several "
+              "processes share one database, and a SQLite file takes one writer at a time (they would only "
+              "queue behind each other). Serve SQLite with one process (--workers 1).")
 
 
 def token_create(
