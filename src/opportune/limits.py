@@ -57,7 +57,8 @@ MAX_SEQUENCE_ITEMS = 2_000_000   # installations in all the sequences of one fil
 MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before it is read
 MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
 MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
-MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
+MAX_WORKING = 256                # partial orders kept while the exact plan is built part by part (each pair compared)
+MAX_DIRECTIONS = 64              # insertion directions (given, or the axes and the contacts' normals)
 
 # ---------------------------------------------------------------- requests to the service
 MAX_BODY = MAX_FILE_BYTES        # a request body: no more than the largest plan file the readers read
@@ -118,7 +119,9 @@ LIMITS = {limit.key: limit for limit in (
     Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
-    Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
+    Limit("working_orders", MAX_WORKING, "partial orders",
+          "incomparable partial orders kept while a derived plan is built (`derive`)", "command line"),
+    Limit("directions", MAX_DIRECTIONS, "directions", "insertion directions of a derivation (`derive`)",
           "command line"),
     Limit("body", MAX_BODY, "bytes", f"a request body (default {DEFAULT_MAX_BODY:,}, at least {MIN_BODY:,})",
           SERVICE, "--max-body"),

@@ -172,7 +172,7 @@ def candidate_pairs(assembly: Assembly, unit: dict[str, np.ndarray]):
     ...     v = np.array([[x + i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     ...     return PartShape(str(x), None, (Body(v, np.eye(3), np.eye(3)),), 12)
     >>> [(i, d, j) for i, d, j, _, _ in candidate_pairs(Assembly((cube(0), cube(1)), 1e-9, "m"), unit_vectors(AXES))]
-    [(0, '-x', 1), (1, '+x', 0)]
+    [(1, '+x', 0), (0, '-x', 1)]
     """
     for i, d, j, pairs in _candidates(assembly, unit):
         for a, b in pairs:
