@@ -6,7 +6,8 @@ set; it may slide along faces it touches but never pass through another part's i
 ``p ⊕ {-t·d : t ≥ 0}``, the Minkowski sum of the part with a ray; ``q`` blocks ``p`` along ``d`` when
 that swept volume and ``q`` overlap by more than the penetration tolerance.
 
-The test is exact for convex bodies (every part is a union of them, :mod:`opportune.derive.geometry`):
+The test is exact for convex bodies (a body that is not convex is left to manifold3d's booleans,
+:mod:`opportune.derive.solids`):
 the swept volume of a convex body is a convex polyhedron (unbounded along ``-d``) whose faces are the
 body's faces and the planes through its edges and ``d``, so by the separating axis theorem two bodies
 overlap iff their projections overlap on every axis among the faces' normals of both, the cross
@@ -87,6 +88,39 @@ def depth(a: Body, b: Body, sweep: np.ndarray | None = None) -> float:
     return float(overlap.min())
 
 
+def penetration(a: Body, b: Body, sweep: np.ndarray | None = None, reach: float = 0.0) -> float:
+    """How deep body ``a`` (swept along ``sweep`` by up to ``reach``, if given) and body ``b`` overlap:
+    the separating axes' depth for two convex bodies (:func:`depth`), else the overlap's mean thickness
+    by manifold3d's booleans (:func:`opportune.derive.solids.thickness`).
+
+    Parameters
+    ----------
+    a, b : Body
+        Closed bodies.
+    sweep : numpy.ndarray, optional
+        A unit vector.
+    reach : float
+        How far ``a`` is swept (past the assembly); unused for convex pairs (the sweep is a ray).
+
+    Returns
+    -------
+    float
+        Metres; 0 or less when they do not overlap.
+
+    Examples
+    --------
+    >>> from opportune.derive.geometry import Body
+    >>> v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    >>> penetration(Body(v, np.eye(3), np.eye(3)), Body(v + [1, 0, 0], np.eye(3), np.eye(3)))
+    0.0
+    """
+    if a.convex and b.convex:
+        return depth(a, b, sweep)
+    from opportune.derive.solids import thickness
+
+    return thickness(a, b, sweep, reach)
+
+
 def _crosses(e: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The unit cross products of every vector of ``e`` with every one of ``f`` (parallel pairs left out)."""
     c = np.cross(e[:, None, :], f[None, :, :]).reshape(-1, 3)
@@ -133,10 +167,11 @@ def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, 
     _check_apart(assembly, np.array([p.bounds for p in parts]))
     found: dict[str, dict[str, set[str]]] = {p.id: {d: set() for d in unit} for p in parts}
     checks = 0
+    reach = 2 * assembly.size        # past the whole assembly: a part comes from far away
     for i, d, j, pairs in _candidates(assembly, unit):
         for a, b in pairs:
             checks += 1
-            if depth(a, b, -unit[d]) > tol:
+            if penetration(a, b, -unit[d], reach) > tol:
                 found[parts[i].id][d].add(parts[j].id)
                 break
     blockers = {p: {d: frozenset(q) for d, q in dirs.items()} for p, dirs in found.items()}
@@ -235,7 +270,7 @@ def _check_apart(assembly: Assembly, boxes: np.ndarray) -> None:
         for j in (i + 1 + np.nonzero((overlap > tol).all(axis=1))[0]).tolist():
             for a in p.bodies:
                 for b in parts[j].bodies:
-                    deep = depth(a, b)
+                    deep = penetration(a, b)
                     if deep > tol:
                         raise GeometryError(
                             f"parts {p.id!r} and {parts[j].id!r} overlap by {deep:.6g} m in the assembled pose "

@@ -91,6 +91,8 @@ def body_contacts(a: Body, b: Body, tol: float) -> list[tuple[np.ndarray, float]
     >>> [(n.tolist(), area) for n, area in body_contacts(cube(0), cube(1), 1e-9)]
     [([1.0, 0.0, 0.0], 1.0)]
     """
+    if not (a.convex and b.convex):
+        return _mesh_contacts(a, b, tol)
     out = []
     for n in np.vstack([a.normals, -a.normals, b.normals, -b.normals]):
         top, bottom = a.vertices @ n, b.vertices @ n
@@ -102,22 +104,71 @@ def body_contacts(a: Body, b: Body, tol: float) -> list[tuple[np.ndarray, float]
     return out
 
 
-def _patch_area(pa: np.ndarray, pb: np.ndarray, n: np.ndarray) -> tuple[float, float]:
-    """The area of the overlap of two faces' hulls in the plane across ``n``, and its longest side
-    (coordinates scaled to the faces' size first: the 2-D booleans round to a fixed precision)."""
+def _mesh_contacts(a: Body, b: Body, tol: float) -> list[tuple[np.ndarray, float]]:
+    """Contacts of bodies that are not both convex, triangle by triangle: triangles of ``a`` and ``b`` facing
+    each other (opposite normals) in one plane (within ``tol``), overlapped per plane by manifold3d's 2-D
+    booleans.  Only triangles near the other body's box are compared, in bounded blocks."""
+    ta, tb = _near_triangles(a, b, tol), _near_triangles(b, a, tol)
+    if not len(ta) or not len(tb):
+        return []
+    na, nb = _unit_normals(ta), _unit_normals(tb)
+    groups: dict[tuple, tuple[np.ndarray, set, set]] = {}
+    step = max(1, 2_000_000 // len(tb))      # rows per block: a block compares at most 2,000,000 pairs
+    for lo in range(0, len(ta), step):
+        facing = na[lo:lo + step] @ nb.T < -1 + 1e-9
+        gap = np.abs(np.einsum("ij,ij->i", na[lo:lo + step], ta[lo:lo + step, 0])[:, None] - na[lo:lo + step] @ tb[:, 0].T)
+        for i, j in zip(*np.nonzero(facing & (gap <= tol))):
+            n = na[lo + i]
+            key = tuple(np.round(n, 6)) + (round(float(n @ ta[lo + i, 0]) / max(tol, 1e-300)),)
+            groups.setdefault(key, (n, set(), set()))
+            groups[key][1].add(lo + int(i))
+            groups[key][2].add(int(j))
+    out = []
+    for n, ia, ib in groups.values():
+        area, side = _patch_area(ta[sorted(ia)], tb[sorted(ib)], n, union=True)
+        if area > tol * side:
+            out.append((n, area))
+    return out
+
+
+def _near_triangles(a: Body, b: Body, tol: float) -> np.ndarray:
+    """``a``'s triangles (k × 3 × 3) whose boxes come within ``tol`` of ``b``'s box."""
+    tri = a.vertices[a.triangles]
+    lo, hi = b.vertices.min(axis=0) - tol, b.vertices.max(axis=0) + tol
+    keep = (tri.max(axis=1) >= lo).all(axis=1) & (tri.min(axis=1) <= hi).all(axis=1)
+    return tri[keep]
+
+
+def _unit_normals(tri: np.ndarray) -> np.ndarray:
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    return n / np.linalg.norm(n, axis=1)[:, None]
+
+
+def _patch_area(pa: np.ndarray, pb: np.ndarray, n: np.ndarray, union: bool = False) -> tuple[float, float]:
+    """The area of the overlap of two faces in the plane across ``n`` (each the hull of its points, or with
+    ``union`` the union of its triangles, k × 3 × 3), and its longest side (coordinates scaled to the faces'
+    size first: the 2-D booleans round to a fixed precision)."""
     import manifold3d
 
-    if len(pa) < 3 or len(pb) < 3:
+    if not union and (len(pa) < 3 or len(pb) < 3):
         return 0.0, 0.0
     other = np.eye(3)[int(np.argmin(np.abs(n)))]
     u = np.cross(n, other)
     u /= np.linalg.norm(u)
     basis = np.array([u, np.cross(n, u)]).T
     qa, qb = pa @ basis, pb @ basis
-    origin = qa.min(axis=0)
-    scale = max(float(np.ptp(np.vstack([qa, qb]), axis=0).max()), 1e-300)
-    both = (manifold3d.CrossSection.hull_points((qa - origin) / scale)
-            ^ manifold3d.CrossSection.hull_points((qb - origin) / scale))
+    flat = np.vstack([qa.reshape(-1, 2), qb.reshape(-1, 2)])
+    origin = flat.min(axis=0)
+    scale = max(float(np.ptp(flat, axis=0).max()), 1e-300)
+
+    def face(q):
+        q = (q - origin) / scale
+        if not union:
+            return manifold3d.CrossSection.hull_points(q)
+        return manifold3d.CrossSection.batch_boolean([manifold3d.CrossSection.hull_points(t) for t in q],
+                                                     manifold3d.OpType.Add)
+
+    both = face(qa) ^ face(qb)
     if both.is_empty():
         return 0.0, 0.0
     (x0, y0, x1, y1) = both.bounds()

@@ -3,10 +3,11 @@
 Each ``.obj``, ``.stl`` or ``.ply`` file of the folder is one part, its id the file's stem; other
 files are left alone.  Coordinates are metres, or millimetres with ``units="mm"`` (scaled to metres
 as read).  Meshes are read by trimesh, then checked before any blocking test: every coordinate
-finite, at least one triangle, no degenerate triangle, every body (connected piece) closed and
-convex.  A part that is not convex is written as several convex bodies in its file (as a convex
-decomposition exports it): the blocking test (:mod:`opportune.derive.blocking`) is exact on convex
-bodies.  Every refusal is a :class:`GeometryError` naming the part and saying what to do.
+finite, at least one triangle, no degenerate triangle, every body (connected piece) closed.  A body
+that is convex is tested by opportune's separating axes (:mod:`opportune.derive.blocking`, exact on
+convex polyhedra); one that is not, by manifold3d's exact booleans (it must then be a valid manifold:
+closed, oriented, not crossing itself).  Every refusal is a :class:`GeometryError` naming the part and
+saying what to do.
 """
 
 from __future__ import annotations
@@ -33,12 +34,16 @@ class GeometryError(ValueError):
 
 @dataclass(frozen=True)
 class Body:
-    """One closed convex piece of a part: its vertices, its faces' outward unit normals and its edges'
-    unit directions (each direction once), all in metres."""
+    """One closed piece of a part: its vertices, its faces' outward unit normals and its edges' unit
+    directions (each direction once), all in metres; its triangles (indices into ``vertices``, outward)
+    where read from a file; ``convex`` False for a piece that is not (tested by manifold3d's booleans
+    instead of the separating axes)."""
 
     vertices: np.ndarray
     normals: np.ndarray
     edges: np.ndarray
+    triangles: np.ndarray | None = None
+    convex: bool = True
 
 
 @dataclass(frozen=True)
@@ -88,7 +93,7 @@ def read_assembly(path: str | Path, *, units: str = "m", tolerance: float | None
     Returns
     -------
     Assembly
-        The parts, each a tuple of closed convex bodies, in metres.
+        The parts, each a tuple of closed bodies, in metres.
 
     Raises
     ------
@@ -96,7 +101,7 @@ def read_assembly(path: str | Path, *, units: str = "m", tolerance: float | None
         A folder that is missing or holds no mesh, over :data:`~opportune.limits.MAX_MESH_PARTS` parts,
         two files of one stem, a file over :data:`~opportune.limits.MAX_MESH_BYTES` bytes or
         :data:`~opportune.limits.MAX_TRIANGLES` triangles, or a mesh that is unreadable, empty, not
-        finite, degenerate, open or not convex: the message names the part.
+        finite, degenerate, open, or not convex and crossing itself: the message names the part.
 
     Examples
     --------
@@ -147,7 +152,7 @@ def _mesh_files(folder: Path) -> list[tuple[str, Path]]:
 
 
 def _read_part(part: str, file: Path, scale: float) -> PartShape:
-    """One part's mesh, read and checked, as convex bodies in metres."""
+    """One part's mesh, read and checked, as closed bodies in metres."""
     import trimesh
 
     try:
@@ -172,7 +177,7 @@ def _read_part(part: str, file: Path, scale: float) -> PartShape:
 
 
 def _bodies(part: str, vertices: np.ndarray, faces: np.ndarray, stl: bool) -> tuple[Body, ...]:
-    """The part's bodies, each checked closed and convex.  A body is a piece whose triangles share the
+    """The part's bodies, each checked closed.  A body is a piece whose triangles share the
     file's vertices (an OBJ or PLY file writes each body with its own vertices, so that bodies touching
     along a face stay apart); an STL file has no shared vertices, so there they are joined by position."""
     if stl:
@@ -222,8 +227,9 @@ def _components(n: int, tri: np.ndarray) -> np.ndarray:
 
 
 def _body(part: str, k: int, points: np.ndarray, tri: np.ndarray, normals: np.ndarray) -> Body:
-    """One connected piece, checked closed (every edge in exactly two triangles, once each way) and convex
-    (every vertex on the inner side of every face's plane); its normals made outward."""
+    """One connected piece, checked closed (every edge in exactly two triangles, once each way); convex
+    when every vertex is on the inner side of every face's plane, else checked a valid manifold; its
+    normals and triangles made outward."""
     directed = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
     keys = {tuple(e) for e in directed.tolist()}
     if len(keys) != len(directed) or any((b, a) not in keys for a, b in keys):
@@ -239,11 +245,21 @@ def _body(part: str, k: int, points: np.ndarray, tri: np.ndarray, normals: np.nd
     size = max(float(np.ptp(verts, axis=0).max()), 1e-300)
     offsets = np.einsum("ij,ij->i", normals, corners[:, 0])
     outside = verts @ normals.T - offsets[None, :]
-    if outside.max() > 1e-9 * size:
-        raise GeometryError(f"part {part!r}: body {k} is not convex; write the part as several convex bodies in "
-                            "its file (a convex decomposition), each closed")
+    renumber = np.zeros(len(points), dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    triangles = renumber[tri][:, [0, 2, 1]] if volume < 0 else renumber[tri]
     edges = points[directed[:, 1]] - points[directed[:, 0]]
-    return Body(verts, _unique_directions(normals), _unique_directions(edges))
+    convex = bool(outside.max() <= 1e-9 * size)
+    body = Body(verts, _unique_directions(normals), _unique_directions(edges), triangles, convex)
+    if not convex:
+        from opportune.derive.solids import solid
+
+        try:
+            solid(body)
+        except ValueError as exc:
+            raise GeometryError(f"part {part!r}: body {k} is not convex and not a valid solid ({exc}); repair the "
+                                "mesh (closed, oriented, not crossing itself) or write it as convex bodies") from None
+    return body
 
 
 def _unique_directions(vectors: np.ndarray) -> np.ndarray:
