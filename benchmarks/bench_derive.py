@@ -32,8 +32,6 @@ import time
 from pathlib import Path
 
 from opportune.derive import DeriveError, derive
-from opportune.derive.blocking import find_blocking
-from opportune.derive.geometry import read_assembly
 from opportune.engine import Schedule
 
 STEPS = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
@@ -79,36 +77,64 @@ def write(folder: Path, parts: dict[str, list]) -> None:
         (folder / f"{name}.obj").write_text("\n".join(lines) + "\n")
 
 
-def row(n: int, seed: int) -> str:
-    block = block_for(n)
+def wall(n: int, running: bool) -> tuple[dict[str, list], tuple[int, int, int]]:
+    """A wall of about ``n`` bricks two cells long, ten bricks a course: stacked (each brick on one below)
+    or in running bond (each course shifted by half a brick: a brick on two below, half bricks at the ends)."""
+    width, courses = 20, max(1, round(n / (10.5 if running else 10)))
+    parts: dict[str, list] = {}
+    for z in range(courses):
+        cuts = list(range(0, width + 1, 2))
+        if running and z % 2:
+            cuts = [0] + list(range(1, width, 2)) + [width]
+        for k, (a, b) in enumerate(zip(cuts, cuts[1:])):
+            parts[f"b{z:02d}_{k:02d}"] = [(x, 0, z) for x in range(a, b)]
+    return parts, (width, 1, courses)
+
+
+#: The generated families: how each assembly is made, and the options it is derived with.
+FAMILIES = {
+    "block": ("a random voxel block (parts grown from random seeds), default directions", {}),
+    "wall": ("a stack-bond wall, --gravity -z", {"gravity": "-z"}),
+    "bond": ("a running-bond wall, --gravity -z", {"gravity": "-z"}),
+}
+
+
+def row(family: str, n: int, seed: int) -> str:
+    if family == "block":
+        block = block_for(n)
+        parts = partition(block, n, seed)
+    else:
+        parts, block = wall(n, running=family == "bond")
+    options = FAMILIES[family][1]
+    head = f"{family:>6} {len(parts):>5} {'x'.join(map(str, block)):>8}"
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        write(folder, partition(block, n, seed))
-        start = time.process_time()
-        block_rel = find_blocking(read_assembly(folder))
-        blocking_s = time.process_time() - start
+        write(folder, parts)
         start = time.process_time()
         try:
-            derived = derive(folder)
+            derived = derive(folder, **options)
         except DeriveError as exc:
             total = time.process_time() - start
-            return (f"{n:>5} {'x'.join(map(str, block)):>8} {len(block_rel.directions):>4} {block_rel.checks:>9,} "
-                    f"{blocking_s:>8.2f} {total:>8.2f}  refused: {str(exc)[:70]}")
+            return f"{head} {'':>4} {'':>9} {'':>8} {total:>8.2f}  refused: {exc}"
         total = time.process_time() - start
+        d = derived.to_dict()
         counted = Schedule(derived.plan).count_result(time_limit=10.0)
         count = f"10^{counted.log10:.2f}" + ("" if counted.exact else " (estimated)")
-        return (f"{n:>5} {'x'.join(map(str, block)):>8} {len(block_rel.directions):>4} {block_rel.checks:>9,} "
-                f"{blocking_s:>8.2f} {total:>8.2f} {len(derived.strategies):>5}  {count}")
+        return (f"{head} {len(d['directions']):>4} {d['blocking_checks']:>9,} {d['contacts']:>8,} {total:>8.2f} "
+                f"{d['strategies']:>5}  {count}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", default="10,30,100,300")
+    parser.add_argument("--families", default=",".join(FAMILIES))
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    print(f"{'parts':>5} {'block':>8} {'dirs':>4} {'checks':>9} {'block_s':>8} {'total_s':>8} {'strat':>5}  count")
-    for n in (int(s) for s in args.sizes.split(",")):
-        print(row(n, args.seed), flush=True)
+    print(f"{'family':>6} {'parts':>5} {'block':>8} {'dirs':>4} {'checks':>9} {'contacts':>8} {'cpu_s':>8} "
+          f"{'strat':>5}  count")
+    for family in args.families.split(","):
+        for n in (int(s) for s in args.sizes.split(",")):
+            print(row(family, n, args.seed), flush=True)
 
 
 if __name__ == "__main__":

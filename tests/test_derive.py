@@ -80,21 +80,23 @@ def partition(block: tuple[int, int, int], k: int, seed: int) -> dict[str, list[
 class BruteForce:
     """Feasible sequences on the voxel grid: a part goes in along d iff no cell it sweeps (its cells
     moved by -t·d, t ≥ 1, within the block) belongs to a part already in.  With ``gravity`` (down is -z)
-    a part after the first also needs a cell on the floor (z = 0) or a cell right on top of a cell of a
-    part already in; with ``connected``, a cell face to face with one of a part already in; with a
-    ``base``, the base first."""
+    a part also needs a cell on the floor (z = 0) or a cell right on top of a cell of a part already
+    in; with ``connected``, unless it is the first, a cell face to face with one of a part already in;
+    with a ``base``, the base first, needing nothing."""
 
     def __init__(self, parts, block, gravity=False, connected=False, base=None):
         self.ids = sorted(parts)
         owner = {c: self.ids.index(p) for p, cells in parts.items() for c in cells}
         self.first = None if base is None else self.ids.index(base)
-        self.needs = []          # per part, per requirement: the mask of parts any one of which holds it (-1: the floor)
+        self.needs = []          # per part, per requirement: the mask of parts any one of which holds it, waived first
         for p in self.ids:
             me, needs = self.ids.index(p), []
             if gravity and all(z > 0 for _, _, z in parts[p]):
-                needs.append(sum(1 << q for q in {owner.get((x, y, z - 1), me) for x, y, z in parts[p]} - {me}))
+                needs.append((sum(1 << q for q in {owner.get((x, y, z - 1), me) for x, y, z in parts[p]} - {me}),
+                              False))
             if connected:
-                needs.append(sum(1 << q for q in {owner.get(n, me) for c in parts[p] for n in neighbours(c)} - {me}))
+                needs.append((sum(1 << q for q in {owner.get(n, me) for c in parts[p] for n in neighbours(c)} - {me}),
+                              True))
             self.needs.append(needs)
         self.swept = []          # per part, per direction: the mask of parts its sweep meets
         for p in self.ids:
@@ -114,9 +116,9 @@ class BruteForce:
             self.swept.append(masks)
 
     def fits(self, i: int, built: int) -> bool:
-        if built == 0:                   # nothing in the way, nothing needed: only the base must be first
-            return self.first is None or i == self.first
-        held = i == self.first or all(n & built for n in self.needs[i])
+        if built == 0:                   # nothing in the way; the base first, or a part on the floor
+            return i == self.first if self.first is not None else all(waived for _, waived in self.needs[i])
+        held = i == self.first or all(n & built for n, _ in self.needs[i])
         return held and any(not (m & built) for m in self.swept[i])
 
     def count(self) -> int:

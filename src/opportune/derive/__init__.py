@@ -45,7 +45,7 @@ class Derivation:
                 "blocking_checks": b.checks, "contacts": len(self.contacts), "strategies": len(self.strategies),
                 "constraints": sum(len(s.pairs) for s in self.strategies), "cpu_seconds": round(self.seconds, 4),
                 "base": self.conditions.base,
-                "supports": {p: [sorted(n) for n in needs] for p, needs in self.conditions.needs.items()},
+                "supports": {p: {kind: sorted(n) for kind, n in needs} for p, needs in self.conditions.needs.items()},
                 "blockers": {p: {d: sorted(q) for d, q in dirs.items()} for p, dirs in b.blockers.items()},
                 "directions_by_strategy": [s.directions for s in self.strategies]}
 
@@ -70,8 +70,8 @@ def derive(source: str | Path | Assembly, *, directions: str | dict | None = Non
     name : str, optional
         The plan's name (default: the folder's name).
     gravity : str, optional
-        The direction of gravity (``"-z"``): each part after the first rests on a part below it that it
-        touches, or on the fixture (its lowest point at the assembly's lowest level).
+        The direction of gravity (``"-z"``): each part rests on a part below it that it touches, or on the
+        fixture (its lowest point at the assembly's lowest level; the first part must, unless it is the base).
     connected : bool
         Each part after the first touches a part already in.
     base : str, optional
@@ -143,6 +143,7 @@ def _supports_text(conditions: Conditions) -> str:
     """The supports asked, as the plan's description states them."""
     text = f"The base {conditions.base} goes first. " if conditions.base else ""
     if conditions.needs:
-        text += (f"{len(conditions.needs)} parts need a part in before them (resting on it under gravity, or "
-                 "touching it) unless they go in first. ")
+        text += (f"{len(conditions.needs)} parts need a part in before them: under gravity one they rest on "
+                 "(unless they rest on the fixture, as the first part must), with connected one they touch "
+                 "(unless they go in first). ")
     return text

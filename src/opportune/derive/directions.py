@@ -142,8 +142,9 @@ def default_directions(contacts: list[Contact]) -> dict[str, tuple[float, float,
 def support_conditions(assembly: Assembly, contacts: list[Contact], *, gravity: str | None = None,
                        connected: bool = False, base: str | None = None) -> Conditions:
     """What each part needs in before it: with ``gravity``, a part it rests on (touching it from above)
-    unless it rests on the fixture (its lowest point at the assembly's lowest level); with
-    ``connected``, a part it touches; the ``base`` first.
+    unless it rests on the fixture (its lowest point at the assembly's lowest level: the first part too
+    must), with ``connected``, a part it touches (unless it is the first); the ``base`` first, held by
+    the fixture.
 
     Parameters
     ----------
@@ -177,13 +178,13 @@ def support_conditions(assembly: Assembly, contacts: list[Contact], *, gravity: 
     ...     return PartShape(name, None, (Body(v, np.eye(3), np.eye(3)),), 12)
     >>> a = Assembly((part("floor", 0), part("side", 0), part("top", 1)), 1e-9, "m")
     >>> support_conditions(a, c, gravity="-z").needs      # side and floor stand on the fixture
-    {'top': (frozenset({'floor'}),)}
+    {'top': (('gravity', frozenset({'floor'})),)}
     """
     ids = {p.id for p in assembly.parts}
     if base is not None and base not in ids:
         raise GeometryError(f"base {base!r} is not a part; the parts are the files' stems: "
                             + ", ".join(sorted(ids)[:10]) + (", …" if len(ids) > 10 else ""))
-    needs: dict[str, list[frozenset[str]]] = {p: [] for p in sorted(ids)}
+    needs: dict[str, list[tuple[str, frozenset[str]]]] = {p: [] for p in sorted(ids)}
     if gravity is not None:
         down = parse_directions(gravity)
         if len(down) != 1:
@@ -200,12 +201,13 @@ def support_conditions(assembly: Assembly, contacts: list[Contact], *, gravity: 
                 on[c.a].add(c.b)
         for p in sorted(ids):
             if lowest[p] > floor + assembly.tolerance:
-                needs[p].append(frozenset(on[p]))
+                needs[p].append(("gravity", frozenset(on[p])))
     if connected:
         touching = {p: set() for p in ids}
         for c in contacts:
             touching[c.a].add(c.b)
             touching[c.b].add(c.a)
         for p in sorted(ids):
-            needs[p].append(frozenset(touching[p]))
-    return Conditions({p: tuple(n) for p, n in needs.items() if n}, base)
+            needs[p].append(("connected", frozenset(touching[p])))
+    # the first part rests on the fixture (gravity holds for it too) but touches nothing built yet
+    return Conditions({p: tuple(n) for p, n in needs.items() if n}, base, frozenset({"connected"}))

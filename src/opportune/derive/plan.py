@@ -108,13 +108,37 @@ def options(block: Blocking) -> dict[str, list[tuple[str, frozenset[str]]]]:
 
 @dataclass(frozen=True)
 class Conditions:
-    """What each part needs besides a free direction: ``needs[p]`` lists ``p``'s requirements (one for
-    ``--gravity``, one for ``--connected``), each the set of parts any one of which must be in before
-    ``p`` (a requirement the fixture meets is left out).  Every part but the first must meet each of its
-    requirements; the ``base``, if given, goes first."""
+    """What each part needs besides a free direction: ``needs[p]`` lists ``p``'s requirements, each a
+    kind (``"gravity"``, ``"connected"``) and the set of parts any one of which must be in before ``p``
+    (a requirement the fixture meets is left out).  The ``base``, if given, goes first and needs
+    nothing; without a base, a part whose requirements are all of kinds in ``waived_first``
+    (``connected``: the first part touches nothing built) may go first instead of meeting them."""
 
-    needs: dict[str, tuple[frozenset[str], ...]]
+    needs: dict[str, tuple[tuple[str, frozenset[str]], ...]]
     base: str | None = None
+    waived_first: frozenset[str] = frozenset()
+
+    def may_go_first(self, p: str) -> bool:
+        """Whether ``p`` can be the first part (its requirements waived there).
+
+        Parameters
+        ----------
+        p : str
+            A part.
+
+        Returns
+        -------
+        bool
+            True for the base; without a base, for a part whose requirements the first part is spared.
+
+        Examples
+        --------
+        >>> Conditions({"b": (("gravity", frozenset("a")),)}).may_go_first("b")
+        False
+        """
+        if self.base is not None:
+            return p == self.base
+        return all(kind in self.waived_first for kind, _ in self.needs.get(p, ()))
 
 
 @dataclass(frozen=True)
@@ -138,10 +162,10 @@ def alternatives(block: Blocking, conditions: Conditions | None = None) -> dict[
         needs = () if p == conditions.base else conditions.needs.get(p, ())
         ways = []
         for d, blockers in opts[p]:
-            for chosen in itertools.product(*(sorted(n) for n in needs)):
+            for chosen in itertools.product(*(sorted(n) for _, n in needs)):
                 name = d + "".join(f" on {q}" for q in dict.fromkeys(chosen))
                 ways.append(_Alternative(name, blockers, frozenset(chosen)))
-        if needs and conditions.base is None:
+        if needs and conditions.may_go_first(p):
             ways.append(_Alternative("first", frozenset(block.parts) - {p}, frozenset()))
         keep: list[_Alternative] = []
         for w in ways:
@@ -188,10 +212,12 @@ def exact_strategies(block: Blocking, conditions: Conditions | None = None) -> l
     ...              0, 0)
     >>> [s.pairs for s in exact_strategies(b)]
     [()]
-    >>> [s.pairs for s in exact_strategies(b, Conditions({"b": (frozenset("a"),)}))]     # b on a, or b first
-    [(('a', 'b'),), (('b', 'a'),)]
-    >>> [s.pairs for s in exact_strategies(b, Conditions({"b": (frozenset("a"),)}, base="a"))]
+    >>> [s.pairs for s in exact_strategies(b, Conditions({"b": (("gravity", frozenset("a")),)}))]    # b rests on a
     [(('a', 'b'),)]
+    >>> touch = Conditions({"a": (("connected", frozenset("b")),), "b": (("connected", frozenset("a")),)},
+    ...                    waived_first=frozenset({"connected"}))
+    >>> sorted(s.pairs for s in exact_strategies(b, touch))      # either first, the other touching it
+    [(('a', 'b'),), (('b', 'a'),)]
     """
     lock = locked(block)
     if lock:
