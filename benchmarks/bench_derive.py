@@ -80,7 +80,7 @@ def write(folder: Path, parts: dict[str, list]) -> None:
 def wall(n: int, running: bool) -> tuple[dict[str, list], tuple[int, int, int]]:
     """A wall of about ``n`` bricks two cells long, ten bricks a course: stacked (each brick on one below)
     or in running bond (each course shifted by half a brick: a brick on two below, half bricks at the ends)."""
-    width, courses = 20, max(1, round(n / (10.5 if running else 10)))
+    width, courses = 20, max(1, int(n / (10.5 if running else 10)))
     parts: dict[str, list] = {}
     for z in range(courses):
         cuts = list(range(0, width + 1, 2))

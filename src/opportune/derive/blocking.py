@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opportune.derive.geometry import Assembly, Body, GeometryError
+from opportune.derive.geometry import Assembly, Body, GeometryError, cross
 
 #: The six axis directions, ``--directions axes``: a name and a unit vector each.
 AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),
@@ -123,7 +123,7 @@ def penetration(a: Body, b: Body, sweep: np.ndarray | None = None, reach: float 
 
 def _crosses(e: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The unit cross products of every vector of ``e`` with every one of ``f`` (parallel pairs left out)."""
-    c = np.cross(e[:, None, :], f[None, :, :]).reshape(-1, 3)
+    c = cross(e[:, None, :], f[None, :, :]).reshape(-1, 3)
     n = np.linalg.norm(c, axis=1)
     keep = n > _PARALLEL
     return c[keep] / n[keep, None]
@@ -238,9 +238,9 @@ def _candidates(assembly: Assembly, unit: dict[str, np.ndarray]):
 def _frame(v: np.ndarray) -> np.ndarray:
     """Rows: two unit vectors across ``v`` and ``v`` itself (an orthonormal frame)."""
     other = np.eye(3)[int(np.argmin(np.abs(v)))]
-    u = np.cross(v, other)
+    u = cross(v, other)
     u /= np.linalg.norm(u)
-    return np.array([u, np.cross(v, u), v])
+    return np.array([u, cross(v, u), v])
 
 
 def _box(points: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opportune.derive.geometry import Assembly, Body
+from opportune.derive.geometry import Assembly, Body, cross
 
 #: A contact supports the part above when its normal (lower part to upper) has at least this component
 #: up (against gravity): a face tilted up by more than about 0.06° holds a part (friction aside).
@@ -49,7 +49,7 @@ def find_contacts(assembly: Assembly) -> list[Contact]:
 
     Examples
     --------
-    >>> from opportune.derive.geometry import Assembly, Body, PartShape
+    >>> from opportune.derive.geometry import Assembly, Body, cross, PartShape
     >>> def cube(x, z=0):
     ...     v = np.array([[x + i, j, z + k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
     ...     return PartShape(f"c{x}{z}", None, (Body(v, np.eye(3), np.eye(3)),), 12)
@@ -58,14 +58,17 @@ def find_contacts(assembly: Assembly) -> list[Contact]:
     """
     parts, tol = assembly.parts, assembly.tolerance
     boxes = np.array([p.bounds for p in parts])
+    body_boxes = [np.array([[b.vertices.min(axis=0), b.vertices.max(axis=0)] for b in p.bodies]) for p in parts]
     out = []
     for i, p in enumerate(parts):
         gap = np.maximum(boxes[i, 0], boxes[i + 1:, 0]) - np.minimum(boxes[i, 1], boxes[i + 1:, 1])
         for j in (i + 1 + np.nonzero((gap <= tol).all(axis=1))[0]).tolist():
-            for a in p.bodies:
-                for b in parts[j].bodies:
-                    for normal, area in body_contacts(a, b, tol):
-                        out.append(Contact(p.id, parts[j].id, tuple(float(x) for x in normal), area))
+            # only bodies whose boxes meet can touch
+            near = (np.maximum(body_boxes[i][:, None, 0], body_boxes[j][None, :, 0])
+                    - np.minimum(body_boxes[i][:, None, 1], body_boxes[j][None, :, 1]) <= tol).all(axis=2)
+            for a, b in zip(*np.nonzero(near)):
+                for normal, area in body_contacts(p.bodies[a], parts[j].bodies[b], tol):
+                    out.append(Contact(p.id, parts[j].id, tuple(float(x) + 0.0 for x in normal), area))
     return out
 
 
@@ -93,12 +96,17 @@ def body_contacts(a: Body, b: Body, tol: float) -> list[tuple[np.ndarray, float]
     """
     if not (a.convex and b.convex):
         return _mesh_contacts(a, b, tol)
+    normals = np.vstack([a.normals, -a.normals, b.normals, -b.normals])
+    top, bottom = a.vertices @ normals.T, b.vertices @ normals.T
+    # a plane the two bodies meet in: a's farthest along the normal, b's nearest, within the tolerance
+    touching = np.abs(bottom.min(axis=0) - top.max(axis=0)) <= tol
     out = []
-    for n in np.vstack([a.normals, -a.normals, b.normals, -b.normals]):
-        top, bottom = a.vertices @ n, b.vertices @ n
-        if abs(bottom.min() - top.max()) > tol or any(np.allclose(n, m) for m, _ in out):
+    for k in np.nonzero(touching)[0]:
+        n = normals[k]
+        if any(np.abs(n - m).max() < 1e-9 for m, _ in out):
             continue
-        area, side = _patch_area(a.vertices[top >= top.max() - tol], b.vertices[bottom <= bottom.min() + tol], n)
+        area, side = _patch_area(a.vertices[top[:, k] >= top[:, k].max() - tol],
+                                 b.vertices[bottom[:, k] <= bottom[:, k].min() + tol], n)
         if area > tol * side:
             out.append((n, area))
     return out
@@ -140,7 +148,7 @@ def _near_triangles(a: Body, b: Body, tol: float) -> np.ndarray:
 
 
 def _unit_normals(tri: np.ndarray) -> np.ndarray:
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n = cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     return n / np.linalg.norm(n, axis=1)[:, None]
 
 
@@ -153,9 +161,9 @@ def _patch_area(pa: np.ndarray, pb: np.ndarray, n: np.ndarray, union: bool = Fal
     if not union and (len(pa) < 3 or len(pb) < 3):
         return 0.0, 0.0
     other = np.eye(3)[int(np.argmin(np.abs(n)))]
-    u = np.cross(n, other)
+    u = cross(n, other)
     u /= np.linalg.norm(u)
-    basis = np.array([u, np.cross(n, u)]).T
+    basis = np.array([u, cross(n, u)]).T
     qa, qb = pa @ basis, pb @ basis
     flat = np.vstack([qa.reshape(-1, 2), qb.reshape(-1, 2)])
     origin = flat.min(axis=0)

@@ -28,6 +28,28 @@ UNITS = {"m": 1.0, "mm": 0.001}
 TOLERANCE_SHARE = 1e-6
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products over the last axis, broadcast (``numpy.cross`` without its per-call overhead, which
+    dominated the narrow phase and the contacts).
+
+    Parameters
+    ----------
+    a, b : numpy.ndarray
+        Arrays whose last axis has length 3.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``a × b``.
+
+    Examples
+    --------
+    >>> cross(np.array([1.0, 0, 0]), np.array([0.0, 1, 0])).tolist()
+    [0.0, 0.0, 1.0]
+    """
+    return (a[..., [1, 2, 0]] * b[..., [2, 0, 1]]) - (a[..., [2, 0, 1]] * b[..., [1, 2, 0]])
+
+
 class GeometryError(ValueError):
     """An assembly that cannot be read or used: the message names the part and says what to do."""
 
@@ -183,14 +205,14 @@ def _bodies(part: str, vertices: np.ndarray, faces: np.ndarray, stl: bool) -> tu
     if stl:
         vertices, faces = _merged(vertices, faces)
     corners = vertices[faces]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    area2 = np.linalg.norm(cross, axis=1)
+    normals_long = cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area2 = np.linalg.norm(normals_long, axis=1)
     longest = max(float(np.ptp(vertices[np.unique(faces)], axis=0).max()), 1e-300)
     bad = np.nonzero(area2 <= 1e-12 * longest * longest)[0]
     if len(bad):
         raise GeometryError(f"part {part!r}: triangle {int(bad[0]) + 1} is degenerate (no area: two corners at one "
                             f"point or all three on a line); {len(bad)} such triangle(s): repair the mesh")
-    normals = cross / area2[:, None]
+    normals = normals_long / area2[:, None]
     labels = _components(len(vertices), faces)
     bodies = []
     for label in np.unique(labels[faces[:, 0]]):
@@ -239,7 +261,7 @@ def _body(part: str, k: int, points: np.ndarray, tri: np.ndarray, normals: np.nd
     verts = points[used]
     corners = points[tri]
     # the signed volume says whether the triangles face out; inward-facing files are turned
-    volume = float(np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])).sum()) / 6
+    volume = float(np.einsum("ij,ij->i", corners[:, 0], cross(corners[:, 1], corners[:, 2])).sum()) / 6
     if volume < 0:
         normals = -normals
     size = max(float(np.ptp(verts, axis=0).max()), 1e-300)
