@@ -529,3 +529,62 @@ def test_a_file_name_the_plan_refuses_as_a_part_id_is_refused_escaped(tmp_path):
     assert r.exit_code == 1 and "\x1b" not in r.output and "rename the files" in " ".join(r.output.split())
     with pytest.raises(DeriveError, match="control character"):
         derive(folder)
+
+
+# ---------------------------------------------------------------- options: directions, supports, a base
+
+
+def test_directions_as_a_list_and_refused_directions(tmp_path):
+    folder = write_assembly(tmp_path / "two", {"a": [(0, 0, 0)], "b": [(1, 0, 0)]})
+    doc = json.loads(run_cli("derive", folder, "--directions", "+z, -x,0 0.7 0.7", "--json").output)
+    assert doc["directions"] == ["+z", "-x", "0 0.707107 0.707107"]
+    # a coming in moving -x (from the +x side) passes through b; b coming the same way meets nothing
+    assert doc["blockers"]["a"]["-x"] == ["b"] and doc["blockers"]["b"]["-x"] == []
+    for bad, said in [("up", "'up' is not a direction"), ("0 0 0", "'0 0 0' is not a direction"),
+                      ("1 nan 0", "is not a direction"), (",".join(["1 2 %d" % k for k in range(70)]), "at most 64")]:
+        r = run_cli("derive", folder, "--directions", bad)
+        assert r.exit_code == 1 and said in r.output, r.output
+    r = run_cli("derive", folder, "--base", "nope")
+    assert r.exit_code == 1 and "base 'nope' is not a part" in r.output
+    r = run_cli("derive", folder, "--gravity", "+z,-z")
+    assert r.exit_code == 1 and "give one direction" in r.output
+
+
+def test_a_part_nothing_holds_under_gravity_is_refused_naming_it(tmp_path):
+    """Two cubes floating beside a tower (nothing under them, touching nothing below): under gravity
+    neither can ever go in; without gravity every order is feasible."""
+    parts = {"floor": [(0, 0, 0)], "top": [(0, 0, 1)], "hang": [(1, 0, 1)], "hung": [(2, 0, 1)]}
+    folder = write_assembly(tmp_path / "hang", parts)
+    r = run_cli("derive", folder, "--gravity", "-z")
+    assert r.exit_code == 1 and "no feasible sequence meets the supports" in " ".join(r.output.split())
+    assert BruteForce(parts, (3, 1, 2), gravity=True).count() == 0
+    assert run_cli("derive", folder).exit_code == 0
+    # connected alone: hang touches top, hung touches hang: feasible
+    derived = derive(folder, connected=True)
+    brute = BruteForce(parts, (3, 1, 2), connected=True)
+    assert Schedule(derived.plan).count() == brute.count() > 0
+
+
+def test_a_tilted_assembly_derives_as_on_the_axes(tmp_path):
+    """One step off the axes: a voxel assembly turned by a random rotation.  The default directions (the
+    axes and the contacts' normals) include the turned axes, and the plan admits exactly the sequences
+    of the brute force on the unturned grid; the axes alone (now off every face) block more."""
+    parts = partition((2, 2, 3), 5, seed=4)
+    q, r = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))
+    turn = q * np.sign(np.diag(r)) * (1 if np.linalg.det(q * np.sign(np.diag(r))) > 0 else -1)
+    folder = write_assembly(tmp_path / "turned", parts)
+    for f in folder.iterdir():
+        lines = []
+        for line in f.read_text().splitlines():
+            if line.startswith("v "):
+                line = "v " + " ".join(f"{c:.15g}" for c in turn @ np.array(line.split()[1:], float))
+            lines.append(line)
+        f.write_text("\n".join(lines) + "\n")
+    derived = derive(folder)
+    assert len(derived.blocking.directions) == 12          # six axes, six turned face normals
+    assert Schedule(derived.plan).count() == BruteForce(parts, (2, 2, 3)).count()
+    try:
+        fewer = Schedule(derive(folder, directions="axes").plan).count()
+    except DeriveError:
+        fewer = 0
+    assert fewer < Schedule(derived.plan).count()
