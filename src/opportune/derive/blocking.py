@@ -179,7 +179,23 @@ def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, 
 
 
 def unit_vectors(directions: dict[str, tuple[float, float, float]]) -> dict[str, np.ndarray]:
-    """The directions as unit vectors (numpy), by name."""
+    """The directions as unit vectors (numpy), by name.
+
+    Parameters
+    ----------
+    directions : dict
+        Names and vectors (not zero).
+
+    Returns
+    -------
+    dict
+        Names and unit vectors.
+
+    Examples
+    --------
+    >>> unit_vectors({"d": (0, 3, 4)})["d"].tolist()
+    [0.0, 0.6, 0.8]
+    """
     return {d: np.asarray(v, float) / np.linalg.norm(v) for d, v in directions.items()}
 
 

@@ -153,8 +153,27 @@ class _Alternative:
 
 def alternatives(block: Blocking, conditions: Conditions | None = None) -> dict[str, list[_Alternative]]:
     """Per part, the minimal ways it can go in: a direction of :func:`options` and, for each requirement,
-    one part in before it (or, without a base, the part first of all); a way that asks a superset of
-    another's orders is left out."""
+    one part in before it (or, where :meth:`Conditions.may_go_first`, the part first of all); a way that
+    asks a superset of another's orders is left out.
+
+    Parameters
+    ----------
+    block : Blocking
+        The blocking relation.
+    conditions : Conditions, optional
+        The supports each part needs, and the base.
+
+    Returns
+    -------
+    dict
+        For each part, its ways: a name (``"+x on b"``, ``"first"``), the parts it must come before and after.
+
+    Examples
+    --------
+    >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
+    >>> [(w.name, sorted(w.after), sorted(w.before)) for w in alternatives(b, Conditions({"b": (("gravity", frozenset("a")),)}))["b"]]
+    [('+x on a', [], ['a'])]
+    """
     conditions = conditions or Conditions({})
     opts = options(block)
     out = {}

@@ -64,7 +64,32 @@ def solid(body: "Body", origin: np.ndarray | None = None):
 
 
 def swept_solid(body: "Body", sweep: np.ndarray, reach: float, origin: np.ndarray):
-    """The solid the body covers moving along ``sweep`` (a unit vector) by up to ``reach``."""
+    """The solid the body covers moving along ``sweep`` (a unit vector) by up to ``reach``: its hull with
+    its moved copy when convex, else the body and one prism per triangle facing the sweep.
+
+    Parameters
+    ----------
+    body : Body
+        A closed body.
+    sweep : numpy.ndarray
+        A unit vector.
+    reach : float
+        How far it moves.
+    origin : numpy.ndarray
+        Subtracted from every coordinate first.
+
+    Returns
+    -------
+    manifold3d.Manifold
+        The swept solid.
+
+    Examples
+    --------
+    >>> from opportune.derive.geometry import Body
+    >>> v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    >>> round(swept_solid(Body(v, np.eye(3), np.eye(3)), np.array([1.0, 0, 0]), 2.0, np.zeros(3)).volume(), 9)
+    3.0
+    """
     import manifold3d
 
     points = body.vertices - origin
