@@ -568,7 +568,8 @@ def test_a_part_nothing_holds_under_gravity_is_refused_naming_it(tmp_path):
 def test_a_tilted_assembly_derives_as_on_the_axes(tmp_path):
     """One step off the axes: a voxel assembly turned by a random rotation.  The default directions (the
     axes and the contacts' normals) include the turned axes, and the plan admits exactly the sequences
-    of the brute force on the unturned grid; the axes alone (now off every face) block more."""
+    of the brute force on the unturned grid; the axes alone (now off every face) block more; gravity
+    along the turned -z gives the brute force's count with gravity."""
     parts = partition((2, 2, 3), 5, seed=4)
     q, r = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))
     turn = q * np.sign(np.diag(r)) * (1 if np.linalg.det(q * np.sign(np.diag(r))) > 0 else -1)
@@ -588,3 +589,7 @@ def test_a_tilted_assembly_derives_as_on_the_axes(tmp_path):
     except DeriveError:
         fewer = 0
     assert fewer < Schedule(derived.plan).count()
+    # gravity along the turned -z (a vector, not an axis): resting and the floor found off the axes too
+    down = " ".join(f"{c:.15g}" for c in turn @ np.array([0, 0, -1.0]))
+    held = derive(folder, gravity=down)
+    assert Schedule(held.plan).count() == BruteForce(parts, (2, 2, 3), gravity=True).count() > 0
