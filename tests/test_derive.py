@@ -593,3 +593,21 @@ def test_a_tilted_assembly_derives_as_on_the_axes(tmp_path):
     down = " ".join(f"{c:.15g}" for c in turn @ np.array([0, 0, -1.0]))
     held = derive(folder, gravity=down)
     assert Schedule(held.plan).count() == BruteForce(parts, (2, 2, 3), gravity=True).count() > 0
+
+
+def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monkeypatch):
+    """The default directions grow with the contacts' normals: over the limit, exit 1 saying to give
+    --directions (checked before any blocking test); with --directions axes the same assembly derives."""
+    from opportune.derive import blocking, directions
+
+    folder = write_assembly(tmp_path / "wedge", {"a": [(0, 0, 0)]})
+    # a wedge (a triangular prism, one face tilted) against the cube's +x face
+    (folder / "b.obj").write_text("v 1 0 0\nv 1 1 0\nv 1 0 1\nv 1 1 1\nv 2 0 0\nv 2 1 0\n"
+                                  "f 1 3 2\nf 2 3 4\nf 1 5 3\nf 2 4 6\nf 1 2 6\nf 1 6 5\nf 3 5 6\nf 3 6 4\n")
+    assert len(derive(folder).blocking.directions) == 6            # the contact's normal is +x: an axis
+    monkeypatch.setattr(directions, "MAX_DIRECTIONS", 5)
+    called = []
+    monkeypatch.setattr(blocking, "depth", lambda *a: called.append(1))
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
+    assert not called
