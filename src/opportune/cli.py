@@ -1340,9 +1340,13 @@ def derive(
                                                                      "requires); default: assembly.yaml in the folder"),
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="Write the plan (YAML) here instead of "
                                                                        "standard output"),
-    directions: Optional[str] = typer.Option(None, "--directions", help="Insertion directions: axes (the six axis "
-                                                                        "directions); default: the manifest's, else "
-                                                                        "axes"),
+    directions: Optional[str] = typer.Option(None, "--directions", help="Insertion directions: axes (the six "
+                                             "axis directions), or a list such as \"+z,-x,0 0.7 0.7\" (default: the "
+                                             "manifest's, else the axes and the normals of the contacts between parts)"),
+    gravity: Optional[str] = typer.Option(None, "--gravity", help="Gravity's direction (e.g. -z): each part after "
+                                          "the first rests on a part below it that it touches, or on the fixture"),
+    connected: bool = typer.Option(False, "--connected", help="Each part after the first touches a part already in"),
+    base: Optional[str] = typer.Option(None, "--base", help="The part that goes first"),
     tolerance: Optional[float] = typer.Option(None, "--tolerance", min=0.0,
                                               help="Penetration tolerance in the files' units: parts may overlap by "
                                                    "this much (default: a millionth of the assembly's size)"),
@@ -1362,7 +1366,8 @@ def derive(
     except ImportError as exc:   # trimesh missing: the geometry extra
         fail(f"opportune derive needs the geometry extra: pip install 'opportune[geometry]' ({exc})")
     try:
-        derived = derive_plan(assembly, directions=directions, tolerance=tolerance, units=units, manifest=manifest)
+        derived = derive_plan(assembly, directions=directions, tolerance=tolerance, units=units, gravity=gravity,
+                              connected=connected, base=base, manifest=manifest)
     except (GeometryError, DeriveError, ManifestError) as exc:
         fail(str(exc))
     text = _plan_yaml(derived.plan.to_dict())

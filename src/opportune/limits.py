@@ -57,7 +57,8 @@ MAX_SEQUENCE_ITEMS = 2_000_000   # installations in all the sequences of one fil
 MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before it is read
 MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
 MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
-MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
+MAX_WORKING = 256                # partial orders kept while the exact plan is built part by part (each pair compared)
+MAX_DIRECTIONS = 64              # insertion directions (given, or the axes and the contacts' normals)
 MAX_COORDINATE = 10_000          # metres from the origin, any vertex (beyond, squares of lengths lose their digits)
 MAX_SCENE_BYTES = 256 << 20      # a glTF/GLB scene file, and its buffers in all (256 MiB: 300 parts of 20,000 triangles)
 MAX_SCENE_NODES = 10_000         # entries of each list of a glTF file (nodes, meshes, accessors, buffers, ...)
@@ -71,7 +72,6 @@ MAX_STEP_BYTES = 64 << 20        # a STEP file (64 MiB), checked before Open CAS
 STEP_SECONDS = 120               # meshing a STEP file (a child process, ended past this)
 STEP_MEMORY = 4 << 30            # the address space of the child process that meshes a STEP file (4 GiB)
 MAX_MANIFEST_BYTES = 1 << 20     # an assembly's manifest (assembly.yaml, 1 MiB)
-MAX_DIRECTIONS = 26              # insertion directions a manifest lists (the axes and the diagonals are 26)
 MAX_PROCESS = 10_000             # process constraints ("this before that") of a manifest
 
 # ---------------------------------------------------------------- requests to the service
@@ -133,7 +133,9 @@ LIMITS = {limit.key: limit for limit in (
     Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
-    Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
+    Limit("working_orders", MAX_WORKING, "partial orders",
+          "incomparable partial orders kept while a derived plan is built (`derive`)", "command line"),
+    Limit("directions", MAX_DIRECTIONS, "directions", "insertion directions of a derivation (`derive`)",
           "command line"),
     Limit("coordinate", MAX_COORDINATE, "m", "a vertex's distance from the origin along each axis (`derive`)",
           "command line"),
@@ -154,8 +156,6 @@ LIMITS = {limit.key: limit for limit in (
     Limit("step_memory", STEP_MEMORY, "bytes", "memory of the process that meshes a STEP file (`derive`)",
           "command line"),
     Limit("manifest_bytes", MAX_MANIFEST_BYTES, "bytes", "an assembly's manifest (`derive`)", "command line"),
-    Limit("directions", MAX_DIRECTIONS, "directions", "insertion directions a manifest lists (`derive`)",
-          "command line"),
     Limit("process", MAX_PROCESS, "constraints", "process constraints of a manifest (`derive`)", "command line"),
     Limit("body", MAX_BODY, "bytes", f"a request body (default {DEFAULT_MAX_BODY:,}, at least {MIN_BODY:,})",
           SERVICE, "--max-body"),

@@ -18,11 +18,13 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from opportune.derive.blocking import AXES, Blocking, find_blocking
-from opportune.derive.geometry import SCENE_SUFFIXES, GeometryError, read_assembly
+from opportune.derive.contacts import Contact, find_contacts
+from opportune.derive.directions import default_directions, parse_directions, support_conditions
+from opportune.derive.geometry import SCENE_SUFFIXES, Assembly, GeometryError, read_assembly
 from opportune.derive.manifest import (MANIFEST, Manifest, ManifestError, check_interchangeable, check_parts,
                                        manifest_from, merge_units, part_ids, read_manifest, unit_pairs,
                                        without_fixture)
-from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies, options
+from opportune.derive.plan import Conditions, DeriveError, DerivedStrategy, alternatives, exact_strategies, options
 from opportune.derive.mjcf import read_mjcf_assembly
 from opportune.derive.scene import read_scene_assembly
 from opportune.planning.plan import Plan, PlanError
@@ -35,52 +37,62 @@ DIRECTION_SETS = {"axes": AXES}
 
 @dataclass(frozen=True)
 class Derivation:
-    """A derived plan with what it was derived from: the blocking relation, the strategies with each
-    part's direction, and the CPU seconds taken."""
+    """A derived plan with what it was derived from: the blocking relation, the contacts, the supports
+    each part needed, the strategies with each part's way in, and the CPU seconds taken."""
 
     plan: Plan
     blocking: Blocking
     strategies: tuple[DerivedStrategy, ...]
     seconds: float
+    contacts: tuple[Contact, ...] = ()
+    conditions: Conditions = Conditions({})
 
     def to_dict(self) -> dict:
         """The numbers of the derivation, as ``derive --json`` prints them (the plan aside)."""
         b = self.blocking
         return {"parts": len(b.parts), "directions": list(b.directions), "tolerance_m": b.tolerance,
-                "blocking_checks": b.checks, "strategies": len(self.strategies),
+                "blocking_checks": b.checks, "contacts": len(self.contacts), "strategies": len(self.strategies),
                 "constraints": sum(len(s.pairs) for s in self.strategies), "cpu_seconds": round(self.seconds, 4),
+                "base": self.conditions.base,
+                "supports": {p: {kind: sorted(n) for kind, n in needs} for p, needs in self.conditions.needs.items()},
                 "blockers": {p: {d: sorted(q) for d, q in dirs.items()} for p, dirs in b.blockers.items()},
                 "directions_by_strategy": [s.directions for s in self.strategies]}
 
 
-def derive(path: str | Path, *, directions: str | Sequence | None = None, tolerance: float | None = None,
-           units: str = "m", name: str | None = None, manifest: str | Path | None = None,
+def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict | None = None,
+           tolerance: float | None = None, units: str = "m", name: str | None = None, gravity: str | None = None,
+           connected: bool = False, base: str | None = None, manifest: str | Path | None = None,
            names: Mapping[str, str] | None = None, quantities: Mapping[str, Sequence[str]] | None = None,
-           base: str | None = None, fixture: str | None = None,
-           requires: Mapping[str, Sequence[str]] | None = None) -> Derivation:
+           fixture: str | None = None, requires: Mapping[str, Sequence[str]] | None = None) -> Derivation:
     """Derive the plan of an assembly: exactly the sequences feasible under the motion model.
 
     Parameters
     ----------
-    path : str or Path
+    source : str, Path or Assembly
         The assembly in its assembled pose: a folder of meshes, one file a part (``.obj``, ``.stl``,
-        ``.ply``; the id is the file's stem), a glTF/GLB scene (each named node with a mesh a part) or a
-        MuJoCo MJCF model (each named body with geoms a part).
-    directions : str or list, optional
-        The insertion directions: ``"axes"`` (the six axis directions), or a list of axis names and
-        ``[x, y, z]`` vectors.  Default: the manifest's, else ``"axes"``.
+        ``.ply``; the id is the file's stem), a glTF/GLB scene (each named node with a mesh a part), a
+        MuJoCo MJCF model (each named body with geoms a part), or an assembly already read.
+    directions : str, list or dict, optional
+        The insertion directions: ``"axes"`` (the six axis directions), a text list such as
+        ``"+z,-x,0 0.7 0.7"``, a list of axis names and ``[x, y, z]`` vectors, or names and vectors.
+        Default: the manifest's, else the axes and the normals of the contacts between parts.
     tolerance : float, optional
         Penetration tolerance in the files' units (default: a millionth of the assembly's size).
     units : str
         ``"m"`` or ``"mm"``: the files' unit of length.
     name : str, optional
         The plan's name (default: the folder's or file's name).
+    gravity : str, optional
+        The direction of gravity (``"-z"``): each part rests on a part below it that it touches, or on the
+        fixture (its lowest point at the assembly's lowest level; the first part must, unless it is the base).
+    connected : bool
+        Each part after the first touches a part already in.
     manifest : str or Path, optional
         The assembly's manifest (:mod:`opportune.derive.manifest`); default ``assembly.yaml`` in the folder,
         if there is one.
     names, quantities, base, fixture, requires : optional
         As the manifest's keys, replacing them: display names; identical parts (a part id: its instances);
-        the part installed first; the part in place from the start (not installed); process constraints
+        the part installed first (it needs no support); the part in place from the start (not installed); process constraints
         (a part id: the parts before it), added to every strategy.
 
     Returns
@@ -106,20 +118,48 @@ def derive(path: str | Path, *, directions: str | Sequence | None = None, tolera
     opportune.derive.geometry.GeometryError: no-such-folder: not a folder; give a folder of meshes, one file a part (.obj, .stl, .ply)
     """
     start = time.process_time()
-    man = _manifest(path, manifest, {"names": names, "quantities": quantities, "base": base, "fixture": fixture,
-                                     "requires": requires, "directions": directions})
-    label, vectors = _direction_set(directions, man)
-    assembly = _reader(path)(path, units=units, tolerance=tolerance)
+    man = _manifest(source, manifest, {"names": names, "quantities": quantities, "base": base, "fixture": fixture,
+                                       "requires": requires, "directions": directions})
+    label, given = _direction_set(directions, man)
+    assembly, title = _read(source, units, tolerance)
     check_parts(man, [p.id for p in assembly.parts])
-    block = find_blocking(assembly, vectors)
+    # contacts only where something asks for them: the supports, or the default directions
+    contacts = find_contacts(assembly) if given is None or gravity is not None or connected else []
+    ids = {p.id for p in assembly.parts}
+    conditions = support_conditions(assembly, contacts, gravity=gravity, connected=connected,
+                                    base=man.base if man.base in ids else None)
+    block = find_blocking(assembly, default_directions(contacts) if given is None else given)
     if man.fixture is not None:
         block = without_fixture(block, man.fixture)
-    check_interchangeable(man, options(block))
-    strategies = exact_strategies(block, unit_pairs(man, block.parts))
+        conditions = _held_by_fixture(conditions, man.fixture)
+    check_interchangeable(man, _ways(block, conditions))
+    strategies = exact_strategies(block, conditions, unit_pairs(man, block.parts))
     written = merge_units(man, block.parts, strategies)
-    whole = Path(path).resolve()
-    plan = _plan(block, written, man, name or (whole.name if whole.is_dir() else whole.stem) or "assembly", label)
-    return Derivation(plan, block, tuple(strategies), time.process_time() - start)
+    plan = _plan(block, written, man, name or title or "assembly", label, conditions)
+    return Derivation(plan, block, tuple(strategies), time.process_time() - start, tuple(contacts), conditions)
+
+
+def _read(source, units: str, tolerance: float | None) -> tuple[Assembly, str]:
+    """The assembly and its title (the folder's or file's name)."""
+    if isinstance(source, Assembly):
+        return source, "assembly"
+    whole = Path(source).resolve()
+    return _reader(source)(source, units=units, tolerance=tolerance), whole.name if whole.is_dir() else whole.stem
+
+
+def _held_by_fixture(conditions: Conditions, fixture: str) -> Conditions:
+    """The supports with the fixture in place from the start: a requirement it meets is met."""
+    needs = {p: tuple((kind, n) for kind, n in needs if fixture not in n)
+             for p, needs in conditions.needs.items() if p != fixture}
+    return Conditions({p: n for p, n in needs.items() if n}, conditions.base, conditions.waived_first)
+
+
+def _ways(block: Blocking, conditions: Conditions) -> dict:
+    """Each part's ways in, as the check of identical instances compares them: the blocker sets, or with
+    supports or a base the (after, before) sets of each way."""
+    if not conditions.needs and conditions.base is None:
+        return options(block)
+    return {p: [(w.name, (w.after, w.before)) for w in ws] for p, ws in alternatives(block, conditions).items()}
 
 
 def _reader(path):
@@ -132,29 +172,34 @@ def _reader(path):
 
 def _manifest(path, file, keywords: dict) -> Manifest:
     """The manifest: the file's (given, or ``assembly.yaml`` in the folder), its keys replaced by the keywords given."""
-    if file is None and Path(path).is_dir() and (Path(path) / MANIFEST).is_file():
+    if file is None and not isinstance(path, Assembly) and Path(path).is_dir() and (Path(path) / MANIFEST).is_file():
         file = Path(path) / MANIFEST
     doc = read_manifest(file) if file is not None else {"data": {}, "lines": {}, "file": None}
     if not isinstance(doc["data"], dict):
         return manifest_from(doc["data"], file=doc["file"])     # refused, saying what a manifest is
     data = doc["data"]
-    given = {k: v for k, v in keywords.items() if v is not None and not (k == "directions" and isinstance(v, str))}
+    given = {k: v for k, v in keywords.items()
+             if v is not None and not (k == "directions" and isinstance(v, (str, dict)))}
     lines = {k: v for k, v in doc["lines"].items() if not (k and k[0] in given)}
     return manifest_from({**data, **given}, file=doc["file"], lines=lines)
 
 
-def _direction_set(directions, man: Manifest) -> tuple[str, dict]:
-    """The directions' label (for the plan's description) and vectors: a named set, or the manifest's list."""
+def _direction_set(directions, man: Manifest) -> tuple[str, dict | None]:
+    """The directions' label (for the plan's description) and vectors (None: the axes and the contacts'
+    normals): a named set, a text list, names and vectors, or the manifest's list."""
     if isinstance(directions, str):
-        if directions not in DIRECTION_SETS:
-            raise GeometryError(f"directions {directions!r}: give one of {', '.join(DIRECTION_SETS)}, or a list")
-        return directions, DIRECTION_SETS[directions]
+        if directions in DIRECTION_SETS:
+            return directions, DIRECTION_SETS[directions]
+        return "listed", parse_directions(directions)
+    if isinstance(directions, dict):
+        return "listed", directions
     if man.directions:
         return "listed", man.directions
-    return "axes", DIRECTION_SETS["axes"]
+    return "the axes and the contacts' normals", None
 
 
-def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: str) -> Plan:
+def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: str,
+          conditions: Conditions) -> Plan:
     """The strategies as a plan, through the plan checker (what ``opportune check`` reads back)."""
     from opportune.formats.loader import plan_from_dict
 
@@ -165,7 +210,8 @@ def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: 
         f"Derived from the parts' geometry (opportune derive): each part goes in by one straight translation "
         f"from far away along one of the directions {directions} ({', '.join(block.directions)}), sliding along "
         f"faces it touches, never through another part (penetration tolerance {block.tolerance:.6g} m). "
-        "Each strategy is one choice of a direction per part; the plan admits exactly the feasible sequences."
+        + _supports_text(conditions)
+        + "Each strategy is one choice of a way in per part; the plan admits exactly the feasible sequences."
         + extra), "parts": [], "strategies": []}
     for pid in part_ids(man, block.parts):
         quantity = len(man.quantities.get(pid, (pid,)))
@@ -183,3 +229,13 @@ def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: 
     except PlanError as exc:   # the files' names are the part ids: one the plan refuses is the user's to rename
         raise DeriveError(f"the derived plan is not valid ({exc}); part ids are the files' stems: rename the "
                           "files") from None
+
+
+def _supports_text(conditions: Conditions) -> str:
+    """The supports asked, as the plan's description states them."""
+    text = f"The base {conditions.base} goes first. " if conditions.base else ""
+    if conditions.needs:
+        text += (f"{len(conditions.needs)} parts need a part in before them: under gravity one they rest on "
+                 "(unless they rest on the fixture, as the first part must), with connected one they touch "
+                 "(unless they go in first). ")
+    return text

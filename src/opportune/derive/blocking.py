@@ -6,7 +6,8 @@ set; it may slide along faces it touches but never pass through another part's i
 ``p ⊕ {-t·d : t ≥ 0}``, the Minkowski sum of the part with a ray; ``q`` blocks ``p`` along ``d`` when
 that swept volume and ``q`` overlap by more than the penetration tolerance.
 
-The test is exact for convex bodies (every part is a union of them, :mod:`opportune.derive.geometry`):
+The test is exact for convex bodies (a body that is not convex is left to manifold3d's booleans,
+:mod:`opportune.derive.solids`):
 the swept volume of a convex body is a convex polyhedron (unbounded along ``-d``) whose faces are the
 body's faces and the planes through its edges and ``d``, so by the separating axis theorem two bodies
 overlap iff their projections overlap on every axis among the faces' normals of both, the cross
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opportune.derive.geometry import Assembly, Body, GeometryError
+from opportune.derive.geometry import Assembly, Body, GeometryError, cross
 
 #: The six axis directions, ``--directions axes``: a name and a unit vector each.
 AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0), "-y": (0.0, -1.0, 0.0),
@@ -87,9 +88,42 @@ def depth(a: Body, b: Body, sweep: np.ndarray | None = None) -> float:
     return float(overlap.min())
 
 
+def penetration(a: Body, b: Body, sweep: np.ndarray | None = None, reach: float = 0.0) -> float:
+    """How deep body ``a`` (swept along ``sweep`` by up to ``reach``, if given) and body ``b`` overlap:
+    the separating axes' depth for two convex bodies (:func:`depth`), else the overlap's mean thickness
+    by manifold3d's booleans (:func:`opportune.derive.solids.thickness`).
+
+    Parameters
+    ----------
+    a, b : Body
+        Closed bodies.
+    sweep : numpy.ndarray, optional
+        A unit vector.
+    reach : float
+        How far ``a`` is swept (past the assembly); unused for convex pairs (the sweep is a ray).
+
+    Returns
+    -------
+    float
+        Metres; 0 or less when they do not overlap.
+
+    Examples
+    --------
+    >>> from opportune.derive.geometry import Body
+    >>> v = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    >>> penetration(Body(v, np.eye(3), np.eye(3)), Body(v + [1, 0, 0], np.eye(3), np.eye(3)))
+    0.0
+    """
+    if a.convex and b.convex:
+        return depth(a, b, sweep)
+    from opportune.derive.solids import thickness
+
+    return thickness(a, b, sweep, reach)
+
+
 def _crosses(e: np.ndarray, f: np.ndarray) -> np.ndarray:
     """The unit cross products of every vector of ``e`` with every one of ``f`` (parallel pairs left out)."""
-    c = np.cross(e[:, None, :], f[None, :, :]).reshape(-1, 3)
+    c = cross(e[:, None, :], f[None, :, :]).reshape(-1, 3)
     n = np.linalg.norm(c, axis=1)
     keep = n > _PARALLEL
     return c[keep] / n[keep, None]
@@ -127,42 +161,113 @@ def find_blocking(assembly: Assembly, directions: dict[str, tuple[float, float, 
     ['-x']
     """
     directions = dict(AXES if directions is None else directions)
-    unit = {d: np.asarray(v, float) / np.linalg.norm(v) for d, v in directions.items()}
+    unit = unit_vectors(directions)
     parts = assembly.parts
     tol = assembly.tolerance
-    boxes = np.array([p.bounds for p in parts])          # n × 2 × 3
-    # each body's box too: a part's box overlapping another's says little when parts are long or bent
-    body_boxes = [np.array([[b.vertices.min(axis=0), b.vertices.max(axis=0)] for b in p.bodies]) for p in parts]
+    _check_apart(assembly, np.array([p.bounds for p in parts]))
+    found: dict[str, dict[str, set[str]]] = {p.id: {d: set() for d in unit} for p in parts}
     checks = 0
-    _check_apart(assembly, boxes)
-    blockers: dict[str, dict[str, frozenset[str]]] = {p.id: {} for p in parts}
-    for i, p in enumerate(parts):
-        for d, v in unit.items():
-            sweep = -v
-            lo, hi = boxes[i, 0].copy(), boxes[i, 1].copy()
-            hi[sweep > _PARALLEL] = np.inf
-            lo[sweep < -_PARALLEL] = -np.inf
-            overlap = np.minimum(hi, boxes[:, 1]) - np.maximum(lo, boxes[:, 0])
-            near = np.nonzero((overlap > tol).all(axis=1))[0]
-            found = set()
-            swept = _swept_boxes(body_boxes[i], sweep)
-            for j in near.tolist():
-                if j == i:
-                    continue
-                for a, b in _box_pairs(swept, body_boxes[j], tol):
-                    checks += 1
-                    if depth(p.bodies[a], parts[j].bodies[b], sweep) > tol:
-                        found.add(parts[j].id)
-                        break
-            blockers[p.id][d] = frozenset(found)
+    reach = 2 * assembly.size        # past the whole assembly: a part comes from far away
+    for i, d, j, pairs in _candidates(assembly, unit):
+        for a, b in pairs:
+            checks += 1
+            if penetration(a, b, -unit[d], reach) > tol:
+                found[parts[i].id][d].add(parts[j].id)
+                break
+    blockers = {p: {d: frozenset(q) for d, q in dirs.items()} for p, dirs in found.items()}
     return Blocking(tuple(p.id for p in parts), directions, blockers, tol, checks)
 
 
-def _swept_boxes(boxes: np.ndarray, sweep: np.ndarray) -> np.ndarray:
-    """Boxes (k × 2 × 3) stretched to infinity along the ray's direction."""
+def unit_vectors(directions: dict[str, tuple[float, float, float]]) -> dict[str, np.ndarray]:
+    """The directions as unit vectors (numpy), by name.
+
+    Parameters
+    ----------
+    directions : dict
+        Names and vectors (not zero).
+
+    Returns
+    -------
+    dict
+        Names and unit vectors.
+
+    Examples
+    --------
+    >>> unit_vectors({"d": (0, 3, 4)})["d"].tolist()
+    [0.0, 0.6, 0.8]
+    """
+    return {d: np.asarray(v, float) / np.linalg.norm(v) for d, v in directions.items()}
+
+
+def candidate_pairs(assembly: Assembly, unit: dict[str, np.ndarray]):
+    """Every body pair the narrow phase must test: ``(i, direction, j, body of part i, body of part j)``
+    for each part ``i`` swept along each direction and each part ``j`` whose box its swept box meets
+    (the broad phase :func:`find_blocking` runs, flattened; the collision benchmark asks each method these).
+
+    Parameters
+    ----------
+    assembly : Assembly
+        The parts.
+    unit : dict
+        Direction names and unit vectors (:func:`unit_vectors`).
+
+    Returns
+    -------
+    iterator of tuple
+        ``(i, direction, j, a, b)``.
+
+    Examples
+    --------
+    >>> from opportune.derive.geometry import Assembly, Body, PartShape
+    >>> def cube(x):
+    ...     v = np.array([[x + i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], float)
+    ...     return PartShape(str(x), None, (Body(v, np.eye(3), np.eye(3)),), 12)
+    >>> [(i, d, j) for i, d, j, _, _ in candidate_pairs(Assembly((cube(0), cube(1)), 1e-9, "m"), unit_vectors(AXES))]
+    [(1, '+x', 0), (0, '-x', 1)]
+    """
+    for i, d, j, pairs in _candidates(assembly, unit):
+        for a, b in pairs:
+            yield i, d, j, a, b
+
+
+def _candidates(assembly: Assembly, unit: dict[str, np.ndarray]):
+    """The broad phase, in each direction's own frame (two axes across it and the direction itself, so
+    that a tilted direction prunes as well as an axis): every part's box swept to infinity against every
+    part's box at once (one n × n comparison), then, for each pair left, the bodies' boxes the same way.
+    A box's overlap on an axis is at least the bodies' penetration depth, so no pair left out can block."""
+    parts, tol = assembly.parts, assembly.tolerance
+    for d, v in unit.items():
+        frame = _frame(v)
+        # each body's box too: a part's box overlapping another's says little when parts are long or bent
+        body_boxes = [np.array([_box(b.vertices @ frame.T) for b in p.bodies]) for p in parts]
+        boxes = np.array([[bb[:, 0].min(axis=0), bb[:, 1].max(axis=0)] for bb in body_boxes])
+        swept = _swept_boxes(boxes)
+        overlap = np.minimum(swept[:, None, 1], boxes[None, :, 1]) - np.maximum(swept[:, None, 0], boxes[None, :, 0])
+        near = (overlap > tol).all(axis=2)
+        np.fill_diagonal(near, False)
+        for i, j in zip(*(k.tolist() for k in np.nonzero(near))):
+            pairs = _box_pairs(_swept_boxes(body_boxes[i]), body_boxes[j], tol)
+            if pairs:
+                yield i, d, j, [(parts[i].bodies[a], parts[j].bodies[b]) for a, b in pairs]
+
+
+def _frame(v: np.ndarray) -> np.ndarray:
+    """Rows: two unit vectors across ``v`` and ``v`` itself (an orthonormal frame)."""
+    other = np.eye(3)[int(np.argmin(np.abs(v)))]
+    u = cross(v, other)
+    u /= np.linalg.norm(u)
+    return np.array([u, cross(v, u), v])
+
+
+def _box(points: np.ndarray) -> np.ndarray:
+    return np.array([points.min(axis=0), points.max(axis=0)])
+
+
+def _swept_boxes(boxes: np.ndarray) -> np.ndarray:
+    """Boxes (k × 2 × 3, in a direction's frame) swept from far away along the direction (the third
+    axis): coming in along ``v``, a part passes everything behind where it ends."""
     out = boxes.copy()
-    out[:, 1, sweep > _PARALLEL] = np.inf
-    out[:, 0, sweep < -_PARALLEL] = -np.inf
+    out[:, 0, 2] = -np.inf
     return out
 
 
@@ -181,7 +286,7 @@ def _check_apart(assembly: Assembly, boxes: np.ndarray) -> None:
         for j in (i + 1 + np.nonzero((overlap > tol).all(axis=1))[0]).tolist():
             for a in p.bodies:
                 for b in parts[j].bodies:
-                    deep = depth(a, b)
+                    deep = penetration(a, b)
                     if deep > tol:
                         raise GeometryError(
                             f"parts {p.id!r} and {parts[j].id!r} overlap by {deep:.6g} m in the assembled pose "

@@ -412,7 +412,8 @@ def check_interchangeable(man: Manifest, options: Mapping[str, list[tuple[str, f
     man : Manifest
         The manifest.
     options : dict
-        Each instance's minimal blocker sets, by direction (:func:`opportune.derive.plan.options`).
+        Each instance's minimal blocker sets, by direction (:func:`opportune.derive.plan.options`), or with
+        supports its ways in as ``(name, (after, before))`` (:func:`opportune.derive.plan.alternatives`).
 
     Raises
     ------
@@ -432,13 +433,20 @@ def check_interchangeable(man: Manifest, options: Mapping[str, list[tuple[str, f
         for a, b in zip(group, group[1:]):
             swap = {a: b, b: a}
             for p, family in sets.items():
-                image = {frozenset(swap.get(x, x) for x in q) for q in family}
+                image = {_swapped(q, swap) for q in family}
                 if image != sets.get(swap.get(p, p)):
                     raise ManifestError([Problem(
                         f"quantities.{shown(part)}: instances {a!r} and {b!r} are not interchangeable "
                         f"in the assembly (part {p!r} goes in with other parts in its way than "
                         f"{swap.get(p, p)!r} would)", "list them as separate parts",
                         **man.where("quantities", part))])
+
+
+def _swapped(q, swap: dict):
+    """A set of parts (or a tuple of such sets: a way's parts after and before) with two instances swapped."""
+    if isinstance(q, tuple):
+        return tuple(_swapped(x, swap) for x in q)
+    return frozenset(swap.get(x, x) for x in q)
 
 
 def merge_units(man: Manifest, ids: Sequence[str], strategies: Sequence[DerivedStrategy]

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from opportune.derive.blocking import Blocking
-from opportune.engine.poset import CycleError, Poset, bits
-from opportune.limits import MAX_CHOICES, MAX_STRATEGIES
+from opportune.engine.poset import bits
+from opportune.limits import MAX_STRATEGIES, MAX_WORKING
 
 
 class DeriveError(ValueError):
@@ -107,13 +107,112 @@ def options(block: Blocking) -> dict[str, list[tuple[str, frozenset[str]]]]:
     return out
 
 
-def exact_strategies(block: Blocking, before: Sequence[tuple[str, str]] = ()) -> list[DerivedStrategy]:
-    """The minimal strategies whose union admits exactly the feasible sequences.
+@dataclass(frozen=True)
+class Conditions:
+    """What each part needs besides a free direction: ``needs[p]`` lists ``p``'s requirements, each a
+    kind (``"gravity"``, ``"connected"``) and the set of parts any one of which must be in before ``p``
+    (a requirement the fixture meets is left out).  The ``base``, if given, goes first and needs
+    nothing; without a base, a part whose requirements are all of kinds in ``waived_first``
+    (``connected``: the first part touches nothing built) may go first instead of meeting them."""
+
+    needs: dict[str, tuple[tuple[str, frozenset[str]], ...]]
+    base: str | None = None
+    waived_first: frozenset[str] = frozenset()
+
+    def may_go_first(self, p: str) -> bool:
+        """Whether ``p`` can be the first part (its requirements waived there).
+
+        Parameters
+        ----------
+        p : str
+            A part.
+
+        Returns
+        -------
+        bool
+            True for the base; without a base, for a part whose requirements the first part is spared.
+
+        Examples
+        --------
+        >>> Conditions({"b": (("gravity", frozenset("a")),)}).may_go_first("b")
+        False
+        """
+        if self.base is not None:
+            return p == self.base
+        return all(kind in self.waived_first for kind, _ in self.needs.get(p, ()))
+
+
+@dataclass(frozen=True)
+class _Alternative:
+    """One way a part can go in: its name (a direction, with its supports) and the parts it must come
+    before and after."""
+
+    name: str
+    after: frozenset[str]
+    before: frozenset[str]
+
+
+def alternatives(block: Blocking, conditions: Conditions | None = None) -> dict[str, list[_Alternative]]:
+    """Per part, the minimal ways it can go in: a direction of :func:`options` and, for each requirement,
+    one part in before it (or, where :meth:`Conditions.may_go_first`, the part first of all); a way that
+    asks a superset of another's orders is left out.
 
     Parameters
     ----------
     block : Blocking
         The blocking relation.
+    conditions : Conditions, optional
+        The supports each part needs, and the base.
+
+    Returns
+    -------
+    dict
+        For each part, its ways: a name (``"+x on b"``, ``"first"``), the parts it must come before and after.
+
+    Examples
+    --------
+    >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
+    >>> [(w.name, sorted(w.after), sorted(w.before)) for w in alternatives(b, Conditions({"b": (("gravity", frozenset("a")),)}))["b"]]
+    [('+x on a', [], ['a'])]
+    """
+    conditions = conditions or Conditions({})
+    opts = options(block)
+    out = {}
+    for p in block.parts:
+        needs = () if p == conditions.base else conditions.needs.get(p, ())
+        ways = []
+        for d, blockers in opts[p]:
+            for chosen in itertools.product(*(sorted(n) for _, n in needs)):
+                name = d + "".join(f" on {q}" for q in dict.fromkeys(chosen))
+                ways.append(_Alternative(name, blockers, frozenset(chosen)))
+        if needs and conditions.may_go_first(p):
+            ways.append(_Alternative("first", frozenset(block.parts) - {p}, frozenset()))
+        keep: list[_Alternative] = []
+        for w in ways:
+            if any(o.after <= w.after and o.before <= w.before and (o.after, o.before) != (w.after, w.before)
+                   for o in ways) or any((o.after, o.before) == (w.after, w.before) for o in keep):
+                continue
+            keep.append(w)
+        out[p] = keep
+    return out
+
+
+def exact_strategies(block: Blocking, conditions: Conditions | None = None,
+                     before: Sequence[tuple[str, str]] = ()) -> list[DerivedStrategy]:
+    """The minimal strategies whose union admits exactly the feasible sequences.
+
+    A sequence is feasible iff each part has a way (:func:`alternatives`) whose orders it keeps, so the
+    feasible sequences are the union over a way per part of one partial order each.  The union is built
+    part by part (parts with one way first, in one order): after each part, an order whose closure
+    contains another's is dropped (whatever the later parts add, it stays the larger, admitting fewer
+    sequences) and so is one with a cycle; what remains at the end is the minimal union, exactly.
+
+    Parameters
+    ----------
+    block : Blocking
+        The blocking relation.
+    conditions : Conditions, optional
+        Supports each part needs (``--gravity``, ``--connected``) and the base part.
     before : sequence of (str, str)
         Orders added to every strategy (process constraints: ``(a, b)``, a before b).
 
@@ -125,8 +224,8 @@ def exact_strategies(block: Blocking, before: Sequence[tuple[str, str]] = ()) ->
     Raises
     ------
     DeriveError
-        No feasible sequence (the locked parts named, with what blocks each; or none that keeps ``before``), more than
-        :data:`~opportune.limits.MAX_CHOICES` direction choices × parts to examine, or more than
+        No feasible sequence (the locked parts named, with what blocks each), more than
+        :data:`~opportune.limits.MAX_WORKING` incomparable partial orders while building, or more than
         :data:`~opportune.limits.MAX_STRATEGIES` strategies in the exact plan.
 
     Examples
@@ -136,66 +235,123 @@ def exact_strategies(block: Blocking, before: Sequence[tuple[str, str]] = ()) ->
     ...              0, 0)
     >>> [s.pairs for s in exact_strategies(b)]
     [()]
+    >>> [s.pairs for s in exact_strategies(b, Conditions({"b": (("gravity", frozenset("a")),)}))]    # b rests on a
+    [(('a', 'b'),)]
+    >>> touch = Conditions({"a": (("connected", frozenset("b")),), "b": (("connected", frozenset("a")),)},
+    ...                    waived_first=frozenset({"connected"}))
+    >>> sorted(s.pairs for s in exact_strategies(b, touch))      # either first, the other touching it
+    [(('a', 'b'),), (('b', 'a'),)]
     """
     lock = locked(block)
     if lock:
         raise DeriveError(_lock_message(lock))
-    opts = options(block)
+    ways = alternatives(block, conditions)
     ids = block.parts
     index = {p: i for i, p in enumerate(ids)}
-    fixed = [p for p in ids if len(opts[p]) == 1]
-    free = [p for p in ids if len(opts[p]) > 1]
-    combos = 1
-    for p in free:
-        combos *= len(opts[p])
-    # each combination examined keeps its order's closure (a mask per part): bounded before the work
-    if combos * len(ids) > MAX_CHOICES:
-        raise DeriveError(f"{combos:,} combinations of insertion directions to examine ({len(free)} parts have "
-                          f"several), times {len(ids)} parts, is over {MAX_CHOICES:,}: give fewer directions, or "
-                          "derive subassemblies; no approximation is written")
-    base = _edges({p: opts[p][0][1] for p in fixed}, index) | {(index[a], index[b]) for a, b in before}
-    closures: dict[tuple[int, ...], tuple[dict[str, str], tuple[int, ...]]] = {}
-    for choice in itertools.product(*(opts[p] for p in free)):
-        edges = base | _edges({p: q for p, (_, q) in zip(free, choice)}, index)
-        try:
-            key = tuple(Poset.from_pairs(len(ids), edges).above)    # the closure: each part's successors
-        except CycleError:
-            continue
-        if key not in closures:
-            dirs = {p: opts[p][0][0] for p in fixed} | {p: d for p, (d, _) in zip(free, choice)}
-            closures[key] = (dirs, key)
-    if not closures:    # every choice of directions is in a cycle with the added orders
-        raise DeriveError(f"no feasible sequence keeps the process constraints ({len(before)} order"
-                          f"{'' if len(before) == 1 else 's'}, the base and identical parts' included): every choice of insertion directions contradicts them; drop or "
-                          "change a constraint")
-    kept = _undominated(list(closures.values()), MAX_STRATEGIES)
-    if kept is None:
-        raise DeriveError(f"the exact plan needs more than {MAX_STRATEGIES} strategies (no one's sequences contain "
+    base = conditions.base if conditions else None
+    start = _Order.empty(len(ids))
+    if base is not None:
+        start = start.adding([(index[base], index[q]) for q in ids if q != base])
+    if start is not None and before:
+        start = start.adding([(index[a], index[b]) for a, b in before])
+        if start is None:
+            raise DeriveError(_contradiction_message(before))
+    order = sorted(ids, key=lambda p: (len(ways[p]), index[p]))
+    working = [(start, {})] if start is not None else []
+    for step, p in enumerate(order):
+        grown = {}
+        for closure, names in working:
+            for w in ways[p]:
+                more = closure.adding([(index[p], index[q]) for q in w.after]
+                                      + [(index[q], index[p]) for q in w.before])
+                if more is not None and more.key not in grown:
+                    grown[more.key] = (more, {**names, p: w.name})
+        working = _undominated(list(grown.values()), MAX_WORKING)
+        if working is None:
+            raise DeriveError(_wall_message(ways, order[:step + 1], len(ids)))
+        if not working:
+            raise DeriveError(_contradiction_message(before) if before else _no_sequence_message(ways))
+    if len(working) > MAX_STRATEGIES:
+        raise DeriveError(f"the exact plan needs {len(working)} strategies (none of whose sequences contain "
                           f"another's); a plan holds at most {MAX_STRATEGIES}: give fewer directions, or derive "
                           "subassemblies; no approximation is written")
-    return [DerivedStrategy(dict(sorted(dirs.items(), key=lambda kv: index[kv[0]])), reduction(ids, closure))
-            for dirs, closure in kept]
+    return [DerivedStrategy(dict(sorted(names.items(), key=lambda kv: index[kv[0]])), reduction(ids, closure.above))
+            for closure, names in working]
 
 
-def _edges(chosen: dict[str, frozenset[str]], index: dict[str, int]) -> set[tuple[int, int]]:
-    """The order's edges ``p -> q`` (p before q) for each part's chosen blockers."""
-    return {(index[p], index[q]) for p, qs in chosen.items() for q in qs}
+@dataclass(frozen=True)
+class _Order:
+    """A partial order of parts ``0..n-1``, transitively closed: ``above[x]`` and ``below[x]`` are the
+    masks of the parts after and before ``x``; ``key`` packs ``above`` into one integer (a closure is
+    inside another iff its key's bits are)."""
+
+    above: tuple[int, ...]
+    below: tuple[int, ...]
+    key: int
+
+    @staticmethod
+    def empty(n: int) -> "_Order":
+        return _Order((0,) * n, (0,) * n, 0)
+
+    def adding(self, edges) -> "_Order | None":
+        """The closure with the edges ``a -> b`` added, or None if that makes a cycle."""
+        above, below = list(self.above), list(self.below)
+        for a, b in edges:
+            if a == b or above[b] >> a & 1:
+                return None
+            if above[a] >> b & 1:
+                continue
+            preds, succs = below[a] | 1 << a, above[b] | 1 << b
+            for x in bits(preds):
+                above[x] |= succs
+            for y in bits(succs):
+                below[y] |= preds
+        n = len(above)
+        return _Order(tuple(above), tuple(below), sum(m << (x * n) for x, m in enumerate(above)))
 
 
-def _undominated(found: list[tuple[dict[str, str], tuple[int, ...]]], most: int) -> list | None:
-    """Drop each strategy whose closure contains another's (its sequences are a subset), or None as soon
-    as more than ``most`` are kept.  Fewest constraints first: a strategy kept is never dominated by a
-    later one (as many constraints or more, and a different closure), so the kept list only grows and
-    the work is O(found × most)."""
-    found.sort(key=lambda item: sum(bin(m).count("1") for m in item[1]))
+def _undominated(found: list, most: int) -> list | None:
+    """Drop each order whose closure contains another's (its sequences are a subset), or None as soon as
+    more than ``most`` are kept.  Fewest pairs first: an order kept is never dominated by a later one (as
+    many pairs or more, and a different closure), so the kept list only grows and the work is
+    O(found × most) comparisons of packed closures."""
+    found.sort(key=lambda item: item[0].key.bit_count())
     kept: list = []
-    for dirs, closure in found:
-        if any(all(k & c == k for k, c in zip(other, closure)) for _, other in kept):
+    for item in found:
+        key = item[0].key
+        if any(other.key & ~key == 0 for other, _ in kept):
             continue
-        kept.append((dirs, closure))
+        kept.append(item)
         if len(kept) > most:
             return None
     return kept
+
+
+def _wall_message(ways: dict[str, list[_Alternative]], done: list[str], n: int) -> str:
+    """Why the exact plan is refused: how many parts have several ways, and where the union outgrew the limit."""
+    several = sorted((p for p in ways if len(ways[p]) > 1), key=lambda p: -len(ways[p]))
+    shown = ", ".join(f"{p} ({len(ways[p])})" for p in several[:8]) + (", …" if len(several) > 8 else "")
+    return (f"the exact plan is a union of more than {MAX_WORKING} incomparable partial orders after {len(done)} of "
+            f"{n} parts ({len(several)} {'part' if len(several) == 1 else 'parts'} with several ways in: {shown}); a plan "
+            f"holds at most "
+            f"{MAX_STRATEGIES} strategies, and the engine counts and runs unions of partial orders only: give fewer "
+            "directions, a base part, or derive subassemblies; no approximation is written")
+
+
+def _contradiction_message(before: Sequence[tuple[str, str]]) -> str:
+    """No sequence keeps the orders added to every strategy (process constraints, base, identical parts)."""
+    return (f"no feasible sequence keeps the process constraints ({len(before)} order"
+            f"{'' if len(before) == 1 else 's'}, the base and identical parts' included): every choice of insertion "
+            "directions contradicts them; drop or change a constraint")
+
+
+def _no_sequence_message(ways: dict[str, list[_Alternative]]) -> str:
+    """No sequence meets the supports: the parts that can only go in first (nothing can hold them) named."""
+    alone = [p for p, w in ways.items() if [x.name for x in w] == ["first"]]
+    why = (f": parts {', '.join(alone[:12])} rest on nothing and touch nothing that could be in before them, so "
+           "each of them could only go in first" if len(alone) > 1 else "")
+    return ("no feasible sequence meets the supports asked (--gravity, --connected, --base)" + why
+            + "; give a base part, or derive without the option")
 
 
 def reduction(ids: tuple[str, ...], reach: tuple[int, ...]) -> tuple[tuple[str, str], ...]:
