@@ -145,14 +145,18 @@ def test_the_bytes_are_known_before_and_the_caps_hold():
 
 
 def test_the_factory_falls_back_to_python(monkeypatch):
-    """Weights that differ, or no compiled core (OPPORTUNE_PURE_PYTHON=1): the Python programme."""
+    """Weights out of range, buffer contents past the core's codes, or no compiled core
+    (OPPORTUNE_PURE_PYTHON=1): the Python programme; weights that differ are compiled too."""
     from opportune.policies import optimal
 
     engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
-    assert type(optimal_solver(engine, weights={"a": 2.0})) is OptimalSolver
+    assert type(optimal_solver(engine, weights={"a": 2.0})) is CompiledOptimalSolver
+    assert type(optimal_solver(engine, weights={"a": -1.0})) is OptimalSolver
     assert optimal_solver(engine, weights={"a": 2.0, "b": 2.0, "c": 2.0}).uniform
-    # 63 parts of one unit: 2^63 buffer contents, past the core's 64-bit codes
-    wide = OrderEngine(make_plan([f"p{i}" for i in range(63)], {}))
+    # 63 parts of one unit, one before each of the others: 2^63 buffer contents, past the core's 64-bit
+    # codes (as 63 parts of no constraint they would be merged: one part of 63 units)
+    ids = [f"p{i}" for i in range(63)]
+    wide = OrderEngine(make_plan(ids, {p: ids[:i] for i, p in enumerate(ids) if i}))
     assert not compiled_optimal_available(wide) and type(optimal_solver(wide)) is OptimalSolver
     monkeypatch.setattr(optimal, "_native", None)
     assert not compiled_optimal_available(engine)

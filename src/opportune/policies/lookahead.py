@@ -20,7 +20,14 @@ from opportune.policies.base import (
     resume_collector,
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.optimal import OptimalTooLarge, compiled_optimal_available, optimal_solver, optimum_bytes, same_action
+from opportune.policies.optimal import (
+    OptimalTooLarge,
+    compiled_optimal_available,
+    optimal_solver,
+    optimum_bytes,
+    optimum_engine,
+    same_action,
+)
 from opportune.policies.variants import Slack
 
 __all__ = ["Lookahead"]
@@ -161,7 +168,9 @@ class Lookahead(DecidesOnMasks):
             from opportune.policies.pile import compiled_pile_available
 
             return compiled_pile_available(engine)
-        return compiled_optimal_available(engine, self.settings.get("weights"))
+        weights = self.settings.get("weights")
+        return compiled_optimal_available(optimum_engine(engine, self.settings.get("costs"), weights), weights,
+                                          visible=self.settings.get("visible", 2))
 
     def _optimum_cap(self, engine) -> int:
         """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for a compiled
@@ -178,7 +187,10 @@ class Lookahead(DecidesOnMasks):
             from opportune.policies.pile import COMPILED_BYTES_PER_STATE
 
             return COMPILED_BYTES_PER_STATE * estimate.states
-        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile)
+        weights = self.settings.get("weights")
+        weighted = bool(weights) and len({float(weights.get(p.id, 1.0)) for p in engine.plan.parts}) > 1
+        looks = (estimate.looks, min(self.settings.get("visible", 2), engine.n_units)) if weighted else None
+        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks)
 
     def _optimum_fits(self, engine) -> bool:
         """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,
@@ -195,7 +207,9 @@ class Lookahead(DecidesOnMasks):
 
         seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
         cap = self._optimum_cap(engine)
-        est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
+        # the optimum's states are those of the plan with its interchangeable parts merged (not in the pile)
+        sized = engine if self.pile else optimum_engine(engine, self.settings.get("costs"), self.settings.get("weights"))
+        est = estimate_states(sized, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
         self._optimum_states = est.states
         if not est.exact or est.states > cap:

@@ -1,0 +1,90 @@
+"""Benchmark: the exact optimum on real precedence graphs with few buffer locations, or its wall.
+
+KILBRID (45 tasks), TONGE70 (70) and ARC111 (111), uniform bin, 1-3 visible parts, 1 and 2 buffer
+locations: per setting, the optimum's states (listed before the work by ``estimate_states`` on the plan
+with its interchangeable parts merged, and on the plan as declared), the bytes the compiled programme
+holds for them (``optimum_bytes``), and either the optimum (computed by ``optimal_solver``, within a
+deadline and the bytes the plan's engine grants) or the wall: the states and bytes it would need
+("at least" where the listing stopped).  A plan past 64 units is outside the compiled programme (64-bit
+sets); its wall is the listing's figure all the same.
+
+Prints a Markdown table (the one in docs/decisions.md); wall and CPU seconds beside each attempt.
+
+    python benchmarks/bench_salbp_optimum.py                       # every plan and setting
+    python benchmarks/bench_salbp_optimum.py --plans KILBRID --seconds 60
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+from opportune import load_plan
+from opportune.engine import OrderEngine
+from opportune.engine.deadline import Deadline
+from opportune.policies.interchangeable import merge_interchangeable
+from opportune.policies.optimal import OptimalTooLarge, OutOfTime, compiled_optimal_available, optimal_solver, optimum_bytes
+from opportune.policies.states import big, estimate_states
+
+PLANS = ("KILBRID", "TONGE70", "ARC111")
+VISIBLE = (1, 2, 3)
+LOCATIONS = (1, 2)
+
+
+def attempt(engine, merged, visible: int, locations: int, seconds: float, listing: float) -> dict:
+    """One setting: its sizes, and the optimum where it fits (by the engine's grant and the time)."""
+    est = estimate_states(merged.engine, visible=visible, capacity=locations, time_limit=listing)
+    plain = estimate_states(engine, visible=visible, capacity=locations, time_limit=listing)
+    need = optimum_bytes(est.states, est.keys, compiled=True)
+    row = dict(states=est.describe(), plain=plain.describe(), bytes=big(need), value=None, seconds="")
+    compiled = compiled_optimal_available(merged.engine)
+    if not est.exact:
+        row["value"] = f"wall: {big(est.low)}+ states, {big(need)}+ bytes (listing stopped)"
+        return row
+    if not compiled:
+        row["value"] = f"wall: {big(est.states)} states, over 64 units (the compiled programme's sets)"
+        return row
+    if not engine.reserve_programme(("bench", visible, locations), need):
+        row["value"] = f"wall: {big(est.states)} states, {big(need)} bytes (over the plan's memory share)"
+        return row
+    solver = optimal_solver(engine, visible=visible, capacity=locations, max_states=est.states + 1)
+    solver.reserve(est.states)
+    solver.deadline = Deadline.after(seconds)
+    wall, cpu = time.perf_counter(), time.process_time()
+    try:
+        row["value"] = f"{solver.value():.6f}"
+    except OutOfTime:
+        row["value"] = f"wall: {big(est.states)} states, {big(need)} bytes (past {seconds:.0f} s at {big(solver.states)})"
+    except OptimalTooLarge:
+        row["value"] = f"wall: over {big(est.states)} states"
+    row["seconds"] = f"{time.perf_counter() - wall:.1f} ({time.process_time() - cpu:.1f} CPU)"
+    engine.programmes.pop(("bench", visible, locations), None)
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--plans", nargs="+", default=list(PLANS))
+    ap.add_argument("--visible", nargs="+", type=int, default=list(VISIBLE))
+    ap.add_argument("--locations", nargs="+", type=int, default=list(LOCATIONS))
+    ap.add_argument("--seconds", type=float, default=600.0, help="deadline of each optimum (default 600)")
+    ap.add_argument("--listing", type=float, default=30.0, help="seconds for each state count (default 30)")
+    args = ap.parse_args()
+    print(f"load: {os.getloadavg()[0]:.1f} (1 min), {os.cpu_count()} cores\n")
+    print("| plan | visible | locations | states (merged) | states (as declared) | bytes | optimum | seconds |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | --- | ---: |")
+    for name in args.plans:
+        plan = load_plan(f"salbp:{name}")
+        engine = OrderEngine(plan)
+        merged = merge_interchangeable(engine)
+        label = f"{name} ({len(plan.parts)} parts, {len(merged.groups)} merged)"
+        for visible in args.visible:
+            for locations in args.locations:
+                r = attempt(engine, merged, visible, locations, args.seconds, args.listing)
+                print(f"| {label} | {visible} | {locations} | {r['states']} | {r['plain']} | {r['bytes']} | "
+                      f"{r['value']} | {r['seconds']} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
