@@ -14,6 +14,7 @@ import pytest
 from conftest import random_plans
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_optimal_compiled import _costs, compiled
 
 from opportune import Sequencer, make_plan
 from opportune.engine import OrderEngine
@@ -21,7 +22,10 @@ from opportune.engine.deadline import Deadline
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
 from opportune.policies import optimal
-from opportune.policies.interchangeable import interchangeable_groups, merge_interchangeable
+from opportune.policies.interchangeable import (
+    interchangeable_groups,
+    merge_interchangeable,
+)
 from opportune.policies.lookahead import Lookahead
 from opportune.policies.optimal import (
     CompiledOptimalSolver,
@@ -37,13 +41,6 @@ from opportune.policies.optimal import (
 from opportune.policies.states import estimate_states
 
 CAPACITIES = (0, 1, 2, None)
-compiled = pytest.mark.skipif(not compiled_optimal_available(OrderEngine(make_plan(["a"], {}))),
-                              reason="the compiled core is not built")
-
-
-def _costs(plan, rng: random.Random) -> TimeModel:
-    return TimeModel(shake=rng.choice([0.5, 1.0, 2.7]), look=rng.choice([0.0, 0.3]),
-                     parts={p.id: rng.choice([1.0, 1.7, 0.35]) for p in plan.parts})
 
 
 def _weights(plan, rng: random.Random) -> dict[str, float]:
@@ -84,17 +81,9 @@ class PerLook(OptimalSolver):
     """The optimum with every look of a weighted bin taken on its own (the looks sorted by their best
     move, then the shake loop over them): as the Python programme was before it grouped them."""
 
-    def _value(self, key):
-        cached = self._values.get(key)
-        if cached is not None:
-            return cached
-        if key[0] == self.engine.full:
-            self._values[key] = 0.0
-            return 0.0
-        best = [(min((c + self._value(nxt) for c, nxt, _ in self._moves(key, look)), default=float("inf")), p)
-                for look, p in self._looks(self._bin_counts(key))]
-        self._values[key] = v = self._solve_shake_loop(best)
-        return v
+    def _order_statistics(self, key):
+        return sorted((min((c + self._value(nxt) for c, nxt, _ in self._moves(key, look)), default=float("inf")), p)
+                      for look, p in self._looks(self._bin_counts(key)))
 
 
 @compiled
@@ -107,7 +96,7 @@ def test_the_compiled_weighted_optimum_gives_the_same_doubles_as_python(plan, se
     looks grouped by their best part within 1e-12 of every look taken on its own."""
     engine = OrderEngine(plan)
     rng = random.Random(seed)
-    costs, weights = _costs(plan, rng), _weights(plan, rng)
+    costs, weights = _costs(plan, seed), _weights(plan, rng)
     for visible in (1, 2, 3):
         for capacity in CAPACITIES:
             py = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights)
@@ -133,7 +122,7 @@ def test_merging_interchangeable_parts_keeps_the_value(plan, seed, weighted):
     or weight tells apart."""
     engine = OrderEngine(plan)
     rng = random.Random(seed)
-    costs = _costs(plan, rng)
+    costs = _costs(plan, seed)
     weights = _weights(plan, rng) if weighted else None
     merged = merge_interchangeable(engine, costs, weights)
     for group in merged.groups:
@@ -207,8 +196,8 @@ def _layers(width: int, depth: int) -> Plan:
 @compiled
 def test_the_look_ahead_decides_by_the_merged_optimum_past_16_units():
     """24 parts in 4 layers of 6 interchangeable parts, 2 visible, 2 locations: as declared its optimum
-    needs 9,217 states; merged, 152.  With the look-ahead's compiled cap at 1,000 states it decides by the
-    exact optimum (sized and built on the merged plan: the states it stored are the 152 counted before),
+    needs 25,903 states; merged, 201.  With the look-ahead's compiled cap at 1,000 states it decides by the
+    exact optimum (sized and built on the merged plan: the states it stored are the 201 counted before),
     and its action is the optimum's on the plan as declared."""
     plan = _layers(6, 4)
     engine = OrderEngine(plan)
@@ -286,3 +275,27 @@ def test_the_factory_falls_back_to_python_with_the_same_values(monkeypatch):
     python = optimal_solver(engine, visible=2, capacity=1, weights=weights)
     assert isinstance(python, MergedOptimalSolver) and type(python.inner) is OptimalSolver
     assert python.value() == value
+
+
+@compiled
+def test_with_the_core_switched_off_the_python_programme_gives_the_same_doubles():
+    """``OPPORTUNE_PURE_PYTHON=1`` in a fresh interpreter: the weighted and the uniform optimum by the
+    Python programme (merged all the same), the same doubles as the compiled one here."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from opportune import make_plan; from opportune.engine import OrderEngine; "
+            "from opportune.policies.optimal import optimal_solver; "
+            "e = OrderEngine(make_plan(list('abcdef'), {'e': ['a', 'b'], 'f': ['c']})); "
+            "w = dict(a=2.0, b=2.0, c=0.5, d=1.0, e=3.0, f=1.0); "
+            "s = [optimal_solver(e, visible=2, capacity=1, weights=x) for x in (w, None)]; "
+            "print(*[type(x.inner).__name__ + ' ' + repr(x.value()) for x in s])")
+    env = dict(os.environ, OPPORTUNE_PURE_PYTHON="1")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    engine = OrderEngine(make_plan(list("abcdef"), {"e": ["a", "b"], "f": ["c"]}))
+    weights = dict(a=2.0, b=2.0, c=0.5, d=1.0, e=3.0, f=1.0)
+    here = [optimal_solver(engine, visible=2, capacity=1, weights=w) for w in (weights, None)]
+    assert all(type(s.inner) is CompiledOptimalSolver for s in here)
+    assert out.stdout.split() == ["OptimalSolver", repr(here[0].value()), "OptimalSolver", repr(here[1].value())]

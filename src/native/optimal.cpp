@@ -17,8 +17,10 @@
 // visible one is the sum, over the looks whose best-ranked part it is, of the look's probability; the
 // looks of a bin and their probabilities are those of OptimalSolver._look_distribution (the draws
 // enumerated depth first, each sorted look's probability accumulated in the order it is reached,
-// the looks in lexicographic order), kept in a cache of at most `look_cache_looks` looks (cleared
-// whole when full: its bytes are bounded whatever the plan).
+// the looks in lexicographic order), kept in a cache of at most `look_cache_bytes` bytes (cleared
+// whole when full: its bytes are bounded whatever the plan).  The parts are ranked and the looks
+// grouped by their best-ranked part in both programmes: the least over the prefixes of the groups is
+// the least over the prefixes of the looks, and no look is sorted.
 //
 // Every value is memoised in one open-addressing table of 16-byte slots (a 64-bit code of the
 // state, the value), at most half full: 32-64 bytes per state when reserved for the count known

@@ -247,7 +247,9 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         :attr:`states`), else by this evaluator's own memo.  The ``deadline`` and ``progress`` apply."""
         weights = None if self.uniform else dict(zip(self.ids, self.weights))
         if self._optimum is None and compiled_optimal_available(self.engine, weights):
-            self._optimum = optimal_solver(self.engine, visible=self.visible, capacity=self.capacity,
+            # on the plan as declared (not merged): its states are those counted before the work, which
+            # bound the policy's too
+            self._optimum = optimal_solver(self.engine, visible=self.visible, capacity=self.capacity, merge=False,
                                            costs=self.costs, weights=weights, max_states=self.max_states)
         if self._optimum is None:
             return OptimalSolver.value(self)

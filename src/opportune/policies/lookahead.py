@@ -21,6 +21,7 @@ from opportune.policies.base import (
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.optimal import (
+    COMPILED_WEIGHTED_LOOKS,
     OptimalTooLarge,
     compiled_optimal_available,
     optimal_solver,
@@ -168,14 +169,34 @@ class Lookahead(DecidesOnMasks):
             from opportune.policies.pile import compiled_pile_available
 
             return compiled_pile_available(engine)
-        weights = self.settings.get("weights")
-        return compiled_optimal_available(optimum_engine(engine, self.settings.get("costs"), weights), weights,
+        return compiled_optimal_available(self._sized(engine), self.settings.get("weights"),
                                           visible=self.settings.get("visible", 2))
 
     def _optimum_cap(self, engine) -> int:
         """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for a compiled
-        optimum, else ``max_states``.  O(parts)."""
-        return max(self.max_states, self.COMPILED_STATES) if self._compiled(engine) else self.max_states
+        optimum, else ``max_states``; in a weighted bin, whose compiled programme enumerates a bin's looks
+        at every state, no more states than :data:`~opportune.policies.optimal.COMPILED_WEIGHTED_LOOKS`
+        over the looks at the start (nor fewer than ``max_states``).  O(parts × visible)."""
+        if not self._compiled(engine):
+            return self.max_states
+        cap = max(self.max_states, self.COMPILED_STATES)
+        if self._weighted(engine):
+            from opportune.policies.states import looks_at_start
+
+            looks = looks_at_start(self._sized(engine), self.settings.get("visible", 2))
+            cap = max(self.max_states, min(cap, COMPILED_WEIGHTED_LOOKS // max(1, looks)))
+        return cap
+
+    def _sized(self, engine):
+        """The engine whose states the optimum's programme stores: the plan's with its interchangeable
+        parts merged (:func:`~opportune.policies.optimal.optimum_engine`), or in the pile the plan's."""
+        return engine if self.pile else optimum_engine(engine, self.settings.get("costs"), self.settings.get("weights"))
+
+    def _weighted(self, engine) -> bool:
+        """Whether the bin is weighted with weights that differ (not the pile).  O(parts)."""
+        weights = self.settings.get("weights")
+        return (not self.pile and bool(weights)
+                and len({float(weights.get(p.id, 1.0)) for p in engine.plan.parts}) > 1)
 
     def _optimum_bytes(self, engine, estimate) -> int:
         """The bytes the optimum's programme holds, from its state count: the compiled uniform table and
@@ -187,9 +208,7 @@ class Lookahead(DecidesOnMasks):
             from opportune.policies.pile import COMPILED_BYTES_PER_STATE
 
             return COMPILED_BYTES_PER_STATE * estimate.states
-        weights = self.settings.get("weights")
-        weighted = bool(weights) and len({float(weights.get(p.id, 1.0)) for p in engine.plan.parts}) > 1
-        looks = (estimate.looks, min(self.settings.get("visible", 2), engine.n_units)) if weighted else None
+        looks = (estimate.looks, min(self.settings.get("visible", 2), engine.n_units)) if self._weighted(engine) else None
         return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks)
 
     def _optimum_fits(self, engine) -> bool:
@@ -207,9 +226,7 @@ class Lookahead(DecidesOnMasks):
 
         seconds = 1.0 if self.lookahead_budget is None else self.lookahead_budget / 3
         cap = self._optimum_cap(engine)
-        # the optimum's states are those of the plan with its interchangeable parts merged (not in the pile)
-        sized = engine if self.pile else optimum_engine(engine, self.settings.get("costs"), self.settings.get("weights"))
-        est = estimate_states(sized, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
+        est = estimate_states(self._sized(engine), visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
         self._optimum_states = est.states
         if not est.exact or est.states > cap:

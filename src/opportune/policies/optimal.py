@@ -20,10 +20,14 @@ In a uniform bin no look is enumerated: *m(L)* is the least of the visible parts
 and of the buffer's best installation, so with the bin's *n* units ranked by their part's best move
 the best visible unit is the *j*-th with probability C(n − j, k − 1) / C(n, k) for *k* visible: the
 looks' values are order statistics (:meth:`OptimalSolver._order_statistics`), O(parts) a state.
-The weighted bin enumerates its looks.  :class:`CompiledOptimalSolver` runs the uniform bin's
-recursion in the compiled core (``src/native/optimal.cpp``) with the same operations in the same
-order: the same doubles, about 25 times faster, at most 64 bytes a state (:func:`optimum_bytes`);
-:func:`optimal_solver` picks it where the core is built (not with ``OPPORTUNE_PURE_PYTHON=1``).
+The weighted bin ranks its parts the same way and sums, per part, the probabilities of the looks
+whose best-ranked part it is (its looks enumerated, once per bin content): O(looks) a state, no sort.
+:class:`CompiledOptimalSolver` runs the recursion of either bin in the compiled core
+(``src/native/optimal.cpp``) with the same operations in the same order: the same doubles, about 25
+times faster (25 to 30 in a weighted bin), at most 64 bytes a state (:func:`optimum_bytes`; and a
+bounded look cache in a weighted bin); :func:`optimal_solver` picks it where the core is built (not
+with ``OPPORTUNE_PURE_PYTHON=1``), on the plan with its interchangeable parts merged
+(:mod:`.interchangeable`: parts no strategy, cost or weight tells apart counted as one part's units).
 
 Bounds: the states stored never exceed ``max_states`` (:class:`OptimalTooLarge`), and a
 ``deadline`` (:class:`~opportune.engine.deadline.Deadline`) is read between states
@@ -63,6 +67,12 @@ COMPILED_LOOK_CACHE_BYTES = 4 << 20
 #: Visible parts the compiled optimum of a weighted bin takes at most: a look is coded in 6 bits a part.
 COMPILED_WEIGHTED_VISIBLE = 10
 
+#: The compiled optimum of a weighted bin enumerates a bin's looks at every state (about 7 ns a look,
+#: measured on 12 parts, 3 visible): the look-ahead takes it on plans of at most this many looks at the
+#: start times states (the start has the most looks), about ten seconds' work like its uniform bin's
+#: cap (:attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`).
+COMPILED_WEIGHTED_LOOKS = 1_000_000_000
+
 #: Bytes a look of a weighted bin takes in the compiled cache besides its parts (one byte each): its
 #: probability (8), and while the bin's looks are enumerated, its sum and its sorted parts by code (128).
 COMPILED_LOOK_BYTES = 136
@@ -85,7 +95,7 @@ class OptimalSolver:
 
     ``weights`` gives per-part visibility weights (``None``: uniform bin).
     Complexity: O(states × parts) in a uniform bin (the looks as order statistics), else
-    O(states × looks × actions); states ≤ down-sets × buffer contents.
+    O(states × (looks × visible + parts)); states ≤ down-sets × buffer contents.
     """
 
     #: The policy whose value a subclass computes (None: the optimum).
@@ -314,14 +324,15 @@ class OptimalSolver:
 
     def _order_statistics(self, key: tuple) -> list[tuple[float, float]]:
         """``(m, p)`` in increasing ``m``: the best move's value on a look, and the chance of a look
-        with that best move, in a uniform bin, with no look enumerated (see the module's docstring).
+        with that best move (in a uniform bin with no look enumerated; see the module's docstring).
 
         The best move on a look is the least of the visible parts' own best moves (install from the bin
         or buffer) and of the buffer's best installation, which every look shares.  With the bin's units
         ranked by their part's best move (ties by declaration order), the part whose ``c`` units hold
         ranks ``r + 1 .. r + c`` of ``n`` is the best visible one with probability
-        ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` for ``k`` visible.  The compiled programme
-        (``src/native/optimal.cpp``) does the same operations in the same order.  O(parts) values."""
+        ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` for ``k`` visible (:meth:`_uniform_chances`; in a
+        weighted bin :meth:`_weighted_chances`).  The compiled programme (``src/native/optimal.cpp``)
+        does the same operations in the same order.  O(parts) values."""
         mask, cons, buf = key
         engine, move, value = self.engine, self.move, self._value
         free = self.capacity is None or sum(buf) < self.capacity
@@ -622,15 +633,20 @@ class CompiledCore:
 
 
 class CompiledOptimalSolver(CompiledCore, OptimalSolver):
-    """The uniform bin's optimum computed by the compiled core (``_native.OptimalCore``,
+    """The optimum of a uniform or weighted bin computed by the compiled core (``_native.OptimalCore``,
     ``src/native/optimal.cpp``): the recursion of :meth:`OptimalSolver._value` with the looks as order
-    statistics, the same floating-point operations in the same order, so the same doubles.
+    statistics (a weighted bin's looks enumerated once per bin content, as
+    :meth:`OptimalSolver._look_distribution` does, in a cache of at most
+    :data:`COMPILED_LOOK_CACHE_BYTES`), the same floating-point operations in the same order, so the
+    same doubles.
 
     The same settings and methods; ``max_states`` bounds the stored values (:class:`OptimalTooLarge`),
     the ``deadline`` is read at every new state (:class:`OutOfTime`; what was finished stays).
-    Memory: :func:`optimum_bytes` (32-64 bytes a state once :meth:`reserve` d, and the pairs).  A
-    ``ValueError`` where the core does not take the plan (:func:`compiled_optimal_available`).
-    Complexity: O(states × parts × strategies).
+    Memory: :func:`optimum_bytes` (32-64 bytes a state once :meth:`reserve` d, the pairs, and in a
+    weighted bin the look cache).  A ``ValueError`` where the core does not take the plan
+    (:func:`compiled_optimal_available`, or more than :data:`COMPILED_WEIGHTED_VISIBLE` visible in a
+    weighted bin).  Complexity: O(states × parts × strategies), and O(states × looks × visible) in a
+    weighted bin.
     """
 
     def __init__(self, engine: OrderEngine, **settings):

@@ -45,7 +45,7 @@ from opportune.engine.deadline import Deadline, as_deadline, recursion_room
 from opportune.engine.poset import bits
 
 __all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states",
-           "orderings_factor", "reachable_keys"]
+           "looks_at_start", "orderings_factor", "reachable_keys"]
 
 #: Memory a programme uses per state, rounded up: the dict entry, the key and buffer tuples and the
 #: value (measured: 574 bytes per state for the optimum of KILBRID, 716 on the gearbox, 220-260 per
@@ -119,7 +119,7 @@ def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pi
     """
     until = as_deadline(deadline).within(time_limit)
     weigh = _Weigher(engine, visible, capacity, pile)
-    looks = _looks_at_start(engine, visible)
+    looks = looks_at_start(engine, visible)
     # the listing gets part of the time: where it cannot finish, the estimate needs the rest
     listed = _list_keys(engine, weigh, stop_above, until.share(0.6))
     if listed.complete:
@@ -133,8 +133,15 @@ def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pi
     return StateEstimate(profile, low, False, "estimated from the order's down-sets", listed.keys, looks)
 
 
-def _looks_at_start(engine, visible: int) -> int:
-    """Distinct looks with every unit in the bin: multisets of ``visible`` parts within their quantities."""
+def looks_at_start(engine, visible: int) -> int:
+    """Distinct looks with every unit in the bin (the most any state has): multisets of ``visible`` parts
+    within their quantities.  O(parts × visible).
+
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> looks_at_start(OrderEngine(make_plan(["a", "b", "c"], {})), 2)     # ab ac bc
+    3
+    """
     quantity = [p.quantity for p in engine.plan.parts]
     k = min(visible, sum(quantity))
     poly = [1]
