@@ -30,7 +30,7 @@ from opportune.policies.optimal import (
 )
 from opportune.policies.states import estimate_states
 
-CAPACITIES = (1, 2, 3, None)
+CAPACITIES = (0, 1, 2, 3, None)
 compiled = pytest.mark.skipif(not compiled_optimal_available(OrderEngine(make_plan(["a"], {}))),
                               reason="the compiled core is not built")
 
@@ -104,7 +104,7 @@ def test_the_chances_of_the_best_visible_part_are_those_of_the_draws():
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(plan=random_plans(max_parts=5, max_units=7, max_strategies=2), seed=st.integers(0, 1000))
 def test_the_compiled_optimum_gives_the_same_doubles_as_python(plan, seed):
-    """Every setting (1-3 visible; 1, 2, 3 or unlimited buffer locations; one or two strategies; uneven
+    """Every setting (1-3 visible; 0, 1, 2, 3 or unlimited buffer locations; one or two strategies; uneven
     costs): the value at the start and after every move of every look there, bit for bit, the same
     number of states, and that number the one counted before the work."""
     engine = OrderEngine(plan)

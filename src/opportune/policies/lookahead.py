@@ -64,16 +64,17 @@ class Lookahead(DecidesOnMasks):
     #: What the decisions say where the optimum's programme decides.
     OPTIMAL_RULE = "the action with the least expected cost of finishing (the exact optimum)"
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
-    #: The compiled optimum (of the uniform bin, :class:`~opportune.policies.optimal.CompiledOptimalSolver`, or
-    #: of the pile, :class:`~opportune.policies.pile.CompiledPileSolver`) decides on plans of up to this many
-    #: states (counted before it starts; ``max_states`` if larger), whatever their units, where its bytes
-    #: (known before it starts too: at most 64 a state and the pairs it interns, so about 350 MB at most)
+    #: The compiled optimum (of the uniform or weighted bin, :class:`~opportune.policies.optimal.CompiledOptimalSolver`,
+    #: on the plan with its interchangeable parts merged, or of the pile, :class:`~opportune.policies.pile.CompiledPileSolver`)
+    #: decides on plans of up to this many states (counted before it starts; ``max_states`` if larger; in a weighted
+    #: bin fewer, see :meth:`_optimum_cap`), whatever their units, where its bytes (known before it starts too: at
+    #: most 64 a state and the pairs it interns, so about 350 MB at most, and a weighted bin's look cache)
     #: are granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.reserve_programme`, within
     #: half its ``memory_limit``); its table is reserved for the count at once.  Without a budget it is
     #: solved whole in the first decision on the plan (a warm-up: about a million states a second) and
     #: shared by the look-aheads of the same settings; with one, each decision goes on with it within its
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
-    #: core, or a weighted bin) is held to ``max_states``.
+    #: core) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
     #: Where the optimum does not fit, plans of more units than this decide as the base does: the step over
     #: the base evaluates the base look by look in Python (every look of every state asks the base rule), hours
