@@ -161,6 +161,9 @@ class _Weigher:
         self.quantity = [p.quantity for p in engine.plan.parts]
         self.single = all(q == 1 for q in self.quantity)
         self.engine = engine
+        # the units of single-unit parts (counted by one bit count), and the parts of several units
+        self.singles = sum(1 << engine.first[i] for i, q in enumerate(self.quantity) if q == 1)
+        self.multiple = [(engine.first[i], q) for i, q in enumerate(self.quantity) if q > 1]
         self._by_rem = lru_cache(maxsize=65_536)(self._weight)
 
     def of_remaining(self, r: int) -> int:
@@ -171,13 +174,14 @@ class _Weigher:
         engine = self.engine
         if self.single:
             return self._by_rem((1,) * (engine.n_units - mask.bit_count()))
+        # the sorted multiset of units left per part: the single parts' ones first, then the others'
         rem = []
-        for i, first in enumerate(engine.first):
-            q = self.quantity[i]
+        for first, q in self.multiple:
             left = q - ((mask >> first) & ((1 << q) - 1)).bit_count()
             if left:
                 rem.append(left)
-        return self._by_rem(tuple(sorted(rem)))
+        ones = (self.singles & ~mask).bit_count()
+        return self._by_rem((1,) * ones + tuple(sorted(rem)))
 
     def _weight(self, rem: tuple[int, ...]) -> int:
         total = sum(rem)
