@@ -299,3 +299,20 @@ def test_with_the_core_switched_off_the_python_programme_gives_the_same_doubles(
     here = [optimal_solver(engine, visible=2, capacity=1, weights=w) for w in (weights, None)]
     assert all(type(s.inner) is CompiledOptimalSolver for s in here)
     assert out.stdout.split() == ["OptimalSolver", repr(here[0].value()), "OptimalSolver", repr(here[1].value())]
+
+
+def test_the_merged_plans_go_with_their_engine():
+    """The merged plan is cached per engine and dropped with it (the cache never refers to the engine)."""
+    import gc
+    import weakref
+
+    from opportune.policies import interchangeable
+
+    engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    assert optimum_engine(engine) is optimum_engine(engine) is not engine
+    assert optimum_engine(OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))).plan.part_ids == ("a", "b")
+    assert engine in interchangeable._MERGED
+    alive = weakref.ref(engine)
+    del engine
+    gc.collect()
+    assert alive() is None

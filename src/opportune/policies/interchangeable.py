@@ -45,7 +45,7 @@ _MERGED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 def interchangeable_groups(engine: OrderEngine, costs: TimeModel | None = None,
                            weights: dict[str, float] | None = None) -> list[list[int]]:
     """The plan's parts (indices) grouped by interchangeability (see the module's docstring), each
-    group in declaration order, the groups by their first part.  O(strategies × units × parts / 64).
+    group in declaration order, the groups by their first part.  O(strategies × parts × units).
 
     >>> from opportune import make_plan
     >>> interchangeable_groups(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})))
@@ -112,7 +112,7 @@ def merge_interchangeable(engine: OrderEngine, costs: TimeModel | None = None,
                           weights: dict[str, float] | None = None) -> Merged:
     """The plan of ``engine`` with its interchangeable parts merged (:class:`Merged`; its ``engine`` is
     ``engine`` itself where no two parts are interchangeable), cached per engine, costs and weights.
-    O(strategies × units × parts / 64) the first time.
+    O(strategies × parts × units) the first time.
 
     >>> from opportune import make_plan
     >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["a"]}))
@@ -121,15 +121,15 @@ def merge_interchangeable(engine: OrderEngine, costs: TimeModel | None = None,
     """
     costs = costs or TimeModel()
     setting = (repr(sorted((weights or {}).items())), repr(costs))
+    # the cache holds the groups and the merged plan's engine, never ``engine`` itself (a weak key
+    # its own value refers to would never be dropped)
     cached = _MERGED.setdefault(engine, {})
     if setting not in cached:
         groups = tuple(tuple(g) for g in interchangeable_groups(engine, costs, weights))
-        if len(groups) == len(engine.plan.parts):
-            cached[setting] = Merged(engine, engine, groups)
-        else:
-            plan = _merged_plan(engine.plan, groups)
-            cached[setting] = Merged(engine, OrderEngine(plan, memory_limit=None), groups)
-    return cached[setting]
+        reduced = len(groups) < len(engine.plan.parts)
+        cached[setting] = (groups, OrderEngine(_merged_plan(engine.plan, groups), memory_limit=None) if reduced else None)
+    groups, merged = cached[setting]
+    return Merged(engine, merged or engine, groups)
 
 
 def _merged_plan(plan: Plan, groups: tuple[tuple[int, ...], ...]) -> Plan:
