@@ -60,11 +60,15 @@ def attempt(engine, merged, visible: int, locations: int, seconds: float, sizes)
     est, plain = sizes
     need = optimum_bytes(est.states, est.keys, compiled=True)
     row = dict(states=count(est), plain=count(plain), bytes=big(need), value=None, seconds="")
+    units = "" if compiled_optimal_available(merged.engine) else f"; {engine.n_units} units, over the compiled 64"
     if not est.exact:
-        row["value"] = f"wall: ≥ {big(est.low)} states, ≥ {big(need)} bytes (the listing stopped)"
+        # the keys listed before the listing stopped: a lower bound on the pairs as on the states
+        least = optimum_bytes(est.low, min(est.keys, est.low), compiled=True)
+        row["bytes"] = f"≥ {big(least)} (~{big(need)})"
+        row["value"] = f"wall: ≥ {big(est.low)} states, ≥ {big(least)} bytes{units}"
         return row
-    if not compiled_optimal_available(merged.engine):
-        row["value"] = f"wall: {big(est.states)} states, over 64 units (the compiled programme's sets)"
+    if units:
+        row["value"] = f"wall: {big(est.states)} states{units}"
         return row
     if not engine.reserve_programme(("bench", visible, locations), need):
         row["value"] = f"wall: {big(est.states)} states, {big(need)} bytes (over the plan's memory share)"
