@@ -111,15 +111,24 @@ def test_the_compiled_optimum_gives_the_same_doubles_as_python(plan, seed):
     costs = _costs(plan, seed)
     for visible in (1, 2, 3):
         for capacity in CAPACITIES:
-            py = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs)
-            cc = CompiledOptimalSolver(engine, visible=visible, capacity=capacity, costs=costs)
-            assert cc.value() == py.value(), (visible, capacity)
-            assert cc.states == py.states == estimate_states(engine, visible=visible, capacity=capacity).states
-            start = py.start_key()
-            for look, _ in py._looks(py._bin_counts(start)):
-                assert cc.best_action(start, look) == py.best_action(start, look)
-                for _, nxt, _ in py._moves(start, look):
-                    assert cc._value(nxt) == py._value(nxt)
+            check_same_doubles(engine, visible=visible, capacity=capacity, costs=costs)
+
+
+def check_same_doubles(engine, **settings) -> float:
+    """The compiled and the Python programme in ``settings``: the value at the start and after every move of
+    every look there bit for bit, the best actions, the same states, and that number the one counted before
+    the work.  Returns the value."""
+    py, cc = OptimalSolver(engine, **settings), CompiledOptimalSolver(engine, **settings)
+    value = py.value()
+    assert cc.value() == value, settings
+    assert cc.states == py.states == estimate_states(engine, visible=settings["visible"],
+                                                     capacity=settings["capacity"]).states
+    start = py.start_key()
+    for look, _ in py._looks(py._bin_counts(start)):
+        assert cc.best_action(start, look) == py.best_action(start, look)
+        for _, nxt, _ in py._moves(start, look):
+            assert cc._value(nxt) == py._value(nxt)
+    return value
 
 
 @compiled
@@ -132,11 +141,17 @@ def test_the_bytes_are_known_before_and_the_caps_hold():
     cc.reserve(est.states)
     value = cc.value()
     assert cc.states == est.states and cc.bytes == optimum_bytes(est.states, est.keys, compiled=True)
-    small = CompiledOptimalSolver(engine, visible=2, capacity=2, max_states=est.states // 2)
+    check_caps(lambda **cap: CompiledOptimalSolver(engine, visible=2, capacity=2, **cap), value, est.states)
+
+
+def check_caps(make, value: float, states: int) -> None:
+    """The state cap and the deadline stop the programme ``make(**cap)`` builds (OptimalTooLarge at half its
+    ``states``, OutOfTime), and what it finished stays: a later call ends with ``value``."""
+    small = make(max_states=states // 2)
     with pytest.raises(OptimalTooLarge):
         small.value()
-    assert 0 < small.states <= est.states // 2
-    late = CompiledOptimalSolver(engine, visible=2, capacity=2)
+    assert 0 < small.states <= states // 2
+    late = make()
     late.deadline = Deadline.after(0.0)
     with pytest.raises(OutOfTime):
         late.value()

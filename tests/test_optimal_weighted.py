@@ -14,11 +14,10 @@ import pytest
 from conftest import random_plans
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_optimal_compiled import _costs, compiled
+from test_optimal_compiled import _costs, check_caps, check_same_doubles, compiled
 
 from opportune import Sequencer, make_plan
 from opportune.engine import OrderEngine
-from opportune.engine.deadline import Deadline
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
 from opportune.policies import optimal
@@ -31,8 +30,6 @@ from opportune.policies.optimal import (
     CompiledOptimalSolver,
     MergedOptimalSolver,
     OptimalSolver,
-    OptimalTooLarge,
-    OutOfTime,
     compiled_optimal_available,
     optimal_solver,
     optimum_bytes,
@@ -99,16 +96,7 @@ def test_the_compiled_weighted_optimum_gives_the_same_doubles_as_python(plan, se
     costs, weights = _costs(plan, seed), _weights(plan, rng)
     for visible in (1, 2, 3):
         for capacity in CAPACITIES:
-            py = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights)
-            cc = CompiledOptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights)
-            value = py.value()
-            assert cc.value() == value, (visible, capacity)
-            assert cc.states == py.states == estimate_states(engine, visible=visible, capacity=capacity).states
-            start = py.start_key()
-            for look, _ in py._looks(py._bin_counts(start)):
-                assert cc.best_action(start, look) == py.best_action(start, look)
-                for _, nxt, _ in py._moves(start, look):
-                    assert cc._value(nxt) == py._value(nxt)
+            value = check_same_doubles(engine, visible=visible, capacity=capacity, costs=costs, weights=weights)
             per_look = PerLook(engine, visible=visible, capacity=capacity, costs=costs, weights=weights)
             assert value == pytest.approx(per_look.value(), rel=1e-12, abs=1e-12)
 
@@ -250,15 +238,8 @@ def test_the_weighted_bytes_are_known_before_and_the_caps_hold(monkeypatch):
     assert cc.bytes > optimum_bytes(est.states, est.keys, compiled=True)      # its looks are counted
     monkeypatch.setattr(optimal, "COMPILED_LOOK_CACHE_BYTES", 0)             # cleared at every bin
     assert CompiledOptimalSolver(engine, visible=3, capacity=2, weights=weights).value() == value
-    small = CompiledOptimalSolver(engine, visible=3, capacity=2, weights=weights, max_states=est.states // 2)
-    with pytest.raises(OptimalTooLarge):
-        small.value()
-    late = CompiledOptimalSolver(engine, visible=3, capacity=2, weights=weights)
-    late.deadline = Deadline.after(0.0)
-    with pytest.raises(OutOfTime):
-        late.value()
-    late.deadline = None
-    assert late.value() == value
+    check_caps(lambda **cap: CompiledOptimalSolver(engine, visible=3, capacity=2, weights=weights, **cap), value,
+               est.states)
 
 
 def test_the_factory_falls_back_to_python_with_the_same_values(monkeypatch):
