@@ -31,7 +31,6 @@ import weakref
 from dataclasses import dataclass, replace
 
 from opportune.engine import OrderEngine
-from opportune.engine.poset import bits
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
 
@@ -45,7 +44,7 @@ _MERGED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 def interchangeable_groups(engine: OrderEngine, costs: TimeModel | None = None,
                            weights: dict[str, float] | None = None) -> list[list[int]]:
     """The plan's parts (indices) grouped by interchangeability (see the module's docstring), each
-    group in declaration order, the groups by their first part.  O(strategies × parts × units).
+    group in declaration order, the groups by their first part.  O(strategies × parts × units / 64).
 
     >>> from opportune import make_plan
     >>> interchangeable_groups(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})))
@@ -53,19 +52,15 @@ def interchangeable_groups(engine: OrderEngine, costs: TimeModel | None = None,
     """
     costs = costs or TimeModel()
     plan = engine.plan
-    unit_part = engine.unit_part
     groups: dict[tuple, list[int]] = {}
     for i, part in enumerate(plan.parts):
+        # the units before the part's first unit and after its last are whole parts' units (a part's
+        # units are chained), so equal masks are equal sets of parts, and neither part is in the other's
         first, last = engine.first[i], engine.first[i] + part.quantity - 1
-        sides = tuple((_parts_of(poset.below[first], unit_part), _parts_of(poset.above[last], unit_part))
-                      for poset in engine.posets)
+        sides = tuple((poset.below[first], poset.above[last]) for poset in engine.posets)
         weight = float((weights or {}).get(part.id, 1.0))
         groups.setdefault((sides, float(costs.move(part.id)), weight), []).append(i)
     return sorted(groups.values())
-
-
-def _parts_of(units: int, unit_part: list[int]) -> frozenset[int]:
-    return frozenset(unit_part[u] for u in bits(units))
 
 
 @dataclass(frozen=True)
@@ -112,7 +107,7 @@ def merge_interchangeable(engine: OrderEngine, costs: TimeModel | None = None,
                           weights: dict[str, float] | None = None) -> Merged:
     """The plan of ``engine`` with its interchangeable parts merged (:class:`Merged`; its ``engine`` is
     ``engine`` itself where no two parts are interchangeable), cached per engine, costs and weights.
-    O(strategies × parts × units) the first time.
+    O(strategies × parts × units / 64) the first time.
 
     >>> from opportune import make_plan
     >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["a"]}))

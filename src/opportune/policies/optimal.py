@@ -513,7 +513,7 @@ def optimal_solver(engine: OrderEngine, *, merge: bool = True, **settings) -> Op
     either way.  With ``merge`` (the default), on the plan with its interchangeable parts merged
     (:func:`~opportune.policies.interchangeable.merge_interchangeable`; fewer states, the same values
     to rounding), through a :class:`MergedOptimalSolver` whose decisions name the plan's parts.
-    O(strategies × parts × units) before the work.
+    O(strategies × parts × units / 64) before the work.
 
     >>> from opportune import make_plan
     >>> round(optimal_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
@@ -531,7 +531,7 @@ def optimum_engine(engine: OrderEngine, costs: TimeModel | None = None,
                    weights: dict[str, float] | None = None) -> OrderEngine:
     """The engine whose states :func:`optimal_solver` stores: the plan's with its interchangeable
     parts merged (``engine`` itself where none are), to size the programme before it starts
-    (:func:`~opportune.policies.states.estimate_states`).  O(strategies × parts × units) the
+    (:func:`~opportune.policies.states.estimate_states`).  O(strategies × parts × units / 64) the
     first time, then cached.
 
     >>> from opportune import make_plan
