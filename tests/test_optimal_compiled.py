@@ -30,7 +30,7 @@ from opportune.policies.optimal import (
 )
 from opportune.policies.states import estimate_states
 
-CAPACITIES = (1, 2, 3, None)
+CAPACITIES = (0, 1, 2, 3, None)
 compiled = pytest.mark.skipif(not compiled_optimal_available(OrderEngine(make_plan(["a"], {}))),
                               reason="the compiled core is not built")
 
@@ -104,22 +104,31 @@ def test_the_chances_of_the_best_visible_part_are_those_of_the_draws():
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(plan=random_plans(max_parts=5, max_units=7, max_strategies=2), seed=st.integers(0, 1000))
 def test_the_compiled_optimum_gives_the_same_doubles_as_python(plan, seed):
-    """Every setting (1-3 visible; 1, 2, 3 or unlimited buffer locations; one or two strategies; uneven
+    """Every setting (1-3 visible; 0, 1, 2, 3 or unlimited buffer locations; one or two strategies; uneven
     costs): the value at the start and after every move of every look there, bit for bit, the same
     number of states, and that number the one counted before the work."""
     engine = OrderEngine(plan)
     costs = _costs(plan, seed)
     for visible in (1, 2, 3):
         for capacity in CAPACITIES:
-            py = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs)
-            cc = CompiledOptimalSolver(engine, visible=visible, capacity=capacity, costs=costs)
-            assert cc.value() == py.value(), (visible, capacity)
-            assert cc.states == py.states == estimate_states(engine, visible=visible, capacity=capacity).states
-            start = py.start_key()
-            for look, _ in py._looks(py._bin_counts(start)):
-                assert cc.best_action(start, look) == py.best_action(start, look)
-                for _, nxt, _ in py._moves(start, look):
-                    assert cc._value(nxt) == py._value(nxt)
+            check_same_doubles(engine, visible=visible, capacity=capacity, costs=costs)
+
+
+def check_same_doubles(engine, **settings) -> float:
+    """The compiled and the Python programme in ``settings``: the value at the start and after every move of
+    every look there bit for bit, the best actions, the same states, and that number the one counted before
+    the work.  Returns the value."""
+    py, cc = OptimalSolver(engine, **settings), CompiledOptimalSolver(engine, **settings)
+    value = py.value()
+    assert cc.value() == value, settings
+    assert cc.states == py.states == estimate_states(engine, visible=settings["visible"],
+                                                     capacity=settings["capacity"]).states
+    start = py.start_key()
+    for look, _ in py._looks(py._bin_counts(start)):
+        assert cc.best_action(start, look) == py.best_action(start, look)
+        for _, nxt, _ in py._moves(start, look):
+            assert cc._value(nxt) == py._value(nxt)
+    return value
 
 
 @compiled
@@ -132,11 +141,17 @@ def test_the_bytes_are_known_before_and_the_caps_hold():
     cc.reserve(est.states)
     value = cc.value()
     assert cc.states == est.states and cc.bytes == optimum_bytes(est.states, est.keys, compiled=True)
-    small = CompiledOptimalSolver(engine, visible=2, capacity=2, max_states=est.states // 2)
+    check_caps(lambda **cap: CompiledOptimalSolver(engine, visible=2, capacity=2, **cap), value, est.states)
+
+
+def check_caps(make, value: float, states: int) -> None:
+    """The state cap and the deadline stop the programme ``make(**cap)`` builds (OptimalTooLarge at half its
+    ``states``, OutOfTime), and what it finished stays: a later call ends with ``value``."""
+    small = make(max_states=states // 2)
     with pytest.raises(OptimalTooLarge):
         small.value()
-    assert 0 < small.states <= est.states // 2
-    late = CompiledOptimalSolver(engine, visible=2, capacity=2)
+    assert 0 < small.states <= states // 2
+    late = make()
     late.deadline = Deadline.after(0.0)
     with pytest.raises(OutOfTime):
         late.value()
@@ -145,14 +160,18 @@ def test_the_bytes_are_known_before_and_the_caps_hold():
 
 
 def test_the_factory_falls_back_to_python(monkeypatch):
-    """Weights that differ, or no compiled core (OPPORTUNE_PURE_PYTHON=1): the Python programme."""
+    """Weights out of range, buffer contents past the core's codes, or no compiled core
+    (OPPORTUNE_PURE_PYTHON=1): the Python programme; weights that differ are compiled too."""
     from opportune.policies import optimal
 
     engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
-    assert type(optimal_solver(engine, weights={"a": 2.0})) is OptimalSolver
+    assert type(optimal_solver(engine, weights={"a": 2.0})) is CompiledOptimalSolver
+    assert type(optimal_solver(engine, weights={"a": -1.0})) is OptimalSolver
     assert optimal_solver(engine, weights={"a": 2.0, "b": 2.0, "c": 2.0}).uniform
-    # 63 parts of one unit: 2^63 buffer contents, past the core's 64-bit codes
-    wide = OrderEngine(make_plan([f"p{i}" for i in range(63)], {}))
+    # 63 parts of one unit, one before each of the others: 2^63 buffer contents, past the core's 64-bit
+    # codes (as 63 parts of no constraint they would be merged: one part of 63 units)
+    ids = [f"p{i}" for i in range(63)]
+    wide = OrderEngine(make_plan(ids, {p: ids[:i] for i, p in enumerate(ids) if i}))
     assert not compiled_optimal_available(wide) and type(optimal_solver(wide)) is OptimalSolver
     monkeypatch.setattr(optimal, "_native", None)
     assert not compiled_optimal_available(engine)

@@ -12,6 +12,16 @@
 //
 //   V(s) = min over prefixes A of (c_look + sum_A p m + (1 - P_A) c_shake) / P_A.
 //
+// In a weighted bin (a unit of part i drawn with chance proportional to weights[i], one after another
+// without replacement) the parts are ranked the same way, and a part's chance of being the best
+// visible one is the sum, over the looks whose best-ranked part it is, of the look's probability; the
+// looks of a bin and their probabilities are those of OptimalSolver._look_distribution (the draws
+// enumerated depth first, each sorted look's probability accumulated in the order it is reached,
+// the looks in lexicographic order), kept in a cache of at most `look_cache_bytes` bytes (cleared
+// whole when full: its bytes are bounded whatever the plan).  The parts are ranked and the looks
+// grouped by their best-ranked part in both programmes: the least over the prefixes of the groups is
+// the least over the prefixes of the looks, and no look is sorted.
+//
 // Every value is memoised in one open-addressing table of 16-byte slots (a 64-bit code of the
 // state, the value), at most half full: 32-64 bytes per state when reserved for the count known
 // before the work, plus the (installed, strategies) pairs interned once.  A value goes into the
@@ -53,13 +63,116 @@ struct OptimalStuck : std::runtime_error {
 
 constexpr double INF = std::numeric_limits<double>::infinity();
 
+// OptimalSolver._shake_loop, one (m, p) pair at a time in increasing m: the least over the prefixes
+struct Prefixes {
+    double look, shake;
+    double acc_pm = 0.0, acc_p = 0.0, s = INF;
+    bool step(double m, double p) {
+        if (m == INF) return false;
+        acc_pm += p * m;
+        acc_p += p;
+        s = std::min(s, (look + acc_pm + (1.0 - acc_p) * shake) / acc_p);
+        return true;
+    }
+};
+
+// The looks of one bin in a weighted bin, as OptimalSolver._look_distribution gives them: k parts per
+// look (sorted), in lexicographic order, with their probabilities.
+struct Looks {
+    int k = 0;
+    std::vector<uint8_t> parts;
+    std::vector<double> p;
+};
+
+// The bins' looks, by bin code; at most `limit` bytes of looks in all (cleared whole before a bin's
+// looks would pass it: one bin's looks, the largest those of the start, may be held beyond it).
+class LookCache {
+public:
+    explicit LookCache(size_t limit) : limit_(limit) {}
+    // bytes one cached look of k parts takes, and one cached bin (its map node and vectors)
+    static constexpr size_t ENTRY_BYTES = 96;
+    static size_t look_bytes(int k) { return sizeof(double) + (size_t)k; }
+
+    const Looks& of(uint64_t code, const std::vector<int>& bin, const std::vector<double>& w, int k) {
+        auto it = cache_.find(code);
+        if (it != cache_.end()) return it->second;
+        Looks looks = enumerate(bin, w, k);
+        size_t need = looks.p.size() * look_bytes(k) + ENTRY_BYTES;
+        if (bytes_ + need > limit_) {
+            cache_.clear();
+            bytes_ = 0;
+        }
+        bytes_ += need;
+        return cache_.emplace(code, std::move(looks)).first->second;
+    }
+    size_t bytes() const { return bytes_; }
+
+private:
+    // Units drawn one after another without replacement, each with chance proportional to its part's
+    // weight: every order of draws depth first (parts in declaration order), a sorted look's
+    // probability the sum of its orders' in the order they are reached.  The same operations as
+    // OptimalSolver._look_distribution: the mass summed over every part in declaration order, the
+    // chance of a draw as prob * c * w / mass from left to right.
+    static Looks enumerate(const std::vector<int>& bin, const std::vector<double>& w, int k) {
+        std::vector<int> counts(bin);
+        std::vector<uint8_t> taken;
+        std::unordered_map<uint64_t, double> sums;  // by the sorted look's code (6 bits a part, first most significant)
+        std::vector<std::pair<uint64_t, std::vector<uint8_t>>> seen;
+        auto draw = [&](auto&& self, int depth, double prob) -> void {
+            if (depth == k) {
+                std::vector<uint8_t> look(taken);
+                std::sort(look.begin(), look.end());
+                uint64_t c = 0;
+                for (uint8_t x : look) c = c << 6 | x;
+                auto [it, fresh] = sums.try_emplace(c, 0.0);
+                it->second = it->second + prob;
+                if (fresh) seen.emplace_back(c, std::move(look));
+                return;
+            }
+            double mass = 0.0;
+            for (size_t i = 0; i < counts.size(); ++i) mass += (double)counts[i] * w[i];
+            for (size_t i = 0; i < counts.size(); ++i) {
+                int c = counts[i];
+                if (!c) continue;
+                counts[i] -= 1;
+                taken.push_back((uint8_t)i);
+                self(self, depth + 1, prob * (double)c * w[i] / mass);
+                taken.pop_back();
+                counts[i] += 1;
+            }
+        };
+        draw(draw, 0, 1.0);
+        std::sort(seen.begin(), seen.end());
+        Looks out;
+        out.k = k;
+        out.parts.reserve(seen.size() * k);
+        out.p.reserve(seen.size());
+        for (auto& [c, look] : seen) {
+            out.parts.insert(out.parts.end(), look.begin(), look.end());
+            out.p.push_back(sums[c]);
+        }
+        return out;
+    }
+
+    size_t limit_, bytes_ = 0;
+    std::unordered_map<uint64_t, Looks> cache_;
+};
+
 class OptimalCore : private PlanUnits {
 public:
     OptimalCore(int n_units, std::vector<int> first, std::vector<int> quantity,
                 std::vector<std::vector<uint64_t>> below, std::vector<double> move, double look, double shake,
-                int visible, int capacity)
+                int visible, int capacity, std::vector<double> weights, size_t look_cache_bytes)
         : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
-                    visible, capacity) {
+                    visible, capacity),
+          weights_(std::move(weights)), looks_(look_cache_bytes) {
+        if (!weights_.empty()) {
+            if ((int)weights_.size() != parts_) throw std::invalid_argument("weights need one entry per part");
+            for (double w : weights_)
+                if (!(w > 0.0) || w == INF) throw std::invalid_argument("every weight must be a positive finite number");
+            // a look is coded in 6 bits a part (at most 64 parts): at most 10 parts in 64 bits
+            if (visible_ > 10) throw std::invalid_argument("a weighted bin takes at most 10 visible parts");
+        }
         if (buffers_ > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
         max_pairs_ = (~uint64_t(0) - 1) / (uint64_t)buffers_;
         // C(n, k) for n <= 64: at most C(64, 32) < 2^61, exact in 64 bits
@@ -85,7 +198,7 @@ public:
 
     void reserve(size_t n) { table_.reserve(n); }
     size_t states() const { return table_.size(); }
-    size_t bytes() const { return table_.bytes() + pairs_.bytes(); }
+    size_t bytes() const { return table_.bytes() + pairs_.bytes() + looks_.bytes(); }
     // the bytes a programme of `states` states over `pairs` (installed, strategies) pairs holds once reserved
     static size_t bytes_for(size_t states, size_t pairs) { return Table::bytes_for(states) + pairs * PairIds::PAIR_BYTES; }
 
@@ -113,6 +226,7 @@ private:
         bool free = capacity_ < 0 || used < capacity_;
         // each part in the bin: its best move (install from the bin, or buffer), in declaration order
         std::vector<std::tuple<double, int, int>> ranked;  // (best move, part, units in the bin)
+        std::vector<int> bin(weights_.empty() ? 0 : parts_, 0);
         int n = 0;
         for (int i = 0; i < parts_; ++i) {
             int units = in_bin(mask, buf, i);
@@ -129,6 +243,7 @@ private:
                 best = std::min(best, v);
             }
             ranked.emplace_back(best, i, units);
+            if (!weights_.empty()) bin[i] = units;
         }
         // the buffer's best installation (the same on every look)
         double from_buffer = INF;
@@ -142,7 +257,7 @@ private:
             buf[i] += 1;
             from_buffer = std::min(from_buffer, v);
         }
-        double s = shake_loop(ranked, n, from_buffer);
+        double s = weights_.empty() ? shake_loop(ranked, n, from_buffer) : weighted_shake_loop(ranked, n, from_buffer, bin);
         if (s == INF) throw OptimalStuck("no look allows any action: the assembly cannot proceed");
         if (table_.size() >= max_states_) throw OptimalTooLarge("over the state limit");
         table_.put(c, s);
@@ -152,17 +267,10 @@ private:
     // OptimalSolver._order_statistics and _shake_loop: the parts by rank, their chances of being the
     // best visible one, the least over the prefixes
     double shake_loop(std::vector<std::tuple<double, int, int>>& ranked, int n, double from_buffer) const {
-        double acc_pm = 0.0, acc_p = 0.0, s = INF;
-        auto step = [&](double m, double p) {
-            if (m == INF) return false;
-            acc_pm += p * m;
-            acc_p += p;
-            s = std::min(s, (look_ + acc_pm + (1.0 - acc_p) * shake_) / acc_p);
-            return true;
-        };
+        Prefixes run{look_, shake_};
         if (n == 0) {  // every unit left is in the buffer: no part is seen
-            step(from_buffer, 1.0);
-            return s;
+            run.step(from_buffer, 1.0);
+            return run.s;
         }
         std::sort(ranked.begin(), ranked.end());
         int k = std::min(visible_, n);
@@ -172,11 +280,36 @@ private:
             (void)part;
             uint64_t hits = binom_[n - rank][k] - binom_[n - rank - units][k];
             rank += units;
-            if (!step(std::min(best, from_buffer), (double)(int64_t)hits / total)) break;
+            if (!run.step(std::min(best, from_buffer), (double)(int64_t)hits / total)) break;
         }
-        return s;
+        return run.s;
     }
 
+    // The same in a weighted bin: a part's chance of being the best visible one summed over the bin's
+    // looks in their order (OptimalSolver._order_statistics)
+    double weighted_shake_loop(std::vector<std::tuple<double, int, int>>& ranked, int n, double from_buffer,
+                               const std::vector<int>& bin) {
+        if (n == 0) return shake_loop(ranked, n, from_buffer);
+        std::sort(ranked.begin(), ranked.end());
+        std::vector<int> rank_of(parts_, 0);
+        for (size_t r = 0; r < ranked.size(); ++r) rank_of[std::get<1>(ranked[r])] = (int)r;
+        const Looks& looks = looks_.of(buffer_code(bin), bin, weights_, std::min(visible_, n));
+        std::vector<double> chance(ranked.size(), 0.0);
+        const int k = looks.k;
+        for (size_t j = 0; j < looks.p.size(); ++j) {
+            const uint8_t* look = &looks.parts[j * k];
+            int best = rank_of[look[0]];
+            for (int d = 1; d < k; ++d) best = std::min(best, rank_of[look[d]]);
+            chance[best] += looks.p[j];
+        }
+        Prefixes run{look_, shake_};
+        for (size_t r = 0; r < ranked.size(); ++r)
+            if (!run.step(std::min(std::get<0>(ranked[r]), from_buffer), chance[r])) break;
+        return run.s;
+    }
+
+    std::vector<double> weights_;  // empty: a uniform bin
+    LookCache looks_;
     uint64_t max_pairs_ = 0;
     uint64_t binom_[65][65] = {};
     PairIds pairs_;
@@ -194,9 +327,10 @@ void bind_optimal(py::module_& m) {
     py::register_exception<OptimalStuck>(m, "OptimalCoreStuck", PyExc_RuntimeError);
     py::class_<OptimalCore>(m, "OptimalCore")
         .def(py::init<int, std::vector<int>, std::vector<int>, std::vector<std::vector<uint64_t>>, std::vector<double>,
-                      double, double, int, int>(),
+                      double, double, int, int, std::vector<double>, size_t>(),
              py::arg("n_units"), py::arg("first"), py::arg("quantity"), py::arg("below"), py::arg("move"),
-             py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"))
+             py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"),
+             py::arg("weights") = std::vector<double>{}, py::arg("look_cache_bytes") = size_t(0))
         .def("value", &OptimalCore::value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("seconds"),
              py::arg("max_states"))
         .def("reserve", &OptimalCore::reserve, py::arg("states"))

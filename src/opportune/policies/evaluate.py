@@ -245,9 +245,12 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         """The optimum from the start, for comparison (see :class:`OptimalSolver`): by the compiled
         programme where it takes the plan and bin (the same values, 20 times sooner; its states are
         :attr:`states`), else by this evaluator's own memo.  The ``deadline`` and ``progress`` apply."""
-        if self._optimum is None and compiled_optimal_available(self.engine) and self.uniform:
-            self._optimum = optimal_solver(self.engine, visible=self.visible, capacity=self.capacity,
-                                           costs=self.costs, max_states=self.max_states)
+        weights = None if self.uniform else dict(zip(self.ids, self.weights))
+        if self._optimum is None and compiled_optimal_available(self.engine, weights):
+            # on the plan as declared (not merged): its states are those counted before the work, which
+            # bound the policy's too
+            self._optimum = optimal_solver(self.engine, visible=self.visible, capacity=self.capacity, merge=False,
+                                           costs=self.costs, weights=weights, max_states=self.max_states)
         if self._optimum is None:
             return OptimalSolver.value(self)
         self._optimum.deadline, self._optimum.progress = self.deadline, self.progress

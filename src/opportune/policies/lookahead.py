@@ -20,7 +20,15 @@ from opportune.policies.base import (
     resume_collector,
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
-from opportune.policies.optimal import OptimalTooLarge, compiled_optimal_available, optimal_solver, optimum_bytes, same_action
+from opportune.policies.optimal import (
+    COMPILED_WEIGHTED_LOOKS,
+    OptimalTooLarge,
+    compiled_optimal_available,
+    optimal_solver,
+    optimum_bytes,
+    optimum_engine,
+    same_action,
+)
 from opportune.policies.variants import Slack
 
 __all__ = ["Lookahead"]
@@ -56,16 +64,17 @@ class Lookahead(DecidesOnMasks):
     #: What the decisions say where the optimum's programme decides.
     OPTIMAL_RULE = "the action with the least expected cost of finishing (the exact optimum)"
     decision_key = None     # it decides on the whole state (the buffer's contents too): no alike situations
-    #: The compiled optimum (of the uniform bin, :class:`~opportune.policies.optimal.CompiledOptimalSolver`, or
-    #: of the pile, :class:`~opportune.policies.pile.CompiledPileSolver`) decides on plans of up to this many
-    #: states (counted before it starts; ``max_states`` if larger), whatever their units, where its bytes
-    #: (known before it starts too: at most 64 a state and the pairs it interns, so about 350 MB at most)
+    #: The compiled optimum (of the uniform or weighted bin, :class:`~opportune.policies.optimal.CompiledOptimalSolver`,
+    #: on the plan with its interchangeable parts merged, or of the pile, :class:`~opportune.policies.pile.CompiledPileSolver`)
+    #: decides on plans of up to this many states (counted before it starts; ``max_states`` if larger; in a weighted
+    #: bin fewer, see :meth:`_optimum_cap`), whatever their units, where its bytes (known before it starts too: at
+    #: most 64 a state and the pairs it interns, so about 350 MB at most, and a weighted bin's look cache)
     #: are granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.reserve_programme`, within
     #: half its ``memory_limit``); its table is reserved for the count at once.  Without a budget it is
     #: solved whole in the first decision on the plan (a warm-up: about a million states a second) and
     #: shared by the look-aheads of the same settings; with one, each decision goes on with it within its
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
-    #: core, or a weighted bin) is held to ``max_states``.
+    #: core) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
     #: Where the optimum does not fit, plans of more units than this decide as the base does: the step over
     #: the base evaluates the base look by look in Python (every look of every state asks the base rule), hours
@@ -144,7 +153,8 @@ class Lookahead(DecidesOnMasks):
                     else:
                         ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
                 elif base is None:
-                    ev = optimal_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
+                    ev = optimal_solver(engine, max_states=self._optimum_cap(engine), merge=self._merges(engine),
+                                        **self.settings)
                 else:
                     ev = PolicyEvaluator(engine, base, max_states=self.max_states, **self.settings)
                 if base is None:
@@ -161,12 +171,42 @@ class Lookahead(DecidesOnMasks):
             from opportune.policies.pile import compiled_pile_available
 
             return compiled_pile_available(engine)
-        return compiled_optimal_available(engine, self.settings.get("weights"))
+        return compiled_optimal_available(self._sized(engine), self.settings.get("weights"),
+                                          visible=self.settings.get("visible", 2))
 
     def _optimum_cap(self, engine) -> int:
         """The optimum's state cap: :attr:`COMPILED_STATES` (or ``max_states`` if larger) for a compiled
-        optimum, else ``max_states``.  O(parts)."""
-        return max(self.max_states, self.COMPILED_STATES) if self._compiled(engine) else self.max_states
+        optimum, else ``max_states``; in a weighted bin, whose compiled programme enumerates a bin's looks
+        at every state, no more states than :data:`~opportune.policies.optimal.COMPILED_WEIGHTED_LOOKS`
+        over the looks at the start (nor fewer than ``max_states``).  O(parts × visible)."""
+        if not self._compiled(engine):
+            return self.max_states
+        cap = max(self.max_states, self.COMPILED_STATES)
+        if self._weighted(engine):
+            from opportune.policies.states import looks_at_start
+
+            looks = looks_at_start(self._sized(engine), self.settings.get("visible", 2))
+            cap = max(self.max_states, min(cap, COMPILED_WEIGHTED_LOOKS // max(1, looks)))
+        return cap
+
+    def _sized(self, engine):
+        """The engine whose states the optimum's programme stores: the plan's with its interchangeable
+        parts merged (:func:`~opportune.policies.optimal.optimum_engine`) where :meth:`_merges`, else the plan's."""
+        if not self._merges(engine):
+            return engine
+        return optimum_engine(engine, self.settings.get("costs"), self.settings.get("weights"))
+
+    def _merges(self, engine) -> bool:
+        """Whether its optimum merges interchangeable parts: not in the pile, and with a budget only on plans
+        the compiled programme takes (at most 64 units): merging builds the merged plan's orders, 50 ms on a
+        2,000-part plan, inside the first budgeted decision.  O(1)."""
+        return not self.pile and (self.lookahead_budget is None or engine.n_units <= 64)
+
+    def _weighted(self, engine) -> bool:
+        """Whether the bin is weighted with weights that differ (not the pile).  O(parts)."""
+        weights = self.settings.get("weights")
+        return (not self.pile and bool(weights)
+                and len({float(weights.get(p.id, 1.0)) for p in engine.plan.parts}) > 1)
 
     def _optimum_bytes(self, engine, estimate) -> int:
         """The bytes the optimum's programme holds, from its state count: the compiled uniform table and
@@ -178,7 +218,8 @@ class Lookahead(DecidesOnMasks):
             from opportune.policies.pile import COMPILED_BYTES_PER_STATE
 
             return COMPILED_BYTES_PER_STATE * estimate.states
-        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile)
+        looks = (estimate.looks, min(self.settings.get("visible", 2), engine.n_units)) if self._weighted(engine) else None
+        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks)
 
     def _optimum_fits(self, engine) -> bool:
         """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,
@@ -197,7 +238,7 @@ class Lookahead(DecidesOnMasks):
 
         seconds = None if self.lookahead_budget is None else self.lookahead_budget / 3
         cap = self._optimum_cap(engine)
-        est = estimate_states(engine, visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
+        est = estimate_states(self._sized(engine), visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
         self._optimum_states = est.states
         if est.exact and est.states <= cap:

@@ -20,10 +20,14 @@ In a uniform bin no look is enumerated: *m(L)* is the least of the visible parts
 and of the buffer's best installation, so with the bin's *n* units ranked by their part's best move
 the best visible unit is the *j*-th with probability C(n − j, k − 1) / C(n, k) for *k* visible: the
 looks' values are order statistics (:meth:`OptimalSolver._order_statistics`), O(parts) a state.
-The weighted bin enumerates its looks.  :class:`CompiledOptimalSolver` runs the uniform bin's
-recursion in the compiled core (``src/native/optimal.cpp``) with the same operations in the same
-order: the same doubles, about 25 times faster, at most 64 bytes a state (:func:`optimum_bytes`);
-:func:`optimal_solver` picks it where the core is built (not with ``OPPORTUNE_PURE_PYTHON=1``).
+The weighted bin ranks its parts the same way and sums, per part, the probabilities of the looks
+whose best-ranked part it is (its looks enumerated, once per bin content): O(looks) a state, no sort.
+:class:`CompiledOptimalSolver` runs the recursion of either bin in the compiled core
+(``src/native/optimal.cpp``) with the same operations in the same order: the same doubles, about 25
+times faster (25 to 30 in a weighted bin), at most 64 bytes a state (:func:`optimum_bytes`; and a
+bounded look cache in a weighted bin); :func:`optimal_solver` picks it where the core is built (not
+with ``OPPORTUNE_PURE_PYTHON=1``), on the plan with its interchangeable parts merged
+(:mod:`.interchangeable`: parts no strategy, cost or weight tells apart counted as one part's units).
 
 Bounds: the states stored never exceed ``max_states`` (:class:`OptimalTooLarge`), and a
 ``deadline`` (:class:`~opportune.engine.deadline.Deadline`) is read between states
@@ -43,6 +47,7 @@ from math import comb, prod
 from opportune.engine import OrderEngine, compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.policies.base import DONE, SHAKE, Action, Decision
+from opportune.policies.interchangeable import merge_interchangeable
 from opportune.planning.costs import TimeModel
 
 #: Looks (with their probabilities) the look cache keeps, over all the bin contents it holds: about
@@ -54,6 +59,27 @@ _native = compiled_core()   # None: the Python programme only
 #: Bytes of an (installed, strategies) pair the compiled optimum interns: the pair in a vector and a
 #: node of the hash map that finds it (what ``OptimalCore.bytes`` counts).
 COMPILED_PAIR_BYTES = 64
+
+#: The compiled optimum's cache of a weighted bin's looks (by bin content) holds at most this many
+#: bytes, and is cleared whole before it would hold more (a bin's looks are enumerated again when needed).
+COMPILED_LOOK_CACHE_BYTES = 4 << 20
+
+#: Visible parts the compiled optimum of a weighted bin takes at most: a look is coded in 6 bits a part.
+COMPILED_WEIGHTED_VISIBLE = 10
+
+#: The compiled optimum of a weighted bin enumerates a bin's looks at every state (about 7 ns a look,
+#: measured on 12 parts, 3 visible): the look-ahead takes it on plans of at most this many looks at the
+#: start times states (the start has the most looks), about ten seconds' work like its uniform bin's
+#: cap (:attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`).
+COMPILED_WEIGHTED_LOOKS = 1_000_000_000
+
+#: Bytes a look of a weighted bin takes in the compiled cache besides its parts (one byte each): its
+#: probability (8), and while the bin's looks are enumerated, its sum and its sorted parts by code (128).
+COMPILED_LOOK_BYTES = 136
+
+#: Bytes a bin's entry takes in the compiled look cache (its hash node and vectors; ``ENTRY_BYTES``
+#: in ``src/native/optimal.cpp``).
+COMPILED_LOOK_ENTRY_BYTES = 96
 
 
 class OptimalTooLarge(RuntimeError):
@@ -69,7 +95,7 @@ class OptimalSolver:
 
     ``weights`` gives per-part visibility weights (``None``: uniform bin).
     Complexity: O(states × parts) in a uniform bin (the looks as order statistics), else
-    O(states × looks × actions); states ≤ down-sets × buffer contents.
+    O(states × (looks × visible + parts)); states ≤ down-sets × buffer contents.
     """
 
     #: The policy whose value a subclass computes (None: the optimum).
@@ -183,7 +209,11 @@ class OptimalSolver:
                 key = tuple(sorted(taken))
                 out[key] = out.get(key, 0.0) + prob
                 return
-            mass = sum(c * w[i] for i, c in enumerate(counts))
+            # summed in a loop, not with sum(): the same additions on every Python (3.12's sum()
+            # compensates) and in the compiled programme
+            mass = 0.0
+            for i, c in enumerate(counts):
+                mass += c * w[i]
             for i, c in enumerate(counts):
                 if c:
                     counts[i] -= 1
@@ -288,27 +318,21 @@ class OptimalSolver:
             raise OptimalTooLarge(
                 f"the optimum needs more than {self.max_states:,} states for this plan; "
                 "raise --optimal-states, or leave 'optimal' out of the strategies")
-        if self.uniform:
-            v = self._shake_loop(self._order_statistics(key))
-        else:
-            best_per_look = []
-            for look, p in self._looks(self._bin_counts(key)):
-                m = min((c + self._value(nxt) for c, nxt, _ in self._moves(key, look)), default=float("inf"))
-                best_per_look.append((m, p))
-            v = self._solve_shake_loop(best_per_look)
+        v = self._shake_loop(self._order_statistics(key))
         self._values[key] = v
         return v
 
     def _order_statistics(self, key: tuple) -> list[tuple[float, float]]:
         """``(m, p)`` in increasing ``m``: the best move's value on a look, and the chance of a look
-        with that best move, in a uniform bin, with no look enumerated (see the module's docstring).
+        with that best move (in a uniform bin with no look enumerated; see the module's docstring).
 
         The best move on a look is the least of the visible parts' own best moves (install from the bin
         or buffer) and of the buffer's best installation, which every look shares.  With the bin's units
         ranked by their part's best move (ties by declaration order), the part whose ``c`` units hold
         ranks ``r + 1 .. r + c`` of ``n`` is the best visible one with probability
-        ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` for ``k`` visible.  The compiled programme
-        (``src/native/optimal.cpp``) does the same operations in the same order.  O(parts) values."""
+        ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` for ``k`` visible (:meth:`_uniform_chances`; in a
+        weighted bin :meth:`_weighted_chances`).  The compiled programme (``src/native/optimal.cpp``)
+        does the same operations in the same order.  O(parts) values."""
         mask, cons, buf = key
         engine, move, value = self.engine, self.move, self._value
         free = self.capacity is None or sum(buf) < self.capacity
@@ -335,12 +359,30 @@ class OptimalSolver:
         if n == 0:          # every unit left is in the buffer: no part is seen
             return [(from_buffer, 1.0)]
         ranked.sort()
+        chances = self._uniform_chances(ranked, n) if self.uniform else self._weighted_chances(ranked, key)
+        return [(min(best, from_buffer), p) for (best, _, _), p in zip(ranked, chances)]
+
+    def _uniform_chances(self, ranked: list[tuple[float, int, int]], n: int) -> list[float]:
+        """Each ranked part's chance of being the best visible one in a uniform bin of ``n`` units:
+        ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)``.  O(parts)."""
         k = min(self.visible, n)
         total = float(comb(n, k))
         out, rank = [], 0
-        for best, _, c in ranked:
-            out.append((min(best, from_buffer), float(comb(n - rank, k) - comb(n - rank - c, k)) / total))
+        for _, _, c in ranked:
+            out.append(float(comb(n - rank, k) - comb(n - rank - c, k)) / total)
             rank += c
+        return out
+
+    def _weighted_chances(self, ranked: list[tuple[float, int, int]], key: tuple) -> list[float]:
+        """Each ranked part's chance of being the best visible one in a weighted bin: the probabilities
+        of the looks (:meth:`_look_distribution`, in its order) whose best-ranked part it is.  A look's
+        best move is its best part's (or the buffer's), so the looks are grouped, not sorted one by one:
+        the least over the prefixes of the groups is the least over the prefixes of the looks (adding
+        looks of one value moves the value monotonically towards it).  O(looks × visible)."""
+        rank = {i: r for r, (_, i, _) in enumerate(ranked)}
+        out = [0.0] * len(ranked)
+        for look, p in self._looks(self._bin_counts(key)):
+            out[min(rank[i] for i in look)] += p
         return out
 
     def _solve_shake_loop(self, best_per_look) -> float:
@@ -416,32 +458,40 @@ class Optimal:
         return Decision(action, "least expected remaining cost", note=f"expected remaining cost {cost:.4f}")
 
 
-def compiled_optimal_available(engine, weights: dict[str, float] | None = None) -> bool:
+def compiled_optimal_available(engine, weights: dict[str, float] | None = None, *, visible: int | None = None) -> bool:
     """Whether the compiled optimum takes this plan: the core is built (and not switched off with
-    ``OPPORTUNE_PURE_PYTHON=1``), the bin is uniform (no weights, or all equal), the plan has at most
+    ``OPPORTUNE_PURE_PYTHON=1``), the weights (if any) are positive and finite, the plan has at most
     64 units and 64 strategies, and at most 2^62 buffer contents (the product of the quantities plus
-    one: up to 62 parts of one unit).  O(parts).
+    one: up to 62 parts of one unit), and in a weighted bin (weights that differ) at most
+    :data:`COMPILED_WEIGHTED_VISIBLE` visible parts (``visible``; None: not asked).  O(parts).
 
     >>> from opportune import make_plan
-    >>> compiled_optimal_available(OrderEngine(make_plan(["a", "b"], {})), {"a": 2.0})
+    >>> compiled_optimal_available(OrderEngine(make_plan(["a", "b"], {})), {"a": 0.0})
     False
     """
-    uniform = len({float((weights or {}).get(p.id, 1.0)) for p in engine.plan.parts}) <= 1
+    values = {float((weights or {}).get(p.id, 1.0)) for p in engine.plan.parts}
+    valid = all(0.0 < w < float("inf") for w in values)
+    if visible is not None and visible > COMPILED_WEIGHTED_VISIBLE and len(values) > 1:
+        valid = False
     # a state's code is (installed, strategies) × buffer contents + contents: at most 2^62 contents
     contents = prod(p.quantity + 1 for p in engine.plan.parts)
-    return (_native is not None and hasattr(_native, "OptimalCore") and uniform and 1 <= engine.n_units <= 64
+    return (_native is not None and hasattr(_native, "OptimalCore") and valid and 1 <= engine.n_units <= 64
             and engine.k <= 64 and contents <= 1 << 62)
 
 
-def optimum_bytes(states: int, keys: int, *, compiled: bool) -> int:
+def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tuple[int, int] | None = None) -> int:
     """The bytes the optimum's programme holds for ``states`` states over ``keys`` (installed,
     strategies) pairs, known before it starts: the compiled table reserved for the count (16-byte
     slots, a power of two at least twice the states, at least 1,024) and the pairs it interns, or
     :data:`~opportune.policies.states.BYTES_PER_STATE` a state in Python (plus the bounded look cache).
-    O(log states).
+    ``weighted_looks``: in a weighted bin, ``(looks at the start, parts a look)``: the compiled
+    programme's look cache adds at most :data:`COMPILED_LOOK_CACHE_BYTES` and the start's looks
+    (:data:`COMPILED_LOOK_BYTES` each, the most any bin has).  O(log states).
 
     >>> optimum_bytes(3_000, 100, compiled=True)
     137472
+    >>> optimum_bytes(3_000, 100, compiled=True, weighted_looks=(10, 2)) - 137472
+    4195780
     """
     if not compiled:
         from opportune.policies.states import BYTES_PER_STATE
@@ -450,24 +500,102 @@ def optimum_bytes(states: int, keys: int, *, compiled: bool) -> int:
     slots = 1024
     while slots < 2 * states:
         slots *= 2
-    return 16 * slots + COMPILED_PAIR_BYTES * keys
+    looks = 0
+    if weighted_looks is not None:
+        start, k = weighted_looks
+        looks = COMPILED_LOOK_CACHE_BYTES + start * (COMPILED_LOOK_BYTES + k) + COMPILED_LOOK_ENTRY_BYTES
+    return 16 * slots + COMPILED_PAIR_BYTES * keys + looks
 
 
-def optimal_solver(engine: OrderEngine, **settings) -> OptimalSolver:
+def optimal_solver(engine: OrderEngine, *, merge: bool = True, **settings) -> OptimalSolver:
     """The optimum's programme: :class:`CompiledOptimalSolver` where the compiled core takes the plan
     and bin (see :func:`compiled_optimal_available`), else :class:`OptimalSolver`; the same values
-    either way.  O(parts) before the work.
+    either way.  With ``merge`` (the default), on the plan with its interchangeable parts merged
+    (:func:`~opportune.policies.interchangeable.merge_interchangeable`; fewer states, the same values
+    to rounding), through a :class:`MergedOptimalSolver` whose decisions name the plan's parts.
+    O(strategies × parts × units / 64) before the work.
 
     >>> from opportune import make_plan
     >>> round(optimal_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
     2.5
     """
+    if merge:
+        merged = merge_interchangeable(engine, settings.get("costs"), settings.get("weights"))
+        if merged.reduced:
+            inner = dict(settings, weights=merged.weights(settings.get("weights")))
+            return MergedOptimalSolver(engine, merged, _solver(merged.engine, inner), **settings)
+    return _solver(engine, settings)
+
+
+def optimum_engine(engine: OrderEngine, costs: TimeModel | None = None,
+                   weights: dict[str, float] | None = None) -> OrderEngine:
+    """The engine whose states :func:`optimal_solver` stores: the plan's with its interchangeable
+    parts merged (``engine`` itself where none are), to size the programme before it starts
+    (:func:`~opportune.policies.states.estimate_states`).  O(strategies × parts × units / 64) the
+    first time, then cached.
+
+    >>> from opportune import make_plan
+    >>> optimum_engine(OrderEngine(make_plan(["a", "b"], {}))).plan.parts[0].quantity
+    2
+    """
+    return merge_interchangeable(engine, costs, weights).engine
+
+
+def _solver(engine: OrderEngine, settings: dict) -> OptimalSolver:
+    """The compiled programme where the core takes the plan and bin, else the Python one."""
     if compiled_optimal_available(engine, settings.get("weights")):
         try:
             return CompiledOptimalSolver(engine, **settings)
-        except ValueError:          # buffer contents over 64-bit codes: the Python programme
+        except ValueError:          # buffer contents over 64-bit codes, or too many visible: Python
             pass
     return OptimalSolver(engine, **settings)
+
+
+class MergedOptimalSolver(OptimalSolver):
+    """The optimum on a plan's own states and looks, its values those of the plan with interchangeable
+    parts merged (``inner``, on ``merged.engine``; see :mod:`~opportune.policies.interchangeable`).
+
+    Its moves, actions and keys are the plan's (a decision names the part seen); every value is the
+    inner programme's at :meth:`~opportune.policies.interchangeable.Merged.key` of the state, so
+    states that differ only by which of interchangeable parts are installed or buffered share one.
+    Its states, bytes, reserve, deadline and state cap are the inner programme's.  O(parts) a value
+    on top of the inner programme's work.
+    """
+
+    def __init__(self, engine: OrderEngine, merged, inner: OptimalSolver, **settings):
+        super().__init__(engine, **settings)
+        self.merged = merged
+        self.inner = inner
+        inner.progress = self._inner_progress
+
+    def _inner_progress(self, _inner) -> None:
+        if self.progress is not None:
+            self.progress(self)
+
+    @property
+    def deadline(self) -> Deadline | None:
+        """The inner programme's (see :attr:`OptimalSolver.deadline`)."""
+        return self.inner.deadline
+
+    @deadline.setter
+    def deadline(self, value) -> None:
+        self.inner.deadline = value
+
+    def reserve(self, states: int) -> None:
+        """The inner programme's room for ``states`` values (its count: on the merged plan)."""
+        self.inner.reserve(states)
+
+    @property
+    def states(self) -> int:
+        return self.inner.states
+
+    @property
+    def bytes(self) -> int | None:
+        """The memory the inner compiled programme holds (None: the Python programme's is not measured)."""
+        return getattr(self.inner, "bytes", None)
+
+    def _value(self, key: tuple) -> float:
+        return self.inner._value(self.merged.key(key))
 
 
 class CompiledCore:
@@ -505,23 +633,30 @@ class CompiledCore:
 
 
 class CompiledOptimalSolver(CompiledCore, OptimalSolver):
-    """The uniform bin's optimum computed by the compiled core (``_native.OptimalCore``,
+    """The optimum of a uniform or weighted bin computed by the compiled core (``_native.OptimalCore``,
     ``src/native/optimal.cpp``): the recursion of :meth:`OptimalSolver._value` with the looks as order
-    statistics, the same floating-point operations in the same order, so the same doubles.
+    statistics (a weighted bin's looks enumerated once per bin content, as
+    :meth:`OptimalSolver._look_distribution` does, in a cache of at most
+    :data:`COMPILED_LOOK_CACHE_BYTES`), the same floating-point operations in the same order, so the
+    same doubles.
 
     The same settings and methods; ``max_states`` bounds the stored values (:class:`OptimalTooLarge`),
     the ``deadline`` is read at every new state (:class:`OutOfTime`; what was finished stays).
-    Memory: :func:`optimum_bytes` (32-64 bytes a state once :meth:`reserve` d, and the pairs).  A
-    ``ValueError`` where the core does not take the plan (:func:`compiled_optimal_available`).
-    Complexity: O(states × parts × strategies).
+    Memory: :func:`optimum_bytes` (32-64 bytes a state once :meth:`reserve` d, the pairs, and in a
+    weighted bin the look cache).  A ``ValueError`` where the core does not take the plan
+    (:func:`compiled_optimal_available`, or more than :data:`COMPILED_WEIGHTED_VISIBLE` visible in a
+    weighted bin).  Complexity: O(states × parts × strategies), and O(states × looks × visible) in a
+    weighted bin.
     """
 
     def __init__(self, engine: OrderEngine, **settings):
         super().__init__(engine, **settings)
-        if not self.uniform or not compiled_optimal_available(engine):
-            raise ValueError("the compiled optimum needs the compiled core, a uniform bin and a plan of 1 to 64 "
-                             "units and at most 64 strategies")
-        self._core = _native.OptimalCore(*self._core_args())
+        weights = None if self.uniform else dict(zip(self.ids, self.weights))
+        if not compiled_optimal_available(engine, weights):
+            raise ValueError("the compiled optimum needs the compiled core, positive weights and a plan of 1 to "
+                             "64 units and at most 64 strategies")
+        self._core = _native.OptimalCore(*self._core_args(), weights=[] if self.uniform else list(self.weights),
+                                         look_cache_bytes=COMPILED_LOOK_CACHE_BYTES)
 
     def _value(self, key: tuple) -> float:
         try:

@@ -45,7 +45,7 @@ from opportune.engine.deadline import Deadline, as_deadline, recursion_room
 from opportune.engine.poset import bits
 
 __all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states",
-           "orderings_factor", "reachable_keys"]
+           "looks_at_start", "orderings_factor", "reachable_keys"]
 
 #: Memory a programme uses per state, rounded up: the dict entry, the key and buffer tuples and the
 #: value (measured: 574 bytes per state for the optimum of KILBRID, 716 on the gearbox, 220-260 per
@@ -119,7 +119,7 @@ def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pi
     """
     until = as_deadline(deadline).within(time_limit)
     weigh = _Weigher(engine, visible, capacity, pile)
-    looks = _looks_at_start(engine, visible)
+    looks = looks_at_start(engine, visible)
     # the listing gets part of the time: where it cannot finish, the estimate needs the rest
     listed = _list_keys(engine, weigh, stop_above, until.share(0.6))
     if listed.complete:
@@ -133,8 +133,15 @@ def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pi
     return StateEstimate(profile, low, False, "estimated from the order's down-sets", listed.keys, looks)
 
 
-def _looks_at_start(engine, visible: int) -> int:
-    """Distinct looks with every unit in the bin: multisets of ``visible`` parts within their quantities."""
+def looks_at_start(engine, visible: int) -> int:
+    """Distinct looks with every unit in the bin (the most any state has): multisets of ``visible`` parts
+    within their quantities.  O(parts × visible).
+
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> looks_at_start(OrderEngine(make_plan(["a", "b", "c"], {})), 2)     # ab ac bc
+    3
+    """
     quantity = [p.quantity for p in engine.plan.parts]
     k = min(visible, sum(quantity))
     poly = [1]
@@ -154,6 +161,9 @@ class _Weigher:
         self.quantity = [p.quantity for p in engine.plan.parts]
         self.single = all(q == 1 for q in self.quantity)
         self.engine = engine
+        # the units of single-unit parts (counted by one bit count), and the parts of several units
+        self.singles = sum(1 << engine.first[i] for i, q in enumerate(self.quantity) if q == 1)
+        self.multiple = [(engine.first[i], q) for i, q in enumerate(self.quantity) if q > 1]
         self._by_rem = lru_cache(maxsize=65_536)(self._weight)
 
     def of_remaining(self, r: int) -> int:
@@ -164,13 +174,14 @@ class _Weigher:
         engine = self.engine
         if self.single:
             return self._by_rem((1,) * (engine.n_units - mask.bit_count()))
+        # the sorted multiset of units left per part: the single parts' ones first, then the others'
         rem = []
-        for i, first in enumerate(engine.first):
-            q = self.quantity[i]
+        for first, q in self.multiple:
             left = q - ((mask >> first) & ((1 << q) - 1)).bit_count()
             if left:
                 rem.append(left)
-        return self._by_rem(tuple(sorted(rem)))
+        ones = (self.singles & ~mask).bit_count()
+        return self._by_rem((1,) * ones + tuple(sorted(rem)))
 
     def _weight(self, rem: tuple[int, ...]) -> int:
         total = sum(rem)

@@ -270,7 +270,7 @@ def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
 
 
 def _solver(engine, config):
-    from opportune.policies.optimal import OptimalSolver
+    from opportune.policies.optimal import optimal_solver
 
     if config.bin == "pile":
         from opportune.policies.pile import pile_solver
@@ -279,9 +279,11 @@ def _solver(engine, config):
         return pile_solver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
                           max_states=config.optimal_states)
 
-    return OptimalSolver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
-                         weights=config.weights if config.bin == "weighted" else None,
-                         max_states=config.optimal_states)
+    # compiled where the core is built, on the plan with its interchangeable parts merged (the Python
+    # programme's memo is handed to the workers; the compiled one's stays in the core: a worker solves again)
+    return optimal_solver(engine, visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
+                          weights=config.weights if config.bin == "weighted" else None,
+                          max_states=config.optimal_states)
 
 
 def _world(config: StudyConfig, prepared: Prepared, strategy: str = "") -> World:
