@@ -142,3 +142,21 @@ def test_the_choice_of_the_optimum_does_not_depend_on_the_clock(monkeypatch):
     budgeted = Lookahead(visible=1, capacity=1, budget=0.05)
     assert not budgeted._optimum_fits(OrderEngine(plan))
     assert "could not be listed" in budgeted.refusal and "more than" not in budgeted.refusal
+
+
+def test_the_shared_programme_goes_with_its_engine():
+    """The look-ahead's programme is shared by the look-aheads of one engine and freed with it: the
+    programme holds the engine, so a table keyed weakly by the engine kept both alive forever."""
+    import gc
+    import weakref
+
+    engine = OrderEngine(_chains(6))
+    first, second = Lookahead(visible=1, capacity=1), Lookahead(visible=1, capacity=1)
+    state = Sequencer(engine).state
+    for policy in (first, second):
+        policy.decide(state, ("p00",))
+    assert first._evaluator is second._evaluator is not None
+    alive = weakref.ref(engine)
+    del engine, first, second, state, policy
+    gc.collect()
+    assert alive() is None

@@ -288,6 +288,9 @@ class OrderEngine:
         self._pass = None   # a shrink under way: (keep share, [(memo, entries to keep)]) left to do
         #: Bytes granted to programmes kept beside the engine, by name (:meth:`reserve_programme`).
         self.programmes: dict[object, int] = {}
+        #: The programmes themselves, kept here by the policies that share them (freed with the engine:
+        #: a programme holds its engine, so a table keyed weakly by the engine would keep both forever).
+        self.kept: dict[object, object] = {}
         # Units: part i owns units first[i] .. first[i] + quantity - 1, installed in that order.
         self.first: list[int] = []
         self.unit_part: list[int] = []

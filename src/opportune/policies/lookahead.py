@@ -6,7 +6,6 @@ decision budget if it has one.  See :mod:`~opportune.policies.variants` for the 
 from __future__ import annotations
 
 import time
-import weakref
 from dataclasses import replace
 
 from opportune.engine.deadline import BudgetExceeded, as_deadline
@@ -33,8 +32,9 @@ from opportune.policies.variants import Slack
 
 __all__ = ["Lookahead"]
 
-# The look-ahead's programmes, per engine (dropped with it) and settings: see Lookahead._values.
-_EVALUATORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+# The look-ahead's programmes are kept on their engine (OrderEngine.kept, freed with it), by settings:
+# see Lookahead._values.
+_KEPT = "lookahead programmes"
 
 
 class Lookahead(DecidesOnMasks):
@@ -138,7 +138,7 @@ class Lookahead(DecidesOnMasks):
             # starts a policy per run: each would otherwise redo the whole programme).  Callers that share
             # an engine already serialise its use, which covers its evaluator too.
             key = self._share_key()
-            shared = _EVALUATORS.setdefault(engine, {}) if key is not None else {}
+            shared = engine.kept.setdefault(_KEPT, {}) if key is not None else {}
             ev = shared.get(key)
             if ev is None:
                 # the optimum's values where they fit (a policy of None), else the base's
