@@ -58,6 +58,10 @@ MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before
 MAX_TRIANGLES = 20_000           # triangles of one part (the blocking test compares bodies' edges pairwise)
 MAX_MESH_PARTS = 300             # parts (mesh files) of one assembly
 MAX_CHOICES = 10_000_000         # combinations of insertion directions examined × parts (each keeps a closure of parts)
+# a part's real shape in a plan (`geometry: {convex: ...}`, written by derive, heaped by the physical bin)
+MAX_SHAPE_BODIES = 64            # convex bodies of one part's shape
+MAX_BODY_POINTS = 256            # corners of one body (the physical bin takes its convex hull)
+MAX_SHAPE_POINTS = 20_000        # corners of all the shapes of one plan (80,000 values of a document)
 
 # ---------------------------------------------------------------- requests to the service
 MAX_BODY = MAX_FILE_BYTES        # a request body: no more than the largest plan file the readers read
@@ -117,6 +121,9 @@ LIMITS = {limit.key: limit for limit in (
           "command line"),
     Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
+    Limit("shape_bodies", MAX_SHAPE_BODIES, "bodies", "convex bodies of one part's shape in a plan", BOTH),
+    Limit("body_points", MAX_BODY_POINTS, "corners", "corners of one body of a part's shape", BOTH),
+    Limit("shape_points", MAX_SHAPE_POINTS, "corners", "corners of all the shapes of one plan", BOTH),
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
     Limit("choices", MAX_CHOICES, "", "combinations of insertion directions examined, times the parts (`derive`)",
           "command line"),

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from opportune.derive.blocking import AXES, Blocking, find_blocking
-from opportune.derive.geometry import GeometryError, read_assembly
+from opportune.derive.geometry import Assembly, GeometryError, read_assembly
 from opportune.derive.plan import DeriveError, DerivedStrategy, exact_strategies
 from opportune.planning.plan import Plan, PlanError
 
-__all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "DIRECTION_SETS"]
+__all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "DIRECTION_SETS", "plan_of"]
 
 #: The direction sets ``--directions`` names.
 DIRECTION_SETS = {"axes": AXES}
@@ -33,6 +33,8 @@ class Derivation:
     blocking: Blocking
     strategies: tuple[DerivedStrategy, ...]
     seconds: float
+    assembly: Assembly | None = None
+    notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         """The numbers of the derivation, as ``derive --json`` prints them (the plan aside)."""
@@ -52,7 +54,7 @@ def derive(path: str | Path, *, directions: str = "axes", tolerance: float | Non
     ----------
     path : str or Path
         A folder of meshes in the assembled pose, one file a part (``.obj``, ``.stl``, ``.ply``; the id
-        is the file's stem).
+        is the file's stem), or ``geometry:NAME``, a shipped assembly (``gearbox``, ``pump``, ``puzzle``).
     directions : str
         The insertion directions: ``"axes"`` (the six axis directions).
     tolerance : float, optional
@@ -84,16 +86,57 @@ def derive(path: str | Path, *, directions: str = "axes", tolerance: float | Non
     """
     if directions not in DIRECTION_SETS:
         raise GeometryError(f"directions {directions!r}: give one of {', '.join(DIRECTION_SETS)}")
+    from opportune.formats.shipped import resolve_assembly
+
+    try:
+        path = resolve_assembly(path)
+    except KeyError as exc:
+        raise GeometryError(exc.args[0]) from None
     start = time.process_time()
     assembly = read_assembly(path, units=units, tolerance=tolerance)
     block = find_blocking(assembly, DIRECTION_SETS[directions])
     strategies = exact_strategies(block)
-    plan = _plan(block, strategies, name or Path(path).resolve().name or "assembly", directions)
-    return Derivation(plan, block, tuple(strategies), time.process_time() - start)
+    from opportune.derive.shapes import shapes
+
+    carried, notes = shapes(assembly)
+    plan = plan_of(block, strategies, name or Path(path).resolve().name or "assembly", directions, carried)
+    return Derivation(plan, block, tuple(strategies), time.process_time() - start, assembly, tuple(notes))
 
 
-def _plan(block: Blocking, strategies: list[DerivedStrategy], name: str, directions: str) -> Plan:
-    """The strategies as a plan, through the plan checker (what ``opportune check`` reads back)."""
+def plan_of(block: Blocking, strategies: list[DerivedStrategy], name: str, directions: str,
+            shapes: dict[str, dict] | None = None) -> Plan:
+    """The strategies as a plan, through the plan checker (what ``opportune check`` reads back).
+
+    Parameters
+    ----------
+    block : Blocking
+        The blocking relation (its directions and tolerance are stated in the plan's description).
+    strategies : list of DerivedStrategy
+        What :func:`~opportune.derive.plan.exact_strategies` found.
+    name : str
+        The plan's name.
+    directions : str
+        The name of the direction set, as the description states it.
+    shapes : dict, optional
+        Part id → its ``geometry`` (:func:`opportune.derive.shapes.shapes`), carried by the plan.
+
+    Returns
+    -------
+    Plan
+        The plan, checked.
+
+    Raises
+    ------
+    DeriveError
+        A plan the checker refuses (a part id it does not take).
+
+    Examples
+    --------
+    >>> from opportune.derive.plan import exact_strategies
+    >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
+    >>> plan_of(b, exact_strategies(b), "two", "axes").strategies[0].requires
+    {'b': ('a',)}
+    """
     from opportune.formats.loader import plan_from_dict
 
     doc = {"name": name, "description": (
@@ -101,7 +144,8 @@ def _plan(block: Blocking, strategies: list[DerivedStrategy], name: str, directi
         f"from far away along one of the directions {directions} ({', '.join(block.directions)}), sliding along "
         f"faces it touches, never through another part (penetration tolerance {block.tolerance:.6g} m). "
         "Each strategy is one choice of a direction per part; the plan admits exactly the feasible sequences."),
-        "parts": list(block.parts), "strategies": []}
+        "parts": [{"id": p, "geometry": shapes[p]} if shapes and p in shapes else p for p in block.parts],
+        "strategies": []}
     for k, s in enumerate(strategies, 1):
         requires: dict[str, list[str]] = {}
         for before, after in s.pairs:
