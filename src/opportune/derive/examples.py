@@ -322,6 +322,61 @@ def write(name: str, folder: str | Path) -> list[Path]:
     return out
 
 
+def looks(plan, seed: int = 0, visible: int = 2) -> list[list[str]]:
+    """Looks at a bin for a replay: the parts in a seeded random order, the camera seeing the first ``visible``
+    still in it, the paper's rule (exact) choosing each time; the looks it saw, until the product is built.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan the rule follows.
+    seed : int
+        Seed of the parts' order in the bin.
+    visible : int
+        Parts seen per look.
+
+    Returns
+    -------
+    list of list of str
+        One look per decision (an empty look when only the buffer is left to install from).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> looks(make_plan(["a", "b"], {"b": ["a"]}), seed=1)
+    [['b', 'a'], ['b']]
+    """
+    import random
+
+    from opportune.sequencer import Sequencer
+
+    bin_ = [p.id for p in plan.parts for _ in range(p.quantity)]
+    random.Random(seed).shuffle(bin_)
+    seq = Sequencer(plan, budget=None)
+    out: list[list[str]] = []
+    while True:
+        look = bin_[:visible]
+        decision = seq.decide(visible=look)
+        if decision.action.kind == "done":
+            return out
+        out.append(look)
+        if decision.action.kind in ("install", "buffer") and decision.action.source != "buffer":
+            bin_.remove(decision.action.part)
+        seq.report("success")
+
+
+def looks_text(name: str, plan, seed: int = 0) -> str:
+    """A looks file for a shipped assembly's derived plan (see :func:`looks`), one look a line."""
+    rows = looks(plan, seed)
+    return (f"# Looks at a bin of the {name} derived from its meshes (opportune derive geometry:{name}): the parts in\n"
+            f"# a random order (seed {seed}), the camera seeing two; `opportune replay` replays them.\n"
+            + "\n".join(" ".join(r) or "-" for r in rows) + "\n")
+
+
 if __name__ == "__main__":   # python -m opportune.derive.examples FOLDER: the shipped assemblies, one folder each
     for shipped in ASSEMBLIES:
         write(shipped, Path(sys.argv[1]) / shipped)
+    from opportune.derive import derive
+
+    (Path(sys.argv[1]).parent / "gearbox-meshes.looks").write_text(
+        looks_text("gearbox", derive(Path(sys.argv[1]) / "gearbox").plan), encoding="utf-8")

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from opportune.derive.blocking import AXES, Blocking, find_blocking
+from opportune.derive.blocking import Blocking, find_blocking
 from opportune.derive.plan import DeriveError, exact_strategies, locked
 from opportune.formats.problems import CONTROL_CHARS
 
@@ -37,6 +37,8 @@ DIAGONALS = {f"{'+' if sa > 0 else '-'}{a}{'+' if sb > 0 else '-'}{b}":
 #: Seconds of counting for the whole explanation (shared between the plan's count and the recounts);
 #: a count that does not finish in its share is an estimate, marked so.
 TIME_LIMIT = 10.0
+#: The relative error an estimated count stops at (a 95% interval): enough to rank the changes.
+REL_ERROR = 0.05
 #: Part ids a line of the report names at most (the ``--json`` form names all).
 SHOWN = 6
 _CONTROL = re.compile(f"[{CONTROL_CHARS}]")
@@ -166,11 +168,12 @@ def _count(plan, seconds: float, seed: int) -> dict:
     """The plan's feasible sequences (the engine's count), with their share of all orders of its parts."""
     from opportune.engine import Schedule
 
-    r = Schedule(plan).count_result(time_limit=seconds, seed=seed)
+    r = Schedule(plan).count_result(time_limit=seconds, seed=seed, rel_error=REL_ERROR)
     n = len(plan.parts)
     log_all = math.lgamma(n + 1) / math.log(10)
+    low, high = r.interval_log10 or (r.log10, r.log10)
     return {"value": r.value if r.exact else float(r.value), "exact": r.exact, "log10": r.log10,
-            "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
+            "log10_low": low, "log10_high": high, "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
 
 
 def _trials(block: Blocking, assembly, directions: dict | None) -> list[tuple[str, str, Blocking]]:
