@@ -217,6 +217,8 @@ def test_a_figure_that_cannot_be_drawn_is_refused_before_anything_is_written(tmp
     plan = tmp_path / "p.yaml"
     bad = runner.invoke(app, ["derive", "geometry:gearbox", "--figure", str(tmp_path / "x.gif"), "-o", str(plan)])
     assert bad.exit_code == 1 and "x.gif" in bad.output and not plan.exists()
+    nowhere = runner.invoke(app, ["derive", "geometry:pump", "--figure", str(tmp_path / "no" / "x.svg"), "-o", str(plan)])
+    assert nowhere.exit_code == 1 and "cannot write the figure" in nowhere.output and not plan.exists()
     many = runner.invoke(app, ["derive", "geometry:gearbox", "--figure", str(tmp_path / "x.png"), "--strategy", "99"])
     assert many.exit_code == 1 and "strategy 99" in many.output
 
@@ -227,3 +229,14 @@ def test_the_puzzle_is_refused_naming_the_parts_that_lock():
     assert "link_a" in result.output and "link_b" in result.output and "stand" not in result.output
     unknown = runner.invoke(app, ["derive", "geometry:nothing"])
     assert unknown.exit_code == 1 and "gearbox, pump, puzzle" in unknown.output
+
+
+def test_parts_outside_the_shapes_bounds_are_written_without_one_and_said(tmp_path):
+    for part, bodies in ex.gearbox().items():        # the gearbox ten times larger: housing, cover, shafts 0.8 m
+        (tmp_path / f"{part}.obj").write_text(ex.obj_text([(c * 10, f) for c, f in bodies]), encoding="utf-8")
+    d = derive(tmp_path)
+    without = {p.id for p in d.plan.parts if p.geometry is None}
+    assert without == {"housing", "cover", "shaft_a", "shaft_b"}
+    assert all(any(f"'{p}'" in n for n in d.notes) for p in without)
+    result = runner.invoke(app, ["derive", str(tmp_path), "-o", str(tmp_path / "p.yaml")])
+    assert result.exit_code == 0 and "housing" in result.output and "default box" in result.output

@@ -134,7 +134,7 @@ def plan_of(block: Blocking, strategies: list[DerivedStrategy], name: str, direc
     --------
     >>> from opportune.derive.plan import exact_strategies
     >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
-    >>> plan_of(b, exact_strategies(b), "two", "axes").strategies[0].requires
+    >>> dict(plan_of(b, exact_strategies(b), "two", "axes").strategies[0].requires)
     {'b': ('a',)}
     """
     from opportune.formats.loader import plan_from_dict

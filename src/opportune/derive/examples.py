@@ -19,7 +19,7 @@ are this script's output).
 
 >>> parts = gearbox()
 >>> sorted(parts)[:3], len(parts)
-(['bearing_a1', 'bearing_a2', 'bearing_b1'], 15)
+(['bearing_a1', 'bearing_a2', 'bearing_b1'], 14)
 """
 
 from __future__ import annotations
@@ -149,7 +149,7 @@ def gearbox(g: Gearbox = Gearbox()) -> dict[str, list[Body]]:
     Examples
     --------
     >>> len(gearbox()["housing"])     # base, two side walls, two end walls cut around bores and screw holes
-    23
+    19
     """
     if not math.isclose(sum(g.gears), g.shaft_y[1] - g.shaft_y[0]):
         raise ValueError("the gears' apothems must add up to the distance between the shafts")

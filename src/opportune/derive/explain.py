@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 import re
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from opportune.derive.blocking import Blocking, find_blocking
-from opportune.derive.plan import DeriveError, exact_strategies, locked
+from opportune.derive.plan import DeriveError, exact_strategies
 from opportune.formats.problems import CONTROL_CHARS
 
 #: Directions tried as "one more direction" when the assembly's geometry is given: the twelve
@@ -65,6 +66,7 @@ class Explanation:
     count: dict
     forced: list[tuple[str, str]]
     frees: list[dict] = field(default_factory=list)
+    unfinished: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
         """The explanation as plain data (``derive --explain --json``)."""
@@ -73,7 +75,7 @@ class Explanation:
                 "single_direction": {p: d[0] for p, d in self.usable.items() if len(d) == 1},
                 "reasons": reasons(self),
                 "count": self.count, "forced_in_every_strategy": [list(p) for p in self.forced],
-                "frees": self.frees}
+                "frees": self.frees, "unfinished": self.unfinished}
 
     def text(self) -> str:
         """The explanation as a report, one statement a line (control characters escaped)."""
@@ -94,8 +96,11 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
         Name → vector of the directions to try adding (default :data:`DIAGONALS`; those already used are
         left out).
     time_limit : float
-        Seconds for all the counts together (default :data:`TIME_LIMIT`): the plan's own count gets a
-        quarter, each recount an equal share of the rest; a count not finished is an estimate.
+        Seconds for the whole explanation but its forced orders (default :data:`TIME_LIMIT`; kept within
+        a second or so past it, the longest single step): the plan's own count gets a quarter, each
+        recount an equal share of what is left when it starts, and a count not finished is an estimate;
+        the insertion directions and the changes to try are worked through until the time is up, the
+        most blocking parts first, and what was not reached is said (``unfinished``).
     seed : int
         Seed of the estimates, if any.
 
@@ -108,24 +113,43 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     --------
     >>> from opportune.derive import derive
     >>> from opportune.datasets import geometry_path
-    >>> e = explain(derive(geometry_path("puzzle").parent / "gearbox"))
-    >>> e.count["value"] > 0 and e.usable["cover"]
-    ['-z']
+    >>> e = explain(derive(geometry_path("gearbox")))
+    >>> e.count["value"], e.usable["shaft_a"]
+    (159160320, ['+x', '-x'])
     """
+    end = time.perf_counter() + time_limit
     block, strategies = derivation.blocking, derivation.strategies
     orders = [_order(block, s) for s in strategies]
-    usable = {p: [d for d in block.directions if _usable(block, p, d)] for p in block.parts}
     closures = [_closure(s.pairs) for s in strategies]
     forced = sorted(set.intersection(*closures)) if closures else []
-    share = max(0.001, time_limit / 4)
-    base = _count(derivation.plan, share, seed)
-    trials = _trials(block, assembly, directions)
-    each = (time_limit - share) / max(1, len(trials))
-    frees = []
-    for kind, name, changed in trials:
-        frees.append({"kind": kind, "name": name, **_recount(changed, derivation.plan.name, each, seed)})
+    base = _count(derivation.plan, max(0.001, time_limit / 4), seed)
+    unfinished = []
+    usable: dict[str, list[str]] = {}
+    for p in block.parts:
+        if time.perf_counter() > end:
+            unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
+            break
+        usable[p] = [d for d in block.directions if _usable(block, p, d)]
+    frees: list[dict] = []
+    later = len(_new_directions(block, directions)) if assembly is not None else 0   # their share kept for them
+    # the added directions' blocking is geometry, not interruptible: found only if it fits the time left, as
+    # the derivation's own blocking took per direction
+    cost = derivation.seconds * later / max(1, len(block.directions))
+    for trials in (_part_trials(block), lambda: _direction_trials(block, assembly, directions)):
+        if not isinstance(trials, list) and time.perf_counter() + cost > end:
+            unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
+            break
+        trials = trials if isinstance(trials, list) else trials()
+        for k, (kind, name, changed) in enumerate(trials):
+            left = end - time.perf_counter()
+            if left <= 0:
+                unfinished.append(f"{len(trials) - k} changes to try")
+                break
+            pending = len(trials) - k + (later if kind == "part" else 0)
+            count = _recount(changed, derivation.plan.name, left / pending, seed)
+            frees.append({"kind": kind, "name": name, **count})
     frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
-    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees)
+    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
 
 
 def _order(block: Blocking, strategy) -> dict:
@@ -141,10 +165,29 @@ def _order(block: Blocking, strategy) -> dict:
 
 def _usable(block: Blocking, part: str, direction: str) -> bool:
     """Whether ``part`` goes in along ``direction`` in some feasible sequence: the relation with ``part`` held
-    to that direction locks no part."""
-    held = dict(block.blockers)
-    held[part] = {direction: block.blockers[part][direction]}
-    return not locked(replace(block, blockers=held))
+    to that direction lets every part out, last first (:func:`~opportune.derive.plan.locked`'s peeling, with a
+    count of the blockers left per part and direction: O(parts × directions + the blocker sets' sizes))."""
+    waiting: dict[str, list[tuple[str, str]]] = {}   # blocker -> the (part, direction) it blocks
+    left: dict[tuple[str, str], int] = {}
+    for p, dirs in block.blockers.items():
+        for d, q in dirs.items():
+            if p == part and d != direction:
+                continue
+            left[p, d] = len(q)
+            for b in q:
+                waiting.setdefault(b, []).append((p, d))
+    free = [p for p, d in left if left[p, d] == 0]
+    out = set()
+    while free:
+        p = free.pop()
+        if p in out:
+            continue
+        out.add(p)
+        for key in waiting.get(p, ()):
+            left[key] -= 1
+            if left[key] == 0 and key[0] not in out:
+                free.append(key[0])
+    return len(out) == len(block.parts)
 
 
 def _closure(pairs) -> set[tuple[str, str]]:
@@ -176,19 +219,36 @@ def _count(plan, seconds: float, seed: int) -> dict:
             "log10_low": low, "log10_high": high, "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
 
 
-def _trials(block: Blocking, assembly, directions: dict | None) -> list[tuple[str, str, Blocking]]:
-    """The changed blocking relations to recount: each part out of everyone's way, each direction added."""
+def _part_trials(block: Blocking) -> list[tuple[str, str, Blocking]]:
+    """The changed blocking relations to recount: each part out of everyone's way, those that block the most
+    part-directions first."""
     out = []
-    for q in block.parts:
-        if not any(q in s for dirs in block.blockers.values() for s in dirs.values()):
+    blocks = {q: 0 for q in block.parts}
+    for dirs in block.blockers.values():
+        for s in dirs.values():
+            for q in s:
+                blocks[q] += 1
+    for q in sorted(block.parts, key=lambda q: -blocks[q]):
+        if not blocks[q]:
             continue
         blockers = {p: {d: s - {q} for d, s in dirs.items()} for p, dirs in block.blockers.items()}
         out.append(("part", q, replace(block, blockers=blockers)))
+    return out
+
+
+def _new_directions(block: Blocking, directions: dict | None) -> dict:
+    """The directions to try adding (default :data:`DIAGONALS`) that the relation does not have yet."""
+    used = {tuple(np.round(np.asarray(v, float) / np.linalg.norm(v), 9)) for v in block.directions.values()}
+    return {name: vec for name, vec in (DIAGONALS if directions is None else directions).items()
+            if name not in block.directions
+            and tuple(np.round(np.asarray(vec, float) / np.linalg.norm(vec), 9)) not in used}
+
+
+def _direction_trials(block: Blocking, assembly, directions: dict | None) -> list[tuple[str, str, Blocking]]:
+    """The changed blocking relations to recount: each direction added, its blocking found in the geometry."""
+    out = []
     if assembly is not None:
-        used = {tuple(np.round(np.asarray(v, float) / np.linalg.norm(v), 9)) for v in block.directions.values()}
-        tried = {name: vec for name, vec in (DIAGONALS if directions is None else directions).items()
-                 if name not in block.directions
-                 and tuple(np.round(np.asarray(vec, float) / np.linalg.norm(vec), 9)) not in used}
+        tried = _new_directions(block, directions)
         more = find_blocking(assembly, tried) if tried else None   # one pass for all of them
         for name, vec in tried.items():
             blockers = {p: {**dirs, name: more.blockers[p][name]} for p, dirs in block.blockers.items()}
@@ -293,9 +353,12 @@ def _report(e: Explanation) -> list[str]:
     c = e.count
     lines.append(f"feasible sequences: {_number(c)} of 10^{c['log10_all_orders']:.2f} orders of the parts "
                  f"(1 in 10^{-c['share_log10']:.2f}); {len(e.forced)} orders forced in every strategy")
+    if e.unfinished:
+        lines.append("not reached within the time limit: " + "; ".join(e.unfinished))
     best = next((f for f in e.frees if f["count"]), None)
     if best is None:
-        lines.append("frees the most: nothing to try (no part is in another's way)")
+        lines.append("frees the most: nothing tried within the time limit" if e.unfinished else
+                     "frees the most: nothing to try (no part is in another's way)")
     else:
         what = (f"{best['name']} out of everyone's way" if best["kind"] == "part" else
                 f"the direction {best['name']} added")

@@ -262,7 +262,7 @@ def _draw(assembly, moves: dict[str, np.ndarray], stage: dict[str, int], title: 
     for axis, name in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz"):
         axis(f"{name} (mm)", fontsize=8, labelpad=1)
     ax.tick_params(labelsize=6, pad=0)
-    ax.set_title(title, fontsize=9)
+    fig.suptitle(title, fontsize=9)
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.08,
                        ticks=range(1, top + 1) if top <= 20 else None)
     bar.set_label("stage: earliest position in a sequence", fontsize=8)

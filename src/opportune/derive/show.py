@@ -38,22 +38,25 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
     Raises
     ------
     ValueError
-        A figure's suffix or strategy that cannot be drawn (checked before anything is drawn).
-    OSError
-        A figure file that cannot be written.
+        A figure's suffix or strategy that cannot be drawn (checked before anything is drawn), or a figure
+        file that cannot be written.
 
     Examples
     --------
     >>> from opportune.derive import derive
     >>> shown = show(derive("geometry:gearbox"), explain=True)
     >>> shown.text.splitlines()[0]
-    'gearbox: 15 parts, 1 strategy'
+    'gearbox: 14 parts, 7 strategies'
     """
     out = Shown(notes=list(derivation.notes))
     if figure is not None:
         from opportune.derive.figure import exploded
 
-        written = exploded(derivation, figure, strategy=strategy)
+        try:
+            written = exploded(derivation, figure, strategy=strategy)
+        except OSError as exc:
+            raise ValueError(f"{figure}: cannot write the figure ({exc.strerror or exc}); give a path in a folder "
+                             "you can write to") from None
         out.data["figure"] = str(written)
         out.notes.append(f"wrote the exploded view (strategy s{strategy}) to {written}")
     if explain:

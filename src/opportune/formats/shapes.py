@@ -71,8 +71,8 @@ def shape_problems(parts) -> list[tuple[int, str]]:
     Examples
     --------
     >>> flat = [[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]]
-    >>> shape_problems([{"id": "plate", "geometry": {"convex": [flat]}}])[0][1][:40]
-    "part 'plate': body 1 is flat (0 m thick"
+    >>> shape_problems([{"id": "plate", "geometry": {"convex": [flat]}}])[0][1].split(" (")[0]
+    "part 'plate': body 1 is flat"
     """
     from opportune.planning.plan import MAX_DIMENSION, MIN_DIMENSION
 
