@@ -167,8 +167,7 @@ def exploded(derivation, path: str | Path, *, strategy: int = 1, gap: float | No
              for p in assembly.parts}
     fig = _draw(assembly, moves, stage, title or f"{derivation.plan.name}: each part moved out along its insertion "
                                                   f"direction (strategy s{strategy})")
-    with np.errstate(over="ignore"):   # mplot3d's own limits arithmetic overflows harmlessly on some views
-        fig.savefig(path, dpi=200, bbox_inches="tight")
+    fig.savefig(path, dpi=200, bbox_inches="tight")
     return path
 
 
@@ -228,7 +227,7 @@ def _draw(assembly, moves: dict[str, np.ndarray], stage: dict[str, int], title: 
     top = max(stage.values())
     cmap = _colours()
     norm = BoundaryNorm(np.arange(0.5, top + 1.5), cmap.N)
-    polys, colours, points = [], [], []
+    polys, colours, points, paths, labels = [], [], [], [], []
     for part in assembly.parts:
         shift = moves[part.id] * 1000
         colour = cmap(norm(stage[part.id]))
@@ -239,17 +238,23 @@ def _draw(assembly, moves: dict[str, np.ndarray], stage: dict[str, int], title: 
         centre = part.bounds.mean(axis=0) * 1000
         points += [centre, centre + shift]
         if np.linalg.norm(shift) > 0:
-            ax.plot(*zip(centre, centre + shift), color="0.45", linestyle=(0, (3, 2)), linewidth=0.7)
-        label = centre + shift + np.array([0, 0, 0.04 * assembly.size * 1000])
-        ax.text(*label, part.id, fontsize=7, ha="center", va="bottom", zorder=10,
-                bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.75})
-    ax.add_collection3d(Poly3DCollection(polys, facecolors=colours, edgecolors="0.15", linewidths=0.3, alpha=0.95))
+            paths.append((centre, centre + shift))
+        labels.append((centre + shift + np.array([0, 0, 0.04 * assembly.size * 1000]), part.id))
     every = np.vstack([np.vstack(polys), np.array(points)])
     lo, hi = every.min(axis=0), every.max(axis=0)
+    # the limits first and no autoscaling: mplot3d's autoscale of lines and text can overflow to infinite limits
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
     ax.set_zlim(lo[2], hi[2])
+    ax.set_autoscale_on(False)
     ax.set_box_aspect(np.maximum(hi - lo, 1e-9 * (hi - lo).max()))
+    ax.add_collection3d(Poly3DCollection(polys, facecolors=colours, edgecolors="0.15", linewidths=0.3, alpha=0.95),
+                        autolim=False)
+    for a, b in paths:
+        ax.plot(*zip(a, b), color="0.45", linestyle=(0, (3, 2)), linewidth=0.7)
+    for at, text in labels:
+        ax.text(*at, text, fontsize=7, ha="center", va="bottom", zorder=10,
+                bbox={"boxstyle": "round,pad=0.15", "facecolor": "white", "edgecolor": "none", "alpha": 0.75})
     ax.view_init(elev=24, azim=-58)
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):   # white panes, no grid: the parts are the figure
         axis.pane.fill = False
