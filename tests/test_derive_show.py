@@ -32,6 +32,12 @@ def derived(name: str):
     return derive(f"geometry:{name}")
 
 
+@lru_cache(maxsize=None)
+def explained(name: str):
+    d = derived(name)
+    return explain(d, d.assembly, time_limit=20)
+
+
 def brute_count(parts, blockers) -> int:
     """Feasible sequences of a blocking relation: f(S) = sum over the parts p of S that can go in last
     (some direction's blockers all outside S - p) of f(S - p)."""
@@ -118,7 +124,7 @@ def test_the_plan_carries_each_parts_shape_and_the_physical_bin_heaps_them(tmp_p
 
 def test_explain_states_only_what_the_blocking_relation_says():
     d = derived("gearbox")
-    e = explain(d, d.assembly, time_limit=20)
+    e = explained("gearbox")
     b = d.blocking.blockers
     constraints = [c for order in e.orders for c in order["constraints"]]
     assert constraints
@@ -137,7 +143,7 @@ def test_explain_states_only_what_the_blocking_relation_says():
 
 def test_what_frees_the_most_is_checked_by_recounting():
     d = derived("pump")
-    e = explain(d, d.assembly, time_limit=20)
+    e = explained("pump")
     b = d.blocking.blockers
     parts = d.blocking.parts
     recount = {}
@@ -155,8 +161,9 @@ def test_what_frees_the_most_is_checked_by_recounting():
             assert c["value"] == recount[f["name"]], f
         else:
             assert c["log10_low"] - 1e-9 <= math.log10(recount[f["name"]]) <= c["log10_high"] + 1e-9, f
-    assert {f["name"] for f in e.frees if f["kind"] == "part"} == {q for q in parts if recount[q] > 0
-                                                                   and any(q in s for x in b.values() for s in x.values())}
+    blocking = {q for q in parts if any(q in s for x in b.values() for s in x.values())}
+    tried = {f["name"] for f in e.frees if f["kind"] == "part"}
+    assert tried == blocking or (e.unfinished and tried < blocking)     # every part in someone's way, in time
     best = e.frees[0]
     assert recount[best["name"]] == max(recount[f["name"]] for f in e.frees)     # it does free the most
     assert f"frees the most: {best['name']} out of everyone's way" in e.text()
@@ -170,7 +177,7 @@ def ex_direction(name: str):
 
 def test_insertion_directions_are_those_of_some_feasible_sequence():
     d = derived("pump")
-    e = explain(d, d.assembly, time_limit=20)
+    e = explained("pump")
     b = d.blocking.blockers
     for p in d.blocking.parts:
         for k in d.blocking.directions:
