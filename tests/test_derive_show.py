@@ -247,3 +247,13 @@ def test_parts_outside_the_shapes_bounds_are_written_without_one_and_said(tmp_pa
     assert all(any(f"'{p}'" in n for n in d.notes) for p in without)
     result = runner.invoke(app, ["derive", str(tmp_path), "-o", str(tmp_path / "p.yaml")])
     assert result.exit_code == 0 and "housing" in result.output and "default box" in result.output
+
+
+def test_a_part_id_with_dollars_is_drawn_as_written_not_as_mathtext(tmp_path):
+    for part, bodies in ex.puzzle().items():
+        if part != "link_b":     # the stand and one link: nothing locked
+            (tmp_path / f"{part.replace('link_a', 'a$b$c')}.obj").write_text(ex.obj_text(bodies), encoding="utf-8")
+    out = tmp_path / "x.svg"
+    result = runner.invoke(app, ["derive", str(tmp_path), "--figure", str(out), "--explain"])
+    assert result.exit_code == 0, result.output
+    assert "a$b$c" in out.read_text(encoding="utf-8") and "1 in 10^0.00" in result.stdout

@@ -352,7 +352,7 @@ def _report(e: Explanation) -> list[str]:
                  + (", ".join(f"{p} {d}" for p, d in single.items()) or "none"))
     c = e.count
     lines.append(f"feasible sequences: {_number(c)} of 10^{c['log10_all_orders']:.2f} orders of the parts "
-                 f"(1 in 10^{-c['share_log10']:.2f}); {len(e.forced)} orders forced in every strategy")
+                 f"(1 in 10^{max(0.0, -c['share_log10']):.2f}); {len(e.forced)} orders forced in every strategy")
     if e.unfinished:
         lines.append("not reached within the time limit: " + "; ".join(e.unfinished))
     best = next((f for f in e.frees if f["count"]), None)

@@ -239,7 +239,8 @@ def _draw(assembly, moves: dict[str, np.ndarray], stage: dict[str, int], title: 
         points += [centre, centre + shift]
         if np.linalg.norm(shift) > 0:
             paths.append((centre, centre + shift))
-        labels.append((centre + shift + np.array([0, 0, 0.04 * assembly.size * 1000]), part.id))
+        # a part id is the user's text: a "$" would start matplotlib's mathtext
+        labels.append((centre + shift + np.array([0, 0, 0.04 * assembly.size * 1000]), part.id.replace("$", r"\$")))
     every = np.vstack([np.vstack(polys), np.array(points)])
     lo, hi = every.min(axis=0), every.max(axis=0)
     # the limits first and no autoscaling: mplot3d's autoscale of lines and text can overflow to infinite limits
@@ -267,7 +268,7 @@ def _draw(assembly, moves: dict[str, np.ndarray], stage: dict[str, int], title: 
     for axis, name in zip((ax.set_xlabel, ax.set_ylabel, ax.set_zlabel), "xyz"):
         axis(f"{name} (mm)", fontsize=8, labelpad=1)
     ax.tick_params(labelsize=6, pad=0)
-    fig.suptitle(title, fontsize=9)
+    fig.suptitle(title.replace("$", r"\$"), fontsize=9)
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.08,
                        ticks=range(1, top + 1) if top <= 20 else None)
     bar.set_label("stage: earliest position in a sequence", fontsize=8)
