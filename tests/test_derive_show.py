@@ -117,6 +117,11 @@ def test_the_plan_carries_each_parts_shape_and_the_physical_bin_heaps_them(tmp_p
 
     meshes = sum(1 for g in range(world.model.ngeom) if world.model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH)
     assert meshes == sum(len(p.bodies) for p in d.assembly.parts)
+    exposure = world.exposure()                  # rays over each real shape: some seen whole, some hidden
+    assert max(exposure.values()) > 0.9 and min(exposure.values()) < 0.9 and world.look()
+    alone = PhysicsBin(visible=1, geometry=geometry)
+    alone.reset(["gear_a"], random.Random(1))    # a gear alone in the bin: in full view, pickable
+    assert alone.exposure() == {0: 1.0} and alone.look() == ("gear_a",)
     result = run_study(StudyConfig(plan, strategies=("paper",), trials=1, bin="physics", seed=2), workers=1)
     trial, = result.trials["paper"]
     assert trial.complete and trial.motions >= len(plan.parts)        # every part picked from the heap
