@@ -1351,6 +1351,13 @@ def derive(
                                               help="Penetration tolerance in the files' units: parts may overlap by "
                                                    "this much (default: a millionth of the assembly's size)"),
     units: str = typer.Option("m", "--units", help="The files' unit of length: m or mm"),
+    explain: bool = typer.Option(False, "--explain", help="Print why the plan is as it is instead of the plan: each "
+                                                          "forced order with the part in the way, the parts with one "
+                                                          "insertion direction, the count, and what would free the most"),
+    figure: Optional[Path] = typer.Option(None, "--figure", help="Draw the exploded view (.png, .svg or .pdf): each "
+                                                                 "part moved out along its insertion direction, coloured "
+                                                                 "by stage"),
+    strategy: int = typer.Option(1, "--strategy", min=1, help="The strategy the figure explodes (from 1)"),
     as_json: bool = json_option("Machine-readable output: {\"parts\", \"directions\", \"blocking_checks\", "
                                 "\"strategies\", \"blockers\", ...} on standard output (errors too)"),
 ):
@@ -1370,14 +1377,25 @@ def derive(
                               connected=connected, base=base, manifest=manifest)
     except (GeometryError, DeriveError, ManifestError) as exc:
         fail(str(exc))
+    from opportune.derive.show import show
+
+    try:   # before the plan is written: a figure that cannot be drawn leaves no plan file behind
+        shown = show(derived, explain=explain, figure=figure, strategy=strategy)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
     text = _plan_yaml(derived.plan.to_dict())
     if output is not None:
         _write_text(output, text)
     if as_json:
-        print(json.dumps({"plan": derived.plan.to_dict(), **derived.to_dict()}, indent=2, ensure_ascii=False))
+        print(json.dumps({"plan": derived.plan.to_dict(), **derived.to_dict(), **shown.data}, indent=2,
+                         ensure_ascii=False))
         return
-    if output is None:
+    if explain:
+        sys.stdout.write(shown.text)
+    elif output is None:
         sys.stdout.write(text)
+    for note in shown.notes:
+        _err().print(f"[yellow]note[/]: {_escape(note)}", markup=True)
     d = derived.to_dict()
     _err().print(_escape(f"{derived.plan.name}: {d['parts']} parts, {len(d['directions'])} directions, "
                          f"{d['blocking_checks']:,} blocking checks, {d['strategies']} strateg"

@@ -73,6 +73,10 @@ STEP_SECONDS = 120               # meshing a STEP file (a child process, ended p
 STEP_MEMORY = 4 << 30            # the address space of the child process that meshes a STEP file (4 GiB)
 MAX_MANIFEST_BYTES = 1 << 20     # an assembly's manifest (assembly.yaml, 1 MiB)
 MAX_PROCESS = 10_000             # process constraints ("this before that") of a manifest
+# a part's real shape in a plan (`geometry: {convex: ...}`, written by derive, heaped by the physical bin)
+MAX_SHAPE_BODIES = 64            # convex bodies of one part's shape
+MAX_BODY_POINTS = 256            # corners of one body (the physical bin takes its convex hull)
+MAX_SHAPE_POINTS = 20_000        # corners of all the shapes of one plan (80,000 values of a document)
 
 # ---------------------------------------------------------------- requests to the service
 MAX_BODY = MAX_FILE_BYTES        # a request body: no more than the largest plan file the readers read
@@ -132,6 +136,9 @@ LIMITS = {limit.key: limit for limit in (
           "command line"),
     Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),
+    Limit("shape_bodies", MAX_SHAPE_BODIES, "bodies", "convex bodies of one part's shape in a plan", BOTH),
+    Limit("body_points", MAX_BODY_POINTS, "corners", "corners of one body of a part's shape", BOTH),
+    Limit("shape_points", MAX_SHAPE_POINTS, "corners", "corners of all the shapes of one plan", BOTH),
     Limit("mesh_parts", MAX_MESH_PARTS, "parts", "parts (mesh files) of one assembly (`derive`)", "command line"),
     Limit("working_orders", MAX_WORKING, "partial orders",
           "incomparable partial orders kept while a derived plan is built (`derive`)", "command line"),

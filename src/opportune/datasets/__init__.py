@@ -18,13 +18,17 @@ The examples (the paper's gearbox and the looks of its Table 1) ship too, as ``e
 >>> "gearbox" in names and "gearbox-table1" in names
 True
 
+The assemblies ``opportune derive`` reads ship as folders of meshes, ``geometry:NAME``
+(``opportune derive geometry:gearbox``): the gearbox, the pump and an interlocked puzzle.
+
 The names and paths are :mod:`opportune.formats.shipped`'s (the readers resolve ``salbp:`` and
 ``example:`` through it); this package adds loading a graph as a plan.
 """
 
 from __future__ import annotations
 
-from opportune.formats.shipped import (EXAMPLE_PREFIX, PREFIX, SALBP, example_path, examples, resolve,  # noqa: F401
+from opportune.formats.shipped import (EXAMPLE_PREFIX, GEOMETRY, GEOMETRY_PREFIX, PREFIX, SALBP,  # noqa: F401
+                                       example_path, examples, geometry_path, resolve, resolve_assembly,
                                        salbp_names, salbp_path)
 
 

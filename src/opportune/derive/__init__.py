@@ -29,7 +29,7 @@ from opportune.derive.mjcf import read_mjcf_assembly
 from opportune.derive.scene import read_scene_assembly
 from opportune.planning.plan import Plan, PlanError
 
-__all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "ManifestError", "DIRECTION_SETS"]
+__all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "ManifestError", "DIRECTION_SETS", "plan_of"]
 
 #: The direction sets ``--directions`` names.
 DIRECTION_SETS = {"axes": AXES}
@@ -46,6 +46,8 @@ class Derivation:
     seconds: float
     contacts: tuple[Contact, ...] = ()
     conditions: Conditions = Conditions({})
+    assembly: Assembly | None = None
+    notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         """The numbers of the derivation, as ``derive --json`` prints them (the plan aside)."""
@@ -71,7 +73,8 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
     source : str, Path or Assembly
         The assembly in its assembled pose: a folder of meshes, one file a part (``.obj``, ``.stl``,
         ``.ply``; the id is the file's stem), a glTF/GLB scene (each named node with a mesh a part), a
-        MuJoCo MJCF model (each named body with geoms a part), or an assembly already read.
+        MuJoCo MJCF model (each named body with geoms a part), ``geometry:NAME`` (a shipped assembly:
+        ``gearbox``, ``pump``, ``puzzle``), or an assembly already read.
     directions : str, list or dict, optional
         The insertion directions: ``"axes"`` (the six axis directions), a text list such as
         ``"+z,-x,0 0.7 0.7"``, a list of axis names and ``[x, y, z]`` vectors, or names and vectors.
@@ -118,6 +121,7 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
     opportune.derive.geometry.GeometryError: no-such-folder: not a folder; give a folder of meshes, one file a part (.obj, .stl, .ply)
     """
     start = time.process_time()
+    source = _resolve(source)
     man = _manifest(source, manifest, {"names": names, "quantities": quantities, "base": base, "fixture": fixture,
                                        "requires": requires, "directions": directions})
     label, given = _direction_set(directions, man)
@@ -135,8 +139,24 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
     check_interchangeable(man, _ways(block, conditions))
     strategies = exact_strategies(block, conditions, unit_pairs(man, block.parts))
     written = merge_units(man, block.parts, strategies)
-    plan = _plan(block, written, man, name or title or "assembly", label, conditions)
-    return Derivation(plan, block, tuple(strategies), time.process_time() - start, tuple(contacts), conditions)
+    from opportune.derive.shapes import shapes
+
+    carried, notes = shapes(assembly)
+    plan = plan_of(block, written, name or title or "assembly", label, carried, manifest=man, conditions=conditions)
+    return Derivation(plan, block, tuple(strategies), time.process_time() - start, tuple(contacts), conditions,
+                      assembly, tuple(notes))
+
+
+def _resolve(source):
+    """A shipped assembly's folder for ``geometry:NAME``; any other source as it is."""
+    if isinstance(source, Assembly):
+        return source
+    from opportune.formats.shipped import resolve_assembly
+
+    try:
+        return resolve_assembly(source)
+    except KeyError as exc:
+        raise GeometryError(exc.args[0]) from None
 
 
 def _read(source, units: str, tolerance: float | None) -> tuple[Assembly, str]:
@@ -198,9 +218,48 @@ def _direction_set(directions, man: Manifest) -> tuple[str, dict | None]:
     return "the axes and the contacts' normals", None
 
 
-def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: str,
-          conditions: Conditions) -> Plan:
-    """The strategies as a plan, through the plan checker (what ``opportune check`` reads back)."""
+def plan_of(block: Blocking, written: list, name: str, directions: str, shapes: dict[str, dict] | None = None, *,
+            manifest: Manifest | None = None, conditions: Conditions | None = None) -> Plan:
+    """The strategies as a plan, through the plan checker (what ``opportune check`` reads back).
+
+    Parameters
+    ----------
+    block : Blocking
+        The blocking relation (its directions and tolerance are stated in the plan's description).
+    written : list
+        What :func:`~opportune.derive.plan.exact_strategies` found, or
+        :func:`~opportune.derive.manifest.merge_units`' ``(strategy, pairs)`` with identical parts merged.
+    name : str
+        The plan's name.
+    directions : str
+        The name of the direction set, as the description states it.
+    shapes : dict, optional
+        Part id → its ``geometry`` (:func:`opportune.derive.shapes.shapes`), carried by the plan.
+    manifest : Manifest, optional
+        Names, quantities, base, fixture and process constraints, as the plan states them.
+    conditions : Conditions, optional
+        The supports asked (``gravity``, ``connected``), as the description states them.
+
+    Returns
+    -------
+    Plan
+        The plan, checked.
+
+    Raises
+    ------
+    DeriveError
+        A plan the checker refuses (a part id it does not take).
+
+    Examples
+    --------
+    >>> from opportune.derive.plan import exact_strategies
+    >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
+    >>> dict(plan_of(b, exact_strategies(b), "two", "axes").strategies[0].requires)
+    {'b': ('a',)}
+    """
+    man = manifest if manifest is not None else manifest_from({})
+    conditions = conditions if conditions is not None else Conditions({})
+    written = [w if isinstance(w, tuple) else (w, w.pairs) for w in written]
     from opportune.formats.loader import plan_from_dict
 
     extra = "".join([f" {man.fixture} is in place from the start (the fixture)." if man.fixture else "",
@@ -216,7 +275,9 @@ def _plan(block: Blocking, written: list, man: Manifest, name: str, directions: 
     for pid in part_ids(man, block.parts):
         quantity = len(man.quantities.get(pid, (pid,)))
         entry = {"id": pid, **({"name": man.names[pid]} if pid in man.names else {}),
-                 **({"quantity": quantity} if quantity > 1 else {})}
+                 **({"quantity": quantity} if quantity > 1 else {}),
+                 **({"geometry": shapes[shape]} if shapes and (shape := man.quantities.get(pid, (pid,))[0]) in shapes
+                    else {})}
         doc["parts"].append(entry if len(entry) > 1 else pid)
     for k, (s, pairs) in enumerate(written, 1):
         requires: dict[str, list[str]] = {}

@@ -197,6 +197,56 @@ def alternatives(block: Blocking, conditions: Conditions | None = None) -> dict[
     return out
 
 
+def way_direction(block: Blocking, part: str, way: str) -> str:
+    """The direction of a way in (:func:`alternatives`' names: ``"+x"``, ``"+x on b"``); for ``"first"``
+    (nothing is in yet, every direction is free) the part's first direction.
+
+    Parameters
+    ----------
+    block : Blocking
+        The blocking relation.
+    part : str
+        The part.
+    way : str
+        Its way in, as a strategy names it.
+
+    Returns
+    -------
+    str
+        A direction of ``block``.
+
+    Examples
+    --------
+    >>> b = Blocking(("a",), {"+x": (1, 0, 0), "-z": (0, 0, -1)}, {"a": {"+x": frozenset(), "-z": frozenset()}}, 0, 0)
+    >>> way_direction(b, "a", "-z on f"), way_direction(b, "a", "first")
+    ('-z', '+x')
+    """
+    if way == "first":
+        return next(iter(block.blockers[part]))
+    return way.split(" on ")[0]
+
+
+def way_supports(way: str) -> frozenset[str]:
+    """The parts a way in rests on or touches (``"+x on b on c"``: b and c).
+
+    Parameters
+    ----------
+    way : str
+        A way in, as a strategy names it.
+
+    Returns
+    -------
+    frozenset of str
+        The supporting parts (empty for a bare direction or ``"first"``).
+
+    Examples
+    --------
+    >>> sorted(way_supports("+x on b on c"))
+    ['b', 'c']
+    """
+    return frozenset(way.split(" on ")[1:])
+
+
 def exact_strategies(block: Blocking, conditions: Conditions | None = None,
                      before: Sequence[tuple[str, str]] = ()) -> list[DerivedStrategy]:
     """The minimal strategies whose union admits exactly the feasible sequences.

@@ -18,6 +18,9 @@ SALBP = ("MERTENS", "BOWMAN8", "JAESCHKE", "JACKSON", "MANSOOR", "MITCHELL", "HE
          "TONGE70", "ARC111")
 PREFIX = "salbp:"
 EXAMPLE_PREFIX = "example:"
+GEOMETRY_PREFIX = "geometry:"
+#: The shipped assemblies (folders of meshes under ``examples/geometry``), for ``opportune derive``.
+GEOMETRY = ("gearbox", "pump", "puzzle")
 
 
 def shipped_folder(kind: str):
@@ -100,4 +103,31 @@ def resolve(path: str | Path) -> Path:
         return salbp_path(text[len(PREFIX):])
     if text.lower().startswith(EXAMPLE_PREFIX):
         return example_path(text[len(EXAMPLE_PREFIX):])
+    return Path(path)
+
+
+def geometry_path(name: str) -> Path:
+    """The folder of a shipped assembly's meshes (``gearbox``, ``pump``, ``puzzle``), for ``opportune derive``.
+
+    Raises ``KeyError`` naming the assemblies there are.
+
+    >>> sorted(p.name for p in geometry_path("puzzle").iterdir())
+    ['link_a.obj', 'link_b.obj', 'stand.obj']
+    """
+    if name not in GEOMETRY:
+        raise KeyError(f"no shipped assembly named '{name}': the package ships {', '.join(GEOMETRY)}")
+    return Path(str(shipped_folder("examples").joinpath("geometry").joinpath(name)))
+
+
+def resolve_assembly(path: str | Path) -> Path:
+    """``geometry:NAME`` as the shipped assembly's folder; any other path as it is.
+
+    Raises ``KeyError`` (naming what there is) for an unknown name.
+
+    >>> resolve_assembly("geometry:gearbox").name, resolve_assembly("my-product").name
+    ('gearbox', 'my-product')
+    """
+    text = str(path)
+    if text.lower().startswith(GEOMETRY_PREFIX):
+        return geometry_path(text[len(GEOMETRY_PREFIX):])
     return Path(path)

@@ -15,9 +15,10 @@ from functools import lru_cache
 
 from opportune.formats.documents import CheckResult, Document, file_stem
 from opportune.formats.problems import CONTROL_CHARS, Problem, closest
+from opportune.formats.shapes import COORDINATE, HINT as SHAPE_HINT, shape_problems, too_many_points
 from opportune.planning.plan import (MAX_CONSTRAINTS, MAX_DIMENSION, MAX_PARTS, MAX_QUANTITY, MAX_STRATEGIES, MAX_UNITS,
                             MAX_WEIGHT, MIN_DIMENSION, SHAPES, Part, Plan, Strategy)
-from opportune.limits import MAX_ID, MAX_TEXT  # noqa: F401 (their home: the one table of limits)
+from opportune.limits import MAX_BODY_POINTS, MAX_ID, MAX_SHAPE_BODIES, MAX_TEXT  # noqa: F401 (their home: the one table of limits)
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
@@ -81,6 +82,9 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
     if problems:
         return CheckResult(None, _capped(_sorted(problems)))
 
+    problems += [Problem(message, SHAPE_HINT, file=doc.file, line=doc.line(("parts", i, "geometry")),
+                         parts=(str(data["parts"][i]["id"]),), code="geometry")
+                 for i, message in shape_problems(data["parts"])]
     parts, part_problems = _read_parts(data, doc)
     problems += part_problems
     units = sum(p.quantity for p in parts)
@@ -137,6 +141,9 @@ def _size_problems(data: dict, doc: Document) -> list[Problem]:
             out.append(Problem(f"parts[{i}]: a part id of {len(pid):,} characters; at most {MAX_ID:,} are accepted",
                                "shorten the id, and put a longer text under the part's `name`", file=doc.file,
                                line=doc.line(("parts", i)), parts=(pid[:40] + "…",), code="limit"))
+    many = too_many_points(parts)
+    if many:
+        out.append(Problem(many, SHAPE_HINT, file=doc.file, line=doc.line(("parts",)), code="limit"))
     declared = 0
     for req in [data.get("requires")] + [s.get("requires") for s in (strategies if isinstance(strategies, list) else ())
                                          if isinstance(s, dict)]:
@@ -303,8 +310,21 @@ def _is_geometry(geometry) -> bool:
     if not (isinstance(geometry, dict) and len(geometry) == 1):
         return False
     (shape, dims), = geometry.items()
+    if shape == "convex":
+        return _is_convex(dims)
     return (shape in SHAPES and isinstance(dims, list) and len(dims) == SHAPES[shape]
             and all(_is_cost(d) and MIN_DIMENSION <= d <= MAX_DIMENSION for d in dims))
+
+
+def _is_convex(bodies) -> bool:
+    """True only if ``bodies`` certainly fits the schema's ``convex`` shape (the bounds of :mod:`opportune.formats.shapes`)."""
+    def is_point(p) -> bool:
+        return (isinstance(p, list) and len(p) == 3 and all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                                            and -COORDINATE <= c <= COORDINATE for c in p))
+
+    return (isinstance(bodies, list) and 1 <= len(bodies) <= MAX_SHAPE_BODIES
+            and all(isinstance(b, list) and 4 <= len(b) <= MAX_BODY_POINTS and all(is_point(p) for p in b)
+                    for b in bodies))
 
 
 def _is_requires(req) -> bool:
@@ -525,10 +545,17 @@ def _explain(error: jsonschema.ValidationError, doc: Document, where_kept: dict 
                             "write `part: [before1, before2]` with part ids (no spaces or commas), or "
                             "`{part: before1, weight: 5}` for a weighted constraint", "type")]
         return [problem(f"{where}: {_describe(error.instance)} is not allowed here", "see the plan schema", "type")]
+    if "convex" in path:
+        shown = _describe(error.instance)
+        what = {"minimum": f"{shown} is below -{COORDINATE:g} m", "maximum": f"{shown} is above {COORDINATE:g} m",
+                "minItems": f"{shown} has too few entries (a body has 4 corners or more, a corner 3 coordinates)",
+                "maxItems": f"{shown} has too many entries (at most {MAX_SHAPE_BODIES} bodies of {MAX_BODY_POINTS} "
+                            "corners, a corner 3 coordinates)"}.get(v, f"{shown} is not a convex shape")
+        return [problem(f"{where}: {what}", SHAPE_HINT, "geometry")]
     if "geometry" in path:
         shown = _describe(error.instance)
         what = {"minimum": f"{shown} is below {MIN_DIMENSION:g} m", "maximum": f"{shown} is above {MAX_DIMENSION:g} m",
-                "additionalProperties": f"{shown} is not a shape (box or cylinder)",
+                "additionalProperties": f"{shown} is not a shape (box, cylinder or convex)",
                 "maxProperties": f"{shown} gives more than one shape", "minProperties": "no shape is given",
                 "minItems": f"{shown} has too few dimensions", "maxItems": f"{shown} has too many dimensions",
                 }.get(v, f"{shown} is not a geometry")
@@ -616,6 +643,8 @@ def _geometry(geometry: dict | None) -> tuple | None:
     if geometry is None:
         return None
     (shape, dims), = geometry.items()
+    if shape == "convex":
+        return ("convex", tuple(tuple(tuple(float(c) for c in p) for p in body) for body in dims))
     return (str(shape), tuple(float(d) for d in dims))
 
 

@@ -53,8 +53,9 @@ class Part:
     ``quantity`` identical, interchangeable units (e.g. 4 screws) share every
     constraint on the part.  ``acquire`` and ``install`` are handling costs (or
     durations) used as tie-breaks and in timing.  ``geometry`` is the part's shape in the physical
-    bin, ``("box", (x, y, z))`` (edge lengths) or ``("cylinder", (radius, height))`` in metres, or
-    ``None`` for the bin's default shape.
+    bin, ``("box", (x, y, z))`` (edge lengths) or ``("cylinder", (radius, height))`` in metres, its real
+    shape ``("convex", bodies)`` (each body a tuple of corners ``(x, y, z)``, the corners of a convex
+    body: :mod:`opportune.formats.shapes`), or ``None`` for the bin's default shape.
     """
 
     id: str
@@ -228,6 +229,8 @@ class Plan:
 def geometry_dict(geometry: tuple) -> dict:
     """A part's geometry as written in a file: ``{"box": [x, y, z]}``."""
     shape, dims = geometry
+    if shape == "convex":   # bodies of corners
+        return {shape: [[[_number(c) for c in p] for p in body] for body in dims]}
     return {shape: [_number(d) for d in dims]}
 
 

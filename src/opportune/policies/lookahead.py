@@ -30,11 +30,44 @@ from opportune.policies.optimal import (
 )
 from opportune.policies.variants import Slack
 
-__all__ = ["Lookahead"]
+__all__ = ["Lookahead", "programme_bytes"]
 
 # The look-ahead's programmes are kept on their engine (OrderEngine.kept, freed with it), by settings:
 # see Lookahead._values.
 _KEPT = "lookahead programmes"
+
+
+def programme_bytes(engine) -> int:
+    """The bytes of the look-ahead programmes kept on ``engine`` (Python values and look caches; a
+    compiled table's bytes are granted by :meth:`~opportune.engine.schedule.OrderEngine.reserve_programme`
+    and counted in the engine's own :meth:`~opportune.engine.schedule.OrderEngine.nbytes`).  O(programmes).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The engine the programmes were built on.
+
+    Returns
+    -------
+    int
+        Estimated bytes (0 where no look-ahead has decided on it).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> programme_bytes(OrderEngine(make_plan(["a"], {})))
+    0
+    """
+    from opportune.engine.memory import nbytes
+
+    total = 0
+    for ev in list(engine.kept.get(_KEPT, {}).values()):
+        total += nbytes(getattr(ev, "_values", {}))
+        looks = getattr(ev, "_looks", None)
+        if looks is not None and hasattr(looks, "cache_info"):
+            total += 400 * looks.cache_info().currsize     # a look distribution: a tuple of a few tuples
+    return total
 
 
 class Lookahead(DecidesOnMasks):

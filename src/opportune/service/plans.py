@@ -299,15 +299,9 @@ class LoadedPlan:
     def measure(self) -> int:
         """Bytes held for this plan: its engine (memos, vectors, tails, per-state caches) and the
         look-ahead programmes on it.  Caller holds ``lock`` (the memos must not change meanwhile)."""
-        total = self.engine.nbytes()
-        from opportune.engine.memory import nbytes
-        from opportune.policies.lookahead import _EVALUATORS
+        from opportune.policies.lookahead import programme_bytes
 
-        for ev in list(_EVALUATORS.get(self.engine, {}).values()):
-            total += nbytes(getattr(ev, "_values", {}))
-            looks = getattr(ev, "_looks", None)
-            if looks is not None and hasattr(looks, "cache_info"):
-                total += 400 * looks.cache_info().currsize     # a look distribution: a tuple of a few tuples
+        total = self.engine.nbytes() + programme_bytes(self.engine)
         self.nbytes = total
         self.measured = time.monotonic()
         return total

@@ -1,7 +1,9 @@
 """A physical bin: the parts as rigid bodies heaped in a MuJoCo bin, seen by a camera through occlusion.
 
 Each unit of the plan is a free rigid body whose shape and size come from its part's ``geometry``
-(a box or a cylinder, in metres; :data:`DEFAULT_GEOMETRY` where the plan gives none).  A trial drops
+(a box or a cylinder, in metres; :data:`DEFAULT_GEOMETRY` where the plan gives none), or its real
+shape, ``convex`` bodies (as ``opportune derive`` writes them: each body a mesh geom, the convex hull
+of its corners, all of them one rigid body centred on the part's bounding box).  A trial drops
 them from seeded random poses into an open box and lets the heap settle; a camera above the bin's
 centre casts a grid of :data:`RAY_GRID` × :data:`RAY_GRID` rays over each part's top (its footprint
 seen from above):
@@ -93,8 +95,16 @@ def require_mujoco():
 
 
 def _volume(geometry: tuple) -> float:
+    """The part's volume (a convex shape's: its bodies' bounding boxes, at least the true volume)."""
     shape, dims = geometry
+    if shape == "convex":
+        return sum(math.prod(max(p[a] for p in b) - min(p[a] for p in b) for a in range(3)) for b in dims)
     return dims[0] * dims[1] * dims[2] if shape == "box" else math.pi * dims[0] ** 2 * dims[1]
+
+
+def _centre(bodies) -> tuple[float, float, float]:
+    """The centre of a convex shape's bounding box: the origin of its rigid body."""
+    return tuple((min(p[a] for b in bodies for p in b) + max(p[a] for b in bodies for p in b)) / 2 for a in range(3))
 
 
 def _radius(geometry: tuple) -> float:
@@ -102,7 +112,42 @@ def _radius(geometry: tuple) -> float:
     shape, dims = geometry
     if shape == "box":
         return 0.5 * math.sqrt(sum(d * d for d in dims))
+    if shape == "convex":
+        c = _centre(dims)
+        return max(math.dist(p, c) for b in dims for p in b)
     return math.sqrt(dims[0] ** 2 + (dims[1] / 2) ** 2)
+
+
+def _extent(geometry: tuple) -> list[float]:
+    """A part's three sides (a convex shape's bounding box; a cylinder's diameter, diameter, height)."""
+    shape, dims = geometry
+    if shape == "convex":
+        return [max(p[a] for b in dims for p in b) - min(p[a] for b in dims for p in b) for a in range(3)]
+    return list(dims) if shape == "box" else [2 * dims[0], 2 * dims[0], dims[1]]
+
+
+def _shape_problem(part: str, geometry: tuple) -> str | None:
+    """What is wrong with a part's geometry for the bin, or None (the plan's own bounds, for a geometry
+    given in Python rather than read from a plan)."""
+    shape, dims = geometry
+    if shape == "convex":
+        from opportune.formats.shapes import COORDINATE, THICKNESS, thickness
+        from opportune.limits import MAX_BODY_POINTS, MAX_SHAPE_BODIES
+
+        ok = (1 <= len(dims) <= MAX_SHAPE_BODIES and all(4 <= len(b) <= MAX_BODY_POINTS for b in dims)
+              and all(len(p) == 3 and all(math.isfinite(c) and abs(c) <= COORDINATE for c in p) for b in dims for p in b))
+        if not ok:
+            return (f"part '{part}': a convex shape is 1 to {MAX_SHAPE_BODIES} bodies of 4 to {MAX_BODY_POINTS} corners "
+                    f"(x, y, z), each coordinate within {COORDINATE:g} m")
+        side = max(_extent(geometry))
+        if not MIN_DIMENSION <= side <= MAX_DIMENSION or any(thickness(b) < THICKNESS for b in dims):
+            return (f"part '{part}': its shape must be {MIN_DIMENSION:g} to {MAX_DIMENSION:g} m along its longest side, "
+                    f"each body at least {THICKNESS:g} m thick")
+        return None
+    if shape not in SHAPES or len(dims) != SHAPES[shape] or not all(MIN_DIMENSION <= d <= MAX_DIMENSION for d in dims):
+        return (f"part '{part}': geometry {shape} {list(dims)} is not a box of 3 or a cylinder of 2 "
+                f"dimensions from {MIN_DIMENSION:g} to {MAX_DIMENSION:g} m")
+    return None
 
 
 def check_bin(units: Sequence[str], geometry: Mapping[str, tuple], bin_size: Sequence[float],
@@ -124,14 +169,15 @@ def check_bin(units: Sequence[str], geometry: Mapping[str, tuple], bin_size: Seq
     volume = 0.0
     for part in dict.fromkeys(units):
         shape, dims = geometry.get(part, DEFAULT_GEOMETRY)
-        if shape not in SHAPES or len(dims) != SHAPES[shape] or not all(MIN_DIMENSION <= d <= MAX_DIMENSION
-                                                                        for d in dims):
-            raise PhysicsError(f"part '{part}': geometry {shape} {list(dims)} is not a box of 3 or a cylinder of 2 "
-                               f"dimensions from {MIN_DIMENSION:g} to {MAX_DIMENSION:g} m")
+        problem = _shape_problem(part, (shape, dims))
+        if problem:
+            raise PhysicsError(problem)
         # lying on its largest face (a cylinder on its side), its footprint must fit the bin's floor
-        footprint = sorted(dims)[1:] if shape == "box" else sorted((2 * dims[0], dims[1]))
+        footprint = sorted(dims)[1:] if shape == "box" else sorted((2 * dims[0], dims[1])) if shape == "cylinder" \
+            else sorted(_extent((shape, dims)))[1:]
         if footprint[1] > max(length, width) or footprint[0] > min(length, width):
-            raise PhysicsError(f"part '{part}' ({shape} {list(dims)} m) cannot lie flat in a bin {length:g} × {width:g} m: "
+            sides = list(dims) if shape != "convex" else [round(e, 4) for e in _extent((shape, dims))]
+            raise PhysicsError(f"part '{part}' ({shape} {sides} m) cannot lie flat in a bin {length:g} × {width:g} m: "
                                "make the bin larger (simulation.physics.bin) or check the part's geometry")
     for part in units:
         volume += _volume(geometry.get(part, DEFAULT_GEOMETRY))
@@ -149,13 +195,37 @@ def _model_xml(units: Sequence[str], geometry: Mapping[str, tuple], bin_size: Se
            '<geom name="floor" type="plane" size="0 0 1"/>']
     for i, (x, y, sx, sy) in enumerate(walls):
         xml.append(f'<geom name="wall{i}" type="box" pos="{x:g} {y:g} {height / 2:g}" size="{sx:g} {sy:g} {height / 2:g}"/>')
+    meshes: list[str] = []
+    kinds = {part: k for k, part in enumerate(dict.fromkeys(units))}
+    for part, k in kinds.items():
+        shape, dims = geometry.get(part, DEFAULT_GEOMETRY)
+        if shape == "convex":   # the corners about the part's centre: the rigid body's origin
+            c = _centre(dims)
+            meshes += [f'<mesh name="m{k}_{b}" vertex="' + " ".join(f"{p[a] - c[a]:.9g}" for p in body for a in range(3))
+                       + '"/>' for b, body in enumerate(dims)]
     for i, part in enumerate(units):
         shape, dims = geometry.get(part, DEFAULT_GEOMETRY)
-        size = " ".join(f"{d / 2:g}" for d in dims) if shape == "box" else f"{dims[0]:g} {dims[1] / 2:g}"
-        xml.append(f'<body name="u{i}" pos="{_PARKED + i:g} 0 1"><freejoint/>'
-                   f'<geom name="g{i}" type="{shape}" size="{size}" density="{_DENSITY}"/></body>')
-    xml.append("</worldbody></mujoco>")
+        xml.append(f'<body name="u{i}" pos="{_PARKED + i:g} 0 1"><freejoint/>')
+        if shape == "convex":
+            xml += [f'<geom name="g{i}{"" if b == 0 else f"_{b}"}" type="mesh" mesh="m{kinds[part]}_{b}" '
+                    f'density="{_DENSITY}"/>' for b in range(len(dims))]
+        else:
+            size = " ".join(f"{d / 2:g}" for d in dims) if shape == "box" else f"{dims[0]:g} {dims[1] / 2:g}"
+            xml.append(f'<geom name="g{i}" type="{shape}" size="{size}" density="{_DENSITY}"/>')
+        xml.append("</body>")
+    xml.append("</worldbody>")
+    if meshes:
+        xml.append("<asset>" + "".join(meshes) + "</asset>")
+    xml.append("</mujoco>")
     return "".join(xml)
+
+
+def _plain_geometry(geometry) -> tuple:
+    """A geometry as tuples of floats (hashable: the heaps' cache keys hold it)."""
+    shape, dims = geometry
+    if shape == "convex":
+        return (shape, tuple(tuple(tuple(float(c) for c in p) for p in b) for b in dims))
+    return (shape, tuple(float(d) for d in dims))
 
 
 _HEAPS: OrderedDict = OrderedDict()
@@ -177,7 +247,7 @@ class PhysicsBin(World):
                  bin_size: Sequence[float] = DEFAULT_BIN, settle_steps: int = DEFAULT_SETTLE_STEPS,
                  visible_fraction: float = VISIBLE_FRACTION):
         super().__init__(visible)
-        self.geometry = {k: (v[0], tuple(float(d) for d in v[1])) for k, v in dict(geometry or {}).items()}
+        self.geometry = {k: _plain_geometry(v) for k, v in dict(geometry or {}).items()}
         self.bin_size = tuple(float(s) for s in bin_size)
         self.settle_steps = settle_steps
         self.visible_fraction = float(visible_fraction)
@@ -192,14 +262,21 @@ class PhysicsBin(World):
     def _build(self, units: Sequence[str]) -> None:
         mujoco = require_mujoco()
         check_bin(units, self.geometry, self.bin_size, self.settle_steps, self.visible_fraction)
-        self.model = mujoco.MjModel.from_xml_string(_model_xml(units, self.geometry, self.bin_size))
+        try:
+            self.model = mujoco.MjModel.from_xml_string(_model_xml(units, self.geometry, self.bin_size))
+        except ValueError as exc:   # MuJoCo's compiler refuses a shape (a hull it cannot make): say so
+            raise PhysicsError(f"MuJoCo cannot build the bin from these shapes ({str(exc)[:300]}): check the parts' "
+                               "geometry") from None
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._geom = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"g{i}") for i in range(len(units))]
         self._body = [int(m.geom_bodyid[g]) for g in self._geom]
+        # every geom of each unit (a convex shape has one a body), and whether the unit is a primitive
+        self._geoms = [[g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == b] for b in self._body]
+        self._mesh = [int(m.geom_type[g]) == mujoco.mjtGeom.mjGEOM_MESH for g in self._geom]
         self._qadr = [int(m.jnt_qposadr[m.body_jntadr[b]]) for b in self._body]
         self._vadr = [int(m.jnt_dofadr[m.body_jntadr[b]]) for b in self._body]
-        self._unit_of_geom = {g: i for i, g in enumerate(self._geom)}
+        self._unit_of_geom = {g: i for i, gs in enumerate(self._geoms) for g in gs}
         self._built_for = tuple(units)
 
     def reset(self, units: Sequence[str], rng: random.Random) -> None:
@@ -255,9 +332,9 @@ class PhysicsBin(World):
 
     def _enable(self, i: int, on: bool) -> None:
         m = self.model
-        g, b = self._geom[i], self._body[i]
-        m.geom_contype[g] = m.geom_conaffinity[g] = 1 if on else 0
-        m.body_gravcomp[b] = 0.0 if on else 1.0
+        for g in self._geoms[i]:
+            m.geom_contype[g] = m.geom_conaffinity[g] = 1 if on else 0
+        m.body_gravcomp[self._body[i]] = 0.0 if on else 1.0
 
     def _settle(self) -> int:
         """Step until no part in the bin moves faster than :data:`SETTLED_SPEED`, at most ``settle_steps``
@@ -292,7 +369,9 @@ class PhysicsBin(World):
         pos = self.data.geom_xpos[g]
         mat = self.data.geom_xmat[g].reshape(3, 3)
         size = self.model.geom_size[g]
-        if self.model.geom_type[g] == require_mujoco().mjtGeom.mjGEOM_BOX:
+        if self._mesh[unit]:
+            pos, extent = self._box_of(unit)
+        elif self.model.geom_type[g] == require_mujoco().mjtGeom.mjGEOM_BOX:
             extent = np.abs(mat[:2, :]) @ size
         else:   # a cylinder: its axis is the frame's z
             axis = mat[:2, 2]
@@ -302,6 +381,19 @@ class PhysicsBin(World):
         targets = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, pos[2])], axis=1)
         return targets - np.array(self.camera)
 
+    def _box_of(self, unit: int):
+        """A convex unit's bounding box in the world: its centre and half sides (each geom's box, turned)."""
+        import numpy as np
+
+        d, m = self.data, self.model
+        lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+        for g in self._geoms[unit]:
+            mat = d.geom_xmat[g].reshape(3, 3)
+            centre = d.geom_xpos[g] + mat @ m.geom_aabb[g, :3]
+            half = np.abs(mat) @ m.geom_aabb[g, 3:]
+            lo, hi = np.minimum(lo, centre - half), np.maximum(hi, centre + half)
+        return (lo + hi) / 2, (hi - lo) / 2
+
     def _meets(self, unit: int, vec) -> list[bool]:
         """For each ray, whether it meets ``unit``'s part alone (nothing else in the way)."""
         import numpy as np
@@ -310,6 +402,8 @@ class PhysicsBin(World):
         g = self._geom[unit]
         d, m = self.data, self.model
         pnt = np.array(self.camera)
+        if self._mesh[unit]:
+            return [any(mujoco.mj_rayMesh(m, d, h, pnt, v.copy()) >= 0 for h in self._geoms[unit]) for v in vec]
         return [mujoco.mju_rayGeom(d.geom_xpos[g], d.geom_xmat[g], m.geom_size[g], pnt, v.copy(),
                                    int(m.geom_type[g])) >= 0 for v in vec]
 
@@ -331,7 +425,7 @@ class PhysicsBin(World):
         out = {}
         for k, i in enumerate(self.alive):
             meets = self._meets(i, vecs[k])
-            first = geomid[k * RAY_GRID ** 2:(k + 1) * RAY_GRID ** 2] == self._geom[i]
+            first = np.isin(geomid[k * RAY_GRID ** 2:(k + 1) * RAY_GRID ** 2], self._geoms[i])
             seen = sum(1 for a, b in zip(meets, first) if a and b)
             out[i] = seen / max(1, sum(meets))
         return out
@@ -346,10 +440,16 @@ class PhysicsBin(World):
             a, b = unit_of.get(int(c.geom1)), unit_of.get(int(c.geom2))
             if a is None or b is None or abs(float(c.frame[2])) < LYING_NORMAL_Z:
                 continue
-            za, zb = d.geom_xpos[self._geom[a]][2], d.geom_xpos[self._geom[b]][2]
+            za, zb = self._height(a), self._height(b)
             if abs(za - zb) > 1e-3:
                 out.add(a if za < zb else b)
         return out
+
+    def _height(self, unit: int) -> float:
+        """The height of a unit's centre (a primitive's geom, a convex shape's body origin)."""
+        if self._mesh[unit]:
+            return float(self.data.xpos[self._body[unit]][2])
+        return float(self.data.geom_xpos[self._geom[unit]][2])
 
     def look(self) -> tuple[str, ...]:
         """The ``visible`` most exposed parts that are visible and pickable (fewer if fewer are)."""

@@ -1,0 +1,378 @@
+"""Why a derived plan is as it is: each forced order with the part in the way, and what would free the most.
+
+:func:`explain` reads a :class:`~opportune.derive.Derivation` and says
+
+* for each strategy's constraints (its transitive reduction: every one a direct blocking), which part
+  goes in along which direction, which later part would be in its way there, and what blocks the
+  part's other directions;
+* each part's **insertion directions**: the directions along which it goes in in at least one feasible
+  sequence (a direction ``d`` of ``p`` is one iff the blocking relation with ``p`` held to ``d`` still
+  lets every part out, last first: :func:`~opportune.derive.plan.locked`); the parts with one;
+* for design for assembly: the number of feasible sequences (the engine's count of the plan, exact or
+  a marked estimate), their share of all orders, the orders forced in every strategy, and which single
+  change frees the most: a **part out of everyone's way** (the blocking relation with that part in no
+  blocker set, its own constraints kept) or a **direction added** (the blocking along one more
+  direction, found in the geometry), each measured by deriving the plan again and counting it.
+
+Every text is plain (part ids with control characters escaped, as :func:`printable` writes them).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from opportune.derive.blocking import Blocking, find_blocking
+from opportune.derive.plan import DeriveError, exact_strategies, way_direction, way_supports
+from opportune.formats.problems import CONTROL_CHARS
+
+#: Directions tried as "one more direction" when the assembly's geometry is given: the twelve
+#: diagonals between two axes (a tool tilted 45° about one axis), ``+x+y`` = (1, 1, 0)/√2.
+DIAGONALS = {f"{'+' if sa > 0 else '-'}{a}{'+' if sb > 0 else '-'}{b}":
+             tuple(sa / math.sqrt(2) if c == a else sb / math.sqrt(2) if c == b else 0.0 for c in "xyz")
+             for a, b in ("xy", "xz", "yz") for sa in (1, -1) for sb in (1, -1)}
+#: Seconds of counting for the whole explanation (shared between the plan's count and the recounts);
+#: a count that does not finish in its share is an estimate, marked so.
+TIME_LIMIT = 10.0
+#: The relative error an estimated count stops at (a 95% interval): enough to rank the changes.
+REL_ERROR = 0.05
+#: Part ids a line of the report names at most (the ``--json`` form names all).
+SHOWN = 6
+_CONTROL = re.compile(f"[{CONTROL_CHARS}]")
+
+
+def printable(text: str) -> str:
+    """``text`` with every control character written as an escape (``\\x1b``), lone surrogates too.
+
+    >>> printable("gear\\x1b[2J")
+    'gear\\\\x1b[2J'
+    """
+    text = _CONTROL.sub(lambda m: ascii(m.group())[1:-1], text)
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+@dataclass
+class Explanation:
+    """What :func:`explain` found; :meth:`to_dict` is the ``--json`` form, :meth:`text` the report."""
+
+    name: str
+    parts: tuple[str, ...]
+    orders: list[dict]
+    usable: dict[str, list[str]]
+    count: dict
+    forced: list[tuple[str, str]]
+    frees: list[dict] = field(default_factory=list)
+    unfinished: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """The explanation as plain data (``derive --explain --json``)."""
+        return {"name": self.name, "parts": list(self.parts), "orders": self.orders,
+                "insertion_directions": self.usable,
+                "single_direction": {p: d[0] for p, d in self.usable.items() if len(d) == 1},
+                "reasons": reasons(self),
+                "count": self.count, "forced_in_every_strategy": [list(p) for p in self.forced],
+                "frees": self.frees, "unfinished": self.unfinished}
+
+    def text(self) -> str:
+        """The explanation as a report, one statement a line (control characters escaped)."""
+        return printable("\n".join(_report(self)) + "\n")
+
+
+def explain(derivation, assembly=None, *, directions: dict | None = None, time_limit: float = TIME_LIMIT,
+            seed: int = 0) -> Explanation:
+    """Explain a derived plan: the forced orders, the insertion directions, and what would free the most.
+
+    Parameters
+    ----------
+    derivation : Derivation
+        What :func:`opportune.derive.derive` returned.
+    assembly : Assembly, optional
+        The parts' geometry: with it, adding each direction of ``directions`` is measured too.
+    directions : dict, optional
+        Name → vector of the directions to try adding (default :data:`DIAGONALS`; those already used are
+        left out).
+    time_limit : float
+        Seconds for the whole explanation but its forced orders (default :data:`TIME_LIMIT`; kept within
+        a second or so past it, the longest single step): the plan's own count gets a quarter, each
+        recount an equal share of what is left when it starts, and a count not finished is an estimate;
+        the insertion directions and the changes to try are worked through until the time is up, the
+        most blocking parts first, and what was not reached is said (``unfinished``).
+    seed : int
+        Seed of the estimates, if any.
+
+    Returns
+    -------
+    Explanation
+        Also as ``.to_dict()`` and ``.text()``.
+
+    Examples
+    --------
+    >>> from opportune.derive import derive
+    >>> from opportune.datasets import geometry_path
+    >>> e = explain(derive(geometry_path("gearbox")))
+    >>> e.count["value"], e.usable["shaft_a"]
+    (159160320, ['+x', '-x'])
+    """
+    end = time.perf_counter() + time_limit
+    block, strategies = derivation.blocking, derivation.strategies
+    orders = [_order(block, s) for s in strategies]
+    closures = [_closure(s.pairs) for s in strategies]
+    forced = sorted(set.intersection(*closures)) if closures else []
+    base = _count(derivation.plan, max(0.001, time_limit / 4), seed)
+    unfinished = []
+    usable: dict[str, list[str]] = {}
+    for p in block.parts:
+        if time.perf_counter() > end:
+            unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
+            break
+        usable[p] = [d for d in block.directions if _usable(block, p, d)]
+    frees: list[dict] = []
+    later = len(_new_directions(block, directions)) if assembly is not None else 0   # their share kept for them
+    # the added directions' blocking is geometry, not interruptible: found only if it fits the time left, as
+    # the derivation's own blocking took per direction
+    cost = derivation.seconds * later / max(1, len(block.directions))
+    for trials in (_part_trials(block), lambda: _direction_trials(block, assembly, directions)):
+        if not isinstance(trials, list) and time.perf_counter() + cost > end:
+            unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
+            break
+        trials = trials if isinstance(trials, list) else trials()
+        for k, (kind, name, changed) in enumerate(trials):
+            left = end - time.perf_counter()
+            if left <= 0:
+                unfinished.append(f"{len(trials) - k} changes to try")
+                break
+            pending = len(trials) - k + (later if kind == "part" else 0)
+            count = _recount(changed, derivation.plan.name, left / pending, seed)
+            frees.append({"kind": kind, "name": name, **count})
+    frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
+    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
+
+
+def _order(block: Blocking, strategy) -> dict:
+    """One strategy's constraints, each with its reason: the earlier part's direction, the later part in its way
+    there, and the earlier part's other directions with their blockers."""
+    pairs = []
+    for before, after in strategy.pairs:
+        if before in way_supports(strategy.directions[after]):      # after rests on (or touches) before
+            pairs.append({"before": before, "after": after, "direction": None, "support": True,
+                          "other_directions": {}})
+            continue
+        d = way_direction(block, before, strategy.directions[before])
+        others = {k: sorted(q) for k, q in block.blockers[before].items() if k != d}
+        pairs.append({"before": before, "after": after, "direction": d, "other_directions": others})
+    return {"directions": {p: way_direction(block, p, w) for p, w in strategy.directions.items()},
+            "constraints": pairs}
+
+
+def _usable(block: Blocking, part: str, direction: str) -> bool:
+    """Whether ``part`` goes in along ``direction`` in some feasible sequence: the relation with ``part`` held
+    to that direction lets every part out, last first (:func:`~opportune.derive.plan.locked`'s peeling, with a
+    count of the blockers left per part and direction: O(parts × directions + the blocker sets' sizes))."""
+    waiting: dict[str, list[tuple[str, str]]] = {}   # blocker -> the (part, direction) it blocks
+    left: dict[tuple[str, str], int] = {}
+    for p, dirs in block.blockers.items():
+        for d, q in dirs.items():
+            if p == part and d != direction:
+                continue
+            left[p, d] = len(q)
+            for b in q:
+                waiting.setdefault(b, []).append((p, d))
+    free = [p for p, d in left if left[p, d] == 0]
+    out = set()
+    while free:
+        p = free.pop()
+        if p in out:
+            continue
+        out.add(p)
+        for key in waiting.get(p, ()):
+            left[key] -= 1
+            if left[key] == 0 and key[0] not in out:
+                free.append(key[0])
+    return len(out) == len(block.parts)
+
+
+def _closure(pairs) -> set[tuple[str, str]]:
+    """Every ``(before, after)`` an order's pairs imply."""
+    after: dict[str, set[str]] = {}
+    for a, b in pairs:
+        after.setdefault(a, set()).add(b)
+    out = set()
+    for a in after:
+        stack, seen = list(after[a]), set()
+        while stack:
+            b = stack.pop()
+            if b not in seen:
+                seen.add(b)
+                stack.extend(after.get(b, ()))
+        out |= {(a, b) for b in seen}
+    return out
+
+
+def _count(plan, seconds: float, seed: int) -> dict:
+    """The plan's feasible sequences (the engine's count), with their share of all orders of its parts."""
+    from opportune.engine import Schedule
+
+    r = Schedule(plan).count_result(time_limit=seconds, seed=seed, rel_error=REL_ERROR)
+    n = len(plan.parts)
+    log_all = math.lgamma(n + 1) / math.log(10)
+    low, high = r.interval_log10 or (r.log10, r.log10)
+    return {"value": r.value if r.exact else float(r.value), "exact": r.exact, "log10": r.log10,
+            "log10_low": low, "log10_high": high, "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
+
+
+def _part_trials(block: Blocking) -> list[tuple[str, str, Blocking]]:
+    """The changed blocking relations to recount: each part out of everyone's way, those that block the most
+    part-directions first."""
+    out = []
+    blocks = {q: 0 for q in block.parts}
+    for dirs in block.blockers.values():
+        for s in dirs.values():
+            for q in s:
+                blocks[q] += 1
+    for q in sorted(block.parts, key=lambda q: -blocks[q]):
+        if not blocks[q]:
+            continue
+        blockers = {p: {d: s - {q} for d, s in dirs.items()} for p, dirs in block.blockers.items()}
+        out.append(("part", q, replace(block, blockers=blockers)))
+    return out
+
+
+def _new_directions(block: Blocking, directions: dict | None) -> dict:
+    """The directions to try adding (default :data:`DIAGONALS`) that the relation does not have yet."""
+    used = {tuple(np.round(np.asarray(v, float) / np.linalg.norm(v), 9)) for v in block.directions.values()}
+    return {name: vec for name, vec in (DIAGONALS if directions is None else directions).items()
+            if name not in block.directions
+            and tuple(np.round(np.asarray(vec, float) / np.linalg.norm(vec), 9)) not in used}
+
+
+def _direction_trials(block: Blocking, assembly, directions: dict | None) -> list[tuple[str, str, Blocking]]:
+    """The changed blocking relations to recount: each direction added, its blocking found in the geometry."""
+    out = []
+    if assembly is not None:
+        tried = _new_directions(block, directions)
+        more = find_blocking(assembly, tried) if tried else None   # one pass for all of them
+        for name, vec in tried.items():
+            blockers = {p: {**dirs, name: more.blockers[p][name]} for p, dirs in block.blockers.items()}
+            out.append(("direction", name, replace(block, blockers=blockers,
+                                                     directions={**block.directions, name: vec})))
+    return out
+
+
+def _recount(block: Blocking, name: str, seconds: float, seed: int) -> dict:
+    """Derive the plan of a changed blocking relation again and count it (or say why not)."""
+    from opportune.derive import plan_of
+
+    try:
+        plan = plan_of(block, exact_strategies(block), name, "changed")
+    except DeriveError as exc:
+        return {"count": None, "why": str(exc)}
+    return {"count": _count(plan, seconds, seed)}
+
+
+def _number(count: dict) -> str:
+    """A count as the report writes it: exact digits up to 12, else powers of ten; estimates marked."""
+    if count["exact"] and count["log10"] < 12:
+        return f"{int(count['value']):,}"
+    return ("" if count["exact"] else "about ") + f"10^{count['log10']:.2f}"
+
+
+def _names(parts, most: int = SHOWN) -> str:
+    """Part ids joined, at most ``most`` of them (then how many more)."""
+    parts = list(parts)
+    more = f", … ({len(parts) - most} more)" if len(parts) > most else ""
+    return ", ".join(parts[:most]) + more
+
+
+def _directions(dirs: dict[str, list[str]]) -> str:
+    """``{"+x": [a], "-x": [a], "+y": []}`` as ``±x by a; +y free``: equal blockers grouped, ± joined."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for d, q in dirs.items():
+        groups.setdefault(tuple(q), []).append(d)
+    out = []
+    for q, ds in groups.items():
+        names = []
+        for d in ds:
+            twin = ("-" if d[0] == "+" else "+") + d[1:]
+            if d[0] in "+-" and twin in ds:
+                if d[0] == "+":
+                    names.append("±" + d[1:])
+            else:
+                names.append(d)
+        out.append(", ".join(names) + (" by " + _names(q) if q else " free"))
+    return "; ".join(out)
+
+
+def reasons(e: Explanation) -> list[dict]:
+    """The constraints of every strategy grouped by their reason: a part going in along a direction before the
+    parts that would be in its way there, with the strategies that make that choice.
+
+    Parameters
+    ----------
+    e : Explanation
+        An explanation.
+
+    Returns
+    -------
+    list of dict
+        ``{"part", "direction", "before", "other_directions", "strategies"}`` each (strategies from 1).
+
+    Examples
+    --------
+    >>> from opportune.derive import derive
+    >>> r = reasons(explain(derive("geometry:gearbox")))
+    >>> next(x["before"] for x in r if x["part"] == "cover" and x["direction"] == "+x")
+    ['screw_1', 'screw_2', 'screw_3', 'screw_4']
+    """
+    grouped: dict[tuple[str, str], dict] = {}
+    for k, order in enumerate(e.orders, 1):
+        for c in order["constraints"]:
+            r = grouped.setdefault((c["before"], c["direction"]), {
+                "part": c["before"], "direction": c["direction"], "before": [],
+                "other_directions": c["other_directions"], "strategies": []})
+            if c["after"] not in r["before"]:
+                r["before"].append(c["after"])
+            if k not in r["strategies"]:
+                r["strategies"].append(k)
+    return list(grouped.values())
+
+
+def _report(e: Explanation) -> list[str]:
+    """The lines of :meth:`Explanation.text`."""
+    n = len(e.orders)
+    lines = [f"{e.name}: {len(e.parts)} parts, {n} strateg{'y' if n == 1 else 'ies'}", "forced orders:"]
+    for r in reasons(e):
+        where = "" if len(r["strategies"]) == n else " (strateg" + ("y s" if len(r["strategies"]) == 1 else "ies s") \
+            + ", s".join(map(str, r["strategies"])) + ")"
+        if r["direction"] is None:      # a support: the later parts rest on (or touch) the earlier one
+            lines.append(f"  {_names(r['before'])} after {r['part']}{where}: resting on or touching {r['part']}")
+            continue
+        lines.append(f"  {_names(r['before'])} after {r['part']}{where}: along {r['direction']} "
+                     f"{_names(r['before'])} would be in {r['part']}'s way; "
+                     f"{_directions(r['other_directions']) or 'no other direction'}")
+    single = {p: d[0] for p, d in e.usable.items() if len(d) == 1}
+    lines.append("insertion directions (in some feasible sequence): "
+                 + "; ".join(f"{p} {' '.join(d)}" for p, d in e.usable.items()))
+    lines.append(f"one insertion direction only ({len(single)} of {len(e.parts)} parts): "
+                 + (", ".join(f"{p} {d}" for p, d in single.items()) or "none"))
+    c = e.count
+    lines.append(f"feasible sequences: {_number(c)} of 10^{c['log10_all_orders']:.2f} orders of the parts "
+                 f"(1 in 10^{max(0.0, -c['share_log10']):.2f}); {len(e.forced)} orders forced in every strategy")
+    if e.unfinished:
+        lines.append("not reached within the time limit: " + "; ".join(e.unfinished))
+    best = next((f for f in e.frees if f["count"]), None)
+    if best is None:
+        lines.append("frees the most: nothing tried within the time limit" if e.unfinished else
+                     "frees the most: nothing to try (no part is in another's way)")
+    else:
+        what = (f"{best['name']} out of everyone's way" if best["kind"] == "part" else
+                f"the direction {best['name']} added")
+        gain = best["count"]["log10"] - c["log10"]
+        lines.append(f"frees the most: {what}: {_number(best['count'])} sequences (× 10^{gain:.2f})")
+        for f in e.frees[1:4]:
+            if f["count"]:
+                lines.append(f"  next: {f['kind']} {f['name']}: {_number(f['count'])}")
+    return lines
