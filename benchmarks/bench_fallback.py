@@ -20,7 +20,9 @@ import sys
 import time
 from pathlib import Path
 
+from opportune import load_plan
 from opportune.engine import OrderEngine
+from opportune.policies.lookahead import Lookahead
 from opportune.policies.states import estimate_states
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -42,6 +44,34 @@ def draw_plans(n: int, count: int, seed: int, max_states: int, settings=SETTINGS
     return plans
 
 
+def decisions(name: str, settings, seed: int, budget: float | None) -> None:
+    """CPU time of each decision of the default policy along one seeded run of a plan too large for its
+    optimum (a fresh state at most moves), and the window's counted work."""
+    plan = load_plan(name)
+    for visible, capacity in settings:
+        engine, rng = OrderEngine(plan), random.Random(seed)
+        policy = Lookahead(visible=visible, capacity=capacity, budget=budget)
+        mask, consistent, buffer, times = 0, engine.all_strategies, (), []
+        while mask != engine.full:
+            in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
+            look = tuple(rng.sample(in_bin, min(visible, len(in_bin))))
+            start = time.process_time()
+            action = policy.choose_at(engine, mask, consistent, buffer, capacity - len(buffer), look)
+            times.append(time.process_time() - start)
+            if action.kind == "buffer":
+                buffer += (action.part,)
+            elif action.kind == "install":
+                unit = engine.next_unit(mask, plan.index(action.part))
+                mask, consistent = mask | (1 << unit), engine.consistent_after(mask, consistent, unit)
+                if action.source == "buffer":
+                    buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
+        later = sorted(times[1:])       # the first decision also lists the optimum's states (a second at most)
+        work = policy.window.work
+        print(f"| {plan.name} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | {len(times)} | "
+              f"{1000 * times[0]:.0f} | {1000 * statistics.mean(later):.1f} | {1000 * later[int(0.99 * len(later))]:.1f} | "
+              f"{1000 * later[-1]:.1f} | {work['windows']:,} | {work['most_states']:,} | {work['by_base']} |", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="16,20,25,30", help="parts per plan, comma-separated")
@@ -51,9 +81,18 @@ def main(argv=None) -> int:
     ap.add_argument("--task-seconds", type=float, default=300.0, help="one plan in one setting, at most")
     ap.add_argument("--settings", default="1x1,2x2,3x2", help="VISIBLExLOCATIONS, comma-separated")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--decisions", help="time the default's decisions along a run of these plans instead "
+                    "(comma-separated, e.g. salbp:KILBRID,salbp:ARC111)")
+    ap.add_argument("--budget", type=float, help="with --decisions: the policy's decision budget (s; default none)")
     args = ap.parse_args(argv)
     names = [p for p in args.policies.split(",") if p]
     settings = [tuple(map(int, s.split("x"))) for s in args.settings.split(",")]
+    if args.decisions:
+        print("| plan | setting | decisions | first, ms | mean, ms | 99th percentile, ms | largest, ms | windows | "
+              "most states | by slack |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+        for name in args.decisions.split(","):
+            decisions(name, settings, args.seed, args.budget)
+        return 0
     rows = []
     for n in map(int, args.sizes.split(",")):
         for plan in draw_plans(n, args.plans, args.seed, args.max_optimum_states, settings):

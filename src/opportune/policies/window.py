@@ -1,0 +1,361 @@
+"""The frontier window: near the optimum where the optimum's programme does not fit.
+
+At each state the *window* is the buffered parts and the next remaining parts in a topological order
+(fewest remaining ancestors first, then declaration order), closed under their remaining ancestors in
+every strategy still open, up to :data:`WINDOW_PARTS` parts and 64 units.  The plan's other remaining
+units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
+plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
+buffered (a free location, the others' mean move), and none is installed before the window is complete,
+the terminal state.  What the others cost after it does not depend on what was done in the window, so
+the terminal value is 0.  The window's exact optimum (the compiled ``WindowCore``,
+``src/native/window.cpp``: the optimum's recursion, looks as order statistics, the others one more
+group) is solved once per state, within :data:`WINDOW_STATES` states (counted, so the decision is the
+same on every machine), and the decision is its best action on the look: a visible part outside the
+window seen as an other (buffered, the one first in the topological order).  Where the window does not
+fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time, the base rule decides.
+
+Measured against the optimum on 16-30-part plans and per decision on the SALBP plans:
+``benchmarks/bench_fallback.py`` (docs/decisions.md).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+from opportune.engine import compiled_core
+from opportune.engine.deadline import Deadline, as_deadline
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
+from opportune.planning.costs import TimeModel
+
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available"]
+
+_native = compiled_core()
+
+#: The window's sizes (parts, buffered ones and ancestors included) tried at a state, in turn, until one
+#: fits in :data:`WINDOW_STATES`: 12 was within 0.2% of the optimum on 16-30-part plans (8 within 1.7%),
+#: and the smaller ones keep a window on wide plans, whose frontier's down-sets are many.
+WINDOW_PARTS = (12, 8, 5)
+#: States the window's programme may hold, per size tried (so at most 3 × this a decision): 20,000 take
+#: about 10 ms of CPU (2 visible, 2 locations), so a decision stays within the 50 ms budget with a
+#: margin of more than half on a loaded machine.  Counted, not timed: the same decision everywhere.
+WINDOW_STATES = 20_000
+#: Windows kept, by state (a window's decision table is a few hundred bytes): a state's looks share it.
+WINDOW_CACHE = 4096
+
+
+def window_available(engine, weights: dict[str, float] | None = None) -> bool:
+    """Whether the window serves this plan and bin: the compiled core is built (not switched off with
+    ``OPPORTUNE_PURE_PYTHON=1``), the bin is uniform (its looks are order statistics), and the plan has
+    at most 64 strategies.  O(parts).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    weights : dict, optional
+        Per-part visibility weights (all equal or None: a uniform bin).
+
+    Returns
+    -------
+    bool
+        True where :class:`FrontierWindow` can decide.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> window_available(OrderEngine(make_plan(["a", "b"], {})), {"a": 2.0})
+    False
+    """
+    uniform = len({float((weights or {}).get(p.id, 1.0)) for p in engine.plan.parts}) <= 1
+    return _native is not None and hasattr(_native, "WindowCore") and uniform and engine.k <= 64
+
+
+@dataclass(frozen=True)
+class WindowTable:
+    """What a decision at one state needs, whatever its look: the window's parts (plan indices, declaration
+    order), the expected costs after each move (``WindowCore.moves``), the parts outside the window in
+    topological order, the window's size and the states its programme held."""
+
+    parts: tuple[int, ...]
+    values: tuple[float, ...]
+    outside: tuple[int, ...]
+    size: int
+    states: int
+
+
+def _ancestors(engine, mask: int, consistent: int) -> dict[int, int]:
+    """Remaining part -> the remaining units below its last unit in any open strategy (its own excluded).
+    O(parts × strategies)."""
+    out = {}
+    posets = [p for s, p in enumerate(engine.posets) if consistent >> s & 1]
+    for i, part in enumerate(engine.plan.parts):
+        first, q = engine.first[i], part.quantity
+        own = ((1 << q) - 1) << first
+        if own & ~mask == 0:
+            continue
+        below = 0
+        for poset in posets:
+            below |= poset.below[first + q - 1]
+        out[i] = below & ~mask & ~own
+    return out
+
+
+def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
+    """The window of ``size`` parts at a state: the buffered parts and the remaining parts first in a
+    topological order (fewest remaining ancestor units, then declaration order), each with its remaining
+    ancestors, at most 64 units; and the remaining parts outside it, in that order.  O(parts × strategies).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    buffer : sequence of str
+        The buffered parts.
+    size : int
+        Parts in the window (buffered ones and ancestors counted; more where a closure adds them).
+
+    Returns
+    -------
+    (list of int, list of int)
+        The window's parts in declaration order, the others in topological order.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["b"], "d": ["c"]}))
+    >>> frontier_window(engine, 0, 1, ("c",), 2)
+    ([1, 2], [0, 3])
+    """
+    anc = _ancestors(engine, mask, consistent)
+    order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
+    part_of = engine.unit_part
+    plan = engine.plan
+    window: set[int] = set()
+    units = 0
+    buffered = sorted({plan.index(p) for p in buffer}, key=order.index)
+    for i in buffered + order:
+        if i in window or (len(window) >= size and i not in buffered):
+            continue
+        new = ({i} | {part_of[u] for u in _bits(anc[i])}) - window
+        more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
+        if units + more > 64 or (i in buffered and len(window) + len(new) > size):
+            if i in buffered:
+                continue        # far from the frontier: lumped with the others, an occupied location
+            break
+        window |= new
+        units += more
+    return sorted(window), [i for i in order if i not in window]
+
+
+def _bits(x: int):
+    while x:
+        low = x & -x
+        yield low.bit_length() - 1
+        x ^= low
+
+
+class FrontierWindow(DecidesOnMasks):
+    """The exact optimum of the frontier window at each state, the rest of the plan lumped (see the module).
+
+    Parameters
+    ----------
+    base : policy, optional
+        What decides where no window fits in :data:`WINDOW_STATES` or in time (default
+        :class:`~opportune.policies.variants.Slack`).
+    visible, capacity, costs :
+        The uniform bin's world (as :class:`~opportune.policies.optimal.OptimalSolver`).
+    sizes : tuple of int
+        The window sizes tried in turn (:data:`WINDOW_PARTS`).
+    max_states : int
+        States a window's programme may hold (:data:`WINDOW_STATES`).
+
+    Attributes ``work`` counts what it did: windows solved, the states they held, and decisions left to
+    the base (no window fitted, or out of time).  ``deadline`` (a
+    :class:`~opportune.engine.deadline.Deadline`, or None) stops a window's programme; the base decides then.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> FrontierWindow(visible=1, capacity=1).choose_at(engine, 0, 1, (), 1.0, ("c",))
+    Action(kind='buffer', part='c', source=None)
+    """
+
+    name = "window"
+    rule = "the action of least expected cost in the frontier window's exact optimum (the other parts lumped)"
+    deterministic = True
+    decision_key = None
+
+    def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
+                 sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer",
+                 outside_install: bool = False):
+        from opportune.policies.variants import Slack
+
+        self.base = base if base is not None else Slack()
+        self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
+        self.sizes, self.max_states = tuple(sizes), max_states
+        self.others = others
+        self.outside_install = outside_install
+        self.deadline: Deadline | None = None
+        self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
+        self._tables: OrderedDict = OrderedDict()
+        self._engine = None
+        self.last_table: WindowTable | None = None
+
+    def table(self, engine, mask: int, consistent: int, buffer) -> WindowTable | None:
+        """The window's decision table at a state (cached), or None where no window fits (states, or the
+        deadline).  At most ``len(sizes) × max_states`` states of work."""
+        if self._engine is not engine:
+            self._engine, self._tables = engine, OrderedDict()
+        key = (mask, consistent, tuple(sorted(buffer)))
+        got = self._tables.get(key)
+        if got is not None:
+            self._tables.move_to_end(key)
+            return got
+        for size in self.sizes:
+            try:
+                got = self._solve(engine, mask, consistent, buffer, size)
+            except _native.WindowCoreTooLarge:
+                continue
+            except _native.WindowCoreTimeout:
+                return None
+            self._tables[key] = got
+            if len(self._tables) > WINDOW_CACHE:
+                self._tables.popitem(last=False)
+            return got
+        return None
+
+    def _solve(self, engine, mask: int, consistent: int, buffer, size: int) -> WindowTable:
+        """The window of ``size`` parts solved by the compiled core: its table.  The work is counted."""
+        parts, outside = frontier_window(engine, mask, consistent, buffer, size)
+        core, buf, others_buffered = self._core(engine, mask, consistent, buffer, parts, outside)
+        seconds = as_deadline(self.deadline).seconds()
+        try:
+            values = core.moves(0, (1 << len(core_strategies(engine, consistent))) - 1, buf, others_buffered,
+                                seconds=seconds, max_states=self.max_states)
+        finally:
+            self.work["windows"] += 1
+            self.work["states"] += core.states
+            self.work["most_states"] = max(self.work["most_states"], core.states)
+        return WindowTable(tuple(parts), tuple(values), tuple(outside), size, core.states)
+
+    def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
+        """The compiled window programme for ``parts`` (the remaining units of each, the open strategies'
+        orders among them), the window's buffer counts, and the others buffered."""
+        plan = engine.plan
+        unit_bit, first, quantity, move = {}, [], [], []
+        for i in parts:
+            first.append(len(unit_bit))
+            for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity):
+                if not mask >> u & 1:
+                    unit_bit[u] = len(unit_bit)
+            quantity.append(len(unit_bit) - first[-1])
+            move.append(float(self.costs.move(plan.parts[i].id)))
+        below = []
+        for s in core_strategies(engine, consistent):
+            below.append([sum(1 << unit_bit[b] for b in _bits(engine.posets[s].below[u] & ~mask)) for u in unit_bit])
+        index = {i: j for j, i in enumerate(parts)}
+        buf = [0] * len(parts)
+        others_buffered = 0
+        for p in buffer:
+            j = index.get(plan.index(p))
+            if j is None:
+                others_buffered += 1
+            else:
+                buf[j] += 1
+        other_units = [u for i in outside for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity)
+                       if not mask >> u & 1]
+        other_move = float("inf") if self.others == "ignore" else (sum(self.costs.move(plan.parts[engine.unit_part[u]].id) for u in other_units) / len(other_units)
+                      if other_units else float(self.costs.motion))
+        core = _native.WindowCore(len(unit_bit), first, quantity, below, move, float(self.costs.look),
+                                  float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity,
+                                  len(other_units), float(other_move))
+        return core, buf, others_buffered
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        if mask == engine.full:
+            return DONE
+        table = self.table(engine, mask, consistent, buffer)
+        self.last_table = table
+        if table is None:
+            self.work["by_base"] += 1
+            return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
+        action = best_in_window(engine, table, buffer, visible, self.costs.shake)
+        if self.outside_install and (action.kind == "shake" or (action.kind == "buffer" and
+                                     engine.plan.index(action.part) not in table.parts)):
+            seen = {engine.plan.index(p) for p in visible}
+            for i in table.outside:
+                if i in seen:
+                    u = engine.next_unit(mask, i)
+                    if engine.consistent_after(mask, consistent, u) == consistent:
+                        return Action("install", engine.plan.parts[i].id, "bin")
+        return action
+
+    def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        sched = state.schedule
+        if sched.mask == sched.engine.full:
+            return Decision(DONE, "the assembly is complete")
+        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        table = self.last_table
+        if table is None:
+            base = self.base.decide(state, visible)
+            return Decision(base.action, f"as the base rule ({self.base.name}), because no frontier window fitted its "
+                            f"state cap ({self.max_states:,}) or its time: {base.rule}", note=base.note)
+        return Decision(action, self.rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
+                        f"expected cost of the window {table.values[-1]:.4f}")
+
+
+def core_strategies(engine, consistent: int) -> list[int]:
+    """The open strategies, in order (the window's strategy bits).  O(strategies)."""
+    return [s for s in range(engine.k) if consistent >> s & 1]
+
+
+def best_in_window(engine, table: WindowTable, buffer, visible, shake: float) -> Action:
+    """The window's best action on a look (ties: install, then buffer, then declaration order, the bin
+    before the buffer, as the optimum's), or a shake where no move is cheaper than shaking by 1e-12.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    table : WindowTable
+        The state's window (:meth:`FrontierWindow.table`).
+    buffer, visible : tuple of str
+        The buffered parts and the look.
+    shake : float
+        The shake's cost.
+
+    Returns
+    -------
+    Action
+        The action.
+    """
+    plan = engine.plan
+    values = table.values
+    index = {i: j for j, i in enumerate(table.parts)}
+    ranked = []
+    seen = {plan.index(p) for p in visible}
+    for i in seen:
+        j = index.get(i)
+        if j is not None:
+            ranked.append((values[3 * j], 0, i, 0, Action("install", plan.parts[i].id, "bin")))
+            ranked.append((values[3 * j + 1], 1, i, 0, Action("buffer", plan.parts[i].id)))
+    for i in {plan.index(p) for p in buffer}:
+        j = index.get(i)
+        if j is not None:
+            ranked.append((values[3 * j + 2], 0, i, 1, Action("install", plan.parts[i].id, "buffer")))
+    outside = [i for i in table.outside if i in seen]
+    if outside:
+        ranked.append((values[-2], 1, outside[0], 0, Action("buffer", plan.parts[outside[0]].id)))
+    ranked = [r for r in ranked if r[0] != float("inf")]
+    if not ranked:
+        return SHAKE
+    best = min(ranked, key=lambda r: r[:4])
+    return SHAKE if best[0] > shake + values[-1] + 1e-12 else best[4]
