@@ -107,7 +107,7 @@ public:
                 buf[i] += 1;
             }
         }
-        if (free && ob < others_) out[3 * parts_] = other_move_ + V(mask, cons, buf, ob + 1);
+        if (free && ob < others_ && other_move_ < INF) out[3 * parts_] = other_move_ + V(mask, cons, buf, ob + 1);
         out[3 * parts_ + 1] = V(mask, cons, buf, ob);
         return out;
     }
@@ -120,12 +120,7 @@ private:
     u128& binom(int n, int k) { return binom_[(size_t)n * (ks_ + 1) + k]; }
 
     void start(uint64_t mask, const std::vector<int>& buf, int ob, double seconds, long long max_states) {
-        if ((int)buf.size() != parts_) throw std::invalid_argument("the buffer needs one count per part");
-        for (int i = 0; i < parts_; ++i) {
-            if (buf[i] < 0 || buf[i] + __builtin_popcountll(mask & part_units_[i]) > quantity_[i])
-                throw std::invalid_argument("a buffer count is out of range");
-        }
-        if (mask & ~full_) throw std::invalid_argument("an installed unit is out of range");
+        opportune_memo::check_state(*this, mask, buf);
         if (ob < 0 || ob > most_buffered_ || (capacity_ >= 0 && used(buf, ob) > capacity_))
             throw std::invalid_argument("the others buffered are out of range");
         timed_ = seconds >= 0;
@@ -158,39 +153,15 @@ private:
         if (timed_ && Clock::now() > deadline_) throw WindowTimeout("the window's programme passed its deadline");
         if (table_.size() >= max_states_) throw WindowTooLarge("over the state limit");
         bool free = capacity_ < 0 || used(buf, ob) < capacity_;
+        auto value = [&](uint64_t m, uint64_t s, std::vector<int>& b) { return V(m, s, b, ob); };
         std::vector<std::tuple<double, int, int>> ranked;  // (best move, part, units in the bin)
-        int n = 0;
-        for (int i = 0; i < parts_; ++i) {
-            int units = in_bin(mask, buf, i);
-            if (units <= 0) continue;
-            n += units;
-            double best = INF;
-            int u = next_unit(mask, i);
-            uint64_t after = consistent_after(mask, cons, u);
-            if (after) best = move_[i] + V(mask | uint64_t(1) << u, after, buf, ob);
-            if (free) {
-                buf[i] += 1;
-                double v = move_[i] + V(mask, cons, buf, ob);
-                buf[i] -= 1;
-                best = std::min(best, v);
-            }
-            ranked.emplace_back(best, i, units);
-        }
+        int n = opportune_memo::rank_parts(*this, mask, cons, buf, free, value, ranked);
         if (others_ > ob) {  // the others in the bin: buffered if a location is free, else no move
             n += others_ - ob;
-            ranked.emplace_back(free ? other_move_ + V(mask, cons, buf, ob + 1) : INF, parts_, others_ - ob);
+            bool take = free && other_move_ < INF;  // an infinite move: the others are seen as nothing
+            ranked.emplace_back(take ? other_move_ + V(mask, cons, buf, ob + 1) : INF, parts_, others_ - ob);
         }
-        double from_buffer = INF;
-        for (int i = 0; i < parts_; ++i) {
-            if (!buf[i]) continue;
-            int u = next_unit(mask, i);
-            uint64_t after = consistent_after(mask, cons, u);
-            if (!after) continue;
-            buf[i] -= 1;
-            double v = move_[i] + V(mask | uint64_t(1) << u, after, buf, ob);
-            buf[i] += 1;
-            from_buffer = std::min(from_buffer, v);
-        }
+        double from_buffer = opportune_memo::best_from_buffer(*this, mask, cons, buf, value);
         double s = shake_loop(ranked, n, from_buffer);
         if (s == INF) throw WindowTooLarge("no look allows any action in the window");
         if (table_.size() >= max_states_) throw WindowTooLarge("over the state limit");
@@ -200,17 +171,10 @@ private:
 
     // OptimalCore::shake_loop, the binomials in 128 bits
     double shake_loop(std::vector<std::tuple<double, int, int>>& ranked, int n, double from_buffer) {
-        double acc_pm = 0.0, acc_p = 0.0, s = INF;
-        auto step = [&](double m, double p) {
-            if (m == INF) return false;
-            acc_pm += p * m;
-            acc_p += p;
-            s = std::min(s, (look_ + acc_pm + (1.0 - acc_p) * shake_) / acc_p);
-            return true;
-        };
+        opportune_memo::ShakeLoop loop{look_, shake_};
         if (n == 0) {
-            step(from_buffer, 1.0);
-            return s;
+            loop.step(from_buffer, 1.0);
+            return loop.value;
         }
         std::sort(ranked.begin(), ranked.end());
         int k = std::min(visible_, n);
@@ -220,9 +184,9 @@ private:
             (void)part;
             u128 hits = binom(n - rank, k) - binom(n - rank - units, k);
             rank += units;
-            if (!step(std::min(best, from_buffer), (double)hits / total)) break;
+            if (!loop.step(std::min(best, from_buffer), (double)hits / total)) break;
         }
-        return s;
+        return loop.value;
     }
 
     int others_;

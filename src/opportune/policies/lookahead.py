@@ -47,9 +47,11 @@ class Lookahead(DecidesOnMasks):
     after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
     ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its
     fallback: the window, or in the pile and weighted bins the improvement step (the base past
-    :attr:`STEP_UNITS` units).
-    (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
-    where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
+    :attr:`STEP_UNITS` units).  (The window was within 0.2% of the optimum on 16-30-part plans, 1-3
+    visible and 1-2 locations, where the step alone was +1.6% and slack +5% to +24%: docs/decisions.md.)
+    The window's work is counted (``self.window.work``), at most
+    :data:`~opportune.policies.window.WINDOW_STATES` states a size tried; with a budget it also stops at
+    :attr:`WINDOW_SHARE` of it and the base decides within the rest.  The pile bin likewise, with its own programmes
     (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).  In either bin
     the optimum's programme is the compiled one where the core is built
     (:class:`~opportune.policies.optimal.CompiledOptimalSolver`,
@@ -283,18 +285,20 @@ class Lookahead(DecidesOnMasks):
 
     def _choose(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                 visible: tuple[str, ...]) -> Action:
+        start = time.perf_counter()
         action = self._programme(engine, mask, consistent, buffer, visible)
         if action is not None:
             return action
-        return self._fallback(engine).choose_at(engine, mask, consistent, buffer, free, visible)
+        return self._fallback(engine, start).choose_at(engine, mask, consistent, buffer, free, visible)
 
-    def _fallback(self, engine=None):
-        """What decides where the programme does not: the frontier window (within its share of the budget,
-        and the decision deadline on the engine), else the base."""
+    def _fallback(self, engine=None, start: float | None = None):
+        """What decides where the programme does not: the frontier window (within its share of the budget
+        from the decision's ``start``, a ``perf_counter`` moment, and the decision deadline on the engine),
+        else the base."""
         if self._by_window and self._too_large:
             if engine is not None:
                 own = (Deadline.NEVER if self.lookahead_budget is None
-                       else Deadline.after(self.WINDOW_SHARE * self.lookahead_budget))
+                       else Deadline(start + self.WINDOW_SHARE * self.lookahead_budget))
                 self.window.deadline = own.sooner(engine.decision_deadline)
             return self.window
         return self.fallback_alone if self._too_large else self.fallback
@@ -365,9 +369,10 @@ class Lookahead(DecidesOnMasks):
         sched = state.schedule
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
+        start = time.perf_counter()
         action = self._programme(sched.engine, sched.mask, sched.consistent, state.buffer, visible)
         if action is None and self._by_window and self._too_large:
-            made = self._fallback(sched.engine).decide(state, visible)
+            made = self._fallback(sched.engine, start).decide(state, visible)
             return replace(made, rule=f"by its frontier window, because {self._why_too_large()}: {made.rule}")
         if action is None:
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.poset import bits
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
@@ -141,7 +142,7 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     for i in buffered + order:
         if i in window or (len(window) >= size and i not in buffered):
             continue
-        new = ({i} | {part_of[u] for u in _bits(anc[i])}) - window
+        new = ({i} | {part_of[u] for u in bits(anc[i])}) - window
         more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
         if units + more > 64 or (i in buffered and len(window) + len(new) > size):
             if i in buffered:
@@ -150,13 +151,6 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
         window |= new
         units += more
     return sorted(window), [i for i in order if i not in window]
-
-
-def _bits(x: int):
-    while x:
-        low = x & -x
-        yield low.bit_length() - 1
-        x ^= low
 
 
 class FrontierWindow(DecidesOnMasks):
@@ -173,6 +167,9 @@ class FrontierWindow(DecidesOnMasks):
         The window sizes tried in turn (:data:`WINDOW_PARTS`).
     max_states : int
         States a window's programme may hold (:data:`WINDOW_STATES`).
+    others : {"buffer", "ignore"}
+        Whether an other seen may be buffered (a free location), as on the real plan (the default: nearer
+        the optimum, ``benchmarks/bench_fallback.py``), or is seen as nothing (for measurement).
 
     Attributes ``work`` counts what it did: windows solved, the states they held, and decisions left to
     the base (no window fitted, or out of time).  ``deadline`` (a
@@ -193,15 +190,13 @@ class FrontierWindow(DecidesOnMasks):
     decision_key = None
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
-                 sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer",
-                 outside_install: bool = False):
+                 sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer"):
         from opportune.policies.variants import Slack
 
         self.base = base if base is not None else Slack()
         self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
         self.sizes, self.max_states = tuple(sizes), max_states
         self.others = others
-        self.outside_install = outside_install
         self.deadline: Deadline | None = None
         self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
         self._tables: OrderedDict = OrderedDict()
@@ -259,7 +254,7 @@ class FrontierWindow(DecidesOnMasks):
             move.append(float(self.costs.move(plan.parts[i].id)))
         below = []
         for s in core_strategies(engine, consistent):
-            below.append([sum(1 << unit_bit[b] for b in _bits(engine.posets[s].below[u] & ~mask)) for u in unit_bit])
+            below.append([sum(1 << unit_bit[b] for b in bits(engine.posets[s].below[u] & ~mask)) for u in unit_bit])
         index = {i: j for j, i in enumerate(parts)}
         buf = [0] * len(parts)
         others_buffered = 0
@@ -271,7 +266,8 @@ class FrontierWindow(DecidesOnMasks):
                 buf[j] += 1
         other_units = [u for i in outside for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity)
                        if not mask >> u & 1]
-        other_move = float("inf") if self.others == "ignore" else (sum(self.costs.move(plan.parts[engine.unit_part[u]].id) for u in other_units) / len(other_units)
+        other_move = (float("inf") if self.others == "ignore" else       # an infinite move: never buffered
+                      sum(self.costs.move(plan.parts[engine.unit_part[u]].id) for u in other_units) / len(other_units)
                       if other_units else float(self.costs.motion))
         core = _native.WindowCore(len(unit_bit), first, quantity, below, move, float(self.costs.look),
                                   float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity,
@@ -287,16 +283,7 @@ class FrontierWindow(DecidesOnMasks):
         if table is None:
             self.work["by_base"] += 1
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
-        action = best_in_window(engine, table, buffer, visible, self.costs.shake)
-        if self.outside_install and (action.kind == "shake" or (action.kind == "buffer" and
-                                     engine.plan.index(action.part) not in table.parts)):
-            seen = {engine.plan.index(p) for p in visible}
-            for i in table.outside:
-                if i in seen:
-                    u = engine.next_unit(mask, i)
-                    if engine.consistent_after(mask, consistent, u) == consistent:
-                        return Action("install", engine.plan.parts[i].id, "bin")
-        return action
+        return best_in_window(engine, table, buffer, visible, self.costs.shake)
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
         sched = state.schedule
