@@ -145,7 +145,7 @@ def test_where_no_window_fits_its_states_the_base_decides_and_says_so():
     plan = load_plan("salbp:KILBRID")
     window = FrontierWindow(Slack(), visible=2, capacity=2, max_states=1)
     assert _run(window, plan, 2, 2, seed=1, steps=5) == _run(Slack(), plan, 2, 2, seed=1, steps=5)
-    assert window.work["by_base"] == 5 and window.work["windows"] == 15 and window.work["most_states"] <= 1
+    assert window.work["by_base"] == 5 and window.work["windows"] == 5 and window.work["most_states"] <= 1
     seq = Sequencer(plan, policy=window)
     assert "no frontier window fitted its state cap (1)" in window.decide(seq.state, (plan.part_ids[0],)).rule
 
@@ -155,10 +155,15 @@ def test_past_its_deadline_the_base_decides():
     plan = load_plan("salbp:KILBRID")
     policy = Lookahead(visible=2, capacity=2, optimal=False, budget=0.05)
     engine = OrderEngine(plan)
-    with engine.deadline(0.0):          # already passed
-        action = policy.choose_at(engine, 0, engine.all_strategies, (), 2, (plan.part_ids[0], plan.part_ids[1]))
-    assert policy.window.work["by_base"] == 1 and policy.window.work["windows"] == 1
-    assert action == Slack().choose_at(engine, 0, engine.all_strategies, (), 2, (plan.part_ids[0], plan.part_ids[1]))
+    look = (plan.part_ids[0], plan.part_ids[1])
+    policy.choose_at(engine, 0, engine.all_strategies, (), 2, look)        # chooses its programme: the window
+    before = dict(policy.window.work)
+    with engine.deadline(0.0):          # already passed, at a state not seen yet
+        action = policy.choose_at(engine, 0, engine.all_strategies, (plan.part_ids[5],), 1, look)
+    assert policy.window.work["by_base"] == before["by_base"] + 1
+    assert policy.window.work["windows"] == before["windows"] + 1      # the smallest window, stopped at once
+    assert action.kind in ("install", "buffer", "shake") and (action.part in look + (plan.part_ids[5],)
+                                                            or action.kind == "shake")
 
 
 def test_the_default_decides_by_the_window_where_its_optimum_is_off_and_is_near_it():

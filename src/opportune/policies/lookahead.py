@@ -372,8 +372,7 @@ class Lookahead(DecidesOnMasks):
         start = time.perf_counter()
         action = self._programme(sched.engine, sched.mask, sched.consistent, state.buffer, visible)
         if action is None and self._by_window and self._too_large:
-            made = self._fallback(sched.engine, start).decide(state, visible)
-            return replace(made, rule=f"by its frontier window, because {self._why_too_large()}: {made.rule}")
+            return self._fallback(sched.engine, start).decide(state, visible, because=self._why_too_large())
         if action is None:
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
             # its exactness and any estimates, and why the look-ahead did not decide

@@ -33,13 +33,14 @@ __all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available
 
 _native = compiled_core()
 
-#: The window's sizes (parts, buffered ones and ancestors included) tried at a state, in turn, until one
-#: fits in :data:`WINDOW_STATES`: 12 was within 0.2% of the optimum on 16-30-part plans (8 within 1.7%),
-#: and the smaller ones keep a window on wide plans, whose frontier's down-sets are many.
-WINDOW_PARTS = (12, 8, 5)
-#: States the window's programme may hold, per size tried (so at most 3 × this a decision): 20,000 take
-#: about 10 ms of CPU (2 visible, 2 locations), so a decision stays within the 50 ms budget with a
-#: margin of more than half on a loaded machine.  Counted, not timed: the same decision everywhere.
+#: The window's sizes (parts, buffered ones and ancestors included) tried at a state in increasing size,
+#: the largest that fits :data:`WINDOW_STATES` (and the deadline, where there is one) deciding: 12 was
+#: within 0.3% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
+#: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
+WINDOW_PARTS = (5, 8, 12)
+#: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
+#: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
+#: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
 WINDOW_STATES = 20_000
 #: Windows kept, by state (a window's decision table is a few hundred bytes): a state's looks share it.
 WINDOW_CACHE = 4096
@@ -205,7 +206,22 @@ class FrontierWindow(DecidesOnMasks):
 
     def table(self, engine, mask: int, consistent: int, buffer) -> WindowTable | None:
         """The window's decision table at a state (cached), or None where no window fits (states, or the
-        deadline).  At most ``len(sizes) × max_states`` states of work."""
+        deadline).  At most ``len(sizes) × max_states`` states of work.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+
+        Returns
+        -------
+        WindowTable or None
+            The largest window's table that fitted, or None where none did.
+        """
         if self._engine is not engine:
             self._engine, self._tables = engine, OrderedDict()
         key = (mask, consistent, tuple(sorted(buffer)))
@@ -213,18 +229,20 @@ class FrontierWindow(DecidesOnMasks):
         if got is not None:
             self._tables.move_to_end(key)
             return got
-        for size in self.sizes:
+        got = None
+        for size in sorted(self.sizes):
+            # the smaller windows first: past the deadline or the cap, the largest finished one decides
             try:
                 got = self._solve(engine, mask, consistent, buffer, size)
-            except _native.WindowCoreTooLarge:
-                continue
-            except _native.WindowCoreTimeout:
-                return None
+            except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
+                break
+            if not got.outside:
+                break           # the window holds every part left: a larger one is the same
+        if got is not None:
             self._tables[key] = got
             if len(self._tables) > WINDOW_CACHE:
                 self._tables.popitem(last=False)
-            return got
-        return None
+        return got
 
     def _solve(self, engine, mask: int, consistent: int, buffer, size: int) -> WindowTable:
         """The window of ``size`` parts solved by the compiled core: its table.  The work is counted."""
@@ -285,7 +303,23 @@ class FrontierWindow(DecidesOnMasks):
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
         return best_in_window(engine, table, buffer, visible, self.costs.shake)
 
-    def decide(self, state, visible: tuple[str, ...]) -> Decision:
+    def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
+        """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+        because : str
+            Why the window decides, said first in the rule (empty: nothing said).
+
+        Returns
+        -------
+        Decision
+            The window's decision, or the base's (saying that no window fitted).
+        """
         sched = state.schedule
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
@@ -293,9 +327,11 @@ class FrontierWindow(DecidesOnMasks):
         table = self.last_table
         if table is None:
             base = self.base.decide(state, visible)
-            return Decision(base.action, f"as the base rule ({self.base.name}), because no frontier window fitted its "
-                            f"state cap ({self.max_states:,}) or its time: {base.rule}", note=base.note)
-        return Decision(action, self.rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
+            return Decision(base.action, f"as the base rule ({self.base.name}), because {because + ' and ' * bool(because)}"
+                            f"no frontier window fitted its state cap ({self.max_states:,}) or its time: {base.rule}",
+                            note=base.note)
+        rule = f"by its frontier window, because {because}: {self.rule}" if because else self.rule
+        return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
                         f"expected cost of the window {table.values[-1]:.4f}")
 
 
