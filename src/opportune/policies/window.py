@@ -88,8 +88,9 @@ class WindowTable:
 
 
 def _ancestors(engine, mask: int, consistent: int) -> dict[int, int]:
-    """Remaining part -> the remaining units below its last unit in any open strategy (its own excluded).
-    O(parts × strategies)."""
+    """Remaining part -> the remaining units below its last unit (its own excluded) in the open strategy
+    where they are fewest (ties: the first): the parts it waits for on its nearest way in.  Transitive in
+    that strategy, so a window takes them whole.  O(parts × strategies)."""
     out = {}
     posets = [p for s, p in enumerate(engine.posets) if consistent >> s & 1]
     for i, part in enumerate(engine.plan.parts):
@@ -97,17 +98,15 @@ def _ancestors(engine, mask: int, consistent: int) -> dict[int, int]:
         own = ((1 << q) - 1) << first
         if own & ~mask == 0:
             continue
-        below = 0
-        for poset in posets:
-            below |= poset.below[first + q - 1]
-        out[i] = below & ~mask & ~own
+        out[i] = min((poset.below[first + q - 1] & ~mask & ~own for poset in posets), key=int.bit_count)
     return out
 
 
 def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
     """The window of ``size`` parts at a state: the buffered parts and the remaining parts first in a
-    topological order (fewest remaining ancestor units, then declaration order), each with its remaining
-    ancestors, at most 64 units; and the remaining parts outside it, in that order.  O(parts × strategies).
+    topological order (fewest remaining ancestor units in an open strategy, then declaration order), each
+    with its remaining ancestors in that strategy, at most 64 units; and the remaining parts outside it, in
+    that order.  O(parts × strategies).
 
     Parameters
     ----------
@@ -272,7 +271,10 @@ class FrontierWindow(DecidesOnMasks):
             move.append(float(self.costs.move(plan.parts[i].id)))
         below = []
         for s in core_strategies(engine, consistent):
-            below.append([sum(1 << unit_bit[b] for b in bits(engine.posets[s].below[u] & ~mask)) for u in unit_bit])
+            # a unit's ancestors outside the window are the strategies' other than the one its window took
+            # whole (_ancestors): taken as installed there (blocking them would leave the window stuck once
+            # installs closed the other strategies); a move they forbid on the real plan is never chosen
+            below.append([_window_bits(engine.posets[s].below[u] & ~mask, unit_bit) for u in unit_bit])
         index = {i: j for j, i in enumerate(parts)}
         buf = [0] * len(parts)
         others_buffered = 0
@@ -301,7 +303,7 @@ class FrontierWindow(DecidesOnMasks):
         if table is None:
             self.work["by_base"] += 1
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
-        return best_in_window(engine, table, buffer, visible, self.costs.shake)
+        return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
         """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
@@ -335,12 +337,21 @@ class FrontierWindow(DecidesOnMasks):
                         f"expected cost of the window {table.values[-1]:.4f}")
 
 
+def _window_bits(units: int, unit_bit: dict[int, int]) -> int:
+    """The plan's ``units`` in the window as window bits (the others left out).  O(popcount)."""
+    out = 0
+    for u in bits(units):
+        if u in unit_bit:
+            out |= 1 << unit_bit[u]
+    return out
+
+
 def core_strategies(engine, consistent: int) -> list[int]:
     """The open strategies, in order (the window's strategy bits).  O(strategies)."""
     return [s for s in range(engine.k) if consistent >> s & 1]
 
 
-def best_in_window(engine, table: WindowTable, buffer, visible, shake: float) -> Action:
+def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffer, visible, shake: float) -> Action:
     """The window's best action on a look (ties: install, then buffer, then declaration order, the bin
     before the buffer, as the optimum's), or a shake where no move is cheaper than shaking by 1e-12.
 
@@ -348,6 +359,8 @@ def best_in_window(engine, table: WindowTable, buffer, visible, shake: float) ->
     ----------
     engine : OrderEngine
         The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies (an installation no open strategy allows is not a move).
     table : WindowTable
         The state's window (:meth:`FrontierWindow.table`).
     buffer, visible : tuple of str
@@ -365,14 +378,19 @@ def best_in_window(engine, table: WindowTable, buffer, visible, shake: float) ->
     index = {i: j for j, i in enumerate(table.parts)}
     ranked = []
     seen = {plan.index(p) for p in visible}
+
+    def fits(i: int) -> bool:
+        return engine.consistent_after(mask, consistent, engine.next_unit(mask, i)) != 0
+
     for i in seen:
         j = index.get(i)
         if j is not None:
-            ranked.append((values[3 * j], 0, i, 0, Action("install", plan.parts[i].id, "bin")))
+            if fits(i):
+                ranked.append((values[3 * j], 0, i, 0, Action("install", plan.parts[i].id, "bin")))
             ranked.append((values[3 * j + 1], 1, i, 0, Action("buffer", plan.parts[i].id)))
     for i in {plan.index(p) for p in buffer}:
         j = index.get(i)
-        if j is not None:
+        if j is not None and fits(i):
             ranked.append((values[3 * j + 2], 0, i, 1, Action("install", plan.parts[i].id, "buffer")))
     outside = [i for i in table.outside if i in seen]
     if outside:
