@@ -87,19 +87,38 @@ class WindowTable:
     states: int
 
 
-def _ancestors(engine, mask: int, consistent: int) -> dict[int, int]:
+def _ancestors(engine, mask: int, consistent: int) -> tuple[dict[int, int], dict[int, int]]:
     """Remaining part -> the remaining units below its last unit (its own excluded) in the open strategy
-    where they are fewest (ties: the first): the parts it waits for on its nearest way in.  Transitive in
-    that strategy, so a window takes them whole.  O(parts × strategies)."""
-    out = {}
+    where they are fewest (ties: the first): the parts it waits for on its nearest way in, transitive in
+    that strategy; and -> those below it in any open strategy.  O(parts × strategies)."""
+    nearest, every = {}, {}
     posets = [p for s, p in enumerate(engine.posets) if consistent >> s & 1]
     for i, part in enumerate(engine.plan.parts):
         first, q = engine.first[i], part.quantity
         own = ((1 << q) - 1) << first
         if own & ~mask == 0:
             continue
-        out[i] = min((poset.below[first + q - 1] & ~mask & ~own for poset in posets), key=int.bit_count)
-    return out
+        below = [poset.below[first + q - 1] & ~mask & ~own for poset in posets]
+        nearest[i] = min(below, key=int.bit_count)
+        every[i] = 0
+        for b in below:
+            every[i] |= b
+    return nearest, every
+
+
+def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int) -> set[int] | None:
+    """Part ``i`` and its remaining ancestors in every open strategy not in ``window`` (an ancestor in one
+    strategy brings its own in the others), or None past ``most`` parts.  O(parts added × strategies)."""
+    new, todo = set(), [i]
+    while todo:
+        j = todo.pop()
+        if j in new or j in window:
+            continue
+        new.add(j)
+        if len(new) > most:
+            return None
+        todo.extend(part_of[u] for u in bits(every[j]))
+    return new
 
 
 def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
@@ -132,7 +151,7 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     >>> frontier_window(engine, 0, 1, ("c",), 2)
     ([1, 2], [0, 3])
     """
-    anc = _ancestors(engine, mask, consistent)
+    anc, every = _ancestors(engine, mask, consistent)
     order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
     part_of = engine.unit_part
     plan = engine.plan
@@ -142,7 +161,9 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     for i in buffered + order:
         if i in window or (len(window) >= size and i not in buffered):
             continue
-        new = ({i} | {part_of[u] for u in bits(anc[i])}) - window
+        # closed in every open strategy where that fits the window (exact there), else in its nearest one
+        new = (_closure(i, every, part_of, window, max(0, size - len(window)))
+               or ({i} | {part_of[u] for u in bits(anc[i])}) - window)
         more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
         if units + more > 64 or (i in buffered and len(window) + len(new) > size):
             if i in buffered:
