@@ -1,8 +1,10 @@
 """The frontier window: near the optimum where the optimum's programme does not fit.
 
 At each state the *window* is the buffered parts and the next remaining parts in a topological order
-(fewest remaining ancestors first, then declaration order), closed under their remaining ancestors in
-every strategy still open, up to :data:`WINDOW_PARTS` parts and 64 units.  The plan's other remaining
+(fewest remaining ancestors first, then declaration order), closed under their remaining ancestors (in
+every open strategy where they fit the window, else in the strategy where they are fewest; ancestors
+outside it are taken as installed, and an installation no open strategy allows is never chosen), up to
+:data:`WINDOW_PARTS` parts and 64 units.  The plan's other remaining
 units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
 plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
 buffered (a free location, the others' mean move), and none is installed before the window is complete,
