@@ -47,7 +47,7 @@ class Lookahead(DecidesOnMasks):
     after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
     ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its
     fallback: the window, or in the pile and weighted bins the improvement step (the base past
-    :attr:`STEP_UNITS` units).  (The window was within 0.2% of the optimum on 16-30-part plans, 1-3
+    :attr:`STEP_UNITS` units).  (The window was within 0.24% of the optimum on 16-30-part plans, 1-3
     visible and 1-2 locations, where the step alone was +1.6% and slack +5% to +24%: docs/decisions.md.)
     The window's work is counted (``self.window.work``), at most
     :data:`~opportune.policies.window.WINDOW_STATES` states a size tried; with a budget it also stops at

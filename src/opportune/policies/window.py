@@ -37,7 +37,7 @@ _native = compiled_core()
 
 #: The window's sizes (parts, buffered ones and ancestors included) tried at a state in increasing size,
 #: the largest that fits :data:`WINDOW_STATES` (and the deadline, where there is one) deciding: 12 was
-#: within 0.3% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
+#: within 0.24% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
 #: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
 WINDOW_PARTS = (5, 8, 12)
 #: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
@@ -126,8 +126,9 @@ def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int
 def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
     """The window of ``size`` parts at a state: the buffered parts and the remaining parts first in a
     topological order (fewest remaining ancestor units in an open strategy, then declaration order), each
-    with its remaining ancestors in that strategy, at most 64 units; and the remaining parts outside it, in
-    that order.  O(parts × strategies).
+    with its remaining ancestors (in every open strategy where they fit the window, else in that one), at
+    most 64 units; and the remaining parts outside it, in that order.  A buffered part whose ancestors do
+    not fit is left out (lumped with the others).  O(parts × strategies).
 
     Parameters
     ----------
