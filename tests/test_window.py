@@ -61,7 +61,7 @@ def test_a_window_over_the_whole_plan_is_the_optimum_to_the_last_bit(plan, seed)
     optimum = optimal_solver(engine, visible=visible, capacity=capacity, costs=costs)
     window = FrontierWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), max_states=10**6)
     table = window.table(engine, mask, cons, buffer)
-    assert table.outside == () and len(table.parts) == sum(engine.next_unit(mask, i) is not None
+    assert table.outside == 0 and len(table.parts) == sum(engine.next_unit(mask, i) is not None
                                                             for i in range(len(plan.parts)))
     key = optimum.policy_key(mask, cons, buffer)
     assert table.values[-1] == optimum.value(key)

@@ -44,7 +44,8 @@ WINDOW_PARTS = (5, 8, 12)
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
 WINDOW_STATES = 20_000
-#: Windows kept, by state (a window's decision table is a few hundred bytes): a state's looks share it.
+#: Windows kept, by state (a decision table is under 1 kB for a window of 12 parts, so at most about
+#: 4 MB a policy): a state's looks share it.
 WINDOW_CACHE = 4096
 
 
@@ -79,24 +80,26 @@ def window_available(engine, weights: dict[str, float] | None = None) -> bool:
 @dataclass(frozen=True)
 class WindowTable:
     """What a decision at one state needs, whatever its look: the window's parts (plan indices, declaration
-    order), the expected costs after each move (``WindowCore.moves``), the parts outside the window in
-    topological order, the window's size and the states its programme held."""
+    order), the expected costs after each move (``WindowCore.moves``), how many remaining parts are outside
+    the window, the window's size and the states its programme held.  Under 1 kB for a window of 12 parts,
+    whatever the plan (the parts outside are a count: a look's are ranked when it comes)."""
 
     parts: tuple[int, ...]
     values: tuple[float, ...]
-    outside: tuple[int, ...]
+    outside: int
     size: int
     states: int
 
 
-def _ancestors(engine, mask: int, consistent: int) -> tuple[dict[int, int], dict[int, int]]:
+def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int, int], dict[int, int]]:
     """Remaining part -> the remaining units below its last unit (its own excluded) in the open strategy
     where they are fewest (ties: the first): the parts it waits for on its nearest way in, transitive in
-    that strategy; and -> those below it in any open strategy.  O(parts × strategies)."""
+    that strategy; and -> those below it in any open strategy.  Of every part, or of ``parts`` (indices).
+    O(parts × strategies)."""
     nearest, every = {}, {}
     posets = [p for s, p in enumerate(engine.posets) if consistent >> s & 1]
-    for i, part in enumerate(engine.plan.parts):
-        first, q = engine.first[i], part.quantity
+    for i in range(len(engine.plan.parts)) if parts is None else parts:
+        first, q = engine.first[i], engine.plan.parts[i].quantity
         own = ((1 << q) - 1) << first
         if own & ~mask == 0:
             continue
@@ -279,7 +282,7 @@ class FrontierWindow(DecidesOnMasks):
             self.work["windows"] += 1
             self.work["states"] += core.states
             self.work["most_states"] = max(self.work["most_states"], core.states)
-        return WindowTable(tuple(parts), tuple(values), tuple(outside), size, core.states)
+        return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states)
 
     def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
         """The compiled window programme for ``parts`` (the remaining units of each, the open strategies'
@@ -416,9 +419,12 @@ def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffe
         j = index.get(i)
         if j is not None and fits(i):
             ranked.append((values[3 * j + 2], 0, i, 1, Action("install", plan.parts[i].id, "buffer")))
-    outside = [i for i in table.outside if i in seen]
+    outside = [i for i in seen if i not in index]
     if outside:
-        ranked.append((values[-2], 1, outside[0], 0, Action("buffer", plan.parts[outside[0]].id)))
+        # the one nearest the frontier, as the window's order ranks them
+        anc, _ = _ancestors(engine, mask, consistent, outside)
+        i = min(outside, key=lambda i: (anc[i].bit_count(), i))
+        ranked.append((values[-2], 1, i, 0, Action("buffer", plan.parts[i].id)))
     ranked = [r for r in ranked if r[0] != float("inf")]
     if not ranked:
         return SHAKE
