@@ -12,7 +12,8 @@ moving averages and its deadlines, with the same answers).  The look-ahead decid
 optimum's programme for the small plans and on its base (slack) for KILBRID.  Recorded again when the
 uniform bin's optimum came to sum its looks as order statistics: every action the same, the optimum's
 printed expectations within 1e-4 (their last digit's rounding), and KILBRID's reason for deciding by
-the base in the words of states and bytes.
+the base in the words of states and bytes.  The look-ahead's KILBRID case recorded again when its fallback
+in the uniform bin became the frontier window's optimum (policies/window.py) instead of slack.
 """
 
 from __future__ import annotations

@@ -201,12 +201,12 @@ def test_the_default_policy_decides_by_the_optimum_past_16_units():
 
 def test_the_sizing_refuses_before_starting():
     """Over the state cap, or over the bytes the engine grants: the look-ahead's optimum is refused before
-    any state is stored, the base's step decides, and the decision says why."""
+    any state is stored, the frontier window decides, and the decision says why."""
     plan = _chains(20)
     over_states = Lookahead(visible=2, capacity=2, max_states=10)     # the base's programme stops soon too
     over_states.COMPILED_STATES = 1_000
     decision = Sequencer(plan, policy=over_states).decide(("p05", "p01"))
-    assert decision.rule.startswith("as the base rule (slack)") and "its optimum needs" in decision.rule
+    assert decision.rule.startswith("by its frontier window, because its optimum needs"), decision.rule
     assert "states, more than 1,000" in over_states.refusal and not over_states._optimum
     engine = OrderEngine(plan, memory_limit=10_000)     # a programme may hold half: 5,000 bytes
     small = Lookahead(visible=2, capacity=2, max_states=10)

@@ -40,7 +40,7 @@ def optimum_calls(monkeypatch):
     return calls
 
 
-@pytest.mark.parametrize("n, capacity", [(10, 1), (18, 1)])   # the step over slack; slack alone (> 16 units)
+@pytest.mark.parametrize("n, capacity", [(10, 1), (18, 1)])   # the frontier window (the uniform bin)
 def test_switched_off_it_never_consults_the_optimum_and_is_never_below_it(optimum_calls, n, capacity):
     engine = OrderEngine(_chains(n))
     settings = dict(visible=1, capacity=capacity)
@@ -59,7 +59,7 @@ def test_switched_off_its_decisions_say_so():
     assert policy.decide(seq.state, ("p05", "p01")).rule == Lookahead.OPTIMAL_RULE
     policy.optimal = False          # the programme chosen so far is dropped: the next decision chooses again
     rule = policy.decide(seq.state, ("p05", "p01")).rule
-    assert rule.startswith("as the base rule (slack), because its exact optimum is switched off"), rule
+    assert rule.startswith("by its frontier window, because its exact optimum is switched off"), rule
     assert policy.refusal == Lookahead.SWITCHED_OFF and not policy._optimum
 
 

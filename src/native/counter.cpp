@@ -1155,6 +1155,7 @@ void bind_chains(py::module_& m);  // chains.cpp
 void bind_relax(py::module_& m);   // relax.cpp
 void bind_pile(py::module_& m);    // pile.cpp
 void bind_optimal(py::module_& m); // optimal.cpp
+void bind_window(py::module_& m);  // window.cpp
 
 PYBIND11_MODULE(_native, m) {
     m.doc() = "Compiled core of opportune's order engine (see opportune.engine.native)";
@@ -1167,4 +1168,5 @@ PYBIND11_MODULE(_native, m) {
     bind_relax(m);
     bind_pile(m);
     bind_optimal(m);
+    bind_window(m);
 }

@@ -3,11 +3,14 @@
 // and the (installed, strategies) pairs interned once.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <limits>
 #include <new>
 #include <stdexcept>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -179,5 +182,80 @@ private:
     std::unordered_map<std::pair<uint64_t, uint64_t>, uint64_t, PairHash> ids_;
     std::vector<std::pair<uint64_t, uint64_t>> pairs_;
 };
+
+}  // namespace opportune_memo
+
+// What the uniform bin's programmes share at a state (window.cpp; optimal.cpp computes the same inline):
+// the bin's parts ranked by their best move, the buffer's best installation, and the shake loop over them.
+namespace opportune_memo {
+
+// The least over prefixes A of the looks in increasing best move m:
+// (c_look + sum_A p m + (1 - P_A) c_shake) / P_A, fed one (m, p) at a time.
+struct ShakeLoop {
+    double look, shake;
+    double acc_pm = 0.0, acc_p = 0.0, value = std::numeric_limits<double>::infinity();
+    // false once m is infinite (no later look allows a move either)
+    bool step(double m, double p) {
+        if (m == std::numeric_limits<double>::infinity()) return false;
+        acc_pm += p * m;
+        acc_p += p;
+        value = std::min(value, (look + acc_pm + (1.0 - acc_p) * shake) / acc_p);
+        return true;
+    }
+};
+
+// Each part with units in the bin, in declaration order, with its best move: installing its next unit
+// (`value` of the state after, plus its move) or, with a free location, buffering one; `ranked` gets
+// (best move, part, units in the bin) and the bin's units are returned.  `value(mask, cons, buf)` is the
+// programme's value of a state (the buffer counts changed in place and restored).
+template <class Value>
+int rank_parts(const PlanUnits& plan, uint64_t mask, uint64_t cons, std::vector<int>& buf, bool free, Value&& value,
+               std::vector<std::tuple<double, int, int>>& ranked) {
+    int n = 0;
+    for (int i = 0; i < plan.parts_; ++i) {
+        int units = plan.in_bin(mask, buf, i);
+        if (units <= 0) continue;
+        n += units;
+        double best = std::numeric_limits<double>::infinity();
+        int u = plan.next_unit(mask, i);
+        uint64_t after = plan.consistent_after(mask, cons, u);
+        if (after) best = plan.move_[i] + value(mask | uint64_t(1) << u, after, buf);
+        if (free) {
+            buf[i] += 1;
+            double v = plan.move_[i] + value(mask, cons, buf);
+            buf[i] -= 1;
+            best = std::min(best, v);
+        }
+        ranked.emplace_back(best, i, units);
+    }
+    return n;
+}
+
+// The buffer's best installation (the same on every look): inf where none keeps a strategy.
+template <class Value>
+double best_from_buffer(const PlanUnits& plan, uint64_t mask, uint64_t cons, std::vector<int>& buf, Value&& value) {
+    double best = std::numeric_limits<double>::infinity();
+    for (int i = 0; i < plan.parts_; ++i) {
+        if (!buf[i]) continue;
+        int u = plan.next_unit(mask, i);
+        uint64_t after = plan.consistent_after(mask, cons, u);
+        if (!after) continue;
+        buf[i] -= 1;
+        double v = plan.move_[i] + value(mask | uint64_t(1) << u, after, buf);
+        buf[i] += 1;
+        best = std::min(best, v);
+    }
+    return best;
+}
+
+// A state given by a caller, checked: buffer counts within each part's units left, installed units in range.
+inline void check_state(const PlanUnits& plan, uint64_t mask, const std::vector<int>& buf) {
+    if ((int)buf.size() != plan.parts_) throw std::invalid_argument("the buffer needs one count per part");
+    for (int i = 0; i < plan.parts_; ++i) {
+        if (buf[i] < 0 || buf[i] + __builtin_popcountll(mask & plan.part_units_[i]) > plan.quantity_[i])
+            throw std::invalid_argument("a buffer count is out of range");
+    }
+    if (mask & ~plan.full_) throw std::invalid_argument("an installed unit is out of range");
+}
 
 }  // namespace opportune_memo

@@ -782,7 +782,8 @@ def evaluate(
                                                     "got (default: none; --max-states bounds the work)"),
     without_optimum: bool = typer.Option(False, "--without-optimum",
                                          help="The default policy (lookahead) with its exact optimum switched off: "
-                                              "it decides by its fallback (one step over slack, or slack on plans "
+                                              "it decides by its fallback (the frontier window's optimum in a uniform "
+                                              "bin; in a pile or weighted bin one step over slack, or slack on plans "
                                               "of more than 16 units), measured against the optimum"),
     as_json: bool = json_option(),
 ):

@@ -1,6 +1,7 @@
-"""The look-ahead policy: the optimum's action where its programme fits, else one step of policy
-improvement over a base rule (default :class:`~opportune.policies.variants.Slack`), within a
-decision budget if it has one.  See :mod:`~opportune.policies.variants` for the rules it builds on.
+"""The look-ahead policy: the optimum's action where its programme fits, else the exact optimum of a
+frontier window (:mod:`~opportune.policies.window`) in a uniform bin, or one step of policy improvement
+over a base rule (default :class:`~opportune.policies.variants.Slack`) in the others, within a decision
+budget if it has one.  See :mod:`~opportune.policies.variants` for the rules it builds on.
 """
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-from opportune.engine.deadline import BudgetExceeded, as_deadline
+from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.policies.base import (
     DONE,
     SHAKE,
@@ -29,6 +30,7 @@ from opportune.policies.optimal import (
     same_action,
 )
 from opportune.policies.variants import Slack
+from opportune.policies.window import FrontierWindow, window_available
 
 __all__ = ["Lookahead", "programme_bytes"]
 
@@ -71,8 +73,11 @@ def programme_bytes(engine) -> int:
 
 
 class Lookahead(DecidesOnMasks):
-    """The optimal action where the optimum's programme fits, else one step of policy improvement over
-    ``base`` (default :class:`Slack`); on plans too large for either, the base's action.
+    """The optimal action where the optimum's programme fits, else, in a uniform bin, the best action of
+    the frontier window's exact optimum (:class:`~opportune.policies.window.FrontierWindow`: the next
+    parts of the plan, the rest lumped; ``base`` where no window fits its states or time), and in the
+    pile and weighted bins one step of policy improvement over ``base`` (default :class:`Slack`); on plans
+    too large for that, the base's action.
 
     ``solver_settings`` are the bin and costs of the world it acts in (``visible``, ``capacity``,
     ``costs``, ``weights``; see :class:`~opportune.policies.evaluate.PolicyEvaluator`): the scores
@@ -81,9 +86,13 @@ class Lookahead(DecidesOnMasks):
     before it starts by :func:`~opportune.policies.states.estimate_states`) is used when it holds
     at most that many states, else the base policy's (the states the base reaches, fewer: its values
     after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
-    ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its fallback: the improvement step, or the base past :attr:`STEP_UNITS` units.
-    (The step alone was 0.4-1.8% above the optimum with one part visible and one buffer location,
-    where the optimum's programme is smallest.)  The pile bin likewise, with its own programmes
+    ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its
+    fallback: the window, or in the pile and weighted bins the improvement step (the base past
+    :attr:`STEP_UNITS` units).  (The window was within 0.24% of the optimum on 16-30-part plans, 1-3
+    visible and 1-2 locations, where the step alone was +1.6% and slack +5% to +24%: docs/decisions.md.)
+    The window's work is counted (``self.window.work``), at most
+    :data:`~opportune.policies.window.WINDOW_STATES` states a size tried; with a budget it also stops at
+    :attr:`WINDOW_SHARE` of it and the base decides within the rest.  The pile bin likewise, with its own programmes
     (:class:`~opportune.policies.pile.PileSolver`: the window is part of the state).  In either bin
     the optimum's programme is the compiled one where the core is built
     (:class:`~opportune.policies.optimal.CompiledOptimalSolver`,
@@ -109,10 +118,15 @@ class Lookahead(DecidesOnMasks):
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
     #: core) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
-    #: Where the optimum does not fit, plans of more units than this decide as the base does: the step over
-    #: the base evaluates the base look by look in Python (every look of every state asks the base rule), hours
-    #: on a 45-part plan.  The optimum itself is never refused by units, only by its states and bytes.
+    #: Where the optimum does not fit in a pile or weighted bin (the window serves the uniform bin), plans
+    #: of more units than this decide as the base does: the step over the base evaluates the base look by
+    #: look in Python (every look of every state asks the base rule), hours on a 45-part plan.  The optimum
+    #: itself is never refused by units, only by its states and bytes.
     STEP_UNITS = 16
+    #: With a budget, the share of it the frontier window may take (its programme is stopped there and the
+    #: base decides within the rest, :attr:`fallback`'s quarter): its states are capped
+    #: (:data:`~opportune.policies.window.WINDOW_STATES`), so this binds only on a very slow machine.
+    WINDOW_SHARE = 0.7
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
@@ -131,12 +145,18 @@ class Lookahead(DecidesOnMasks):
         # within the whole budget (nothing else runs then)
         self.fallback = self.base if budget is None else Slack(budget=budget / 4)
         self.fallback_alone = self.base if budget is None else Slack(budget=budget)
+        #: The frontier window that decides where the optimum does not fit, in a uniform bin (its ``work``
+        #: counts its windows and states); its base is the fallback within what it leaves of the budget.
+        self.window = None
         self.max_states = max_states
         # the pile bin has its own programme (policies/pile.py): the window is part of the state
         self.pile = solver_settings.pop("bin", "uniform") == "pile"
         if self.pile:
             solver_settings.pop("weights", None)
         self.settings = solver_settings
+        if not self.pile:
+            self.window = FrontierWindow(self.fallback, visible=solver_settings.get("visible", 2),
+                                         capacity=solver_settings.get("capacity"), costs=solver_settings.get("costs"))
         self.optimal = optimal
         self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
         #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
@@ -152,7 +172,7 @@ class Lookahead(DecidesOnMasks):
     @optimal.setter
     def optimal(self, value: bool) -> None:
         self._optimal = bool(value)
-        self._evaluator, self._too_large = None, False
+        self._evaluator, self._too_large, self._by_window = None, False, False
 
     @property
     def uses_buffer_order(self) -> bool:
@@ -176,6 +196,9 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 # the optimum's values where they fit (a policy of None), else the base's
                 base = None if self._optimum_fits(engine) else self.base
+                if base is not None and self._window_serves(engine):
+                    self._by_window = True
+                    return None         # the frontier window decides
                 if base is not None and engine.n_units > self.STEP_UNITS:
                     return None         # the step over the base is out of reach: the base decides
                 if self.pile:
@@ -197,6 +220,11 @@ class Lookahead(DecidesOnMasks):
             self._evaluator = ev
             self._too_large = False
         return self._evaluator
+
+    def _window_serves(self, engine) -> bool:
+        """Whether the frontier window decides where the optimum does not fit: a uniform bin and the
+        compiled core (:func:`~opportune.policies.window.window_available`).  O(parts)."""
+        return self.window is not None and window_available(engine, self.settings.get("weights"))
 
     def _compiled(self, engine) -> bool:
         """Whether the optimum's programme for this plan and bin is the compiled one.  O(parts)."""
@@ -339,12 +367,22 @@ class Lookahead(DecidesOnMasks):
 
     def _choose(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                 visible: tuple[str, ...]) -> Action:
+        start = time.perf_counter()
         action = self._programme(engine, mask, consistent, buffer, visible)
         if action is not None:
             return action
-        return self._fallback().choose_at(engine, mask, consistent, buffer, free, visible)
+        return self._fallback(engine, start).choose_at(engine, mask, consistent, buffer, free, visible)
 
-    def _fallback(self):
+    def _fallback(self, engine=None, start: float | None = None):
+        """What decides where the programme does not: the frontier window (within its share of the budget
+        from the decision's ``start``, a ``perf_counter`` moment, and the decision deadline on the engine),
+        else the base."""
+        if self._by_window and self._too_large:
+            if engine is not None:
+                own = (Deadline.NEVER if self.lookahead_budget is None
+                       else Deadline(start + self.WINDOW_SHARE * self.lookahead_budget))
+                self.window.deadline = own.sooner(engine.decision_deadline)
+            return self.window
         return self.fallback_alone if self._too_large else self.fallback
 
     def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
@@ -375,12 +413,15 @@ class Lookahead(DecidesOnMasks):
                     self._too_large = True
             except OptimalTooLarge:
                 self._too_large = True      # a large plan: decide as the base does from now on
+                self._by_window = self._window_serves(engine)
             finally:
                 ev.deadline = None
         return None
 
     def _why_too_large(self) -> str:
         """Why the programmes do not fit, in words: the optimum's refusal (states or bytes) and the base's cap."""
+        if self._by_window:
+            return self.refusal or "its optimum needs more states than it holds"
         base = (f"the step over the base rule is evaluated on plans of at most {self.STEP_UNITS} units"
                 if self._evaluator is None else f"the base rule's needs more than {self.max_states:,} states")
         return f"{self.refusal}; {base}" if self.refusal else base
@@ -410,7 +451,10 @@ class Lookahead(DecidesOnMasks):
         sched = state.schedule
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
+        start = time.perf_counter()
         action = self._programme(sched.engine, sched.mask, sched.consistent, state.buffer, visible)
+        if action is None and self._by_window and self._too_large:
+            return self._fallback(sched.engine, start).decide(state, visible, because=self._why_too_large())
         if action is None:
             # the base rule decided (the fallback, within the budget): its own decision, with its candidates,
             # its exactness and any estimates, and why the look-ahead did not decide

@@ -1,0 +1,432 @@
+"""The frontier window: near the optimum where the optimum's programme does not fit.
+
+At each state the *window* is the buffered parts and the next remaining parts in a topological order
+(fewest remaining ancestors first, then declaration order), closed under their remaining ancestors (in
+every open strategy where they fit the window, else in the strategy where they are fewest; ancestors
+outside it are taken as installed, and an installation no open strategy allows is never chosen), up to
+:data:`WINDOW_PARTS` parts and 64 units.  The plan's other remaining
+units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
+plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
+buffered (a free location, the others' mean move), and none is installed before the window is complete,
+the terminal state.  What the others cost after it does not depend on what was done in the window, so
+the terminal value is 0.  The window's exact optimum (the compiled ``WindowCore``,
+``src/native/window.cpp``: the optimum's recursion, looks as order statistics, the others one more
+group) is solved once per state, within :data:`WINDOW_STATES` states (counted, so the decision is the
+same on every machine), and the decision is its best action on the look: a visible part outside the
+window seen as an other (buffered, the one first in the topological order).  Where the window does not
+fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time, the base rule decides.
+
+Measured against the optimum on 16-30-part plans and per decision on the SALBP plans:
+``benchmarks/bench_fallback.py`` (docs/decisions.md).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+from opportune.engine import compiled_core
+from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.poset import bits
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
+from opportune.planning.costs import TimeModel
+
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available"]
+
+_native = compiled_core()
+
+#: The window's sizes (parts, buffered ones and ancestors included) tried at a state in increasing size,
+#: the largest that fits :data:`WINDOW_STATES` (and the deadline, where there is one) deciding: 12 was
+#: within 0.24% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
+#: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
+WINDOW_PARTS = (5, 8, 12)
+#: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
+#: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
+#: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
+WINDOW_STATES = 20_000
+#: Windows kept, by state (a decision table is under 1 kB for a window of 12 parts, so at most about
+#: 4 MB a policy): a state's looks share it.
+WINDOW_CACHE = 4096
+
+
+def window_available(engine, weights: dict[str, float] | None = None) -> bool:
+    """Whether the window serves this plan and bin: the compiled core is built (not switched off with
+    ``OPPORTUNE_PURE_PYTHON=1``), the bin is uniform (its looks are order statistics), and the plan has
+    at most 64 strategies.  O(parts).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    weights : dict, optional
+        Per-part visibility weights (all equal or None: a uniform bin).
+
+    Returns
+    -------
+    bool
+        True where :class:`FrontierWindow` can decide.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> window_available(OrderEngine(make_plan(["a", "b"], {})), {"a": 2.0})
+    False
+    """
+    uniform = len({float((weights or {}).get(p.id, 1.0)) for p in engine.plan.parts}) <= 1
+    return _native is not None and hasattr(_native, "WindowCore") and uniform and engine.k <= 64
+
+
+@dataclass(frozen=True)
+class WindowTable:
+    """What a decision at one state needs, whatever its look: the window's parts (plan indices, declaration
+    order), the expected costs after each move (``WindowCore.moves``), how many remaining parts are outside
+    the window, the window's size and the states its programme held.  Under 1 kB for a window of 12 parts,
+    whatever the plan (the parts outside are a count: a look's are ranked when it comes)."""
+
+    parts: tuple[int, ...]
+    values: tuple[float, ...]
+    outside: int
+    size: int
+    states: int
+
+
+def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int, int], dict[int, int]]:
+    """Remaining part -> the remaining units below its last unit (its own excluded) in the open strategy
+    where they are fewest (ties: the first): the parts it waits for on its nearest way in, transitive in
+    that strategy; and -> those below it in any open strategy.  Of every part, or of ``parts`` (indices).
+    O(parts × strategies)."""
+    nearest, every = {}, {}
+    posets = [p for s, p in enumerate(engine.posets) if consistent >> s & 1]
+    for i in range(len(engine.plan.parts)) if parts is None else parts:
+        first, q = engine.first[i], engine.plan.parts[i].quantity
+        own = ((1 << q) - 1) << first
+        if own & ~mask == 0:
+            continue
+        below = [poset.below[first + q - 1] & ~mask & ~own for poset in posets]
+        nearest[i] = min(below, key=int.bit_count)
+        every[i] = 0
+        for b in below:
+            every[i] |= b
+    return nearest, every
+
+
+def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int) -> set[int] | None:
+    """Part ``i`` and its remaining ancestors in every open strategy not in ``window`` (an ancestor in one
+    strategy brings its own in the others), or None past ``most`` parts.  O(parts added × strategies)."""
+    new, todo = set(), [i]
+    while todo:
+        j = todo.pop()
+        if j in new or j in window:
+            continue
+        new.add(j)
+        if len(new) > most:
+            return None
+        todo.extend(part_of[u] for u in bits(every[j]))
+    return new
+
+
+def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
+    """The window of ``size`` parts at a state: the buffered parts and the remaining parts first in a
+    topological order (fewest remaining ancestor units in an open strategy, then declaration order), each
+    with its remaining ancestors (in every open strategy where they fit the window, else in that one), at
+    most 64 units; and the remaining parts outside it, in that order.  A buffered part whose ancestors do
+    not fit is left out (lumped with the others).  O(parts × strategies).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    buffer : sequence of str
+        The buffered parts.
+    size : int
+        Parts in the window (buffered ones and ancestors counted; more where a closure adds them).
+
+    Returns
+    -------
+    (list of int, list of int)
+        The window's parts in declaration order, the others in topological order.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["b"], "d": ["c"]}))
+    >>> frontier_window(engine, 0, 1, ("c",), 2)
+    ([1, 2], [0, 3])
+    """
+    anc, every = _ancestors(engine, mask, consistent)
+    order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
+    part_of = engine.unit_part
+    plan = engine.plan
+    window: set[int] = set()
+    units = 0
+    buffered = sorted({plan.index(p) for p in buffer}, key=order.index)
+    for i in buffered + order:
+        if i in window or (len(window) >= size and i not in buffered):
+            continue
+        # closed in every open strategy where that fits the window (exact there), else in its nearest one
+        new = (_closure(i, every, part_of, window, max(0, size - len(window)))
+               or ({i} | {part_of[u] for u in bits(anc[i])}) - window)
+        more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
+        if units + more > 64 or (i in buffered and len(window) + len(new) > size):
+            if i in buffered:
+                continue        # far from the frontier: lumped with the others, an occupied location
+            break
+        window |= new
+        units += more
+    return sorted(window), [i for i in order if i not in window]
+
+
+class FrontierWindow(DecidesOnMasks):
+    """The exact optimum of the frontier window at each state, the rest of the plan lumped (see the module).
+
+    Parameters
+    ----------
+    base : policy, optional
+        What decides where no window fits in :data:`WINDOW_STATES` or in time (default
+        :class:`~opportune.policies.variants.Slack`).
+    visible, capacity, costs :
+        The uniform bin's world (as :class:`~opportune.policies.optimal.OptimalSolver`).
+    sizes : tuple of int
+        The window sizes tried in turn (:data:`WINDOW_PARTS`).
+    max_states : int
+        States a window's programme may hold (:data:`WINDOW_STATES`).
+    others : {"buffer", "ignore"}
+        Whether an other seen may be buffered (a free location), as on the real plan (the default: nearer
+        the optimum, ``benchmarks/bench_fallback.py``), or is seen as nothing (for measurement).
+
+    Attributes ``work`` counts what it did: windows solved, the states they held, and decisions left to
+    the base (no window fitted, or out of time).  ``deadline`` (a
+    :class:`~opportune.engine.deadline.Deadline`, or None) stops a window's programme; the base decides then.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> FrontierWindow(visible=1, capacity=1).choose_at(engine, 0, 1, (), 1.0, ("c",))
+    Action(kind='buffer', part='c', source=None)
+    """
+
+    name = "window"
+    rule = "the action of least expected cost in the frontier window's exact optimum (the other parts lumped)"
+    deterministic = True
+    decision_key = None
+
+    def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
+                 sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer"):
+        from opportune.policies.variants import Slack
+
+        self.base = base if base is not None else Slack()
+        self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
+        self.sizes, self.max_states = tuple(sizes), max_states
+        self.others = others
+        self.deadline: Deadline | None = None
+        self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
+        self._tables: OrderedDict = OrderedDict()
+        self._engine = None
+        self.last_table: WindowTable | None = None
+
+    def table(self, engine, mask: int, consistent: int, buffer) -> WindowTable | None:
+        """The window's decision table at a state (cached), or None where no window fits (states, or the
+        deadline).  At most ``len(sizes) × max_states`` states of work.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+
+        Returns
+        -------
+        WindowTable or None
+            The largest window's table that fitted, or None where none did.
+        """
+        if self._engine is not engine:
+            self._engine, self._tables = engine, OrderedDict()
+        key = (mask, consistent, tuple(sorted(buffer)))
+        got = self._tables.get(key)
+        if got is not None:
+            self._tables.move_to_end(key)
+            return got
+        got = None
+        for size in sorted(self.sizes):
+            # the smaller windows first: past the deadline or the cap, the largest finished one decides
+            try:
+                got = self._solve(engine, mask, consistent, buffer, size)
+            except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
+                break
+            if not got.outside:
+                break           # the window holds every part left: a larger one is the same
+        if got is not None:
+            self._tables[key] = got
+            if len(self._tables) > WINDOW_CACHE:
+                self._tables.popitem(last=False)
+        return got
+
+    def _solve(self, engine, mask: int, consistent: int, buffer, size: int) -> WindowTable:
+        """The window of ``size`` parts solved by the compiled core: its table.  The work is counted."""
+        parts, outside = frontier_window(engine, mask, consistent, buffer, size)
+        core, buf, others_buffered = self._core(engine, mask, consistent, buffer, parts, outside)
+        seconds = as_deadline(self.deadline).seconds()
+        try:
+            values = core.moves(0, (1 << len(core_strategies(engine, consistent))) - 1, buf, others_buffered,
+                                seconds=seconds, max_states=self.max_states)
+        finally:
+            self.work["windows"] += 1
+            self.work["states"] += core.states
+            self.work["most_states"] = max(self.work["most_states"], core.states)
+        return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states)
+
+    def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
+        """The compiled window programme for ``parts`` (the remaining units of each, the open strategies'
+        orders among them), the window's buffer counts, and the others buffered."""
+        plan = engine.plan
+        unit_bit, first, quantity, move = {}, [], [], []
+        for i in parts:
+            first.append(len(unit_bit))
+            for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity):
+                if not mask >> u & 1:
+                    unit_bit[u] = len(unit_bit)
+            quantity.append(len(unit_bit) - first[-1])
+            move.append(float(self.costs.move(plan.parts[i].id)))
+        below = []
+        for s in core_strategies(engine, consistent):
+            # a unit's ancestors outside the window are the strategies' other than the one its window took
+            # whole (_ancestors): taken as installed there (blocking them would leave the window stuck once
+            # installs closed the other strategies); a move they forbid on the real plan is never chosen
+            below.append([_window_bits(engine.posets[s].below[u] & ~mask, unit_bit) for u in unit_bit])
+        index = {i: j for j, i in enumerate(parts)}
+        buf = [0] * len(parts)
+        others_buffered = 0
+        for p in buffer:
+            j = index.get(plan.index(p))
+            if j is None:
+                others_buffered += 1
+            else:
+                buf[j] += 1
+        other_units = [u for i in outside for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity)
+                       if not mask >> u & 1]
+        other_move = (float("inf") if self.others == "ignore" else       # an infinite move: never buffered
+                      sum(self.costs.move(plan.parts[engine.unit_part[u]].id) for u in other_units) / len(other_units)
+                      if other_units else float(self.costs.motion))
+        core = _native.WindowCore(len(unit_bit), first, quantity, below, move, float(self.costs.look),
+                                  float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity,
+                                  len(other_units), float(other_move))
+        return core, buf, others_buffered
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]) -> Action:
+        if mask == engine.full:
+            return DONE
+        table = self.table(engine, mask, consistent, buffer)
+        self.last_table = table
+        if table is None:
+            self.work["by_base"] += 1
+            return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
+        return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
+
+    def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
+        """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+        because : str
+            Why the window decides, said first in the rule (empty: nothing said).
+
+        Returns
+        -------
+        Decision
+            The window's decision, or the base's (saying that no window fitted).
+        """
+        sched = state.schedule
+        if sched.mask == sched.engine.full:
+            return Decision(DONE, "the assembly is complete")
+        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        table = self.last_table
+        if table is None:
+            base = self.base.decide(state, visible)
+            return Decision(base.action, f"as the base rule ({self.base.name}), because {because + ' and ' * bool(because)}"
+                            f"no frontier window fitted its state cap ({self.max_states:,}) or its time: {base.rule}",
+                            note=base.note)
+        rule = f"by its frontier window, because {because}: {self.rule}" if because else self.rule
+        return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
+                        f"expected cost of the window {table.values[-1]:.4f}")
+
+
+def _window_bits(units: int, unit_bit: dict[int, int]) -> int:
+    """The plan's ``units`` in the window as window bits (the others left out).  O(popcount)."""
+    out = 0
+    for u in bits(units):
+        if u in unit_bit:
+            out |= 1 << unit_bit[u]
+    return out
+
+
+def core_strategies(engine, consistent: int) -> list[int]:
+    """The open strategies, in order (the window's strategy bits).  O(strategies)."""
+    return [s for s in range(engine.k) if consistent >> s & 1]
+
+
+def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffer, visible, shake: float) -> Action:
+    """The window's best action on a look (ties: install, then buffer, then declaration order, the bin
+    before the buffer, as the optimum's), or a shake where no move is cheaper than shaking by 1e-12.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies (an installation no open strategy allows is not a move).
+    table : WindowTable
+        The state's window (:meth:`FrontierWindow.table`).
+    buffer, visible : tuple of str
+        The buffered parts and the look.
+    shake : float
+        The shake's cost.
+
+    Returns
+    -------
+    Action
+        The action.
+    """
+    plan = engine.plan
+    values = table.values
+    index = {i: j for j, i in enumerate(table.parts)}
+    ranked = []
+    seen = {plan.index(p) for p in visible}
+
+    def fits(i: int) -> bool:
+        return engine.consistent_after(mask, consistent, engine.next_unit(mask, i)) != 0
+
+    for i in seen:
+        j = index.get(i)
+        if j is not None:
+            if fits(i):
+                ranked.append((values[3 * j], 0, i, 0, Action("install", plan.parts[i].id, "bin")))
+            ranked.append((values[3 * j + 1], 1, i, 0, Action("buffer", plan.parts[i].id)))
+    for i in {plan.index(p) for p in buffer}:
+        j = index.get(i)
+        if j is not None and fits(i):
+            ranked.append((values[3 * j + 2], 0, i, 1, Action("install", plan.parts[i].id, "buffer")))
+    outside = [i for i in seen if i not in index]
+    if outside:
+        # the one nearest the frontier, as the window's order ranks them
+        anc, _ = _ancestors(engine, mask, consistent, outside)
+        i = min(outside, key=lambda i: (anc[i].bit_count(), i))
+        ranked.append((values[-2], 1, i, 0, Action("buffer", plan.parts[i].id)))
+    ranked = [r for r in ranked if r[0] != float("inf")]
+    if not ranked:
+        return SHAKE
+    best = min(ranked, key=lambda r: r[:4])
+    return SHAKE if best[0] > shake + values[-1] + 1e-12 else best[4]

@@ -1,0 +1,182 @@
+"""The frontier window (policies/window.py, src/native/window.cpp), the default policy's fallback where its
+optimum does not fit: its programme against the full optimum where the window covers the plan (the same
+doubles), the lumped others against a plan with an explicit part in their place, its decisions
+deterministic and its work bounded by counted states."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+from conftest import random_plans
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from opportune import Sequencer, load_plan, make_plan
+from opportune.engine import OrderEngine, compiled_core
+from opportune.planning.costs import TimeModel
+from opportune.policies.evaluate import PolicyEvaluator
+from opportune.policies.lookahead import Lookahead
+from opportune.policies.optimal import optimal_solver
+from opportune.policies.variants import Slack
+from opportune.policies.window import FrontierWindow, frontier_window, window_available
+
+pytestmark = pytest.mark.skipif(not window_available(OrderEngine(make_plan(["a"], {}))),
+                                reason="the compiled core is not built")
+SETTINGS = ((1, 1), (2, 2), (3, 1), (2, None))      # (visible, buffer locations)
+
+
+def _walk(engine, rng: random.Random, moves: int):
+    """A state a few random legal moves in (installs and buffers), as (mask, strategies, buffer)."""
+    plan, mask, cons, buffer = engine.plan, 0, engine.all_strategies, []
+    for _ in range(moves):
+        left = [i for i in range(len(plan.parts)) if engine.next_unit(mask, i) is not None
+                and buffer.count(plan.parts[i].id) < plan.parts[i].quantity - sum(
+                    mask >> u & 1 for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity))]
+        if not left:
+            break
+        i = rng.choice(left)
+        u = engine.next_unit(mask, i)
+        after = engine.consistent_after(mask, cons, u)
+        if after and plan.parts[i].id not in buffer and rng.random() < 0.7:
+            mask, cons = mask | 1 << u, after
+        elif len(buffer) < 1:
+            buffer.append(plan.parts[i].id)
+    return mask, cons, tuple(buffer)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(plan=random_plans(max_parts=5, max_units=7, max_strategies=3), seed=st.integers(0, 1000))
+def test_a_window_over_the_whole_plan_is_the_optimum_to_the_last_bit(plan, seed):
+    """Several strategies and quantities, costs per part, at the start and a few moves in: the window's
+    value and its values after each move are the full optimum's, the same doubles."""
+    rng = random.Random(seed)
+    engine = OrderEngine(plan)
+    costs = TimeModel(shake=rng.choice([0.5, 1.0, 2.7]), look=rng.choice([0.0, 0.3]),
+                      parts={p.id: rng.choice([1.0, 1.7, 0.35]) for p in plan.parts})
+    visible, capacity = rng.choice(SETTINGS)
+    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 3))
+    if mask == engine.full:
+        return
+    optimum = optimal_solver(engine, visible=visible, capacity=capacity, costs=costs)
+    window = FrontierWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), max_states=10**6)
+    table = window.table(engine, mask, cons, buffer)
+    assert table.outside == 0 and len(table.parts) == sum(engine.next_unit(mask, i) is not None
+                                                            for i in range(len(plan.parts)))
+    key = optimum.policy_key(mask, cons, buffer)
+    assert table.values[-1] == optimum.value(key)
+    in_bin = [plan.parts[i].id for i, c in enumerate(optimum._bin_counts(key)) for _ in range(c)]
+    for _ in range(3):
+        look = rng.sample(in_bin, min(visible, len(in_bin)))
+        ours = window.choose_at(engine, mask, cons, buffer, 0, tuple(look))
+        theirs, _ = optimum.best_action(key, tuple(sorted(plan.index(p) for p in look)))
+        assert ours == theirs
+
+
+def _with_rest(plan, others: int):
+    """The plan with one explicit part of ``others`` units after every part: what the window lumps."""
+    requires = {b: [a for a, bb in plan.strategies[0].pairs() if bb == b] for b in plan.part_ids}
+    requires["_rest"] = list(plan.part_ids)
+    return make_plan(list(plan.part_ids) + [{"id": "_rest", "quantity": others}], {k: v for k, v in requires.items() if v})
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_lumped_others_are_a_part_after_the_window(seed):
+    """The window's programme with ``others`` lumped units is the optimum of the plan with a part of that many
+    units required after every other part, less what those units cost after the window (each a look and a
+    move: the terminal value 0 differs from it by that constant only)."""
+    rng = random.Random(seed)
+    ids = [f"p{i}" for i in range(rng.randint(2, 6))]
+    plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.35] for j, b in enumerate(ids)})
+    others, (visible, capacity) = rng.randint(1, 7), rng.choice(SETTINGS)
+    costs = TimeModel(look=rng.choice([0.0, 0.25]), shake=rng.choice([1.0, 1.6]))
+    explicit = optimal_solver(OrderEngine(_with_rest(plan, others)), visible=visible, capacity=capacity, costs=costs)
+    engine = OrderEngine(plan)
+    core = compiled_core().WindowCore(engine.n_units, list(engine.first), [1] * len(ids),
+                                      [[int(b) for b in p.below] for p in engine.posets], [1.0] * len(ids),
+                                      costs.look, costs.shake, visible, -1 if capacity is None else capacity, others, 1.0)
+    lumped = core.value(0, 1, [0] * len(ids), 0, seconds=-1.0, max_states=-1)
+    assert lumped + others * (costs.look + 1.0) == pytest.approx(explicit.value(), rel=1e-12, abs=1e-12)
+    assert core.states < explicit.states      # the lumped units are not in the masks
+
+
+def test_the_window_takes_the_next_parts_and_lumps_a_buffered_part_far_from_the_frontier():
+    engine = OrderEngine(make_plan(["a", "b", "c", "d", "e"], {"b": ["a"], "c": ["b"], "d": ["c"]}))
+    assert frontier_window(engine, 0, 1, (), 2) == ([0, 4], [1, 2, 3])
+    assert frontier_window(engine, 0, 1, ("d",), 3) == ([0, 1, 4], [2, 3])      # d with its ancestors: 4 parts
+    assert frontier_window(engine, 0, 1, ("d",), 4) == ([0, 1, 2, 3], [4])
+
+
+def _run(policy, plan, visible: int, capacity: int, seed: int, steps: int):
+    """The policy's decisions along a seeded run (the looks drawn from the bin)."""
+    engine, rng = OrderEngine(plan), random.Random(seed)
+    mask, cons, buffer, out = 0, engine.all_strategies, (), []
+    for _ in range(steps):
+        if mask == engine.full:
+            break
+        in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
+        action = policy.choose_at(engine, mask, cons, buffer, capacity - len(buffer),
+                                  tuple(rng.sample(in_bin, min(visible, len(in_bin)))))
+        out.append(action)
+        if action.kind == "buffer":
+            buffer += (action.part,)
+        elif action.kind == "install":
+            unit = engine.next_unit(mask, plan.index(action.part))
+            mask, cons = mask | 1 << unit, engine.consistent_after(mask, cons, unit)
+            if action.source == "buffer":
+                buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
+    return out
+
+
+def test_on_a_large_plan_its_decisions_are_deterministic_and_its_work_is_counted_and_bounded():
+    plan = load_plan("salbp:KILBRID")
+    runs = []
+    for _ in range(2):
+        policy = Lookahead(visible=2, capacity=2, optimal=False)
+        runs.append(_run(policy, plan, 2, 2, seed=3, steps=40))
+        work = policy.window.work
+        assert work["windows"] > 0 and work["by_base"] == 0
+        assert work["most_states"] <= policy.window.max_states
+        assert work["states"] <= len(policy.window.sizes) * policy.window.max_states * work["windows"]
+    assert runs[0] == runs[1]
+
+
+def test_where_no_window_fits_its_states_the_base_decides_and_says_so():
+    plan = load_plan("salbp:KILBRID")
+    window = FrontierWindow(Slack(), visible=2, capacity=2, max_states=1)
+    assert _run(window, plan, 2, 2, seed=1, steps=5) == _run(Slack(), plan, 2, 2, seed=1, steps=5)
+    assert window.work["by_base"] == 5 and window.work["windows"] == 5 and window.work["most_states"] <= 1
+    seq = Sequencer(plan, policy=window)
+    assert "no frontier window fitted its state cap (1)" in window.decide(seq.state, (plan.part_ids[0],)).rule
+
+
+def test_past_its_deadline_the_base_decides():
+    """The window's programme is stopped by the decision's deadline (a service look's, on the engine)."""
+    plan = load_plan("salbp:KILBRID")
+    policy = Lookahead(visible=2, capacity=2, optimal=False, budget=0.05)
+    engine = OrderEngine(plan)
+    look = (plan.part_ids[0], plan.part_ids[1])
+    policy.choose_at(engine, 0, engine.all_strategies, (), 2, look)        # chooses its programme: the window
+    before = dict(policy.window.work)
+    with engine.deadline(0.0):          # already passed, at a state not seen yet
+        action = policy.choose_at(engine, 0, engine.all_strategies, (plan.part_ids[5],), 1, look)
+    assert policy.window.work["by_base"] == before["by_base"] + 1
+    assert policy.window.work["windows"] == before["windows"] + 1      # the smallest window, stopped at once
+    assert action.kind in ("install", "buffer", "shake") and (action.part in look + (plan.part_ids[5],)
+                                                            or action.kind == "shake")
+
+
+def test_the_default_decides_by_the_window_where_its_optimum_is_off_and_is_near_it():
+    """A 12-part plan: the window of 12 parts at the start covers it all; the default without its optimum is
+    then within 0.5% of the optimum (the window of later states is the plan's remaining parts)."""
+    rng = random.Random(4)
+    ids = [f"p{i:02d}" for i in range(12)]
+    plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.25] for j, b in enumerate(ids)})
+    engine = OrderEngine(plan)
+    policy = Lookahead(visible=1, capacity=1, optimal=False)
+    ev = PolicyEvaluator(engine, policy, visible=1, capacity=1)
+    value, best = ev.value(), ev.optimal()
+    assert not ev.by_optimum and policy.window.work["windows"] > 0
+    assert best - 1e-9 <= value <= best * 1.005
+    rule = policy.decide(Sequencer(plan, policy=policy).state, (ids[0],)).rule
+    assert rule.startswith("by its frontier window, because its exact optimum is switched off"), rule
