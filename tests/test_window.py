@@ -90,7 +90,8 @@ def test_lumped_others_are_a_part_after_the_window(seed):
     plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.35] for j, b in enumerate(ids)})
     others, (visible, capacity) = rng.randint(1, 7), rng.choice(SETTINGS)
     costs = TimeModel(look=rng.choice([0.0, 0.25]), shake=rng.choice([1.0, 1.6]))
-    explicit = optimal_solver(OrderEngine(_with_rest(plan, others)), visible=visible, capacity=capacity, costs=costs)
+    explicit = optimal_solver(OrderEngine(_with_rest(plan, others)), merge=False, visible=visible, capacity=capacity,
+                              costs=costs)
     engine = OrderEngine(plan)
     core = compiled_core().WindowCore(engine.n_units, list(engine.first), [1] * len(ids),
                                       [[int(b) for b in p.below] for p in engine.posets], [1.0] * len(ids),
