@@ -14,10 +14,10 @@ import time
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, recursion_room
 from opportune.engine.poset import LazyUnion, Poset, bits
+from opportune.engine.tuning import CHUNK_TABLES_UP_TO as _TABLES_UP_TO
 
 __all__ = ["count_by_downsets", "position_sums_by_downsets", "count_downsets"]
 
-_TABLES_UP_TO = 448     # pieces up to this size get 14-bit chunk tables in upset_counts (32 of them at most)
 
 
 def _setup(poset: Poset, mask: int | None, dl: Deadline = Deadline.NEVER):

@@ -81,6 +81,9 @@ from opportune.engine.count import Counter
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.hub import hub_split
 from opportune.engine.poset import Poset, bits, components, cut_blocks
+from opportune.engine.tuning import (
+    ERROR_MARGIN as _MARGIN, SMC_COST, SKETCH_FLOOR, SKETCH_FLOOR_MOST, ARMC_MAX_N, ARMC_MIN_N,
+    ARMC_SHARE, ARMC_HOPELESS)
 
 __all__ = ["Estimate", "OrderSketch", "estimate_count", "relaxation_estimate"]
 
@@ -154,10 +157,6 @@ def _t_quantile(p: float, df: int) -> float:
     return z + g1 / df + g2 / df ** 2 + g3 / df ** 3 + g4 / df ** 4
 
 
-#: The stated half-width uses Student's t quantile times ``1 + _MARGIN * (1 + skew) / sqrt(n)``,
-#: where ``skew`` is the skewness of a lognormal with the runs' spread of logs, or that of the runs
-#: if larger: a margin calibrated on measured replicate distributions (see :func:`_stated_error`).
-_MARGIN = 0.5
 
 
 def _stated_error(runs: list[float], confidence: float) -> float:
@@ -641,25 +640,6 @@ def _pieces(counter: Counter, mask: int, deadline: Deadline = Deadline.NEVER) ->
     return logf, hard
 
 
-#: Seconds one run of the sequential Monte Carlo takes per particle and squared element (measured
-#: here: ARC111, 111 elements, 1,024 particles ~3 s): a run predicted to take longer than the time
-#: left is not started, and the time goes to sequential importance sampling instead.
-SMC_COST = 2e-7
-#: Seconds per element the certain bounds' one pass may take past a spent deadline (measured: 400
-#: elements in 3–5 ms), and at most this many in all: kept within the count's stated margin.
-SKETCH_FLOOR = 2.5e-5
-SKETCH_FLOOR_MOST = 0.05
-#: Orders of at most this many elements (and at least :data:`ARMC_MIN_N`) are tried by adaptive
-#: relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`, compiled core only) before sequential
-#: Monte Carlo: on sparse orders of 64-100 elements it states about ±5 % in 3 seconds.  Larger
-#: orders need pieces of far more than 64 elements for a draw to hit.
-ARMC_MAX_N = 256
-ARMC_MIN_N = 8
-#: Share of the time left (after the exact attempts) that it may take; it draws nothing, and leaves
-#: the time to the runs, when it predicts fewer than ``ARMC_HOPELESS`` hits in that time (30 hits
-#: state about ±40 %).
-ARMC_SHARE = 0.6
-ARMC_HOPELESS = 30
 
 
 def relaxmc_available() -> bool:

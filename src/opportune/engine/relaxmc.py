@@ -65,31 +65,14 @@ from dataclasses import dataclass, field
 
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
+from opportune.engine.tuning import (
+    RELAX_MAX_N as MAX_N, RELAX_K_START as K_START, RELAX_K_STEP as K_STEP, RELAX_K_MAX as K_MAX,
+    RELAX_TRIES as TRIES, RELAX_MAX_BYTES as MAX_BYTES, RELAX_COUNT_GROWTH as COUNT_GROWTH,
+    RELAX_PILOT_DRAWS as PILOT_DRAWS, RELAX_PILOT_HITS as PILOT_HITS, RELAX_ENTRY_SECONDS as
+    ENTRY_SECONDS, RELAX_STEP_SECONDS as STEP_SECONDS, RELAX_COUNT_SHARE as COUNT_SHARE)
 
 __all__ = ["MAX_N", "RelaxEstimate", "clopper_pearson", "estimate", "target_hits"]
 
-#: Largest order estimated this way: the partition holds an n × n comparability matrix and an
-#: n × (n / k) table of counts (a few MB at 1,024 elements).
-MAX_N = 1024
-#: Piece sizes: the first, the step, the last (the compiled pieces hold at most 64 elements).
-K_START, K_STEP, K_MAX = 20, 5, 64
-#: Random starts of the partition's swap search per ``k`` (as ``armc``).
-TRIES = 50
-#: Bytes the memos of one relaxation may hold (about 100-140 bytes an entry, with the growth slack).
-MAX_BYTES = 256 * 2**20
-#: The next ``k``'s count is predicted to take this many times this one's memo entries (``armc``: 10).
-COUNT_GROWTH = 10.0
-#: The pilot that predicts the draws a relaxation needs: at most this many draws, stopping at
-#: :data:`PILOT_HITS` hits (tens of milliseconds).
-PILOT_DRAWS = 32768
-PILOT_HITS = 64
-#: Seconds per memo entry and per element placed in a draw (x86-64, measured: 0.15-0.65 µs an
-#: entry, 0.04-0.15 µs an element): they only weigh counting against drawing when choosing ``k``;
-#: the clock stops the work.
-ENTRY_SECONDS = 0.5e-6
-STEP_SECONDS = 0.1e-6
-#: Share of the time the exact counts of the relaxations may take, over every ``k`` tried.
-COUNT_SHARE = 0.5
 #: Threads that count and draw, at most (the core's own bound).
 MAX_THREADS = 256
 
