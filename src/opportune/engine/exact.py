@@ -71,9 +71,10 @@ class ExactCounting:
         ``deadline``, :class:`BudgetExceeded`; more than ``MAX_STRATEGIES_EXACT`` strategies too."""
         return self._terms(consistent, deadline)
 
-    def hub_found(self, counter: Counter) -> bool:
-        """Whether ``counter`` counts through a hub it found.  O(1)."""
-        return self._hubs.get(counter) is not None
+    def hub_found_in(self, terms: list) -> bool:
+        """Whether a counter of the terms ``(sign, counter)`` counts through a hub it found.  O(terms)."""
+        hubs = self._hubs
+        return any(hubs.get(c) is not None for _, c in terms)
 
     def hub_looked_for(self, counter: Counter) -> bool:
         """Whether a hub was looked for on ``counter`` (found, not found, or a search cut short).  O(1)."""

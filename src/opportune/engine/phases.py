@@ -44,7 +44,7 @@ class StopReason(enum.Enum):
     SKIPPED = "skipped"             # it does not apply to this question
 
 
-@dataclass
+@dataclass(slots=True)
 class PhaseResult:
     """What a phase gives back: why it stopped, and the answer if it has one."""
 
@@ -52,7 +52,7 @@ class PhaseResult:
     answer: CountResult | None = None
 
 
-@dataclass
+@dataclass(slots=True)
 class CountQuestion:
     """One call of ``count_result``: the state asked about, the error asked, and what the phases
     leave for one another (the inclusion–exclusion terms, the first relaxation estimate, the terms'
@@ -187,7 +187,7 @@ class ExactTurns:
         plain_only = True
         while True:
             now = time.perf_counter()
-            hub = any(engine.hub_found(c) for _, c in q.terms)
+            hub = engine.hub_found_in(q.terms)
             seconds = turn * (tuning.PLAIN_SHARE if plain_only and hub else 1.0)
             # a deadline spent before the call (reading the plan) still leaves a small plan its exact
             # count: GRACE seconds, within COUNT_MARGIN
