@@ -256,9 +256,9 @@ class SequentialMonteCarlo:
             # found none, or were cut short in the search: a new split would start over with less time)
             hub = {"hub": 0.0} if engine.hub_looked_for(counter) else {}
             # fewer particles when time is short, so that two runs fit (a run of p particles on n
-            # elements took about 2e-7 p n^2 seconds here: ARC111 with 1,024 particles ~3 s)
+            # elements takes about SMC_COST p n^2 seconds: ARC111 with 1,024 particles ~3 s)
             particles = 1024
-            while particles > 64 and 2e-7 * particles * n * n > seconds / 4:
+            while particles > 64 and tuning.SMC_COST * particles * n * n > seconds / 4:
                 particles //= 2
             # each of k terms at confidence 1 - 0.05/k, so that all k intervals hold together with
             # probability at least 95% (a union bound); one term keeps the plain 95%
