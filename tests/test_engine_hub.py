@@ -182,18 +182,18 @@ def test_count_result_gives_the_plain_count_turns_of_a_fixed_length_whatever_the
     engine (it used to be a tenth of the limit: a plan that its hub counts at once waited for it, longer
     the longer the limit), and no count's time limit is left changed."""
     from opportune import make_plan
-    from opportune.engine import OrderEngine, Schedule
+    from opportune.engine import OrderEngine, Schedule, phases
     from opportune.engine.schedule import FIRST_TURN
 
     plan = make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["b", "c"]})
     turns = []
-    real = Schedule._exact_by
+    real = phases._exact_by
 
-    def recording(self, terms, remaining, until, plain_only):
+    def recording(schedule, terms, remaining, until, plain_only):
         turns.append((plain_only, until - time.perf_counter()))
-        return real(self, terms, remaining, until, plain_only)
+        return real(schedule, terms, remaining, until, plain_only)
 
-    monkeypatch.setattr(Schedule, "_exact_by", recording)
+    monkeypatch.setattr(phases, "_exact_by", recording)
     for limit, engine_limit in ((10, None), (100, None), (10, 4.0)):
         engine = OrderEngine(plan, time_limit=engine_limit)
         turns.clear()

@@ -16,7 +16,7 @@ import pytest
 
 from opportune.engine import OrderEngine
 from opportune.engine import count as count_module
-from opportune.engine import schedule as schedule_module
+from opportune.engine import tuning
 from opportune.engine.native import NativeCounter
 from opportune.policies.opportunistic import Opportunistic
 from opportune.sequencer import Sequencer
@@ -65,7 +65,7 @@ def assemblies(engine_of, plan, n: int, seed: int, budget=None, on_decision=None
 @pytest.mark.parametrize("budget", [None, 0.05])
 def test_memo_upkeep_happens_between_decisions_never_inside_one(monkeypatch, budget):
     plan = two_strategy_plan()
-    monkeypatch.setattr(schedule_module, "STATE_CACHE_LIMIT", 40)     # small caps: reached every assembly
+    monkeypatch.setattr(tuning, "STATE_CACHE_LIMIT", 40)     # small caps: reached every assembly
     shared = OrderEngine(plan)
     for strategies in (1, 2, 3):
         shared.counter(strategies).max_total = 60

@@ -48,12 +48,12 @@ def test_an_engine_keeps_its_memos_within_its_limit_and_decides_as_one_that_keep
     """TONGE70 through 150 decisions of the paper's exact rule (its memos grow from 5 to about 30 MB):
     an engine limited to 12 MB shrinks several times, is under its limit after every outcome, and
     decides exactly as an engine without a limit."""
-    from opportune.engine import schedule
+    from opportune.engine import tuning
 
     # Each shrink finishes where it starts, however busy the machine: in slices of 20 ms of wall time, a
     # shrink on a loaded machine went on at the next outcome and left this one over the limit (the slices
     # have their own test below)
-    monkeypatch.setattr(schedule, "SHRINK_SECONDS", None)
+    monkeypatch.setattr(tuning, "SHRINK_SECONDS", None)
     plan = load_plan("salbp:TONGE70")
     free = OrderEngine(plan, memory_limit=None)
     small = OrderEngine(plan, memory_limit=12 << 20)
@@ -195,7 +195,7 @@ def test_a_shrink_too_long_for_one_slice_goes_on_at_every_outcome(monkeypatch):
     waiting for the next measurement (memos that grew faster than one slice per measurement stayed
     over their limit), and a resumed pass drops what was planned, not more: the engine ends under
     :data:`SHRINK_TO` of its limit with every memo at the share planned, and counts as before."""
-    from opportune.engine import schedule
+    from opportune.engine import tuning
 
     plan = load_plan("salbp:TONGE70")
     engine = OrderEngine(plan, memory_limit=None)
@@ -204,7 +204,7 @@ def test_a_shrink_too_long_for_one_slice_goes_on_at_every_outcome(monkeypatch):
         pass
     used = engine.nbytes()
     engine.memory_limit = used // 2
-    monkeypatch.setattr(schedule, "SHRINK_SECONDS", 0.0)     # every slice stops after its first entry
+    monkeypatch.setattr(tuning, "SHRINK_SECONDS", 0.0)     # every slice stops after its first entry
     engine.measure_every = float("inf")
     engine._measured = (float("-inf"), 0)
     engine.maintain()
@@ -216,7 +216,7 @@ def test_a_shrink_too_long_for_one_slice_goes_on_at_every_outcome(monkeypatch):
         engine.maintain()
         assert calls < 10**5
     assert engine.shrunk == 1, "one measurement, one pass"
-    assert engine.nbytes() <= schedule.SHRINK_TO * engine.memory_limit
+    assert engine.nbytes() <= tuning.SHRINK_TO * engine.memory_limit
     for memo, target in planned:        # each memo kept what was planned: a resumed pass drops no more
         assert abs(memo.entries() - target) <= 1 or memo.entries() <= 1
     fresh = OrderEngine(plan, memory_limit=None)

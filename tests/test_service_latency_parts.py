@@ -127,7 +127,7 @@ def test_prepare_builds_the_tables_so_that_no_decision_does(monkeypatch):
     engine = OrderEngine(_layered_plan(400, 3))
     built = []
     real = poset_module.byte_unions
-    monkeypatch.setattr("opportune.engine.schedule.byte_unions", lambda *a, **k: built.append(1) or real(*a, **k))
+    monkeypatch.setattr("opportune.engine.questions.byte_unions", lambda *a, **k: built.append(1) or real(*a, **k))
     engine.warm_up(0.2)                       # the tables first, then counting (done or not)
     assert built == [1]
     engine.installable_units(0, engine.all_strategies)

@@ -7,6 +7,11 @@
 * :mod:`~opportune.engine.schedule` — the schedule: installed parts plus all admissible completions,
   and the one counting entry (:meth:`~opportune.engine.schedule.Schedule.count_result` and its
   family): the exact methods, the hub split and the estimates are chosen behind it;
+* :mod:`~opportune.engine.phases` — the counting methods behind that entry, one phase each, run in order;
+* :mod:`~opportune.engine.exact`, :mod:`~opportune.engine.questions`, :mod:`~opportune.engine.memory` —
+  the order engine's exact counts and deadline, its questions about a state, its memory upkeep;
+* :mod:`~opportune.engine.result` — what a count answers, and counts as text;
+* :mod:`~opportune.engine.tuning` — every numeric tuning constant of the engine, with why;
 * :mod:`~opportune.engine.stats` — Student's t for the estimates' stated errors.
 """
 

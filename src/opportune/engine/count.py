@@ -74,6 +74,10 @@ from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, rec
 from opportune.engine.poset import LazyMeet as _LazyMeet
 from opportune.engine.poset import LazyUnion as _LazyUnion
 from opportune.engine.poset import Poset, bits, components, cut_blocks, cut_chain, split_components
+from opportune.engine.tuning import (
+    OTHER_SHARE, MAX_TOTAL, CHECK_EVERY as _CHECK_EVERY, NARROW_UP_TO as _NARROW, BYTE_TABLES_UP_TO as
+    _WIDE, EVICT_CHUNK, PIECE_PROBE as _PROBE, DP_COST as _DP_COST, IDEAL_PROBE as _IDEAL_PROBE, DP_MAX_N
+    as _DP_MAX_N)
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
@@ -82,12 +86,6 @@ if TYPE_CHECKING:
 
 __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions", "entries_within"]
 
-#: Share of each turn's new entries the direction with more extremal elements gets in
-#: :meth:`Counter._count_piece` (the other gets the whole turn).  Tunable for experiments.
-OTHER_SHARE = 0.0625
-#: Memo entries a counter holds between top-level calls, by default (see :meth:`Counter.maintain`).
-MAX_TOTAL = 2_000_000
-_CHECK_EVERY = 256  # new memo entries between clock checks (a power of two), on small posets
 
 
 def _check_every(n: int) -> int:
@@ -98,14 +96,7 @@ def _check_every(n: int) -> int:
         every //= 2
     return every
 
-_NARROW = 64        # posets up to this size may scan with chunk tables of at most 16 bits (three up to 48)
-_WIDE = 1024        # posets up to this size scan with byte tables; larger ones element by element
 _INF = float("inf")
-EVICT_CHUNK = 4096  # memo entries dropped between two readings of the clock
-_PROBE = 1 << 13    # new entries the plain recursion may spend on a set before its hard pieces get a method each
-_DP_COST = 0.7      # one down-set of the dynamic programme costs about this many memo entries of the recursion
-_IDEAL_PROBE = 20_000   # sets the bounded down-set count may memoise before it gives up
-_DP_MAX_N = 100         # pieces larger than this never try the down-set DP (nor count their down-sets)
 
 
 class _Factorials(dict):

@@ -14,10 +14,10 @@ import time
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline, recursion_room
 from opportune.engine.poset import LazyUnion, Poset, bits
+from opportune.engine.tuning import CHUNK_TABLES_UP_TO as _TABLES_UP_TO
 
 __all__ = ["count_by_downsets", "position_sums_by_downsets", "count_downsets"]
 
-_TABLES_UP_TO = 448     # pieces up to this size get 14-bit chunk tables in upset_counts (32 of them at most)
 
 
 def _setup(poset: Poset, mask: int | None, dl: Deadline = Deadline.NEVER):
@@ -257,12 +257,9 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
     >>> upset_counts(Poset.from_pairs(3, [(0, 1)]))
     (3, {3: 1, 6: 2, 7: 3})
     """
-    import time
-
     if mask is None:
         mask = poset.full
     dl = as_deadline(deadline)
-    deadline = dl.at
     if mask == poset.full:
         sub, old = poset, list(range(poset.n))
     else:
@@ -270,10 +267,27 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
             sub, old = poset.restrict(mask, deadline=dl)
         except BudgetExceeded:
             return None
-    k = sub.n
-    if k <= 1:
+    if sub.n <= 1:
         return 1, {mask: 1}
-    below = sub.below
+    chunks = _chunk_tables(sub.below, sub.n, dl)
+    if chunks is None:
+        return None
+    found = _upset_levels(sub, *chunks, keep, dl.at, max_sets if max_sets is not None else float("inf"))
+    if found is None:
+        return None
+    value, top_local = found
+    top = {}
+    for u, v in top_local.items():
+        g = 0
+        for i in bits(u):
+            g |= 1 << old[i]
+        top[g] = v
+    return value, top
+
+
+def _chunk_tables(below: list[int], k: int, dl: Deadline) -> tuple[list, int, int] | None:
+    """``(tables, chunk width c, chunks)``: ``tables[j][v]`` is the union of what lies below the
+    elements of chunk ``j`` that the bits ``v`` hold (None past ``dl``)."""
     if k <= _TABLES_UP_TO:
         nch = -(-k // 14)
         c = -(-k // nch)
@@ -293,6 +307,17 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
         c = 8
         nch = -(-k // c)
         tables = [LazyUnion(below[j * c:(j + 1) * c]) for j in range(nch)]
+    return tables, c, nch
+
+
+def _upset_levels(sub: Poset, tables: list, c: int, nch: int, keep: int, deadline: float,
+                  limit: float) -> tuple[int, dict[int, int]] | None:
+    """The levels of :func:`upset_counts` on the renumbered piece ``sub``: ``(e(sub), the counts of
+    its up-sets of at least |sub| - keep elements)``, or None past ``deadline`` (a ``perf_counter``
+    moment) or ``limit`` sets.  The hot loop: its names are locals."""
+    import time
+
+    k = sub.n
     cm = (1 << c) - 1
     # sets between two readings of the clock: each costs a look-up per chunk
     every = 1023 if nch <= 4 else 63 if nch <= 32 else 0
@@ -301,7 +326,6 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
     c2, c3 = 2 * c, 3 * c
     full = sub.full
     perf = time.perf_counter
-    limit = max_sets if max_sets is not None else float("inf")
     seen = 1
     level: dict[int, int] = {0: 1}
     top_local: dict[int, int] = {}
@@ -346,10 +370,4 @@ def upset_counts(poset: Poset, mask: int | None = None, *, keep: int = 1,
         if size + 1 >= k - keep:
             top_local.update(level)
     (value,) = level.values()
-    top = {}
-    for u, v in top_local.items():
-        g = 0
-        for i in bits(u):
-            g |= 1 << old[i]
-        top[g] = v
-    return value, top
+    return value, top_local

@@ -81,6 +81,9 @@ from opportune.engine.count import Counter
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.hub import hub_split
 from opportune.engine.poset import Poset, bits, components, cut_blocks
+from opportune.engine.tuning import (
+    ERROR_MARGIN as _MARGIN, SMC_COST, SKETCH_FLOOR, SKETCH_FLOOR_MOST, ARMC_MAX_N, ARMC_MIN_N,
+    ARMC_SHARE, ARMC_HOPELESS)
 
 __all__ = ["Estimate", "OrderSketch", "estimate_count", "relaxation_estimate"]
 
@@ -154,10 +157,6 @@ def _t_quantile(p: float, df: int) -> float:
     return z + g1 / df + g2 / df ** 2 + g3 / df ** 3 + g4 / df ** 4
 
 
-#: The stated half-width uses Student's t quantile times ``1 + _MARGIN * (1 + skew) / sqrt(n)``,
-#: where ``skew`` is the skewness of a lognormal with the runs' spread of logs, or that of the runs
-#: if larger: a margin calibrated on measured replicate distributions (see :func:`_stated_error`).
-_MARGIN = 0.5
 
 
 def _stated_error(runs: list[float], confidence: float) -> float:
@@ -641,25 +640,6 @@ def _pieces(counter: Counter, mask: int, deadline: Deadline = Deadline.NEVER) ->
     return logf, hard
 
 
-#: Seconds one run of the sequential Monte Carlo takes per particle and squared element (measured
-#: here: ARC111, 111 elements, 1,024 particles ~3 s): a run predicted to take longer than the time
-#: left is not started, and the time goes to sequential importance sampling instead.
-SMC_COST = 2e-7
-#: Seconds per element the certain bounds' one pass may take past a spent deadline (measured: 400
-#: elements in 3–5 ms), and at most this many in all: kept within the count's stated margin.
-SKETCH_FLOOR = 2.5e-5
-SKETCH_FLOOR_MOST = 0.05
-#: Orders of at most this many elements (and at least :data:`ARMC_MIN_N`) are tried by adaptive
-#: relaxation Monte Carlo (:mod:`opportune.engine.relaxmc`, compiled core only) before sequential
-#: Monte Carlo: on sparse orders of 64-100 elements it states about ±5 % in 3 seconds.  Larger
-#: orders need pieces of far more than 64 elements for a draw to hit.
-ARMC_MAX_N = 256
-ARMC_MIN_N = 8
-#: Share of the time left (after the exact attempts) that it may take; it draws nothing, and leaves
-#: the time to the runs, when it predicts fewer than ``ARMC_HOPELESS`` hits in that time (30 hits
-#: state about ±40 %).
-ARMC_SHARE = 0.6
-ARMC_HOPELESS = 30
 
 
 def relaxmc_available() -> bool:
@@ -793,35 +773,73 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
         raise ValueError(f"mask {mask!r} is not a subset of 0..{poset.n - 1}")
     if not 0 < confidence < 1:
         raise ValueError("confidence must be in (0, 1)")
-    hard_end = as_deadline(deadline)
-    soft = hard_end.within(time_limit)
-    runs_end = hard_end.within(None if time_limit is None else time_limit + overrun)
     if counter is None or counter.poset != poset:
         counter = Counter(poset, max_memo=None)
-
-    def exact_estimate(v: int) -> Estimate:
-        lg = _log10_int(v)
-        return Estimate(_float_or_inf(v), 0.0, 1.0, "exact", 0, lg, v, time.perf_counter() - start, lg, lg)
-
-    saved = counter.max_memo, counter.time_limit
-    low, high = OrderSketch.trivial(mask.bit_count())
-    armc = None
-    sis: list[float] = []
-    runs: list[float] = []
-    logf = 0.0
-    half = math.inf
+    hard_end = as_deadline(deadline)
+    e = _Estimation(poset, mask, counter, start, hard_end, hard_end.within(time_limit),
+                    hard_end.within(None if time_limit is None else time_limit + overrun), rel_error, confidence, seed)
     try:
+        return e.run(time_limit, exact_memo, particles, tail, tail_memo, min_runs, hub,
+                     exact_memo > 0 if relaxation is None else relaxation, resume, threads)
+    finally:
+        counter.max_memo, counter.time_limit = e.saved
+
+
+class _Estimation:
+    """One call of :func:`estimate_count`: its deadlines, what its steps found so far (the certain
+    bounds, the paths of Knuth's estimator, the runs, the relaxation estimate), and the steps."""
+
+    def __init__(self, poset: Poset, mask: int, counter: Counter, start: float, hard_end: Deadline,
+                 soft: Deadline, runs_end: Deadline, rel_error: float, confidence: float, seed: int):
+        self.poset, self.mask, self.counter, self.start = poset, mask, counter, start
+        self.hard_end, self.soft, self.runs_end = hard_end, soft, runs_end
+        self.rel_error, self.confidence, self.seed = rel_error, confidence, seed
+        self.saved = counter.max_memo, counter.time_limit
+        self.low, self.high = OrderSketch.trivial(mask.bit_count())
+        self.armc = None
+        self.sketch = None
+        self.sis: list[float] = []
+        self.runs: list[float] = []
+        self.logf = 0.0
+        self.half = math.inf
+        self.sis_rng = random.Random(seed * 1_000_003 + 999_983)
+
+    def exact(self, v: int) -> Estimate:
+        lg = _log10_int(v)
+        return Estimate(_float_or_inf(v), 0.0, 1.0, "exact", 0, lg, v, time.perf_counter() - self.start, lg, lg)
+
+    def memo(self, entries: int) -> None:
+        """The counter's memo budget for a step: ``entries`` new ones, within its own."""
+        self.counter.max_memo = entries if self.saved[0] is None else min(entries, self.saved[0])
+
+    def run(self, time_limit, exact_memo, particles, tail, tail_memo, min_runs, hub, relaxation, resume,
+            threads) -> Estimate:
+        """The steps in order: the first that has the answer gives it."""
         # 1. exact, under a budget
-        counter.max_memo = exact_memo if saved[0] is None else min(exact_memo, saved[0])
-        counter.time_limit = None
+        self.memo(exact_memo)
+        self.counter.time_limit = None
         try:
-            return exact_estimate(counter.count(mask, deadline=hard_end.within(
+            return self.exact(self.counter.count(self.mask, deadline=self.hard_end.within(
                 None if time_limit is None else time_limit / 4)))
         except BudgetExceeded:
             pass
+        done = self.sketch_pass()
+        if done is not None:
+            return done
+        hard, done = self.pieces(time_limit, particles, tail_memo, hub)
+        if done is not None:
+            return done
+        if self.sketch is not None and relaxation:
+            done = self.relaxation(resume, threads)
+            if done is not None:
+                return done
+        self.sampling(hard, particles, tail, tail_memo, min_runs)
+        return self.answer()
 
-        # 2. one pass over the order: certain bounds, and the first path of Knuth's estimator
-        sketch = None
+    def sketch_pass(self) -> Estimate | None:
+        """2. One pass over the order: certain bounds, and the first path of Knuth's estimator (the
+        answer where the bounds meet: a chain or an antichain)."""
+        mask, hard_end = self.mask, self.hard_end
         try:
             # the certain bounds are what every answer has: their one pass gets at least about its own
             # cost (SKETCH_FLOOR per element, at most SKETCH_FLOOR_MOST seconds) even where the time is spent,
@@ -830,128 +848,147 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
             collecting = gc.isenabled()
             gc.disable()        # a full collection (tens of ms in a large process) must not eat the floor
             try:
-                sketch = OrderSketch(poset, mask, hard_end if hard_end.at >= floor else Deadline(floor))
+                self.sketch = OrderSketch(self.poset, mask, hard_end if hard_end.at >= floor else Deadline(floor))
             finally:
                 if collecting:
                     gc.enable()
-            low, high = sketch.low, sketch.high
+            self.low, self.high = self.sketch.low, self.sketch.high
         except BudgetExceeded:
             pass
-        sis_rng = random.Random(seed * 1_000_003 + 999_983)
-        if sketch is not None:
-            lv = sketch.sample(sis_rng, hard_end)
-            if lv is not None:
-                sis.append(lv)
-            if high - low < 1e-12 * max(1.0, high):     # a chain or an antichain: the bounds are the count
-                return Estimate(math.exp(low) if low < 709 else math.inf, math.expm1(high - low), 1.0,
-                                "bounds", len(sis), low / _LN10, None, time.perf_counter() - start,
-                                low / _LN10, high / _LN10)
+        if self.sketch is None:
+            return None
+        lv = self.sketch.sample(self.sis_rng, hard_end)     # even past the deadline: the first path
+        if lv is not None:
+            self.sis.append(lv)
+        low, high = self.low, self.high
+        if high - low < 1e-12 * max(1.0, high):     # a chain or an antichain: the bounds are the count
+            return Estimate(math.exp(low) if low < 709 else math.inf, math.expm1(high - low), 1.0,
+                            "bounds", len(self.sis), low / _LN10, None, time.perf_counter() - self.start,
+                            low / _LN10, high / _LN10)
+        return None
 
-        # 3. sequential Monte Carlo on the pieces that are still hard (not even tried where a run on
-        # pieces a tenth of the whole would not fit in the time: splitting 10,000 elements costs
-        # seconds, better spent on paths)
-        counter.max_memo = tail_memo if saved[0] is None else min(tail_memo, saved[0])
-        hard = None
+    def paths(self, most: int, end: Deadline) -> None:
+        """More paths of Knuth's estimator, until there are ``most`` or ``end``."""
+        while len(self.sis) < most and not end.expired():
+            lv = self.sketch.sample(self.sis_rng, end)
+            if lv is None:
+                break
+            self.sis.append(lv)
+
+    def pieces(self, time_limit, particles, tail_memo, hub) -> tuple[list[int] | None, Estimate | None]:
+        """3. The pieces that are still hard, each tried exactly through a hub: ``(the hard pieces or
+        None, the exact answer if every piece was counted)``.  Not even tried where a run on pieces a
+        tenth of the whole would not fit in the time: splitting 10,000 elements costs seconds, better
+        spent on paths."""
+        counter, mask, saved = self.counter, self.mask, self.saved
+        self.memo(tail_memo)
         try:
-            if sketch is not None and SMC_COST * max(2, particles) * mask.bit_count() ** 2 > 100 * runs_end.remaining():
+            if (self.sketch is not None
+                    and SMC_COST * max(2, particles) * mask.bit_count() ** 2 > 100 * self.runs_end.remaining()):
                 raise BudgetExceeded("no run of the sequential Monte Carlo fits", reason="time")
-            logf, hard = _pieces(counter, mask, runs_end)
+            self.logf, hard = _pieces(counter, mask, self.runs_end)
             if hard and hub:
                 # exact again, splitting the hard pieces at a hub (most of the time left, shared out)
                 counter.max_memo, counter.time_limit = saved
-                hub_end = soft if time_limit is None else soft.sooner(Deadline(start + time_limit * hub))
+                soft = self.soft
+                hub_end = soft if time_limit is None else soft.sooner(Deadline(self.start + time_limit * hub))
                 for i, s in enumerate(hard):
                     if hub_end.expired() or hub_split(counter, s, deadline=hub_end.share(1 / (len(hard) - i))) is None:
                         break
                 else:
                     hard = []
-                counter.max_memo = tail_memo if saved[0] is None else min(tail_memo, saved[0])
+                self.memo(tail_memo)
                 counter.time_limit = None
                 if hard:
-                    logf, hard = _pieces(counter, mask, runs_end)
+                    self.logf, hard = _pieces(counter, mask, self.runs_end)
             if not hard:                # every piece is in the memo: the whole is one cheap exact count
                 counter.max_memo = None
-                return exact_estimate(counter.count(mask, deadline=hard_end))
+                return hard, self.exact(counter.count(mask, deadline=self.hard_end))
         except BudgetExceeded:
             hard = None
-        # 4. adaptive relaxation Monte Carlo (compiled core) on the whole set: an exactly counted
-        # relaxation and a binomial interval; returned at once when it is as narrow as asked, else
-        # kept to compare with the runs'
-        if relaxation is None:
-            relaxation = exact_memo > 0
-        if (sketch is not None and relaxation and ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N
-                and relaxmc_available() and soft.finite and not soft.expired()):
-            armc = _armc(poset, mask, rel_error, confidence, seed, soft.share(ARMC_SHARE), low, high, start,
-                         resume=resume, threads=threads)
-            if armc is not None and armc.rel_error <= rel_error:
-                return armc
-            if armc is not None:        # an error is stated already: the runs need not overrun for one
-                runs_end = soft
+        return hard, None
+
+    def relaxation(self, resume, threads) -> Estimate | None:
+        """4. Adaptive relaxation Monte Carlo (compiled core) on the whole set: an exactly counted
+        relaxation and a binomial interval; the answer at once when it is as narrow as asked, else
+        kept to compare with the runs'."""
+        mask, soft = self.mask, self.soft
+        if (ARMC_MIN_N <= mask.bit_count() <= ARMC_MAX_N and relaxmc_available() and soft.finite
+                and not soft.expired()):
+            self.armc = _armc(self.poset, mask, self.rel_error, self.confidence, self.seed, soft.share(ARMC_SHARE),
+                              self.low, self.high, self.start, resume=resume, threads=threads)
+            if self.armc is not None and self.armc.rel_error <= self.rel_error:
+                return self.armc
+            if self.armc is not None:        # an error is stated already: the runs need not overrun for one
+                self.runs_end = soft
+        return None
+
+    def sampling(self, hard, particles, tail, tail_memo, min_runs) -> None:
+        """5. Sequential Monte Carlo runs on the hard pieces where one fits (and a few more paths
+        beside them), else more paths."""
         # a run is started if one could finish before the end of the first two runs' time: even one
         # run is a better estimate than the paths (which are kept if none finishes)
         smc_fits = bool(hard) and (SMC_COST * max(2, particles) * sum(s.bit_count() ** 2 for s in hard)
-                                   <= runs_end.remaining())
-        if sketch is not None and smc_fits:
+                                   <= self.runs_end.remaining())
+        if self.sketch is not None and smc_fits:
             # a twentieth of the time for more paths (a hundred at most): an estimate however the
             # runs below fare
-            paths_end = soft.share(0.05)
-            while len(sis) < 100 and not paths_end.expired():
-                lv = sketch.sample(sis_rng, paths_end)
-                if lv is None:
-                    break
-                sis.append(lv)
+            self.paths(100, self.soft.share(0.05))
         if smc_fits:
             # fewer particles (down to 64) when a run would take more than a quarter of the time left
             cost = SMC_COST * sum(s.bit_count() ** 2 for s in hard)
-            while particles > 64 and cost * particles > runs_end.remaining() / 4:
+            while particles > 64 and cost * particles > self.runs_end.remaining() / 4:
                 particles //= 2
-            smc = _SMC(poset, counter, particles, tail_memo)
-            probe_rng = random.Random(seed * 7919 + 1)
-            tails = [tail if tail is not None else smc.probe_tail(s, probe_rng, runs_end) for s in hard]
-            while True:
-                rng = random.Random(seed * 1_000_003 + len(runs))
-                total = 0.0
-                # the first two runs may go on past the soft end: without them no error can be stated
-                run_end = soft if len(runs) >= 2 else runs_end
-                for s, t in zip(hard, tails):
-                    lv = smc.run(s, t, rng, run_end)
-                    if lv is None:
-                        break
-                    total += lv
-                else:
-                    runs.append(total)
-                n = len(runs)
-                if n >= 2:
-                    half = _stated_error(runs, confidence)
-                    if half <= rel_error and n >= min_runs:
-                        break
-                if soft.expired() and (len(runs) >= 2 or runs_end.expired()):
-                    break
-        elif sketch is not None:
+            self.smc_runs(hard, particles, tail, tail_memo, min_runs)
+        elif self.sketch is not None:
             # no run fits: the time goes to more paths (a thousand at most: their mean settles slowly,
             # and the work is better left to a longer time limit than spent on a hopeless spread)
-            while len(sis) < 1000 and not runs_end.expired():
-                lv = sketch.sample(sis_rng, runs_end)
+            self.paths(1000, self.runs_end)
+
+    def smc_runs(self, hard, particles, tail, tail_memo, min_runs) -> None:
+        """Independent runs until their stated interval is within the error asked (after ``min_runs``)
+        or the time is up (the first two runs may go on to ``runs_end``)."""
+        soft, runs_end, runs = self.soft, self.runs_end, self.runs
+        smc = _SMC(self.poset, self.counter, particles, tail_memo)
+        probe_rng = random.Random(self.seed * 7919 + 1)
+        tails = [tail if tail is not None else smc.probe_tail(s, probe_rng, runs_end) for s in hard]
+        while True:
+            rng = random.Random(self.seed * 1_000_003 + len(runs))
+            total = 0.0
+            # the first two runs may go on past the soft end: without them no error can be stated
+            run_end = soft if len(runs) >= 2 else runs_end
+            for s, t in zip(hard, tails):
+                lv = smc.run(s, t, rng, run_end)
                 if lv is None:
                     break
-                sis.append(lv)
-    finally:
-        counter.max_memo, counter.time_limit = saved
-    if armc is not None and armc.rel_error < half:    # the narrower stated interval
-        return replace(armc, seconds=time.perf_counter() - start)
-    if runs:
-        method, lmean = "smc", _log_mean(runs) + logf
-    elif sis:
-        method, lmean, half = "sis", _log_mean(sis), math.inf
-    else:
-        method, lmean, half = "bounds", (low + high) / 2, math.inf
-    # the estimate and its interval within the order's certain bounds
-    lmean = min(max(lmean, low), high)
-    lo, hi = low, high
-    if half < 1:
-        lo = max(low, min(high, lmean + math.log1p(-half)))
-    if math.isfinite(half):
-        hi = min(high, max(low, lmean + math.log1p(half)))
-    value = math.exp(lmean) if lmean < 709 else float("inf")
-    return Estimate(value, half, confidence, method, len(runs) or len(sis), lmean / _LN10, None,
-                    time.perf_counter() - start, lo / _LN10, hi / _LN10)
+                total += lv
+            else:
+                runs.append(total)
+            n = len(runs)
+            if n >= 2:
+                self.half = _stated_error(runs, self.confidence)
+                if self.half <= self.rel_error and n >= min_runs:
+                    break
+            if soft.expired() and (len(runs) >= 2 or runs_end.expired()):
+                break
+
+    def answer(self) -> Estimate:
+        """The estimate from what the steps found, its interval within the order's certain bounds."""
+        armc, half, low, high = self.armc, self.half, self.low, self.high
+        if armc is not None and armc.rel_error < half:    # the narrower stated interval
+            return replace(armc, seconds=time.perf_counter() - self.start)
+        if self.runs:
+            method, lmean = "smc", _log_mean(self.runs) + self.logf
+        elif self.sis:
+            method, lmean, half = "sis", _log_mean(self.sis), math.inf
+        else:
+            method, lmean, half = "bounds", (low + high) / 2, math.inf
+        lmean = min(max(lmean, low), high)
+        lo, hi = low, high
+        if half < 1:
+            lo = max(low, min(high, lmean + math.log1p(-half)))
+        if math.isfinite(half):
+            hi = min(high, max(low, lmean + math.log1p(half)))
+        value = math.exp(lmean) if lmean < 709 else float("inf")
+        return Estimate(value, half, self.confidence, method, len(self.runs) or len(self.sis), lmean / _LN10, None,
+                        time.perf_counter() - self.start, lo / _LN10, hi / _LN10)

@@ -50,16 +50,12 @@ from opportune.engine.poset import (
     components,
     cut_blocks,
 )
+from opportune.engine.tuning import NATIVE_TAILS, HUB_ENTRY_OVERHEAD as ENTRY_OVERHEAD
 
 __all__ = ["HubPath", "TailCounter", "hub_count", "hub_candidates", "hub_split"]
 
-#: Largest order whose tail distributions the compiled core computes (it keeps Pascal's triangle up
-#: to n, about n^2/2 big integers); larger ones run in Python.
-NATIVE_TAILS = 256
 
 
-#: Bytes of one memo entry beside its vector: the key (a set of up to a few hundred elements) and the table's slot.
-ENTRY_OVERHEAD = 120
 
 
 def entry_bytes(d: tuple[int, ...]) -> int:

@@ -22,21 +22,11 @@ import os
 
 from opportune.engine.deadline import Deadline
 from opportune.engine.poset import Poset
+from opportune.engine.tuning import NATIVE_MAX_ELEMENTS as MAX_ELEMENTS, NATIVE_MAX_BYTES as MAX_BYTES
 
-#: Largest order the counter hands to the compiled core: all it takes (16 machine words).  Growing
-#: its table and arena is resumable (a copy stops at the deadline and goes on at the next call), so
-#: budgeted decisions on 1,000-task graphs keep their budget with it too.  Larger orders run in
-#: Python.
-MAX_ELEMENTS = 1024
 #: What the core itself can take (``NativeCounter`` directly, e.g. in tests).
 CORE_MAX_ELEMENTS = 1024
 
-#: Bytes of memo the compiled counter holds for one order before it starts again (at the start of
-#: a top-level count; one count may add its ``max_memo`` entries on top), unless its counter was made
-#: for more entries (:attr:`NativeCounter.max_bytes`).  About 60 bytes an entry on orders of 50
-#: elements, about 1.5 KB on orders of 1,000 (keys of 128 bytes, counts of ~1 KB): see
-#: :func:`entry_bytes`.
-MAX_BYTES = 400 * 2**20
 
 try:
     if os.environ.get("OPPORTUNE_PURE_PYTHON", "") not in ("", "0"):

@@ -65,31 +65,14 @@ from dataclasses import dataclass, field
 
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
+from opportune.engine.tuning import (
+    RELAX_MAX_N as MAX_N, RELAX_K_START as K_START, RELAX_K_STEP as K_STEP, RELAX_K_MAX as K_MAX,
+    RELAX_TRIES as TRIES, RELAX_MAX_BYTES as MAX_BYTES, RELAX_COUNT_GROWTH as COUNT_GROWTH,
+    RELAX_PILOT_DRAWS as PILOT_DRAWS, RELAX_PILOT_HITS as PILOT_HITS, RELAX_ENTRY_SECONDS as
+    ENTRY_SECONDS, RELAX_STEP_SECONDS as STEP_SECONDS, RELAX_COUNT_SHARE as COUNT_SHARE)
 
 __all__ = ["MAX_N", "RelaxEstimate", "clopper_pearson", "estimate", "target_hits"]
 
-#: Largest order estimated this way: the partition holds an n × n comparability matrix and an
-#: n × (n / k) table of counts (a few MB at 1,024 elements).
-MAX_N = 1024
-#: Piece sizes: the first, the step, the last (the compiled pieces hold at most 64 elements).
-K_START, K_STEP, K_MAX = 20, 5, 64
-#: Random starts of the partition's swap search per ``k`` (as ``armc``).
-TRIES = 50
-#: Bytes the memos of one relaxation may hold (about 100-140 bytes an entry, with the growth slack).
-MAX_BYTES = 256 * 2**20
-#: The next ``k``'s count is predicted to take this many times this one's memo entries (``armc``: 10).
-COUNT_GROWTH = 10.0
-#: The pilot that predicts the draws a relaxation needs: at most this many draws, stopping at
-#: :data:`PILOT_HITS` hits (tens of milliseconds).
-PILOT_DRAWS = 32768
-PILOT_HITS = 64
-#: Seconds per memo entry and per element placed in a draw (x86-64, measured: 0.15-0.65 µs an
-#: entry, 0.04-0.15 µs an element): they only weigh counting against drawing when choosing ``k``;
-#: the clock stops the work.
-ENTRY_SECONDS = 0.5e-6
-STEP_SECONDS = 0.1e-6
-#: Share of the time the exact counts of the relaxations may take, over every ``k`` tried.
-COUNT_SHARE = 0.5
 #: Threads that count and draw, at most (the core's own bound).
 MAX_THREADS = 256
 
@@ -322,84 +305,100 @@ def estimate(poset: Poset, seconds: float | None = None, *, rel_error: float = 0
     if not 1 <= threads <= MAX_THREADS:
         raise ValueError(f"threads must be in 1..{MAX_THREADS}")
     end = as_deadline(deadline).within(seconds)
-    preds = [list(bits(poset.below[v])) for v in range(n)]
     hits_wanted = target_hits(rel_error, confidence)
     none = RelaxEstimate(math.nan, -math.inf, math.inf, confidence, math.nan, 0, 0, 0, "none")
     mix = (seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) % 2**64
-    share = COUNT_SHARE if count_share is None else count_share
-    # the relaxations' counts may take `share` of the time, their own time only (not the partitions'
-    # search or the pilots' draws, which would leave a loaded machine's larger pieces uncounted)
-    count_budget = share * end.remaining() if end.finite else math.inf
-    spent = [0.0]
-
-    def count_left() -> float:
-        return count_budget - spent[0]
-
-    def count_deadline() -> Deadline:
-        return end.sooner(Deadline.after(max(0.0, count_left()))) if end.finite else end
-
+    counting = _Counting(core, poset, end, COUNT_SHARE if count_share is None else count_share, max_bytes,
+                         threads, confidence)
     if resume is not None and resume.run is not None:
         if resume.run.n != n:
             raise ValueError(f"resume: an estimate of an order of {resume.run.n} elements, not {n}")
         return _draw(resume.run, hits_wanted, end, confidence, max_draws, threads)
-
-    def relaxation(kk: int, pieces: list[list[int]], until: Deadline):
-        relax = core.ArmcRelaxation(n, preds, pieces)
-        began = time.perf_counter()
-        status, log_r = relax.count(until.seconds(), max_bytes, threads)
-        spent[0] += time.perf_counter() - began
-        return relax, status, log_r
-
-    def exact(relax, log_r: float, kk: int) -> RelaxEstimate:
-        lg = log_r / math.log(10)
-        err = 1e-9 / math.log(10)        # the doubles' rounding over at most 64 levels of sums
-        return RelaxEstimate(lg, lg - err, lg + err, confidence, lg, kk, 0, 0, "exact", relax.bytes())
-
     # an order of at most 64 elements: one piece, exact if it fits (a third of the counting time)
     if n <= K_MAX and (k is None and whole or k is not None and k >= n):
-        relax, status, log_r = relaxation(n, [list(range(n))], count_deadline().share(0.3) if k is None
-                                          else count_deadline())
+        relax, status, log_r = counting.relaxation([list(range(n))], counting.deadline().share(0.3) if k is None
+                                                   else counting.deadline())
         if status == 0:
-            return exact(relax, log_r, n)
+            return counting.exact(relax, log_r, n)
         del relax
         if k is not None:
             return none
-
-    best: _Candidate | None = None
     steps = [min(k, K_MAX, n)] if k is not None else list(range(K_START, min(K_MAX, n - 1) + 1, K_STEP))
-    for kk in steps:
-        if count_left() <= 0 or end.expired():
-            break
-        pieces, _inside, _tries = core.armc_partition(n, preds, kk, TRIES, (mix + kk) % 2**64,
-                                                      count_deadline().share(0.1).seconds())
-        if not pieces:
-            break
-        relax, status, log_r = relaxation(kk, pieces, count_deadline())
-        if status != 0:
-            break
-        if relax.cross_pairs() == 0:
-            return exact(relax, log_r, kk)
-        entries_work = relax.entries() * ENTRY_SECONDS
-        # the pilot: how often a draw hits and how much work a draw is
-        _st, d, h, placed = relax.sample(PILOT_DRAWS, PILOT_HITS, end.seconds(), (mix ^ 0x5851F42D4C957F2D) + kk,
-                                     0, threads)
-        per_hit = math.inf if h == 0 else d / h * (placed / max(1, d)) * STEP_SECONDS
-        cand = _Candidate(relax, log_r, kk, entries_work, hits_wanted * per_hit, per_hit)
-        if best is None or (cand.draw_seconds, cand.log_r) < (best.draw_seconds, best.log_r):
-            best = cand
-        del relax, cand
-        # the next k's count is worth it only while it is cheaper than the draws still needed (both
-        # shared by the threads: its pieces counted at once, the draws in blocks), and fits in the time
-        nxt = COUNT_GROWTH * max(entries_work, 1e-4)
-        at_once = min(threads, -(-n // min(n, kk + K_STEP)))
-        if nxt > best.draw_seconds or (end.finite and nxt / at_once > count_left()):
-            break
+    best = counting.best(steps, hits_wanted, mix)
     if best is None:
         return none
+    if isinstance(best, RelaxEstimate):     # a relaxation without a cross pair: the count itself
+        return best
     if hopeless is not None and end.finite and best.hit_seconds * hopeless / threads > end.remaining():
         return RelaxEstimate(math.nan, -math.inf, math.inf, confidence, best.log_r / math.log(10), best.k, 0, 0,
                              "hopeless", best.relax.bytes())
     return _draw(_Run(best.relax, n, best.log_r, best.k, mix, 0, 0), hits_wanted, end, confidence, max_draws, threads)
+
+
+class _Counting:
+    """The relaxations' exact counts of one :func:`estimate` call: they may take ``share`` of the time,
+    their own time only (not the partitions' search or the pilots' draws, which would leave a loaded
+    machine's larger pieces uncounted)."""
+
+    def __init__(self, core, poset: Poset, end: Deadline, share: float, max_bytes: int, threads: int,
+                 confidence: float):
+        self.core, self.n, self.end = core, poset.n, end
+        self.preds = [list(bits(poset.below[v])) for v in range(poset.n)]
+        self.budget = share * end.remaining() if end.finite else math.inf
+        self.spent = 0.0
+        self.max_bytes, self.threads, self.confidence = max_bytes, threads, confidence
+
+    def left(self) -> float:
+        return self.budget - self.spent
+
+    def deadline(self) -> Deadline:
+        return self.end.sooner(Deadline.after(max(0.0, self.left()))) if self.end.finite else self.end
+
+    def relaxation(self, pieces: list[list[int]], until: Deadline):
+        relax = self.core.ArmcRelaxation(self.n, self.preds, pieces)
+        began = time.perf_counter()
+        status, log_r = relax.count(until.seconds(), self.max_bytes, self.threads)
+        self.spent += time.perf_counter() - began
+        return relax, status, log_r
+
+    def exact(self, relax, log_r: float, kk: int) -> RelaxEstimate:
+        lg = log_r / math.log(10)
+        err = 1e-9 / math.log(10)        # the doubles' rounding over at most 64 levels of sums
+        return RelaxEstimate(lg, lg - err, lg + err, self.confidence, lg, kk, 0, 0, "exact", relax.bytes())
+
+    def best(self, steps: list[int], hits_wanted: int, mix: int) -> _Candidate | RelaxEstimate | None:
+        """The piece size among ``steps`` whose draws are predicted to take least (None if none was
+        counted; the exact count where a relaxation is the order itself)."""
+        n, end, threads = self.n, self.end, self.threads
+        best: _Candidate | None = None
+        for kk in steps:
+            if self.left() <= 0 or end.expired():
+                break
+            pieces, _inside, _tries = self.core.armc_partition(n, self.preds, kk, TRIES, (mix + kk) % 2**64,
+                                                               self.deadline().share(0.1).seconds())
+            if not pieces:
+                break
+            relax, status, log_r = self.relaxation(pieces, self.deadline())
+            if status != 0:
+                break
+            if relax.cross_pairs() == 0:
+                return self.exact(relax, log_r, kk)
+            entries_work = relax.entries() * ENTRY_SECONDS
+            # the pilot: how often a draw hits and how much work a draw is
+            _st, d, h, placed = relax.sample(PILOT_DRAWS, PILOT_HITS, end.seconds(),
+                                             (mix ^ 0x5851F42D4C957F2D) + kk, 0, threads)
+            per_hit = math.inf if h == 0 else d / h * (placed / max(1, d)) * STEP_SECONDS
+            cand = _Candidate(relax, log_r, kk, entries_work, hits_wanted * per_hit, per_hit)
+            if best is None or (cand.draw_seconds, cand.log_r) < (best.draw_seconds, best.log_r):
+                best = cand
+            del relax, cand
+            # the next k's count is worth it only while it is cheaper than the draws still needed (both
+            # shared by the threads: its pieces counted at once, the draws in blocks), and fits in the time
+            nxt = COUNT_GROWTH * max(entries_work, 1e-4)
+            at_once = min(threads, -(-n // min(n, kk + K_STEP)))
+            if nxt > best.draw_seconds or (end.finite and nxt / at_once > self.left()):
+                break
+        return best
 
 
 def _draw(run: _Run, hits_wanted: int, end: Deadline, confidence: float, max_draws: int | None,

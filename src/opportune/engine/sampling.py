@@ -59,20 +59,13 @@ from opportune.engine import native
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import Poset, bits
 from opportune.engine.stats import _t_cdf, prob_positive, t_quantile  # noqa: F401 (their documented import)
+from opportune.engine.tuning import START_KEEP, START_KEEP_UNITS
 
 _M64 = (1 << 64) - 1
 _TO_UNIT = 1.0 / (1 << 53)
 
 __all__ = ["ChainEstimate", "CompletionChains", "prob_positive", "t_quantile"]
 
-#: Populations started alike (the same order, steps left, size and seed) start from the same place: the
-#: cover lists (and, without the compiled core, the spread-out starting sequences and the random stream
-#: after them) are kept for the last START_KEEP of them and reused, so the runs of one plan in a service (each starts its first
-#: population at the plan's first state, with the same seed) build it once.  The chains are the same
-#: as if built afresh.  Memory: at most START_KEEP × (chains × steps × 4 bytes + the covers), and only
-#: populations of at most START_KEEP_UNITS steps are kept.
-START_KEEP = 4
-START_KEEP_UNITS = 20_000
 _starts: OrderedDict = OrderedDict()
 _starts_lock = threading.Lock()
 
