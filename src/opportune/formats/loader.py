@@ -55,8 +55,34 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
     """Read and check a plan file of any supported format; never raises for bad content.
 
     ``salbp:NAME`` reads a SALBP graph shipped with the package, ``example:NAME`` an example
-    (:mod:`opportune.datasets`), and ``-`` standard input.  ``allow_cycles`` keeps the cyclic
-    strategies of a YAML or JSON plan instead of refusing it (for ``opportune relax`` only).
+    (:mod:`opportune.datasets`), and ``-`` standard input.  The format is found from the suffix, else
+    from the content.  At most :data:`MAX_FILE_BYTES` bytes are read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, ``salbp:NAME``, ``example:NAME`` or ``-``.
+    allow_cycles : bool, default False
+        Keep the cyclic strategies of a YAML or JSON plan instead of refusing it (for
+        ``opportune relax`` only).
+
+    Returns
+    -------
+    CheckResult
+        The plan (``None`` if unusable) and every problem found, each with its file, line and what
+        to do; ``result.ok`` says whether the plan can be used.
+
+    See Also
+    --------
+    load_plan : the same, raising :class:`PlanError` instead of returning problems.
+
+    Examples
+    --------
+    >>> read_plan("example:gearbox").plan.part_ids[:4]
+    ('ca', 'ba', 'rl', 'dr')
+    >>> result = read_plan("no-such-plan.yaml")
+    >>> result.ok, result.errors[0].message
+    (False, 'no such file: no-such-plan.yaml')
     """
     shipped = None      # a shipped file is named by its short name in messages, not its installed path
     if str(path).lower().startswith(("salbp:", "example:")):
@@ -116,9 +142,39 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
 
 
 def load_plan(path: str | Path) -> Plan:
-    """Load a plan file (YAML, JSON, SALBP ``.IN2`` or ``.alb``, GraphML, DOT); raise :class:`PlanError` with every problem.
+    """Load a plan file (YAML, JSON, SALBP ``.IN2`` or ``.alb``, GraphML, DOT).
 
-    >>> plan = load_plan("examples/gearbox.yaml")  # doctest: +SKIP
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, ``salbp:NAME`` or ``example:NAME`` for the data shipped with the package
+        (:mod:`opportune.datasets`), or ``-`` for standard input.
+
+    Returns
+    -------
+    Plan
+        The checked plan.
+
+    Raises
+    ------
+    PlanError
+        If the file cannot be read or holds any error; it lists every problem found, each with
+        its file, line and what to do.
+
+    See Also
+    --------
+    read_plan : the same, returning the problems (warnings included) instead of raising.
+    make_plan : a plan from Python values.
+
+    Examples
+    --------
+    >>> plan = load_plan("example:gearbox")
+    >>> plan.name, len(plan.part_ids)
+    ('gearbox', 10)
+    >>> load_plan("no-such-plan.yaml")
+    Traceback (most recent call last):
+        ...
+    opportune.planning.plan.PlanError: error: no such file: no-such-plan.yaml — check the path
     """
     result = read_plan(path)
     if not result.ok:
@@ -132,8 +188,33 @@ def _too_large(name: str) -> Problem:
 
 
 def check_text(text: str, *, fmt: str = "yaml", file: str | None = None, allow_cycles: bool = False) -> CheckResult:
-    """Parse and check plan text in ``fmt`` (``"yaml"`` or ``"json"``); ``allow_cycles`` as in :func:`read_plan`.
-    Text of more than :data:`MAX_FILE_BYTES` bytes (as UTF-8) is refused as a file of that size is."""
+    """Parse and check plan text, as :func:`read_plan` checks a file.
+
+    Parameters
+    ----------
+    text : str
+        The plan, in the file schema (docs/plan-files.md).
+    fmt : {"yaml", "json"}, default "yaml"
+        The text's format.
+    file : str, optional
+        The name problems are reported under (``None``: no file name).
+    allow_cycles : bool, default False
+        As in :func:`read_plan`.
+
+    Returns
+    -------
+    CheckResult
+        The plan (``None`` if unusable) and every problem found.  Text of more than
+        :data:`MAX_FILE_BYTES` bytes (as UTF-8) is refused as a file of that size is.
+
+    Examples
+    --------
+    >>> check_text('{"parts": ["a", "b"], "requires": {"b": ["a"]}}', fmt="json").plan.part_ids
+    ('a', 'b')
+    >>> result = check_text("parts: [a, a]", file="twice.yaml")
+    >>> result.ok, result.errors[0].where
+    (False, 'twice.yaml:1')
+    """
     if len(text) > MAX_FILE_BYTES // 4 and len(text.encode("utf-8", "surrogatepass")) > MAX_FILE_BYTES:
         return CheckResult(None, [_too_large(file or "the plan")])
     doc = parse_json(text, file) if fmt == "json" else parse_yaml(text, file)
@@ -145,7 +226,32 @@ def check_text(text: str, *, fmt: str = "yaml", file: str | None = None, allow_c
 
 
 def plan_from_dict(data: Any, *, file: str | None = None) -> Plan:
-    """Build a plan from already-parsed data in the file schema; raise :class:`PlanError` on errors."""
+    """Build a plan from already-parsed data in the file schema (what ``yaml.safe_load`` or
+    ``json.load`` returns).
+
+    Parameters
+    ----------
+    data : dict
+        The plan document: ``parts`` and ``requires``, ``strategies`` or ``assemblies``
+        (docs/plan-files.md).
+    file : str, optional
+        The name problems are reported under.
+
+    Returns
+    -------
+    Plan
+        The checked plan.
+
+    Raises
+    ------
+    PlanError
+        If the data holds any error; it lists every problem found.
+
+    Examples
+    --------
+    >>> plan_from_dict({"parts": ["a", "b"], "requires": {"b": ["a"]}}).part_ids
+    ('a', 'b')
+    """
     from opportune.formats.validate import check_document
 
     result = check_document(Document(data, {}, file))
@@ -163,11 +269,38 @@ def make_plan(
 ) -> Plan:
     """Build and validate a plan from Python values.
 
-    Give either ``requires`` (one strategy) or ``strategies`` (name → requires).
-    Raises :class:`PlanError` listing every problem, as ``opportune check`` would.
+    Parameters
+    ----------
+    parts : iterable of str, dict or Part
+        The parts: ids, part mappings of the file schema (``{"id": "a", "quantity": 2}``) or
+        :class:`Part` objects.
+    requires : mapping of str to iterable of str, optional
+        One strategy: each part's prerequisites (part → parts that must be installed first).
+    strategies : mapping of str to mapping, optional
+        Several strategies instead of ``requires``: name → requires.
+    name : str, default "plan"
+        The plan's name.
 
+    Returns
+    -------
+    Plan
+        The checked plan.
+
+    Raises
+    ------
+    PlanError
+        Listing every problem, as ``opportune check`` would (unknown parts, cycles, duplicates).
+
+    Examples
+    --------
     >>> make_plan(["a", "b"], {"b": ["a"]}).part_ids
     ('a', 'b')
+    >>> [s.name for s in make_plan(["a", "b", "c"], strategies={"s1": {"c": ["a"]}, "s2": {"c": ["b"]}}).strategies]
+    ['s1', 's2']
+    >>> make_plan(["a"], {"b": ["a"]})
+    Traceback (most recent call last):
+        ...
+    opportune.planning.plan.PlanError: error: unknown part 'b' listed with requirements (strategy 'default') — declare it under `parts` or fix the id
     """
     doc: dict = {"name": name, "parts": [p if isinstance(p, (str, dict)) else _part_dict(p) for p in parts]}
     if strategies is not None:
@@ -181,8 +314,31 @@ def plan_from_andor(parts: Iterable[str | dict], assemblies: Mapping[str, list[d
                     name: str = "plan") -> Plan:
     """A plan from an AND/OR graph given as Python values (the file schema's ``assemblies``).
 
-    Checked and expanded exactly as a file would be; raises :class:`PlanError` with every problem.
+    Checked and expanded exactly as a file would be (docs/andor.md).
 
+    Parameters
+    ----------
+    parts : iterable of str or dict
+        The parts, as in :func:`make_plan`.
+    assemblies : mapping of str to list of dict
+        Each assembly's ways of being made: ``{"join": [...], "then": [...]}`` mappings.
+    product : str, optional
+        The product (``None``: the first assembly listed).
+    name : str, default "plan"
+        The plan's name.
+
+    Returns
+    -------
+    Plan
+        One strategy per way of making the product.
+
+    Raises
+    ------
+    PlanError
+        With every problem found.
+
+    Examples
+    --------
     >>> plan = plan_from_andor(["a", "b", "c"], {"p": [{"join": ["a", "b"], "then": ["c"]}]})
     >>> plan.strategies[0].pairs()
     [('a', 'c'), ('b', 'c')]

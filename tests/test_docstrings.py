@@ -1,0 +1,423 @@
+"""Every public function and class the API reference shows carries the numpydoc sections a user calls from.
+
+The objects are read from the reference pages themselves (``docs/reference/*.md``, each ``::: module``
+block and its ``members`` list), so a name added to the reference is checked at once.  For each one,
+and for every public method, class method and static method its class defines:
+
+* a docstring;
+* ``Parameters``, naming every parameter of the signature (for a class, of its constructor), when it
+  takes any;
+* ``Returns`` (or ``Yields``) when it returns a value (its return annotation is not ``None``);
+* ``Raises``, naming every exception class the function raises itself (``raise X(...)`` in its own
+  body, not in functions it calls);
+* ``Examples`` with at least one ``>>>`` line (tests/test_doctests.py runs them).
+
+Properties and constants are data: they need none of the sections.  An exception class needs only
+``Examples`` (where it is raised) unless it defines its own constructor.
+
+Modules still waiting for this are listed in :data:`PENDING_MODULES`, and single objects in
+:data:`PENDING`: each entry must still lack something (the test fails when it no longer does, so the
+lists only shrink).
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import inspect
+import re
+import textwrap
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+REFERENCE = ROOT / "docs" / "reference"
+BLOCK = re.compile(r"^::: (?P<module>\S+)\n(?:\s+options:\n\s+members: \[(?P<members>[^\]]*)\])?", re.M)
+SECTION = re.compile(r"^(?P<name>[A-Z][A-Za-z ]+)\n-{3,}[ \t]*$", re.M)
+PARAMETER = re.compile(r"^(?P<names>\*{0,2}\w+(?:\s*,\s*\*{0,2}\w+)*)(?:\s*:.*)?$")
+
+#: Modules of the reference whose docstrings are being rewritten with their code (the order engine,
+#: the look-ahead, the optimum and pile programmes, the lower bounds, the plans made by a tool).
+PENDING_MODULES = ("opportune.engine", "opportune.derive", "opportune.policies.lookahead",
+                   "opportune.policies.optimal", "opportune.policies.pile", "opportune.study.bounds")
+
+#: Single objects of the other modules that still lack a section (``module:qualified.name``).
+PENDING: frozenset[str] = frozenset({
+    "opportune.planning.plan:Part",
+    "opportune.planning.plan:Strategy",
+    "opportune.planning.plan:Strategy.pairs",
+    "opportune.planning.plan:Strategy.weight",
+    "opportune.planning.plan:Plan",
+    "opportune.planning.plan:Plan.index",
+    "opportune.planning.plan:Plan.part",
+    "opportune.planning.plan:Plan.index_pairs",
+    "opportune.planning.plan:Plan.to_networkx",
+    "opportune.planning.plan:Plan.to_dict",
+    "opportune.planning.plan:PlanError",
+    "opportune.formats.loader:load_plan",
+    "opportune.formats.loader:read_plan",
+    "opportune.formats.loader:check_text",
+    "opportune.formats.loader:plan_from_dict",
+    "opportune.formats.loader:make_plan",
+    "opportune.formats.loader:plan_from_andor",
+    "opportune.formats.loader:CheckResult",
+    "opportune.formats.andor:AndOrGraph",
+    "opportune.formats.andor:AndOrGraph.ways",
+    "opportune.formats.andor:AndOrGraph.is_assembly",
+    "opportune.formats.andor:AndOrGraph.reachable",
+    "opportune.formats.andor:AndOrGraph.combinations",
+    "opportune.formats.andor:AndOrGraph.to_dict",
+    "opportune.formats.andor:Way",
+    "opportune.formats.andor:expand",
+    "opportune.formats.andor:sequences",
+    "opportune.formats.andor:check_assemblies",
+    "opportune.formats.looks:parse_looks",
+    "opportune.formats.looks:read_looks",
+    "opportune.formats.looks:LooksError",
+    "opportune.formats.graphfiles:check_graphml_bytes",
+    "opportune.formats.graphfiles:check_dot_bytes",
+    "opportune.formats.graphfiles:to_graphml",
+    "opportune.formats.graphfiles:to_dot_precedence",
+    "opportune.formats.graphfiles:plan_to_networkx",
+    "opportune.formats.graphfiles:plan_from_networkx",
+    "opportune.datasets:salbp",
+    "opportune.datasets:salbp_path",
+    "opportune.datasets:salbp_names",
+    "opportune.datasets:examples",
+    "opportune.datasets:example_path",
+    "opportune.datasets:resolve",
+    "opportune.sequencer:Sequencer",
+    "opportune.sequencer:Sequencer.decide",
+    "opportune.sequencer:Sequencer.replay",
+    "opportune.sequencer:Sequencer.cancel",
+    "opportune.sequencer:Sequencer.report",
+    "opportune.sequencer:Sequencer.step",
+    "opportune.sequencer:Sequencer.run",
+    "opportune.sequencer:State",
+    "opportune.sequencer:State.to_dict",
+    "opportune.sequencer:Row",
+    "opportune.sequencer:Row.to_dict",
+    "opportune.sequencer:SequencerError",
+    "opportune.sequencer:LookError",
+    "opportune.sequencer:OutcomeError",
+    "opportune.policies.base:Action",
+    "opportune.policies.base:Action.to_dict",
+    "opportune.policies.base:Action.from_dict",
+    "opportune.policies.base:Decision",
+    "opportune.policies.base:Decision.to_dict",
+    "opportune.policies.base:Decision.recorded",
+    "opportune.policies.base:Candidate",
+    "opportune.policies.base:Candidate.to_dict",
+    "opportune.policies.base:Estimate",
+    "opportune.policies.base:Estimate.to_dict",
+    "opportune.policies.base:Policy",
+    "opportune.policies.base:Policy.decide",
+    "opportune.policies.opportunistic:Opportunistic",
+    "opportune.policies.opportunistic:Opportunistic.rule",
+    "opportune.policies.opportunistic:Opportunistic.rank_candidates",
+    "opportune.policies.opportunistic:Opportunistic.rank_positions",
+    "opportune.policies.opportunistic:Opportunistic.buffer_ties_at",
+    "opportune.policies.opportunistic:Opportunistic.decision_key",
+    "opportune.policies.opportunistic:paper_rule",
+    "opportune.policies.variants:BinFirst",
+    "opportune.policies.variants:BinFirst.rule",
+    "opportune.policies.variants:Slack",
+    "opportune.policies.variants:Slack.then",
+    "opportune.policies.variants:Slack.least_slack",
+    "opportune.policies.answers:Answers",
+    "opportune.policies.answers:Answers.installable",
+    "opportune.policies.answers:Answers.installable_in_bin",
+    "opportune.policies.answers:Answers.visible_parts",
+    "opportune.policies.answers:Answers.without_buffer",
+    "opportune.policies.answers:Answers.index",
+    "opportune.policies.answers:Answers.cost",
+    "opportune.policies.answers:Answers.options",
+    "opportune.policies.answers:Answers.positions",
+    "opportune.policies.answers:Answers.slack",
+    "opportune.policies.answers:Answers.pick",
+    "opportune.policies.answers:Answers.how",
+    "opportune.policies.answers:How",
+    "opportune.policies.answers:CountBasedRule",
+    "opportune.policies.answers:CountBasedRule.rule",
+    "opportune.policies.answers:CountBasedRule.then",
+    "opportune.policies.answers:CountBasedRule.choose_at",
+    "opportune.policies.answers:CountBasedRule.rank_candidates",
+    "opportune.policies.answers:CountBasedRule.rank_positions",
+    "opportune.policies.answers:CountBasedRule.decide",
+    "opportune.policies.evaluate:PolicyEvaluator",
+    "opportune.policies.evaluate:PolicyEvaluator.value",
+    "opportune.policies.evaluate:PolicyEvaluator.takes_optimum",
+    "opportune.policies.evaluate:PolicyEvaluator.optimal",
+    "opportune.planning.products:several_products",
+    "opportune.planning.products:combine_products",
+    "opportune.planning.products:split_unit",
+    "opportune.planning.products:unit_id",
+    "opportune.planning.products:ProductsError",
+    "opportune.multi:MultiSequencer",
+    "opportune.multi:CellState",
+    "opportune.multi:CellState.fixtures",
+    "opportune.multi:CellState.to_dict",
+    "opportune.multi:CellState.view",
+    "opportune.multi:split_action",
+    "opportune.multi:fit_policy",
+    "opportune.service.testing:ServiceProcess",
+    "opportune.service.testing:ServiceProcess.start",
+    "opportune.service.testing:ServiceProcess.stop",
+    "opportune.service.testing:ServiceProcess.kill",
+    "opportune.service.testing:ServiceProcess.worker_pids",
+    "opportune.service.testing:ServiceProcess.kill_worker",
+    "opportune.service.testing:ServiceProcess.log_text",
+    "opportune.service.testing:ServiceProcess.token",
+    "opportune.service.testing:Client",
+    "opportune.service.testing:Client.get",
+    "opportune.service.testing:Client.post",
+    "opportune.service.testing:Client.close",
+    "opportune.service.testing:PostgresServer",
+    "opportune.service.testing:PostgresServer.start",
+    "opportune.service.testing:PostgresServer.database",
+    "opportune.service.testing:PostgresServer.stop",
+    "opportune.service.testing:free_port",
+    "opportune.service.config:Settings",
+    "opportune.service.config:database_url",
+    "opportune.service.opcua:OpcUaOptions",
+    "opportune.service.opcua:OpcUaOptions.checked",
+    "opportune.service.opcua:status_of",
+    "opportune.service.opcua_client:CellClient",
+    "opportune.service.opcua_client:CellClient.connect",
+    "opportune.service.opcua_client:CellClient.disconnect",
+    "opportune.service.opcua_client:CellClient.node_id",
+    "opportune.service.opcua_client:CellClient.call",
+    "opportune.service.opcua_client:CellClient.upload_plan",
+    "opportune.service.opcua_client:CellClient.start_run",
+    "opportune.service.opcua_client:CellClient.look",
+    "opportune.service.opcua_client:CellClient.outcome",
+    "opportune.service.opcua_client:CellClient.cancel",
+    "opportune.service.opcua_client:CellClient.read",
+    "opportune.service.opcua_client:Refused",
+    "opportune.service.opcua_client:listing",
+    "opportune.study.simulate:StudyConfig",
+    "opportune.study.simulate:StudyConfig.validate",
+    "opportune.study.simulate:StudyConfig.settings",
+    "opportune.study.simulate:StudyConfig.from_settings",
+    "opportune.study.simulate:run_study",
+    "opportune.study.simulate:prepare",
+    "opportune.study.simulate:StudyResult",
+    "opportune.study.simulate:StudyResult.to_frame",
+    "opportune.study.simulate:TrialResult",
+    "opportune.study.simulate:TrialResult.row",
+    "opportune.study.simulate:StudyError",
+    "opportune.study.report:summary",
+    "opportune.study.report:write_outputs",
+    "opportune.study.report:describe",
+    "opportune.study.report:make_figures",
+    "opportune.study.report_html:write_report",
+    "opportune.study.report_html:render_report",
+    "opportune.worlds:make_world",
+    "opportune.worlds.bins:World",
+    "opportune.worlds.bins:World.reset",
+    "opportune.worlds.bins:World.look",
+    "opportune.worlds.bins:World.take",
+    "opportune.worlds.bins:World.shake",
+    "opportune.worlds.bins:UniformBin",
+    "opportune.worlds.bins:UniformBin.look",
+    "opportune.worlds.bins:WeightedBin",
+    "opportune.worlds.bins:WeightedBin.look",
+    "opportune.worlds.bins:PileBin",
+    "opportune.worlds.bins:PileBin.reset",
+    "opportune.worlds.bins:PileBin.look",
+    "opportune.worlds.bins:PileBin.take",
+    "opportune.worlds.bins:PileBin.shake",
+    "opportune.worlds.bins:ConveyorBin",
+    "opportune.worlds.bins:ConveyorBin.reset",
+    "opportune.worlds.bins:ConveyorBin.look",
+    "opportune.worlds.bins:ConveyorBin.take",
+    "opportune.worlds.bins:PalletWorld",
+    "opportune.worlds.bins:PalletWorld.reset",
+    "opportune.worlds.bins:PalletWorld.look",
+    "opportune.worlds.bins:PalletWorld.take",
+    "opportune.planning.costs:TimeModel",
+    "opportune.planning.costs:TimeModel.move",
+    "opportune.planning.costs:TimeModel.from_plan",
+    "opportune.planning.costs:TimeModel.to_dict",
+    "opportune.study.simulate_products:ProductsConfig",
+    "opportune.study.simulate_products:ProductsConfig.validate",
+    "opportune.study.simulate_products:run_products",
+    "opportune.study.simulate_products:ProductsResult",
+    "opportune.study.simulate_products:ProductsResult.summary",
+})
+
+
+def shown() -> list[tuple[str, str, object]]:
+    """(module, qualified name, object) of every function, class and method the reference shows."""
+    found = []
+    for page in sorted(REFERENCE.glob("*.md")):
+        for block in BLOCK.finditer(page.read_text(encoding="utf-8")):
+            module = importlib.import_module(block["module"])
+            for name in (n.strip() for n in (block["members"] or "").split(",")):
+                if not name:
+                    continue
+                obj = getattr(module, name)
+                if inspect.isclass(obj):
+                    found.append((block["module"], name, obj))
+                    found += [(block["module"], f"{name}.{k}", v) for k, v in vars(obj).items()
+                              if not k.startswith("_") and _callable(v)]
+                elif callable(obj):
+                    found.append((block["module"], name, obj))
+    return found
+
+
+def _callable(member) -> bool:
+    return isinstance(member, (classmethod, staticmethod)) or inspect.isfunction(member)
+
+
+def sections(doc: str) -> dict[str, str]:
+    """The numpydoc sections of a (dedented) docstring: name → text, up to the next section."""
+    heads = list(SECTION.finditer(doc))
+    return {h["name"].strip(): doc[h.end(): heads[i + 1].start() if i + 1 < len(heads) else len(doc)]
+            for i, h in enumerate(heads)}
+
+
+def documented_names(text: str) -> set[str]:
+    """The names a Parameters section documents: its unindented ``name : type`` lines."""
+    names = set()
+    for line in text.splitlines():
+        if line.strip() and not line[0].isspace() and (m := PARAMETER.match(line.strip())):
+            names |= {n.strip().lstrip("*") for n in m["names"].split(",")}
+    return names
+
+
+def parameters(obj) -> list[str]:
+    """The parameters a caller passes (``self`` and ``cls`` aside); a class's are its constructor's."""
+    function = obj.__func__ if isinstance(obj, (classmethod, staticmethod)) else obj
+    try:
+        signature = inspect.signature(function)
+    except (TypeError, ValueError):
+        return []
+    return [p for p in signature.parameters if p not in ("self", "cls")]
+
+
+def returns_value(function) -> bool:
+    annotation = inspect.signature(function).return_annotation
+    if annotation is inspect.Signature.empty:
+        tree = _tree(function)
+        return tree is not None and any(isinstance(n, ast.Return) and n.value is not None
+                                        and not (isinstance(n.value, ast.Constant) and n.value.value is None)
+                                        for n in _own_nodes(tree))
+    return annotation not in (None, "None", "NoReturn", "Never")
+
+
+def _tree(function):
+    try:
+        source = textwrap.dedent(inspect.getsource(function))
+    except (OSError, TypeError):
+        return None
+    return ast.parse(source).body[0]
+
+
+def _own_nodes(tree):
+    """The nodes of a function's own body, not of functions or classes defined inside it."""
+    stack = list(tree.body)
+    while stack:
+        node = stack.pop()
+        yield node
+        stack += [c for c in ast.iter_child_nodes(node)
+                  if not isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef, ast.Lambda))]
+
+
+def raised(function) -> set[str]:
+    """The exception classes a function raises in its own body (``raise Name(...)`` or ``raise Name``)."""
+    tree = _tree(function)
+    out = set()
+    for node in _own_nodes(tree) if tree is not None else ():
+        if isinstance(node, ast.Raise) and node.exc is not None:
+            exc = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+            name = exc.attr if isinstance(exc, ast.Attribute) else getattr(exc, "id", "")
+            if name[:1].isupper():      # a class; a lower-case name re-raises a caught exception
+                out.add(name)
+    return out
+
+
+def missing(obj) -> list[str]:
+    """What ``obj``'s docstring lacks (empty: nothing)."""
+    function = obj.__func__ if isinstance(obj, (classmethod, staticmethod)) else obj
+    doc = inspect.getdoc(function)
+    if not doc:
+        return ["a docstring"]
+    found = sections(doc)
+    lacks = []
+    is_exception = inspect.isclass(function) and issubclass(function, BaseException)
+    wanted = parameters(obj) if not is_exception or "__init__" in vars(function) else []
+    if wanted:
+        if "Parameters" not in found:
+            lacks.append("Parameters")
+        else:
+            named = documented_names(found["Parameters"])
+            lacks += [f"parameter {p!r} in Parameters" for p in wanted if p not in named]
+    if not inspect.isclass(function):
+        if returns_value(function) and not {"Returns", "Yields"} & set(found):
+            lacks.append("Returns")
+        for exc in sorted(raised(function)):
+            if exc not in found.get("Raises", ""):
+                lacks.append(f"{exc} in Raises")
+    if ">>>" not in found.get("Examples", ""):
+        lacks.append("Examples")
+    return lacks
+
+
+SHOWN = shown()
+PENDING_ENTRIES = {f"{m}:{q}" for m, q, _ in SHOWN if m.startswith(PENDING_MODULES)}
+
+
+@pytest.mark.parametrize("module, name, obj", [s for s in SHOWN if f"{s[0]}:{s[1]}" not in PENDING | PENDING_ENTRIES],
+                         ids=lambda v: v if isinstance(v, str) else "")
+def test_a_shown_object_has_its_sections(module, name, obj):
+    assert missing(obj) == [], f"{module}.{name} lacks {', '.join(missing(obj))}"
+
+
+def test_the_pending_lists_only_shrink():
+    keys = {f"{m}:{q}": o for m, q, o in SHOWN}
+    assert PENDING <= set(keys), f"not in the reference (remove from PENDING): {sorted(PENDING - set(keys))}"
+    done = sorted(k for k in PENDING if not missing(keys[k]))
+    assert not done, f"complete now (remove from PENDING): {done}"
+    for prefix in PENDING_MODULES:
+        entries = [k for k in PENDING_ENTRIES if k.startswith(prefix)]
+        if entries:     # a module gone from the reference needs no entry either
+            assert any(missing(keys[k]) for k in entries), f"every object of {prefix} is complete: remove it"
+
+
+def test_the_check_sees_what_is_missing():
+    """The checks themselves: each lack is found on a function that has it, and none on one that has not."""
+
+    def bare(plan, *, seed=0) -> int:
+        """One line."""
+        raise ValueError("no")
+
+    def whole(plan, *, seed=0) -> int:
+        """One line.
+
+        Parameters
+        ----------
+        plan, seed : object
+            What to read.
+
+        Returns
+        -------
+        int
+            Nothing much.
+
+        Raises
+        ------
+        ValueError
+            Always.
+
+        Examples
+        --------
+        >>> 1
+        1
+        """
+        raise ValueError("no")
+
+    assert missing(bare) == ["Parameters", "Returns", "ValueError in Raises", "Examples"]
+    assert missing(whole) == []
+    assert missing(lambda: None) == ["a docstring"]
