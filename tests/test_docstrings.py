@@ -71,7 +71,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.datasets:examples",
     "opportune.datasets:example_path",
     "opportune.datasets:resolve",
-    "opportune.policies.base:Policy",
     "opportune.policies.opportunistic:Opportunistic",
     "opportune.policies.opportunistic:Opportunistic.rule",
     "opportune.policies.opportunistic:Opportunistic.rank_candidates",
@@ -150,17 +149,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.service.opcua_client:CellClient.read",
     "opportune.service.opcua_client:Refused",
     "opportune.service.opcua_client:listing",
-    "opportune.study.simulate:StudyConfig",
-    "opportune.study.simulate:StudyConfig.validate",
-    "opportune.study.simulate:StudyConfig.settings",
-    "opportune.study.simulate:StudyConfig.from_settings",
-    "opportune.study.simulate:run_study",
-    "opportune.study.simulate:prepare",
-    "opportune.study.simulate:StudyResult",
-    "opportune.study.simulate:StudyResult.to_frame",
-    "opportune.study.simulate:TrialResult",
-    "opportune.study.simulate:TrialResult.row",
-    "opportune.study.simulate:StudyError",
     "opportune.study.report:summary",
     "opportune.study.report:write_outputs",
     "opportune.study.report:describe",
@@ -302,7 +290,8 @@ def missing(obj) -> list[str]:
     lacks = []
     is_exception = inspect.isclass(function) and issubclass(function, BaseException)
     is_protocol = getattr(function, "_is_protocol", False)     # an interface: nobody constructs it
-    wanted = parameters(obj) if not (is_exception or is_protocol) or "__init__" in vars(function) else []
+    own_init = inspect.isclass(function) and "__init__" in vars(function)
+    wanted = [] if is_protocol or (is_exception and not own_init) else parameters(obj)
     if wanted:
         if "Parameters" not in found:
             lacks.append("Parameters")
