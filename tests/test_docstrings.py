@@ -6,7 +6,7 @@ and for every public method, class method and static method its class defines:
 
 * a docstring;
 * ``Parameters``, naming every parameter of the signature (for a class, of its constructor), when it
-  takes any;
+  takes any, and no other;
 * ``Returns`` (or ``Yields``) when it returns a value (its return annotation is not ``None``);
 * ``Raises``, naming every exception class the function raises itself (``raise X(...)`` in its own
   body, not in functions it calls);
@@ -108,23 +108,10 @@ PENDING: frozenset[str] = frozenset({
     "opportune.multi:CellState.view",
     "opportune.multi:split_action",
     "opportune.multi:fit_policy",
-    "opportune.service.testing:ServiceProcess",
-    "opportune.service.testing:ServiceProcess.start",
-    "opportune.service.testing:ServiceProcess.stop",
-    "opportune.service.testing:ServiceProcess.kill",
-    "opportune.service.testing:ServiceProcess.worker_pids",
-    "opportune.service.testing:ServiceProcess.kill_worker",
-    "opportune.service.testing:ServiceProcess.log_text",
-    "opportune.service.testing:ServiceProcess.token",
-    "opportune.service.testing:Client",
-    "opportune.service.testing:Client.get",
-    "opportune.service.testing:Client.post",
-    "opportune.service.testing:Client.close",
     "opportune.service.testing:PostgresServer",
     "opportune.service.testing:PostgresServer.start",
     "opportune.service.testing:PostgresServer.database",
     "opportune.service.testing:PostgresServer.stop",
-    "opportune.service.testing:free_port",
     "opportune.service.config:Settings",
     "opportune.service.config:database_url",
     "opportune.service.opcua:OpcUaOptions",
@@ -269,6 +256,7 @@ def missing(obj) -> list[str]:
         else:
             named = documented_names(found["Parameters"])
             lacks += [f"parameter {p!r} in Parameters" for p in wanted if p not in named]
+            lacks += [f"no parameter {p!r} (documented in Parameters)" for p in sorted(named - set(wanted))]
     if not inspect.isclass(function):
         if returns_value(function) and not {"Returns", "Yields"} & set(found):
             lacks.append("Returns")
@@ -333,6 +321,23 @@ def test_the_check_sees_what_is_missing():
         """
         raise ValueError("no")
 
+    def stale(plan) -> None:
+        """One line.
+
+        Parameters
+        ----------
+        plan : object
+            What to read.
+        seed : int
+            Gone from the signature.
+
+        Examples
+        --------
+        >>> 1
+        1
+        """
+
     assert missing(bare) == ["Parameters", "Returns", "ValueError in Raises", "Examples"]
+    assert missing(stale) == ["no parameter 'seed' (documented in Parameters)"]
     assert missing(whole) == []
     assert missing(lambda: None) == ["a docstring"]
