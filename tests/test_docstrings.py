@@ -45,13 +45,6 @@ PENDING_MODULES = ("opportune.engine", "opportune.derive", "opportune.policies.l
 
 #: Single objects of the other modules that still lack a section (``module:qualified.name``).
 PENDING: frozenset[str] = frozenset({
-    "opportune.formats.loader:CheckResult",
-    "opportune.formats.graphfiles:check_graphml_bytes",
-    "opportune.formats.graphfiles:check_dot_bytes",
-    "opportune.formats.graphfiles:to_graphml",
-    "opportune.formats.graphfiles:to_dot_precedence",
-    "opportune.formats.graphfiles:plan_to_networkx",
-    "opportune.formats.graphfiles:plan_from_networkx",
     "opportune.policies.opportunistic:Opportunistic",
     "opportune.policies.opportunistic:Opportunistic.rule",
     "opportune.policies.opportunistic:Opportunistic.rank_candidates",
@@ -123,10 +116,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.study.report:make_figures",
     "opportune.study.report_html:write_report",
     "opportune.study.report_html:render_report",
-    "opportune.planning.costs:TimeModel",
-    "opportune.planning.costs:TimeModel.move",
-    "opportune.planning.costs:TimeModel.from_plan",
-    "opportune.planning.costs:TimeModel.to_dict",
     "opportune.study.simulate_products:ProductsConfig",
     "opportune.study.simulate_products:ProductsConfig.validate",
     "opportune.study.simulate_products:run_products",
