@@ -504,12 +504,27 @@ class CountBasedRule(DecidesOnMasks):
     """A policy whose rule is a function of :class:`Answers` (:meth:`rule`, and optionally a question
     after it, :meth:`then`), decided exactly or within ``budget`` seconds per decision.
 
-    ``budget``: seconds per decision (None: always exact, however long it takes).  With a budget,
-    ``seed`` and ``chains`` set the estimates' random streams and population.  A rule with a question
-    after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the whole is ``total_budget``).
-    A decision costs what its answers cost; within a budget, at most about the budget (the estimates'
-    and counts' checks of the clock, and building the reasons, are the rest).
+    A rule with a question after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the
+    whole is ``total_budget``).  A decision costs what its answers cost; within a budget, at most
+    about the budget (the estimates' and counts' checks of the clock, and building the reasons, are
+    the rest).
 
+    Parameters
+    ----------
+    budget : float, optional
+        Seconds per decision (``None``: always exact, however long it takes).
+    seed : int, default 0
+        With a budget, the seed of the estimates' random streams.
+    chains : int, default 8
+        With a budget, the estimates' population of chains.
+
+    Raises
+    ------
+    ValueError
+        If ``budget`` is not a positive number of seconds.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> from opportune.policies.variants import Slack
@@ -542,16 +557,93 @@ class CountBasedRule(DecidesOnMasks):
         return cls.then is not CountBasedRule.then
 
     def rule(self, ask: Answers) -> Action:
-        """The action, from the answers to the rule's questions."""
+        """The action, from the answers to the rule's questions.
+
+        Parameters
+        ----------
+        ask : Answers
+            The answering layer for the state and look: exact counts, or estimates within the budget.
+
+        Returns
+        -------
+        Action
+            The rule's action.
+
+        Raises
+        ------
+        NotImplementedError
+            In this base class: each policy defines its rule.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Opportunistic().rule(Answers(engine, 0, engine.all_strategies, (), 1.0, ("b", "a")))
+        Action(kind='install', part='a', source='bin')
+        """
         raise NotImplementedError
 
     def then(self, ask: Answers, action: Action) -> Action:
-        """The action after a question asked once the rule has decided (none here)."""
+        """The action after a question asked once the rule has decided (none here: the rule's action).
+
+        Parameters
+        ----------
+        ask : Answers
+            The same answers the rule had.
+        action : Action
+            The rule's action.
+
+        Returns
+        -------
+        Action
+            The action decided.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b"], {}))
+        >>> Opportunistic().then(Answers(engine, 0, 1, (), 1.0, ("a",)), Action("shake"))
+        Action(kind='shake', part=None, source=None)
+        """
         return action
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """The action on the machine form of a state: exact, or within the budget."""
+        """The action on the machine form of a state: exact, or within the budget.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask : int
+            The installed units, as the engine's bit mask.
+        consistent : int
+            The strategies still consistent, as a bit mask.
+        buffer : tuple of str
+            The buffered parts, in the order they were buffered.
+        free : float
+            Free buffer locations (``math.inf``: unlimited).
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        Action
+            The action (no reasons: :meth:`decide` gives them).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Opportunistic().choose_at(engine, 0, engine.all_strategies, (), 1.0, ("c",))
+        Action(kind='buffer', part='c', source=None)
+        """
         return self._how(engine, mask, consistent, buffer, free, visible)[0]
 
     def _how(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
@@ -636,18 +728,94 @@ class CountBasedRule(DecidesOnMasks):
     # ------------------------------------------------------------ decisions with reasons
 
     def rank_candidates(self, state, visible: tuple[str, ...]) -> list[tuple]:
-        """The installable candidates best first, as ``(sort key, part, source, buffer position)``, the
-        sort key's first element minus the options (for the decision's reasons)."""
+        """The installable candidates best first, for the decision's reasons.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        list of tuple
+            ``(sort key, part, source, buffer position)``; the sort key's first element is minus the
+            options.
+
+        Raises
+        ------
+        NotImplementedError
+            In this base class: each policy ranks by its own rule.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]})).state
+        >>> Opportunistic().rank_candidates(state, ("a", "b"))
+        [((-2, 0, 2.0, -1, 0), 'a', 'bin', None), ((-1, 0, 2.0, -1, 1), 'b', 'bin', None)]
+        """
         raise NotImplementedError
 
     def rank_positions(self, state, visible: tuple[str, ...]) -> list[tuple]:
-        """The visible parts as ``(expected position, declaration index, part)``, best first (likewise)."""
+        """The visible parts best first by their expected positions, for the decision's reasons.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        list of tuple
+            ``(expected position, declaration index, part)``.
+
+        Raises
+        ------
+        NotImplementedError
+            In this base class: each policy ranks by its own rule.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]})).state
+        >>> Opportunistic().rank_positions(state, ("c",))
+        [(Fraction(8, 3), 2, 'c')]
+        """
         raise NotImplementedError
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        """The action with its reasons: the candidates' options and the completions now, or the visible
-        parts' expected positions, counted within what is left of the budget (said where they do not
-        fit); an estimated decision gives its estimates and how sure it is instead."""
+        """The action with its reasons.
+
+        The candidates' options and the completions now, or the visible parts' expected positions,
+        counted within what is left of the budget (said where they do not fit); an estimated decision
+        gives its estimates and how sure it is instead.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look, checked against the state.
+
+        Returns
+        -------
+        Decision
+            The action and why.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]})).state
+        >>> decision = Opportunistic().decide(state, ("c",))
+        >>> decision.action, decision.positions
+        (Action(kind='buffer', part='c', source=None), (('c', Fraction(8, 3)),))
+        """
         start = time.perf_counter()
         sched = state.schedule
         action, how = self._how(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
