@@ -80,11 +80,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.service.opcua_client:CellClient.read",
     "opportune.service.opcua_client:Refused",
     "opportune.service.opcua_client:listing",
-    "opportune.study.simulate_products:ProductsConfig",
-    "opportune.study.simulate_products:ProductsConfig.validate",
-    "opportune.study.simulate_products:run_products",
-    "opportune.study.simulate_products:ProductsResult",
-    "opportune.study.simulate_products:ProductsResult.summary",
 })
 
 
