@@ -62,8 +62,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.service.testing:PostgresServer.start",
     "opportune.service.testing:PostgresServer.database",
     "opportune.service.testing:PostgresServer.stop",
-    "opportune.service.config:Settings",
-    "opportune.service.config:database_url",
     "opportune.service.opcua:OpcUaOptions",
     "opportune.service.opcua:OpcUaOptions.checked",
     "opportune.service.opcua:status_of",
