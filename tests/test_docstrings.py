@@ -62,19 +62,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.service.testing:PostgresServer.start",
     "opportune.service.testing:PostgresServer.database",
     "opportune.service.testing:PostgresServer.stop",
-    "opportune.service.opcua_client:CellClient",
-    "opportune.service.opcua_client:CellClient.connect",
-    "opportune.service.opcua_client:CellClient.disconnect",
-    "opportune.service.opcua_client:CellClient.node_id",
-    "opportune.service.opcua_client:CellClient.call",
-    "opportune.service.opcua_client:CellClient.upload_plan",
-    "opportune.service.opcua_client:CellClient.start_run",
-    "opportune.service.opcua_client:CellClient.look",
-    "opportune.service.opcua_client:CellClient.outcome",
-    "opportune.service.opcua_client:CellClient.cancel",
-    "opportune.service.opcua_client:CellClient.read",
-    "opportune.service.opcua_client:Refused",
-    "opportune.service.opcua_client:listing",
 })
 
 
