@@ -58,10 +58,6 @@ PENDING: frozenset[str] = frozenset({
     "opportune.policies.answers:Answers.pick",
     "opportune.policies.answers:Answers.how",
     "opportune.policies.answers:How",
-    "opportune.service.testing:PostgresServer",
-    "opportune.service.testing:PostgresServer.start",
-    "opportune.service.testing:PostgresServer.database",
-    "opportune.service.testing:PostgresServer.stop",
 })
 
 

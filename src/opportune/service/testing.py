@@ -472,15 +472,29 @@ class PostgresServer:
     """A throwaway PostgreSQL server in a temporary directory, on 127.0.0.1 and a free port, for tests.
 
     Needs the server programs (Debian: ``apt-get install postgresql``); as root it runs them as the
-    ``postgres`` user, as PostgreSQL requires.  It runs with ``fsync=off`` (tests need no durability
-    against power loss; ``kill -9`` of a client loses nothing either way) unless ``durable=True``.  :meth:`database` makes a fresh database and returns
-    its SQLAlchemy URL (driver psycopg 3).
+    ``postgres`` user, as PostgreSQL requires.  The server lives in a fresh directory under the
+    system's temporary directory (the ``postgres`` user must be able to reach it) and is deleted by
+    :meth:`stop`.  A context manager: ``with`` starts and stops it.
 
-    The server lives in a fresh directory under the system's temporary directory (the ``postgres``
-    user must be able to reach it) and is deleted by :meth:`stop`.
+    Parameters
+    ----------
+    durable : bool, default False
+        Run with PostgreSQL's defaults; ``False`` runs with ``fsync=off`` (tests need no durability
+        against power loss; ``kill -9`` of a client loses nothing either way).
+
+    Raises
+    ------
+    RuntimeError
+        If PostgreSQL's server programs (``initdb``, ``pg_ctl``) are not found.
+
+    Examples
+    --------
+    Starting a server takes seconds and the PostgreSQL programs:
 
     >>> with PostgresServer() as pg:                                    # doctest: +SKIP
     ...     url = pg.database("runs")
+    ...     with ServiceProcess(url, log="service.log") as service:
+    ...         token = service.token(cell="cell-1")
     """
 
     def __init__(self, *, durable: bool = False):
@@ -511,6 +525,23 @@ class PostgresServer:
             raise RuntimeError(f"{' '.join(args[:2])} failed: {done.stdout}{done.stderr}")
 
     def start(self) -> "PostgresServer":
+        """Create the data directory and start the server (``initdb``, then ``pg_ctl start``).
+
+        Returns
+        -------
+        PostgresServer
+            This server, started (:attr:`port` set).
+
+        Raises
+        ------
+        RuntimeError
+            If ``initdb`` or ``pg_ctl`` fails (with its output).
+
+        Examples
+        --------
+        >>> pg = PostgresServer().start()          # doctest: +SKIP
+        >>> pg.stop()                              # doctest: +SKIP
+        """
         import tempfile
 
         self.root = Path(tempfile.mkdtemp(prefix="opportune-pg-"))
@@ -526,7 +557,24 @@ class PostgresServer:
         return self
 
     def database(self, name: str) -> str:
-        """Create database ``name``; its URL."""
+        """Create a database.
+
+        Parameters
+        ----------
+        name : str
+            The database's name (a new one).
+
+        Returns
+        -------
+        str
+            Its SQLAlchemy URL (driver psycopg 3), for :class:`ServiceProcess` or ``opportune serve --db``.
+
+        Examples
+        --------
+        >>> with PostgresServer() as pg:                                    # doctest: +SKIP
+        ...     pg.database("runs")
+        'postgresql+psycopg://postgres@127.0.0.1:...'
+        """
         from sqlalchemy import create_engine, text
 
         admin = create_engine(f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/postgres",
@@ -539,6 +587,13 @@ class PostgresServer:
         return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{name}"
 
     def stop(self) -> None:
+        """Stop the server at once (``pg_ctl -m immediate``) and delete its directory; nothing to do if it
+        is not running.
+
+        Examples
+        --------
+        >>> PostgresServer().stop()                # doctest: +SKIP
+        """
         import shutil
 
         if self.root is None:
