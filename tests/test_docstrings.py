@@ -45,19 +45,6 @@ PENDING_MODULES = ("opportune.engine", "opportune.derive", "opportune.policies.l
 
 #: Single objects of the other modules that still lack a section (``module:qualified.name``).
 PENDING: frozenset[str] = frozenset({
-    "opportune.policies.answers:Answers",
-    "opportune.policies.answers:Answers.installable",
-    "opportune.policies.answers:Answers.installable_in_bin",
-    "opportune.policies.answers:Answers.visible_parts",
-    "opportune.policies.answers:Answers.without_buffer",
-    "opportune.policies.answers:Answers.index",
-    "opportune.policies.answers:Answers.cost",
-    "opportune.policies.answers:Answers.options",
-    "opportune.policies.answers:Answers.positions",
-    "opportune.policies.answers:Answers.slack",
-    "opportune.policies.answers:Answers.pick",
-    "opportune.policies.answers:Answers.how",
-    "opportune.policies.answers:How",
 })
 
 
