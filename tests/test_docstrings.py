@@ -44,8 +44,7 @@ PENDING_MODULES = ("opportune.engine", "opportune.derive", "opportune.policies.l
                    "opportune.policies.optimal", "opportune.policies.pile", "opportune.study.bounds")
 
 #: Single objects of the other modules that still lack a section (``module:qualified.name``).
-PENDING: frozenset[str] = frozenset({
-})
+PENDING: frozenset[str] = frozenset()
 
 
 def shown() -> list[tuple[str, str, object]]:
