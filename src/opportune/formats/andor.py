@@ -411,7 +411,7 @@ _WAY_KEYS = frozenset({"name", "description", "join", "then", "before"})
 
 def fits_schema(name: Any, ways: Any, is_part_id) -> bool:
     """True only if one entry of ``assemblies`` certainly satisfies the plan schema (a linear walk):
-    the validator, about 30 µs a value, then judges only the others.  ``is_part_id``: the id test.
+    the validator, far slower a value, then judges only the others.  ``is_part_id``: the id test.
 
     >>> fits_schema("p", [{"join": ["a", "b"], "then": ["c"]}], str.isidentifier)
     True

@@ -388,7 +388,7 @@ def _prescan_yaml(text: str) -> int | None:
     """Refuse YAML text of more than :data:`MAX_VALUES` values, :data:`MAX_DEPTH` levels or
     :data:`MAX_ALIASES` aliases before any node is composed; the number of aliases, or None if not scanned.
 
-    With libyaml, one pass over the parser's events (about 1 µs each, each dropped once counted, so
+    With libyaml, one pass over the parser's events (cheap: each dropped once counted, so
     memory stays that of the text) that stops at the first bound passed; the text is then safe for
     libyaml's own composer, twice as fast as PyYAML's (which has no bound of its own: a list nested
     200,000 deep would overflow its C stack).  Without libyaml, only an upper bound from
@@ -544,7 +544,7 @@ def _plain_yaml(text: str) -> tuple[dict, dict[tuple, int]] | None:
     and numbers (``[a, b, c]``), plain words, integers, decimals and phrases, comments.  Anything
     else, or anything that might read otherwise (quotes, tags, anchors, multi-line scalars, flow
     mappings, booleans and nulls, repeated keys, tabs, several documents), is None: this path only
-    saves PyYAML's import (20 ms) on the plans most often counted; the tests compare it with PyYAML's
+    saves PyYAML's import on the plans most often counted (docs/bounds.md gives what it costs); the tests compare it with PyYAML's
     on generated and mutated documents.  O(len(text)), at most :data:`PLAIN_MAX_CHARS` characters.
 
     >>> _plain_yaml("name: six\\nparts: [a, b]\\nrequires:\\n  b: [a]\\n")
@@ -766,8 +766,8 @@ def _build_from_events(text: str, doc: Document, yaml) -> Document:
 
     The values and depth are counted on the way, as :func:`_prescan_yaml` counts them (the same
     refusals, on the same lines), so one pass replaces three (the pre-scan, the composer and the
-    build): about 5 µs a value instead of 20 (a plan at :data:`MAX_VALUES` read in 0.8 s instead of
-    3 s).  No node is made: plain scalars that resolve to strings are taken as they are, others
+    build), a quarter of their time per value (docs/bounds.md gives the measured costs).  No node
+    is made: plain scalars that resolve to strings are taken as they are, others
     built by PyYAML's safe constructor.  Raises :class:`_Fallback` at the first alias, merge key,
     list or mapping key, or tagged collection (the composer's path reads those);
     :class:`_Refused` past a bound; PyYAML's errors for bad syntax.
@@ -978,8 +978,8 @@ def json_lines(text: str) -> dict[tuple, int]:
     """The line of every value of valid JSON ``text``, by path (a list item's where it starts, a
     mapping value's where its key stands), as :func:`parse_yaml` records them.
 
-    One regular-expression pass over the tokens: O(len(text)), about 0.5 µs a value (the YAML pass
-    it replaces costs 15 µs a value: 2.3 s for a document at :data:`MAX_VALUES`).  Memory: the
+    One regular-expression pass over the tokens: O(len(text)), some thirty times cheaper a value
+    than the YAML pass it replaces (docs/bounds.md gives the measured costs).  Memory: the
     paths (a few tens of bytes each).
 
     >>> lines = json_lines('{"parts": ["a",\\n "b"], "requires": {\\n"b": "a"}}')
@@ -1036,8 +1036,7 @@ def parse_json(text: str, file: str | None = None) -> Document:
     """Parse JSON strictly (its own syntax errors, with line); lines come from a YAML pass when first asked for.
 
     Bounded before parsing (:func:`_prescan_json`: at most :data:`MAX_VALUES` values), then by depth
-    (:data:`MAX_DEPTH`).  A plan without problems never pays for its lines: the YAML pass (about
-    10 µs a value) runs when :meth:`Document.line` is first called, or at once when a key repeats
+    (:data:`MAX_DEPTH`).  A plan without problems never pays for its lines: the YAML pass runs when :meth:`Document.line` is first called, or at once when a key repeats
     (the JSON parser keeps the last; the YAML pass reports each with its line).
     """
     doc = Document(None, {}, file)
