@@ -37,8 +37,8 @@ Exact counts first while they have been quick; where they have been slow (a larg
 states), a short estimate (a probe) first, which ends the decision if it settles it, then the exact
 attempt, then the estimate again with what is left of the budget.  How slow exact attempts have
 been is kept per kind of question and per band of :data:`SIZE_BAND` steps remaining (the readings):
-on an assembly the cost of exact counts follows how far it has come (ARC111's expected positions
-never fit 50 ms with 100 or more steps to go, and fit easily with 50), so each trial's early states
+on an assembly the cost of exact counts follows how far it has come (docs/decisions.md gives
+ARC111's measurements), so each trial's early states
 learn from the last trial's early states rather than from its late ones.
 
 >>> from opportune import make_plan
