@@ -106,7 +106,7 @@ class ServiceProcess:
     >>> folder = pathlib.Path(tempfile.mkdtemp())
     >>> with ServiceProcess(folder / "cell.db") as service:
     ...     cell = Client(service.url, service.token(cell="cell-1"))
-    ...     plan = cell.post("/plans", content=open(resolve("example:gearbox")).read(),
+    ...     plan = cell.post("/plans", content=resolve("example:gearbox").read_text(),
     ...                      headers={"Content-Type": "application/yaml"}).json()
     ...     run = cell.post("/runs", {"plan": plan["id"], "policy": "paper"}).json()
     ...     answer = cell.post(f"/runs/{run['id']}/looks", {"visible": ["rl", "ra"]}).json()
