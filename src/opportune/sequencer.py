@@ -5,11 +5,12 @@ checks the look against its state, asks its policy for an action, and waits
 for the outcome report.  The state changes only on reported outcomes, so a
 crash between a decision and its report loses nothing.
 
->>> from opportune import load_plan                     # doctest: +SKIP
->>> seq = Sequencer(load_plan("examples/gearbox.yaml"))  # doctest: +SKIP
->>> seq.decide(visible=["rl", "ra"]).action             # doctest: +SKIP
+>>> from opportune import load_plan
+>>> seq = Sequencer(load_plan("example:gearbox"))
+>>> seq.decide(visible=["rl", "ra"]).action
 Action(kind='buffer', part='rl', source=None)
->>> seq.report("success")                               # doctest: +SKIP
+>>> seq.report("success").buffer
+('rl',)
 """
 
 from __future__ import annotations
