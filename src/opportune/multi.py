@@ -95,7 +95,29 @@ def layout_of(plan: Plan) -> Layout:
 
 @dataclass(frozen=True)
 class CellState(State):
-    """The state of a multi-fixture cell: the joint schedule, and the buffer holding part kinds."""
+    """The state of a multi-fixture cell: the joint schedule, and the buffer holding part kinds.
+
+    Made by :class:`MultiSequencer`; ``in_bin`` counts part kinds.
+
+    Parameters
+    ----------
+    schedule : Schedule
+        The joint plan's schedule.
+    buffer : tuple of str, default ()
+        The buffered part kinds, in the order they were buffered.
+    capacity : int, optional
+        Buffer locations (``None``: unlimited).
+    defects : int, default 0
+        Units reported defective so far.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.planning.products import several_products
+    >>> seq = MultiSequencer(several_products(make_plan(["a", "b"], {"b": ["a"]}), 2), budget=None)
+    >>> seq.state.in_bin
+    {'a': 2, 'b': 2}
+    """
 
     @property
     def layout(self) -> Layout:
@@ -107,7 +129,23 @@ class CellState(State):
         return self.layout.in_bin(self.schedule, self.buffer)
 
     def fixtures(self) -> list[dict]:
-        """Each fixture's installed parts (kinds, in order) and whether its product is complete."""
+        """Each fixture's installed parts (kinds, in order) and whether its product is complete.
+
+        Returns
+        -------
+        list of dict
+            ``{"fixture": i, "installed": [...], "complete": bool}``, fixture 1 first.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.planning.products import several_products
+        >>> seq = MultiSequencer(several_products(make_plan(["a", "b"], {"b": ["a"]}), 2), budget=None)
+        >>> seq.step(["b", "a"]).action.part
+        'a@1'
+        >>> seq.state.fixtures()
+        [{'fixture': 1, 'installed': ['a'], 'complete': False}, {'fixture': 2, 'installed': [], 'complete': False}]
+        """
         lay = self.layout
         remaining = self.schedule.remaining
         out = [{"fixture": i, "installed": [], "complete": True} for i in range(1, lay.n_fixtures + 1)]
@@ -125,8 +163,28 @@ class CellState(State):
     def view(self, visible: tuple[str, ...]) -> tuple[State, tuple[str, ...]]:
         """The state and look as a policy sees them on the joint plan: units, not kinds.
 
-        Each kind in the look or the buffer becomes every unit it can be; the buffer's
-        capacity grows by as many, so that its free locations stay those of the real buffer.
+        Each kind in the look or the buffer becomes every unit it can be; the buffer's capacity grows by
+        as many, so that its free locations stay those of the real buffer.
+
+        Parameters
+        ----------
+        visible : tuple of str
+            A look of part kinds.
+
+        Returns
+        -------
+        tuple of (State, tuple of str)
+            The state on the joint plan, and the look as units.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.planning.products import several_products
+        >>> seq = MultiSequencer(several_products(make_plan(["a", "b"], {"b": ["a"]}), 2), budget=None)
+        >>> seq.step(["a"]).action.part
+        'a@1'
+        >>> seq.state.view(("a", "b"))[1]
+        ('a@2', 'b@1', 'b@2')
         """
         sched, lay = self.schedule, self.layout
         look = lay.view(sched.engine, sched.mask, visible)
@@ -136,10 +194,33 @@ class CellState(State):
 
 
 def fit_policy(policy, layout: Layout):
-    """The policy a cell uses: ``policy`` itself, except the policies that model the bin (the look-ahead's
-    exact programme, the rollout's sampled futures) when a kind is needed on several fixtures: their model
-    is a bin of the joint plan's units, not of kinds.  They then decide by their base rule (``slack``),
-    within their budget."""
+    """The policy a cell uses: ``policy`` itself, except the policies that model the bin.
+
+    The look-ahead's exact programme and the rollout's sampled futures model a bin of the joint
+    plan's units, not of kinds: when a kind is needed on several fixtures they decide by their base
+    rule (``slack``) instead, within their budget.
+
+    Parameters
+    ----------
+    policy : Policy
+        The policy asked for.
+    layout : Layout
+        The cell's layout (:func:`layout_of`).
+
+    Returns
+    -------
+    Policy
+        The policy that decides.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.planning.products import several_products
+    >>> from opportune.policies.named import make_policy
+    >>> layout = layout_of(several_products(make_plan(["a", "b"], {"b": ["a"]}), 2))
+    >>> fit_policy(make_policy("lookahead"), layout).name, fit_policy(make_policy("paper"), layout).name
+    ('slack', 'paper')
+    """
     from opportune.policies.rollout import Rollout
     from opportune.policies.variants import Slack
     from opportune.policies.lookahead import Lookahead
@@ -181,10 +262,39 @@ def check_kinds(state: CellState, visible: Iterable[str]) -> tuple[str, ...]:
 class MultiSequencer(Sequencer):
     """Keeps the state of a cell of several fixtures fed from one bin, and decides with a policy.
 
-    A :class:`~opportune.sequencer.Sequencer` (``decide``, ``report``, ``cancel``, ``step``,
-    ``run``, ``state``, ``trace``) on a joint plan (:func:`~opportune.planning.products.several_products`,
-    :func:`~opportune.planning.products.combine_products`); looks and buffered parts are part kinds, installs
-    name the unit (``x@2``: ``x`` on fixture 2).
+    A :class:`~opportune.sequencer.Sequencer` (``decide``, ``report``, ``cancel``, ``step``, ``run``,
+    ``state``, ``trace``, with the same errors) on a joint plan; looks and buffered parts are part
+    kinds, installs name the unit (``x@2``: ``x`` on fixture 2).
+
+    Parameters
+    ----------
+    plan : Plan or OrderEngine
+        A joint plan (:func:`~opportune.planning.products.several_products`,
+        :func:`~opportune.planning.products.combine_products`), or its engine.
+    policy : Policy, optional
+        The policy asked for (``None``: the paper's rule within ``budget``); a policy that models the
+        bin may decide by its base rule instead (:func:`fit_policy`).
+    buffer_capacity : int, optional
+        Buffer locations (``None``: unlimited).
+    budget : float or None, default 0.05
+        Seconds per decision of the default policy (``None``: exact).
+    warm_up : float or None, default 10.0
+        Seconds spent counting the first state before the first look (as for ``Sequencer``).
+
+    Raises
+    ------
+    ValueError
+        If ``buffer_capacity`` is negative or ``budget`` is not a positive number of seconds.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.planning.products import several_products
+    >>> seq = MultiSequencer(several_products(make_plan(["a", "b"], {"b": ["a"]}), 2), budget=None)
+    >>> seq.decide(["b", "a"]).action
+    Action(kind='install', part='a@1', source='bin')
+    >>> seq.report().installed, seq.n_fixtures
+    (('a@1',), 2)
     """
 
     COMPLETE = "every product is complete"
@@ -262,9 +372,26 @@ class MultiSequencer(Sequencer):
 
 
 def split_action(action: Action) -> tuple[str | None, int | None]:
-    """``(part kind, fixture)`` of a cell's action: the fixture of an install, None for a buffer move
-    (a buffered kind goes to a fixture later), ``(None, None)`` for a shake or done.
+    """``(part kind, fixture)`` of a cell's action.
 
+    Parameters
+    ----------
+    action : Action
+        A cell's action.
+
+    Returns
+    -------
+    tuple of (str or None, int or None)
+        The fixture of an install; ``None`` for a buffer move (a buffered kind goes to a fixture
+        later); ``(None, None)`` for a shake or done.
+
+    Raises
+    ------
+    ProductsError
+        For an install whose part names no fixture.
+
+    Examples
+    --------
     >>> split_action(Action("install", "x@2", "bin")), split_action(Action("buffer", "x"))
     (('x', 2), ('x', None))
     """

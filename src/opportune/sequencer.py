@@ -5,11 +5,12 @@ checks the look against its state, asks its policy for an action, and waits
 for the outcome report.  The state changes only on reported outcomes, so a
 crash between a decision and its report loses nothing.
 
->>> from opportune import load_plan                     # doctest: +SKIP
->>> seq = Sequencer(load_plan("examples/gearbox.yaml"))  # doctest: +SKIP
->>> seq.decide(visible=["rl", "ra"]).action             # doctest: +SKIP
+>>> from opportune import load_plan
+>>> seq = Sequencer(load_plan("example:gearbox"))
+>>> seq.decide(visible=["rl", "ra"]).action
 Action(kind='buffer', part='rl', source=None)
->>> seq.report("success")                               # doctest: +SKIP
+>>> seq.report("success").buffer
+('rl',)
 """
 
 from __future__ import annotations
@@ -32,14 +33,42 @@ WARM_UP = 10.0          # seconds a new sequencer may spend counting its first s
 
 
 class SequencerError(ValueError):
-    """A look or report that contradicts the state; the state is unchanged."""
+    """A look or report that contradicts the state; the state is unchanged.
+
+    The base of :class:`LookError` and :class:`OutcomeError`; a :class:`ValueError`.
+
+    Examples
+    --------
+    >>> issubclass(LookError, SequencerError), issubclass(OutcomeError, ValueError)
+    (True, True)
+    """
 
 
 class LookError(SequencerError):
+    """A look that does not fit the state, or a look when none is expected; the state is unchanged.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> Sequencer(make_plan(["a"])).decide(["z"])
+    Traceback (most recent call last):
+        ...
+    opportune.sequencer.LookError: unknown part 'z' in the look: the plan's parts are a
+    """
     pass
 
 
 class OutcomeError(SequencerError):
+    """An outcome report that does not fit the pending action; the state is unchanged.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> Sequencer(make_plan(["a"])).report()
+    Traceback (most recent call last):
+        ...
+    opportune.sequencer.OutcomeError: no action is pending: decide an action (send a look) before reporting its outcome
+    """
     pass
 
 
@@ -47,9 +76,28 @@ class OutcomeError(SequencerError):
 class State:
     """Everything the sequencer knows: installed parts (the schedule), buffer contents, what is left in the bin.
 
-    Immutable, so that simulations can branch.  ``buffer`` lists buffered parts
-    in the order they were buffered; ``capacity`` is the number of buffer
-    locations (``None``: unlimited).
+    Immutable, so that simulations can branch.  A sequencer makes its states; read them from
+    :attr:`Sequencer.state` or :meth:`Sequencer.report`.
+
+    Parameters
+    ----------
+    schedule : Schedule
+        The installed parts and every admissible way to finish.
+    buffer : tuple of str, default ()
+        The buffered parts, in the order they were buffered.
+    capacity : int, optional
+        The number of buffer locations (``None``: unlimited).
+    defects : int, default 0
+        Units reported defective so far.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}), buffer_capacity=1)
+    >>> seq.step(["b"]).action.kind
+    'buffer'
+    >>> seq.state.buffer, seq.state.buffer_free, seq.state.in_bin
+    (('b',), 0, {'a': 1})
     """
 
     schedule: Schedule
@@ -105,6 +153,20 @@ class State:
         return self.schedule.consistent_strategies
 
     def to_dict(self) -> dict:
+        """The state as plain values (what the service and ``opportune replay --json`` show).
+
+        Returns
+        -------
+        dict
+            ``installed``, ``buffered``, ``in_bin``, ``capacity``, ``strategies``, ``complete`` and
+            ``defects``.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> Sequencer(make_plan(["a", "b"], {"b": ["a"]})).state.to_dict()["in_bin"]
+        {'a': 1, 'b': 1}
+        """
         return {
             "installed": list(self.installed),
             "buffered": list(self.buffer),
@@ -118,7 +180,24 @@ class State:
 
 @dataclass(frozen=True)
 class Row:
-    """One line of the trace, in the layout of the paper's Table 1 (state *before* the action)."""
+    """One line of the trace, in the layout of the paper's Table 1 (state *before* the action).
+
+    Parameters
+    ----------
+    visible, buffered, installed : tuple of str
+        The look, the buffer and the installed parts before the action.
+    decision : Decision
+        The decision taken for the look.
+    outcome : str, optional
+        The outcome reported (``None`` until reported, and for ``done``).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> row = Sequencer(make_plan(["a", "b"], {"b": ["a"]})).run([["b"], ["a"], []])[0]
+    >>> row.visible, row.action.kind, row.outcome
+    (('b',), 'buffer', 'success')
+    """
 
     visible: tuple[str, ...]
     buffered: tuple[str, ...]
@@ -131,6 +210,19 @@ class Row:
         return self.decision.action
 
     def to_dict(self) -> dict:
+        """The row as plain values.
+
+        Returns
+        -------
+        dict
+            ``visible``, ``buffered``, ``installed``, ``action`` (:meth:`Action.to_dict`) and ``outcome``.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> Sequencer(make_plan(["a", "b"], {"b": ["a"]})).run([["b"]])[0].to_dict()
+        {'visible': ['b'], 'buffered': [], 'installed': [], 'action': {'kind': 'buffer', 'part': 'b', 'source': None}, 'outcome': 'success'}
+        """
         return {"visible": list(self.visible), "buffered": list(self.buffered), "installed": list(self.installed),
                 "action": self.action.to_dict(), "outcome": self.outcome}
 
@@ -180,21 +272,48 @@ def check_look(state: State, visible: Iterable[str]) -> tuple[str, ...]:
 class Sequencer:
     """Keeps the state of one assembly and decides each action with a policy.
 
-    ``decide(visible)`` checks the look and returns a :class:`Decision`; the
-    action is then *pending* until ``report(outcome)``.  ``step(visible)``
-    does both, for a world where every action succeeds.
+    ``decide(visible)`` checks the look and returns a :class:`Decision`; the action is then *pending*
+    until ``report(outcome)``.  ``step(visible)`` does both, for a world where every action succeeds.
+    The state changes only on reported outcomes.
+
+    Parameters
+    ----------
+    plan : Plan or OrderEngine
+        The plan to assemble; an :class:`~opportune.engine.schedule.OrderEngine` of it shares its
+        memos with the other assemblies of the plan.
+    policy : Policy, optional
+        The decision policy (:func:`~opportune.policies.named.make_policy`); ``None``: the paper's
+        rule, :class:`~opportune.policies.opportunistic.Opportunistic`, within ``budget``.
+    buffer_capacity : int, optional
+        Buffer locations; ``None``: unlimited.
+    budget : float or None, default 0.05
+        Seconds per decision for the default policy; ``None``: always exact, however long it
+        takes.  A policy given explicitly keeps its own budget.
+    warm_up : float or None, default 10.0
+        Seconds spent here, before the first look, counting the first state exactly (on a large
+        plan this chooses how it is counted and fills the memos later decisions use).  ``None``: no
+        limit; 0: none.
+
+    Raises
+    ------
+    ValueError
+        If ``buffer_capacity`` is negative or ``budget`` is not a positive number of seconds.
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> seq = Sequencer(load_plan("example:gearbox"))
+    >>> seq.decide(visible=["rl", "ra"]).action
+    Action(kind='buffer', part='rl', source=None)
+    >>> seq.report("success").buffer
+    ('rl',)
+    >>> seq.decide(["ca"]).action
+    Action(kind='install', part='ca', source='bin')
     """
 
     def __init__(self, plan: Plan | OrderEngine, policy: Policy | None = None, *,
                  buffer_capacity: int | None = None, budget: float | None = DEFAULT_BUDGET,
                  warm_up: float | None = WARM_UP):
-        """``budget``: seconds per decision for the default (opportunistic) policy; None: always
-        exact, however long it takes.  A policy given explicitly keeps its own budget.
-
-        ``warm_up``: seconds spent here, before the first look, counting the first state
-        exactly (on a large plan this chooses how it is counted and fills the memos later
-        decisions use; on small plans it takes microseconds).  None: no limit; 0: none.
-        """
         if buffer_capacity is not None and buffer_capacity < 0:
             raise ValueError("buffer capacity must be ≥ 0 (or None for unlimited)")
         if budget is not None and not budget > 0:
@@ -216,10 +335,41 @@ class Sequencer:
     # ------------------------------------------------------------ deciding
 
     def decide(self, visible: Iterable[str] = ()) -> Decision:
-        """Decide the next action for a look; raises :class:`LookError` (state unchanged) on a bad look.
+        """Decide the next action for a look.
 
-        Once the assembly is complete, an empty look is answered once with
-        ``done``; any look after that is refused.
+        The action is pending until :meth:`report` (or :meth:`cancel`).  Once the assembly is complete,
+        an empty look is answered once with ``done``; any look after that is refused.
+
+        Parameters
+        ----------
+        visible : iterable of str, default ()
+            The part ids the vision system sees in the bin (a part id once per unit seen).
+
+        Returns
+        -------
+        Decision
+            The action, why it was chosen, and whether it was decided exactly.
+
+        Raises
+        ------
+        LookError
+            If the look does not fit the state (an unknown part, more units than can be in the bin, a
+            part already installed or buffered), an action is pending, or the run is done; the state is
+            unchanged.
+        RuntimeError
+            If the policy chose an action the state does not allow (a policy bug); the state is
+            unchanged.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> seq.decide(["b"]).action
+        Action(kind='buffer', part='b', source=None)
+        >>> seq.decide(["a"])
+        Traceback (most recent call last):
+            ...
+        opportune.sequencer.LookError: 'buffer b' is pending: report its outcome (or cancel it) before the next look
         """
         look = self._check_ready(visible)
         # The engine (shared by every assembly of the plan) trims and evicts its memos only between
@@ -244,10 +394,38 @@ class Sequencer:
         return part
 
     def replay(self, visible: Iterable[str], action: Action | Decision) -> Decision:
-        """Take a recorded action (or the whole recorded decision) for a look without asking the
-        policy: an estimated decision depends on time and chance, so a log is replayed by what
-        was done, not decided again.  Raises :class:`LookError` if the look or the action does
-        not fit the state (which is then unchanged)."""
+        """Take a recorded action for a look without asking the policy.
+
+        An estimated decision depends on time and chance, so a log is replayed by what was done, not
+        decided again.  The action is pending until :meth:`report`, as after :meth:`decide`.
+
+        Parameters
+        ----------
+        visible : iterable of str
+            The look the action was decided for.
+        action : Action or Decision
+            The recorded action (or the whole recorded decision).
+
+        Returns
+        -------
+        Decision
+            The recorded decision (``method="replayed"`` when only an action was given).
+
+        Raises
+        ------
+        LookError
+            If the look or the action does not fit the state (which is then unchanged).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.policies.base import Action
+        >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> seq.replay(["a", "b"], Action("install", "a", "bin")).method
+        'replayed'
+        >>> seq.report().installed
+        ('a',)
+        """
         look = self._check_ready(visible)
         decision = action if isinstance(action, Decision) else Decision(action, "replayed from the log", exact=False,
                                                                        method="replayed")
@@ -288,7 +466,23 @@ class Sequencer:
                 raise RuntimeError(f"policy {self.policy.name} buffers '{a.part}' without a visible part or a free location")
 
     def cancel(self) -> None:
-        """Drop the pending action (the robot did not carry it out)."""
+        """Drop the pending action (the robot did not carry it out); the state is unchanged.
+
+        Raises
+        ------
+        OutcomeError
+            If no action is pending.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> seq.decide(["a"]).action.kind
+        'install'
+        >>> seq.cancel()
+        >>> seq.pending is None
+        True
+        """
         if self.pending is None:
             raise OutcomeError("no action is pending")
         self.pending = None
@@ -299,11 +493,38 @@ class Sequencer:
     def report(self, outcome: Outcome = "success", *, keep: Literal["bin", "buffer"] = "bin") -> State:
         """Apply the outcome of the pending action and return the new state.
 
-        ``success``: the action happened.  ``failed``: an install or buffer move
-        did not happen; for a failed install the part either goes back to the
-        bin (``keep="bin"``) or stays in the gripper and is put in a buffer
-        location (``keep="buffer"``).  ``defective``: the part is discarded;
-        the plan waits for a replacement unit in the bin.
+        Parameters
+        ----------
+        outcome : {"success", "failed", "defective"}, default "success"
+            ``success``: the action happened.  ``failed``: an install or buffer move did not happen.
+            ``defective``: the part is discarded; the plan waits for a replacement unit in the bin.
+        keep : {"bin", "buffer"}, default "bin"
+            For a failed install: the part goes back to the bin, or stays in the gripper and is put in
+            a buffer location.
+
+        Returns
+        -------
+        State
+            The new state (also :attr:`state`).
+
+        Raises
+        ------
+        OutcomeError
+            If no action is pending, the outcome or ``keep`` is unknown, a shake is reported other than
+            successful, or ``keep="buffer"`` finds the buffer full; the state is unchanged.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> seq.decide(["a"]).action.part
+        'a'
+        >>> seq.report("failed", keep="buffer").buffer
+        ('a',)
+        >>> seq.report()
+        Traceback (most recent call last):
+            ...
+        opportune.sequencer.OutcomeError: no action is pending: decide an action (send a look) before reporting its outcome
         """
         if self.pending is None:
             raise OutcomeError("no action is pending: decide an action (send a look) before reporting its outcome")
@@ -345,14 +566,52 @@ class Sequencer:
         return state
 
     def step(self, visible: Iterable[str] = ()) -> Decision:
-        """Decide for a look and report success at once (a world where every action works)."""
+        """Decide for a look and report success at once (a world where every action works).
+
+        Parameters
+        ----------
+        visible : iterable of str, default ()
+            The look, as in :meth:`decide`.
+
+        Returns
+        -------
+        Decision
+            The decision taken.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}), buffer_capacity=0)
+        >>> seq.step(["b"]).action.kind
+        'shake'
+        >>> seq.step(["a"]).action, seq.state.installed
+        (Action(kind='install', part='a', source='bin'), ('a',))
+        """
         decision = self.decide(visible)
         if decision.action.kind != "done":
             self.report("success")
         return decision
 
     def run(self, looks: Iterable[Iterable[str]]) -> list[Row]:
-        """Step through looks (every action succeeding); close with ``done`` if the assembly completes."""
+        """Step through looks, every action succeeding; close with ``done`` if the assembly completes.
+
+        Parameters
+        ----------
+        looks : iterable of iterable of str
+            One look per action.
+
+        Returns
+        -------
+        list of Row
+            The whole trace (:attr:`trace`), in the layout of the paper's Table 1.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> rows = Sequencer(make_plan(["a", "b"], {"b": ["a"]})).run([["b"], ["a"], []])
+        >>> [str(row.action) for row in rows]
+        ['buffer b', 'install a', 'install b (from buffer)', 'done']
+        """
         for look in looks:
             self.step(look)
         if self.state.is_complete and not self.finished:

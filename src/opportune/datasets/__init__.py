@@ -33,7 +33,29 @@ from opportune.formats.shipped import (EXAMPLE_PREFIX, GEOMETRY, GEOMETRY_PREFIX
 
 
 def salbp(name: str):
-    """A shipped SALBP graph as a single-strategy :class:`~opportune.planning.plan.Plan` (tasks named by number)."""
+    """A shipped SALBP graph as a single-strategy :class:`~opportune.planning.plan.Plan` (tasks named by number).
+
+    Parameters
+    ----------
+    name : str
+        The graph's name (:func:`salbp_names`), case-insensitive.
+
+    Returns
+    -------
+    Plan
+        The graph's precedence constraints as a plan.
+
+    Raises
+    ------
+    KeyError
+        If no graph has that name.
+
+    Examples
+    --------
+    >>> plan = salbp("MERTENS")
+    >>> len(plan.parts), plan.part_ids[:3]
+    (7, ('1', '2', '3'))
+    """
     from opportune.formats.loader import load_plan
 
     return load_plan(salbp_path(name))

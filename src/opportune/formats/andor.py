@@ -77,8 +77,23 @@ MAX_SEQUENCES = 200_000       # sequences the brute-force enumerator lists (test
 class Way:
     """One way to make an assembly: ``join`` its components, then the ``then`` steps.
 
-    ``before`` holds extra ``(X, Y)`` pairs: every step of X precedes every step of Y (both
-    components, or both ``then`` parts, of this way).
+    Parameters
+    ----------
+    name : str
+        The way's name, unique among its assembly's ways.
+    join : tuple of str
+        The components joined: parts or other assemblies.
+    then : tuple of str, default ()
+        Parts installed after the join.
+    before : tuple of (str, str), default ()
+        Extra ``(X, Y)`` pairs: every step of X precedes every step of Y (both components, or both
+        ``then`` parts, of this way).
+
+    Examples
+    --------
+    >>> way = Way("x", ("a", "b"), ("c",))
+    >>> expand(AndOrGraph("p", ("a", "b", "c"), (("p", (way,)),)))[0].pairs()
+    [('a', 'c'), ('b', 'c')]
     """
 
     name: str
@@ -91,8 +106,25 @@ class Way:
 class AndOrGraph:
     """An AND/OR graph: the product, the parts (declaration order) and each assembly's ways.
 
-    ``assemblies`` is a tuple of ``(name, ways)`` in declaration order (plain tuples: the graph
-    pickles and hashes).  Build one from a plan file (``plan.andor``) or with :func:`~opportune.formats.loader.plan_from_andor`.
+    Build one from a plan file (``plan.andor``) or with
+    :func:`~opportune.formats.loader.plan_from_andor`; this constructor does not check it
+    (:func:`check_assemblies` does).
+
+    Parameters
+    ----------
+    product : str
+        The assembly that is the product.
+    parts : tuple of str
+        The parts, in declaration order.
+    assemblies : tuple of (str, tuple of Way)
+        ``(name, ways)`` in declaration order (plain tuples: the graph pickles and hashes).
+
+    Examples
+    --------
+    >>> g = AndOrGraph("p", ("a", "b", "c"), (("p", (Way("1", ("q", "c")), Way("2", ("a", "r")))),
+    ...     ("q", (Way("1", ("a", "b")), Way("2", ("b", "a")))), ("r", (Way("1", ("b", "c")),))))
+    >>> g.reachable(), g.combinations()
+    (['p', 'q', 'r'], 3)
     """
 
     product: str
@@ -100,10 +132,49 @@ class AndOrGraph:
     assemblies: tuple[tuple[str, tuple[Way, ...]], ...]
 
     def ways(self, name: str) -> tuple[Way, ...]:
-        """The ways of assembly ``name`` (``KeyError`` if it is not one)."""
+        """The ways of an assembly.
+
+        Parameters
+        ----------
+        name : str
+            The assembly.
+
+        Returns
+        -------
+        tuple of Way
+            Its ways, in declaration order.
+
+        Raises
+        ------
+        KeyError
+            If ``name`` is not an assembly.
+
+        Examples
+        --------
+        >>> AndOrGraph("p", ("a", "b"), (("p", (Way("1", ("a", "b")),)),)).ways("p")
+        (Way(name='1', join=('a', 'b'), then=(), before=()),)
+        """
         return self._table()[name]
 
     def is_assembly(self, name: str) -> bool:
+        """Whether ``name`` is one of the graph's assemblies (not a part).
+
+        Parameters
+        ----------
+        name : str
+            A part or assembly name.
+
+        Returns
+        -------
+        bool
+            True for an assembly.
+
+        Examples
+        --------
+        >>> g = AndOrGraph("p", ("a", "b"), (("p", (Way("1", ("a", "b")),)),))
+        >>> g.is_assembly("p"), g.is_assembly("a")
+        (True, False)
+        """
         return name in self._table()
 
     def _table(self) -> dict[str, tuple[Way, ...]]:
@@ -114,7 +185,20 @@ class AndOrGraph:
         return table
 
     def reachable(self) -> list[str]:
-        """Assemblies reachable from the product through any way, product first (depth-first).  O(graph)."""
+        """Assemblies reachable from the product through any way, product first (depth-first).  O(graph).
+
+        Returns
+        -------
+        list of str
+            The assemblies' names.
+
+        Examples
+        --------
+        >>> g = AndOrGraph("p", ("a", "b", "c"), (("p", (Way("1", ("q", "c")),)), ("q", (Way("1", ("a", "b")),)),
+        ...     ("unused", (Way("1", ("a", "c")),))))
+        >>> g.reachable()
+        ['p', 'q']
+        """
         seen, order, stack = {self.product}, [], [self.product]
         while stack:
             a = stack.pop()
@@ -132,6 +216,13 @@ class AndOrGraph:
         ``n(a) = Σ over the ways of a of Π over its component assemblies c of n(c)``, computed
         bottom-up without listing anything: O(size of the graph) big-integer operations.
 
+        Returns
+        -------
+        int
+            The combinations of ways.
+
+        Examples
+        --------
         >>> g = AndOrGraph("p", ("a", "b", "c"), (("p", (Way("1", ("q", "c")), Way("2", ("a", "r")))),
         ...     ("q", (Way("1", ("a", "b")), Way("2", ("b", "a")))), ("r", (Way("1", ("b", "c")),))))
         >>> g.combinations()
@@ -140,7 +231,18 @@ class AndOrGraph:
         return _combination_counts(self)[self.product]
 
     def to_dict(self) -> dict:
-        """The graph in the file schema (``product`` and ``assemblies``)."""
+        """The graph in the file schema.
+
+        Returns
+        -------
+        dict
+            ``product`` and ``assemblies`` (name → list of ways), as a plan file writes them.
+
+        Examples
+        --------
+        >>> AndOrGraph("p", ("a", "b"), (("p", (Way("1", ("a", "b")),)),)).to_dict()
+        {'product': 'p', 'assemblies': {'p': [{'name': '1', 'join': ['a', 'b']}]}}
+        """
         out: dict = {}
         for name, ways in self.assemblies:
             items = []
@@ -162,11 +264,26 @@ def check_assemblies(data: dict, doc: Document, part_ids: list[str]) -> tuple[li
                                                                                  list[Problem]]:
     """Read and check the ``assemblies`` of a schema-valid document; expand them into strategies.
 
-    Returns ``(strategies, graph, problems)``; the strategies are empty if there is any error.
     Polynomial before the expansion (O(ways × components × parts / 64)); the expansion is refused
     above :data:`MAX_COMBINATIONS` combinations (or :data:`MAX_EXPANSION` combinations × parts).
     :func:`opportune.formats.validate.check_document` calls it for a document with ``assemblies``.
 
+    Parameters
+    ----------
+    data : dict
+        The plan document.
+    doc : Document
+        The document it was read from (for the problems' lines).
+    part_ids : list of str
+        The plan's part ids.
+
+    Returns
+    -------
+    tuple of (list of Strategy, AndOrGraph or None, list of Problem)
+        The strategies (empty if there is any error), the graph, and every problem found.
+
+    Examples
+    --------
     >>> from opportune.formats.documents import Document
     >>> data = {"parts": ["a", "b", "c"], "assemblies": {"p": [{"join": ["a", "b", "b"]}]}}
     >>> strategies, graph, problems = check_assemblies(data, Document(data, {}, "f.yaml"), ["a", "b", "c"])
@@ -294,7 +411,7 @@ _WAY_KEYS = frozenset({"name", "description", "join", "then", "before"})
 
 def fits_schema(name: Any, ways: Any, is_part_id) -> bool:
     """True only if one entry of ``assemblies`` certainly satisfies the plan schema (a linear walk):
-    the validator, about 30 µs a value, then judges only the others.  ``is_part_id``: the id test.
+    the validator, far slower a value, then judges only the others.  ``is_part_id``: the id test.
 
     >>> fits_schema("p", [{"join": ["a", "b"], "then": ["c"]}], str.isidentifier)
     True
@@ -485,11 +602,27 @@ def expand(graph: AndOrGraph) -> list[Strategy]:
 
     Each strategy's ``requires`` holds its minimal constraints (the transitive reduction).  Identical
     partial orders are kept once (the first combination's name), then a strategy whose sequences
-    another admits too is dropped.  Raises :class:`PlanError` above :data:`MAX_COMBINATIONS`
-    combinations (counted first, without listing them), :data:`MAX_EXPANSION` combinations × parts,
-    or :data:`~opportune.planning.plan.MAX_STRATEGIES` distinct partial orders.  Time O(combinations ×
-    (steps + constraints) × parts / 64).
+    another admits too is dropped.  Time O(combinations × (steps + constraints) × parts / 64).
 
+    Parameters
+    ----------
+    graph : AndOrGraph
+        A checked graph.
+
+    Returns
+    -------
+    list of Strategy
+        The distinct strategies.
+
+    Raises
+    ------
+    PlanError
+        Above :data:`MAX_COMBINATIONS` combinations (counted first, without listing them),
+        :data:`MAX_EXPANSION` combinations × parts, or
+        :data:`~opportune.planning.plan.MAX_STRATEGIES` distinct partial orders.
+
+    Examples
+    --------
     >>> g = AndOrGraph("p", ("a", "b", "c"), (("p", (Way("x", ("a", "b"), ("c",)),)),))
     >>> [(s.name, dict(s.requires)) for s in expand(g)]
     [('default', {'c': ('a', 'b')})]
@@ -669,13 +802,35 @@ def sequences(graph: AndOrGraph, limit: int = MAX_SEQUENCES) -> set[tuple[str, .
     """Every sequence of parts the AND/OR graph admits, by brute force (a reference for tests).
 
     Recursive, straight from the definition: an assembly's sequences are the union over its ways;
-    a way's are the interleavings of one sequence of each component that respect ``before``,
-    each followed by an order of the ``then`` steps that respects ``before``.  Exponential: raises
-    ``ValueError`` past ``limit`` sequences for one assembly.
+    a way's are the interleavings of one sequence of each component that respect ``before``, each
+    followed by an order of the ``then`` steps that respects ``before``.  Exponential.
 
+    Parameters
+    ----------
+    graph : AndOrGraph
+        The graph.
+    limit : int, default MAX_SEQUENCES
+        The most sequences listed for one assembly.
+
+    Returns
+    -------
+    set of tuple of str
+        The admissible sequences.
+
+    Raises
+    ------
+    ValueError
+        Past ``limit`` sequences for one assembly.
+
+    Examples
+    --------
     >>> g = AndOrGraph("p", ("a", "b", "c"), (("p", (Way("x", ("a", "b"), ("c",)),)),))
     >>> sorted(sequences(g))
     [('a', 'b', 'c'), ('b', 'a', 'c')]
+    >>> sequences(g, limit=1)
+    Traceback (most recent call last):
+        ...
+    ValueError: more than 1 sequences for 'p'
     """
     from itertools import product as cartesian
 

@@ -57,7 +57,25 @@ class Document:
 
 @dataclass
 class CheckResult:
-    """Outcome of reading and checking a plan: the plan (if usable) and every finding."""
+    """Outcome of reading and checking a plan: the plan (if usable) and every finding.
+
+    ``errors`` and ``warnings`` split the problems by severity; ``ok`` says whether the plan can be
+    used (a plan and no error).
+
+    Parameters
+    ----------
+    plan : Plan or None
+        The plan, or ``None`` if it is not usable.
+    problems : list of Problem
+        Every problem found, errors and warnings.
+
+    Examples
+    --------
+    >>> from opportune.formats.loader import check_text
+    >>> result = check_text('{"parts": ["a", "a"]}', fmt="json", file="twice.json")
+    >>> result.ok, len(result.errors), result.errors[0].where
+    (False, 1, 'twice.json:1')
+    """
 
     plan: Plan | None
     problems: list[Problem]

@@ -135,7 +135,27 @@ _XML_ENCODINGS = frozenset({"utf-8", "utf8", "us-ascii", "ascii", "iso-8859-1", 
 _XML_ENCODING = re.compile(rb'^(?:\xef\xbb\xbf)?<\?xml[^>]*?\bencoding\s*=\s*["\']([A-Za-z0-9._-]{1,64})["\']')
 
 def check_graphml_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
-    """Read a GraphML file as a plan (one strategy per ``<graph>``), checked like any plan."""
+    """Read a GraphML file as a plan (one strategy per ``<graph>``), checked like any plan.
+
+    Parameters
+    ----------
+    raw : bytes
+        The file's bytes (UTF-8, US-ASCII, ISO-8859-1 or UTF-16, as its XML declaration says).
+    file : str, optional
+        The name problems are reported under.
+
+    Returns
+    -------
+    CheckResult
+        The plan (``None`` if unusable) and every problem found, with its line.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> result = check_graphml_bytes(to_graphml(make_plan(["a", "b"], {"b": ["a"]}, name="two")).encode())
+    >>> result.plan.name, result.plan.strategies[0].pairs()
+    ('two', [('a', 'b')])
+    """
     declared = _XML_ENCODING.match(raw[:200])
     if declared and declared.group(1).decode("ascii").lower().replace("_", "-") not in _XML_ENCODINGS:
         name = declared.group(1).decode("ascii")[:40]
@@ -329,7 +349,24 @@ def _graphml_characters(parser, found: _GraphMLFound):
     return characters
 
 def to_graphml(plan) -> str:
-    """The plan as GraphML: one directed ``<graph>`` per strategy, its cover relations as edges."""
+    """The plan as GraphML: one directed ``<graph>`` per strategy, its cover relations as edges.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan.
+
+    Returns
+    -------
+    str
+        The GraphML document (:func:`check_graphml_bytes` reads it back).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> print(to_graphml(make_plan(["a", "b"], {"b": ["a"]})).splitlines()[-3])
+        <edge source="a" target="b"/>
+    """
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            '<graphml xmlns="http://graphml.graphdrawing.org/xmlns">',
            '  <key id="name" for="node" attr.name="name" attr.type="string"/>',
@@ -421,6 +458,24 @@ def check_dot_bytes(raw: bytes, *, file: str | None = None) -> CheckResult:
     or ``name``, ``quantity``, ``install``, ``acquire``), edge chains with attributes, default
     attribute statements and ``ID = ID`` (ignored), and subgraph blocks (their contents read as if
     inline).  An edge to a subgraph is refused with its line.
+
+    Parameters
+    ----------
+    raw : bytes
+        The file's bytes (UTF-8).
+    file : str, optional
+        The name problems are reported under.
+
+    Returns
+    -------
+    CheckResult
+        The plan (``None`` if unusable) and every problem found, with its line.
+
+    Examples
+    --------
+    >>> result = check_dot_bytes(b"digraph { a -> b -> c; }", file="chain.dot")
+    >>> result.ok, result.plan.strategies[0].pairs()
+    (True, [('a', 'b'), ('b', 'c')])
     """
     try:
         text = raw.decode("utf-8-sig")
@@ -577,7 +632,33 @@ def _dot_id(s: str) -> str:
 
 def to_dot_precedence(plan, strategy: int = 0) -> str:
     """One strategy of the plan as a DOT digraph: its cover relations, names as labels, the rest as
-    node attributes — the format :func:`check_dot_bytes` reads (a drawing is ``opportune graph``)."""
+    node attributes — the format :func:`check_dot_bytes` reads (a drawing is ``opportune graph``).
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan.
+    strategy : int, default 0
+        The strategy's position in ``plan.strategies``.
+
+    Returns
+    -------
+    str
+        The DOT text.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> print(to_dot_precedence(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["a", "b"]}, name="tiny")))
+    digraph tiny {
+      a;
+      b;
+      c;
+      a -> b;
+      b -> c;
+    }
+    <BLANKLINE>
+    """
     lines = [f"digraph {_dot_id(plan.name)} {{"]
     for part in plan.parts:
         attrs = [f"{'label' if key == 'name' else key}={_dot_id(value) if key == 'name' else value}"
@@ -592,14 +673,60 @@ def to_dot_precedence(plan, strategy: int = 0) -> str:
 # ---------------------------------------------------------------- NetworkX (optional)
 
 def plan_to_networkx(plan, strategy: int = 0):
-    """One strategy as a ``networkx.DiGraph`` (:meth:`opportune.planning.plan.Plan.to_networkx`)."""
+    """One strategy as a ``networkx.DiGraph`` (:meth:`opportune.planning.plan.Plan.to_networkx`).
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan.
+    strategy : int, default 0
+        The strategy's position in ``plan.strategies``.
+
+    Returns
+    -------
+    networkx.DiGraph
+        A node per part, an edge per cover relation.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> sorted(plan_to_networkx(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["a", "b"]})).edges())
+    [('a', 'b'), ('b', 'c')]
+    """
     return plan.to_networkx(strategy)
 
 
 def plan_from_networkx(graph, name: str | None = None):
-    """A plan from a directed graph (edges ``a -> b``: a before b; node data ``name``/``label``,
-    ``quantity``, ``install``, ``acquire``).  Raises :class:`~opportune.planning.plan.PlanError` listing every
-    problem (a cycle among them), as ``opportune check`` would."""
+    """A plan from a directed graph.
+
+    Parameters
+    ----------
+    graph : networkx.DiGraph
+        Edges ``a -> b``: a before b; node data ``name`` (or ``label``), ``quantity``, ``install``,
+        ``acquire``.
+    name : str, optional
+        The plan's name (default: the graph's ``name``, else ``"networkx"``).
+
+    Returns
+    -------
+    Plan
+        A one-strategy plan.
+
+    Raises
+    ------
+    PlanError
+        Listing every problem (an undirected graph, a cycle), as ``opportune check`` would.
+
+    Examples
+    --------
+    >>> import networkx as nx
+    >>> plan_from_networkx(nx.DiGraph([("a", "b"), ("b", "c")]), name="chain").strategies[0].pairs()
+    [('a', 'b'), ('b', 'c')]
+    >>> plan_from_networkx(nx.Graph([("a", "b")]))
+    Traceback (most recent call last):
+        ...
+    opportune.planning.plan.PlanError: error: the graph is undirected — a precedence graph is directed: use a networkx.DiGraph
+    """
     from opportune.planning.plan import PlanError
 
     if not getattr(graph, "is_directed", lambda: False)():

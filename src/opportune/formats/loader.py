@@ -55,8 +55,34 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
     """Read and check a plan file of any supported format; never raises for bad content.
 
     ``salbp:NAME`` reads a SALBP graph shipped with the package, ``example:NAME`` an example
-    (:mod:`opportune.datasets`), and ``-`` standard input.  ``allow_cycles`` keeps the cyclic
-    strategies of a YAML or JSON plan instead of refusing it (for ``opportune relax`` only).
+    (:mod:`opportune.datasets`), and ``-`` standard input.  The format is found from the suffix, else
+    from the content.  At most :data:`MAX_FILE_BYTES` bytes are read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, ``salbp:NAME``, ``example:NAME`` or ``-``.
+    allow_cycles : bool, default False
+        Keep the cyclic strategies of a YAML or JSON plan instead of refusing it (for
+        ``opportune relax`` only).
+
+    Returns
+    -------
+    CheckResult
+        The plan (``None`` if unusable) and every problem found, each with its file, line and what
+        to do; ``result.ok`` says whether the plan can be used.
+
+    See Also
+    --------
+    load_plan : the same, raising :class:`PlanError` instead of returning problems.
+
+    Examples
+    --------
+    >>> read_plan("example:gearbox").plan.part_ids[:4]
+    ('ca', 'ba', 'rl', 'dr')
+    >>> result = read_plan("no-such-plan.yaml")
+    >>> result.ok, result.errors[0].message
+    (False, 'no such file: no-such-plan.yaml')
     """
     shipped = None      # a shipped file is named by its short name in messages, not its installed path
     if str(path).lower().startswith(("salbp:", "example:")):
@@ -116,9 +142,39 @@ def read_plan(path: str | Path, *, allow_cycles: bool = False) -> CheckResult:
 
 
 def load_plan(path: str | Path) -> Plan:
-    """Load a plan file (YAML, JSON, SALBP ``.IN2`` or ``.alb``, GraphML, DOT); raise :class:`PlanError` with every problem.
+    """Load a plan file (YAML, JSON, SALBP ``.IN2`` or ``.alb``, GraphML, DOT).
 
-    >>> plan = load_plan("examples/gearbox.yaml")  # doctest: +SKIP
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, ``salbp:NAME`` or ``example:NAME`` for the data shipped with the package
+        (:mod:`opportune.datasets`), or ``-`` for standard input.
+
+    Returns
+    -------
+    Plan
+        The checked plan.
+
+    Raises
+    ------
+    PlanError
+        If the file cannot be read or holds any error; it lists every problem found, each with
+        its file, line and what to do.
+
+    See Also
+    --------
+    read_plan : the same, returning the problems (warnings included) instead of raising.
+    make_plan : a plan from Python values.
+
+    Examples
+    --------
+    >>> plan = load_plan("example:gearbox")
+    >>> plan.name, len(plan.part_ids)
+    ('gearbox', 10)
+    >>> load_plan("no-such-plan.yaml")
+    Traceback (most recent call last):
+        ...
+    opportune.planning.plan.PlanError: error: no such file: no-such-plan.yaml — check the path
     """
     result = read_plan(path)
     if not result.ok:
@@ -132,8 +188,33 @@ def _too_large(name: str) -> Problem:
 
 
 def check_text(text: str, *, fmt: str = "yaml", file: str | None = None, allow_cycles: bool = False) -> CheckResult:
-    """Parse and check plan text in ``fmt`` (``"yaml"`` or ``"json"``); ``allow_cycles`` as in :func:`read_plan`.
-    Text of more than :data:`MAX_FILE_BYTES` bytes (as UTF-8) is refused as a file of that size is."""
+    """Parse and check plan text, as :func:`read_plan` checks a file.
+
+    Parameters
+    ----------
+    text : str
+        The plan, in the file schema (docs/plan-files.md).
+    fmt : {"yaml", "json"}, default "yaml"
+        The text's format.
+    file : str, optional
+        The name problems are reported under (``None``: no file name).
+    allow_cycles : bool, default False
+        As in :func:`read_plan`.
+
+    Returns
+    -------
+    CheckResult
+        The plan (``None`` if unusable) and every problem found.  Text of more than
+        :data:`MAX_FILE_BYTES` bytes (as UTF-8) is refused as a file of that size is.
+
+    Examples
+    --------
+    >>> check_text('{"parts": ["a", "b"], "requires": {"b": ["a"]}}', fmt="json").plan.part_ids
+    ('a', 'b')
+    >>> result = check_text("parts: [a, a]", file="twice.yaml")
+    >>> result.ok, result.errors[0].where
+    (False, 'twice.yaml:1')
+    """
     if len(text) > MAX_FILE_BYTES // 4 and len(text.encode("utf-8", "surrogatepass")) > MAX_FILE_BYTES:
         return CheckResult(None, [_too_large(file or "the plan")])
     doc = parse_json(text, file) if fmt == "json" else parse_yaml(text, file)
@@ -145,7 +226,32 @@ def check_text(text: str, *, fmt: str = "yaml", file: str | None = None, allow_c
 
 
 def plan_from_dict(data: Any, *, file: str | None = None) -> Plan:
-    """Build a plan from already-parsed data in the file schema; raise :class:`PlanError` on errors."""
+    """Build a plan from already-parsed data in the file schema (what ``yaml.safe_load`` or
+    ``json.load`` returns).
+
+    Parameters
+    ----------
+    data : dict
+        The plan document: ``parts`` and ``requires``, ``strategies`` or ``assemblies``
+        (docs/plan-files.md).
+    file : str, optional
+        The name problems are reported under.
+
+    Returns
+    -------
+    Plan
+        The checked plan.
+
+    Raises
+    ------
+    PlanError
+        If the data holds any error; it lists every problem found.
+
+    Examples
+    --------
+    >>> plan_from_dict({"parts": ["a", "b"], "requires": {"b": ["a"]}}).part_ids
+    ('a', 'b')
+    """
     from opportune.formats.validate import check_document
 
     result = check_document(Document(data, {}, file))
@@ -163,11 +269,38 @@ def make_plan(
 ) -> Plan:
     """Build and validate a plan from Python values.
 
-    Give either ``requires`` (one strategy) or ``strategies`` (name → requires).
-    Raises :class:`PlanError` listing every problem, as ``opportune check`` would.
+    Parameters
+    ----------
+    parts : iterable of str, dict or Part
+        The parts: ids, part mappings of the file schema (``{"id": "a", "quantity": 2}``) or
+        :class:`Part` objects.
+    requires : mapping of str to iterable of str, optional
+        One strategy: each part's prerequisites (part → parts that must be installed first).
+    strategies : mapping of str to mapping, optional
+        Several strategies instead of ``requires``: name → requires.
+    name : str, default "plan"
+        The plan's name.
 
+    Returns
+    -------
+    Plan
+        The checked plan.
+
+    Raises
+    ------
+    PlanError
+        Listing every problem, as ``opportune check`` would (unknown parts, cycles, duplicates).
+
+    Examples
+    --------
     >>> make_plan(["a", "b"], {"b": ["a"]}).part_ids
     ('a', 'b')
+    >>> [s.name for s in make_plan(["a", "b", "c"], strategies={"s1": {"c": ["a"]}, "s2": {"c": ["b"]}}).strategies]
+    ['s1', 's2']
+    >>> make_plan(["a"], {"b": ["a"]})
+    Traceback (most recent call last):
+        ...
+    opportune.planning.plan.PlanError: error: unknown part 'b' listed with requirements (strategy 'default') — declare it under `parts` or fix the id
     """
     doc: dict = {"name": name, "parts": [p if isinstance(p, (str, dict)) else _part_dict(p) for p in parts]}
     if strategies is not None:
@@ -181,8 +314,31 @@ def plan_from_andor(parts: Iterable[str | dict], assemblies: Mapping[str, list[d
                     name: str = "plan") -> Plan:
     """A plan from an AND/OR graph given as Python values (the file schema's ``assemblies``).
 
-    Checked and expanded exactly as a file would be; raises :class:`PlanError` with every problem.
+    Checked and expanded exactly as a file would be (docs/andor.md).
 
+    Parameters
+    ----------
+    parts : iterable of str or dict
+        The parts, as in :func:`make_plan`.
+    assemblies : mapping of str to list of dict
+        Each assembly's ways of being made: ``{"join": [...], "then": [...]}`` mappings.
+    product : str, optional
+        The product (``None``: the first assembly listed).
+    name : str, default "plan"
+        The plan's name.
+
+    Returns
+    -------
+    Plan
+        One strategy per way of making the product.
+
+    Raises
+    ------
+    PlanError
+        With every problem found.
+
+    Examples
+    --------
     >>> plan = plan_from_andor(["a", "b", "c"], {"p": [{"join": ["a", "b"], "then": ["c"]}]})
     >>> plan.strategies[0].pairs()
     [('a', 'c'), ('b', 'c')]
@@ -232,7 +388,7 @@ def _prescan_yaml(text: str) -> int | None:
     """Refuse YAML text of more than :data:`MAX_VALUES` values, :data:`MAX_DEPTH` levels or
     :data:`MAX_ALIASES` aliases before any node is composed; the number of aliases, or None if not scanned.
 
-    With libyaml, one pass over the parser's events (about 1 µs each, each dropped once counted, so
+    With libyaml, one pass over the parser's events (cheap: each dropped once counted, so
     memory stays that of the text) that stops at the first bound passed; the text is then safe for
     libyaml's own composer, twice as fast as PyYAML's (which has no bound of its own: a list nested
     200,000 deep would overflow its C stack).  Without libyaml, only an upper bound from
@@ -388,7 +544,7 @@ def _plain_yaml(text: str) -> tuple[dict, dict[tuple, int]] | None:
     and numbers (``[a, b, c]``), plain words, integers, decimals and phrases, comments.  Anything
     else, or anything that might read otherwise (quotes, tags, anchors, multi-line scalars, flow
     mappings, booleans and nulls, repeated keys, tabs, several documents), is None: this path only
-    saves PyYAML's import (20 ms) on the plans most often counted; the tests compare it with PyYAML's
+    saves PyYAML's import on the plans most often counted (docs/bounds.md gives what it costs); the tests compare it with PyYAML's
     on generated and mutated documents.  O(len(text)), at most :data:`PLAIN_MAX_CHARS` characters.
 
     >>> _plain_yaml("name: six\\nparts: [a, b]\\nrequires:\\n  b: [a]\\n")
@@ -610,8 +766,8 @@ def _build_from_events(text: str, doc: Document, yaml) -> Document:
 
     The values and depth are counted on the way, as :func:`_prescan_yaml` counts them (the same
     refusals, on the same lines), so one pass replaces three (the pre-scan, the composer and the
-    build): about 5 µs a value instead of 20 (a plan at :data:`MAX_VALUES` read in 0.8 s instead of
-    3 s).  No node is made: plain scalars that resolve to strings are taken as they are, others
+    build), a quarter of their time per value (docs/bounds.md gives the measured costs).  No node
+    is made: plain scalars that resolve to strings are taken as they are, others
     built by PyYAML's safe constructor.  Raises :class:`_Fallback` at the first alias, merge key,
     list or mapping key, or tagged collection (the composer's path reads those);
     :class:`_Refused` past a bound; PyYAML's errors for bad syntax.
@@ -822,8 +978,8 @@ def json_lines(text: str) -> dict[tuple, int]:
     """The line of every value of valid JSON ``text``, by path (a list item's where it starts, a
     mapping value's where its key stands), as :func:`parse_yaml` records them.
 
-    One regular-expression pass over the tokens: O(len(text)), about 0.5 µs a value (the YAML pass
-    it replaces costs 15 µs a value: 2.3 s for a document at :data:`MAX_VALUES`).  Memory: the
+    One regular-expression pass over the tokens: O(len(text)), some thirty times cheaper a value
+    than the YAML pass it replaces (docs/bounds.md gives the measured costs).  Memory: the
     paths (a few tens of bytes each).
 
     >>> lines = json_lines('{"parts": ["a",\\n "b"], "requires": {\\n"b": "a"}}')
@@ -880,8 +1036,7 @@ def parse_json(text: str, file: str | None = None) -> Document:
     """Parse JSON strictly (its own syntax errors, with line); lines come from a YAML pass when first asked for.
 
     Bounded before parsing (:func:`_prescan_json`: at most :data:`MAX_VALUES` values), then by depth
-    (:data:`MAX_DEPTH`).  A plan without problems never pays for its lines: the YAML pass (about
-    10 µs a value) runs when :meth:`Document.line` is first called, or at once when a key repeats
+    (:data:`MAX_DEPTH`).  A plan without problems never pays for its lines: the YAML pass runs when :meth:`Document.line` is first called, or at once when a key repeats
     (the JSON parser keeps the last; the YAML pass reports each with its line).
     """
     doc = Document(None, {}, file)

@@ -37,6 +37,21 @@ def _shown(value) -> str:
 
 
 class LooksError(ValueError):
+    """A looks file that cannot be used: the problem, with its file, line and what to do.
+
+    Parameters
+    ----------
+    problem : Problem
+        What is wrong (``problem.where``: the file and line).
+
+    Examples
+    --------
+    >>> try:
+    ...     parse_looks('[["a"', file="cell.looks")
+    ... except LooksError as error:
+    ...     print(error.problem.where)
+    cell.looks:1
+    """
     def __init__(self, problem: Problem):
         self.problem = problem
         super().__init__(str(problem))
@@ -48,9 +63,37 @@ def _over(what: str, limit: int, hint: str, file: str | None, line: int | None) 
 
 
 def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
-    """Parse a looks file's text (text or JSON form); raise :class:`LooksError` with the line.
+    """Parse a looks file's text (text or JSON form).
 
     O(len(text)); bounded as the module says, before the looks are built.
+
+    Parameters
+    ----------
+    text : str
+        Text: part ids separated by spaces or commas, one look per line, ``-`` for an empty look,
+        ``#`` starting a comment.  JSON: a list of lists of ids.
+    file : str, optional
+        The name problems are reported under.
+
+    Returns
+    -------
+    list of tuple of str
+        The looks, in order.
+
+    Raises
+    ------
+    LooksError
+        With the file and line of the first problem: malformed JSON, a value that is not a part id,
+        or a bound passed.
+
+    Examples
+    --------
+    >>> parse_looks('[["rl", "ra"], []]')
+    [('rl', 'ra'), ()]
+    >>> parse_looks("[1]", file="x.looks")
+    Traceback (most recent call last):
+        ...
+    opportune.formats.looks.LooksError: x.looks: error: a JSON looks file must be a list of lists of part ids — e.g. [["rl", "ra"], []]
     """
     stripped = text.lstrip()
     if stripped.startswith("["):
@@ -115,7 +158,34 @@ def parse_looks(text: str, *, file: str | None = None) -> list[tuple[str, ...]]:
 
 
 def read_looks(path: str | Path) -> list[tuple[str, ...]]:
-    """Read a looks file (or ``example:NAME``, a shipped one); raise :class:`LooksError` (missing file included)."""
+    """Read a looks file, or ``example:NAME`` (a shipped one).
+
+    At most :data:`MAX_LOOKS_BYTES` bytes are read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, or ``example:NAME``.
+
+    Returns
+    -------
+    list of tuple of str
+        The looks, in order.
+
+    Raises
+    ------
+    LooksError
+        If the file cannot be read (missing included) or holds a problem, as :func:`parse_looks`.
+
+    Examples
+    --------
+    >>> read_looks("example:gearbox-table1")[:2]
+    [('rl', 'ra'), ('ca', 'co')]
+    >>> read_looks("no-such.looks")
+    Traceback (most recent call last):
+        ...
+    opportune.formats.looks.LooksError: error: no such file: no-such.looks — check the path
+    """
     if str(path).lower().startswith("example:"):
         from opportune.formats import shipped
 

@@ -31,14 +31,43 @@ def shipped_folder(kind: str):
 
 
 def salbp_names() -> tuple[str, ...]:
-    """The names of the shipped SALBP graphs, smallest first."""
+    """The names of the shipped SALBP graphs, smallest first.
+
+    Returns
+    -------
+    tuple of str
+        Names for :func:`salbp_path` and ``salbp:NAME``.
+
+    Examples
+    --------
+    >>> salbp_names()[-2:]
+    ('TONGE70', 'ARC111')
+    """
     return SALBP
 
 
 def salbp_path(name: str) -> Path:
-    """The file of a shipped SALBP graph (``.IN2``), by name (case-insensitive; ``.IN2`` optional).
+    """The file of a shipped SALBP graph (``.IN2``), by name.
 
-    Raises ``KeyError`` naming the graphs there are.
+    Parameters
+    ----------
+    name : str
+        The graph's name, case-insensitive; ``.IN2`` optional.
+
+    Returns
+    -------
+    pathlib.Path
+        The installed file.
+
+    Raises
+    ------
+    KeyError
+        If no graph has that name; the message names the graphs there are.
+
+    Examples
+    --------
+    >>> salbp_path("kilbrid").name
+    'KILBRID.IN2'
     """
     stem = name.upper().removesuffix(".IN2")
     if stem not in SALBP:
@@ -47,9 +76,20 @@ def salbp_path(name: str) -> Path:
 
 
 def examples() -> list[tuple[str, str, str]]:
-    """The shipped examples as ``(name, kind, description)``: kind ``plan``, ``looks`` or ``sequences``
-    (observed assemblies, for ``opportune learn``); the description is the plan's ``description`` or
-    the file's first comment line."""
+    """The shipped examples.
+
+    Returns
+    -------
+    list of (str, str, str)
+        ``(name, kind, description)``, by name: kind ``plan``, ``looks`` or ``sequences`` (observed
+        assemblies, for ``opportune learn``); the description is the plan's ``description`` or the
+        file's first comment line.
+
+    Examples
+    --------
+    >>> examples()[0]
+    ('gearbox', 'plan', 'Ten-part gearbox of Fox & Kempf (reconstructed Figure 2)')
+    """
     folder = shipped_folder("examples")
     out = []
     for entry in sorted(folder.iterdir(), key=lambda e: e.name.rpartition(".")[0]):
@@ -69,9 +109,27 @@ def examples() -> list[tuple[str, str, str]]:
 
 
 def example_path(name: str) -> Path:
-    """The file of a shipped example, by name (``gearbox``, ``gearbox-table1``; a suffix is optional).
+    """The file of a shipped example, by name.
 
-    Raises ``KeyError`` naming the examples there are.
+    Parameters
+    ----------
+    name : str
+        ``gearbox``, ``gearbox-table1``, ... (:func:`examples`); a suffix is optional.
+
+    Returns
+    -------
+    pathlib.Path
+        The installed file.
+
+    Raises
+    ------
+    KeyError
+        If no example has that name; the message names the examples there are.
+
+    Examples
+    --------
+    >>> example_path("gearbox-table1").name
+    'gearbox-table1.looks'
     """
     stem = name.removesuffix(".yaml").removesuffix(".looks").removesuffix(".seq")
     folder = shipped_folder("examples")
@@ -96,7 +154,25 @@ def plan_names() -> tuple[str, ...]:
 def resolve(path: str | Path) -> Path:
     """``salbp:NAME`` and ``example:NAME`` as the shipped files they name; any other path as it is.
 
-    Raises ``KeyError`` (naming what there is) for an unknown name.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A file, ``salbp:NAME`` or ``example:NAME``.
+
+    Returns
+    -------
+    pathlib.Path
+        The file.
+
+    Raises
+    ------
+    KeyError
+        For an unknown shipped name (naming what there is).
+
+    Examples
+    --------
+    >>> resolve("salbp:KILBRID").name, resolve("my-plan.yaml").name
+    ('KILBRID.IN2', 'my-plan.yaml')
     """
     text = str(path)
     if text.lower().startswith(PREFIX):

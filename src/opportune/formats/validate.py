@@ -345,8 +345,8 @@ def _fits_schema(data: dict) -> bool:
     """True only if ``data`` certainly satisfies the plan schema: a plain, linear-time walk.
 
     It accepts a subset of what the schema accepts (anything unusual, e.g. a ``simulation`` section
-    or a quantity written ``2.0``, answers False), so that the schema validator, which costs about
-    30 µs a value, runs only on documents that may have problems, and explains them.
+    or a quantity written ``2.0``, answers False), so that the schema validator, far slower a value
+    (docs/bounds.md), runs only on documents that may have problems, and explains them.
     """
     if not _PLAN_KEYS.issuperset(data) or "parts" not in data or ("requires" in data and "strategies" in data):
         return False

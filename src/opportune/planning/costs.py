@@ -13,6 +13,31 @@ from typing import Mapping
 
 @dataclass(frozen=True)
 class TimeModel:
+    """What each robot action costs, in the paper's accounting (unit motions, not seconds).
+
+    Parameters
+    ----------
+    motion : float, default 1.0
+        One robot motion: bin → assembly, bin → buffer or buffer → assembly.
+    shake : float, default 1.0
+        One shake of the bin.
+    look : float, default 0.0
+        One look.
+    parts : mapping of str to float, optional
+        A part's own motion cost (a heavy part moves slowly).
+
+    Raises
+    ------
+    ValueError
+        If a cost is negative.
+
+    Examples
+    --------
+    >>> costs = TimeModel(look=0.1, parts={"co": 3.0})
+    >>> costs.move("co"), costs.move("ca"), costs.look
+    (3.0, 1.0, 0.1)
+    """
+
     motion: float = 1.0
     shake: float = 1.0
     look: float = 0.0
@@ -26,12 +51,52 @@ class TimeModel:
             raise ValueError("per-part motion costs must be ≥ 0")
 
     def move(self, part: str) -> float:
-        """Cost of one robot motion carrying ``part``."""
+        """Cost of one robot motion carrying ``part``.
+
+        Parameters
+        ----------
+        part : str
+            The part carried.
+
+        Returns
+        -------
+        float
+            The part's own motion cost, else :attr:`motion`.
+
+        Examples
+        --------
+        >>> TimeModel(parts={"co": 3.0}).move("co")
+        3.0
+        """
         return self.parts.get(part, self.motion)
 
     @classmethod
     def from_plan(cls, plan, **overrides) -> "TimeModel":
-        """The plan file's ``simulation.costs`` with command-line overrides (``None`` = keep)."""
+        """The plan file's ``simulation.costs``, with command-line overrides.
+
+        Parameters
+        ----------
+        plan : Plan
+            The plan (its ``simulation`` settings).
+        **overrides
+            ``motion``, ``shake`` or ``look`` values that replace the file's (``None``: keep the file's).
+
+        Returns
+        -------
+        TimeModel
+            The costs.
+
+        Raises
+        ------
+        ValueError
+            If the costs name a part the plan does not have, or a cost is negative.
+
+        Examples
+        --------
+        >>> from opportune import load_plan
+        >>> TimeModel.from_plan(load_plan("example:gearbox"), shake=2.0).shake
+        2.0
+        """
         costs = dict(plan.simulation.get("costs", {}) or {})
         values = {k: costs[k] for k in ("motion", "shake", "look") if k in costs}
         values.update({k: v for k, v in overrides.items() if v is not None})
@@ -41,6 +106,18 @@ class TimeModel:
         return cls(parts=dict(costs.get("parts", {}) or {}), **values)
 
     def to_dict(self) -> dict:
+        """The costs as JSON values (a study's recorded settings).
+
+        Returns
+        -------
+        dict
+            ``motion``, ``shake``, ``look`` and ``parts``.
+
+        Examples
+        --------
+        >>> TimeModel().to_dict()
+        {'motion': 1.0, 'shake': 1.0, 'look': 0.0, 'parts': {}}
+        """
         return {"motion": self.motion, "shake": self.shake, "look": self.look, "parts": dict(self.parts)}
 
 

@@ -32,7 +32,7 @@ class StrategyOrder:
     """The partial order of one strategy on the parts its constraints name (its *support*).
 
     A plan of 10,000 parts and 64 strategies that each constrain a few hundred parts would cost 64
-    closures of 10,000-bit sets over the whole plan (6 s); on the support each is a few hundred
+    closures of 10,000-bit sets over the whole plan (seconds); on the support each is a few hundred
     bits.  Parts outside the support are unordered, so nothing is lost.  The support is numbered
     in a topological order (the earliest declared part first among those ready), and one pass in
     that order gives the closure and the covers together: O(k + pairs) big-int operations of at

@@ -37,8 +37,23 @@ SHAPES = {"box": 3, "cylinder": 2}
 class PlanError(ValueError):
     """A plan that cannot be used, with every problem found.
 
-    ``problems`` is a list of :class:`opportune.formats.problems.Problem`;
-    ``str(error)`` renders all of them, one per line.
+    ``problems`` is a list of :class:`opportune.formats.problems.Problem`; ``str(error)`` renders all
+    of them, one per line.  Raised by :func:`~opportune.formats.loader.load_plan`,
+    :func:`~opportune.formats.loader.make_plan` and the other plan builders.
+
+    Parameters
+    ----------
+    problems : iterable of Problem
+        Every problem found.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> try:
+    ...     make_plan(["a", "a"])
+    ... except PlanError as error:
+    ...     print(len(error.problems), error.problems[0].message)
+    1 duplicate part id 'a'
     """
 
     def __init__(self, problems):
@@ -50,12 +65,29 @@ class PlanError(ValueError):
 class Part:
     """One kind of part, installed by one operation per unit.
 
-    ``quantity`` identical, interchangeable units (e.g. 4 screws) share every
-    constraint on the part.  ``acquire`` and ``install`` are handling costs (or
-    durations) used as tie-breaks and in timing.  ``geometry`` is the part's shape in the physical
-    bin, ``("box", (x, y, z))`` (edge lengths) or ``("cylinder", (radius, height))`` in metres, its real
-    shape ``("convex", bodies)`` (each body a tuple of corners ``(x, y, z)``, the corners of a convex
-    body: :mod:`opportune.formats.shapes`), or ``None`` for the bin's default shape.
+    Parameters
+    ----------
+    id : str
+        The part's id, unique in its plan.
+    name : str, optional
+        A name for people.
+    quantity : int, default 1
+        Identical, interchangeable units (e.g. 4 screws); they share every constraint on the part.
+    acquire, install : float, default 1.0
+        Handling costs (or durations), used as tie-breaks and in timing.
+    visibility : float, default 1.0
+        The part's relative chance of being seen in a look of a weighted bin.
+    geometry : tuple, optional
+        The part's shape in the physical bin, ``("box", (x, y, z))`` (edge lengths) or
+        ``("cylinder", (radius, height))`` in metres, its real shape ``("convex", bodies)`` (each body a
+        tuple of corners ``(x, y, z)``, the corners of a convex body: :mod:`opportune.formats.shapes`), or
+        ``None`` for the bin's default shape.
+
+    Examples
+    --------
+    >>> screw = Part("s", name="screw", quantity=4)
+    >>> screw.label, screw.cost
+    ('s (screw)', 2.0)
     """
 
     id: str
@@ -80,11 +112,23 @@ class Part:
 class Strategy:
     """One partial order over the parts: ``requires[x]`` must precede ``x``.
 
-    The mapping holds the constraints as declared (direct, possibly redundant);
-    parts with no requirements may be absent from it.  ``weights`` maps a
-    constraint ``(before, after)`` to the price of dropping it when the plan is
-    over-constrained (:mod:`opportune.derive.relax`); constraints absent from it
-    weigh 1, and only weights other than 1 are kept.
+    Parameters
+    ----------
+    name : str
+        The strategy's name, unique in its plan.
+    requires : mapping of str to tuple of str, optional
+        The constraints as declared (direct, possibly redundant): part → the parts installed before
+        it.  Parts with no requirements may be absent.
+    weights : mapping of (str, str) to float, optional
+        A constraint ``(before, after)`` → the price of dropping it when the plan is
+        over-constrained (:mod:`opportune.derive.relax`); absent constraints weigh 1, and only
+        weights other than 1 are kept.
+
+    Examples
+    --------
+    >>> s = Strategy("default", {"c": ("a", "b")}, weights={("a", "c"): 5})
+    >>> s.pairs(), s.weight("a", "c"), s.weight("b", "c")
+    ([('a', 'c'), ('b', 'c')], 5.0, 1.0)
     """
 
     name: str
@@ -101,11 +145,38 @@ class Strategy:
         return (Strategy, (self.name, dict(self.requires), dict(self.weights)))
 
     def pairs(self) -> list[tuple[str, str]]:
-        """Declared constraints as ``(before, after)`` pairs, in declaration order."""
+        """The declared constraints as ``(before, after)`` pairs, in declaration order.
+
+        Returns
+        -------
+        list of (str, str)
+            One pair per declared constraint.
+
+        Examples
+        --------
+        >>> Strategy("s", {"c": ("a", "b")}).pairs()
+        [('a', 'c'), ('b', 'c')]
+        """
         return [(b, a) for a, bs in self.requires.items() for b in bs]
 
     def weight(self, before: str, after: str) -> float:
-        """The weight of the constraint ``before -> after`` (1 unless the plan gives another)."""
+        """The weight of the constraint ``before -> after`` (1 unless the plan gives another).
+
+        Parameters
+        ----------
+        before, after : str
+            The constraint's parts.
+
+        Returns
+        -------
+        float
+            The price of dropping the constraint.
+
+        Examples
+        --------
+        >>> Strategy("s", {"c": ("a",)}, weights={("a", "c"): 3}).weight("a", "c")
+        3.0
+        """
         return self.weights.get((before, after), 1.0)
 
     def __hash__(self):
@@ -124,11 +195,29 @@ class Strategy:
 class Plan:
     """Parts (in declaration order) and one or more strategies.
 
-    Declaration order is meaningful: it is the final, deterministic tie-break
-    of every decision made over the plan.  Build plans with
-    :func:`opportune.formats.load_plan` (files) or :func:`opportune.make_plan` (code);
-    both validate.
+    Declaration order is meaningful: it is the final, deterministic tie-break of every decision made
+    over the plan.  Build plans with :func:`opportune.formats.loader.load_plan` (files) or
+    :func:`opportune.formats.loader.make_plan` (code): both validate; this constructor does not.
 
+    Parameters
+    ----------
+    name : str
+        The plan's name.
+    parts : tuple of Part
+        The parts, in declaration order.
+    strategies : tuple of Strategy
+        The alternative partial orders; an admissible sequence respects at least one.
+    source : str, optional
+        The file the plan was read from.
+    description : str, optional
+        Text for people.
+    simulation : mapping, optional
+        The file's ``simulation`` settings (the cell's geometry and times).
+    andor : AndOrGraph, optional
+        The AND/OR graph the strategies were expanded from, kept for drawing.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]}, name="tiny")
     >>> plan.part_ids
@@ -162,10 +251,55 @@ class Plan:
         return tuple(p.id for p in self.parts)
 
     def index(self, part_id: str) -> int:
-        """Declaration position of a part (0-based); ``KeyError`` if unknown."""
+        """The declaration position of a part (0-based).
+
+        Parameters
+        ----------
+        part_id : str
+            The part's id.
+
+        Returns
+        -------
+        int
+            Its position in :attr:`parts`.
+
+        Raises
+        ------
+        KeyError
+            If the plan has no such part.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> make_plan(["a", "b"]).index("b")
+        1
+        """
         return self._index[part_id]
 
     def part(self, part_id: str) -> Part:
+        """The part of an id.
+
+        Parameters
+        ----------
+        part_id : str
+            The part's id.
+
+        Returns
+        -------
+        Part
+            The part.
+
+        Raises
+        ------
+        KeyError
+            If the plan has no such part.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> make_plan([{"id": "s", "quantity": 4}]).part("s").quantity
+        4
+        """
         return self.parts[self._index[part_id]]
 
     def __contains__(self, part_id: object) -> bool:
@@ -177,14 +311,56 @@ class Plan:
         return sum(p.quantity for p in self.parts)
 
     def index_pairs(self, strategy: Strategy) -> list[tuple[int, int]]:
-        """A strategy's declared constraints as ``(before, after)`` part indices."""
+        """A strategy's declared constraints as ``(before, after)`` part indices.
+
+        Parameters
+        ----------
+        strategy : Strategy
+            One of the plan's strategies.
+
+        Returns
+        -------
+        list of (int, int)
+            One pair of declaration positions per declared constraint.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+        >>> plan.index_pairs(plan.strategies[0])
+        [(0, 2), (1, 2)]
+        """
         return [(self._index[b], self._index[a]) for b, a in strategy.pairs()]
 
     def to_networkx(self, strategy: int = 0):
-        """One strategy as a ``networkx.DiGraph``: a node per part (its plan attributes as node data), an
-        edge per cover relation (the fewest edges that give the order; O(constraints), computed once per
-        plan).  networkx is optional (``pip install networkx``); the way back is
-        :func:`opportune.formats.graphfiles.plan_from_networkx`."""
+        """One strategy as a ``networkx.DiGraph``.
+
+        A node per part (its plan attributes as node data), an edge per cover relation (the fewest
+        edges that give the order; O(constraints), computed once per plan).  The way back is
+        :func:`opportune.formats.graphfiles.plan_from_networkx`.
+
+        Parameters
+        ----------
+        strategy : int, default 0
+            The strategy's position in :attr:`strategies`.
+
+        Returns
+        -------
+        networkx.DiGraph
+            The strategy's order, named after the plan.
+
+        Raises
+        ------
+        ImportError
+            If networkx is not installed (``pip install networkx``).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> graph = make_plan(["a", "b", "c"], {"b": ["a"], "c": ["a", "b"]}).to_networkx()
+        >>> sorted(graph.edges())
+        [('a', 'b'), ('b', 'c')]
+        """
         try:
             import networkx as nx
         except ImportError:
@@ -200,7 +376,20 @@ class Plan:
         return g
 
     def to_dict(self) -> dict:
-        """The plan in the file schema (round-trips through :func:`opportune.formats.plan_from_dict`)."""
+        """The plan in the file schema.
+
+        Returns
+        -------
+        dict
+            A document that round-trips through :func:`opportune.formats.loader.plan_from_dict`
+            (every strategy written out, default values left out).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> make_plan(["a", "b"], {"b": ["a"]}, name="two").to_dict()
+        {'name': 'two', 'parts': ['a', 'b'], 'strategies': [{'name': 'default', 'requires': {'b': ['a']}}]}
+        """
         parts: list = []
         for p in self.parts:
             extra = {

@@ -62,12 +62,34 @@ SEPARATOR = "@"
 
 
 class ProductsError(ValueError):
-    """A multi-product request that cannot be honoured (too many products, too large a joint plan…)."""
+    """A multi-product request that cannot be honoured (too many products, too large a joint plan…).
+
+    Examples
+    --------
+    >>> split_unit("bolt")
+    Traceback (most recent call last):
+        ...
+    opportune.planning.products.ProductsError: 'bolt' is not a part of a multi-product plan (expected KIND@FIXTURE, e.g. 'x@1')
+    """
 
 
 def unit_id(kind: str, fixture: int) -> str:
-    """The joint plan's id of part ``kind`` on ``fixture`` (1-based): ``"x@2"``.
+    """The joint plan's id of part ``kind`` on ``fixture``.
 
+    Parameters
+    ----------
+    kind : str
+        The part's id in its own plan.
+    fixture : int
+        The fixture, from 1.
+
+    Returns
+    -------
+    str
+        ``"KIND@FIXTURE"``.
+
+    Examples
+    --------
     >>> unit_id("co", 3)
     'co@3'
     """
@@ -78,8 +100,25 @@ def split_unit(unit: str) -> tuple[str, int]:
     """``(part kind, fixture)`` of a joint plan's part id; the inverse of :func:`unit_id`.
 
     The fixture is the number after the *last* ``@`` (part ids may contain ``@`` themselves).
-    Raises :class:`ProductsError` for an id without one.  O(len(unit)).
+    O(len(unit)).
 
+    Parameters
+    ----------
+    unit : str
+        A joint plan's part id.
+
+    Returns
+    -------
+    tuple of (str, int)
+        The part kind and the fixture.
+
+    Raises
+    ------
+    ProductsError
+        For an id without a fixture number.
+
+    Examples
+    --------
     >>> split_unit("bolt@home@12")
     ('bolt@home', 12)
     """
@@ -125,15 +164,32 @@ def check_products(n, *, what: str = "products") -> int:
 def several_products(plan: Plan, n: int, *, serial: bool = False) -> Plan:
     """The joint plan of ``n`` copies of ``plan`` built at once on ``n`` fixtures from one bin.
 
-    Each part ``x`` becomes ``x@1 … x@n`` (same name, quantity and costs); each strategy of the
-    joint plan is one choice of strategy per fixture (``s^n`` of them for ``s`` strategies).
-    With ``serial``, every product must be finished before the next one starts (the
-    "one product after another" cell: each fixture's first steps require the previous
-    fixture's last ones).
+    Each part ``x`` becomes ``x@1 … x@n`` (same name, quantity and costs); each strategy of the joint
+    plan is one choice of strategy per fixture (``s^n`` of them for ``s`` strategies).
+    O(n * (parts + constraints) * strategy combinations).
 
-    Raises :class:`ProductsError` for ``n`` outside 1..:data:`MAX_PRODUCTS` or a joint plan
-    beyond the plan limits.  O(n * (parts + constraints) * strategy combinations).
+    Parameters
+    ----------
+    plan : Plan
+        One product's plan.
+    n : int
+        The number of products (fixtures), 1 to :data:`MAX_PRODUCTS`.
+    serial : bool, default False
+        Every product is finished before the next one starts (the "one product after another" cell:
+        each fixture's first steps require the previous fixture's last ones).
 
+    Returns
+    -------
+    Plan
+        The joint plan.
+
+    Raises
+    ------
+    ProductsError
+        For ``n`` outside 1..:data:`MAX_PRODUCTS` or a joint plan beyond the plan limits.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> joint = several_products(make_plan(["a", "b"], {"b": ["a"]}), 2, serial=True)
     >>> joint.strategies[0].pairs()
@@ -146,11 +202,32 @@ def several_products(plan: Plan, n: int, *, serial: bool = False) -> Plan:
 def combine_products(plans: Sequence[Plan], *, serial: bool = False, name: str | None = None) -> Plan:
     """The joint plan of different products, ``plans[i]`` on fixture ``i + 1``, fed from one bin.
 
-    Parts with the same id in two plans are the same *kind*: one unit in the bin can go to
-    either fixture.  A kind's visibility in the bin is its first plan's.  See
-    :func:`several_products` for ``serial`` and the limits.  O(total parts and constraints
+    Parts with the same id in two plans are the same *kind*: one unit in the bin can go to either
+    fixture.  A kind's visibility in the bin is its first plan's.  O(total parts and constraints
     times strategy combinations).
 
+    Parameters
+    ----------
+    plans : sequence of Plan
+        The products, one per fixture.
+    serial : bool, default False
+        As in :func:`several_products`.
+    name : str, optional
+        The joint plan's name.
+
+    Returns
+    -------
+    Plan
+        The joint plan.
+
+    Raises
+    ------
+    ProductsError
+        For no product, more than :data:`MAX_PRODUCTS`, a value that is not a plan, or a joint plan
+        beyond the plan limits (strategy combinations, parts, units).
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> joint = combine_products([make_plan(["a", "b"]), make_plan(["b", "c"])])
     >>> joint.part_ids

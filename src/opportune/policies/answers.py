@@ -37,8 +37,8 @@ Exact counts first while they have been quick; where they have been slow (a larg
 states), a short estimate (a probe) first, which ends the decision if it settles it, then the exact
 attempt, then the estimate again with what is left of the budget.  How slow exact attempts have
 been is kept per kind of question and per band of :data:`SIZE_BAND` steps remaining (the readings):
-on an assembly the cost of exact counts follows how far it has come (ARC111's expected positions
-never fit 50 ms with 100 or more steps to go, and fit easily with 50), so each trial's early states
+on an assembly the cost of exact counts follows how far it has come (docs/decisions.md gives
+ARC111's measurements), so each trial's early states
 learn from the last trial's early states rather than from its late ones.
 
 >>> from opportune import make_plan
@@ -109,7 +109,29 @@ class MustCount(Exception):
 
 @dataclass(frozen=True)
 class How:
-    """How a choice was reached (exact, or which estimates and how sure)."""
+    """How a choice was reached: exact, or which estimates and how sure.
+
+    Parameters
+    ----------
+    exact : bool, default True
+        Decided on exact numbers.
+    method : str, default "exact"
+        The estimate's method otherwise.
+    estimates : tuple of Estimate, default ()
+        The estimates that decided.
+    confidence : float, default 1.0
+        The estimated probability that the choice is the exact rule's.
+    note : str, default ""
+        More about the choice.
+    close : bool, default False
+        Estimated: no other candidate better by more than :data:`INDIFFERENT`
+        (:meth:`Decision.certainty <opportune.policies.base.Decision.certainty>`).
+
+    Examples
+    --------
+    >>> How().settled, How(exact=False, method="mcmc", confidence=0.5).settled
+    (True, False)
+    """
 
     exact: bool = True
     method: str = "exact"
@@ -168,12 +190,54 @@ class Readings:
 
 
 class Answers:
-    """The answers to a rule's questions at one look (see the module's text for the four ``mode``\\ s).
+    """The answers to a rule's questions at one look.
 
-    ``buffer`` and ``visible`` are the buffer (in buffer order) and the look; ``free`` the free buffer
-    locations.  In the estimate modes ``readings`` keeps the chains and ``end`` is the clock time
-    (``time.perf_counter``) the estimate stops by.  After the rule, :meth:`how` says how sure its
-    choice is.  Each question costs what its count costs (the engine's memos), or the estimate's time.
+    After the rule, :meth:`how` says how sure its choice is.  Each question costs what its count costs
+    (the engine's memos), or the estimate's time.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask : int
+        The installed units, as the engine's bit mask.
+    consistent : int
+        The strategies still consistent, as a bit mask.
+    buffer : tuple of str
+        The buffered parts, in buffer order.
+    free : float
+        Free buffer locations (``math.inf``: unlimited).
+    visible : tuple of str
+        The look.
+    mode : {"order", "exact", "estimate", "then"}, default "exact"
+        The kind of answers (see the module's text): what needs no counting, exact counts,
+        estimates, or a question asked after the rule.
+    order_first : bool, default True
+        Exact answers try what the partial order alone settles before counting.
+    readings : Readings, optional
+        In the estimate modes, the chains kept from look to look (``None``: a population of its own).
+    end : float, default math.inf
+        In the estimate modes, the clock time (``time.perf_counter``) the estimate stops by.
+    stop_when_sure : bool, default True
+        An estimate stops early once it is sure of its choice.
+    after : How, default EXACT
+        In mode ``"then"``: how the rule decided.
+    exact_seconds : float, default math.inf
+        In mode ``"then"``: the seconds the exact answer may take.
+
+    Raises
+    ------
+    ValueError
+        If ``mode`` is not one of :data:`MODES`.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+    >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+    >>> ask.installable(), ask.options(["a", "b"])
+    (['a', 'b'], {'a': 0})
     """
 
     __slots__ = (
@@ -222,19 +286,79 @@ class Answers:
         return self.mask == self.engine.full
 
     def installable(self) -> list[str]:
-        """The installable parts among the visible and the buffered ones."""
+        """The installable parts among the visible and the buffered ones.
+
+        Returns
+        -------
+        list of str
+            The candidates.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.installable()
+        ['a', 'b']
+        """
         return self.engine.installable_among(self.mask, self.consistent, (*self.visible, *self.buffer))
 
     def installable_in_bin(self) -> list[str]:
-        """The installable parts among the visible ones."""
+        """The installable parts among the visible ones.
+
+        Returns
+        -------
+        list of str
+            The bin's candidates.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.installable_in_bin()
+        ['a']
+        """
         return self.engine.installable_among(self.mask, self.consistent, self.visible)
 
     def visible_parts(self) -> list[str]:
-        """The visible parts, each once, in the look's order."""
+        """The visible parts, each once, in the look's order.
+
+        Returns
+        -------
+        list of str
+            The parts.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.visible_parts()
+        ['a', 'c']
+        """
         return list(dict.fromkeys(self.visible))
 
     def without_buffer(self) -> Answers:
-        """The same answers with the buffered parts out of sight (the bin's candidates only)."""
+        """The same answers with the buffered parts out of sight (the bin's candidates only).
+
+        Returns
+        -------
+        Answers
+            Answers of the same mode, sharing what the estimates record.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.without_buffer().installable()
+        ['a']
+        """
         other = Answers(self.engine, self.mask, self.consistent, (), self.free, self.visible, mode=self.mode,
                         order_first=self.order_first, readings=self.readings, end=self.end,
                         stop_when_sure=self.stop_when_sure, after=self.after, exact_seconds=self.exact_seconds)
@@ -242,9 +366,51 @@ class Answers:
         return other
 
     def index(self, part: str) -> int:
+        """A part's declaration position (the last tie-break of every rule).
+
+        Parameters
+        ----------
+        part : str
+            The part.
+
+        Returns
+        -------
+        int
+            Its position in the plan.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.index("c")
+        2
+        """
         return self.engine.plan.index(part)
 
     def cost(self, part: str) -> float:
+        """A part's handling cost, acquire + install (a tie-break).
+
+        Parameters
+        ----------
+        part : str
+            The part.
+
+        Returns
+        -------
+        float
+            The cost of one unit.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.cost("c")
+        2.0
+        """
         return self.engine.plan.part(part).cost
 
     def _settled(self, parts: list[str], rule) -> list[str] | None:
@@ -260,19 +426,73 @@ class Answers:
     # ------------------------------------------------------------ the questions
 
     def options(self, parts: list[str]) -> dict:
-        """Each candidate's options: the completions left after installing it (exact), or its share of
-        the completions (estimated; 0.0 for a part that cannot come next in the chains' strategy).
-        Exact answers may hold only the best parts, tied, where that is all the order alone proves
-        (or the one part asked)."""
+        """Each candidate's options: the completions left after installing it.
+
+        Exact answers are counts, and may hold only the best parts, tied at 0, where that is all the
+        order alone proves (or the one part asked); estimated answers are shares of the completions
+        (0.0 for a part that cannot come next in the chains' strategy).
+
+        Parameters
+        ----------
+        parts : list of str
+            Installable candidates.
+
+        Returns
+        -------
+        dict of str to int or float
+            Each part's options, or share.
+
+        Raises
+        ------
+        MustCount
+            In mode ``"order"``, when the order alone does not settle it.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.options(["a", "b"])
+        {'a': 0}
+        >>> Answers(engine, 0, engine.all_strategies, (), 1.0, ("a", "b"), order_first=False).options(["a", "b"])
+        {'a': 3, 'b': 1}
+        """
         if self.mode == "estimate":
             return self._estimated_options(parts)
         known = self._uncounted(parts, most_options_by_order, "install")
         return known if known is not None else self.schedule.options_for(parts)
 
     def positions(self, parts: list[str]) -> dict:
-        """Each part's expected position in a uniformly random completion (1 = next): exact as the sum
-        of its positions over all completions (one denominator, so the same order), or estimated.
-        Exact answers may hold only the earliest parts, tied, as for :meth:`options`."""
+        """Each part's expected position in a uniformly random completion (1 = next).
+
+        Exact as the sum of its positions over all completions (one denominator, so the same order), or
+        estimated; exact answers may hold only the earliest parts, tied, as for :meth:`options`.
+
+        Parameters
+        ----------
+        parts : list of str
+            Visible parts.
+
+        Returns
+        -------
+        dict of str to int or float
+            Each part's position sum (exact) or expected position (estimated).
+
+        Raises
+        ------
+        MustCount
+            In mode ``"order"``, when the order alone does not settle it.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> Answers(engine, 0, engine.all_strategies, (), 1.0, ("a", "b"), order_first=False).positions(["a", "b"])
+        {'a': 5, 'b': 10}
+        """
         if self.mode == "estimate":
             return self._estimated_positions(parts)
         known = self._uncounted(parts, earliest_by_order, "buffer")
@@ -292,10 +512,39 @@ class Answers:
         return None
 
     def slack(self, parts: list[str], weight: float) -> dict | None:
-        """Each part's slack: expected position, minus the installs still needed before it can go in,
-        minus ``weight`` times the steps that wait on it (with several strategies open, under the one
-        that frees it soonest).  Asked after the rule (``mode="then"``): exact if it fits, else
-        estimated with what is left, else None (no time left)."""
+        """Each part's slack: expected position, minus the installs still needed before it can go in, minus
+        ``weight`` times the steps that wait on it (with several strategies open, under the one that
+        frees it soonest).
+
+        Asked after the rule (``mode="then"``): exact if it fits, else estimated with what is left,
+        else None.
+
+        Parameters
+        ----------
+        parts : list of str
+            Visible parts.
+        weight : float
+            The weight of the steps that wait on a part.
+
+        Returns
+        -------
+        dict of str to float, or None
+            Each part's slack; ``None`` when no time is left (mode ``"then"``).
+
+        Raises
+        ------
+        MustCount
+            In mode ``"order"``.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.slack(["c"], 0.1)
+        {'c': 1.4}
+        """
         if self.mode == "order":
             raise MustCount("buffer")
         if self.mode == "estimate":
@@ -313,15 +562,53 @@ class Answers:
         return self._estimated_slack(parts, weight)
 
     def pick(self, kind: str, ranked: list[tuple[str, str | None]]) -> Action:
-        """The action for the first of ``ranked`` (``(part, source)``, best first): the rule's choice.
-        Estimated answers keep the ranking to say how sure the choice is (:meth:`how`)."""
+        """The action for the first of ``ranked``: the rule's choice.
+
+        Estimated answers keep the ranking to say how sure the choice is (:meth:`how`).
+
+        Parameters
+        ----------
+        kind : {"install", "buffer"}
+            The action's kind.
+        ranked : list of (str, str or None)
+            ``(part, source)``, best first.
+
+        Returns
+        -------
+        Action
+            The action for the first.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.pick("install", [("a", "bin"), ("b", "buffer")])
+        Action(kind='install', part='a', source='bin')
+        """
         if self._record is not None:
             self._record["ranked"] = ranked
         part, source = ranked[0]
         return shared_action(kind, part, source)
 
     def how(self) -> How:
-        """How the rule's choice was reached: exact, or the estimate that decided with its confidence."""
+        """How the rule's choice was reached: exact, or the estimate that decided with its confidence.
+
+        Returns
+        -------
+        How
+            :data:`EXACT` when nothing was estimated.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
+        >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
+        >>> ask.pick("install", [("a", "bin")]).part, ask.how().exact
+        ('a', True)
+        """
         rec = self._record
         if not rec or "how" not in rec:     # nothing was estimated
             return self.after
@@ -504,12 +791,27 @@ class CountBasedRule(DecidesOnMasks):
     """A policy whose rule is a function of :class:`Answers` (:meth:`rule`, and optionally a question
     after it, :meth:`then`), decided exactly or within ``budget`` seconds per decision.
 
-    ``budget``: seconds per decision (None: always exact, however long it takes).  With a budget,
-    ``seed`` and ``chains`` set the estimates' random streams and population.  A rule with a question
-    after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the whole is ``total_budget``).
-    A decision costs what its answers cost; within a budget, at most about the budget (the estimates'
-    and counts' checks of the clock, and building the reasons, are the rest).
+    A rule with a question after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the
+    whole is ``total_budget``).  A decision costs what its answers cost; within a budget, at most
+    about the budget (the estimates' and counts' checks of the clock, and building the reasons, are
+    the rest).
 
+    Parameters
+    ----------
+    budget : float, optional
+        Seconds per decision (``None``: always exact, however long it takes).
+    seed : int, default 0
+        With a budget, the seed of the estimates' random streams.
+    chains : int, default 8
+        With a budget, the estimates' population of chains.
+
+    Raises
+    ------
+    ValueError
+        If ``budget`` is not a positive number of seconds.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> from opportune.policies.variants import Slack
@@ -542,16 +844,93 @@ class CountBasedRule(DecidesOnMasks):
         return cls.then is not CountBasedRule.then
 
     def rule(self, ask: Answers) -> Action:
-        """The action, from the answers to the rule's questions."""
+        """The action, from the answers to the rule's questions.
+
+        Parameters
+        ----------
+        ask : Answers
+            The answering layer for the state and look: exact counts, or estimates within the budget.
+
+        Returns
+        -------
+        Action
+            The rule's action.
+
+        Raises
+        ------
+        NotImplementedError
+            In this base class: each policy defines its rule.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Opportunistic().rule(Answers(engine, 0, engine.all_strategies, (), 1.0, ("b", "a")))
+        Action(kind='install', part='a', source='bin')
+        """
         raise NotImplementedError
 
     def then(self, ask: Answers, action: Action) -> Action:
-        """The action after a question asked once the rule has decided (none here)."""
+        """The action after a question asked once the rule has decided (none here: the rule's action).
+
+        Parameters
+        ----------
+        ask : Answers
+            The same answers the rule had.
+        action : Action
+            The rule's action.
+
+        Returns
+        -------
+        Action
+            The action decided.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b"], {}))
+        >>> Opportunistic().then(Answers(engine, 0, 1, (), 1.0, ("a",)), Action("shake"))
+        Action(kind='shake', part=None, source=None)
+        """
         return action
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
-        """The action on the machine form of a state: exact, or within the budget."""
+        """The action on the machine form of a state: exact, or within the budget.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask : int
+            The installed units, as the engine's bit mask.
+        consistent : int
+            The strategies still consistent, as a bit mask.
+        buffer : tuple of str
+            The buffered parts, in the order they were buffered.
+        free : float
+            Free buffer locations (``math.inf``: unlimited).
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        Action
+            The action (no reasons: :meth:`decide` gives them).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Opportunistic().choose_at(engine, 0, engine.all_strategies, (), 1.0, ("c",))
+        Action(kind='buffer', part='c', source=None)
+        """
         return self._how(engine, mask, consistent, buffer, free, visible)[0]
 
     def _how(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
@@ -636,18 +1015,94 @@ class CountBasedRule(DecidesOnMasks):
     # ------------------------------------------------------------ decisions with reasons
 
     def rank_candidates(self, state, visible: tuple[str, ...]) -> list[tuple]:
-        """The installable candidates best first, as ``(sort key, part, source, buffer position)``, the
-        sort key's first element minus the options (for the decision's reasons)."""
+        """The installable candidates best first, for the decision's reasons.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        list of tuple
+            ``(sort key, part, source, buffer position)``; the sort key's first element is minus the
+            options.
+
+        Raises
+        ------
+        NotImplementedError
+            In this base class: each policy ranks by its own rule.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]})).state
+        >>> Opportunistic().rank_candidates(state, ("a", "b"))
+        [((-2, 0, 2.0, -1, 0), 'a', 'bin', None), ((-1, 0, 2.0, -1, 1), 'b', 'bin', None)]
+        """
         raise NotImplementedError
 
     def rank_positions(self, state, visible: tuple[str, ...]) -> list[tuple]:
-        """The visible parts as ``(expected position, declaration index, part)``, best first (likewise)."""
+        """The visible parts best first by their expected positions, for the decision's reasons.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        list of tuple
+            ``(expected position, declaration index, part)``.
+
+        Raises
+        ------
+        NotImplementedError
+            In this base class: each policy ranks by its own rule.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]})).state
+        >>> Opportunistic().rank_positions(state, ("c",))
+        [(Fraction(8, 3), 2, 'c')]
+        """
         raise NotImplementedError
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        """The action with its reasons: the candidates' options and the completions now, or the visible
-        parts' expected positions, counted within what is left of the budget (said where they do not
-        fit); an estimated decision gives its estimates and how sure it is instead."""
+        """The action with its reasons.
+
+        The candidates' options and the completions now, or the visible parts' expected positions,
+        counted within what is left of the budget (said where they do not fit); an estimated decision
+        gives its estimates and how sure it is instead.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look, checked against the state.
+
+        Returns
+        -------
+        Decision
+            The action and why.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]})).state
+        >>> decision = Opportunistic().decide(state, ("c",))
+        >>> decision.action, decision.positions
+        (Action(kind='buffer', part='c', source=None), (('c', Fraction(8, 3)),))
+        """
         start = time.perf_counter()
         sched = state.schedule
         action, how = self._how(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)

@@ -37,9 +37,23 @@ Source = Literal["bin", "buffer"]
 
 @dataclass(frozen=True)
 class Action:
-    """One robot action: ``install`` a part (from the bin or a buffer location),
-    ``buffer`` a visible part (bin → a free buffer location), ``shake`` the bin
-    (and look again), or ``done``."""
+    """One robot action.
+
+    Parameters
+    ----------
+    kind : {"install", "buffer", "shake", "done"}
+        ``install`` a part (from the bin or a buffer location), ``buffer`` a visible part (bin → a
+        free buffer location), ``shake`` the bin (and look again), or ``done``.
+    part : str, optional
+        The part installed or buffered (``None`` for ``shake`` and ``done``).
+    source : {"bin", "buffer"}, optional
+        Where an installed part comes from.
+
+    Examples
+    --------
+    >>> str(Action("install", "a", "buffer")), str(Action("shake"))
+    ('install a (from buffer)', 'shake')
+    """
 
     kind: ActionKind
     part: str | None = None
@@ -53,10 +67,44 @@ class Action:
         return self.kind
 
     def to_dict(self) -> dict:
+        """The action as JSON values.
+
+        Returns
+        -------
+        dict
+            ``kind``, ``part`` and ``source``.
+
+        Examples
+        --------
+        >>> Action("buffer", "a").to_dict()
+        {'kind': 'buffer', 'part': 'a', 'source': None}
+        """
         return {"kind": self.kind, "part": self.part, "source": self.source}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Action":
+        """The action :meth:`to_dict` wrote.
+
+        Parameters
+        ----------
+        d : dict
+            ``kind``, and ``part`` and ``source`` where the action has them.
+
+        Returns
+        -------
+        Action
+            The action.
+
+        Raises
+        ------
+        KeyError
+            If ``d`` has no ``kind``.
+
+        Examples
+        --------
+        >>> Action.from_dict({"kind": "install", "part": "a", "source": "bin"})
+        Action(kind='install', part='a', source='bin')
+        """
         return cls(d["kind"], d.get("part"), d.get("source"))
 
 
@@ -78,7 +126,28 @@ def shared_action(kind: ActionKind, part: str | None = None, source: Source | No
 
 @dataclass(frozen=True)
 class Candidate:
-    """A part that could be installed now, with what installing it keeps open."""
+    """A part that could be installed now, with what installing it keeps open.
+
+    Parameters
+    ----------
+    part : str
+        The part.
+    source : {"bin", "buffer"}
+        Where it would come from.
+    options : int
+        Admissible completions left after installing it.
+    total : int or None
+        Admissible completions now (``None``: not counted within the decision budget).
+    cost : float
+        Its handling cost, acquire + install.
+    buffered_at : int, optional
+        Its position in the buffer (0: buffered longest).
+
+    Examples
+    --------
+    >>> Candidate("a", "bin", 1, 2, 2.0).to_dict()
+    {'part': 'a', 'source': 'bin', 'options': '1', 'total': '2', 'cost': 2.0, 'buffered_at': None}
+    """
 
     part: str
     source: Source
@@ -88,6 +157,18 @@ class Candidate:
     buffered_at: int | None = None  # position in the buffer (0 = buffered longest)
 
     def to_dict(self) -> dict:
+        """The candidate as JSON values; counts as decimal strings (they may exceed any JSON number).
+
+        Returns
+        -------
+        dict
+            ``part``, ``source``, ``options``, ``total``, ``cost`` and ``buffered_at``.
+
+        Examples
+        --------
+        >>> Candidate("a", "buffer", 10 ** 30, None, 1.0, buffered_at=0).to_dict()["options"]
+        '1000000000000000000000000000000'
+        """
         return {"part": self.part, "source": self.source, "options": str(self.options),
                 "total": None if self.total is None else str(self.total), "cost": self.cost, "buffered_at": self.buffered_at}
 
@@ -96,9 +177,23 @@ class Candidate:
 class Estimate:
     """An estimated quantity of one part that decided an action, with its standard error.
 
-    ``kind`` is ``"share"`` (the share of admissible completions that keep the part next:
-    its options over all completions), ``"position"`` (its expected position, 1 = next) or
-    ``"slack"`` (the slack rule's value: expected position less what the order alone gives).
+    Parameters
+    ----------
+    part : str
+        The part.
+    kind : {"share", "position", "slack"}
+        ``"share"``: the share of admissible completions that keep the part next (its options over
+        all completions); ``"position"``: its expected position, 1 = next; ``"slack"``: the slack
+        rule's value, expected position less what the order alone gives.
+    value, se : float
+        The estimate and its standard error.
+    source : {"bin", "buffer"}, optional
+        Where the part is.
+
+    Examples
+    --------
+    >>> Estimate("a", "share", 0.25, 0.01, "bin").to_dict()
+    {'part': 'a', 'kind': 'share', 'value': 0.25, 'se': 0.01, 'source': 'bin'}
     """
 
     part: str
@@ -108,6 +203,18 @@ class Estimate:
     source: Source | None = None
 
     def to_dict(self) -> dict:
+        """The estimate as JSON values.
+
+        Returns
+        -------
+        dict
+            ``part``, ``kind``, ``value``, ``se`` and ``source``.
+
+        Examples
+        --------
+        >>> Estimate("a", "position", 1.5, 0.1).to_dict()["kind"]
+        'position'
+        """
         return {"part": self.part, "kind": self.kind, "value": self.value, "se": self.se, "source": self.source}
 
 
@@ -115,19 +222,41 @@ class Estimate:
 class Decision:
     """An action with the reasons it was chosen, and how sure it is.
 
-    ``candidates`` lists every installable candidate (best first) with the
-    options each keeps; ``positions`` the expected positions (1 = next) of the
-    visible parts that decided a buffer choice; ``rule`` which rule applied.
+    Policies make decisions; :meth:`Sequencer.decide <opportune.sequencer.Sequencer.decide>` returns them.
 
-    ``exact`` says whether the rule was applied to exact numbers.  When the exact
-    numbers did not fit the decision budget, ``method`` names the estimate (e.g.
-    ``"mcmc"``), ``estimates`` gives each candidate's estimated share of completions
-    or expected position with its standard error, and ``confidence`` the estimated
-    probability that the action is the one the exact rule would choose.  ``close``: the estimate
-    stopped on a near tie, being at least :data:`SURE` sure that no other candidate is better by more
-    than :data:`INDIFFERENT`; that is then what the decision states (``confidence``, the chance of
-    matching the exact rule's pick among candidates that close, changes nothing measurable).
-    ``seconds`` is the time the decision took.
+    Parameters
+    ----------
+    action : Action
+        The action.
+    rule : str
+        Which rule applied, in words.
+    candidates : tuple of Candidate, default ()
+        Every installable candidate (best first) with the options each keeps.
+    positions : tuple of (str, Fraction), default ()
+        The expected positions (1 = next) of the visible parts that decided a buffer choice.
+    note : str, default ""
+        More about the choice.
+    exact : bool, default True
+        Whether the rule was applied to exact numbers.
+    method : str, default "exact"
+        When the exact numbers did not fit the decision budget, the estimate used (e.g. ``"mcmc"``).
+    estimates : tuple of Estimate, default ()
+        Each candidate's estimated share of completions or expected position, with its standard
+        error.
+    confidence : float, default 1.0
+        The estimated probability that the action is the one the exact rule would choose.
+    seconds : float, default 0.0
+        The time the decision took.
+    close : bool, default False
+        The estimate stopped on a near tie, being at least :data:`SURE` sure that no other candidate
+        is better by more than :data:`INDIFFERENT`; that is then what the decision states.
+
+    Examples
+    --------
+    >>> from opportune import make_plan, Sequencer
+    >>> decision = Sequencer(make_plan(["a", "b", "c"], {"c": ["a", "b"]})).decide(["a", "b"])
+    >>> decision.action, decision.exact, [c.part for c in decision.candidates]
+    (Action(kind='install', part='a', source='bin'), True, ['a', 'b'])
     """
 
     action: Action
@@ -219,8 +348,22 @@ class Decision:
         return f"{sure} sure this is the exact rule's choice"
 
     def to_dict(self) -> dict:
-        """The decision as JSON values.  An exact decision's dict depends only on the state and
-        the look (no timing in it), so replays and stored answers compare equal."""
+        """The decision as JSON values.
+
+        An exact decision's dict depends only on the state and the look (no timing in it), so replays
+        and stored answers compare equal.
+
+        Returns
+        -------
+        dict
+            ``action``, ``rule``, ``note``, ``candidates``, ``positions``, ``exact`` and ``method``; an
+            estimated decision adds ``estimates``, ``confidence``, ``close`` and ``seconds``.
+
+        Examples
+        --------
+        >>> Decision(Action("shake"), "nothing fits").to_dict()
+        {'action': {'kind': 'shake', 'part': None, 'source': None}, 'rule': 'nothing fits', 'note': '', 'candidates': [], 'positions': [], 'exact': True, 'method': 'exact'}
+        """
         out = {
             "action": self.action.to_dict(),
             "rule": self.rule,
@@ -237,9 +380,33 @@ class Decision:
 
     @classmethod
     def recorded(cls, d: dict) -> "Decision":
-        """An estimated decision as :meth:`to_dict` recorded it (its action, rule and estimates; the
-        exact candidates and positions, which such a decision never has, are not restored).  Earlier
-        versions wrote a near tie into the note (``stopped early: ...``): read as ``close``."""
+        """An estimated decision as :meth:`to_dict` recorded it.
+
+        Its action, rule and estimates; the exact candidates and positions, which such a decision never
+        has, are not restored.  Earlier versions wrote a near tie into the note (``stopped early:
+        ...``): read as ``close``.
+
+        Parameters
+        ----------
+        d : dict
+            What :meth:`to_dict` wrote.
+
+        Returns
+        -------
+        Decision
+            An estimated decision (``exact=False``).
+
+        Raises
+        ------
+        KeyError
+            If ``d`` has no ``action``, or an estimate lacks a field.
+
+        Examples
+        --------
+        >>> d = Decision(Action("buffer", "a"), "buffer", exact=False, method="mcmc", confidence=0.9)
+        >>> Decision.recorded(d.to_dict()) == d
+        True
+        """
         note, close = d.get("note", ""), d.get("close", False)
         if "close" not in d and _OLD_NEAR_TIE in note:
             close = True
@@ -275,15 +442,44 @@ class DecidesOnMasks:
 
 @runtime_checkable
 class Policy(Protocol):
-    """Chooses the next action.  ``decide`` must not change ``state``.
+    """Chooses the next action: what the sequencer, the simulation and the service ask.
 
-    ``visible`` is the look: the part ids seen in the bin now, with repeats
-    for several visible units of one part, already checked against the state.
+    Any object with a ``name`` and a ``decide(state, visible)`` method is a policy;
+    :func:`~opportune.policies.named.make_policy` makes the package's by name.
+
+    Examples
+    --------
+    >>> from opportune.policies.named import make_policy
+    >>> isinstance(make_policy("paper"), Policy)
+    True
     """
 
     name: str
 
-    def decide(self, state: State, visible: tuple[str, ...]) -> Decision: ...
+    def decide(self, state: State, visible: tuple[str, ...]) -> Decision:
+        """The next action for a look, with its reasons.  Must not change ``state``.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state (:class:`opportune.sequencer.State`).
+        visible : tuple of str
+            The look: the part ids seen in the bin now, with repeats for several visible units of one
+            part, already checked against the state.
+
+        Returns
+        -------
+        Decision
+            The action and why.
+
+        Examples
+        --------
+        >>> from opportune import make_plan, Sequencer
+        >>> from opportune.policies.named import make_policy
+        >>> seq = Sequencer(make_plan(["a", "b"], {"b": ["a"]}))
+        >>> make_policy("paper").decide(seq.state, ("b",)).action
+        Action(kind='buffer', part='b', source=None)
+        """
 
 
 _gc_lock = threading.Lock()
@@ -296,8 +492,8 @@ def pause_collector() -> None:
     nest, and count across threads).  Allocates nothing: an allocation may start a collection, so a
     decision calls this first and :func:`resume_collector` last, after its answer is built, and the
     collection that waited runs at the caller's next allocation, after the decision (with the pause
-    in a ``with`` block it ran in the block's own exit, inside the decision: 114 ms on a 1,000-task
-    plan against a 50 ms budget)."""
+    in a ``with`` block it ran in the block's own exit, inside the decision; docs/decisions.md gives
+    what a collection costs there)."""
     global _gc_pausers, _gc_was_enabled
     _gc_lock.acquire()      # a method call, not ``with``: entering a block allocates
     try:
@@ -328,7 +524,8 @@ def collector_paused():
 
     A budgeted decision runs in one (:func:`pause_collector`, which this block uses): a full
     collection walks every object of the process (the memos of a large plan are millions), and one
-    landing inside a decision took 300 ms against a 50 ms budget.  Paused, it runs between looks
+    landing inside a decision can take longer than the whole budget (docs/decisions.md states the
+    measured cost).  Paused, it runs between looks
     instead, where a cell has seconds to spare.  The pause is as long as the decision, so what it
     lets pile up is bounded by the budget.  The order engine holds back its own upkeep (memo
     eviction, cache trimming) the same way: :meth:`opportune.engine.OrderEngine.deciding`, done by

@@ -200,14 +200,39 @@ class BufferOrder:
 
 
 class PolicyEvaluator(BufferOrder, OptimalSolver):
-    """Exact expected cost of ``policy`` (deterministic, deciding by ``choose_at``).
+    """Exact expected cost of a deterministic policy (one deciding by ``choose_at``) in a Markov bin.
 
-    Takes the same bin and cost settings as :class:`OptimalSolver`, whose looks and moves it
-    shares; ``max_states`` bounds the states visited (:class:`OptimalTooLarge` above it), ``deadline``
-    the time (:class:`OutOfTime`).  :func:`~opportune.policies.states.estimate_states` says how many
-    states the optimum needs; a policy that ignores the buffer's order reaches at most as many, one
-    that uses it (:attr:`ordered`) at most :meth:`states_bound` of them.
+    :func:`~opportune.policies.states.estimate_states` says how many states the optimum needs; a
+    policy that ignores the buffer's order reaches at most as many, one that uses it
+    (:attr:`ordered`) at most :meth:`states_bound` of them.
     Complexity: O(states × looks × one decision of the policy).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    policy : Policy
+        A deterministic policy with ``choose_at`` (:func:`~opportune.policies.named.make_policy`).
+    **settings
+        The bin and costs of :class:`~opportune.policies.optimal.OptimalSolver`, whose looks and
+        moves it shares: ``visible`` (2), ``capacity`` (None: unlimited), ``costs`` (a
+        :class:`~opportune.planning.costs.TimeModel`), ``weights`` (a weighted bin's visibilities)
+        and ``max_states`` (the states visited, :class:`OptimalTooLarge` above it).
+
+    Raises
+    ------
+    ValueError
+        If the policy chooses at random or does not decide on the state alone (no ``choose_at``).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> from opportune.policies.opportunistic import Opportunistic
+    >>> evaluator = PolicyEvaluator(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), Opportunistic(),
+    ...                             visible=1)
+    >>> round(evaluator.value(), 4), round(evaluator.optimal(), 4), evaluator.policy_states
+    (3.6667, 3.6667, 9)
     """
 
     def __init__(self, engine, policy, **settings):
@@ -222,29 +247,93 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
 
     #: Whether :meth:`value` takes the optimum's value for a policy that decides by the optimum in this bin
     #: (the look-ahead where its programme is the optimum's) instead of evaluating it look by look: the
-    #: same value to the last ulps (tests/test_optimal_compiled.py checks both ways agree), and the
-    #: look-by-look evaluation took minutes on a 14-part plan (every look of every state asks the policy).
+    #: same value to the last ulps (tests/test_optimal_compiled.py checks both ways agree), and far sooner
+    #: than the look-by-look evaluation (every look of every state asks the policy).
     OPTIMUM_SHORTCUT = True
 
     def value(self, key: tuple | None = None) -> float:
-        """Expected remaining cost of the policy from a state (a :meth:`policy_key`; default: the start)."""
+        """Expected remaining cost of the policy from a state.
+
+        From the start, a policy that decides by the optimum in this bin (:meth:`takes_optimum`) is
+        given the optimum's value.  The ``deadline`` and ``progress`` apply.
+
+        Parameters
+        ----------
+        key : tuple, optional
+            A state, as :meth:`policy_key` makes it; ``None``: the start.
+
+        Returns
+        -------
+        float
+            The expected cost (in the costs' units: moves and looks by default).
+
+        Raises
+        ------
+        OptimalTooLarge
+            If the policy reaches more than ``max_states`` states.
+        OutOfTime
+            If the ``deadline`` passes (the states finished stay memoised).
+        PolicyStuck
+            If the policy shakes at every look of some state it reaches (it never finishes).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> # one part visible: a first (2 moves), or b first (buffer b, install a, install b: 3 moves)
+        >>> PolicyEvaluator(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), Opportunistic(), visible=1).value()
+        2.5
+        """
         if key is None and self.takes_optimum():
             self.by_optimum = True
             return self.optimal()
         return self._deep(self._policy_value, self.policy_start() if key is None else key)
 
     def takes_optimum(self) -> bool:
-        """Whether :meth:`value` from the start takes the optimum's value (:attr:`OPTIMUM_SHORTCUT`): the
-        policy says it decides by the optimum in this bin (the look-ahead prepares its programme to tell, as
-        its first decision would).  Then the policy reaches none of :meth:`states_bound`'s states."""
+        """Whether :meth:`value` from the start takes the optimum's value (:attr:`OPTIMUM_SHORTCUT`).
+
+        The policy says it decides by the optimum in this bin (the look-ahead prepares its programme to
+        tell, as its first decision would).  Then the policy reaches none of :meth:`states_bound`'s
+        states.
+
+        Returns
+        -------
+        bool
+            True if the policy decides by the optimum here.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> PolicyEvaluator(OrderEngine(make_plan(["a", "b"], {})), Opportunistic()).takes_optimum()
+        False
+        """
         decides_by = getattr(self.policy, "decides_by_optimum", None)
         return bool(self.OPTIMUM_SHORTCUT and self.uniform and decides_by is not None
                     and decides_by(self.engine, self.visible, self.capacity, self.costs))
 
     def optimal(self) -> float:
-        """The optimum from the start, for comparison (see :class:`OptimalSolver`): by the compiled
-        programme where it takes the plan and bin (the same values, 20 times sooner; its states are
-        :attr:`states`), else by this evaluator's own memo.  The ``deadline`` and ``progress`` apply."""
+        """The optimum from the start, for comparison (see :class:`OptimalSolver`).
+
+        By the compiled programme where it takes the plan and bin (the same values, sooner:
+        docs/decisions.md gives how much; its states are :attr:`states`), else by this evaluator's own
+        memo.  The ``deadline`` and ``progress`` apply.
+
+        Returns
+        -------
+        float
+            The least expected cost of any online policy in this bin.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> PolicyEvaluator(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), Opportunistic(), visible=1).optimal()
+        2.5
+        """
         weights = None if self.uniform else dict(zip(self.ids, self.weights))
         if self._optimum is None and compiled_optimal_available(self.engine, weights):
             # on the plan as declared (not merged): its states are those counted before the work, which

@@ -73,7 +73,18 @@ def _outside_stacklevel() -> int:
 
 
 class UnknownPolicy(ValueError):
-    """A policy name that is not one of :data:`POLICIES`."""
+    """A policy name that is not one of :data:`POLICIES` (a :class:`ValueError`).
+
+    Parameters
+    ----------
+    name : str
+        The name given.
+
+    Examples
+    --------
+    >>> UnknownPolicy("best").name
+    'best'
+    """
 
     def __init__(self, name: str):
         super().__init__(f"unknown policy '{name}': choose from {', '.join(POLICIES)}")
@@ -82,12 +93,50 @@ class UnknownPolicy(ValueError):
 
 def make_policy(name: str, *, budget: float | None = None, seed: int = 0, visible: int = 2,
                 capacity: int | None = None, costs=None, bin: str = "uniform", weights=None):
-    """A new policy object for ``name`` (see :data:`POLICIES`), deciding within ``budget`` seconds.
+    """A new policy object by name, deciding within ``budget`` seconds.
 
     ``visible``, ``capacity``, ``costs``, ``bin`` and ``weights`` describe the world the look-ahead and
-    the rollout score their actions in (the other policies need no model of the world).
-    A former name (``opportunistic``) gives its policy, with a :class:`DeprecationWarning`.
-    Raises :class:`UnknownPolicy`.
+    the rollout score their actions in; the other policies need no model of the world.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`POLICIES`: ``lookahead`` (the default), ``paper`` (the paper's rule),
+        ``bin-first``, ``slack`` or ``rollout``.  A former name (``opportunistic``) gives its policy,
+        with a :class:`DeprecationWarning`.
+    budget : float, optional
+        Seconds per decision; ``None``: exact, however long it takes.
+    seed : int, default 0
+        The seed of the policy's estimates (and of the rollout's trials).
+    visible : int, default 2
+        Parts seen per look, in the world the look-ahead and the rollout score their actions in.
+    capacity : int, optional
+        Buffer locations in that world (``None``: unlimited).
+    costs : CellModel, optional
+        The cell's times, for the look-ahead and the rollout (``None``: counted actions).
+    bin : str, default "uniform"
+        The bin model of that world (``pile``: the look-ahead's pile programme).
+    weights : mapping of str to float, optional
+        The weighted bin's visibilities.
+
+    Returns
+    -------
+    Policy
+        A new policy, with no state shared with any other.
+
+    Raises
+    ------
+    UnknownPolicy
+        If ``name`` is not a policy's name (a :class:`ValueError`).
+
+    Examples
+    --------
+    >>> make_policy("slack", budget=None).name
+    'slack'
+    >>> make_policy("best")
+    Traceback (most recent call last):
+        ...
+    opportune.policies.named.UnknownPolicy: unknown policy 'best': choose from lookahead, paper, bin-first, slack, rollout
     """
     from opportune.policies import lookahead as lookahead_module, variants
     from opportune.policies.opportunistic import Opportunistic

@@ -33,11 +33,25 @@ def paper_rule(ask: Answers) -> Action:
     """The paper's rule: install the candidate that keeps the most options; else buffer the visible part
     needed earliest; else shake.  O(candidates log candidates) beyond the answers.
 
+    Parameters
+    ----------
+    ask : Answers
+        The answers for the state and look (exact, or estimated within a budget).
+
+    Returns
+    -------
+    Action
+        ``done`` once the assembly is complete, else the rule's action.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
     >>> paper_rule(Answers(engine, 0, engine.all_strategies, (), 1.0, ("b", "a")))
     Action(kind='install', part='a', source='bin')
+    >>> paper_rule(Answers(engine, 0, engine.all_strategies, (), 1.0, ("c",)))
+    Action(kind='buffer', part='c', source=None)
     """
     if ask.complete:
         return DONE
@@ -117,9 +131,24 @@ def _buffer_ranking(state, visible: tuple[str, ...]) -> tuple[int, list[tuple]]:
 
 
 class Opportunistic(CountBasedRule):
-    """Install what keeps the most options; buffer what is needed earliest; shake last.
+    """The paper's rule: install what keeps the most options; buffer what is needed earliest; shake last.
 
-    ``Opportunistic(0.05)``: within 50 ms a decision (see :class:`~opportune.policies.answers.CountBasedRule`).
+    Parameters
+    ----------
+    budget : float, optional
+        Seconds per decision (``None``: always exact); ``Opportunistic(0.05)`` decides within 50 ms,
+        estimating what it cannot count (see :class:`~opportune.policies.answers.CountBasedRule`).
+    seed : int, default 0
+        With a budget, the seed of the estimates.
+    chains : int, default 8
+        With a budget, the estimates' population of chains.
+
+    Examples
+    --------
+    >>> from opportune import make_plan, Sequencer
+    >>> seq = Sequencer(make_plan(["a", "b", "c"], {"c": ["a"]}), Opportunistic())
+    >>> seq.decide(["a", "b"]).candidates[0]
+    Candidate(part='a', source='bin', options=2, total=3, cost=2.0, buffered_at=None)
     """
 
     name = "paper"   # the paper's rule (formerly also "opportunistic": policies/named.py)
@@ -139,12 +168,29 @@ class Opportunistic(CountBasedRule):
         return buffer_choice(state, visible)
 
     def buffer_ties_at(self, engine, mask: int, consistent: int) -> list[tuple[int, int]]:
-        """The pairs of parts (declaration indices, the lower first) whose order in the buffer can decide
-        an action in this (installed, strategies) state: both installable, with as many options and the
-        same cost, so that "buffered longest" breaks their tie.  The exact evaluation keeps the buffer's
-        order between the pairs of every state it can reach, and only between them.  Complexity: one
-        count of options.
+        """The pairs of parts whose order in the buffer can decide an action in this (installed,
+        strategies) state.
 
+        Both installable, with as many options and the same cost, so that "buffered longest" breaks their
+        tie.  The exact evaluation keeps the buffer's order between the pairs of every state it can
+        reach, and only between them.  Complexity: one count of options.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask : int
+            The installed units, as the engine's bit mask.
+        consistent : int
+            The strategies still consistent, as a bit mask.
+
+        Returns
+        -------
+        list of (int, int)
+            Declaration indices, the lower first.
+
+        Examples
+        --------
         >>> from opportune import make_plan
         >>> from opportune.engine import OrderEngine
         >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
@@ -163,10 +209,31 @@ class Opportunistic(CountBasedRule):
 
     @staticmethod
     def decision_key(engine, capacity):
-        """A function of (installed mask, strategies, buffer, sorted look) whose equal values mean equal
-        decisions — for caching decisions in simulations.  Only installable parts matter when there are
-        candidates (with the buffered ones in buffer order, for the tie-break); otherwise the look and
-        whether a buffer location is free."""
+        """A function whose equal values mean equal decisions, for caching decisions in simulations.
+
+        Only installable parts matter when there are candidates (with the buffered ones in buffer order,
+        for the tie-break); otherwise the look and whether a buffer location is free.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        capacity : int or None
+            Buffer locations (``None``: unlimited).
+
+        Returns
+        -------
+        callable
+            ``key(mask, consistent, buffer, sorted look)``, a hashable value.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> key = Opportunistic.decision_key(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]})), None)
+        >>> key(0, 1, (), ("a", "b")) == key(0, 1, (), ("b", "a"))
+        True
+        """
         installable = engine.installable_set
 
         def key(mask, cons, buffer, look):

@@ -44,6 +44,17 @@ def bin_first(ask: Answers) -> Answers:
 class BinFirst(Opportunistic):
     """The paper's rule, with a visible installable part always before a buffered one.
 
+    Parameters
+    ----------
+    budget : float, optional
+        Seconds per decision (``None``: always exact).
+    seed : int, default 0
+        With a budget, the seed of the estimates.
+    chains : int, default 8
+        With a budget, the estimates' population of chains.
+
+    Examples
+    --------
     >>> from opportune import make_plan, Sequencer
     >>> plan = make_plan(["a", "b", "c"], {"c": ["a"]})
     >>> BinFirst().choose_at(Sequencer(plan).state.schedule.engine, 0b001, 1, ("c",), 1.0, ("b",))
@@ -64,6 +75,15 @@ class Slack(BinFirst):
     in a uniformly random completion, all counted in units of the remaining work.  The buffer choice
     of the paper's rule comes first; the slack is a question after it (:meth:`then`).
 
+    Parameters
+    ----------
+    weight : float, default 0.1
+        The weight of the steps that wait on a part.
+    **kwargs
+        ``budget``, ``seed`` and ``chains``, as for :class:`BinFirst`.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> engine = OrderEngine(make_plan(["a", "b", "c", "d", "x"], {"b": ["a"], "c": ["b"], "d": ["x"]}))
@@ -84,7 +104,28 @@ class Slack(BinFirst):
 
     def then(self, ask: Answers, action: Action) -> Action:
         """A buffer choice among several visible parts: the one with the least slack (ties: declaration
-        order); unanswered, the paper's choice stands."""
+        order); unanswered within the budget, the paper's choice stands.
+
+        Parameters
+        ----------
+        ask : Answers
+            The answers the rule had.
+        action : Action
+            The paper's rule's action.
+
+        Returns
+        -------
+        Action
+            The action decided.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d", "x"], {"b": ["a"], "c": ["b"], "d": ["x"]}))
+        >>> Slack().then(Answers(engine, 0, 1, (), 1.0, ("b", "d")), Action("buffer", "d"))
+        Action(kind='buffer', part='b', source=None)
+        """
         parts = ask.visible_parts()
         if action.kind != "buffer" or len(parts) == 1:
             return action
@@ -94,7 +135,32 @@ class Slack(BinFirst):
         return ask.pick("buffer", [(p, None) for p in sorted(slack, key=lambda p: (slack[p], ask.index(p)))])
 
     def least_slack(self, engine, mask: int, consistent: int, visible: tuple[str, ...]) -> str:
-        """The visible part with the least slack (ties: declaration order), exactly."""
+        """The visible part with the least slack (ties: declaration order), exactly.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask : int
+            The installed units, as the engine's bit mask.
+        consistent : int
+            The strategies still consistent, as a bit mask.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        str
+            The part.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c", "d", "x"], {"b": ["a"], "c": ["b"], "d": ["x"]}))
+        >>> Slack().least_slack(engine, 0, 1, ("b", "d"))
+        'b'
+        """
         ask = Answers(engine, mask, consistent, (), 0, visible)
         slack = ask.slack(ask.visible_parts(), self.weight)
         return min(slack, key=lambda p: (slack[p], ask.index(p)))

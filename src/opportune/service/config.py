@@ -19,9 +19,25 @@ REVOCATION_SECONDS = 1.0
 
 
 def database_url(db: str | None) -> str:
-    """A SQLAlchemy URL from ``--db``: a URL as given, a bare path as a SQLite file; default ``./opportune.db``.
+    """A SQLAlchemy URL from ``--db``: a URL as given, a bare path as a SQLite file.
 
-    ``OPPORTUNE_DB`` is used when ``--db`` is not given.
+    Parameters
+    ----------
+    db : str or None
+        A database URL or a SQLite file's path; ``None``: ``OPPORTUNE_DB`` if set, else
+        ``./opportune.db``.
+
+    Returns
+    -------
+    str
+        The URL (a SQLite file's path made absolute).
+
+    Examples
+    --------
+    >>> database_url("postgresql+psycopg://cell@db.local/runs")
+    'postgresql+psycopg://cell@db.local/runs'
+    >>> database_url("/var/lib/opportune/runs.db")
+    'sqlite:////var/lib/opportune/runs.db'
     """
     db = db or os.environ.get(DB_ENV) or DEFAULT_DB
     if "://" in db:
@@ -33,37 +49,71 @@ def database_url(db: str | None) -> str:
 class Settings:
     """Everything :func:`opportune.service.app.create_app` needs.
 
-    ``max_body`` bounds request bodies (bytes; at most :data:`opportune.limits.MAX_BODY`, the largest plan
-    file the readers read: a larger value raises ValueError); ``token_cache_seconds`` is how
-    long a checked token is trusted without asking the database again (a
-    revoked token stops working within that time, over HTTP and OPC UA:
-    :data:`REVOCATION_SECONDS` by default); ``ticket_seconds`` is how
-    long an SSE ticket can be used to open a stream; ``live_runs`` is how many
-    runs keep their sequencer in memory (others are rebuilt from the event log
-    on demand); ``count_seconds`` bounds one exact count (the policy's
-    decisions need exact counts; a plan too large for them is refused with a
-    clear error instead of holding a request for minutes); ``idempotency_seconds``
-    is how long the stored answer of an idempotent request is kept (a retry
-    after that is judged afresh).  ``decision_budget`` is the seconds a look's decision
-    may take (estimated, and marked so, when exact counts do not fit; the answer's
-    counts get what the decision leaves of it (the decision's own counts stop by twice it at
-    most), a read's 0.25 s; a count that misses its
-    time is null); None: every decision exact, each count bounded by ``count_seconds``.
+    Memory.  ``memory_cap`` is kept by two checks, between requests: the bytes the loaded plans'
+    engines account (memos, vectors, tails, programmes, per-state caches; least recently used plans
+    are evicted past the cap, their runs rebuilt from their logs when next asked), and the process's
+    resident memory (past 85% of the cap, the plans' memos are shrunk to their newest quarter and
+    freed pages given back; over the cap itself, least recently used plans are evicted, never the one
+    used last).
 
-    Memory.  ``memory_cap`` bounds the memory the server holds beyond its footprint at start, over
-    all plans; None: a quarter of the machine's memory (``MemTotal``).  Two checks keep it, between
-    requests: the bytes the loaded plans' engines account (memos, vectors, tails, programmes,
-    per-state caches; least recently used plans are evicted past the cap, their runs rebuilt from
-    their logs when next asked), and the process's resident memory (past 85% of the cap, the plans'
-    memos are shrunk to their newest quarter and freed pages given back; over the cap itself, least
-    recently used plans are evicted, never the one used last).  One plan
-    may hold at most ``plan_share`` of the cap: its engine keeps its accounted memos within half of that
-    share between decisions (resident memory runs up to twice the accounted bytes), and a plan whose
-    minimum working set is over the share is refused at upload (413).
-    ``warm_up_seconds`` is the most time the warm-up of one plan (counting its first state, once per
-    plan and process, in the background) may take.  ``request_seconds``: a request must arrive whole
-    (line, headers, body) within this many seconds of its first byte or of its connection's opening,
-    or its connection is closed (:mod:`opportune.service.protocol`).
+    Parameters
+    ----------
+    db_url : str, default "sqlite:///./opportune.db"
+        Where runs are stored (:func:`database_url`).
+    max_body : int, default 1048576
+        Bytes of a request body; at most :data:`opportune.limits.MAX_BODY`, the largest plan file the
+        readers read.
+    token_cache_seconds : float, default 1.0
+        How long a checked token is trusted without asking the database again: a revoked token stops
+        working within that time, over HTTP and OPC UA (:data:`REVOCATION_SECONDS`).
+    ticket_seconds : float, default 60.0
+        How long an SSE ticket can be used to open a stream.
+    live_runs : int, default 512
+        Runs that keep their sequencer in memory (others are rebuilt from the event log on demand).
+    count_seconds : float, default 10.0
+        The most one exact count may take: a plan too large for the policy's exact counts is refused
+        with a clear error instead of holding a request for minutes.
+    decision_budget : float or None, default 0.05
+        Seconds a look's decision may take (estimated, and marked so, when exact counts do not fit);
+        the answer's counts get what the decision leaves of it (the decision's own counts stop by
+        twice it at most), a read's 0.25 s; a count that misses its time is null.  ``None``: every
+        decision exact, each count bounded by ``count_seconds``.
+    idempotency_seconds : float, default 604800.0
+        How long the stored answer of an idempotent request is kept (a retry after that is judged
+        afresh).
+    sse_poll_seconds : float, default 2.0
+        How often an event stream polls the log for changes.
+    request_seconds : float, default 10.0
+        A request must arrive whole (line, headers, body) within this many seconds of its first byte
+        or of its connection's opening, or its connection is closed
+        (:mod:`opportune.service.protocol`).
+    sse_keepalive_seconds : float, default 15.0
+        How often an idle event stream sends a comment, so that proxies keep it open.
+    memory_cap : int, optional
+        Bytes the server may hold beyond its footprint at start, over all plans; ``None``: a quarter
+        of the machine's memory (``MemTotal``).
+    plan_share : float, default 0.5
+        The share of the cap one plan may hold: its engine keeps its accounted memos within half of
+        that share between decisions (resident memory runs up to twice the accounted bytes), and a
+        plan whose minimum working set is over the share is refused at upload (413).
+    warm_up_seconds : float, default 30.0
+        The most time the warm-up of one plan (counting its first state, once per plan and process,
+        in the background) may take.
+
+    Raises
+    ------
+    ValueError
+        If ``max_body`` is over :data:`opportune.limits.MAX_BODY` or under the least body a request
+        needs.
+
+    Examples
+    --------
+    >>> Settings(decision_budget=0.1).max_body
+    1048576
+    >>> Settings(max_body=10**12)
+    Traceback (most recent call last):
+        ...
+    ValueError: max_body 1,000,000,000,000 is over its maximum of 33,554,432 bytes (32 MiB): the readers read no larger plan file, so a larger body could only be refused later; give at most 33554432
     """
 
     db_url: str = DEFAULT_DB

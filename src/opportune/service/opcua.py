@@ -99,9 +99,28 @@ class OpcUaError(ValueError):
 
 @dataclass(frozen=True)
 class OpcUaOptions:
-    """How the OPC UA server listens: its endpoint, its certificates' folder (``own/`` its key and certificate,
-    generated on first start; ``trusted/`` the clients' certificates), and the cell anonymous sessions act as
-    (None: refused; loopback endpoints only)."""
+    """How the OPC UA server listens.
+
+    Parameters
+    ----------
+    endpoint : str, default "opc.tcp://127.0.0.1:4840"
+        The ``opc.tcp://HOST:PORT`` URL served.
+    pki : pathlib.Path, default Path("opcua-pki")
+        The certificates' folder: ``own/`` the server's key and certificate, generated on first
+        start; ``trusted/`` the clients' certificates.
+    anonymous_cell : str, optional
+        The cell anonymous sessions act as (``None``: anonymous sessions are refused; loopback
+        endpoints only).
+    max_run_nodes : int, default MAX_RUN_NODES
+        Runs with nodes in the address space (active ones first; the oldest go first).
+    transport : TransportBounds, optional
+        Sizes, counts and times allowed before login (:mod:`opportune.service.opcua_transport`).
+
+    Examples
+    --------
+    >>> OpcUaOptions(endpoint="opc.tcp://0.0.0.0:4841").checked()
+    ('0.0.0.0', 4841)
+    """
 
     endpoint: str = DEFAULT_ENDPOINT
     pki: Path = Path("opcua-pki")
@@ -110,7 +129,28 @@ class OpcUaOptions:
     transport: TransportBounds = TransportBounds()   # sizes, counts and times before login (opcua_transport)
 
     def checked(self) -> tuple[str, int]:
-        """The endpoint's host and port; :class:`OpcUaError` saying what to fix if it cannot be served."""
+        """The endpoint's host and port, checked before the server starts.
+
+        Returns
+        -------
+        tuple of (str, int)
+            The host and the port (4840 when the URL gives none).
+
+        Raises
+        ------
+        OpcUaError
+            Saying what to fix: not an ``opc.tcp://HOST:PORT`` URL, a bad port, or anonymous sessions on
+            an endpoint that is not loopback.
+
+        Examples
+        --------
+        >>> OpcUaOptions().checked()
+        ('127.0.0.1', 4840)
+        >>> OpcUaOptions(endpoint="http://cell").checked()
+        Traceback (most recent call last):
+            ...
+        opportune.service.opcua.OpcUaError: the OPC UA endpoint 'http://cell' is not an opc.tcp://HOST:PORT URL: give e.g. opc.tcp://127.0.0.1:4840
+        """
         url = urlparse(self.endpoint)
         if url.scheme != "opc.tcp" or not url.hostname:
             raise OpcUaError(f"the OPC UA endpoint {self.endpoint!r} is not an opc.tcp://HOST:PORT URL: "
@@ -220,7 +260,26 @@ class OwnCellOnly:
 # ---------------------------------------------------------------- refusals
 
 def status_of(err: ApiError) -> int:
-    """The OPC UA status code of a refusal of the service."""
+    """The OPC UA status code of a refusal of the service.
+
+    Parameters
+    ----------
+    err : ApiError
+        The service's refusal (its HTTP status and code).
+
+    Returns
+    -------
+    int
+        ``BadUserAccessDenied`` (401, 403), ``BadNotFound`` (404), ``BadInvalidState`` (a run's state
+        refuses it), ``BadResourceUnavailable`` (busy, 503), ``BadRequestTooLarge`` (413),
+        ``BadInternalError`` (5xx), else ``BadInvalidArgument``.
+
+    Examples
+    --------
+    >>> from asyncua import ua
+    >>> status_of(ApiError(409, "action_pending", "an action is pending")) == ua.StatusCodes.BadInvalidState
+    True
+    """
     codes = ua.StatusCodes
     if err.status in (401, 403):
         return codes.BadUserAccessDenied

@@ -64,7 +64,8 @@ def own_files(pki: Path) -> tuple[Path, Path]:
 
 async def make_certificate(key: Path, cert: Path, app_uri: str, *, client: bool, host: str = "127.0.0.1") -> None:
     """A self-signed application certificate (RSA 2048, a year) for ``app_uri`` with its key, unless both
-    exist and are valid for it; the key is readable by its owner only.  About 0.1-0.5 s to generate."""
+    exist and are valid for it; the key is readable by its owner only.  Making the RSA key takes a
+    moment of CPU (docs/opcua.md says how long)."""
     from asyncua.crypto.cert_gen import setup_self_signed_certificate
     from cryptography.x509.oid import ExtendedKeyUsageOID
 
@@ -87,7 +88,7 @@ def client_files(folder: str | Path) -> tuple[Path, Path]:
 
 async def client_certificate_async(folder: str | Path, app_uri: str = "urn:opportune:client", *,
                                    trust_in: str | Path | None = None) -> tuple[Path, Path]:
-    """:func:`client_certificate` for async code: the same, awaited; the key (0.1-0.5 s of CPU) is made in a
+    """:func:`client_certificate` for async code: the same, awaited; the key (a moment of CPU) is made in a
     thread, so the event loop goes on serving meanwhile.
 
     Parameters

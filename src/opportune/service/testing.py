@@ -33,7 +33,18 @@ from pathlib import Path
 
 
 def free_port() -> int:
-    """A TCP port free on 127.0.0.1 now (the OS picks it)."""
+    """A TCP port free on 127.0.0.1 now (the OS picks it; another process may take it next).
+
+    Returns
+    -------
+    int
+        The port.
+
+    Examples
+    --------
+    >>> 0 < free_port() < 65536
+    True
+    """
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
@@ -62,8 +73,47 @@ def _listening(port: int) -> bool:
 
 
 class ServiceProcess:
-    """``opportune serve`` on 127.0.0.1 over a SQLite file or a database URL; a context manager that
-    always stops it.  With a URL, give ``log`` (where the server's output goes)."""
+    """``opportune serve`` on 127.0.0.1 and a free port, over a SQLite file or a database URL; a context
+    manager that always stops it.
+
+    Parameters
+    ----------
+    db : str or os.PathLike
+        A SQLite file, or a database URL (``postgresql+psycopg://...``).
+    max_body : int, optional
+        The server's ``--max-body`` (bytes of a request body).
+    log : str or os.PathLike, optional
+        Where the server's output goes (default: ``db`` with the suffix ``.log``; required with a URL).
+    extra_args : tuple of str, default ()
+        More arguments for ``opportune serve``.
+    workers : int, default 1
+        Worker processes (``--workers N``, PostgreSQL): a supervisor and N workers on one port.
+    opcua : bool, default False
+        Also serve OPC UA (``--opcua``) on a free loopback port (:attr:`opcua_endpoint`).
+    pki : str or os.PathLike, optional
+        Where the OPC UA certificates go (default: ``db`` + ``.pki``; required with a URL and
+        ``opcua``).
+
+    Raises
+    ------
+    ValueError
+        With a database URL and no ``log``, or with ``opcua`` and no ``pki``.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from opportune.datasets import resolve
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> with ServiceProcess(folder / "cell.db") as service:
+    ...     cell = Client(service.url, service.token(cell="cell-1"))
+    ...     plan = cell.post("/plans", content=resolve("example:gearbox").read_text(),
+    ...                      headers={"Content-Type": "application/yaml"}).json()
+    ...     run = cell.post("/runs", {"plan": plan["id"], "policy": "paper"}).json()
+    ...     answer = cell.post(f"/runs/{run['id']}/looks", {"visible": ["rl", "ra"]}).json()
+    ...     cell.close()
+    >>> plan["name"], answer["action"]["kind"], answer["action"]["part"]
+    ('gearbox', 'buffer', 'rl')
+    """
 
     def __init__(self, db: str | Path, *, max_body: int | None = None, log: str | Path | None = None,
                  extra_args: tuple[str, ...] = (), workers: int = 1, opcua: bool = False,
@@ -93,6 +143,32 @@ class ServiceProcess:
         return f"opc.tcp://127.0.0.1:{self.opcua_port}"
 
     def start(self, timeout: float = 30.0) -> "ServiceProcess":
+        """Start the server and wait until it answers (``/healthz``, and every worker up).
+
+        Parameters
+        ----------
+        timeout : float, default 30.0
+            Seconds to wait for it, per attempt (three attempts: another process may take the free
+            port first).
+
+        Returns
+        -------
+        ServiceProcess
+            This object, started (:attr:`url` answers).
+
+        Raises
+        ------
+        RuntimeError
+            If the service did not start; the message ends with its log.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> service = ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").start()
+        >>> service.url.startswith("http://127.0.0.1:")
+        True
+        >>> service.stop()
+        """
         for _attempt in range(3):  # another process may take the free port first
             self.port = free_port()
             args = [sys.executable, "-m", "opportune.cli", "serve", "--db", self.db,
@@ -123,7 +199,19 @@ class ServiceProcess:
         raise RuntimeError(f"the service did not start; its log:\n{self.log_text()[-3000:]}")
 
     def stop(self, timeout: float = 10.0) -> None:
-        """SIGTERM (the supervisor of ``workers`` stops its workers), then SIGKILL if it has not stopped within ``timeout``."""
+        """SIGTERM (the supervisor of ``workers`` stops its workers), then SIGKILL if it has not stopped
+        within ``timeout``.  Nothing to do if the server is not running.
+
+        Parameters
+        ----------
+        timeout : float, default 10.0
+            Seconds to wait after SIGTERM.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").stop()    # never started: nothing to stop
+        """
         if self.proc is None or self.proc.poll() is not None:
             return
         self.proc.send_signal(signal.SIGTERM)
@@ -133,8 +221,14 @@ class ServiceProcess:
             self.kill()
 
     def kill(self) -> None:
-        """``kill -9`` the server's process group (with ``workers``: the supervisor and every worker at once):
-        no chance to flush or clean up."""
+        """``kill -9`` the server's process group (with ``workers``: the supervisor and every worker at
+        once): no chance to flush or clean up.  Nothing to do if the server is not running.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").kill()    # never started: nothing to kill
+        """
         if self.proc is not None and self.proc.poll() is None:
             # Not reaped yet, so the group's id is still this server's: nothing else can be hit.
             try:
@@ -144,7 +238,19 @@ class ServiceProcess:
             self.proc.wait(10)
 
     def worker_pids(self) -> list[int]:
-        """The worker processes of ``--workers N`` (children of the server process), from /proc (Linux)."""
+        """The worker processes of ``--workers N`` (children of the server process), from /proc (Linux).
+
+        Returns
+        -------
+        list of int
+            Their pids, ascending; empty with one worker or when the server is not running.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").worker_pids()
+        []
+        """
         if self.workers == 1 or self.proc is None or self.proc.poll() is not None:
             return []
         children = []
@@ -164,7 +270,31 @@ class ServiceProcess:
         return sorted(children)
 
     def kill_worker(self, pid: int | None = None) -> int:
-        """``kill -9`` one worker (the first, or ``pid``); the supervisor starts another. Its pid."""
+        """``kill -9`` one worker; the supervisor starts another.
+
+        Parameters
+        ----------
+        pid : int, optional
+            The worker to kill (``None``, or not a worker: the first).
+
+        Returns
+        -------
+        int
+            The pid killed.
+
+        Raises
+        ------
+        RuntimeError
+            If there are no worker processes (one worker, or the server is not running).
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").kill_worker()
+        Traceback (most recent call last):
+            ...
+        RuntimeError: no worker processes: start the service with workers=N > 1
+        """
         pids = self.worker_pids()
         if not pids:
             raise RuntimeError("no worker processes: start the service with workers=N > 1")
@@ -173,13 +303,47 @@ class ServiceProcess:
         return pid
 
     def log_text(self) -> str:
+        """What the server wrote to its log so far.
+
+        Returns
+        -------
+        str
+            The log's text (``""`` before the server first started).
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").log_text()
+        ''
+        """
         try:
             return self.log_path.read_text(errors="replace")
         except FileNotFoundError:
             return ""
 
     def token(self, *, cell: str | None = None, operator: str | None = None) -> str:
-        """Create a token directly in the database (as ``opportune token create`` does)."""
+        """Create a token directly in the database (as ``opportune token create`` does).
+
+        Needs no running server: the database is made if it does not exist.
+
+        Parameters
+        ----------
+        cell : str, optional
+            The cell the token drives (a cell's token).
+        operator : str, optional
+            The operator the token belongs to (an operator's token).
+
+        Returns
+        -------
+        str
+            The token, for ``Authorization: Bearer``.
+
+        Examples
+        --------
+        >>> import pathlib, tempfile
+        >>> ServiceProcess(pathlib.Path(tempfile.mkdtemp()) / "cell.db").token(cell="cell-1").startswith("opp_")
+        True
+        """
         from opportune.service.auth import create_token
         from opportune.service.config import database_url
         from opportune.service.storage import Store
@@ -198,7 +362,30 @@ class ServiceProcess:
 
 
 class Client:
-    """An ``httpx.Client`` for one token; POSTs carry a fresh ``Idempotency-Key`` unless ``key=`` is given."""
+    """An ``httpx.Client`` for one token: every request carries it, and every POST a fresh
+    ``Idempotency-Key`` unless ``key=`` is given.
+
+    Parameters
+    ----------
+    base_url : str
+        The service's address (:attr:`ServiceProcess.url`).
+    token : str or None
+        The bearer token (``None``: none sent).
+    timeout : float, default 30.0
+        Seconds per request.
+
+    Raises
+    ------
+    ImportError
+        If httpx is not installed (the ``service`` extra does not install it: ``pip install httpx``).
+
+    Examples
+    --------
+    >>> client = Client("http://127.0.0.1:8700", "opp_example")
+    >>> client.http.headers["Authorization"]
+    'Bearer opp_example'
+    >>> client.close()
+    """
 
     def __init__(self, base_url: str, token: str | None, timeout: float = 30.0):
         try:
@@ -212,15 +399,72 @@ class Client:
         self.http = httpx.Client(base_url=base_url, headers=headers, timeout=timeout)
 
     def get(self, path: str, **kw):
+        """``GET path``.
+
+        Parameters
+        ----------
+        path : str
+            The path, e.g. ``"/runs/1"``.
+        **kw
+            More arguments for ``httpx.Client.get`` (``params``, ``headers``, ...).
+
+        Returns
+        -------
+        httpx.Response
+            The answer, whatever its status.
+
+        Examples
+        --------
+        >>> import httpx
+        >>> client = Client("http://service", "opp_example")
+        >>> client.http = httpx.Client(base_url="http://service", headers=client.http.headers,
+        ...                            transport=httpx.MockTransport(lambda request: httpx.Response(200, text=request.url.path)))
+        >>> client.get("/healthz").text
+        '/healthz'
+        """
         return self.http.get(path, **kw)
 
     def post(self, path: str, json=None, *, key: str | None | bool = None, **kw):
+        """``POST path`` with a JSON body, and an ``Idempotency-Key``.
+
+        Parameters
+        ----------
+        path : str
+            The path, e.g. ``"/runs"``.
+        json : object, optional
+            The body, as JSON (``None``: give ``content=`` instead, or no body).
+        key : str, bool or None, default None
+            The ``Idempotency-Key``: ``None``, a fresh one; a string, that one (to send a request again);
+            ``False``, none.
+        **kw
+            More arguments for ``httpx.Client.post`` (``content``, ``headers``, ...).
+
+        Returns
+        -------
+        httpx.Response
+            The answer, whatever its status.
+
+        Examples
+        --------
+        >>> import httpx
+        >>> client = Client("http://service", "opp_example")
+        >>> echo = httpx.MockTransport(lambda request: httpx.Response(200, json=dict(request.headers)))
+        >>> client.http = httpx.Client(base_url="http://service", headers=client.http.headers, transport=echo)
+        >>> client.post("/runs", {"plan": "example:gearbox"}, key="k-1").json()["idempotency-key"]
+        'k-1'
+        """
         headers = dict(kw.pop("headers", {}) or {})
         if key is not False:
             headers["Idempotency-Key"] = key or uuid.uuid4().hex
         return self.http.post(path, json=json, headers=headers, **kw)
 
     def close(self) -> None:
+        """Close the connections.
+
+        Examples
+        --------
+        >>> Client("http://127.0.0.1:8700", None).close()
+        """
         self.http.close()
 
 
@@ -228,15 +472,29 @@ class PostgresServer:
     """A throwaway PostgreSQL server in a temporary directory, on 127.0.0.1 and a free port, for tests.
 
     Needs the server programs (Debian: ``apt-get install postgresql``); as root it runs them as the
-    ``postgres`` user, as PostgreSQL requires.  It runs with ``fsync=off`` (tests need no durability
-    against power loss; ``kill -9`` of a client loses nothing either way) unless ``durable=True``.  :meth:`database` makes a fresh database and returns
-    its SQLAlchemy URL (driver psycopg 3).
+    ``postgres`` user, as PostgreSQL requires.  The server lives in a fresh directory under the
+    system's temporary directory (the ``postgres`` user must be able to reach it) and is deleted by
+    :meth:`stop`.  A context manager: ``with`` starts and stops it.
 
-    The server lives in a fresh directory under the system's temporary directory (the ``postgres``
-    user must be able to reach it) and is deleted by :meth:`stop`.
+    Parameters
+    ----------
+    durable : bool, default False
+        Run with PostgreSQL's defaults; ``False`` runs with ``fsync=off`` (tests need no durability
+        against power loss; ``kill -9`` of a client loses nothing either way).
+
+    Raises
+    ------
+    RuntimeError
+        If PostgreSQL's server programs (``initdb``, ``pg_ctl``) are not found.
+
+    Examples
+    --------
+    Starting a server takes seconds and the PostgreSQL programs:
 
     >>> with PostgresServer() as pg:                                    # doctest: +SKIP
     ...     url = pg.database("runs")
+    ...     with ServiceProcess(url, log="service.log") as service:
+    ...         token = service.token(cell="cell-1")
     """
 
     def __init__(self, *, durable: bool = False):
@@ -267,6 +525,23 @@ class PostgresServer:
             raise RuntimeError(f"{' '.join(args[:2])} failed: {done.stdout}{done.stderr}")
 
     def start(self) -> "PostgresServer":
+        """Create the data directory and start the server (``initdb``, then ``pg_ctl start``).
+
+        Returns
+        -------
+        PostgresServer
+            This server, started (:attr:`port` set).
+
+        Raises
+        ------
+        RuntimeError
+            If ``initdb`` or ``pg_ctl`` fails (with its output).
+
+        Examples
+        --------
+        >>> pg = PostgresServer().start()          # doctest: +SKIP
+        >>> pg.stop()                              # doctest: +SKIP
+        """
         import tempfile
 
         self.root = Path(tempfile.mkdtemp(prefix="opportune-pg-"))
@@ -282,7 +557,24 @@ class PostgresServer:
         return self
 
     def database(self, name: str) -> str:
-        """Create database ``name``; its URL."""
+        """Create a database.
+
+        Parameters
+        ----------
+        name : str
+            The database's name (a new one).
+
+        Returns
+        -------
+        str
+            Its SQLAlchemy URL (driver psycopg 3), for :class:`ServiceProcess` or ``opportune serve --db``.
+
+        Examples
+        --------
+        >>> with PostgresServer() as pg:                                    # doctest: +SKIP
+        ...     pg.database("runs")
+        'postgresql+psycopg://postgres@127.0.0.1:...'
+        """
         from sqlalchemy import create_engine, text
 
         admin = create_engine(f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/postgres",
@@ -295,6 +587,13 @@ class PostgresServer:
         return f"postgresql+psycopg://postgres@127.0.0.1:{self.port}/{name}"
 
     def stop(self) -> None:
+        """Stop the server at once (``pg_ctl -m immediate``) and delete its directory; nothing to do if it
+        is not running.
+
+        Examples
+        --------
+        >>> PostgresServer().stop()                # doctest: +SKIP
+        """
         import shutil
 
         if self.root is None:

@@ -38,7 +38,26 @@ LABELS = {
 
 
 def describe(values: list[float]) -> dict:
-    """Mean, standard deviation, p5/p50/p95, max and the 95% confidence interval of the mean."""
+    """Mean, standard deviation, p5/p50/p95, max and the 95% confidence interval of the mean.
+
+    Parameters
+    ----------
+    values : list of float
+        The sample.
+
+    Returns
+    -------
+    dict
+        ``n``, ``mean``, ``sd`` (the sample's, n - 1), ``p5``, ``p50``, ``p95`` (linear
+        interpolation, numpy's default), ``max`` and ``ci95`` (normal); ``None`` for each of an
+        empty sample.
+
+    Examples
+    --------
+    >>> d = describe([1.0, 2.0, 3.0, 4.0])
+    >>> d["n"], d["mean"], d["p50"], d["max"], [round(x, 3) for x in d["ci95"]]
+    (4, 2.5, 2.5, 4.0, [1.235, 3.765])
+    """
     n = len(values)
     if n == 0:
         return {"n": 0, "mean": None, "sd": None, "p5": None, "p50": None, "p95": None, "max": None, "ci95": None}
@@ -58,7 +77,30 @@ def describe(values: list[float]) -> dict:
 
 
 def summary(result: StudyResult) -> dict:
-    """The study as the ``--json`` document."""
+    """The study as the ``--json`` document (``results.json``).
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+
+    Returns
+    -------
+    dict
+        The settings, the planned sequence, each strategy's statistics (:func:`describe` of every
+        cost, the trials, the incomplete ones, the ratio to the optimum), the timing and the
+        provenance.
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> from opportune.study.simulate import StudyConfig, run_study
+    >>> result = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=20, seed=1),
+    ...                    workers=1)
+    >>> doc = summary(result)
+    >>> doc["strategies"]["paper"]["trials"], doc["strategies"]["paper"]["time"]["mean"]
+    (20, 13.65)
+    """
     cfg = result.config
     optimum = result.prepared.optimal_start
     strategies = {}
@@ -164,7 +206,34 @@ def notes(result: StudyResult) -> list[str]:
 
 
 def write_outputs(result: StudyResult, out_dir: str | Path) -> list[Path]:
-    """Write results.json, trials.csv and the plots (PNG and SVG) into ``out_dir``."""
+    """Write ``results.json``, ``trials.csv`` and the figures (PNG, SVG and PDF) into ``out_dir``.
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    out_dir : str or os.PathLike
+        The folder (made if missing).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+
+    Raises
+    ------
+    OSError
+        If the folder or a file cannot be written.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from opportune import load_plan
+    >>> from opportune.study.simulate import StudyConfig, run_study
+    >>> result = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=10), workers=1)
+    >>> [path.name for path in write_outputs(result, tempfile.mkdtemp())][:3]
+    ['results.json', 'trials.csv', 'mean_time.png']
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -239,11 +308,25 @@ def label(name: str) -> str:
 
 def make_figures(result: StudyResult, doc: dict | None = None) -> list[Figure]:
     """The study's figures, drawn (not saved): the mean time of each strategy against the optimum
-    (single column) and the distribution of time per strategy (double column); call inside
-    ``matplotlib.rc_context(figure_style())``.  Empty when no trial finished.
+    (single column) and the distribution of time per strategy (double column).
 
-    Strategies appear in one order in both, best mean first.  Cost: O(trials) to draw.
+    Call inside ``matplotlib.rc_context(figure_style())``.  Strategies appear in one order in both,
+    best mean first.  Cost: O(trials) to draw.
 
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    doc : dict, optional
+        The study's :func:`summary` (computed when not given).
+
+    Returns
+    -------
+    list of Figure
+        Each figure with its file stem, column width and caption; empty when no trial finished.
+
+    Examples
+    --------
     >>> import matplotlib; from opportune import load_plan; from opportune.study.simulate import StudyConfig, run_study
     >>> r = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=20), workers=1)
     >>> with matplotlib.rc_context(figure_style()):

@@ -210,9 +210,29 @@ def _notes(result: StudyResult, doc: dict) -> list[str]:
 
 
 def render_report(result: StudyResult, doc: dict | None = None) -> str:
-    """The report of a study as one HTML document (a string).  ``doc``: the study's :func:`summary`
-    (computed when not given).  Deterministic: the same study gives the same text.  Cost: drawing
-    the figures, O(trials), about a second for 10 strategies of 10,000 trials.
+    """The report of a study as one HTML document (a string).
+
+    Deterministic: the same study gives the same text.  Cost: drawing the figures, O(trials).
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    doc : dict, optional
+        The study's :func:`~opportune.study.report.summary` (computed when not given).
+
+    Returns
+    -------
+    str
+        The HTML document, its figures inline (SVG).
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> from opportune.study.simulate import StudyConfig, run_study
+    >>> result = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=10), workers=1)
+    >>> render_report(result).startswith("<!DOCTYPE html>")
+    True
     """
     import matplotlib
 
@@ -264,7 +284,36 @@ moves, shakes and buffer peak are means per assembly; × optimum divides the mea
 
 
 def write_report(result: StudyResult, path: str | Path, doc: dict | None = None) -> Path:
-    """Write :func:`render_report` to ``path`` (UTF-8) and return the path.  OSError if it cannot be written."""
+    """Write :func:`render_report` to ``path`` (UTF-8).
+
+    Parameters
+    ----------
+    result : StudyResult
+        The study.
+    path : str or os.PathLike
+        The file written.
+    doc : dict, optional
+        The study's :func:`~opportune.study.report.summary` (computed when not given).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> from opportune import load_plan
+    >>> from opportune.study.simulate import StudyConfig, run_study
+    >>> result = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=10), workers=1)
+    >>> write_report(result, pathlib.Path(tempfile.mkdtemp()) / "report.html").name
+    'report.html'
+    """
     doc = doc or summary(result)
     if sys.argv and Path(sys.argv[0]).name == "opportune" and "command" not in doc["provenance"]:
         doc = {**doc, "provenance": {**doc["provenance"],

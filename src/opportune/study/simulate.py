@@ -3,7 +3,7 @@
 The simulated world acts on the same policies as the sequencer (one decision
 path); the trial loop here only keeps the cell's state in machine form
 (bitmasks) and memoises the decisions of deterministic policies, which is
-what makes tens of thousands of trials per second possible.
+what makes large studies fast (docs/comparison.md gives the measured rates).
 :func:`run_trial_with_sequencer` plays a trial through the full
 :class:`~opportune.sequencer.Sequencer` instead; the tests check that both
 give identical trials.
@@ -45,7 +45,16 @@ OPTIMAL_BINS = MARKOV_BINS + ("pile",)   # bins whose exact optimum is computed 
 
 
 class StudyError(ValueError):
-    """A study that cannot be run as asked (a user mistake: say what to change)."""
+    """A study that cannot be run as asked (a user mistake: the message says what to change).
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> StudyConfig(load_plan("example:gearbox"), bin="tray").validate()
+    Traceback (most recent call last):
+        ...
+    opportune.study.simulate.StudyError: unknown bin model 'tray': use uniform, weighted, pile, conveyor or physics
+    """
 
 
 class StrategyUnavailable(StudyError):
@@ -61,7 +70,48 @@ COUNTING_STRATEGIES = ("paper", "bin-first", "slack", "lookahead")  # decide by 
 
 @dataclass(frozen=True)
 class StudyConfig:
-    """Everything that determines a study's numbers."""
+    """Everything that determines a study's numbers.
+
+    Parameters
+    ----------
+    plan : Plan
+        The plan assembled in every trial.
+    strategies : tuple of str, default STRATEGIES
+        The strategies compared: the paper's (``pallet``, ``shake``, ``kitting``, ``buffer``,
+        ``quantify``, ``paper``), ``lookahead``, ``random`` and ``optimal``, and those of
+        :data:`MORE_STRATEGIES`.  A former name is replaced by its name now, each name kept once.
+    trials : int, default 10000
+        Trials per strategy; trial *i* of every strategy sees the same bin.
+    seed : int, default 0
+        The seed of every trial's bin (and of random policies).
+    bin : str, default "uniform"
+        The bin model: one of :data:`~opportune.worlds.BIN_NAMES`.
+    visible : int, default 2
+        Parts seen per look.
+    buffer_capacity : int, optional
+        Buffer locations (``None``: unlimited).
+    costs : TimeModel, optional
+        The costs of motions, shakes and looks (default: one per motion and shake).
+    training_runs : int, default 200
+        Runs that train ``quantify``'s statistics.
+    optimal_states : int, default 500000
+        The most states the optimum's programme may store.
+    count_time_limit : float, default 10.0
+        Seconds the first look's exact counts may take (see :func:`prepare`).
+    max_steps : int, optional
+        Steps after which a trial is given up as incomplete (``None``: 1000 + 200 × units²).
+    decision_budget : float, optional
+        Seconds per decision of the counting policies (``None``: exact, reproducible).
+    cell : CellModel, optional
+        The cell's times, for the cycle time in seconds.
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> config = StudyConfig(load_plan("example:gearbox"), strategies=("paper", "shake"), trials=50, seed=1)
+    >>> config.validate().trials
+    50
+    """
 
     plan: Plan
     strategies: tuple[str, ...] = STRATEGIES
@@ -84,6 +134,27 @@ class StudyConfig:
             object.__setattr__(self, "strategies", current_names(self.strategies)[0])
 
     def validate(self) -> "StudyConfig":
+        """Check the settings before any work.
+
+        Returns
+        -------
+        StudyConfig
+            This configuration, unchanged.
+
+        Raises
+        ------
+        StudyError
+            Naming the setting to change: an unknown strategy or bin, ``optimal`` in a bin without an
+            exact optimum, a physical bin the plan does not fit, or a count, limit or budget out of range.
+
+        Examples
+        --------
+        >>> from opportune import load_plan
+        >>> StudyConfig(load_plan("example:gearbox"), trials=0).validate()
+        Traceback (most recent call last):
+            ...
+        opportune.study.simulate.StudyError: --trials must be at least 1
+        """
         unknown = [s for s in self.strategies if s not in ALL_STRATEGIES]
         if unknown:
             raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(ALL_STRATEGIES)}")
@@ -126,7 +197,20 @@ class StudyConfig:
         return {p.id: p.geometry for p in self.plan.parts if p.geometry is not None}
 
     def settings(self) -> dict:
-        """The settings, the plan aside, as plain JSON values (``results.json``'s ``provenance.study``)."""
+        """The settings, the plan aside, as plain JSON values (``results.json``'s ``provenance.study``).
+
+        Returns
+        -------
+        dict
+            One entry per setting; :meth:`from_settings` reads it back.
+
+        Examples
+        --------
+        >>> from opportune import load_plan
+        >>> settings = StudyConfig(load_plan("example:gearbox"), trials=50).settings()
+        >>> settings["trials"], settings["bin"]
+        (50, 'uniform')
+        """
         return {"strategies": list(self.strategies), "trials": self.trials, "seed": self.seed, "bin": self.bin,
                 "visible": self.visible, "buffer_capacity": self.buffer_capacity, "costs": self.costs.to_dict(),
                 "training_runs": self.training_runs, "optimal_states": self.optimal_states,
@@ -135,7 +219,32 @@ class StudyConfig:
 
     @classmethod
     def from_settings(cls, plan: Plan, settings: dict) -> "StudyConfig":
-        """The study :meth:`settings` describe, on ``plan``; a missing or malformed setting is a StudyError."""
+        """The study :meth:`settings` describe, on ``plan``.
+
+        Parameters
+        ----------
+        plan : Plan
+            The plan the study runs on.
+        settings : dict
+            What :meth:`settings` wrote (a recorded study's ``provenance.study``).
+
+        Returns
+        -------
+        StudyConfig
+            The configuration, validated.
+
+        Raises
+        ------
+        StudyError
+            If a setting is missing, unknown or malformed, or the configuration is not valid.
+
+        Examples
+        --------
+        >>> from opportune import load_plan
+        >>> config = StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=50)
+        >>> StudyConfig.from_settings(config.plan, config.settings()) == config
+        True
+        """
         try:
             values = dict(settings)
             costs = dict(values.pop("costs"))
@@ -176,7 +285,34 @@ class StudyConfig:
 
 @dataclass
 class TrialResult:
-    """The costs of one trial of one strategy."""
+    """The costs of one trial of one strategy.
+
+    Parameters
+    ----------
+    strategy : str
+        The strategy.
+    trial : int
+        The trial's number (its bin's stream).
+    motions, buffer_moves, shakes, looks : int
+        What the trial took: robot motions (buffer moves included), moves into a buffer location,
+        shakes and looks.
+    buffer_peak : int
+        The most buffer locations held at once.
+    time : float
+        The trial's cost in the study's :class:`~opportune.planning.costs.TimeModel`.
+    cycle_seconds : float, default 0.0
+        The cycle time in seconds, in the study's cell model.
+    complete : bool, default True
+        Whether the assembly was completed within the step limit.
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> result = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=5), workers=1)
+    >>> trial = result.trials["paper"][0]
+    >>> trial.strategy, trial.trial, trial.complete
+    ('paper', 0, True)
+    """
 
     strategy: str
     trial: int
@@ -190,6 +326,18 @@ class TrialResult:
     complete: bool = True
 
     def row(self) -> tuple:
+        """The trial as a row of ``trials.csv``.
+
+        Returns
+        -------
+        tuple
+            ``strategy``, ``trial``, the costs in the order of the fields, and ``complete``.
+
+        Examples
+        --------
+        >>> TrialResult("paper", 0, 15, 5, 0, 15, 5, 15.0, 81.5).row()
+        ('paper', 0, 15, 5, 0, 15, 5, 15.0, 81.5, True)
+        """
         return (self.strategy, self.trial, self.motions, self.buffer_moves, self.shakes, self.looks,
                 self.buffer_peak, self.time, self.cycle_seconds, self.complete)
 
@@ -218,7 +366,35 @@ class Prepared:
 
 
 def prepare(config: StudyConfig, engine: OrderEngine | None = None) -> Prepared:
-    """Compute once, in the parent, what every worker needs (optimum, training statistics)."""
+    """Compute once, in the parent, what every worker needs: the optimum's values, quantify's
+    statistics, the planned sequence, and the first state's counts.
+
+    Parameters
+    ----------
+    config : StudyConfig
+        The study.
+    engine : OrderEngine, optional
+        The plan's engine, whose memos the trials share (``None``: a new one).
+
+    Returns
+    -------
+    Prepared
+        The shareable preparation, for :func:`run_study`'s ``prepared``.
+
+    Raises
+    ------
+    StrategyUnavailable
+        If a strategy cannot run on this plan: a counting policy whose first look's exact counts do
+        not finish within ``count_time_limit`` (without a decision budget), or an optimum over
+        ``optimal_states`` states.  It is a :class:`StudyError` naming the strategy.
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> prepared = prepare(StudyConfig(load_plan("example:gearbox"), strategies=("paper",), trials=5))
+    >>> prepared.sequence[:3]
+    ('ca', 'ba', 'rl')
+    """
     from opportune.policies.fixed import Quantify, planned_sequence
 
     began = _time.perf_counter()
@@ -614,9 +790,34 @@ def chunks(trials: int, size: int) -> list[tuple[int, int]]:
 class StudyResult:
     """A study's trials per strategy, and what the study cost.
 
-    ``cpu_seconds[strategy]``: CPU seconds of that strategy's trials summed over every worker that ran
-    them (the same measure on 1 worker or 20); ``wall_seconds``: elapsed seconds of the whole study,
-    preparation (the optimum, quantify's training) and trials together.
+    Made by :func:`run_study`.
+
+    Parameters
+    ----------
+    config : StudyConfig
+        The study.
+    prepared : Prepared
+        Its preparation (:func:`prepare`).
+    trials : dict of str to list of TrialResult
+        Each strategy's trials, by trial number.
+    cpu_seconds : dict of str to float
+        CPU seconds of each strategy's trials summed over every worker that ran them (the same
+        measure on 1 worker or 20).
+    interrupted : bool, default False
+        Ctrl-C stopped the study: the trials are those that finished.
+    wall_seconds : float, default 0.0
+        Elapsed seconds of the whole study, preparation (the optimum, quantify's training) and
+        trials together.
+    workers : int or None, default 1
+        Local worker processes (``None``: on a Dask cluster).
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> result = run_study(StudyConfig(load_plan("example:gearbox"), strategies=("paper", "shake"), trials=20),
+    ...                    workers=1)
+    >>> sorted(result.trials), len(result.trials["shake"]), result.interrupted
+    (['paper', 'shake'], 20, False)
     """
 
     config: StudyConfig
@@ -635,11 +836,23 @@ class StudyResult:
     def to_frame(self):
         """The trials as a pandas DataFrame, one row per trial of each strategy (the rows of ``trials.csv``).
 
-        Columns: ``strategy``, ``trial``, the costs (``motions``, ``buffer_moves``, ``shakes``, ``looks``,
-        ``buffer_peak``, ``time``, ``cycle_seconds``) and ``complete``; trial ``i`` of every strategy saw the same bin, so
-        ``df.pivot(index="trial", columns="strategy", values="time")`` pairs them.  Needs pandas
-        (``pip install pandas``).
+        Columns: ``strategy``, ``trial``, the costs (``motions``, ``buffer_moves``, ``shakes``,
+        ``looks``, ``buffer_peak``, ``time``, ``cycle_seconds``) and ``complete``; trial ``i`` of every
+        strategy saw the same bin, so ``df.pivot(index="trial", columns="strategy", values="time")``
+        pairs them.
 
+        Returns
+        -------
+        pandas.DataFrame
+            The trials, ``strategy`` as a category.
+
+        Raises
+        ------
+        ImportError
+            If pandas is not installed (``pip install pandas``).
+
+        Examples
+        --------
         >>> from opportune.datasets import example_path
         >>> from opportune.formats import load_plan
         >>> config = StudyConfig(load_plan(example_path("gearbox")), strategies=("paper", "random"), trials=100)
@@ -661,10 +874,45 @@ class StudyResult:
 def run_study(config: StudyConfig, *, workers: int | None = None, dask_address: str | None = None,
               chunk_size: int | None = None, progress: Callable[[str, int], None] | None = None,
               prepared: Prepared | None = None) -> StudyResult:
-    """Run every strategy of ``config``; locally (``workers`` processes; 1 = in this process) or on Dask.
+    """Run every strategy of ``config``: locally (``workers`` processes; 1 = in this process) or on Dask.
 
-    ``progress(strategy, n)`` is called as chunks of ``n`` trials finish.  Ctrl-C stops cleanly:
-    the result holds the trials that finished, with ``interrupted`` set.
+    The numbers depend only on the configuration, not on the workers or the chunks: trial *i*
+    draws its bin from its own seeded stream.  Ctrl-C stops cleanly: the result holds the trials
+    that finished, with ``interrupted`` set.
+
+    Parameters
+    ----------
+    config : StudyConfig
+        The study.
+    workers : int, optional
+        Local worker processes (``None``: one per core this process may use; 1: in this process).
+    dask_address : str, optional
+        A Dask scheduler's address (``tcp://host:8786``): run the chunks there instead.
+    chunk_size : int, optional
+        Trials per chunk handed to a worker (``None``: about four chunks per worker).
+    progress : callable, optional
+        Called as ``progress(strategy, n)`` when a chunk of ``n`` trials finishes.
+    prepared : Prepared, optional
+        The study's :func:`prepare`, made beforehand (its time counts in ``wall_seconds``).
+
+    Returns
+    -------
+    StudyResult
+        The trials of every strategy, and what they cost.
+
+    Raises
+    ------
+    StudyError
+        If the configuration is not valid (:meth:`StudyConfig.validate`), or a strategy cannot run on
+        the plan (:class:`StrategyUnavailable`, from :func:`prepare`).
+
+    Examples
+    --------
+    >>> from opportune import load_plan
+    >>> config = StudyConfig(load_plan("example:gearbox"), strategies=("paper", "shake"), trials=50, seed=1)
+    >>> result = run_study(config, workers=1)
+    >>> {s: sum(t.motions for t in trials) / len(trials) for s, trials in result.trials.items()}
+    {'paper': 13.64, 'shake': 10.0}
     """
     config.validate()
     began = _time.perf_counter()

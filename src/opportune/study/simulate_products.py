@@ -71,7 +71,39 @@ def step_limit(units: int) -> int:
 
 @dataclass(frozen=True)
 class ProductsConfig:
-    """Everything that determines a multi-product study's numbers: ``plans[i]`` is built on fixture ``i + 1``."""
+    """Everything that determines a multi-product study's numbers: ``plans[i]`` is built on fixture ``i + 1``.
+
+    Parameters
+    ----------
+    plans : tuple of Plan
+        The products, one per fixture.
+    policies : tuple of str, default ("paper", "lookahead")
+        The policies compared (:data:`~opportune.policies.named.POLICIES`).
+    modes : tuple of str, default MODES
+        ``together`` (N fixtures, one bin), ``independent`` (N cells, N bins), ``serial`` (one product
+        after another, one bin).
+    trials : int, default 1000
+        Trials per mode and policy, 1 to :data:`MAX_TRIALS`.
+    seed : int, default 0
+        The seed of every trial's bin.
+    bin : str, default "uniform"
+        ``uniform``, ``weighted``, ``pile`` or ``conveyor``.
+    visible : int, default 2
+        Parts seen per look.
+    buffer_capacity : int, optional
+        Buffer locations of a cell (``None``: unlimited).
+    costs : TimeModel, optional
+        The costs of motions, shakes and looks.
+    decision_budget : float, optional
+        Seconds per decision (``None``: exact).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> config = ProductsConfig((make_plan(["a", "b"], {"b": ["a"]}),) * 2, policies=("paper",), trials=20)
+    >>> config.validate().n
+    2
+    """
 
     plans: tuple[Plan, ...]
     policies: tuple[str, ...] = ("paper", "lookahead")
@@ -94,7 +126,26 @@ class ProductsConfig:
         return len(self.plans)
 
     def validate(self) -> ProductsConfig:
-        """Raise :class:`~opportune.planning.products.ProductsError` naming the first setting out of bounds."""
+        """Check the settings before any work.
+
+        Returns
+        -------
+        ProductsConfig
+            This configuration, unchanged.
+
+        Raises
+        ------
+        ProductsError
+            Naming the first setting out of bounds.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> ProductsConfig((make_plan(["a"]),), trials=0).validate()
+        Traceback (most recent call last):
+            ...
+        opportune.planning.products.ProductsError: --trials must be a whole number from 1 to 1,000,000, not 0
+        """
         check_products(len(self.plans), what="--products")
         for p in self.policies:
             if p not in PRODUCT_POLICIES:
@@ -116,13 +167,48 @@ class ProductsConfig:
 
 @dataclass
 class ProductsResult:
-    """Per ``(mode, policy)``, one dict of :data:`METRICS` per trial (all per product but the buffer's)."""
+    """A multi-product study's trials: per ``(mode, policy)``, one dict of :data:`METRICS` per trial
+    (all per product but the buffer's), and ``complete``.
+
+    Made by :func:`run_products`.
+
+    Parameters
+    ----------
+    config : ProductsConfig
+        The study.
+    trials : dict of (str, str) to list of dict
+        The trials of each mode and policy.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> result = run_products(ProductsConfig((make_plan(["a", "b"], {"b": ["a"]}),) * 2, policies=("paper",),
+    ...                                      trials=20))
+    >>> list(result.trials)
+    [('together', 'paper'), ('independent', 'paper'), ('serial', 'paper')]
+    """
 
     config: ProductsConfig
     trials: dict[tuple[str, str], list[dict]]
 
     def summary(self) -> dict:
-        """Means with 95% intervals (normal approximation) per mode and policy, as JSON values."""
+        """Means with 95% intervals (normal approximation) per mode and policy, as JSON values.
+
+        Returns
+        -------
+        dict
+            The settings, and ``rows``: one per mode and policy, with each metric's ``mean`` and
+            ``ci95``, the trials, the complete ones and the buffer's maximum.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> result = run_products(ProductsConfig((make_plan(["a", "b"], {"b": ["a"]}),) * 2, policies=("paper",),
+        ...                                      trials=20))
+        >>> row = result.summary()["rows"][0]
+        >>> row["mode"], row["trials"], round(row["time"]["mean"], 3)
+        ('together', 20, 2.075)
+        """
         rows = []
         for (mode, policy), trials in self.trials.items():
             row = {"mode": mode, "label": MODE_LABELS[mode], "policy": policy, "trials": len(trials),
@@ -248,9 +334,31 @@ def check_countable(joint: Plan, budget: float | None) -> None:
 def run_products(config: ProductsConfig, *, progress: Callable[[str, str, int], None] | None = None) -> ProductsResult:
     """Run every mode and policy of ``config``, in this process.  O(modes × policies × trials × looks).
 
-    ``progress(mode, policy, trials)`` is called every 50 trials.  Raises
-    :class:`~opportune.planning.products.ProductsError` for a setting out of bounds, or a joint plan whose
-    decisions cannot be counted exactly (:func:`check_countable`).
+    Parameters
+    ----------
+    config : ProductsConfig
+        The study.
+    progress : callable, optional
+        Called as ``progress(mode, policy, trials)`` every 50 trials.
+
+    Returns
+    -------
+    ProductsResult
+        The trials of every mode and policy.
+
+    Raises
+    ------
+    ProductsError
+        For a setting out of bounds, or a joint plan whose decisions cannot be counted exactly
+        (:func:`check_countable`; allow a ``decision_budget``).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> result = run_products(ProductsConfig((make_plan(["a", "b"], {"b": ["a"]}),) * 2, policies=("paper",),
+    ...                                      trials=20, modes=("together",)))
+    >>> len(result.trials[("together", "paper")])
+    20
     """
     config.validate()
     check_countable(combine_products(config.plans), config.decision_budget)

@@ -23,14 +23,42 @@ BIN_NAMES = (*BINS, "physics")
 
 def make_world(kind: str, *, visible: int = 2, weights: Mapping[str, float] | None = None,
                geometry: Mapping[str, tuple] | None = None, physics: Mapping | None = None) -> World:
-    """A bin model by name: ``uniform``, ``weighted``, ``pile``, ``conveyor`` or ``physics``.
+    """A bin model by name.
 
-    ``weights`` are the weighted bin's visibilities; ``geometry`` (part id → ``(shape, dimensions)``) and
-    ``physics`` (``bin``, ``settle_steps``, ``visible_fraction``: a plan's ``simulation.physics``) set up
-    the physical bin.  O(1); the physical bin builds its model at its first trial.
+    O(1); the physical bin builds its model at its first trial.
 
+    Parameters
+    ----------
+    kind : str
+        ``uniform``, ``weighted``, ``pile``, ``conveyor`` or ``physics`` (:data:`BIN_NAMES`).
+    visible : int, default 2
+        Units seen per look.
+    weights : mapping of str to float, optional
+        The weighted bin's visibilities.
+    geometry : mapping of str to tuple, optional
+        The physical bin's shapes: part id → ``(shape, dimensions)``.
+    physics : mapping, optional
+        The physical bin's settings (``bin``, ``settle_steps``, ``visible_fraction``: a plan's
+        ``simulation.physics``).
+
+    Returns
+    -------
+    World
+        A new bin, empty until :meth:`~opportune.worlds.bins.World.reset`.
+
+    Raises
+    ------
+    ValueError
+        If ``kind`` is not a bin model's name, or ``visible`` is below 1.
+
+    Examples
+    --------
     >>> make_world("pile", visible=3).name
     'pile'
+    >>> make_world("tray")
+    Traceback (most recent call last):
+        ...
+    ValueError: unknown bin model 'tray': use one of uniform, weighted, pile, conveyor, physics
     """
     if kind == "physics":
         from opportune.worlds.physics import PhysicsBin
