@@ -82,12 +82,18 @@ from opportune.planning.costs import TimeModel
 
 __all__ = ["BoundError", "BoundResult", "PENALTIES", "describe_gaps", "lower_bound", "policy_gaps"]
 
-PENALTIES = ("auto", "none", "motions", "optimal")
+PENALTIES = ("auto", "none", "motions", "relaxed", "optimal")
 BINS = ("uniform", "weighted")
 MAX_TRIALS = 1_000_000
 MAX_NODE_BUDGET = 5_000_000
 #: States of the exact optimum ``penalty="auto"`` tries before it falls back to ``"motions"``.
 AUTO_OPTIMAL_STATES = 200_000
+#: States of the relaxed plan's optimum (``penalty="relaxed"``) with the compiled programme (about 1-3 s and
+#: 70 MB at 2 million) and with the Python one (about 100 MB and 10-20 s at 100,000).
+RELAXED_STATES = 2_000_000
+RELAXED_STATES_PYTHON = 100_000
+#: The most ``relaxed_states`` accepts (about 1 GB in the compiled programme).
+MAX_RELAXED_STATES = 20_000_000
 Z95 = 1.959963984540054
 
 
@@ -215,6 +221,42 @@ class _Penalty:
                 best = x
         return best
 
+    def mean_look_term(self, key) -> float:
+        """``E_L f(s, L)`` in a uniform bin without enumerating the looks: *f* is the least of the visible
+        parts' own best moves, of the buffer's best installation and of the shake, so with the bin's units
+        ranked by their part's best move, the part whose ``c`` units hold ranks ``r + 1 .. r + c`` of ``n``
+        is the best visible one with chance ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` (as the optimum's
+        programme does).  O(parts) values of *V̂*."""
+        s, v, move = self.solver, self.value, self.solver.move
+        mask, cons, buf = key
+        engine = s.engine
+        free = s.capacity is None or sum(buf) < s.capacity
+        shared = self.costs.shake + v(key)     # the shake and the buffer's installations: on every look
+        for i, nxt in s._buffer_installs(mask, cons, buf):
+            shared = min(shared, move[i] + v(nxt))
+        ranked, n = [], 0
+        for i, c in enumerate(self.bin_counts(key)):
+            if c <= 0:
+                continue
+            n += c
+            best = math.inf
+            u = engine.next_unit(mask, i)
+            after = engine.consistent_after(mask, cons, u)
+            if after:
+                best = move[i] + v((mask | 1 << u, after, buf))
+            if free:
+                best = min(best, move[i] + v((mask, cons, buf[:i] + (buf[i] + 1,) + buf[i + 1:])))
+            ranked.append((best, c))
+        if n == 0:
+            return shared
+        ranked.sort()
+        k = min(s.visible, n)
+        total, rank, mean = comb(n, k), 0, 0.0
+        for best, c in ranked:
+            mean += (comb(n - rank, k) - comb(n - rank - c, k)) / total * min(best, shared)
+            rank += c
+        return mean
+
     def residual(self, key) -> float:
         """``c_look + E_L f(s, L) − V̂(s)`` (≥ 0 for a subsolution): by enumerating the looks."""
         s = self.solver
@@ -308,6 +350,36 @@ class _Motions(_Penalty):
         return self.costs.look + blocked * extra
 
 
+class _Relaxed(_Penalty):
+    """*V̂* = the larger of the motions still needed and the exact optimum of a relaxed plan read through
+    its projection (:mod:`opportune.study.relaxation`): a subsolution, and one that knows the plan's
+    order, so it charges the blocking the kept parts cause.  Its mean over the looks: order statistics
+    in a uniform bin (O(parts) values a state), else the looks enumerated."""
+
+    name = "relaxed"
+
+    def __init__(self, solver: OptimalSolver, relaxation, relaxed_solver: OptimalSolver):
+        super().__init__(solver)
+        self.motions = _Motions(solver)
+        self.relaxation = relaxation
+        self.relaxed = relaxed_solver
+        self._cache: dict = {}
+
+    def value(self, key) -> float:
+        got = self._cache.get(key)
+        if got is None:
+            got = max(self.motions.value(key), self.relaxed.value(self.relaxation.project(key)))
+            if len(self._cache) > 1_000_000:    # a bounded memo: the values are recomputed, never wrong
+                self._cache.clear()
+            self._cache[key] = got
+        return got
+
+    def residual(self, key) -> float:
+        if not self.solver.uniform:
+            return super().residual(key)
+        return self.costs.look + self.mean_look_term(key) - self.value(key)
+
+
 class _Optimal(_Penalty):
     """*V̂* = the exact optimum's values: a solution of the Bellman equation, so the residual is zero."""
 
@@ -383,7 +455,8 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
 def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
                 seed: int = 0, penalty: str = "auto", costs: TimeModel | None = None,
                 weights: dict[str, float] | None = None, node_budget: int = 5_000,
-                max_states: int = AUTO_OPTIMAL_STATES, engine: OrderEngine | None = None) -> BoundResult:
+                max_states: int = AUTO_OPTIMAL_STATES, engine: OrderEngine | None = None,
+                relaxed_states: int | None = None) -> BoundResult:
     """A lower bound on the expected cost of every online policy on ``plan``, with its 95% interval.
 
     ``visible``, ``capacity`` (None: unlimited), ``bin`` (``uniform`` or ``weighted``, with ``weights``:
@@ -391,7 +464,9 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
     are the world's, as in ``opportune simulate``.  ``penalty``: one of :data:`PENALTIES` (see the
     module's docstring); ``node_budget``: nodes the inner search of one trial expands at most (past
     it the trial's value is a lower bound of its inner minimum); ``max_states``: states of the exact
-    optimum the ``optimal`` penalty may use.  Trial *i* draws its keys from its own stream of ``seed``:
+    optimum the ``optimal`` penalty may use; ``relaxed_states``: states of the relaxed plan's optimum the
+    ``relaxed`` penalty may use (default :data:`RELAXED_STATES`, or :data:`RELAXED_STATES_PYTHON` where
+    the compiled programme does not take the plan).  Trial *i* draws its keys from its own stream of ``seed``:
     the same seed gives the same numbers.
 
     A request that cannot be served raises :class:`BoundError` saying what to change, before any work.
@@ -416,6 +491,9 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
         raise BoundError(f"node_budget must be a whole number from 1 to {MAX_NODE_BUDGET:,}, not {node_budget!r}")
     if penalty not in PENALTIES:
         raise BoundError(f"unknown penalty '{penalty}': choose from {', '.join(PENALTIES)}")
+    if relaxed_states is not None and (isinstance(relaxed_states, bool) or not isinstance(relaxed_states, int)
+                                       or not 1 <= relaxed_states <= MAX_RELAXED_STATES):
+        raise BoundError(f"relaxed_states must be a whole number from 1 to {MAX_RELAXED_STATES:,}, not {relaxed_states!r}")
     began = time.perf_counter()
     costs = costs if costs is not None else TimeModel.from_plan(plan)
     if bin == "weighted":
@@ -429,7 +507,7 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
     engine = engine or OrderEngine(plan)
     solver = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights,
                            max_states=max_states)
-    pen = _choose_penalty(penalty, solver)
+    pen = _choose_penalty(penalty, solver, relaxed_states)
     optimum = None
     if pen.exact_optimum:
         optimum = solver.value()
@@ -453,12 +531,14 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
                        pen.value(solver.start_key()), optimum, tuple(values))
 
 
-def _choose_penalty(name: str, solver: OptimalSolver) -> _Penalty:
+def _choose_penalty(name: str, solver: OptimalSolver, relaxed_states: int | None = None) -> _Penalty:
     """The penalty by name; ``auto``: the optimum's where it fits within ``solver.max_states``, else motions."""
     if name == "none":
         return _NoPenalty(solver)
     if name == "motions":
         return _Motions(solver)
+    if name == "relaxed":
+        return _relaxed_penalty(solver, relaxed_states)
     from opportune.policies.states import estimate_states
 
     est = estimate_states(solver.engine, visible=solver.visible, capacity=solver.capacity,
@@ -474,6 +554,47 @@ def _choose_penalty(name: str, solver: OptimalSolver) -> _Penalty:
     except OptimalTooLarge as exc:
         raise BoundError(f"{exc}") from None
     return _Optimal(solver)
+
+
+def _relaxed_penalty(solver: OptimalSolver, budget: int | None = None) -> _Relaxed:
+    """The ``relaxed`` penalty: the most-ordered parts kept, as many as keep the relaxed plan's states within
+    :data:`RELAXED_STATES` (:data:`RELAXED_STATES_PYTHON` where the compiled programme does not take it),
+    found by bisection on the states counted before any is solved; then the relaxed optimum solved whole.
+    O(log parts) counts, then the relaxed programme's states."""
+    from opportune.policies.optimal import compiled_optimal_available, optimal_solver
+    from opportune.policies.states import estimate_states
+    from opportune.study.relaxation import ranked_parts, relax_plan
+
+    engine = solver.engine
+    weights = {p: w for p, w in zip(solver.ids, solver.weights)}
+    if budget is None:
+        budget = RELAXED_STATES if compiled_optimal_available(engine, weights) else RELAXED_STATES_PYTHON
+    ranked = ranked_parts(engine)
+
+    def relaxed(k: int):
+        r = relax_plan(engine.plan, ranked[:k], solver.costs, weights, engine)
+        r_engine = OrderEngine(r.plan)
+        est = estimate_states(r_engine, visible=solver.visible, capacity=solver.capacity, stop_above=budget,
+                              time_limit=2.0)
+        return r, r_engine, est.exact and est.states <= budget
+
+    best = relaxed(0)
+    if not best[2]:
+        raise BoundError(f"the relaxed plan needs more than {budget:,} states even with no order kept: allow more "
+                         "relaxed states, or use penalty 'motions'")
+    low, high = 0, len(ranked)          # low: a count that fits
+    while low < high:
+        mid = (low + high + 1) // 2
+        got = relaxed(mid)
+        if got[2]:
+            low, best = mid, got
+        else:
+            high = mid - 1
+    r, r_engine, _ = best
+    r_solver = optimal_solver(r_engine, visible=solver.visible, capacity=solver.capacity, costs=r.costs,
+                              weights=r.weights, max_states=budget)
+    r_solver.value()
+    return _Relaxed(solver, r, r_solver)
 
 
 # ---------------------------------------------------------------- policies against the bound
