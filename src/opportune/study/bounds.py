@@ -80,7 +80,7 @@ from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 from opportune.planning.costs import TimeModel
 
-__all__ = ["BoundError", "BoundResult", "PENALTIES", "describe_gaps", "lower_bound", "policy_gaps"]
+__all__ = ["BoundError", "BoundResult", "PENALTIES", "check_request", "describe_gaps", "lower_bound", "policy_gaps"]
 
 PENALTIES = ("auto", "none", "motions", "relaxed", "optimal")
 BINS = ("uniform", "weighted")
@@ -364,6 +364,7 @@ class _Relaxed(_Penalty):
         self.relaxation = relaxation
         self.relaxed = relaxed_solver
         self._cache: dict = {}
+        self._residuals: dict = {}
 
     def value(self, key) -> float:
         got = self._cache.get(key)
@@ -375,9 +376,16 @@ class _Relaxed(_Penalty):
         return got
 
     def residual(self, key) -> float:
-        if not self.solver.uniform:
-            return super().residual(key)
-        return self.costs.look + self.mean_look_term(key) - self.value(key)
+        got = self._residuals.get(key)
+        if got is None:     # the trials' searches meet the same states near the start: each solved once
+            if self.solver.uniform:
+                got = self.costs.look + self.mean_look_term(key) - self.value(key)
+            else:
+                got = super().residual(key)
+            if len(self._residuals) > 1_000_000:
+                self._residuals.clear()
+            self._residuals[key] = got
+        return got
 
 
 class _Optimal(_Penalty):
@@ -452,6 +460,60 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
 # ---------------------------------------------------------------- the bound
 
 
+def check_request(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
+                  penalty: str = "auto", node_budget: int = 5_000, weights: dict[str, float] | None = None,
+                  relaxed_states: int | None = None, max_states: int = AUTO_OPTIMAL_STATES,
+                  engine: OrderEngine | None = None) -> dict[str, float] | None:
+    """Refuse, before any work, a bound :func:`lower_bound` cannot compute as asked: a :class:`BoundError`
+    saying what to change.  Also ``penalty="optimal"`` on a plan whose optimum needs more than ``max_states``
+    states (counted, within 2 s, never solved), so a command refuses it before its study.  Returns the
+    weighted bin's weights (default: the plan's visibilities), None for the uniform bin.
+
+    >>> from opportune import load_plan
+    >>> try:
+    ...     check_request(load_plan("salbp:KILBRID"), penalty="optimal")
+    ... except BoundError as exc:
+    ...     print(exc)
+    the optimum's values need more than 200,000 states on this plan: use penalty 'relaxed' or 'motions' (or 'auto'), or, in the library, a larger max_states
+    """
+    if visible is None or isinstance(visible, bool) or not isinstance(visible, int) or visible < 1:
+        raise BoundError(f"visible must be a whole number ≥ 1, not {visible!r}")
+    if capacity is not None and (isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 0):
+        raise BoundError(f"capacity must be a whole number ≥ 0 or None (unlimited), not {capacity!r}")
+    if bin not in BINS:
+        raise BoundError(f"the bound is defined for the Markov bins ({', '.join(BINS)}), not '{bin}': "
+                         "use --bin uniform or weighted")
+    if isinstance(trials, bool) or not isinstance(trials, int) or not 2 <= trials <= MAX_TRIALS:
+        raise BoundError(f"trials must be a whole number from 2 to {MAX_TRIALS:,} (for an interval), not {trials!r}")
+    if isinstance(node_budget, bool) or not isinstance(node_budget, int) or not 1 <= node_budget <= MAX_NODE_BUDGET:
+        raise BoundError(f"node_budget must be a whole number from 1 to {MAX_NODE_BUDGET:,}, not {node_budget!r}")
+    if penalty not in PENALTIES:
+        raise BoundError(f"unknown penalty '{penalty}': choose from {', '.join(PENALTIES)}")
+    if relaxed_states is not None and (isinstance(relaxed_states, bool) or not isinstance(relaxed_states, int)
+                                       or not 1 <= relaxed_states <= MAX_RELAXED_STATES):
+        raise BoundError(f"relaxed_states must be a whole number from 1 to {MAX_RELAXED_STATES:,}, not {relaxed_states!r}")
+    if bin == "weighted":
+        weights = weights if weights is not None else {p.id: p.visibility for p in plan.parts}
+        bad = [p for p, w in weights.items() if not (isinstance(w, (int, float)) and w > 0 and math.isfinite(w))]
+        if bad:
+            raise BoundError(f"the weighted bin needs a positive visibility for every part ('{bad[0]}' has "
+                             f"{weights[bad[0]]!r})")
+    else:
+        weights = None
+    if penalty == "optimal" and not _optimum_fits(engine or OrderEngine(plan), visible, capacity, max_states):
+        raise BoundError(f"the optimum's values need more than {max_states:,} states on this plan: "
+                         "use penalty 'relaxed' or 'motions' (or 'auto'), or, in the library, a larger max_states")
+    return weights
+
+
+def _optimum_fits(engine: OrderEngine, visible: int, capacity: int | None, max_states: int) -> bool:
+    """Whether the optimum's states are counted, within 2 s, to at most ``max_states``."""
+    from opportune.policies.states import estimate_states
+
+    est = estimate_states(engine, visible=visible, capacity=capacity, stop_above=max_states, time_limit=2.0)
+    return est.exact and est.states <= max_states
+
+
 def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
                 seed: int = 0, penalty: str = "auto", costs: TimeModel | None = None,
                 weights: dict[str, float] | None = None, node_budget: int = 5_000,
@@ -478,32 +540,11 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
     >>> 10.0 <= r.mean <= 13.5725 and r.exact_trials == 50
     True
     """
-    if visible is None or isinstance(visible, bool) or not isinstance(visible, int) or visible < 1:
-        raise BoundError(f"visible must be a whole number ≥ 1, not {visible!r}")
-    if capacity is not None and (isinstance(capacity, bool) or not isinstance(capacity, int) or capacity < 0):
-        raise BoundError(f"capacity must be a whole number ≥ 0 or None (unlimited), not {capacity!r}")
-    if bin not in BINS:
-        raise BoundError(f"the bound is defined for the Markov bins ({', '.join(BINS)}), not '{bin}': "
-                         "use --bin uniform or weighted")
-    if isinstance(trials, bool) or not isinstance(trials, int) or not 2 <= trials <= MAX_TRIALS:
-        raise BoundError(f"trials must be a whole number from 2 to {MAX_TRIALS:,} (for an interval), not {trials!r}")
-    if isinstance(node_budget, bool) or not isinstance(node_budget, int) or not 1 <= node_budget <= MAX_NODE_BUDGET:
-        raise BoundError(f"node_budget must be a whole number from 1 to {MAX_NODE_BUDGET:,}, not {node_budget!r}")
-    if penalty not in PENALTIES:
-        raise BoundError(f"unknown penalty '{penalty}': choose from {', '.join(PENALTIES)}")
-    if relaxed_states is not None and (isinstance(relaxed_states, bool) or not isinstance(relaxed_states, int)
-                                       or not 1 <= relaxed_states <= MAX_RELAXED_STATES):
-        raise BoundError(f"relaxed_states must be a whole number from 1 to {MAX_RELAXED_STATES:,}, not {relaxed_states!r}")
+    weights = check_request(plan, visible=visible, capacity=capacity, bin=bin, trials=trials, penalty=penalty,
+                            node_budget=node_budget, weights=weights, relaxed_states=relaxed_states,
+                            max_states=max_states, engine=engine)
     began = time.perf_counter()
     costs = costs if costs is not None else TimeModel.from_plan(plan)
-    if bin == "weighted":
-        weights = weights if weights is not None else {p.id: p.visibility for p in plan.parts}
-        bad = [p for p, w in weights.items() if not (isinstance(w, (int, float)) and w > 0 and math.isfinite(w))]
-        if bad:
-            raise BoundError(f"the weighted bin needs a positive visibility for every part ('{bad[0]}' has "
-                             f"{weights[bad[0]]!r})")
-    else:
-        weights = None
     engine = engine or OrderEngine(plan)
     solver = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights,
                            max_states=max_states)
@@ -532,23 +573,22 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
 
 
 def _choose_penalty(name: str, solver: OptimalSolver, relaxed_states: int | None = None) -> _Penalty:
-    """The penalty by name; ``auto``: the optimum's where it fits within ``solver.max_states``, else motions."""
+    """The penalty by name; ``auto``: the optimum's where it fits within ``solver.max_states``, else the relaxed
+    plan's with a limited buffer and the motions with an unlimited one (see the module's docstring)."""
     if name == "none":
         return _NoPenalty(solver)
     if name == "motions":
         return _Motions(solver)
     if name == "relaxed":
         return _relaxed_penalty(solver, relaxed_states)
-    from opportune.policies.states import estimate_states
-
-    est = estimate_states(solver.engine, visible=solver.visible, capacity=solver.capacity,
-                          stop_above=solver.max_states, time_limit=2.0)
-    fits = est.exact and est.states <= solver.max_states
+    fits = _optimum_fits(solver.engine, solver.visible, solver.capacity, solver.max_states)
     if name == "auto":
-        return _Optimal(solver) if fits else _Motions(solver)
+        if fits:
+            return _Optimal(solver)
+        return _Motions(solver) if solver.capacity is None else _relaxed_penalty(solver, relaxed_states)
     if not fits:
         raise BoundError(f"the optimum's values need more than {solver.max_states:,} states on this plan: "
-                         "use penalty 'motions' (or 'auto'), or allow more states")
+                         "use penalty 'relaxed' or 'motions' (or 'auto'), or, in the library, a larger max_states")
     try:
         solver.value()
     except OptimalTooLarge as exc:
