@@ -80,7 +80,7 @@ from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 from opportune.planning.costs import TimeModel
 
-__all__ = ["BoundError", "BoundResult", "PENALTIES", "check_request", "describe_gaps", "lower_bound", "policy_gaps"]
+__all__ = ["BoundError", "BoundResult", "PENALTIES", "check_request", "describe_gaps", "inner_minimum", "penalty_for", "lower_bound", "policy_gaps"]
 
 PENALTIES = ("auto", "none", "motions", "relaxed", "optimal")
 BINS = ("uniform", "weighted")
@@ -548,7 +548,7 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
     engine = engine or OrderEngine(plan)
     solver = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights,
                            max_states=max_states)
-    pen = _choose_penalty(penalty, solver, relaxed_states)
+    pen = penalty_for(penalty, solver, relaxed_states)
     optimum = None
     if pen.exact_optimum:
         optimum = solver.value()
@@ -572,9 +572,19 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
                        pen.value(solver.start_key()), optimum, tuple(values))
 
 
-def _choose_penalty(name: str, solver: OptimalSolver, relaxed_states: int | None = None) -> _Penalty:
-    """The penalty by name; ``auto``: the optimum's where it fits within ``solver.max_states``, else the relaxed
-    plan's with a limited buffer and the motions with an unlimited one (see the module's docstring)."""
+def penalty_for(name: str, solver: OptimalSolver, relaxed_states: int | None = None) -> _Penalty:
+    """The penalty named ``name`` (one of :data:`PENALTIES`) for the world of ``solver``; ``auto``: the optimum's
+    where it fits within ``solver.max_states``, else the relaxed plan's with a limited buffer and the motions
+    with an unlimited one (see the module's docstring).  A penalty gives *V̂* (``value(key)``), the look
+    term *f* (``look_term(key, look, moves)``) and the Bellman residual ``c_look + E_L f − V̂`` (``residual(key)``)
+    for the solver's state keys.  Raises :class:`BoundError` when the penalty cannot be built as asked.
+
+    >>> from opportune import load_plan
+    >>> solver = OptimalSolver(OrderEngine(load_plan("example:gearbox")), visible=2)
+    >>> pen = penalty_for("relaxed", solver)
+    >>> round(pen.value(solver.start_key()), 4), abs(pen.residual(solver.start_key())) < 1e-9
+    (13.5711, True)
+    """
     if name == "none":
         return _NoPenalty(solver)
     if name == "motions":
