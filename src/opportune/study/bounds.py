@@ -566,8 +566,12 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
     half = Z95 * statistics.stdev(values) / math.sqrt(trials)
     solved = ("each inner problem solved exactly" if exact == trials else
               f"{exact} inner problems solved exactly, {trials - exact} bounded at {node_budget:,} nodes")
-    method = (f"information relaxation (Brown, Smith & Sun 2010), {pen.name!r} penalty"
-              f"{' (the clairvoyant bound)' if pen.name == 'none' else ''}, {trials} trials, {solved}")
+    detail = {"none": " (the clairvoyant bound)"}.get(pen.name, "")
+    if isinstance(pen, _Relaxed):
+        detail = (f" ({len(pen.relaxation.kept)} of {len(solver.ids)} parts kept, {pen.relaxed.states:,} states, "
+                  f"{pen.value(solver.start_key()):.4g} at the start)")
+    method = (f"information relaxation (Brown, Smith & Sun 2010), {pen.name!r} penalty{detail}, {trials} trials, "
+              f"{solved}")
     return BoundResult(mean, half, trials, method, pen.name, exact, nodes, time.perf_counter() - began,
                        pen.value(solver.start_key()), optimum, tuple(values))
 
