@@ -99,6 +99,20 @@ def assert_below(values: list[float], best: float) -> None:
     assert mean - half <= best + 1e-9, f"bound {mean:.4f} ± {half:.4f} above the optimum {best:.4f}"
 
 
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), penalty=st.sampled_from(PENALISED), trial_seed=st.integers(0, 99))
+def test_each_trial_is_at_most_the_optimums_own_penalised_path(seed, penalty, trial_seed):
+    """Deterministic, trial by trial: the inner minimum is at most the inner objective of one action sequence,
+    the optimum's own on the same bin (whose mean over bins is the optimum, the penalty's mean being zero)."""
+    plan, visible, capacity = small_world(seed)
+    solver = OptimalSolver(OrderEngine(plan), visible=visible, capacity=capacity, max_states=10**6)
+    solver.value()
+    pen = penalty_for(penalty, solver, 100)
+    for trial, value in enumerate(trial_values(solver, pen, 4, seed=trial_seed)):
+        keys = Keys(list(solver.quantity), None, visible, random.Random(f"bound:{trial_seed}:{trial}"))
+        assert value <= policy_path(solver, pen, keys) + 1e-9
+
+
 class Biased:
     """A penalty whose mean is not zero: it says each look's mean is ``bias`` more than it is (so it charges
     every look ``bias`` less than it should): not dual feasible, and the bound it gives is wrong."""
