@@ -160,7 +160,8 @@ def main(argv=None) -> int:
                     help="states of the relaxed plan in the small table's middle column, as a share of the optimum's "
                          "(a partial relaxation)")
     ap.add_argument("--policy-seconds", type=float, default=60.0, help="the default's exact programme, at most")
-    ap.add_argument("--write", type=Path, help="a page whose <!-- bound-small --> / <!-- bound-large --> tables to replace")
+    ap.add_argument("--write", type=Path,
+                    help="a page whose <!-- bound-small --> / <!-- bound-large --> tables to replace")
     args = ap.parse_args(argv)
     if not (args.small or args.large):
         args.small = args.large = True

@@ -88,7 +88,8 @@ from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 from opportune.planning.costs import TimeModel
 
-__all__ = ["BoundError", "BoundResult", "PENALTIES", "check_request", "describe_gaps", "inner_minimum", "penalty_for", "lower_bound", "policy_gaps"]
+__all__ = ["BoundError", "BoundResult", "PENALTIES", "check_request", "describe_gaps", "inner_minimum", "lower_bound",
+           "penalty_for", "policy_gaps"]
 
 PENALTIES = ("auto", "none", "motions", "relaxed", "optimal")
 BINS = ("uniform", "weighted")
@@ -103,8 +104,10 @@ RELAXED_STATES_PYTHON = 100_000
 #: Seconds (wall) one count of a relaxed plan's states may take: a safety, never the measure.  The count's work
 #: is bounded by the budget (it stops past it), so a limit this generous is not reached and the parts kept
 #: are the same on any machine; a count cut short says "does not fit", which is how a short limit once made
-#: the choice depend on the machine's load (2 s kept 31 of KILBRID's 45 parts at load 18, 35 when idle).
+#: the choice depend on the machine's load (2 s kept 31 of KILBRID's 45 parts at load 18, where 36 fit).
 RELAXED_COUNT_SECONDS = 120.0
+#: Values and residuals the relaxed penalty keeps per state met (each memo about 40 MB when full; cleared past it).
+PENALTY_MEMO = 200_000
 #: The most ``relaxed_states`` accepts (about 1 GB in the compiled programme).
 MAX_RELAXED_STATES = 20_000_000
 Z95 = 1.959963984540054
@@ -383,7 +386,7 @@ class _Relaxed(_Penalty):
         got = self._cache.get(key)
         if got is None:
             got = max(self.motions.value(key), self.relaxed.value(self.relaxation.project(key)))
-            if len(self._cache) > 1_000_000:    # a bounded memo: the values are recomputed, never wrong
+            if len(self._cache) > PENALTY_MEMO:     # a bounded memo: the values are recomputed, never wrong
                 self._cache.clear()
             self._cache[key] = got
         return got
@@ -395,7 +398,7 @@ class _Relaxed(_Penalty):
                 got = self.costs.look + self.mean_look_term(key) - self.value(key)
             else:
                 got = super().residual(key)
-            if len(self._residuals) > 1_000_000:
+            if len(self._residuals) > PENALTY_MEMO:
                 self._residuals.clear()
             self._residuals[key] = got
         return got
@@ -504,7 +507,8 @@ def check_request(plan, *, visible: int = 2, capacity: int | None = None, bin: s
         raise BoundError(f"unknown penalty '{penalty}': choose from {', '.join(PENALTIES)}")
     if relaxed_states is not None and (isinstance(relaxed_states, bool) or not isinstance(relaxed_states, int)
                                        or not 1 <= relaxed_states <= MAX_RELAXED_STATES):
-        raise BoundError(f"relaxed_states must be a whole number from 1 to {MAX_RELAXED_STATES:,}, not {relaxed_states!r}")
+        raise BoundError(f"relaxed_states must be a whole number from 1 to {MAX_RELAXED_STATES:,}, "
+                         f"not {relaxed_states!r}")
     if bin == "weighted":
         weights = weights if weights is not None else {p.id: p.visibility for p in plan.parts}
         bad = [p for p, w in weights.items() if not (isinstance(w, (int, float)) and w > 0 and math.isfinite(w))]
