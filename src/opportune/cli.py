@@ -557,8 +557,9 @@ def simulate(
     penalty: Optional[str] = typer.Option(
         None, "--penalty", show_default=False,
         help="The bound's penalty (with --bound): auto (the default: the optimum's values where they fit, else "
-             "motions), motions (the motions still needed), none (the clairvoyant bound) or optimal (the "
-             "optimum's values: the bound is the optimum)"),
+             "relaxed with a limited buffer and motions with an unlimited one), motions (the motions still "
+             "needed), relaxed (the exact optimum of a relaxed plan: the most-ordered parts kept), none (the "
+             "clairvoyant bound) or optimal (the optimum's values: the bound is the optimum)"),
 ):
     """Run the paper's comparison by simulation: every strategy, a bin model, Monte Carlo trials."""
     if report_file is not None:   # checked before any work: a study of minutes must not end in "cannot write"
@@ -628,6 +629,8 @@ def simulate(
         if bound and config.bin not in BOUND_BINS:   # before the study: refused at once, not after it
             fail(f"--bound is defined for the {' and '.join(BOUND_BINS)} bins, not '{config.bin}': "
                  "leave --bound out or change --bin", 2, as_json=as_json)
+        if bound:
+            _check_bound(config, penalty or "auto", as_json)
         while True:
             try:
                 prepared = prepare(config)
@@ -727,14 +730,30 @@ def _check_penalty(bound: bool, penalty: Optional[str], as_json: bool) -> None:
         fail("--penalty chooses the penalty of the lower bound: give --bound too", 2, as_json=as_json)
 
 
+def _bound_settings(config, penalty: str) -> dict:
+    """The bound's request for ``simulate``'s world: the same plan, bin, costs, trials (at most 200) and seed."""
+    return dict(visible=config.visible, capacity=config.buffer_capacity, bin=config.bin, penalty=penalty,
+                trials=max(2, min(config.trials, BOUND_TRIALS)),
+                weights=config.weights if config.bin == "weighted" else None)
+
+
+def _check_bound(config, penalty: str, as_json: bool) -> None:
+    """Refuse a bound that cannot be computed as asked before the study runs (the optimum's penalty on a plan
+    too large for it is counted, within 2 s, not solved)."""
+    from opportune.study.bounds import BoundError, check_request
+
+    try:
+        check_request(config.plan, **_bound_settings(config, penalty))
+    except BoundError as exc:
+        fail(f"--bound: {exc}", 2, as_json=as_json)
+
+
 def _study_bound(config, doc: dict, penalty: str, as_json: bool) -> dict:
     """``simulate --bound``: the certified lower bound on the study's world, and each policy's mean against it."""
     from opportune.study.bounds import BoundError, lower_bound, policy_gaps
 
     try:
-        r = lower_bound(config.plan, visible=config.visible, capacity=config.buffer_capacity, bin=config.bin,
-                        trials=max(2, min(config.trials, BOUND_TRIALS)), seed=config.seed, costs=config.costs,
-                        weights=config.weights if config.bin == "weighted" else None, penalty=penalty)
+        r = lower_bound(config.plan, seed=config.seed, costs=config.costs, **_bound_settings(config, penalty))
     except BoundError as exc:
         fail(f"--bound: {exc}", 2, as_json=as_json)
     out = r.to_dict()

@@ -46,10 +46,18 @@ zero and the optimal action costs zero at every look: the bound equals the optim
   ``m(s, L) = V̂(s)`` when a part can go in, and one more motion or a shake when none can, so the
   penalty charges each look the *chance* of being blocked instead of the blocking that happened:
   the inner problem keeps the clairvoyant's foresight of which parts come but loses its luck.
+* ``"relaxed"``: *V̂* = the larger of the motions and the exact optimum of a relaxed plan read through a
+  projection of the state (:mod:`opportune.study.relaxation`: the most-ordered parts kept with their
+  common order, the others merged into free parts): a subsolution that charges the blocking the kept
+  parts cause.  Its relaxed plan keeps as many parts as fit :data:`RELAXED_STATES` states
+  (``relaxed_states=``); its mean over the looks is order statistics in a uniform bin.  Worth most with
+  a limited buffer, where most parts fit.
 * ``"optimal"``: the exact optimum's values (:class:`~opportune.policies.optimal.OptimalSolver`; plans
   whose optimum fits ``max_states``): the bound is the optimum, with no Monte Carlo spread (a check
   of the method, and of this implementation).
-* ``"auto"`` (default): ``"optimal"`` where the optimum fits, else ``"motions"``.
+* ``"auto"`` (default): ``"optimal"`` where the optimum fits, else ``"relaxed"`` with a limited buffer and
+  ``"motions"`` with an unlimited one (where the relaxed plan keeps few parts and costs 10-30 times the
+  CPU per node for about a unit more on KILBRID).
 
 The inner search is exact when it finishes within ``node_budget`` expanded nodes; where it does not, the
 trial's value is the queue's least cost (lower, still valid).  The result says how many trials were
@@ -80,14 +88,28 @@ from opportune.engine import OrderEngine
 from opportune.policies.optimal import OptimalSolver, OptimalTooLarge
 from opportune.planning.costs import TimeModel
 
-__all__ = ["BoundError", "BoundResult", "PENALTIES", "describe_gaps", "lower_bound", "policy_gaps"]
+__all__ = ["BoundError", "BoundResult", "PENALTIES", "check_request", "describe_gaps", "inner_minimum", "lower_bound",
+           "penalty_for", "policy_gaps"]
 
-PENALTIES = ("auto", "none", "motions", "optimal")
+PENALTIES = ("auto", "none", "motions", "relaxed", "optimal")
 BINS = ("uniform", "weighted")
 MAX_TRIALS = 1_000_000
 MAX_NODE_BUDGET = 5_000_000
 #: States of the exact optimum ``penalty="auto"`` tries before it falls back to ``"motions"``.
 AUTO_OPTIMAL_STATES = 200_000
+#: States of the relaxed plan's optimum (``penalty="relaxed"``) with the compiled programme (about 1-3 s and
+#: 70 MB at 2 million) and with the Python one (about 100 MB and 10-20 s at 100,000).
+RELAXED_STATES = 2_000_000
+RELAXED_STATES_PYTHON = 100_000
+#: Seconds (wall) one count of a relaxed plan's states may take: a safety, never the measure.  The count's work
+#: is bounded by the budget (it stops past it), so a limit this generous is not reached and the parts kept
+#: are the same on any machine; a count cut short says "does not fit", which is how a short limit once made
+#: the choice depend on the machine's load (2 s kept 31 of KILBRID's 45 parts at load 18, where 36 fit).
+RELAXED_COUNT_SECONDS = 120.0
+#: Values and residuals the relaxed penalty keeps per state met (each memo about 40 MB when full; cleared past it).
+PENALTY_MEMO = 200_000
+#: The most ``relaxed_states`` accepts (about 1 GB in the compiled programme).
+MAX_RELAXED_STATES = 20_000_000
 Z95 = 1.959963984540054
 
 
@@ -215,6 +237,42 @@ class _Penalty:
                 best = x
         return best
 
+    def mean_look_term(self, key) -> float:
+        """``E_L f(s, L)`` in a uniform bin without enumerating the looks: *f* is the least of the visible
+        parts' own best moves, of the buffer's best installation and of the shake, so with the bin's units
+        ranked by their part's best move, the part whose ``c`` units hold ranks ``r + 1 .. r + c`` of ``n``
+        is the best visible one with chance ``(C(n − r, k) − C(n − r − c, k)) / C(n, k)`` (as the optimum's
+        programme does).  O(parts) values of *V̂*."""
+        s, v, move = self.solver, self.value, self.solver.move
+        mask, cons, buf = key
+        engine = s.engine
+        free = s.capacity is None or sum(buf) < s.capacity
+        shared = self.costs.shake + v(key)     # the shake and the buffer's installations: on every look
+        for i, nxt in s._buffer_installs(mask, cons, buf):
+            shared = min(shared, move[i] + v(nxt))
+        ranked, n = [], 0
+        for i, c in enumerate(self.bin_counts(key)):
+            if c <= 0:
+                continue
+            n += c
+            best = math.inf
+            u = engine.next_unit(mask, i)
+            after = engine.consistent_after(mask, cons, u)
+            if after:
+                best = move[i] + v((mask | 1 << u, after, buf))
+            if free:
+                best = min(best, move[i] + v((mask, cons, buf[:i] + (buf[i] + 1,) + buf[i + 1:])))
+            ranked.append((best, c))
+        if n == 0:
+            return shared
+        ranked.sort()
+        k = min(s.visible, n)
+        total, rank, mean = comb(n, k), 0, 0.0
+        for best, c in ranked:
+            mean += (comb(n - rank, k) - comb(n - rank - c, k)) / total * min(best, shared)
+            rank += c
+        return mean
+
     def residual(self, key) -> float:
         """``c_look + E_L f(s, L) − V̂(s)`` (≥ 0 for a subsolution): by enumerating the looks."""
         s = self.solver
@@ -308,6 +366,44 @@ class _Motions(_Penalty):
         return self.costs.look + blocked * extra
 
 
+class _Relaxed(_Penalty):
+    """*V̂* = the larger of the motions still needed and the exact optimum of a relaxed plan read through
+    its projection (:mod:`opportune.study.relaxation`): a subsolution, and one that knows the plan's
+    order, so it charges the blocking the kept parts cause.  Its mean over the looks: order statistics
+    in a uniform bin (O(parts) values a state), else the looks enumerated."""
+
+    name = "relaxed"
+
+    def __init__(self, solver: OptimalSolver, relaxation, relaxed_solver: OptimalSolver):
+        super().__init__(solver)
+        self.motions = _Motions(solver)
+        self.relaxation = relaxation
+        self.relaxed = relaxed_solver
+        self._cache: dict = {}
+        self._residuals: dict = {}
+
+    def value(self, key) -> float:
+        got = self._cache.get(key)
+        if got is None:
+            got = max(self.motions.value(key), self.relaxed.value(self.relaxation.project(key)))
+            if len(self._cache) > PENALTY_MEMO:     # a bounded memo: the values are recomputed, never wrong
+                self._cache.clear()
+            self._cache[key] = got
+        return got
+
+    def residual(self, key) -> float:
+        got = self._residuals.get(key)
+        if got is None:     # the trials' searches meet the same states near the start: each solved once
+            if self.solver.uniform:
+                got = self.costs.look + self.mean_look_term(key) - self.value(key)
+            else:
+                got = super().residual(key)
+            if len(self._residuals) > PENALTY_MEMO:
+                self._residuals.clear()
+            self._residuals[key] = got
+        return got
+
+
 class _Optimal(_Penalty):
     """*V̂* = the exact optimum's values: a solution of the Bellman equation, so the residual is zero."""
 
@@ -380,28 +476,21 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
 # ---------------------------------------------------------------- the bound
 
 
-def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
-                seed: int = 0, penalty: str = "auto", costs: TimeModel | None = None,
-                weights: dict[str, float] | None = None, node_budget: int = 5_000,
-                max_states: int = AUTO_OPTIMAL_STATES, engine: OrderEngine | None = None) -> BoundResult:
-    """A lower bound on the expected cost of every online policy on ``plan``, with its 95% interval.
-
-    ``visible``, ``capacity`` (None: unlimited), ``bin`` (``uniform`` or ``weighted``, with ``weights``:
-    part id → visibility; default the plan's) and ``costs`` (default the plan's ``simulation.costs``)
-    are the world's, as in ``opportune simulate``.  ``penalty``: one of :data:`PENALTIES` (see the
-    module's docstring); ``node_budget``: nodes the inner search of one trial expands at most (past
-    it the trial's value is a lower bound of its inner minimum); ``max_states``: states of the exact
-    optimum the ``optimal`` penalty may use.  Trial *i* draws its keys from its own stream of ``seed``:
-    the same seed gives the same numbers.
-
-    A request that cannot be served raises :class:`BoundError` saying what to change, before any work.
-    Time: O(trials × node_budget × (units + moves per look)); memory O(node_budget) nodes at a time
-    (plus the optimum's states with ``penalty="optimal"``).
+def check_request(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
+                  penalty: str = "auto", node_budget: int = 5_000, weights: dict[str, float] | None = None,
+                  relaxed_states: int | None = None, max_states: int = AUTO_OPTIMAL_STATES,
+                  engine: OrderEngine | None = None) -> dict[str, float] | None:
+    """Refuse, before any work, a bound :func:`lower_bound` cannot compute as asked: a :class:`BoundError`
+    saying what to change.  Also ``penalty="optimal"`` on a plan whose optimum needs more than ``max_states``
+    states (counted, within 2 s, never solved), so a command refuses it before its study.  Returns the
+    weighted bin's weights (default: the plan's visibilities), None for the uniform bin.
 
     >>> from opportune import load_plan
-    >>> r = lower_bound(load_plan("example:gearbox"), visible=2, trials=50, penalty="motions")
-    >>> 10.0 <= r.mean <= 13.5725 and r.exact_trials == 50
-    True
+    >>> try:
+    ...     check_request(load_plan("salbp:KILBRID"), penalty="optimal")
+    ... except BoundError as exc:
+    ...     print(exc)
+    the optimum's values need more than 200,000 states on this plan: use penalty 'relaxed' or 'motions' (or 'auto'), or, in the library, a larger max_states
     """
     if visible is None or isinstance(visible, bool) or not isinstance(visible, int) or visible < 1:
         raise BoundError(f"visible must be a whole number ≥ 1, not {visible!r}")
@@ -416,8 +505,10 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
         raise BoundError(f"node_budget must be a whole number from 1 to {MAX_NODE_BUDGET:,}, not {node_budget!r}")
     if penalty not in PENALTIES:
         raise BoundError(f"unknown penalty '{penalty}': choose from {', '.join(PENALTIES)}")
-    began = time.perf_counter()
-    costs = costs if costs is not None else TimeModel.from_plan(plan)
+    if relaxed_states is not None and (isinstance(relaxed_states, bool) or not isinstance(relaxed_states, int)
+                                       or not 1 <= relaxed_states <= MAX_RELAXED_STATES):
+        raise BoundError(f"relaxed_states must be a whole number from 1 to {MAX_RELAXED_STATES:,}, "
+                         f"not {relaxed_states!r}")
     if bin == "weighted":
         weights = weights if weights is not None else {p.id: p.visibility for p in plan.parts}
         bad = [p for p, w in weights.items() if not (isinstance(w, (int, float)) and w > 0 and math.isfinite(w))]
@@ -426,10 +517,55 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
                              f"{weights[bad[0]]!r})")
     else:
         weights = None
+    if penalty == "optimal" and not _optimum_fits(engine or OrderEngine(plan), visible, capacity, max_states):
+        raise BoundError(f"the optimum's values need more than {max_states:,} states on this plan: "
+                         "use penalty 'relaxed' or 'motions' (or 'auto'), or, in the library, a larger max_states")
+    return weights
+
+
+def _optimum_fits(engine: OrderEngine, visible: int, capacity: int | None, max_states: int) -> bool:
+    """Whether the optimum's states are counted, within 2 s, to at most ``max_states``."""
+    from opportune.policies.states import estimate_states
+
+    est = estimate_states(engine, visible=visible, capacity=capacity, stop_above=max_states, time_limit=2.0)
+    return est.exact and est.states <= max_states
+
+
+def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str = "uniform", trials: int = 200,
+                seed: int = 0, penalty: str = "auto", costs: TimeModel | None = None,
+                weights: dict[str, float] | None = None, node_budget: int = 5_000,
+                max_states: int = AUTO_OPTIMAL_STATES, engine: OrderEngine | None = None,
+                relaxed_states: int | None = None) -> BoundResult:
+    """A lower bound on the expected cost of every online policy on ``plan``, with its 95% interval.
+
+    ``visible``, ``capacity`` (None: unlimited), ``bin`` (``uniform`` or ``weighted``, with ``weights``:
+    part id → visibility; default the plan's) and ``costs`` (default the plan's ``simulation.costs``)
+    are the world's, as in ``opportune simulate``.  ``penalty``: one of :data:`PENALTIES` (see the
+    module's docstring); ``node_budget``: nodes the inner search of one trial expands at most (past
+    it the trial's value is a lower bound of its inner minimum); ``max_states``: states of the exact
+    optimum the ``optimal`` penalty may use; ``relaxed_states``: states of the relaxed plan's optimum the
+    ``relaxed`` penalty may use (default :data:`RELAXED_STATES`, or :data:`RELAXED_STATES_PYTHON` where
+    the compiled programme does not take the plan).  Trial *i* draws its keys from its own stream of ``seed``:
+    the same seed gives the same numbers.
+
+    A request that cannot be served raises :class:`BoundError` saying what to change, before any work.
+    Time: O(trials × node_budget × (units + moves per look)); memory O(node_budget) nodes at a time
+    (plus the optimum's states with ``penalty="optimal"``).
+
+    >>> from opportune import load_plan
+    >>> r = lower_bound(load_plan("example:gearbox"), visible=2, trials=50, penalty="motions")
+    >>> 10.0 <= r.mean <= 13.5725 and r.exact_trials == 50
+    True
+    """
+    weights = check_request(plan, visible=visible, capacity=capacity, bin=bin, trials=trials, penalty=penalty,
+                            node_budget=node_budget, weights=weights, relaxed_states=relaxed_states,
+                            max_states=max_states, engine=engine)
+    began = time.perf_counter()
+    costs = costs if costs is not None else TimeModel.from_plan(plan)
     engine = engine or OrderEngine(plan)
     solver = OptimalSolver(engine, visible=visible, capacity=capacity, costs=costs, weights=weights,
                            max_states=max_states)
-    pen = _choose_penalty(penalty, solver)
+    pen = penalty_for(penalty, solver, relaxed_states)
     optimum = None
     if pen.exact_optimum:
         optimum = solver.value()
@@ -447,33 +583,89 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
     half = Z95 * statistics.stdev(values) / math.sqrt(trials)
     solved = ("each inner problem solved exactly" if exact == trials else
               f"{exact} inner problems solved exactly, {trials - exact} bounded at {node_budget:,} nodes")
-    method = (f"information relaxation (Brown, Smith & Sun 2010), {pen.name!r} penalty"
-              f"{' (the clairvoyant bound)' if pen.name == 'none' else ''}, {trials} trials, {solved}")
+    detail = {"none": " (the clairvoyant bound)"}.get(pen.name, "")
+    if isinstance(pen, _Relaxed):
+        detail = (f" ({len(pen.relaxation.kept)} of {len(solver.ids)} parts kept, {pen.relaxed.states:,} states, "
+                  f"{pen.value(solver.start_key()):.4g} at the start)")
+    method = (f"information relaxation (Brown, Smith & Sun 2010), {pen.name!r} penalty{detail}, {trials} trials, "
+              f"{solved}")
     return BoundResult(mean, half, trials, method, pen.name, exact, nodes, time.perf_counter() - began,
                        pen.value(solver.start_key()), optimum, tuple(values))
 
 
-def _choose_penalty(name: str, solver: OptimalSolver) -> _Penalty:
-    """The penalty by name; ``auto``: the optimum's where it fits within ``solver.max_states``, else motions."""
+def penalty_for(name: str, solver: OptimalSolver, relaxed_states: int | None = None) -> _Penalty:
+    """The penalty named ``name`` (one of :data:`PENALTIES`) for the world of ``solver``; ``auto``: the optimum's
+    where it fits within ``solver.max_states``, else the relaxed plan's with a limited buffer and the motions
+    with an unlimited one (see the module's docstring).  A penalty gives *V̂* (``value(key)``), the look
+    term *f* (``look_term(key, look, moves)``) and the Bellman residual ``c_look + E_L f − V̂`` (``residual(key)``)
+    for the solver's state keys.  Raises :class:`BoundError` when the penalty cannot be built as asked.
+
+    >>> from opportune import load_plan
+    >>> solver = OptimalSolver(OrderEngine(load_plan("example:gearbox")), visible=2)
+    >>> pen = penalty_for("relaxed", solver)
+    >>> round(pen.value(solver.start_key()), 4), abs(pen.residual(solver.start_key())) < 1e-9
+    (13.5711, True)
+    """
     if name == "none":
         return _NoPenalty(solver)
     if name == "motions":
         return _Motions(solver)
-    from opportune.policies.states import estimate_states
-
-    est = estimate_states(solver.engine, visible=solver.visible, capacity=solver.capacity,
-                          stop_above=solver.max_states, time_limit=2.0)
-    fits = est.exact and est.states <= solver.max_states
+    if name == "relaxed":
+        return _relaxed_penalty(solver, relaxed_states)
+    fits = _optimum_fits(solver.engine, solver.visible, solver.capacity, solver.max_states)
     if name == "auto":
-        return _Optimal(solver) if fits else _Motions(solver)
+        if fits:
+            return _Optimal(solver)
+        return _Motions(solver) if solver.capacity is None else _relaxed_penalty(solver, relaxed_states)
     if not fits:
         raise BoundError(f"the optimum's values need more than {solver.max_states:,} states on this plan: "
-                         "use penalty 'motions' (or 'auto'), or allow more states")
+                         "use penalty 'relaxed' or 'motions' (or 'auto'), or, in the library, a larger max_states")
     try:
         solver.value()
     except OptimalTooLarge as exc:
         raise BoundError(f"{exc}") from None
     return _Optimal(solver)
+
+
+def _relaxed_penalty(solver: OptimalSolver, budget: int | None = None) -> _Relaxed:
+    """The ``relaxed`` penalty: the most-ordered parts kept, as many as keep the relaxed plan's states within
+    :data:`RELAXED_STATES` (:data:`RELAXED_STATES_PYTHON` where the compiled programme does not take it),
+    found by bisection on the states counted before any is solved; then the relaxed optimum solved whole.
+    O(log parts) counts, then the relaxed programme's states."""
+    from opportune.policies.optimal import compiled_optimal_available, optimal_solver
+    from opportune.policies.states import estimate_states
+    from opportune.study.relaxation import ranked_parts, relax_plan
+
+    engine = solver.engine
+    weights = {p: w for p, w in zip(solver.ids, solver.weights)}
+    if budget is None:
+        budget = RELAXED_STATES if compiled_optimal_available(engine, weights) else RELAXED_STATES_PYTHON
+    ranked = ranked_parts(engine)
+
+    def relaxed(k: int):
+        r = relax_plan(engine.plan, ranked[:k], solver.costs, weights, engine)
+        r_engine = OrderEngine(r.plan)
+        est = estimate_states(r_engine, visible=solver.visible, capacity=solver.capacity, stop_above=budget,
+                              time_limit=RELAXED_COUNT_SECONDS)
+        return r, r_engine, est.exact and est.states <= budget
+
+    best = relaxed(0)
+    if not best[2]:
+        raise BoundError(f"the relaxed plan needs more than {budget:,} states even with no order kept: allow more "
+                         "relaxed states, or use penalty 'motions'")
+    low, high = 0, len(ranked)          # low: a count that fits
+    while low < high:
+        mid = (low + high + 1) // 2
+        got = relaxed(mid)
+        if got[2]:
+            low, best = mid, got
+        else:
+            high = mid - 1
+    r, r_engine, _ = best
+    r_solver = optimal_solver(r_engine, visible=solver.visible, capacity=solver.capacity, costs=r.costs,
+                              weights=r.weights, max_states=budget)
+    r_solver.value()
+    return _Relaxed(solver, r, r_solver)
 
 
 # ---------------------------------------------------------------- policies against the bound
