@@ -145,6 +145,8 @@ class Counter:
         compiled memo holds the counts of every set the recursion visits, the
         Python memo only those asked for.
 
+    Notes
+    -----
     All three budgets are plain attributes and may be changed between calls; the memo
     survives a :class:`BudgetExceeded`.
 
