@@ -15,7 +15,7 @@ from opportune._lazy import attach
 # start-up, and type checkers read a module-level TYPE_CHECKING = False the same way
 TYPE_CHECKING = False
 
-__version__ = "0.1.0"
+__version__ = "0.2.0.dev0"
 
 __all__ = ["NotAdmissible", "OrderEngine", "Part", "Plan", "PlanError", "Schedule", "Sequencer", "Strategy",
            "load_plan", "make_plan", "__version__"]
