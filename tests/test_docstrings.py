@@ -41,7 +41,8 @@ PARAMETER = re.compile(r"^(?P<names>\*{0,2}\w+(?:\s*,\s*\*{0,2}\w+)*)(?:\s*:.*)?
 #: Modules of the reference whose docstrings are being rewritten with their code (the order engine,
 #: the look-ahead, the optimum and pile programmes, the lower bounds, the plans made by a tool).
 PENDING_MODULES = ("opportune.engine", "opportune.derive", "opportune.policies.lookahead",
-                   "opportune.policies.optimal", "opportune.policies.pile", "opportune.study.bounds")
+                   "opportune.policies.optimal", "opportune.policies.pile", "opportune.policies.window",
+                   "opportune.study.bounds")
 
 #: Single objects of the other modules that still lack a section (``module:qualified.name``).
 PENDING: frozenset[str] = frozenset()

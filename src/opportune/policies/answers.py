@@ -490,8 +490,9 @@ class Answers:
         >>> from opportune.engine import OrderEngine
         >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"c": ["a"], "d": ["c"]}))
         >>> ask = Answers(engine, 0, engine.all_strategies, ("b",), 1.0, ("a", "c", "a"))
-        >>> Answers(engine, 0, engine.all_strategies, (), 1.0, ("a", "b"), order_first=False).positions(["a", "b"])
-        {'a': 5, 'b': 10}
+        >>> answers = Answers(engine, 0, engine.all_strategies, (), 1.0, ("a", "b"), order_first=False)
+        >>> sorted(answers.positions(["a", "b"]).items())
+        [('a', 5), ('b', 10)]
         """
         if self.mode == "estimate":
             return self._estimated_positions(parts)

@@ -198,9 +198,11 @@ class FrontierWindow(DecidesOnMasks):
         Whether an other seen may be buffered (a free location), as on the real plan (the default: nearer
         the optimum, ``benchmarks/bench_fallback.py``), or is seen as nothing (for measurement).
 
-    Attributes ``work`` counts what it did: windows solved, the states they held, and decisions left to
-    the base (no window fitted, or out of time).  ``deadline`` (a
-    :class:`~opportune.engine.deadline.Deadline`, or None) stops a window's programme; the base decides then.
+    Notes
+    -----
+    The attribute ``work`` counts what it did: windows solved, the states they held, and decisions left
+    to the base (no window fitted, or out of time).  The attribute ``deadline``, a
+    :class:`~opportune.engine.deadline.Deadline` or None, stops a window's programme; the base decides then.
 
     Examples
     --------
