@@ -800,7 +800,7 @@ def make_jobs(args) -> tuple[list[Job], list[str]]:
 
 
 def print_table(table: dict, groups: list[str], names) -> None:
-    print(f"\ngap to the optimum, mean / max (%), over the plans evaluated")
+    print("\ngap to the optimum, mean / max (%), over the plans evaluated")
     print(f"  {'parts':<6} {'setting':<36} {'plans':>5} {'skipped':>7}  " + "  ".join(f"{n:>17}" for n in names))
     for (group, setting), cell in table.items():
         if group in groups:
