@@ -73,10 +73,16 @@ from pathlib import Path
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline
+from opportune.planning.costs import TimeModel
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.lookahead import Lookahead
 from opportune.policies.opportunistic import Opportunistic
-from opportune.policies.optimal import OptimalSolver, OptimalTooLarge, OutOfTime, optimal_solver
+from opportune.policies.optimal import (
+    OptimalSolver,
+    OptimalTooLarge,
+    OutOfTime,
+    optimal_solver,
+)
 from opportune.policies.pile import PileSolver, pile_solver
 from opportune.policies.states import estimate_states
 from opportune.policies.variants import BinFirst, Slack
@@ -152,6 +158,10 @@ def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | Non
             return best, True
         ev = PileSolver(engine, policy, **settings)
     else:
+        # as PolicyEvaluator.takes_optimum, without solving the optimum a second time
+        decides = getattr(policy, "decides_by_optimum", None)
+        if decides is not None and decides(engine, settings["visible"], settings["capacity"], TimeModel()):
+            return best, True
         ev = PolicyEvaluator(engine, policy, **settings)
     ev.deadline = deadline
     value = ev.value()
