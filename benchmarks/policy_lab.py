@@ -205,6 +205,8 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
             out["policy_skipped"][name] = f"over {max_states:,} states"
         except OutOfTime:
             out["policy_skipped"][name] = f"over {seconds:g} s"
+        if name == "lookahead" and name in out["policy_skipped"] and policy.refusal:
+            out["policy_skipped"][name] += f"; it did not decide by its optimum: {policy.refusal}"
         out["cpu"][name] = round(time.process_time() - cpu, 3)
         if name in POLICY_VERSIONS:
             out["versions"][name] = POLICY_VERSIONS[name]
@@ -339,9 +341,10 @@ def _missing(rec: dict | None, asked, redo_skipped: bool) -> tuple[str, ...]:
 def describe(setting, r: dict, name: str) -> str:
     if "skipped" in r:
         return f"{setting_name(*setting)}: {name}: skipped ({r['skipped']})"
-    left = "".join(f", {p} {why}" for p, why in r.get("policy_skipped", {}).items())
+    measured = [f"{p} {100 * v:+.3f}%" for p, v in r["gaps"].items()]
+    left = [f"{p} {why}" for p, why in r.get("policy_skipped", {}).items()]
     return (f"{setting_name(*setting)}: {name}: optimum {r['optimum']:.4f} ({r['states']:,} states); "
-            + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in r["gaps"].items()) + left)
+            + ", ".join(measured + left))
 
 
 def _run_jobs(jobs: list[Job], args, done: dict, sink) -> None:
