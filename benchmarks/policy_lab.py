@@ -37,10 +37,11 @@ The whole lab (hours; resumable), and the order it was run in (the cheap columns
 
     python benchmarks/policy_lab.py --results benchmarks/policy_lab_results.jsonl --without-optimum \\
         --table docs/policy-lab.md --readme README.md --plot docs/img/policy-lab.png --paired "" --workers 2
-    python benchmarks/policy_lab.py --results R --policies lookahead --paired ""        # every setting
-    python benchmarks/policy_lab.py --results R --policies paper --capacities 1,2 --paired ""
-    python benchmarks/policy_lab.py --results R --policies paper --capacities 3,inf --paired ""
-    python benchmarks/policy_lab.py --results R --policies fallback --paired ""
+    python benchmarks/policy_lab.py --results R --policies lookahead --capacities 1,2 --paired "" --task-seconds 60
+    python benchmarks/policy_lab.py --results R --policies lookahead --capacities 3,inf --paired "" --task-seconds 60
+    python benchmarks/policy_lab.py --results R --policies paper --capacities 1,2 --salbp "" --paired "" \
+        --task-seconds 120 --only r0-16,r1-16,r2-16x2,...      # the first plans of each size first
+    python benchmarks/policy_lab.py --results R --policies fallback --paired "" --only ...
     python benchmarks/policy_lab.py --results R --no-run --table docs/policy-lab.md --readme README.md \\
         --plot docs/img/policy-lab.png --paired ""                                   # the tables alone
 
@@ -466,13 +467,14 @@ def skipped_text(table: dict) -> list[str]:
 
 
 def missing_policies(table: dict, names) -> list[str]:
-    """Each group-setting's plans with the optimum whose column lacks a policy, and why."""
+    """Each group-setting's plans with the optimum whose policy's evaluation was cut (time or states), and
+    why; the plans a column lacks because it was not run are told by the counts in brackets."""
     out = []
     for (group, setting), cell in table.items():
         for p in names:
-            left = [f"{r['plan']} ({r.get('policy_skipped', {}).get(p, 'not run')})" for r in cell.rows
-                    if p not in r["gaps"]]
-            if left and len(left) < len(cell.rows):
+            left = [f"{r['plan']} ({r['policy_skipped'][p]})" for r in cell.rows
+                    if p not in r["gaps"] and p in r.get("policy_skipped", {})]
+            if left:
                 out.append(f"- {group}, {setting_name(*setting)}, {p}: {', '.join(left)}")
     return out
 
@@ -629,7 +631,7 @@ def document(table: dict, groups: list[str], names, n_plans: int, done_cpu: floa
                 "within a second of wall-clock time, which a loaded machine may not give it); it then decided by "
                 "its fallback:", "", *refused]
     if left := missing_policies(random_cells, names):
-        out += ["", "## Columns with fewer plans", "", *left]
+        out += ["", "## Policies out of time or states", "", *left]
     for group in dict.fromkeys(g for g, _ in table):
         if group not in groups:
             out += ["", f"## {group}", "", *single_table({k: c for k, c in table.items() if k[0] == group}, names)]
