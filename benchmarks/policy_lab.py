@@ -390,6 +390,8 @@ TABLE_HEAD = "| parts | setting | plans | skipped |"        # docs/policy-lab.md
 README_HEAD = "| parts | settings measured |"               # how --readme finds the lab's table in a document
 CLAIM_START = "Measured on "                                # the paragraph after it, written with it
 LABELS = {"lookahead": "default", "fallback": "without its optimum", "paper": "paper's rule"}
+CLAIM_LABELS = {"lookahead": "the default", "fallback": "the default without its optimum (`--without-optimum`)",
+                "paper": "the paper's rule"}
 
 
 def summarise(values: list[float]) -> tuple[float, float, float]:
@@ -481,13 +483,17 @@ def missing_policies(table: dict, names) -> list[str]:
 
 def not_by_optimum(table: dict) -> list[str]:
     """The plan-settings where the default did not decide by its optimum, though the lab's optimum fits: its
-    gap and why (its refusal; where the run did not record it, the optimum's states)."""
+    gap (or that its evaluation was cut) and why (its refusal; where the run did not record it, the optimum's
+    states)."""
     out = []
     for (group, setting), cell in table.items():
         for r in cell.rows:
+            cut = r.get("policy_skipped", {}).get("lookahead", "")
             if "lookahead" in r["gaps"] and r.get("cpu") and "lookahead" not in r.get("by_optimum", []):
                 why = r.get("refusals", {}).get("lookahead") or f"refusal not recorded; the optimum: {r['states']:,} states"
                 out.append(f"- {group}, {setting_name(*setting)}, {r['plan']}: {pct(r['gaps']['lookahead'])} ({why})")
+            elif "did not decide by its optimum" in cut:
+                out.append(f"- {group}, {setting_name(*setting)}, {r['plan']}: its evaluation {cut}")
     return out
 
 
@@ -512,6 +518,10 @@ def _words(items: list) -> str:
 
 def _capacity(c) -> str:
     return "unlimited" if c is None else str(c)
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n:,} {what}{'s' * (n != 1)}"
 
 
 def _span(values: list[int]) -> str:
@@ -569,18 +579,22 @@ def readme_block(table: dict, groups: list[str], settings: list[tuple], args) ->
     vis = _words(sorted({v for v, _, _ in settings}))
     caps = _words([_capacity(c) for c in dict.fromkeys(c for _, c, _ in settings)])
     bins = " and the ".join(dict.fromkeys(b for _, _, b in settings))
-    claim = [f"{CLAIM_START}{args.plans} random plans each of {sizes} parts (a third with two strategies) with "
-             f"{vis} parts visible, {caps} buffer locations, the {bins} bin, in every setting where the optimum's "
-             f"programme fits ({args.max_states:,} states, {args.task_seconds:g} s for a plan in a setting);"]
+    claim = [f"{CLAIM_START}{args.plans} random plans each of {sizes} parts (a third with two strategies), in the "
+             f"settings each row names (of {vis} parts visible; {caps} buffer locations; the {bins} bin), on the plans "
+             f"whose optimum's programme fits in {args.max_states:,} states:"]
     for n in names:
         w = _worst_mean(table, keys, n)
         if w is not None:
             count = sum(len(table[k].gaps(n)) for k in keys)
-            claim.append(f"{LABELS[n]}: within mean {pct(w[0])} (the worst setting's) and max {pct(w[1])} of "
-                         f"the optimum over {count} plan-settings;")
+            claim.append(f"{CLAIM_LABELS[n]} within mean {pct(w[0])} (the worst setting's) and max {pct(w[1])} of the "
+                         f"optimum over {_count(count, 'plan-setting')};")
+    refused = not_by_optimum({k: table[k] for k in keys})
+    if refused:
+        claim.append(f"in {_count(len(refused), 'plan-setting')} the default did not decide by its optimum (its "
+                     "count of the states was cut by the clock on the loaded machine);")
     skipped = sum(len(table[k].skipped) for k in keys)
-    claim.append(f"{skipped} plan-settings skipped (the optimum over the cap, or not run), each listed in "
-                 "[docs/policy-lab.md](docs/policy-lab.md).")
+    claim.append(f"{_count(skipped, 'plan-setting')} skipped (the optimum over the cap, or not yet run); each "
+                 "listed in [docs/policy-lab.md](docs/policy-lab.md).")
     return "\n".join(lines) + "\n\n" + " ".join(claim) + "\n"
 
 
