@@ -1,31 +1,63 @@
-"""The policy lab: every policy evaluated exactly against the optimum, in every setting, on random plans,
-the gearbox and any folder of plans.
+"""The policy lab: every policy evaluated exactly against the optimum, in every setting, on random plans
+of the sizes users have, the SALBP graphs, the gearbox and any folder of plans.
 
-For ``--plans`` random plans (``--min-parts`` to ``--max-parts`` parts, one or two strategies, a
-range of densities; seeded) and every plan file in ``--plans-dir``, each policy's exact expected
-time (:class:`~opportune.policies.evaluate.PolicyEvaluator` in the uniform bin,
-:class:`~opportune.policies.pile.PileSolver` in the pile) is divided by the optimum's, in every
-setting of ``--visible`` (1, 2, 3) × ``--capacities`` (1, 2, unlimited) × ``--bins`` (uniform, pile);
-the tables give the mean, median and largest gap per policy and setting (``--table``, ``--readme``
-and ``--plot`` write them and the gap per setting), over all plans and over
-those with two strategies, and how many plans a setting skipped (the optimum over ``--max-states``
-states, or a plan's evaluation over ``--task-seconds``: said, never hidden).  Then the gearbox in
-every setting.  No Monte Carlo: every number is exact.
+Plans.  ``--sizes`` names groups of ``--plans`` random plans each (a third with two strategies; seeded
+by ``--seed`` alone, so a group's plans do not depend on the others): ``8-12`` is the small lab (parts
+drawn from 8 to 12, edge probability 0.1, 0.2 or 0.3: :data:`DENSITIES`), and 16, 20, 25 and 30 are
+the sizes users have (edge probability 0.2-0.35: :data:`USER_DENSITIES`; sparser plans of these sizes
+have optima far over any state cap).  Then ``--salbp`` (KILBRID, TONGE70, ARC111), every plan file in
+``--plans-dir`` and the gearbox.
 
-Plans too large for exact evaluation (``--paired``, default KILBRID and TONGE70) are compared by
-paired Monte Carlo instead: every policy runs on the same ``--paired-trials`` random bins (trial
-``i`` of each sees the same bin), and the table gives each policy's mean time and its mean
-difference from the paper's rule with the 95% interval of that difference (Student's t).
+Settings.  ``--visible`` (1, 2, 3) × ``--capacities`` (1, 2, 3, unlimited) × ``--bins`` (uniform,
+pile).  Each policy's exact expected time (:class:`~opportune.policies.evaluate.PolicyEvaluator` in
+the uniform bin, :class:`~opportune.policies.pile.PileSolver` in the pile) is divided by the optimum's
+(the compiled programme where the core is built; ``--python-optimum``: the Python one, the same values).
+The optimum's states are counted before the work (:func:`~opportune.policies.states.estimate_states`):
+a plan-setting whose optimum needs more than ``--max-states`` is skipped with that count, one whose
+optimum takes over ``--task-seconds`` likewise, and a policy whose evaluation takes over
+``--task-seconds`` is left out of that column (said, never hidden).  Where the look-ahead decides by the
+optimum (its decisions say so), its value is the optimum's, as in ``opportune evaluate``.  No Monte
+Carlo: every number is exact.
 
-    python benchmarks/policy_lab.py                    # 30 plans of 8-12 parts, every setting, then KILBRID and TONGE70
-    python benchmarks/policy_lab.py --results lab.jsonl --table docs/policy-lab.md --readme README.md \
-        --plot docs/img/policy-lab.png --workers 2     # resumable; writes the tables and the figure
-    python benchmarks/policy_lab.py --plans 10 --visible 2 --capacities inf --bins uniform --policies lookahead
-    python benchmarks/policy_lab.py --plans 6 --min-parts 16 --max-parts 30 --visible 1 --capacities 1 \
-        --bins uniform --policies lookahead --without-optimum --paired ""   # the fallback beside the optimum
-    python benchmarks/policy_lab.py --plans 0 --plans-dir my-plans/ --paired ""
-    python benchmarks/policy_lab.py --plans 0 --paired salbp:KILBRID --paired-trials 400
-    python benchmarks/policy_lab.py --plans 0 --paired salbp:KILBRID --bound   # and a lower bound beside the means
+Columns.  ``lookahead`` is the default policy; ``fallback`` the default with its exact optimum switched
+off (``Lookahead(optimal=False)``, ``evaluate --without-optimum``; asked for with ``--without-optimum``):
+what decides where the optimum's programme does not fit; ``paper`` the paper's rule.  The tables
+(``--table``, ``--readme``, ``--plot``) are written from ``--results`` alone, per size and setting.
+
+Results.  ``--results`` gets one JSON line per plan-setting as it finishes (an interrupted run goes on
+where it stopped); a later line adds its policies' gaps to an earlier one's, and only the policies a
+plan-setting lacks are run.  Each gap carries its policy's version (:data:`POLICY_VERSIONS`): when a
+policy's decisions change (a new fallback), bump its version and rerun that column alone; its old gaps
+are then stale and dropped from the tables::
+
+    python benchmarks/policy_lab.py --results benchmarks/policy_lab_results.jsonl --policies fallback \\
+        --table docs/policy-lab.md --readme README.md --plot docs/img/policy-lab.png --paired "" --workers 2
+
+The whole lab (hours; resumable), and the order it was run in (the cheap columns first)::
+
+    python benchmarks/policy_lab.py --results benchmarks/policy_lab_results.jsonl --without-optimum \\
+        --table docs/policy-lab.md --readme README.md --plot docs/img/policy-lab.png --paired "" --workers 2
+    python benchmarks/policy_lab.py --results R --policies lookahead --capacities 1,2 --paired "" --task-seconds 60
+    python benchmarks/policy_lab.py --results R --policies lookahead --capacities 3,inf --paired "" --task-seconds 60
+    python benchmarks/policy_lab.py --results R --policies paper --capacities 1,2 --salbp "" --paired "" \
+        --task-seconds 120 --only r0-16,r1-16,r2-16x2,...      # the first plans of each size first
+    python benchmarks/policy_lab.py --results R --policies fallback --paired "" --only ...
+    python benchmarks/policy_lab.py --results R --no-run --table docs/policy-lab.md --readme README.md \\
+        --plot docs/img/policy-lab.png --paired ""                                   # the tables alone
+
+Others::
+
+    python benchmarks/policy_lab.py --sizes 8-12 --plans 10 --visible 2 --capacities inf --bins uniform
+    python benchmarks/policy_lab.py --sizes 16 --plans 6 --visible 1 --capacities 1 --bins uniform \\
+        --policies lookahead --without-optimum --paired ""      # the fallback beside the optimum
+    python benchmarks/policy_lab.py --plans 0 --salbp "" --plans-dir my-plans/ --paired ""
+    python benchmarks/policy_lab.py --plans 0 --salbp "" --paired salbp:KILBRID --paired-trials 400
+    python benchmarks/policy_lab.py --plans 0 --salbp "" --paired salbp:KILBRID --bound   # a lower bound beside
+
+Plans too large for exact evaluation (``--paired``, default KILBRID and TONGE70) are compared by paired
+Monte Carlo instead: every policy runs on the same ``--paired-trials`` random bins (trial ``i`` of each
+sees the same bin), and the table gives each policy's mean time and its mean difference from the
+paper's rule with the 95% interval of that difference (Student's t).
 """
 
 from __future__ import annotations
@@ -36,20 +68,41 @@ import random
 import statistics
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline
+from opportune.planning.costs import TimeModel
 from opportune.policies.evaluate import PolicyEvaluator
-from opportune.policies.optimal import OptimalTooLarge, OutOfTime
-from opportune.policies.pile import PileSolver, pile_solver
-from opportune.policies.opportunistic import Opportunistic
-from opportune.policies.variants import BinFirst, Slack
 from opportune.policies.lookahead import Lookahead
+from opportune.policies.opportunistic import Opportunistic
+from opportune.policies.optimal import (
+    OptimalSolver,
+    OptimalTooLarge,
+    OutOfTime,
+    optimal_solver,
+)
+from opportune.policies.pile import PileSolver, pile_solver
+from opportune.policies.states import estimate_states
+from opportune.policies.variants import BinFirst, Slack
 
 HERE = Path(__file__).resolve().parent
 GEARBOX = HERE.parent / "examples" / "gearbox.yaml"
+
+#: Edge probabilities of the small lab's plans (8-12 parts).
+DENSITIES = (0.1, 0.2, 0.3)
+#: Edge probabilities of plans of more than 12 parts: at 25-30 parts a plan of 0.1 needs 10^6-10^8
+#: states in every setting (over any cap), one of 0.2-0.35 10^3-10^6 with 1-3 locations.
+USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
+#: Seconds for counting the optimum's states before the work (past it, the down-set estimate).
+ESTIMATE_SECONDS = 5.0
+#: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
+#: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
+POLICY_VERSIONS = {"fallback": "step over slack"}
+#: The version a results line without one measured (lines written before versions were stored).
+UNTAGGED = {"fallback": "step over slack"}
 
 
 def policies(visible: int, capacity: int | None, bin: str = "uniform"):
@@ -78,52 +131,565 @@ def random_plan(rng: random.Random, n: int, strategies: int, density: float, lab
     return make_plan(ids, strategies={f"s{k}": requires() for k in range(strategies)}, name=f"{label}-{n}x{strategies}")
 
 
-def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
-         seconds: float | None = None, only=None, compiled: bool = False) -> tuple[dict[str, float], float, int]:
-    """Each policy's exact expected time over the optimum's, less one; the optimum; its states.  Raises
-    OptimalTooLarge past ``max_states`` states and OutOfTime past ``seconds`` (the whole plan).  ``compiled``:
-    the pile's optimum by the compiled core where it is built (the same values, far sooner)."""
-    engine = OrderEngine(plan)
-    deadline = Deadline.after(seconds) if seconds is not None else None
-    settings = dict(visible=visible, capacity=capacity, max_states=max_states)
+# ------------------------------------------------------------------ one plan in one setting
+
+
+def _optimum(engine, bin: str, settings: dict, python: bool) -> OptimalSolver:
     if bin == "pile":
-        optimum = (pile_solver if compiled else PileSolver)(engine, **settings)
-        optimum.deadline = deadline
-        best, states = optimum.value(), optimum.states
-    out = {}
+        return (PileSolver if python else pile_solver)(engine, **settings)
+    return OptimalSolver(engine, **settings) if python else optimal_solver(engine, **settings)
+
+
+def _decides_by_pile_optimum(engine, policy, visible: int, deadline) -> bool:
+    """Whether the look-ahead decides by the pile's optimum on this plan: its first decision prepares its
+    programme and says which rule decided (the uniform bin's evaluator asks ``decides_by_optimum``)."""
+    if not isinstance(policy, Lookahead):
+        return False
+    policy.deadline = deadline
+    look = tuple(p.id for p in engine.plan.parts)[:visible]
+    policy.choose_at(engine, 0, engine.all_strategies, (), float("inf"), look)
+    return policy.deciding_rule == Lookahead.OPTIMAL_RULE
+
+
+def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | None, best: float) -> tuple[float, bool]:
+    """A policy's exact expected time, and whether it is the optimum's (the policy decides by it)."""
+    deadline = Deadline.after(seconds)
+    if bin == "pile":
+        if _decides_by_pile_optimum(engine, policy, settings["visible"], deadline):
+            return best, True
+        ev = PileSolver(engine, policy, **settings)
+    else:
+        # as PolicyEvaluator.takes_optimum, without solving the optimum a second time
+        decides = getattr(policy, "decides_by_optimum", None)
+        if decides is not None and decides(engine, settings["visible"], settings["capacity"], TimeModel()):
+            return best, True
+        ev = PolicyEvaluator(engine, policy, **settings)
+    ev.deadline = deadline
+    value = ev.value()
+    return value, bool(getattr(ev, "by_optimum", False))
+
+
+def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
+            seconds: float | None = None, only=None, python: bool = False) -> dict:
+    """One plan in one setting: the optimum, its states and each policy's gap over it (with the CPU seconds
+    each took, the versions, the policies out of time or states and those worth the optimum); or
+    ``{"skipped": why, "estimate": states}`` where the optimum does not fit (counted first) or runs out of time."""
+    engine = OrderEngine(plan)
+    est = estimate_states(engine, visible=visible, capacity=capacity, pile=bin == "pile", stop_above=max_states,
+                          time_limit=ESTIMATE_SECONDS)
+    if est.over(max_states):
+        return {"skipped": f"optimum over {max_states:,} states: {est.describe()}", "estimate": est.states}
+    settings = dict(visible=visible, capacity=capacity, max_states=max_states)
+    cpu = time.process_time()
+    optimum = _optimum(engine, bin, settings, python)
+    optimum.deadline = Deadline.after(seconds)
+    try:
+        best = optimum.value()
+    except OptimalTooLarge:
+        return {"skipped": f"optimum over {max_states:,} states", "estimate": est.states}
+    except OutOfTime:
+        return {"skipped": f"optimum over {seconds:g} s", "estimate": est.states}
+    out = {"optimum": best, "states": optimum.states, "gaps": {}, "policy_skipped": {}, "by_optimum": [],
+           "cpu": {"optimum": round(time.process_time() - cpu, 3)}, "versions": {}}
     for name, policy in policies(visible, capacity, bin).items():
         if only is not None and name not in only:
             continue
-        ev = PileSolver(engine, policy, **settings) if bin == "pile" else PolicyEvaluator(engine, policy, **settings)
-        ev.deadline = deadline
-        value = ev.value()
-        if bin != "pile" and not out:
-            best, states = ev.optimal(), ev.states
-        out[name] = value / best - 1
-    return out, best, states
+        cpu = time.process_time()
+        try:
+            value, by_optimum = _policy_value(engine, policy, bin, settings, seconds, best)
+            out["gaps"][name] = value / best - 1
+            if by_optimum:
+                out["by_optimum"].append(name)
+            elif name == "lookahead" and policy.refusal:     # the default did not decide by its optimum: why
+                out["refusals"] = {name: policy.refusal}
+        except OptimalTooLarge:
+            out["policy_skipped"][name] = f"over {max_states:,} states"
+        except OutOfTime:
+            out["policy_skipped"][name] = f"over {seconds:g} s"
+        if name == "lookahead" and name in out["policy_skipped"] and policy.refusal:
+            out["policy_skipped"][name] += f"; it did not decide by its optimum: {policy.refusal}"
+        out["cpu"][name] = round(time.process_time() - cpu, 3)
+        if name in POLICY_VERSIONS:
+            out["versions"][name] = POLICY_VERSIONS[name]
+    return out
+
+
+def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
+         seconds: float | None = None, only=None, compiled: bool = True) -> tuple[dict[str, float], float, int]:
+    """Each policy's exact expected time over the optimum's, less one; the optimum; its states (see
+    :func:`measure`).  Raises OptimalTooLarge past ``max_states`` states and OutOfTime past ``seconds``
+    (the optimum, or one policy)."""
+    r = measure(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, python=not compiled)
+    if "skipped" in r:
+        raise (OutOfTime if r["skipped"].endswith(" s") else OptimalTooLarge)(r["skipped"])
+    for why in r["policy_skipped"].values():
+        raise (OutOfTime if why.endswith(" s") else OptimalTooLarge)(why)
+    return r["gaps"], r["optimum"], r["states"]
 
 
 def _task(job):
-    """One plan in one setting (a worker's job): (gaps, optimum, states) or the reason it was skipped."""
-    plan, visible, capacity, bin, max_states, seconds, only, compiled = job
-    try:
-        return gaps(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, compiled=compiled)
-    except OptimalTooLarge:
-        return f"over {max_states:,} states"
-    except OutOfTime:
-        return f"over {seconds:g} s"
+    """One plan in one setting (a worker's job): :func:`measure`'s record."""
+    plan, visible, capacity, bin, max_states, seconds, only, python = job
+    return measure(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, python=python)
 
 
-def summarise(rows: list[dict[str, float]]) -> dict[str, tuple[float, float, float]]:
-    names = rows[0].keys()
-    return {k: (statistics.mean(r[k] for r in rows), statistics.median(r[k] for r in rows), max(r[k] for r in rows))
-            for k in names}
+# ------------------------------------------------------------------ the jobs and the results file
 
 
-def print_summary(title: str, rows: list[dict[str, float]]) -> None:
-    print(f"\n{title} ({len(rows)} plans): gap to the optimum, mean / median / max")
-    for name, (mean, median, top) in summarise(rows).items():
-        print(f"  {name:<10} {100 * mean:+8.3f}% {100 * median:+8.3f}% {100 * top:+8.3f}%")
+@dataclass(frozen=True)
+class Job:
+    """One plan in one setting: its key in ``--results``, its group (a size, ``SALBP``, a folder), the
+    plan, the setting (visible, capacity, bin) and whether the plan has two strategies."""
+    key: str
+    group: str
+    plan: object
+    setting: tuple
+    two: bool
+
+
+def parse_sizes(text: str) -> list[tuple[int, int]]:
+    """``"8-12,16"`` → ``[(8, 12), (16, 16)]``."""
+    out = []
+    for part in filter(None, text.split(",")):
+        lo, _, hi = part.partition("-")
+        out.append((int(lo), int(hi or lo)))
+    return out
+
+
+def size_label(lo: int, hi: int) -> str:
+    return f"{lo}–{hi}" if lo != hi else str(lo)
+
+
+def generate(seed: int, count: int, lo: int, hi: int) -> list[tuple[object, bool]]:
+    """``count`` random plans of ``lo`` to ``hi`` parts, each with whether it has two strategies (every
+    third); the group's own stream from ``seed`` (the small lab's plans as they always were)."""
+    rng = random.Random(seed)
+    out = []
+    for i in range(count):
+        n = rng.randint(lo, hi)
+        k = 2 if i % 3 == 2 else 1
+        density = rng.choice(DENSITIES if hi <= 12 else USER_DENSITIES)
+        out.append((random_plan(rng, n, k, density, label=f"r{i}"), k == 2))
+    return out
+
+
+def _key(seed: int, group: str, plan, setting, max_states: int) -> str:
+    """A job's identity in ``--results``: the plans' generator (seed and sizes), the plan, the setting, the cap."""
+    visible, capacity, bin = setting
+    return f"{seed}:{group}:{plan.name}:{visible}:{'inf' if capacity is None else capacity}:{bin}:{max_states}"
+
+
+def _fresh(rec: dict) -> dict:
+    """``rec`` without the gaps measured at another version of their policy (:data:`POLICY_VERSIONS`)."""
+    if "gaps" not in rec:
+        return rec
+    versions = {**UNTAGGED, **rec.get("versions", {})}
+    gaps = {n: g for n, g in rec["gaps"].items() if versions.get(n) == POLICY_VERSIONS.get(n)}
+    return {**rec, "gaps": gaps}
+
+
+def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:
+    """Read one line of ``--results`` into ``done``. An exact result stands whatever state cap it was
+    run with (the cap decides only whether a plan is skipped), so it is filed under this run's cap; a
+    later line wins, its gaps added to an earlier result's (a rerun of one policy keeps the others'),
+    a policy's gap is never hidden by a later skip of it, and a skip never hides a result."""
+    rec = _fresh(rec)
+    if "skipped" not in rec:
+        key = f"{key.rsplit(':', 1)[0]}:{max_states}"
+    old = done.get(key)
+    if "skipped" in rec:
+        if old is None or "skipped" in old:
+            done[key] = rec
+        return
+    if old is not None and "skipped" not in old:
+        gaps = {**old["gaps"], **rec["gaps"]}
+        skipped = {n: w for n, w in {**old.get("policy_skipped", {}), **rec.get("policy_skipped", {})}.items()
+                   if n not in gaps}
+        refusals = {**{n: w for n, w in old.get("refusals", {}).items() if n not in rec["gaps"]}, **rec.get("refusals", {})}
+        rec = {**old, **rec, "gaps": gaps, "policy_skipped": skipped, "refusals": refusals,
+               "by_optimum": sorted(set(old.get("by_optimum", [])) | set(rec.get("by_optimum", []))),
+               "cpu": {**old.get("cpu", {}), **rec.get("cpu", {})},
+               "versions": {**old.get("versions", {}), **rec.get("versions", {})}}
+    done[key] = rec
+
+
+def read_results(path: Path | None, max_states: int) -> dict[str, dict]:
+    """Every plan-setting of a results file by key (see :func:`_keep`)."""
+    done: dict[str, dict] = {}
+    if path is not None and path.exists():
+        # a line not yet ended by its newline is being written by a run going on: not read
+        for line in path.read_text().split("\n")[:-1]:
+            if line.strip():
+                rec = json.loads(line)
+                _keep(done, rec.pop("key"), rec, max_states)
+    return done
+
+
+def _record(job: Job, r: dict) -> dict:
+    visible, capacity, bin = job.setting
+    return {"plan": job.plan.name, "visible": visible, "capacity": capacity, "bin": bin, "two_strategies": job.two,
+            **{k: v for k, v in r.items() if v or k == "gaps"}}
+
+
+def _missing(rec: dict | None, asked, redo_skipped: bool) -> tuple[str, ...]:
+    """The asked policies a plan-setting still needs (all where it was not run, or skipped and redone)."""
+    if rec is None or "skipped" in rec:
+        return tuple(asked) if rec is None or redo_skipped else ()
+    tried = set(rec["gaps"]) | (set() if redo_skipped else set(rec.get("policy_skipped", {})))
+    return tuple(p for p in asked if p not in tried)
+
+
+def describe(setting, r: dict, name: str) -> str:
+    if "skipped" in r:
+        return f"{setting_name(*setting)}: {name}: skipped ({r['skipped']})"
+    measured = [f"{p} {100 * v:+.3f}%" for p, v in r["gaps"].items()]
+    left = [f"{p} {why}" for p, why in r.get("policy_skipped", {}).items()]
+    return (f"{setting_name(*setting)}: {name}: optimum {r['optimum']:.4f} ({r['states']:,} states); "
+            + ", ".join(measured + left))
+
+
+def _run_jobs(jobs: list[Job], args, done: dict, sink) -> None:
+    """Run what the jobs lack of the asked policies, each reported as it finishes (a full run takes hours)
+    and appended to ``--results`` at once, so that an interrupted run goes on from where it stopped."""
+    todo = [(job, need) for job in jobs if (need := _missing(done.get(job.key), args.policies, args.redo_skipped))]
+
+    def report(job: Job, r: dict) -> None:
+        rec = _record(job, r)
+        _keep(done, job.key, dict(rec), args.max_states)
+        print(describe(job.setting, r, job.plan.name), flush=True)
+        if sink is not None:
+            sink.write(json.dumps({"key": job.key, **rec}) + "\n")
+            sink.flush()
+
+    tasks = [(job.plan, *job.setting, args.max_states, args.task_seconds, need, args.python_optimum)
+             for job, need in todo]
+    if args.workers > 1 and len(todo) > 1:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(args.workers) as pool:
+            futures = {pool.submit(_task, t): job for t, (job, _) in zip(tasks, todo)}
+            for f in as_completed(futures):
+                report(futures[f], f.result())
+    else:
+        for t, (job, _) in zip(tasks, todo):
+            report(job, _task(t))
+
+
+# ------------------------------------------------------------------ the tables
+
+
+def setting_name(visible: int, capacity: int | None, bin: str) -> str:
+    return f"{bin}, {visible} visible, buffer {'unlimited' if capacity is None else capacity}"
+
+
+POLICIES = ("paper", "bin-first", "slack", "lookahead", "fallback")
+DEFAULT_POLICIES = ("lookahead", "paper")     # the fallback with --without-optimum (or --policies)
+#: The tables' columns, in order, before any other policy asked for.
+TABLE_POLICIES = ("lookahead", "fallback", "paper")
+TABLE_HEAD = "| parts | setting | plans | skipped |"        # docs/policy-lab.md's table
+README_HEAD = "| parts | settings measured |"               # how --readme finds the lab's table in a document
+CLAIM_START = "Measured on "                                # the paragraph after it, written with it
+LABELS = {"lookahead": "default", "fallback": "without its optimum", "paper": "paper's rule"}
+CLAIM_LABELS = {"lookahead": "the default", "fallback": "the default without its optimum (`--without-optimum`)",
+                "paper": "the paper's rule"}
+
+
+def summarise(values: list[float]) -> tuple[float, float, float]:
+    return statistics.mean(values), statistics.median(values), max(values)
+
+
+def pct(x: float) -> str:
+    """A gap in percent; a rounding error's minus sign on an exact 0 is not shown."""
+    v = 100 * x
+    return f"{0.0 if abs(v) < 5e-4 else v:+.3f}%"
+
+
+@dataclass
+class Cell:
+    """One group in one setting: the records with the optimum, and why the others were skipped."""
+    rows: list
+    skipped: list
+
+    def gaps(self, name: str) -> list[float]:
+        return [r["gaps"][name] for r in self.rows if name in r["gaps"]]
+
+
+def cells(jobs: list[Job], done: dict) -> dict[tuple[str, tuple], Cell]:
+    """Every (group, setting) of the jobs, in the jobs' order, from the results (``not run`` where none)."""
+    out: dict[tuple[str, tuple], Cell] = {}
+    for job in jobs:
+        cell = out.setdefault((job.group, job.setting), Cell([], []))
+        rec = done.get(job.key, {"skipped": "not run"})
+        if "skipped" in rec:
+            cell.skipped.append((job.plan.name, rec["skipped"]))
+        else:
+            cell.rows.append({**rec, "plan": job.plan.name})
+    groups = list(dict.fromkeys(g for g, _ in out))
+    return dict(sorted(out.items(), key=lambda kv: groups.index(kv[0][0])))     # a group's settings together
+
+
+def _mean_max(values: list[float], n: int) -> str:
+    if not values:
+        return "— | —"
+    mean, _, top = summarise(values)
+    of = f" ({len(values)})" if len(values) < n else ""
+    return f"{pct(mean)}{of} | {pct(top)}{of}"
+
+
+def full_table(table: dict, names) -> list[str]:
+    """docs/policy-lab.md's table: one row per group and setting."""
+    head = TABLE_HEAD + " " + " | ".join(f"{n} mean | {n} max" for n in names) + " | optimum's states, largest |"
+    lines = [head, "| --- | --- | ---: | ---: | " + " | ".join("---: | ---:" for _ in names) + " | ---: |"]
+    for (group, setting), cell in table.items():
+        n = len(cell.rows)
+        states = f"{max(r['states'] for r in cell.rows):,}" if cell.rows else "—"
+        lines.append(f"| {group} | {setting_name(*setting)} | {n} | {len(cell.skipped)} | "
+                     + " | ".join(_mean_max(cell.gaps(p), n) for p in names) + f" | {states} |")
+    return lines
+
+
+def _why(reason: str) -> str:
+    """A skip's kind, for grouping: the state cap, the time cap or not run."""
+    return "over the state cap" if "states" in reason else "not run" if reason == "not run" else "over the time cap"
+
+
+def skipped_text(table: dict) -> list[str]:
+    """Each group-setting's skipped plans, grouped by why (with each plan's state count where it was over the cap)."""
+    out = []
+    for (group, setting), cell in table.items():
+        if not cell.skipped:
+            continue
+        kinds: dict[str, list[str]] = {}
+        for plan, why in cell.skipped:
+            count = why.split(": ", 1)[1].split(" (")[0] if ": " in why else ""
+            kinds.setdefault(_why(why), []).append(f"{plan} ({count})" if count else plan)
+        out.append(f"- {group}, {setting_name(*setting)}: "
+                   + "; ".join(f"{kind}: {', '.join(plans)}" for kind, plans in kinds.items()))
+    return out
+
+
+def missing_policies(table: dict, names) -> list[str]:
+    """Each group-setting's plans with the optimum whose policy's evaluation was cut (time or states), and
+    why; the plans a column lacks because it was not run are told by the counts in brackets."""
+    out = []
+    for (group, setting), cell in table.items():
+        for p in names:
+            left = [f"{r['plan']} ({r['policy_skipped'][p]})" for r in cell.rows
+                    if p not in r["gaps"] and p in r.get("policy_skipped", {})]
+            if left:
+                out.append(f"- {group}, {setting_name(*setting)}, {p}: {', '.join(left)}")
+    return out
+
+
+def not_by_optimum(table: dict) -> list[str]:
+    """The plan-settings where the default did not decide by its optimum, though the lab's optimum fits: its
+    gap (or that its evaluation was cut) and why (its refusal; where the run did not record it, the optimum's
+    states)."""
+    out = []
+    for (group, setting), cell in table.items():
+        for r in cell.rows:
+            cut = r.get("policy_skipped", {}).get("lookahead", "")
+            if "lookahead" in r["gaps"] and r.get("cpu") and "lookahead" not in r.get("by_optimum", []):
+                why = r.get("refusals", {}).get("lookahead") or f"refusal not recorded; the optimum: {r['states']:,} states"
+                out.append(f"- {group}, {setting_name(*setting)}, {r['plan']}: {pct(r['gaps']['lookahead'])} ({why})")
+            elif "did not decide by its optimum" in cut:
+                out.append(f"- {group}, {setting_name(*setting)}, {r['plan']}: its evaluation {cut}")
+    return out
+
+
+def single_table(table: dict, names) -> list[str]:
+    """One plan per group (SALBP, the gearbox): its optimum and each policy's gap, or why it was skipped."""
+    lines = ["| plan | setting | optimum | states | " + " | ".join(names) + " |",
+             "| --- | --- | ---: | ---: | " + " | ".join("---:" for _ in names) + " |"]
+    for (_, setting), cell in table.items():
+        for plan, why in cell.skipped:
+            lines.append(f"| {plan} | {setting_name(*setting)} | skipped ({why}) | — | " + " | ".join("—" for _ in names) + " |")
+        for r in cell.rows:
+            lines.append(f"| {r['plan']} | {setting_name(*setting)} | {r['optimum']:.4f} | {r['states']:,} | "
+                         + " | ".join(pct(r["gaps"][p]) if p in r["gaps"] else "—" for p in names) + " |")
+    return lines
+
+
+def _words(items: list) -> str:
+    """``[1, 2, 3]`` → ``'1, 2 or 3'``."""
+    items = [str(i) for i in items]
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " or " + items[-1]
+
+
+def _capacity(c) -> str:
+    return "unlimited" if c is None else str(c)
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n:,} {what}{'s' * (n != 1)}"
+
+
+def _span(values: list[int]) -> str:
+    """``[1, 2, 3]`` → ``'1–3'``; ``[1, 3]`` → ``'1, 3'``."""
+    if len(values) > 2 and values == list(range(values[0], values[-1] + 1)):
+        return f"{values[0]}–{values[-1]}"
+    return ", ".join(map(str, values))
+
+
+def _settings_text(covered: list[tuple], settings: list[tuple]) -> str:
+    """The settings measured, in words: every one asked for, or per bin the buffers and the parts visible
+    (``'uniform: buffer 1, 2 with 1–3 visible, unlimited with 1 visible; pile: ...'``)."""
+    if set(covered) == set(settings):
+        return "every setting"
+    out = []
+    for b in dict.fromkeys(b for _, _, b in settings):
+        by_visible: dict[tuple, list[str]] = {}
+        for c in dict.fromkeys(c for _, c, _ in settings):
+            vs = tuple(v for v in dict.fromkeys(v for v, _, _ in settings) if (v, c, b) in covered)
+            if vs:
+                by_visible.setdefault(vs, []).append(_capacity(c))
+        if by_visible:
+            out.append(f"{b}: buffer " + ", ".join(f"{', '.join(caps)} with {_span(list(vs))} visible"
+                                                    for vs, caps in by_visible.items()))
+    return "; ".join(out)
+
+
+def _worst_mean(table: dict, keys, name: str) -> tuple[float, float] | None:
+    """The largest of the settings' mean gaps and the largest gap, over the given (group, setting) cells."""
+    means = [summarise(g)[0] for k in keys if (g := table[k].gaps(name))]
+    tops = [max(g) for k in keys if (g := table[k].gaps(name))]
+    return (max(means), max(tops)) if means else None
+
+
+def readme_block(table: dict, groups: list[str], settings: list[tuple], args) -> str:
+    """The README's table (one row per size: the settings measured, the default's worst setting's mean and
+    its largest gap, the same without its optimum and for the paper's rule) and the claim under it."""
+    names = TABLE_POLICIES
+    lines = [README_HEAD + " plan-settings | skipped | "
+             + " | ".join(f"{LABELS[n]}: mean (worst setting) | max" for n in names) + " |",
+             "| --- | --- | ---: | ---: | " + " | ".join("---: | ---:" for _ in names) + " |"]
+    for group in groups:
+        keys = [(group, s) for s in settings]
+        covered = [s for s in settings if table[(group, s)].gaps("lookahead")]
+        rows = sum(len(table[k].rows) for k in keys)
+        skipped = sum(len(table[k].skipped) for k in keys)
+        cols = []
+        for n in names:
+            w = _worst_mean(table, keys, n)
+            cols.append("— | —" if w is None else f"{pct(w[0])} | {pct(w[1])}")
+        lines.append(f"| {group} | {_settings_text(covered, settings) if covered else 'none'} | {rows} | {skipped} | "
+                     + " | ".join(cols) + " |")
+    keys = [(g, s) for g in groups for s in settings]
+    sizes = ", ".join(groups[:-1]) + f" and {groups[-1]}" if len(groups) > 1 else groups[0]
+    vis = _words(sorted({v for v, _, _ in settings}))
+    caps = _words([_capacity(c) for c in dict.fromkeys(c for _, c, _ in settings)])
+    bins = " and the ".join(dict.fromkeys(b for _, _, b in settings))
+    claim = [f"{CLAIM_START}{args.plans} random plans each of {sizes} parts (a third with two strategies), in the "
+             f"settings each row names (of {vis} parts visible; {caps} buffer locations; the {bins} bin), on the plans "
+             f"whose optimum's programme fits in {args.max_states:,} states:"]
+    for n in names:
+        w = _worst_mean(table, keys, n)
+        if w is not None:
+            count = sum(len(table[k].gaps(n)) for k in keys)
+            claim.append(f"{CLAIM_LABELS[n]} within mean {pct(w[0])} (the worst setting's) and max {pct(w[1])} of the "
+                         f"optimum over {_count(count, 'plan-setting')};")
+    refused = not_by_optimum({k: table[k] for k in keys})
+    if refused:
+        claim.append(f"in {_count(len(refused), 'plan-setting')} the default did not decide by its optimum (its "
+                     "count of the states was cut by the clock on the loaded machine);")
+    skipped = sum(len(table[k].skipped) for k in keys)
+    claim.append(f"{_count(skipped, 'plan-setting')} skipped (the optimum over the cap, or not yet run); each "
+                 "listed in [docs/policy-lab.md](docs/policy-lab.md).")
+    return "\n".join(lines) + "\n\n" + " ".join(claim) + "\n"
+
+
+def replace_block(path: Path, text: str, head: str = README_HEAD) -> None:
+    """Put ``text`` in place of the lab's table in ``path``: the Markdown table whose header starts with
+    ``head``, with the paragraph after it that starts with :data:`CLAIM_START` (the table must be there)."""
+    lines = path.read_text().split("\n")
+    start = next((k for k, line in enumerate(lines) if line.startswith(head)), None)
+    if start is None:
+        raise SystemExit(f"{path}: no lab table (a line starting {head!r}); put one where the table goes")
+    end = start
+    while end < len(lines) and lines[end].startswith("|"):
+        end += 1
+    if end + 1 < len(lines) and not lines[end] and lines[end + 1].startswith(CLAIM_START):
+        end += 2
+    path.write_text("\n".join(lines[:start] + text.rstrip("\n").split("\n") + lines[end:]))
+
+
+def read_block(path: Path, head: str = README_HEAD) -> str:
+    """The block :func:`replace_block` writes, as it stands in ``path``."""
+    lines = path.read_text().split("\n")
+    start = next(k for k, line in enumerate(lines) if line.startswith(head))
+    end = start
+    while lines[end].startswith("|"):
+        end += 1
+    return "\n".join(lines[start:end + 2]) + "\n"
+
+
+def document(table: dict, groups: list[str], names, n_plans: int, done_cpu: float) -> str:
+    """docs/policy-lab.md: the random plans' table per size and setting, what was skipped and why, the
+    columns with fewer plans, then each single plan's (SALBP, the gearbox, a folder's) optimum and gaps."""
+    random_cells = {k: c for k, c in table.items() if k[0] in groups}
+    out = ["# The policy lab", "",
+           "Written by `benchmarks/policy_lab.py --table` from `benchmarks/policy_lab_results.jsonl`; how it works: "
+           "[the paper's comparison](comparison.md); how to run it: the script's docstring.", "",
+           f"Gap of each policy's exact expected time to the optimum's, per size and setting, over {n_plans} random "
+           "plans a size (a third with two strategies): the mean and the largest. `lookahead` is the default "
+           "policy; `fallback` the default with its exact optimum switched off (`--without-optimum`): what "
+           "decides where the optimum's programme does not fit; `paper` the paper's rule. A plan-setting is "
+           "skipped when the optimum's programme is over the lab's state cap (counted before the work) or time, "
+           "or was not run, and listed below; a number in brackets is how many plans a column covers where "
+           "fewer than the row's.", "", *full_table(random_cells, names)]
+    if skips := skipped_text(random_cells):
+        out += ["", "## Skipped", "", *skips]
+    if refused := not_by_optimum(random_cells):
+        out += ["", "## Where the default did not decide by its optimum", "",
+                "The lab's optimum fits, but the default's own check did not let it decide (it lists the states "
+                "within a second of wall-clock time, which a loaded machine may not give it); it then decided by "
+                "its fallback:", "", *refused]
+    if left := missing_policies(random_cells, names):
+        out += ["", "## Policies out of time or states", "", *left]
+    for group in dict.fromkeys(g for g, _ in table):
+        if group not in groups:
+            out += ["", f"## {group}", "", *single_table({k: c for k, c in table.items() if k[0] == group}, names)]
+    out += ["", f"The results took {done_cpu / 3600:.1f} CPU hours (each plan-setting's optimum and policies)."]
+    return "\n".join(out) + "\n"
+
+
+def plot_sizes(path: Path, table: dict, groups: list[str], names) -> None:
+    """One row per size: each policy's mean gap over every plan-setting (dot) and largest gap (end of its line)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams["svg.fonttype"] = "none"
+    fig, ax = plt.subplots(figsize=(7, 0.5 * len(groups) + 1.2), dpi=150)
+    top = 0.3
+    for j, name in enumerate(names):
+        for i, group in enumerate(groups):
+            values = [g for (gr, _), c in table.items() if gr == group for g in c.gaps(name)]
+            if not values:
+                continue
+            mean, _, largest = summarise(values)
+            top = max(top, 100 * largest)
+            y = i + (j - (len(names) - 1) / 2) * 0.2
+            ax.plot([100 * mean, 100 * largest], [y, y], color=f"C{j}", lw=1)
+            ax.plot([100 * mean], [y], "o", color=f"C{j}", ms=3.5, label=name if i == 0 else None)
+    ax.set_yticks(range(len(groups)), [f"{g} parts" for g in groups], fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xscale("symlog", linthresh=0.01)
+    ax.set_xlabel("gap to the optimum (%) over every setting measured: mean (dot) to largest (line end); "
+                  "dashed: 0.3%", fontsize=8)
+    ax.axvline(0, color="grey", lw=0.6)
+    ax.axvline(0.3, color="grey", lw=0.6, ls="--")
+    ticks = [t for t in (0, 0.01, 0.1, 0.3, 1, 3, 10, 30, 100) if t <= top * 1.5]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+    ax.tick_params(axis="x", labelsize=7)
+    ax.set_xlim(-0.002, top * 1.5)
+    ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(names), frameon=False)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, metadata={"Date": None} if path.suffix == ".pdf" else None)
+    plt.close(fig)
+    print(f"wrote {path}")
 
 
 PAIRED = ("paper", "bin-first", "slack", "lookahead", "rollout")
@@ -159,203 +725,21 @@ def paired(spec: str, args) -> None:
               "mean against it: " + describe_gaps(policy_gaps(b, {n: doc[n]["time"] for n in PAIRED})))
 
 
-def setting_name(visible: int, capacity: int | None, bin: str) -> str:
-    return f"{bin}, {visible} visible, buffer {'unlimited' if capacity is None else capacity}"
+# ------------------------------------------------------------------ the command
 
 
-POLICIES = ("paper", "bin-first", "slack", "lookahead", "fallback")
-DEFAULT_POLICIES = POLICIES[:4]     # the fallback with --without-optimum (or --policies)
-TABLE_HEAD = "| setting | plans | skipped |"      # how --readme finds the lab's table in a document
-SKIPPED_TAIL = "plan-settings skipped"
-
-
-def _key(args, plan, setting) -> str:
-    """A job's identity in ``--results``: the plans' generator, the plan, the setting and the cap."""
-    visible, capacity, bin = setting
-    return (f"{args.seed}:{args.min_parts}-{args.max_parts}:{plan.name}:{visible}:"
-            f"{'inf' if capacity is None else capacity}:{bin}:{args.max_states}")
-
-
-def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:
-    """Read one line of ``--results`` into ``done``. An exact result stands whatever state cap it was
-    run with (the cap decides only whether a plan is skipped), so it is filed under this run's cap; a
-    later line wins, its gaps added to an earlier result's (a rerun of one policy keeps the others'),
-    and a skip never hides a result."""
-    if "skipped" not in rec:
-        key = f"{key.rsplit(':', 1)[0]}:{max_states}"
-    old = done.get(key)
-    if "skipped" in rec:
-        if old is None or "skipped" in old:
-            done[key] = rec
-        return
-    if old is not None and "skipped" not in old:
-        rec = {**rec, "gaps": {**old["gaps"], **rec["gaps"]}}
-    done[key] = rec
-
-
-def _record(plan, setting, r, two: bool) -> dict:
-    visible, capacity, bin = setting
-    out = {"plan": plan.name, "visible": visible, "capacity": capacity, "bin": bin, "two_strategies": two}
-    if isinstance(r, str):
-        out["skipped"] = r
-    else:
-        out.update(gaps=r[0], optimum=r[1], states=r[2])
-    return out
-
-
-def _run_jobs(jobs, args, done: dict, sink) -> None:
-    """Run the jobs not in ``done``, each reported as it finishes (a full run takes hours) and appended
-    to ``--results`` at once, so that an interrupted run goes on from where it stopped."""
-    def needed(key) -> bool:          # not run, skipped (with --redo-skipped), or without a policy asked for
-        rec = done.get(key)
-        if rec is None or "skipped" in rec:
-            return rec is None or args.redo_skipped
-        return not set(args.policies) <= set(rec["gaps"])
-
-    todo = [j for j in jobs if needed(j[0])]
-
-    def report(job, r) -> None:
-        key, plan, setting, two = job
-        rec = _record(plan, setting, r, two)
-        done[key] = rec
-        if isinstance(r, str):
-            print(f"{setting_name(*setting)}: {plan.name}: skipped ({r})", flush=True)
-        else:
-            print(f"{setting_name(*setting)}: {plan.name}: optimum {r[1]:.4f} ({r[2]:,} states); "
-                  + ", ".join(f"{p} {100 * v:+.3f}%" for p, v in r[0].items()), flush=True)
-        if sink is not None:
-            sink.write(json.dumps({"key": key, **rec}) + "\n")
-            sink.flush()
-
-    tasks = [(plan, *setting, args.max_states, args.task_seconds, args.policies, args.compiled_optimum)
-             for _, plan, setting, _ in todo]
-    if args.workers > 1 and len(todo) > 1:
-        from concurrent.futures import ProcessPoolExecutor, as_completed
-
-        with ProcessPoolExecutor(args.workers) as pool:
-            futures = {pool.submit(_task, t): job for t, job in zip(tasks, todo)}
-            for f in as_completed(futures):
-                report(futures[f], f.result())
-    else:
-        for t, job in zip(tasks, todo):
-            report(job, _task(t))
-
-
-def setting_rows(records: list[dict], names) -> tuple[list[dict], list[str], list[dict]]:
-    """The evaluated gaps, the skipped plans (with why) and the gaps of the plans with two strategies."""
-    rows = [r["gaps"] for r in records if "gaps" in r]
-    skipped = [f"{r['plan']} ({r['skipped']})" for r in records if "skipped" in r]
-    multi = [r["gaps"] for r in records if "gaps" in r and r["two_strategies"]]
-    return [{n: g[n] for n in names} for g in rows], skipped, [{n: g[n] for n in names} for g in multi]
-
-
-def pct(x: float) -> str:
-    """A gap in percent; a rounding error's minus sign on an exact 0 is not shown."""
-    v = 100 * x
-    return f"{0.0 if abs(v) < 5e-4 else v:+.3f}%"
-
-
-def markdown(settings, per_setting, gear, names, n_plans: int, brief: bool = False) -> str:
-    """The lab's tables in Markdown: every setting's gaps over the plans, and the gearbox's (``brief``: the
-    first table alone, and how many were skipped)."""
-    head = "| setting | plans | skipped | " + " | ".join(f"{n} mean | {n} max" for n in names) + " |"
-    lines = [head, "| --- | ---: | ---: | " + " | ".join("---: | ---:" for _ in names) + " |"]
-    for setting in settings:
-        rows, skipped, _ = per_setting[setting]
-        if not rows:
-            lines.append(f"| {setting_name(*setting)} | 0 | {len(skipped)} | " + " | ".join("— | —" for _ in names) + " |")
-            continue
-        s = summarise(rows)
-        lines.append(f"| {setting_name(*setting)} | {len(rows)} | {len(skipped)} | "
-                     + " | ".join(f"{pct(s[n][0])} | {pct(s[n][2])}" for n in names) + " |")
-    out = [f"Gap of each policy's exact expected time to the optimum's, over {n_plans} plans "
-           "(mean and largest); a plan is skipped when its optimum's programme is over the lab's "
-           "state cap or time, or was not run, and then listed below."
-           + (" `fallback` is the default (`lookahead`) with its exact optimum switched off (`--without-optimum`): "
-              "what decides where the optimum's programme does not fit." if "fallback" in names else ""), "", *lines]
-    skips = [(setting_name(*st), per_setting[st][1]) for st in settings if per_setting[st][1]]
-    if brief:
-        n_skip = sum(len(s) for _, s in skips)
-        return "\n".join(out + ["", f"{n_skip} {SKIPPED_TAIL}, each listed in docs/policy-lab.md."] * bool(n_skip)) + "\n"
-    if skips:
-        out += ["", "Skipped: " + "; ".join(f"{name}: {', '.join(s)}" for name, s in skips) + "."]
-    if gear:
-        out += ["", "The gearbox:", "",
-                "| setting | optimum | " + " | ".join(names) + " |",
-                "| --- | ---: | " + " | ".join("---:" for _ in names) + " |"]
-        for setting in settings:
-            r = gear.get(setting)
-            if r is None:
-                continue
-            if "skipped" in r:
-                out.append(f"| {setting_name(*setting)} | skipped ({r['skipped']}) | " + " | ".join("—" for _ in names) + " |")
-            else:
-                out.append(f"| {setting_name(*setting)} | {r['optimum']:.4f} | "
-                           + " | ".join(pct(r['gaps'][n]) for n in names) + " |")
-    return "\n".join(out) + "\n"
-
-
-def replace_block(path: Path, text: str) -> None:
-    """Put ``text`` in place of the lab's table in ``path``: the Markdown table whose header starts with
-    :data:`TABLE_HEAD`, with the line after it that says how many were skipped (the table must be there)."""
-    lines = path.read_text().split("\n")
-    start = next((k for k, line in enumerate(lines) if line.startswith(TABLE_HEAD)), None)
-    if start is None:
-        raise SystemExit(f"{path}: no lab table (a line starting {TABLE_HEAD!r}); put one where the table goes")
-    end = start
-    while end < len(lines) and lines[end].startswith("|"):
-        end += 1
-    if end + 1 < len(lines) and not lines[end] and SKIPPED_TAIL in lines[end + 1]:
-        end += 2
-    new = text.rstrip("\n").split("\n")
-    new = new[next(k for k, line in enumerate(new) if line.startswith(TABLE_HEAD)):]
-    path.write_text("\n".join(lines[:start] + new + lines[end:]))
-
-
-def plot_settings(path: Path, settings, per_setting, names) -> None:
-    """One row per setting: each policy's mean gap (dot) and largest gap (end of its line)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    plt.rcParams["svg.fonttype"] = "none"
-    shown = [st for st in settings if per_setting[st][0]]
-    fig, ax = plt.subplots(figsize=(7, 0.28 * len(shown) + 1.2), dpi=150)
-    for j, name in enumerate(names):
-        for i, st in enumerate(shown):
-            s = summarise(per_setting[st][0])[name]
-            y = i + (j - (len(names) - 1) / 2) * 0.18
-            ax.plot([100 * s[0], 100 * s[2]], [y, y], color=f"C{j}", lw=1)
-            ax.plot([100 * s[0]], [y], "o", color=f"C{j}", ms=3.5, label=name if i == 0 else None)
-    ax.set_yticks(range(len(shown)), [f"{setting_name(*st)} ({len(per_setting[st][0])})" for st in shown], fontsize=7)
-    ax.invert_yaxis()
-    ax.set_xscale("symlog", linthresh=0.01)
-    ax.set_xlabel("gap to the optimum (%): mean (dot) to largest (line end); dashed: 0.3%", fontsize=8)
-    ax.axvline(0, color="grey", lw=0.6)
-    ax.tick_params(axis="x", labelsize=7)
-    # gaps are never below 0 but by rounding; the right edge past the largest gap and the 0.3% mark
-    top = max([0.3] + [100 * summarise(per_setting[st][0])[n][2] for st in shown for n in names])
-    ax.axvline(0.3, color="grey", lw=0.6, ls="--")
-    ticks = [t for t in (0, 0.01, 0.1, 0.3, 1, 3, 10, 30, 100) if t <= top * 1.5]
-    ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
-    ax.set_xlim(-0.002, top * 1.5)
-    ax.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=len(names), frameon=False)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, metadata={"Date": None} if path.suffix == ".pdf" else None)
-    plt.close(fig)
-    print(f"wrote {path}")
-
-
-def main(argv=None) -> int:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--plans", type=int, default=30)
-    ap.add_argument("--min-parts", type=int, default=8)
-    ap.add_argument("--max-parts", type=int, default=12)
+    ap.add_argument("--plans", type=int, default=30, help="random plans a size")
+    ap.add_argument("--sizes", default="8-12,16,20,25,30",
+                    help="parts of the random plans, comma-separated groups: N, or LOW-HIGH (drawn)")
+    ap.add_argument("--min-parts", type=int, help="one group of LOW to HIGH parts (with --max-parts) instead of --sizes")
+    ap.add_argument("--max-parts", type=int)
+    ap.add_argument("--salbp", default="KILBRID,TONGE70,ARC111",
+                    help="SALBP graphs in every setting, comma-separated (skipped with their states where over the cap)")
     ap.add_argument("--plans-dir", type=Path, help="also every plan file in this folder (.yaml, .json, .IN2, ...)")
     ap.add_argument("--visible", default="1,2,3", help="parts visible per look, comma-separated")
-    ap.add_argument("--capacities", default="1,2,inf", help="buffer capacities, comma-separated (inf: unlimited)")
+    ap.add_argument("--capacities", default="1,2,3,inf", help="buffer capacities, comma-separated (inf: unlimited)")
     ap.add_argument("--bins", default="uniform,pile", help="bins, comma-separated (uniform, pile)")
     ap.add_argument("--policies", default=",".join(DEFAULT_POLICIES),
                     help=f"policies evaluated against the optimum, comma-separated ({', '.join(POLICIES)})")
@@ -363,24 +747,32 @@ def main(argv=None) -> int:
                     help="also the default policy with its exact optimum switched off (the column 'fallback'): "
                          "its fallback measured where the optimum is known")
     ap.add_argument("--only", default="", help="only these plans (names, comma-separated: r3-11, gearbox, ...)")
-    ap.add_argument("--compiled-optimum", action="store_true",
-                    help="the pile's optimum by the compiled core (the same values as the Python programme, 32-46x sooner)")
+    ap.add_argument("--python-optimum", action="store_true",
+                    help="the optimum by the Python programme (the same values as the compiled core, 20-46x later)")
+    ap.add_argument("--compiled-optimum", action="store_true", help="the optimum by the compiled core (the default)")
     ap.add_argument("--max-states", type=int, default=2_000_000, help="states of one exact programme, at most")
-    ap.add_argument("--task-seconds", type=float, default=600.0, help="seconds for one plan in one setting, at most")
+    ap.add_argument("--task-seconds", type=float, default=300.0,
+                    help="seconds for the optimum of one plan in one setting, and for each policy's evaluation, at most")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (plans x settings, and the paired studies)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--results", type=Path, help="append every plan-setting's result here (JSON lines) and skip "
                     "those already there: an interrupted run goes on where it stopped")
     ap.add_argument("--redo-skipped", action="store_true", help="run again the plan-settings --results has as skipped")
+    ap.add_argument("--no-run", action="store_true", help="run nothing: the tables from --results alone")
     ap.add_argument("--table", type=Path, help="write the tables in Markdown here")
-    ap.add_argument("--readme", type=Path, help="replace the every-setting table in this file (found by its header)")
-    ap.add_argument("--plot", type=Path, help="write the gap per setting here (PNG or PDF)")
+    ap.add_argument("--readme", type=Path, help="replace the lab's table and claim in this file (found by its header)")
+    ap.add_argument("--plot", type=Path, help="write the gap per size here (PNG or PDF)")
     ap.add_argument("--paired", default="salbp:KILBRID,salbp:TONGE70",
                     help="plans compared by paired Monte Carlo (comma-separated; empty: none)")
     ap.add_argument("--paired-trials", type=int, default=200)
     ap.add_argument("--paired-visible", type=int, default=2, help="parts visible per look in the paired studies")
     ap.add_argument("--bound", action="store_true",
                     help="also a certified lower bound on any online policy beside the paired studies' means")
+    return ap
+
+
+def _args(argv) -> argparse.Namespace:
+    ap = parser()
     args = ap.parse_args(argv)
     args.policies = tuple(p for p in args.policies.split(",") if p)
     if args.without_optimum and "fallback" not in args.policies:
@@ -388,92 +780,90 @@ def main(argv=None) -> int:
     unknown = set(args.policies) - set(POLICIES)
     if unknown or not args.policies:
         ap.error(f"--policies: unknown {', '.join(sorted(unknown)) or '(none given)'}; choose from {', '.join(POLICIES)}")
-    settings = [(v, None if c == "inf" else int(c), b) for b in args.bins.split(",")
-                for v in map(int, args.visible.split(",")) for c in args.capacities.split(",")]
+    if args.min_parts is not None or args.max_parts is not None:
+        lo = args.min_parts if args.min_parts is not None else args.max_parts
+        args.sizes = f"{lo}-{args.max_parts if args.max_parts is not None else lo}"
+    try:
+        args.size_groups = parse_sizes(args.sizes)
+        args.settings = [(v, None if c == "inf" else int(c), b) for b in args.bins.split(",")
+                         for v in map(int, args.visible.split(",")) for c in args.capacities.split(",")]
+    except ValueError as exc:
+        ap.error(f"--sizes, --visible or --capacities: not a number ({exc})")
+    args.error = ap.error
+    return args
 
-    rng = random.Random(args.seed)
-    plans, two = [], set()
-    for i in range(args.plans):
-        n = rng.randint(args.min_parts, args.max_parts)
-        k = 2 if i % 3 == 2 else 1                     # a third of the plans have two strategies
-        density = rng.choice([0.1, 0.2, 0.3])
-        plans.append(random_plan(rng, n, k, density, label=f"r{i}"))
-        if k == 2:
-            two.add(i)
+
+def make_jobs(args) -> tuple[list[Job], list[str]]:
+    """Every plan in every setting (the random groups first, then SALBP, the folder, the gearbox), and the
+    random groups' labels."""
+    plans: list[tuple[str, object, bool]] = []
+    groups = []
+    for lo, hi in args.size_groups:
+        groups.append(size_label(lo, hi))
+        plans += [(f"{lo}-{hi}", plan, two) for plan, two in generate(args.seed, args.plans, lo, hi)]
+    plans += [("salbp", load_plan(f"salbp:{name}"), False) for name in filter(None, args.salbp.split(","))]
     if args.plans_dir is not None:
         for path in sorted(args.plans_dir.iterdir()):
             if path.is_file() and not path.name.startswith("."):
                 plan = load_plan(path)
-                plans.append(plan)
-                if len(plan.strategies) > 1:
-                    two.add(len(plans) - 1)
-    gear = load_plan(GEARBOX)
-    t0 = time.perf_counter()
+                plans.append(("folder", plan, len(plan.strategies) > 1))
+    if args.plans and args.size_groups:     # the gearbox beside the first group, as it always was
+        lo, hi = args.size_groups[0]
+        plans.append((f"{lo}-{hi}", load_plan(GEARBOX), False))
     only = {name for name in args.only.split(",") if name}
-    unknown = only - {plan.name for plan in plans} - {gear.name}
+    unknown = only - {plan.name for _, plan, _ in plans}
     if unknown:
-        ap.error(f"--only: no plan named {', '.join(sorted(unknown))}; the plans are {', '.join(p.name for p in plans)}, "
-                 f"{gear.name}")
-    jobs = [(_key(args, plan, s), plan, s, i in two) for s in settings for i, plan in enumerate(plans)
-            if not only or plan.name in only]
-    gear_jobs = [(_key(args, gear, s), gear, s, False) for s in settings
-                 if args.plans and (not only or gear.name in only)]
-    done: dict[str, dict] = {}
-    if args.results is not None and args.results.exists():
-        for line in args.results.read_text().splitlines():
-            if line.strip():
-                rec = json.loads(line)
-                _keep(done, rec.pop("key"), rec, args.max_states)
-    n_plans = len({plan.name for _, plan, _, _ in jobs})
-    sink = None if args.results is None else args.results.open("a")
-    try:
-        _run_jobs(jobs + gear_jobs, args, done, sink)
-    finally:
-        if sink is not None:
-            sink.close()
+        args.error(f"--only: no plan named {', '.join(sorted(unknown))}; the plans are "
+                   f"{', '.join(dict.fromkeys(p.name for _, p, _ in plans))}")
+    labels = {f"{lo}-{hi}": size_label(lo, hi) for lo, hi in args.size_groups}
+    jobs = []
+    for setting in args.settings:
+        for tag, plan, two in plans:
+            if only and plan.name not in only:
+                continue
+            group = {"salbp": "SALBP", "folder": "The folder"}.get(tag) or labels[tag]
+            if plan.name == "gearbox":
+                group = "The gearbox"
+            jobs.append(Job(_key(args.seed, tag, plan, setting, args.max_states), group, plan, setting, two))
+    return jobs, groups
 
-    names = list(args.policies)
-    per_setting = {}
-    table = []
-    for setting in settings:
-        name = setting_name(*setting)
-        recs = [done.get(key, {"plan": plan.name, "skipped": "not run"}) for key, plan, s, _ in jobs if s == setting]
-        rows, skipped, multi = setting_rows(recs, names)
-        per_setting[setting] = (rows, skipped, multi)
-        if rows:
-            print_summary(f"random plans{' and the folder' * bool(args.plans_dir)}, {name}", rows)
-            table.append((name, len(rows), len(skipped), summarise(rows)))
-        if multi:
-            print_summary(f"with two strategies, {name}", multi)
-        if skipped:
-            print(f"  skipped: {', '.join(skipped)}")
-    if table:
-        print(f"\nevery setting: gap to the optimum, mean / max (%), over the plans evaluated ({n_plans} plans)")
-        print(f"  {'setting':<36} {'plans':>5} {'skipped':>7}  " + "  ".join(f"{n:>17}" for n in names))
-        for name, n_done, skip, summ in table:
-            print(f"  {name:<36} {n_done:>5} {skip:>7}  "
-                  + "  ".join(f"{100 * summ[n][0]:>+8.3f} {100 * summ[n][2]:>+8.3f}" for n in names))
-    gear_done = {s: done[key] for key, _, s, _ in gear_jobs if key in done}
-    if gear_done:
-        print("\ngearbox: gap to the optimum per setting")
-        for setting, r in gear_done.items():
-            if "skipped" in r:
-                print(f"  {setting_name(*setting):<36}: skipped ({r['skipped']})")
-            else:
-                print(f"  {setting_name(*setting):<36}: optimum {r['optimum']:.4f}; "
-                      + ", ".join(f"{p} {100 * r['gaps'][p]:+.3f}%" for p in names))
-    print(f"\n{time.perf_counter() - t0:.0f} s")
-    text = markdown(settings, per_setting, gear_done, names, n_plans)
+
+def print_table(table: dict, groups: list[str], names) -> None:
+    print("\ngap to the optimum, mean / max (%), over the plans evaluated")
+    print(f"  {'parts':<6} {'setting':<36} {'plans':>5} {'skipped':>7}  " + "  ".join(f"{n:>17}" for n in names))
+    for (group, setting), cell in table.items():
+        if group in groups:
+            print(f"  {group:<6} {setting_name(*setting):<36} {len(cell.rows):>5} {len(cell.skipped):>7}  "
+                  + "  ".join(f"{100 * summarise(g)[0]:>+8.3f} {100 * summarise(g)[2]:>+8.3f}" if (g := cell.gaps(n))
+                              else f"{'—':>17}" for n in names))
+
+
+def main(argv=None) -> int:
+    args = _args(argv)
+    jobs, groups = make_jobs(args)
+    done = read_results(args.results, args.max_states)
+    t0 = time.perf_counter()
+    if not args.no_run:
+        sink = None if args.results is None else args.results.open("a")
+        try:
+            _run_jobs(jobs, args, done, sink)
+        finally:
+            if sink is not None:
+                sink.close()
+        print(f"\n{time.perf_counter() - t0:.0f} s")
+    names = list(TABLE_POLICIES) + [p for p in args.policies if p not in TABLE_POLICIES]
+    table = cells(jobs, done)
+    print_table(table, groups, names)
+    cpu = sum(sum(done[j.key].get("cpu", {}).values()) for j in jobs if j.key in done)
     if args.table:
         args.table.parent.mkdir(parents=True, exist_ok=True)
-        args.table.write_text("# The policy lab\n\nWritten by `benchmarks/policy_lab.py --table`; how it works: "
-                              "[the paper's comparison](comparison.md).\n\n" + text)
+        args.table.write_text(document(table, groups, names, args.plans, cpu))
         print(f"wrote {args.table}")
     if args.readme:
-        replace_block(args.readme, markdown(settings, per_setting, gear_done, names, n_plans, brief=True))
+        replace_block(args.readme, readme_block(table, groups, args.settings, args))
         print(f"wrote the lab's table into {args.readme}")
     if args.plot:
-        plot_settings(args.plot, settings, per_setting, names)
+        plot_sizes(args.plot, table, groups, names)
     for spec in filter(None, args.paired.split(",")):
         paired(spec, args)
     return 0

@@ -1,4 +1,5 @@
 """The policy lab's results file: how its lines are read back (benchmarks/policy_lab.py)."""
+import json
 import sys
 from pathlib import Path
 
@@ -33,3 +34,114 @@ def test_a_later_rerun_of_one_policy_keeps_the_others_gaps():
     done = _read([(KEY + "2000000", {"gaps": {"paper": 0.01, "lookahead": 0.01}, "optimum": 2.0, "states": 9}),
                   (KEY + "2000000", {"gaps": {"lookahead": 0.0}, "optimum": 2.0, "states": 9})])
     assert done[KEY + "2000000"]["gaps"] == {"paper": 0.01, "lookahead": 0.0}
+
+
+# ------------------------------------------------------------------ the committed results and what is written from them
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "policy_lab_results.jsonl"
+
+
+def _committed():
+    """The lab's jobs as the committed documents were written (``--no-run``) and the results read back."""
+    args = policy_lab._args(["--no-run", "--results", str(RESULTS), "--paired", ""])
+    jobs, groups = policy_lab.make_jobs(args)
+    done = policy_lab.read_results(RESULTS, args.max_states)
+    return args, jobs, groups, policy_lab.cells(jobs, done)
+
+
+def test_the_docs_table_and_the_readme_claim_are_written_from_the_committed_results():
+    args, _, groups, table = _committed()
+    names = list(policy_lab.TABLE_POLICIES)
+    cpu = sum(sum(r.get("cpu", {}).values()) for c in table.values() for r in c.rows)
+    assert (ROOT / "docs" / "policy-lab.md").read_text() == policy_lab.document(table, groups, names, args.plans, cpu)
+    assert policy_lab.read_block(ROOT / "README.md") == policy_lab.readme_block(table, groups, args.settings, args)
+
+
+def _lines():
+    return [json.loads(line) for line in RESULTS.read_text().splitlines() if line.strip()]
+
+
+def test_no_policy_beats_the_optimum_in_the_committed_results():
+    """Every gap of every line is at least the optimum's (a policy below it would be a wrong optimum)."""
+    lines = _lines()
+    assert len(lines) > 1000
+    for rec in lines:
+        for name, gap in rec.get("gaps", {}).items():
+            assert gap >= -1e-9, (rec["key"], name, gap)
+
+
+def test_the_readme_numbers_are_the_results_counted_directly():
+    """A second count, from the raw lines (the last line of a plan-setting's policy wins): per size, the
+    default's worst setting's mean and its largest gap, and the plan-settings, as the README's rows say."""
+    gaps: dict[tuple, dict[str, float]] = {}        # (size, setting) -> plan -> the default's gap
+    solved: set[tuple] = set()                      # (size, setting, plan) with the optimum
+    for rec in _lines():
+        seed, group, plan, visible, cap, bin, _ = rec["key"].split(":")
+        if seed != "0" or "-" not in group or plan == "gearbox" or "optimum" not in rec:
+            continue
+        solved.add((group, visible, cap, bin, plan))
+        if "lookahead" in rec["gaps"]:
+            gaps.setdefault((group, visible, cap, bin), {})[plan] = rec["gaps"]["lookahead"]
+    readme = (ROOT / "README.md").read_text()
+    for size in ("8-12", "16", "20", "25", "30"):
+        lo, _, hi = size.partition("-")
+        cells = [v for k, v in gaps.items() if k[0] == f"{lo}-{hi or lo}"]
+        assert cells, size
+        worst = max(sum(c.values()) / len(c) for c in cells)
+        top = max(max(c.values()) for c in cells)
+        label = size.replace("-", "–")
+        row = next(line for line in readme.splitlines() if line.startswith(f"| {label} |"))
+        fields = [f.strip() for f in row.split("|")]
+        assert int(fields[3]) == sum(1 for k in solved if k[0] == f"{lo}-{hi or lo}"), (size, row)
+        assert fields[5:7] == [_pct(worst), _pct(top)], (size, row)
+
+
+def _pct(x: float) -> str:
+    v = 100 * x
+    return f"{0.0 if abs(v) < 5e-4 else v:+.3f}%"
+
+
+def test_a_gap_of_another_version_of_its_policy_is_stale():
+    """A policy's gaps measured at another version (POLICY_VERSIONS) are dropped, so that rerunning that
+    policy alone recomputes them; a line without versions measured UNTAGGED's."""
+    now = policy_lab.POLICY_VERSIONS["fallback"]
+    done = _read([(KEY + "2000000", {"gaps": {"paper": 0.01, "fallback": 0.02}, "optimum": 2.0, "states": 9})])
+    assert done[KEY + "2000000"]["gaps"] == ({"paper": 0.01, "fallback": 0.02} if policy_lab.UNTAGGED["fallback"] == now
+                                            else {"paper": 0.01})
+    done = _read([(KEY + "2000000", {"gaps": {"paper": 0.01, "fallback": 0.02}, "optimum": 2.0, "states": 9,
+                                     "versions": {"fallback": now + " (older)"}})])
+    assert done[KEY + "2000000"]["gaps"] == {"paper": 0.01}
+    assert policy_lab._missing(done[KEY + "2000000"], ("fallback", "paper"), False) == ("fallback",)
+
+
+def test_rerunning_one_policy_runs_that_policy_alone_and_keeps_the_others(tmp_path, monkeypatch):
+    """``--policies fallback`` after a new version of the fallback: one new line with its gap alone, the
+    paper's rule's gap kept from the old line."""
+    out = tmp_path / "lab.jsonl"
+    argv = ["--sizes", "7", "--plans", "1", "--salbp", "", "--only", "r0-7", "--bins", "uniform", "--visible", "1",
+            "--capacities", "1", "--paired", "", "--results", str(out)]
+    assert policy_lab.main(argv + ["--policies", "paper,fallback"]) == 0
+    first = _lines_of(out)
+    assert [sorted(r["gaps"]) for r in first] == [["fallback", "paper"]]
+    assert policy_lab.main(argv + ["--policies", "fallback"]) == 0
+    assert len(_lines_of(out)) == 1                 # nothing missing: nothing run
+    monkeypatch.setitem(policy_lab.POLICY_VERSIONS, "fallback", "a new fallback")
+    assert policy_lab.main(argv + ["--policies", "paper,fallback"]) == 0
+    lines = _lines_of(out)
+    assert len(lines) == 2 and list(lines[1]["gaps"]) == ["fallback"]
+    assert lines[1]["versions"] == {"fallback": "a new fallback"} and lines[1]["cpu"].keys() == {"optimum", "fallback"}
+    done = policy_lab.read_results(out, 2_000_000)
+    (rec,) = done.values()
+    assert rec["gaps"] == {"paper": first[0]["gaps"]["paper"], "fallback": lines[1]["gaps"]["fallback"]}
+
+
+def _lines_of(path):
+    return [json.loads(line) for line in path.read_text().splitlines()]
+
+
+def test_a_plan_over_the_state_cap_is_skipped_with_its_count_before_any_work():
+    plan = policy_lab.random_plan(policy_lab.random.Random(1), 14, 1, 0.05)
+    r = policy_lab.measure(plan, 2, None, max_states=1000)
+    assert r["skipped"].startswith("optimum over 1,000 states: ") and r["estimate"] > 1000
+    assert "cpu" not in r
