@@ -1443,6 +1443,20 @@ def entries_within(n: int, nbytes: int) -> int:
     else by a Python entry's size (a dict slot, a key of ``n`` bits and a count of ``log2(n!)``
     bits, about 100 bytes of objects besides).  At least 1.  O(1).
 
+    Parameters
+    ----------
+    n : int
+        Elements of the order.
+    nbytes : int
+        Bytes the memo may take.
+
+    Returns
+    -------
+    int
+        Entries that fit (at least 1).
+
+    Examples
+    --------
     >>> entries_within(50, 2**30) > 1_000_000
     True
     """

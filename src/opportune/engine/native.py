@@ -47,6 +47,18 @@ def entry_bytes(n: int) -> int:
     are smaller on most sets (most sit in their slot), so real entries take less: about 50-60 bytes
     on sparse orders of 50-64 elements.  O(1).
 
+    Parameters
+    ----------
+    n : int
+        Elements of the order.
+
+    Returns
+    -------
+    int
+        Bytes an entry may take, at most.
+
+    Examples
+    --------
     >>> entry_bytes(50), entry_bytes(300)
     (96, 528)
     """

@@ -78,7 +78,26 @@ class ChainEstimate:
     ``positions[u] = (e, se)``: estimated expected position (1 = next).
     ``per_chain`` keeps each chain's means (``{"first": {u: [..]}, "positions": ...}``)
     for paired comparisons between candidates; ``samples`` and ``steps`` say how much
-    work stands behind the numbers.
+    work stands behind the numbers.  Made by :meth:`CompletionChains.estimate`.
+
+    Parameters
+    ----------
+    first : dict of int to (float, float)
+        Unit → its chance of coming next and that chance's standard error.
+    positions : dict of int to (float, float)
+        Unit → its expected position and that position's standard error.
+    per_chain : dict of str to dict of int to list of float
+        ``"first"`` and ``"positions"``: unit → each chain's mean.
+    samples : int
+        Readings behind the means (rounds × chains).
+    steps : int
+        Moves per chain since the population was started.
+
+    Examples
+    --------
+    >>> est = ChainEstimate({0: (0.6, 0.05)}, {}, {"first": {0: [0.55, 0.65]}, "positions": {}}, 2, 100)
+    >>> est.first[0], est.per_chain["first"][0]
+    ((0.6, 0.05), [0.55, 0.65])
     """
 
     first: dict[int, tuple[float, float]]
@@ -89,7 +108,28 @@ class ChainEstimate:
 
     def prob_greater(self, kind: str, a: int, b: int, margin: float = 0.0) -> float:
         """Estimated probability that the true value of ``a`` exceeds that of ``b`` by more than
-        ``margin`` (paired over chains)."""
+        ``margin`` (paired over chains).
+
+        Parameters
+        ----------
+        kind : str
+            ``"first"`` (chances of coming next) or ``"positions"`` (expected positions).
+        a, b : int
+            The units compared, both asked of the estimate as ``kind``.
+        margin : float
+            How much more ``a``'s value must be.
+
+        Returns
+        -------
+        float
+            The probability, from Student's t on the chains' paired differences.
+
+        Examples
+        --------
+        >>> est = ChainEstimate({}, {}, {"first": {0: [0.7, 0.6, 0.65, 0.7], 1: [0.3, 0.4, 0.35, 0.3]}}, 4, 10)
+        >>> est.prob_greater("first", 0, 1) > 0.99, est.prob_greater("first", 1, 0) < 0.01
+        (True, True)
+        """
         xs, ys = self.per_chain[kind][a], self.per_chain[kind][b]
         return prob_positive([x - y - margin for x, y in zip(xs, ys)])
 

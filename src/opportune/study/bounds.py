@@ -491,6 +491,46 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
     passes a queued node, and its cost from there is at least the node's residual).  Looks past ``max_looks`` are not
     expanded (their nodes stay on the queue, so the value stays a lower bound).  O(node_budget × (units +
     moves per look) × log nodes) time, O(nodes) memory.
+
+    Parameters
+    ----------
+    solver : OptimalSolver
+        The world: plan, visible parts, buffer, costs and weights.
+    penalty : penalty
+        What :func:`penalty_for` gives for ``solver``.
+    keys : Keys
+        The trial's keys (its looks).
+    node_budget : int
+        Most nodes expanded.
+    max_looks : int
+        Looks past which no node is expanded (a guard against a search that never ends).
+
+    Returns
+    -------
+    tuple of (float, bool, int)
+        ``(value, exact, nodes expanded)``.
+
+    Raises
+    ------
+    AssertionError
+        When a step costs less than nothing: the penalty's value is not a subsolution (a defect).
+    RuntimeError
+        When no way finishes the assembly (unreachable: every state has a move on some look).
+
+    Examples
+    --------
+    With the optimum's values every trial's minimum is the optimum; cut short, the value is lower:
+
+    >>> import random
+    >>> from opportune import make_plan
+    >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), visible=1)
+    >>> keys = Keys(list(solver.quantity), None, 1, random.Random(0))
+    >>> value, exact, _ = inner_minimum(solver, penalty_for("optimal", solver), keys, 1000, 100)
+    >>> round(value, 9) == round(solver.value(), 9), exact
+    (True, True)
+    >>> cut = inner_minimum(solver, penalty_for("none", solver), keys, 1, 100)
+    >>> cut[0] <= inner_minimum(solver, penalty_for("none", solver), keys, 1000, 100)[0], cut[1]
+    (True, False)
     """
     engine = solver.engine
     full = engine.full
@@ -541,9 +581,31 @@ def check_request(plan, *, visible: int = 2, capacity: int | None = None, bin: s
                   engine: OrderEngine | None = None) -> dict[str, float] | None:
     """Refuse, before any work, a bound :func:`lower_bound` cannot compute as asked: a :class:`BoundError`
     saying what to change.  Also ``penalty="optimal"`` on a plan whose optimum needs more than ``max_states``
-    states (counted, within 2 s, never solved), so a command refuses it before its study.  Returns the
-    weighted bin's weights (default: the plan's visibilities), None for the uniform bin.
+    states (counted, within 2 s, never solved), so a command refuses it before its study.
 
+    Parameters
+    ----------
+    plan : Plan
+        The plan.
+    visible, capacity, bin, trials, penalty, node_budget, weights, relaxed_states, max_states, engine
+        As for :func:`lower_bound`.
+
+    Returns
+    -------
+    dict of str to float or None
+        The weighted bin's weights (default: the plan's visibilities), None for the uniform bin.
+
+    Raises
+    ------
+    BoundError
+        What to change, for the first thing that cannot be served.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> plan = make_plan(["a", "b"], {"b": ["a"]})
+    >>> check_request(plan), check_request(plan, bin="weighted")
+    (None, {'a': 1.0, 'b': 1.0})
     >>> from opportune import load_plan
     >>> try:
     ...     check_request(load_plan("salbp:KILBRID"), penalty="optimal")
@@ -696,8 +758,29 @@ def penalty_for(name: str, solver: OptimalSolver, relaxed_states: int | None = N
     where it fits within ``solver.max_states``, else the relaxed plan's with a limited buffer and the motions
     with an unlimited one (see the module's docstring).  A penalty gives *V̂* (``value(key)``), the look
     term *f* (``look_term(key, look, moves)``) and the Bellman residual ``c_look + E_L f − V̂`` (``residual(key)``)
-    for the solver's state keys.  Raises :class:`BoundError` when the penalty cannot be built as asked.
+    for the solver's state keys.
 
+    Parameters
+    ----------
+    name : str
+        One of :data:`PENALTIES`.
+    solver : OptimalSolver
+        The world: plan, visible parts, buffer, costs and weights.
+    relaxed_states : int or None
+        As for :func:`lower_bound`.
+
+    Returns
+    -------
+    penalty
+        The value function, its look term and its residual.
+
+    Raises
+    ------
+    BoundError
+        When the penalty cannot be built as asked (the optimum or the relaxed plan does not fit).
+
+    Examples
+    --------
     >>> from opportune import load_plan
     >>> solver = OptimalSolver(OrderEngine(load_plan("example:gearbox")), visible=2)
     >>> pen = penalty_for("relaxed", solver)
@@ -785,6 +868,20 @@ def policy_gaps(bound: BoundResult, times: dict[str, dict]) -> dict[str, dict]:
     :data:`DEFECT_SE`: noise a 95% interval shows about once in 40 studies) or ``"defect"`` (beyond).
     Policies without a mean are left out.
 
+    Parameters
+    ----------
+    bound : BoundResult
+        The bound.
+    times : dict of str to dict
+        Policy name → its time's statistics (``mean``, ``ci95``).
+
+    Returns
+    -------
+    dict of str to dict
+        Policy name → ``mean``, ``gap``, ``below`` (None above the bound) and ``z``.
+
+    Examples
+    --------
     >>> r = BoundResult(10.0, 0.1, 200, "m", "motions", 200, 0, 0.0, 9.0)
     >>> gaps = policy_gaps(r, {"a": {"mean": 11.0, "ci95": [10.9, 11.1]}, "b": {"mean": 9.95, "ci95": [9.8, 10.1]},
     ...                        "c": {"mean": 9.5, "ci95": [9.45, 9.55]}})
@@ -811,6 +908,18 @@ def describe_gaps(gaps: dict[str, dict]) -> str:
     """:func:`policy_gaps` in words: ``lookahead 0.2% below; paper 1.0% above``, then what each mean below
     the bound means (one sentence per kind).
 
+    Parameters
+    ----------
+    gaps : dict of str to dict
+        What :func:`policy_gaps` gives.
+
+    Returns
+    -------
+    str
+        The sentences.
+
+    Examples
+    --------
     >>> print(describe_gaps({"a": {"gap": 0.1, "below": None, "z": None},
     ...                      "b": {"gap": -0.002, "below": "noise", "z": 0.5}}))
     a 10.0% above; b 0.2% below. b below the bound is sampling noise: no online policy's expected time is below it, and b's 95% interval reaches the bound's
