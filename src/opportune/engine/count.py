@@ -58,9 +58,10 @@ can be 3–35 times cheaper); and the dynamic programme over down-sets when the
 piece has few enough of them (a bounded count tells).  All three store exact
 values in the one memo, so the memo semantics are unchanged: a value is the
 count of its set, whichever way it was found.  ``Counter.methods`` counts the
-pieces each method finished.  Honest limit, pure Python: about 5 µs per memo
-entry, so random sparse orders of 50 elements (0.05–5 million entries in the
-better direction) take 0.3–25 s where the C++ ``linext`` takes 0.05–2 s.
+pieces each method finished.  Pure Python pays for every memo entry in
+interpreted big-int operations, so the compiled core
+(:mod:`opportune.engine.native`) runs the recursion wherever it is built;
+docs/counting.md gives the measured times of both, beside the C++ peers'.
 """
 
 from __future__ import annotations
@@ -90,7 +91,8 @@ __all__ = ["BudgetExceeded", "Counter", "count_linear_extensions", "entries_with
 
 def _check_every(n: int) -> int:
     """New memo entries between clock checks: fewer on large posets, whose entries cost O(n) big-int
-    operations each (a 1,000-element poset's 256 entries take ~0.1 s: a deadline would be missed by that)."""
+    operations each (between two checks at the usual rate, a 1,000-element poset would do 256,000 of them:
+    a deadline would be missed by that)."""
     every = _CHECK_EVERY
     while every > 1 and every * n > 16_384:
         every //= 2
@@ -114,6 +116,7 @@ class Counter:
     Parameters
     ----------
     poset : Poset
+        The order whose linear extensions are counted (its subsets by bitmask).
     max_memo : int or None
         Most *new* memo entries (counts plus position-sum vectors) one call of
         :meth:`count` / :meth:`position_sums` may add (None: unlimited).  A call
@@ -226,10 +229,41 @@ class Counter:
         length depends on the order reads the clock, so a call ends within a
         few milliseconds of its deadline on orders of up to 10,000 elements.
 
+        Parameters
+        ----------
+        mask : int or None
+            The set, a bitmask of the order's elements (None: all of them).
+        deadline : Deadline, float or None
+            When this call must stop, besides ``time_limit`` and the attribute ``deadline``.
+
+        Returns
+        -------
+        int
+            The exact number of linear extensions of the subposet on ``mask``.
+
+        Raises
+        ------
+        BudgetExceeded
+            When the call would add more than ``max_memo`` entries or pass its deadline (what it
+            stored stays: the same call with more budget continues from there).
+        ValueError
+            When ``mask`` is not a subset of the order's elements.
+
+        Examples
+        --------
         >>> Counter(Poset.antichain(3)).count()
         6
         >>> Counter(Poset.chain(3)).count(0b101)
         1
+        >>> fence = Poset.from_pairs(12, [(i, i + 1) if i % 2 == 0 else (i + 1, i) for i in range(11)])
+        >>> c = Counter(fence, max_memo=20)                 # a zigzag of 12: more than 20 sets to count
+        >>> try:
+        ...     c.count()
+        ... except BudgetExceeded as exc:
+        ...     print(exc.reason)
+        memo
+        >>> c.max_memo = None; c.count()                    # goes on from what it stored
+        2702765
         """
         r = self._memo.get(mask)
         if r is not None:
@@ -257,12 +291,33 @@ class Counter:
         * first element: ``P(S)[y] = e(S) + sum over minimal x != y of P(S - x)[y]``.
 
         Each new set costs O(children) big-int operations on packed vectors;
-        sets seen by earlier calls cost nothing.  Raises
-        :class:`BudgetExceeded` like :meth:`count` (vectors count as memo
-        entries; ``deadline`` as there).
+        sets seen by earlier calls cost nothing.
 
-        >>> Counter(Poset.from_pairs(3, [(0, 1)])).position_sums()
+        Parameters
+        ----------
+        mask : int or None
+            The set, a bitmask of the order's elements (None: all of them).
+        deadline : Deadline, float or None
+            When this call must stop, as for :meth:`count`.
+
+        Returns
+        -------
+        dict of int to int
+            Element → the sum of its positions over all linear extensions of ``mask``.
+
+        Raises
+        ------
+        BudgetExceeded
+            Like :meth:`count` (vectors count as memo entries).
+        ValueError
+            When ``mask`` is not a subset of the order's elements.
+
+        Examples
+        --------
+        >>> Counter(Poset.from_pairs(3, [(0, 1)])).position_sums()     # 012, 021, 201
         {0: 4, 1: 8, 2: 6}
+        >>> Counter(Poset.chain(3)).position_sums(0b110)
+        {1: 1, 2: 2}
         """
         if mask is None:
             mask = self.poset.full
@@ -291,6 +346,27 @@ class Counter:
                            deadline: Deadline | float | None = None) -> dict[int, float]:
         """Expected 1-based position of each element of ``mask`` in a uniformly random linear extension.
 
+        ``position_sums(mask)[x] / count(mask)``, as a float.
+
+        Parameters
+        ----------
+        mask : int or None
+            The set, a bitmask of the order's elements (None: all of them).
+        deadline : Deadline, float or None
+            When this call must stop, as for :meth:`count`.
+
+        Returns
+        -------
+        dict of int to float
+            Element → its expected position (1 = first).
+
+        Raises
+        ------
+        BudgetExceeded
+            Like :meth:`count`.
+
+        Examples
+        --------
         >>> Counter(Poset.from_pairs(3, [(0, 1)])).expected_positions()
         {0: 1.3333333333333333, 1: 2.6666666666666665, 2: 2.0}
         """
@@ -303,12 +379,36 @@ class Counter:
         """A uniformly random linear extension of ``mask`` (exact; ``rng`` is a :class:`random.Random`).
 
         Chooses the first element ``x`` with probability ``e(S - x) / e(S)``,
-        then recurses.  O(|mask| × width) memo lookups, after :meth:`count`;
-        ``deadline`` bounds the counts it needs and is read at every step.
+        then recurses.  O(|mask| × width) memo lookups, after :meth:`count`.
 
+        Parameters
+        ----------
+        rng : random.Random
+            The random stream (seeded by the caller).
+        mask : int or None
+            The set, a bitmask of the order's elements (None: all of them).
+        deadline : Deadline, float or None
+            Bounds the counts it needs, and is read at every step.
+
+        Returns
+        -------
+        list of int
+            The elements of ``mask`` in the order drawn.
+
+        Raises
+        ------
+        BudgetExceeded
+            Like :meth:`count`, or past ``deadline`` between steps.
+
+        Examples
+        --------
         >>> import random
         >>> Counter(Poset.chain(3)).sample(random.Random(1))
         [0, 1, 2]
+        >>> c, rng = Counter(Poset.from_pairs(3, [(0, 1)])), random.Random(2)
+        >>> draws = [tuple(c.sample(rng)) for _ in range(3000)]         # 012, 021, 201: a third each
+        >>> {d: abs(draws.count(d) - 1000) < 120 for d in sorted(set(draws))}
+        {(0, 1, 2): True, (0, 2, 1): True, (2, 0, 1): True}
         """
         if mask is None:
             mask = self.poset.full
@@ -338,6 +438,18 @@ class Counter:
     def cached(self, mask: int) -> int | None:
         """The count of ``mask`` if it is in the memo, else None (never computes).
 
+        Parameters
+        ----------
+        mask : int
+            The set, a bitmask of the order's elements.
+
+        Returns
+        -------
+        int or None
+            The stored exact count (from the Python memo or the compiled one), or None.
+
+        Examples
+        --------
         >>> c = Counter(Poset.antichain(2))
         >>> c.cached(0b11), c.count(0b11), c.cached(0b11)
         (None, 2, 2)
@@ -356,6 +468,24 @@ class Counter:
         """Store the exact count ``value`` of ``mask`` found by another exact method (see :mod:`.hub`).
 
         Later counts that meet ``mask`` as a piece use it instead of recursing.
+
+        Parameters
+        ----------
+        mask : int
+            The set, a bitmask of the order's elements.
+        value : int
+            Its exact number of linear extensions.
+
+        Raises
+        ------
+        ValueError
+            When ``mask`` is not a subset of the order's elements.
+
+        Examples
+        --------
+        >>> c = Counter(Poset.from_pairs(4, [(0, 1), (2, 3)]))
+        >>> c.learn(0b0111, 3); c.cached(0b0111), c.count()
+        (3, 6)
         """
         self._check_mask(mask)
         self._memo[mask] = value
@@ -368,6 +498,18 @@ class Counter:
         Bit-parallel (a table look-up per byte of ``mask``); the recursions of
         this package use it to split a set before they recurse.
 
+        Parameters
+        ----------
+        mask : int
+            The set, a bitmask of the order's elements.
+
+        Returns
+        -------
+        tuple of (int, int)
+            The minimal elements of ``mask`` and its cut elements, as bitmasks.
+
+        Examples
+        --------
         >>> Counter(Poset.from_pairs(3, [(0, 1), (0, 2)])).scan(0b111)   # 0 is minimal and a cut
         (1, 1)
         """
@@ -386,13 +528,32 @@ class Counter:
         return len(self._memo) + len(self._vec) + (self._native.size() if self._native is not None else 0)
 
     def entries(self) -> int:
-        """What :meth:`shrink` keeps a share of: :attr:`memo_size`.  O(1)."""
+        """What :meth:`shrink` keeps a share of: :attr:`memo_size`.  O(1).
+
+        Returns
+        -------
+        int
+            Entries held (counts plus position-sum vectors, the compiled memo's included).
+
+        Examples
+        --------
+        >>> c = Counter(Poset.antichain(3), native=False); _ = c.count(0b011)
+        >>> c.entries() == c.memo_size == 2                  # the empty set's count and 0b011's
+        True
+        """
         return self.memo_size
 
     def nbytes(self) -> int:
         """Estimated bytes this counter holds: memo, vectors, compiled memo, scan tables, its order and
         the reversed view's (see :mod:`opportune.engine.memory`; O(1) in the memo's size).
 
+        Returns
+        -------
+        int
+            Estimated bytes.
+
+        Examples
+        --------
         >>> c = Counter(Poset.from_pairs(3, [(0, 1)])); c.count() == 3 and c.nbytes() > 0
         True
         """
@@ -417,6 +578,23 @@ class Counter:
         (no deadline: the upkeep finishes).  Complexity: O(1) when under the caps, else O(entries
         dropped).
 
+        Parameters
+        ----------
+        deadline : float
+            A ``time.perf_counter()`` moment past which evicting stops (default: never).
+
+        Returns
+        -------
+        bool
+            True if anything was dropped.
+
+        Raises
+        ------
+        BudgetExceeded
+            Past ``deadline`` while evicting (what is left is valid; the next upkeep goes on).
+
+        Examples
+        --------
         >>> c = Counter(Poset.antichain(3), max_total=1, native=False); _ = c.count(0b011), c.count(0b101)
         >>> c.maintain(), c.memo_size
         (True, 1)
@@ -436,7 +614,15 @@ class Counter:
         return dropped
 
     def clear(self) -> None:
-        """Forget every memoised value (frees memory; later calls recompute)."""
+        """Forget every memoised value (frees memory; later calls recompute).
+
+        Examples
+        --------
+        >>> c = Counter(Poset.antichain(3)); c.count()
+        6
+        >>> c.clear(); c.cached(0b111) is None, c.count()
+        (True, 6)
+        """
         if self._native is not None:
             self._native.reset()
         self._memo.clear()
@@ -488,6 +674,22 @@ class Counter:
         over its memory limit does.  Past ``deadline``, :class:`BudgetExceeded` (what is left is
         valid).  O(entries dropped).
 
+        Parameters
+        ----------
+        keep : float
+            The share of entries kept, newest first (0 to 1).
+        deadline : Deadline, float or None
+            When dropping must stop (None: never).
+
+        Raises
+        ------
+        ValueError
+            When ``keep`` is not from 0 to 1.
+        BudgetExceeded
+            Past ``deadline`` (what is left is valid).
+
+        Examples
+        --------
         >>> c = Counter(Poset.antichain(4), native=False); _ = c.count(0b0111), c.count(0b1110)
         >>> c.shrink(0.0); c.memo_size, c.count(0b0111)
         (1, 6)
@@ -1241,6 +1443,20 @@ def entries_within(n: int, nbytes: int) -> int:
     else by a Python entry's size (a dict slot, a key of ``n`` bits and a count of ``log2(n!)``
     bits, about 100 bytes of objects besides).  At least 1.  O(1).
 
+    Parameters
+    ----------
+    n : int
+        Elements of the order.
+    nbytes : int
+        Bytes the memo may take.
+
+    Returns
+    -------
+    int
+        Entries that fit (at least 1).
+
+    Examples
+    --------
     >>> entries_within(50, 2**30) > 1_000_000
     True
     """
@@ -1259,8 +1475,32 @@ def count_linear_extensions(poset: Poset, mask: int | None = None, *, max_memo: 
                             time_limit: float | None = None, deadline: Deadline | float | None = None) -> int:
     """Number of linear extensions of ``poset`` (or of the subposet induced on ``mask``).
 
-    A one-shot convenience around :class:`Counter`; ``deadline`` as in :meth:`Counter.count`.
+    A one-shot convenience around :class:`Counter`: its memo goes with it, so repeated questions
+    about one order are cheaper asked of one :class:`Counter`.
 
+    Parameters
+    ----------
+    poset : Poset
+        The order.
+    mask : int or None
+        The set, a bitmask of the order's elements (None: all of them).
+    max_memo, time_limit : int or None, float or None
+        As for :class:`Counter`.
+    deadline : Deadline, float or None
+        As in :meth:`Counter.count`.
+
+    Returns
+    -------
+    int
+        The exact number of linear extensions.
+
+    Raises
+    ------
+    BudgetExceeded
+        When the count does not fit ``max_memo``, ``time_limit`` or ``deadline``.
+
+    Examples
+    --------
     >>> count_linear_extensions(Poset.from_pairs(3, [(0, 2), (1, 2)]))
     2
     """

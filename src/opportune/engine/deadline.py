@@ -49,7 +49,35 @@ class BudgetExceeded(Exception):
     again with a larger budget to continue where it stopped, or fall back to
     :func:`opportune.engine.estimate.estimate_count`.
 
-    Attributes: ``reason`` (``"memo"`` or ``"time"``), ``memo_size``, ``elapsed``.
+    Parameters
+    ----------
+    message : str
+        What ran out, in words (the exception's text).
+    reason : str
+        ``"memo"`` (more new entries than a call may add) or ``"time"`` (the deadline passed).
+    memo_size : int
+        Entries the memo holds when it stopped.
+    elapsed : float
+        Seconds the call had run, where the raiser measured them (else 0).
+
+    Examples
+    --------
+    A count over its budget of new entries stops, and the same count with more budget goes on
+    from what the first one stored:
+
+    >>> from opportune.engine.count import Counter
+    >>> from opportune.engine.poset import Poset
+    >>> fence = Poset.from_pairs(12, [(i, i + 1) if i % 2 == 0 else (i + 1, i) for i in range(11)])
+    >>> c = Counter(fence, max_memo=20)
+    >>> try:
+    ...     c.count()
+    ... except BudgetExceeded as exc:
+    ...     print(exc.reason, exc.memo_size > 0)
+    memo True
+    >>> c.max_memo = None; c.count()                    # the zigzag numbers: 2,702,765 orders up and down
+    2702765
+    >>> str(BudgetExceeded("counting ran out of time", reason="time"))
+    'counting ran out of time'
     """
 
     def __init__(self, message: str, *, reason: str = "memo", memo_size: int = 0, elapsed: float = 0.0):

@@ -78,7 +78,26 @@ class ChainEstimate:
     ``positions[u] = (e, se)``: estimated expected position (1 = next).
     ``per_chain`` keeps each chain's means (``{"first": {u: [..]}, "positions": ...}``)
     for paired comparisons between candidates; ``samples`` and ``steps`` say how much
-    work stands behind the numbers.
+    work stands behind the numbers.  Made by :meth:`CompletionChains.estimate`.
+
+    Parameters
+    ----------
+    first : dict of int to (float, float)
+        Unit → its chance of coming next and that chance's standard error.
+    positions : dict of int to (float, float)
+        Unit → its expected position and that position's standard error.
+    per_chain : dict of str to dict of int to list of float
+        ``"first"`` and ``"positions"``: unit → each chain's mean.
+    samples : int
+        Readings behind the means (rounds × chains).
+    steps : int
+        Moves per chain since the population was started.
+
+    Examples
+    --------
+    >>> est = ChainEstimate({0: (0.6, 0.05)}, {}, {"first": {0: [0.55, 0.65]}, "positions": {}}, 2, 100)
+    >>> est.first[0], est.per_chain["first"][0]
+    ((0.6, 0.05), [0.55, 0.65])
     """
 
     first: dict[int, tuple[float, float]]
@@ -89,7 +108,28 @@ class ChainEstimate:
 
     def prob_greater(self, kind: str, a: int, b: int, margin: float = 0.0) -> float:
         """Estimated probability that the true value of ``a`` exceeds that of ``b`` by more than
-        ``margin`` (paired over chains)."""
+        ``margin`` (paired over chains).
+
+        Parameters
+        ----------
+        kind : str
+            ``"first"`` (chances of coming next) or ``"positions"`` (expected positions).
+        a, b : int
+            The units compared, both asked of the estimate as ``kind``.
+        margin : float
+            How much more ``a``'s value must be.
+
+        Returns
+        -------
+        float
+            The probability, from Student's t on the chains' paired differences.
+
+        Examples
+        --------
+        >>> est = ChainEstimate({}, {}, {"first": {0: [0.7, 0.6, 0.65, 0.7], 1: [0.3, 0.4, 0.35, 0.3]}}, 4, 10)
+        >>> est.prob_greater("first", 0, 1) > 0.99, est.prob_greater("first", 1, 0) < 0.01
+        (True, True)
+        """
         xs, ys = self.per_chain[kind][a], self.per_chain[kind][b]
         return prob_positive([x - y - margin for x, y in zip(xs, ys)])
 
@@ -100,8 +140,38 @@ class CompletionChains:
     ``poset`` gives the order (bitmask ``below``/``above`` per element); ``remaining``
     the steps still to do.  Call :meth:`advance` when steps are installed and
     :meth:`estimate` to run the chains and read the statistics.  Starting the population costs
-    O(n + covers) per chain; past ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`, read
-    every 256 steps) it raises :class:`~opportune.engine.deadline.BudgetExceeded`.
+    O(n + covers) per chain.  The chains run compiled where the core is (:mod:`opportune.engine.native`)
+    and in pure Python elsewhere, drawing from the same stream: the same seed gives the same moves.
+
+    Parameters
+    ----------
+    poset : Poset
+        The order (bitmask ``below``/``above`` per element).
+    remaining : int
+        The steps still to do, a bitmask: an up-set of ``poset`` (what is left after installing a down-set).
+    chains : int
+        Chains in the population, at least 2 (their spread gives the stated errors).
+    seed : int
+        Seed of the chains' random stream.
+    deadline : Deadline, float or None
+        When starting the population must stop (a :class:`~opportune.engine.deadline.Deadline` or a
+        ``time.perf_counter()`` moment, read every 256 steps; None: never).
+
+    Raises
+    ------
+    ValueError
+        With fewer than 2 chains.
+    BudgetExceeded
+        Past ``deadline`` while starting (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+    Examples
+    --------
+    >>> p = Poset.from_pairs(4, [(0, 1), (2, 3)])     # two chains of two steps
+    >>> chains = CompletionChains(p, p.full, chains=4, seed=7)
+    >>> [sorted(o) for o in chains.orders] == [[0, 1, 2, 3]] * 4      # each chain: a whole sequence
+    True
+    >>> all(o.index(0) < o.index(1) and o.index(2) < o.index(3) for o in chains.orders)   # admissible
+    True
     """
 
     def __init__(self, poset: Poset, remaining: int, *, chains: int = 8, seed: int = 0,
@@ -195,7 +265,33 @@ class CompletionChains:
         return orders
 
     def advance(self, remaining: int) -> None:
-        """Move to a later state: drop the steps no longer remaining (they were installed)."""
+        """Move to a later state: drop the steps no longer remaining (they were installed).
+
+        What is left of each sequence is still admissible, so the chains go on from there; readings
+        kept with ``estimate(keep=True)`` are dropped.  O(chains × n).
+
+        Parameters
+        ----------
+        remaining : int
+            The steps still to do now, a bitmask: a subset of :attr:`remaining`.
+
+        Raises
+        ------
+        ValueError
+            When ``remaining`` holds a step the chains no longer have (steps cannot be undone).
+
+        Examples
+        --------
+        >>> p = Poset.from_pairs(3, [(0, 2)])
+        >>> chains = CompletionChains(p, 0b111, seed=1)
+        >>> chains.advance(0b110)                           # step 0 installed
+        >>> sorted(chains.orders[0]), chains.remaining
+        ([1, 2], 6)
+        >>> chains.advance(0b111)
+        Traceback (most recent call last):
+        ...
+        ValueError: the chains can only move forward (install steps, not undo them)
+        """
         gone = self.remaining & ~remaining
         if remaining & ~self.remaining:
             raise ValueError("the chains can only move forward (install steps, not undo them)")
@@ -214,9 +310,24 @@ class CompletionChains:
 
         One move can carry a step across the whole sequence, where the adjacent swaps of Karzanov
         and Khachiyan move it one place: on ARC111 the chains mix in far fewer moves.  Each move
-        costs a few C-level list scans (``list.index`` for its cover neighbours).  With a ``deadline``,
-        stops once it has passed (read every 64 moves of a chain), with fewer moves made (counted
-        in ``steps``).
+        costs a few C-level list scans (``list.index`` for its cover neighbours).
+
+        Parameters
+        ----------
+        steps : int
+            Moves per chain.
+        deadline : Deadline, float or None
+            Stop once it has passed (read every 64 moves of a chain), with fewer moves made (counted
+            in :attr:`steps`); None: make them all.
+
+        Examples
+        --------
+        >>> p = Poset.from_pairs(3, [(0, 2)])
+        >>> chains = CompletionChains(p, 0b111, seed=1)
+        >>> chains.run(100); chains.steps
+        100
+        >>> all(o.index(0) < o.index(2) for o in chains.orders)     # every move keeps the order
+        True
         """
         dl = as_deadline(deadline)
         if dl.finite and steps > 64:        # in pieces, so that the clock is read between them
@@ -296,6 +407,54 @@ class CompletionChains:
         other instead of starting again, so a part's expected position seen twice is known better the
         second time.  A unit's rounds may differ from another's; each chain's means are still means
         of its own readings, so the comparisons over chains stay valid.
+
+        Parameters
+        ----------
+        first : iterable of int
+            Units, each minimal in :attr:`remaining`, whose chance of coming next is asked.
+        positions : iterable of int
+            Units whose expected position (1 = next) is asked.
+        steps : int
+            Moves per chain in total (0: rounds until ``deadline``).
+        samples : int
+            Rounds that ``steps`` is spread over.
+        deadline : Deadline, float or None
+            When the rounds stop: a :class:`~opportune.engine.deadline.Deadline` (also read inside
+            the moves), or a moment of ``clock``.
+        clock : callable or None
+            The clock ``deadline`` is a moment of (e.g. ``time.perf_counter``, or an injected one).
+        settled : callable or None
+            A function of the estimate so far: True ends the rounds early (with a deadline).
+        min_rounds : int
+            Rounds every unit has before ``settled`` is asked.
+        keep : bool
+            Keep the readings with the population, and continue those kept, until it advances.
+
+        Returns
+        -------
+        ChainEstimate
+            Means and standard errors per unit, each chain's means, and the work behind them.
+
+        Raises
+        ------
+        ValueError
+            When a unit of ``first`` is not minimal (it cannot come next).
+
+        Examples
+        --------
+        0 before 1, 2 free: of the 3 completions ``0 1 2``, ``0 2 1`` and ``2 0 1``, two start with 0
+        and one with 2, and 1 stands at 2, 3 and 3:
+
+        >>> p = Poset.from_pairs(3, [(0, 1)])
+        >>> est = CompletionChains(p, 0b111, seed=3).estimate(first=[0, 2], positions=[1], steps=4_000)
+        >>> abs(est.first[0][0] - 2 / 3) < 0.06, abs(est.first[2][0] - 1 / 3) < 0.06
+        (True, True)
+        >>> abs(est.positions[1][0] - 8 / 3) < 0.1, est.samples       # 32 rounds of 8 chains
+        (True, 256)
+        >>> CompletionChains(p, 0b111).estimate(first=[1], steps=10)
+        Traceback (most recent call last):
+        ...
+        ValueError: unit 1 is not minimal: it cannot come next
         """
         moves_until = deadline if isinstance(deadline, Deadline) else None   # read inside the moves too
         if moves_until is not None:

@@ -56,8 +56,8 @@ zero and the optimal action costs zero at every look: the bound equals the optim
   whose optimum fits ``max_states``): the bound is the optimum, with no Monte Carlo spread (a check
   of the method, and of this implementation).
 * ``"auto"`` (default): ``"optimal"`` where the optimum fits, else ``"relaxed"`` with a limited buffer and
-  ``"motions"`` with an unlimited one (where the relaxed plan keeps few parts and costs 10-30 times the
-  CPU per node for about a unit more on KILBRID).
+  ``"motions"`` with an unlimited one (where the relaxed plan keeps few parts and adds little for its
+  cost per node: docs/lower-bounds.md gives both, measured).
 
 The inner search is exact when it finishes within ``node_budget`` expanded nodes; where it does not, the
 trial's value is the queue's least cost (lower, still valid).  The result says how many trials were
@@ -97,14 +97,14 @@ MAX_TRIALS = 1_000_000
 MAX_NODE_BUDGET = 5_000_000
 #: States of the exact optimum ``penalty="auto"`` tries before it falls back to ``"motions"``.
 AUTO_OPTIMAL_STATES = 200_000
-#: States of the relaxed plan's optimum (``penalty="relaxed"``) with the compiled programme (about 1-3 s and
-#: 70 MB at 2 million) and with the Python one (about 100 MB and 10-20 s at 100,000).
+#: States of the relaxed plan's optimum (``penalty="relaxed"``) with the compiled programme and with the Python
+#: one (docs/lower-bounds.md gives the time and memory each takes at its limit).
 RELAXED_STATES = 2_000_000
 RELAXED_STATES_PYTHON = 100_000
 #: Seconds (wall) one count of a relaxed plan's states may take: a safety, never the measure.  The count's work
 #: is bounded by the budget (it stops past it), so a limit this generous is not reached and the parts kept
 #: are the same on any machine; a count cut short says "does not fit", which is how a short limit once made
-#: the choice depend on the machine's load (2 s kept 31 of KILBRID's 45 parts at load 18, where 36 fit).
+#: the choice depend on the machine's load (fewer of KILBRID's parts kept on a loaded machine).
 RELAXED_COUNT_SECONDS = 120.0
 #: Values and residuals the relaxed penalty keeps per state met (each memo about 40 MB when full; cleared past it).
 PENALTY_MEMO = 200_000
@@ -114,7 +114,19 @@ Z95 = 1.959963984540054
 
 
 class BoundError(ValueError):
-    """A bound that cannot be computed as asked (a user mistake: the message says what to change)."""
+    """A bound that cannot be computed as asked (a user mistake: the message says what to change).
+
+    Raised by :func:`lower_bound` (and :func:`check_request`) before any work.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> try:
+    ...     lower_bound(make_plan(["a", "b"], {"b": ["a"]}), bin="pile")
+    ... except BoundError as exc:
+    ...     print(exc)
+    the bound is defined for the Markov bins (uniform, weighted), not 'pile': use --bin uniform or weighted
+    """
 
 
 @dataclass(frozen=True)
@@ -125,6 +137,39 @@ class BoundResult:
     (or its lower bound where the search stopped at its budget: ``trials - exact_trials`` of them);
     ``start_value`` is *V̂* at the start (itself a lower bound when the penalty's *V̂* is a subsolution);
     ``optimum`` the exact optimum where the penalty computed it (``penalty="optimal"``), else None.
+    Made by :func:`lower_bound`; :attr:`low` and :attr:`high` are the interval's ends.
+
+    Parameters
+    ----------
+    mean : float
+        The bound: the mean of the trials' values.
+    half_width : float
+        Half the normal 95% interval of that mean.
+    trials : int
+        Trials (bins of keys) drawn.
+    method : str
+        How the bound was computed, in words (penalty, parts kept, trials solved exactly).
+    penalty : str
+        The penalty used (``auto`` resolved: ``none``, ``motions``, ``relaxed`` or ``optimal``).
+    exact_trials : int
+        Trials whose inner problem was solved exactly (the others are bounded below).
+    nodes : int
+        Nodes the inner searches expanded in all.
+    seconds : float
+        Wall seconds it took.
+    start_value : float
+        *V̂* at the start.
+    optimum : float or None
+        The exact optimum, where the penalty computed it.
+    values : tuple of float
+        Each trial's value.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> r = lower_bound(make_plan(["a", "b", "c"], {"c": ["a", "b"]}), visible=1, trials=20, penalty="motions")
+    >>> r.low <= r.mean <= r.high, len(r.values) == r.trials == r.exact_trials == 20, r.penalty
+    (True, True, 'motions')
     """
 
     mean: float
@@ -148,6 +193,20 @@ class BoundResult:
         return self.mean + self.half_width
 
     def to_dict(self) -> dict:
+        """The result as plain data (what ``simulate --json`` writes), each trial's values left out.
+
+        Returns
+        -------
+        dict
+            ``mean``, ``half_width``, ``ci95`` (``[low, high]``), ``trials``, ``method``, ``penalty``,
+            ``exact_trials``, ``nodes``, ``seconds``, ``start_value`` and ``optimum``.
+
+        Examples
+        --------
+        >>> d = BoundResult(10.0, 0.5, 200, "m", "motions", 200, 1234, 0.25, 9.0).to_dict()
+        >>> d["ci95"], d["optimum"], "values" in d
+        ([9.5, 10.5], None, False)
+        """
         return {"mean": self.mean, "half_width": self.half_width, "ci95": [self.low, self.high],
                 "trials": self.trials, "method": self.method, "penalty": self.penalty,
                 "exact_trials": self.exact_trials, "nodes": self.nodes, "seconds": self.seconds,
@@ -432,6 +491,46 @@ def inner_minimum(solver: OptimalSolver, penalty: _Penalty, keys: Keys, node_bud
     passes a queued node, and its cost from there is at least the node's residual).  Looks past ``max_looks`` are not
     expanded (their nodes stay on the queue, so the value stays a lower bound).  O(node_budget × (units +
     moves per look) × log nodes) time, O(nodes) memory.
+
+    Parameters
+    ----------
+    solver : OptimalSolver
+        The world: plan, visible parts, buffer, costs and weights.
+    penalty : penalty
+        What :func:`penalty_for` gives for ``solver``.
+    keys : Keys
+        The trial's keys (its looks).
+    node_budget : int
+        Most nodes expanded.
+    max_looks : int
+        Looks past which no node is expanded (a guard against a search that never ends).
+
+    Returns
+    -------
+    tuple of (float, bool, int)
+        ``(value, exact, nodes expanded)``.
+
+    Raises
+    ------
+    AssertionError
+        When a step costs less than nothing: the penalty's value is not a subsolution (a defect).
+    RuntimeError
+        When no way finishes the assembly (unreachable: every state has a move on some look).
+
+    Examples
+    --------
+    With the optimum's values every trial's minimum is the optimum; cut short, the value is lower:
+
+    >>> import random
+    >>> from opportune import make_plan
+    >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), visible=1)
+    >>> keys = Keys(list(solver.quantity), None, 1, random.Random(0))
+    >>> value, exact, _ = inner_minimum(solver, penalty_for("optimal", solver), keys, 1000, 100)
+    >>> round(value, 9) == round(solver.value(), 9), exact
+    (True, True)
+    >>> cut = inner_minimum(solver, penalty_for("none", solver), keys, 1, 100)
+    >>> cut[0] <= inner_minimum(solver, penalty_for("none", solver), keys, 1000, 100)[0], cut[1]
+    (True, False)
     """
     engine = solver.engine
     full = engine.full
@@ -482,9 +581,31 @@ def check_request(plan, *, visible: int = 2, capacity: int | None = None, bin: s
                   engine: OrderEngine | None = None) -> dict[str, float] | None:
     """Refuse, before any work, a bound :func:`lower_bound` cannot compute as asked: a :class:`BoundError`
     saying what to change.  Also ``penalty="optimal"`` on a plan whose optimum needs more than ``max_states``
-    states (counted, within 2 s, never solved), so a command refuses it before its study.  Returns the
-    weighted bin's weights (default: the plan's visibilities), None for the uniform bin.
+    states (counted, within 2 s, never solved), so a command refuses it before its study.
 
+    Parameters
+    ----------
+    plan : Plan
+        The plan.
+    visible, capacity, bin, trials, penalty, node_budget, weights, relaxed_states, max_states, engine
+        As for :func:`lower_bound`.
+
+    Returns
+    -------
+    dict of str to float or None
+        The weighted bin's weights (default: the plan's visibilities), None for the uniform bin.
+
+    Raises
+    ------
+    BoundError
+        What to change, for the first thing that cannot be served.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> plan = make_plan(["a", "b"], {"b": ["a"]})
+    >>> check_request(plan), check_request(plan, bin="weighted")
+    (None, {'a': 1.0, 'b': 1.0})
     >>> from opportune import load_plan
     >>> try:
     ...     check_request(load_plan("salbp:KILBRID"), penalty="optimal")
@@ -538,24 +659,63 @@ def lower_bound(plan, *, visible: int = 2, capacity: int | None = None, bin: str
                 relaxed_states: int | None = None) -> BoundResult:
     """A lower bound on the expected cost of every online policy on ``plan``, with its 95% interval.
 
-    ``visible``, ``capacity`` (None: unlimited), ``bin`` (``uniform`` or ``weighted``, with ``weights``:
-    part id → visibility; default the plan's) and ``costs`` (default the plan's ``simulation.costs``)
-    are the world's, as in ``opportune simulate``.  ``penalty``: one of :data:`PENALTIES` (see the
-    module's docstring); ``node_budget``: nodes the inner search of one trial expands at most (past
-    it the trial's value is a lower bound of its inner minimum); ``max_states``: states of the exact
-    optimum the ``optimal`` penalty may use; ``relaxed_states``: states of the relaxed plan's optimum the
-    ``relaxed`` penalty may use (default :data:`RELAXED_STATES`, or :data:`RELAXED_STATES_PYTHON` where
-    the compiled programme does not take the plan).  Trial *i* draws its keys from its own stream of ``seed``:
-    the same seed gives the same numbers.
-
-    A request that cannot be served raises :class:`BoundError` saying what to change, before any work.
+    ``visible``, ``capacity``, ``bin`` and ``costs`` are the world's, as in ``opportune simulate``.
+    Trial *i* draws its keys from its own stream of ``seed``: the same seed gives the same numbers.
     Time: O(trials × node_budget × (units + moves per look)); memory O(node_budget) nodes at a time
     (plus the optimum's states with ``penalty="optimal"``).
 
+    Parameters
+    ----------
+    plan : Plan
+        The plan (its ``simulation.costs`` and parts' visibilities are the defaults below).
+    visible : int
+        Parts the camera sees in a look (at least 1).
+    capacity : int or None
+        Buffer locations (None: unlimited).
+    bin : str
+        ``"uniform"`` or ``"weighted"`` (the Markov bins, where the bound is defined).
+    trials : int
+        Bins of keys drawn, 2 to :data:`MAX_TRIALS`.
+    seed : int
+        Seed of the trials' keys.
+    penalty : str
+        One of :data:`PENALTIES` (see the module's docstring).
+    costs : TimeModel or None
+        The costs of a look, a motion and a shake (None: the plan's ``simulation.costs``).
+    weights : dict of str to float or None
+        Part id → visibility in the weighted bin (None: the plan's).
+    node_budget : int
+        Nodes the inner search of one trial expands at most, 1 to :data:`MAX_NODE_BUDGET` (past it the
+        trial's value is a lower bound of its inner minimum).
+    max_states : int
+        States of the exact optimum the ``optimal`` penalty may use.
+    engine : OrderEngine or None
+        The plan's order engine, to share its counts (None: a new one).
+    relaxed_states : int or None
+        States of the relaxed plan's optimum the ``relaxed`` penalty may use (None:
+        :data:`RELAXED_STATES`, or :data:`RELAXED_STATES_PYTHON` where the compiled programme does
+        not take the plan).
+
+    Returns
+    -------
+    BoundResult
+        The bound, its interval, and how it was computed.
+
+    Raises
+    ------
+    BoundError
+        A request that cannot be served, before any work, with what to change.
+
+    Examples
+    --------
     >>> from opportune import load_plan
     >>> r = lower_bound(load_plan("example:gearbox"), visible=2, trials=50, penalty="motions")
-    >>> 10.0 <= r.mean <= 13.5725 and r.exact_trials == 50
+    >>> 10.0 <= r.mean <= 13.5725 and r.exact_trials == 50          # below the optimum, 13.5711
     True
+    >>> lower_bound(load_plan("example:gearbox"), visible=0)
+    Traceback (most recent call last):
+    ...
+    opportune.study.bounds.BoundError: visible must be a whole number ≥ 1, not 0
     """
     weights = check_request(plan, visible=visible, capacity=capacity, bin=bin, trials=trials, penalty=penalty,
                             node_budget=node_budget, weights=weights, relaxed_states=relaxed_states,
@@ -598,8 +758,29 @@ def penalty_for(name: str, solver: OptimalSolver, relaxed_states: int | None = N
     where it fits within ``solver.max_states``, else the relaxed plan's with a limited buffer and the motions
     with an unlimited one (see the module's docstring).  A penalty gives *V̂* (``value(key)``), the look
     term *f* (``look_term(key, look, moves)``) and the Bellman residual ``c_look + E_L f − V̂`` (``residual(key)``)
-    for the solver's state keys.  Raises :class:`BoundError` when the penalty cannot be built as asked.
+    for the solver's state keys.
 
+    Parameters
+    ----------
+    name : str
+        One of :data:`PENALTIES`.
+    solver : OptimalSolver
+        The world: plan, visible parts, buffer, costs and weights.
+    relaxed_states : int or None
+        As for :func:`lower_bound`.
+
+    Returns
+    -------
+    penalty
+        The value function, its look term and its residual.
+
+    Raises
+    ------
+    BoundError
+        When the penalty cannot be built as asked (the optimum or the relaxed plan does not fit).
+
+    Examples
+    --------
     >>> from opportune import load_plan
     >>> solver = OptimalSolver(OrderEngine(load_plan("example:gearbox")), visible=2)
     >>> pen = penalty_for("relaxed", solver)
@@ -687,6 +868,20 @@ def policy_gaps(bound: BoundResult, times: dict[str, dict]) -> dict[str, dict]:
     :data:`DEFECT_SE`: noise a 95% interval shows about once in 40 studies) or ``"defect"`` (beyond).
     Policies without a mean are left out.
 
+    Parameters
+    ----------
+    bound : BoundResult
+        The bound.
+    times : dict of str to dict
+        Policy name → its time's statistics (``mean``, ``ci95``).
+
+    Returns
+    -------
+    dict of str to dict
+        Policy name → ``mean``, ``gap``, ``below`` (None above the bound) and ``z``.
+
+    Examples
+    --------
     >>> r = BoundResult(10.0, 0.1, 200, "m", "motions", 200, 0, 0.0, 9.0)
     >>> gaps = policy_gaps(r, {"a": {"mean": 11.0, "ci95": [10.9, 11.1]}, "b": {"mean": 9.95, "ci95": [9.8, 10.1]},
     ...                        "c": {"mean": 9.5, "ci95": [9.45, 9.55]}})
@@ -713,6 +908,18 @@ def describe_gaps(gaps: dict[str, dict]) -> str:
     """:func:`policy_gaps` in words: ``lookahead 0.2% below; paper 1.0% above``, then what each mean below
     the bound means (one sentence per kind).
 
+    Parameters
+    ----------
+    gaps : dict of str to dict
+        What :func:`policy_gaps` gives.
+
+    Returns
+    -------
+    str
+        The sentences.
+
+    Examples
+    --------
     >>> print(describe_gaps({"a": {"gap": 0.1, "below": None, "z": None},
     ...                      "b": {"gap": -0.002, "below": "noise", "z": 0.5}}))
     a 10.0% above; b 0.2% below. b below the bound is sampling noise: no online policy's expected time is below it, and b's 95% interval reaches the bound's
