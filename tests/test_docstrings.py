@@ -2,7 +2,8 @@
 
 The objects are read from the reference pages themselves (``docs/reference/*.md``, each ``::: module``
 block and its ``members`` list), so a name added to the reference is checked at once.  For each one,
-and for every public method, class method and static method its class defines:
+and for every public method, class method and static method its class defines (or inherits, where
+the block says ``inherited_members: true``, as the reference then shows them too):
 
 * a docstring;
 * ``Parameters``, naming every parameter of the signature (for a class, of its constructor), when it
@@ -34,7 +35,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / "docs" / "reference"
-BLOCK = re.compile(r"^::: (?P<module>\S+)\n(?:\s+options:\n\s+members: \[(?P<members>[^\]]*)\])?", re.M)
+BLOCK = re.compile(r"^::: (?P<module>\S+)\n(?:\s+options:\n\s+members: \[(?P<members>[^\]]*)\]"
+                   r"(?P<inherited>\n\s+inherited_members: true)?)?", re.M)
 SECTION = re.compile(r"^(?P<name>[A-Z][A-Za-z ]+)\n-{3,}[ \t]*$", re.M)
 PARAMETER = re.compile(r"^(?P<names>\*{0,2}\w+(?:\s*,\s*\*{0,2}\w+)*)(?:\s*:.*)?$")
 
@@ -62,11 +64,21 @@ def shown() -> list[tuple[str, str, object]]:
                 obj = getattr(module, name)
                 if inspect.isclass(obj):
                     found.append((block["module"], name, obj))
-                    found += [(block["module"], f"{name}.{k}", v) for k, v in vars(obj).items()
-                              if not k.startswith("_") and _callable(v)]
+                    found += [(block["module"], f"{name}.{k}", v) for k, v in _members(obj, block["inherited"])]
                 elif callable(obj):
                     found.append((block["module"], name, obj))
     return found
+
+
+def _members(cls, inherited) -> list[tuple[str, object]]:
+    """The public methods of ``cls``: its own, and with ``inherited`` those of its bases it does not
+    override (the nearest base's, as Python finds them)."""
+    out: dict[str, object] = {}
+    for base in cls.__mro__[:-1] if inherited else (cls,):   # object's members are Python's
+        for k, v in vars(base).items():
+            if not k.startswith("_") and _callable(v):
+                out.setdefault(k, v)
+    return list(out.items())
 
 
 def _callable(member) -> bool:
