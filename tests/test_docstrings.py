@@ -14,8 +14,8 @@ the block says ``inherited_members: true``, as the reference then shows them too
 * ``Examples`` with at least one ``>>>`` line (tests/test_doctests.py runs them).
 
 Properties and constants are data: they need none of the sections.  An exception class needs only
-``Examples`` (where it is raised) unless it defines its own constructor, and so does an interface
-(a ``typing.Protocol``).
+``Examples`` (where it is raised) unless it defines its own constructor, and so do an interface
+(a ``typing.Protocol``) and an enumeration (an ``enum.Enum``: its members are its values).
 
 Modules still waiting for this are listed in :data:`PENDING_MODULES`, and single objects in
 :data:`PENDING`: each entry must still lack something (the test fails when it no longer does, so the
@@ -25,6 +25,7 @@ lists only shrink).
 from __future__ import annotations
 
 import ast
+import enum
 import importlib
 import inspect
 import re
@@ -162,8 +163,11 @@ def missing(obj) -> list[str]:
     lacks = []
     is_exception = inspect.isclass(function) and issubclass(function, BaseException)
     is_protocol = getattr(function, "_is_protocol", False)     # an interface: nobody constructs it
+    # an enumeration: its members are its values (its "constructor" looks one up, or is Python's
+    # functional API for new enumerations, which no user calls on it)
+    is_enum = inspect.isclass(function) and issubclass(function, enum.Enum)
     own_init = inspect.isclass(function) and "__init__" in vars(function)
-    wanted = [] if is_protocol or (is_exception and not own_init) else parameters(obj)
+    wanted = [] if is_protocol or is_enum or (is_exception and not own_init) else parameters(obj)
     if wanted:
         if "Parameters" not in found:
             lacks.append("Parameters")
@@ -255,3 +259,21 @@ def test_the_check_sees_what_is_missing():
     assert missing(stale) == ["no parameter 'seed' (documented in Parameters)"]
     assert missing(whole) == []
     assert missing(lambda: None) == ["a docstring"]
+
+    class Colour(enum.Enum):
+        """One line.
+
+        Examples
+        --------
+        >>> 1
+        1
+        """
+
+        RED = "red"
+
+    class Bare(enum.Enum):
+        """One line."""
+
+        RED = "red"
+
+    assert missing(Colour) == [] and missing(Bare) == ["Examples"]    # no Parameters for Python's lookup

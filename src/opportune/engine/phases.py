@@ -37,19 +37,34 @@ __all__ = ["PHASES", "CertainBounds", "CountQuestion", "EarlyRelaxation", "Exact
 class StopReason(enum.Enum):
     """Why a phase stopped: what :attr:`PhaseResult.stop` says.
 
-    Parameters
+    A reason is also found from its text: ``StopReason("time")`` is ``StopReason.OUT_OF_TIME``.
+
+    Attributes
     ----------
-    value : str
-        A reason's text (``"exact"``, ``"time"``, ``"memory"``, ``"estimated"``, ``"skipped"``):
-        ``StopReason("time")`` is ``StopReason.OUT_OF_TIME``.
-    names, module, qualname, type, start, boundary
-        Python's way of making a new enumeration from this one, which it refuses (``TypeError``: an
-        enumeration with members cannot be extended).
+    EXACT
+        It counted exactly: the answer.
+    OUT_OF_TIME
+        Its deadline came first.
+    OUT_OF_MEMORY
+        Its memo budget ran out.
+    ESTIMATED
+        It stated an estimate (the answer, or a step towards it).
+    SKIPPED
+        It does not apply to this question.
+
+    Raises
+    ------
+    ValueError
+        Looking up a text that is no reason's.
 
     Examples
     --------
     >>> StopReason("time") is StopReason.OUT_OF_TIME, StopReason.EXACT.value
     (True, 'exact')
+    >>> StopReason("late")
+    Traceback (most recent call last):
+    ...
+    ValueError: 'late' is not a valid StopReason
     """
 
     EXACT = "exact"                 # it counted exactly: the answer

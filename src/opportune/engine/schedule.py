@@ -424,6 +424,7 @@ class Schedule:
 
     @property
     def is_complete(self) -> bool:
+        """Whether every unit of the plan is installed (then :meth:`count` is 1).  O(1)."""
         return self.mask == self.engine.full
 
     @property
