@@ -2,7 +2,8 @@
 
 The objects are read from the reference pages themselves (``docs/reference/*.md``, each ``::: module``
 block and its ``members`` list), so a name added to the reference is checked at once.  For each one,
-and for every public method, class method and static method its class defines:
+and for every public method, class method and static method its class defines (or inherits, where
+the block says ``inherited_members: true``, as the reference then shows them too):
 
 * a docstring;
 * ``Parameters``, naming every parameter of the signature (for a class, of its constructor), when it
@@ -13,8 +14,8 @@ and for every public method, class method and static method its class defines:
 * ``Examples`` with at least one ``>>>`` line (tests/test_doctests.py runs them).
 
 Properties and constants are data: they need none of the sections.  An exception class needs only
-``Examples`` (where it is raised) unless it defines its own constructor, and so does an interface
-(a ``typing.Protocol``).
+``Examples`` (where it is raised) unless it defines its own constructor, and so do an interface
+(a ``typing.Protocol``) and an enumeration (an ``enum.Enum``: its members are its values).
 
 Modules still waiting for this are listed in :data:`PENDING_MODULES` (by their exact names, as the
 reference's ``:::`` blocks name them), and single objects in
@@ -25,6 +26,7 @@ lists only shrink).
 from __future__ import annotations
 
 import ast
+import enum
 import importlib
 import inspect
 import re
@@ -35,17 +37,15 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT / "docs" / "reference"
-BLOCK = re.compile(r"^::: (?P<module>\S+)\n(?:\s+options:\n\s+members: \[(?P<members>[^\]]*)\])?", re.M)
+BLOCK = re.compile(r"^::: (?P<module>\S+)\n(?:\s+options:\n\s+members: \[(?P<members>[^\]]*)\]"
+                   r"(?P<inherited>\n\s+inherited_members: true)?)?", re.M)
 SECTION = re.compile(r"^(?P<name>[A-Z][A-Za-z ]+)\n-{3,}[ \t]*$", re.M)
 PARAMETER = re.compile(r"^(?P<names>\*{0,2}\w+(?:\s*,\s*\*{0,2}\w+)*)(?:\s*:.*)?$")
 
-#: Modules of the reference whose docstrings are being rewritten with their code (the order engine's
-#: package and its schedule, phases, results, orders, statistics and estimates; the look-ahead, the
-#: optimum and pile programmes; the plans made by a tool).  Exact names: ``opportune.engine`` is the
-#: package's own exports, not its modules.
-PENDING_MODULES = ("opportune.engine", "opportune.engine.estimate", "opportune.engine.phases",
-                   "opportune.engine.poset", "opportune.engine.result", "opportune.engine.schedule",
-                   "opportune.engine.stats", "opportune.derive.learn", "opportune.derive.relax",
+#: Modules of the reference whose docstrings are being rewritten with their code (the
+#: look-ahead, the optimum and pile programmes, the window; the plans made by a tool).  Exact names:
+#: ``opportune.engine`` would be the package's own exports, not its modules.
+PENDING_MODULES = ("opportune.derive.learn", "opportune.derive.relax",
                    "opportune.policies.lookahead", "opportune.policies.optimal", "opportune.policies.pile",
                    "opportune.policies.window")
 
@@ -65,11 +65,21 @@ def shown() -> list[tuple[str, str, object]]:
                 obj = getattr(module, name)
                 if inspect.isclass(obj):
                     found.append((block["module"], name, obj))
-                    found += [(block["module"], f"{name}.{k}", v) for k, v in vars(obj).items()
-                              if not k.startswith("_") and _callable(v)]
+                    found += [(block["module"], f"{name}.{k}", v) for k, v in _members(obj, block["inherited"])]
                 elif callable(obj):
                     found.append((block["module"], name, obj))
     return found
+
+
+def _members(cls, inherited) -> list[tuple[str, object]]:
+    """The public methods of ``cls``: its own, and with ``inherited`` those of its bases it does not
+    override (the nearest base's, as Python finds them)."""
+    out: dict[str, object] = {}
+    for base in cls.__mro__[:-1] if inherited else (cls,):   # object's members are Python's
+        for k, v in vars(base).items():
+            if not k.startswith("_") and _callable(v):
+                out.setdefault(k, v)
+    return list(out.items())
 
 
 def _callable(member) -> bool:
@@ -153,8 +163,11 @@ def missing(obj) -> list[str]:
     lacks = []
     is_exception = inspect.isclass(function) and issubclass(function, BaseException)
     is_protocol = getattr(function, "_is_protocol", False)     # an interface: nobody constructs it
+    # an enumeration: its members are its values (its "constructor" looks one up, or is Python's
+    # functional API for new enumerations, which no user calls on it)
+    is_enum = inspect.isclass(function) and issubclass(function, enum.Enum)
     own_init = inspect.isclass(function) and "__init__" in vars(function)
-    wanted = [] if is_protocol or (is_exception and not own_init) else parameters(obj)
+    wanted = [] if is_protocol or is_enum or (is_exception and not own_init) else parameters(obj)
     if wanted:
         if "Parameters" not in found:
             lacks.append("Parameters")
@@ -246,3 +259,21 @@ def test_the_check_sees_what_is_missing():
     assert missing(stale) == ["no parameter 'seed' (documented in Parameters)"]
     assert missing(whole) == []
     assert missing(lambda: None) == ["a docstring"]
+
+    class Colour(enum.Enum):
+        """One line.
+
+        Examples
+        --------
+        >>> 1
+        1
+        """
+
+        RED = "red"
+
+    class Bare(enum.Enum):
+        """One line."""
+
+        RED = "red"
+
+    assert missing(Colour) == [] and missing(Bare) == ["Examples"]    # no Parameters for Python's lookup

@@ -37,6 +37,13 @@ def compiled_core():
     ``OPPORTUNE_PURE_PYTHON=1`` (then the pure-Python fallbacks run).  The one way above the engine to
     ask for it: what a report states, what the pile's optimum is built on.  O(1) once looked for.
 
+    Returns
+    -------
+    module or None
+        ``opportune._native``, or None when the pure-Python fallbacks run.
+
+    Examples
+    --------
     >>> core = compiled_core()
     >>> core is None or hasattr(core, "PileCore")
     True

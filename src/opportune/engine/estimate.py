@@ -37,23 +37,11 @@ shrinks like ``1/sqrt(runs)``, calibrated on measured runs
 Honest limits: the estimator is unbiased, but on wide posets its distribution
 is right-skewed (rare runs find much of the mass), so a few runs usually lie
 below the truth, and the interval for a few runs is wide: it has to be.  More
-``particles`` make each run both less variable and less skewed.  On ARC111
-(111 tasks) a run of 1,024 particles takes ~3 s, and its estimate varies
-4-fold (80 runs: coefficient of variation 0.83, logs spread 0.62 and skewed
-0.6; the largest run 4.7 times the truth); 10 s give 2–3 runs and an interval
-of hundreds of percent.  Until issue 11 the interval was Student's t on the
-estimates alone, stopped on accuracy from 4 runs on: it covered the truth in
-only 63–90% of the cases measured with few particles or few runs (and missed
-ARC111's by 5% while stating ±3.7%).  With 128 particles ARC111's runs spread
-1.1 in logs (the largest of 300 runs 58 times the truth): no interval from
-the runs is reliable there (resampled, coverage falls to 87% at 40 runs), so
-use more particles.
-The previous estimator (one-path importance sampling) stated ±55–120% on
-ARC111 around 10^102.3–10^102.9, while long runs of this one (8,000 and
-40,000 particles) agree on about 10^103.0–10^103.1.  ARC111 is now counted
-exactly through its hub (:mod:`opportune.engine.hub`, 10^103.0294), which
-:func:`estimate_count` tries before sampling; the estimator is what is left
-for orders with neither structure.
+``particles`` make each run both less variable and less skewed (a run's cost and spread on ARC111,
+measured: the documentation's page on counting, which also says how the interval came to take
+the logs into account).  Orders with a hub are counted exactly through it
+(:mod:`opportune.engine.hub`), which :func:`estimate_count` tries before sampling; the estimator is
+what is left for orders with neither structure.
 
 An estimate always comes back, on time.  Everything stops at one
 :class:`~opportune.engine.deadline.Deadline`, read inside a run and inside a
@@ -64,8 +52,7 @@ path of Knuth's estimator (hook-weighted sequential importance sampling,
 unbiased from one path).  Where no run fits the time (a run costs about
 ``SMC_COST`` × particles × n² seconds: thousands of elements), the estimate is
 the mean of such paths and the interval is the order's bounds; with no time at
-all, the middle of the bounds ``1 <= e <= n!``.  On 10,000 elements the pass
-takes ~0.2 s and a path ~0.05 s of CPU here.
+all, the middle of the bounds ``1 <= e <= n!``.
 """
 
 from __future__ import annotations
@@ -711,49 +698,100 @@ def estimate_count(poset: Poset, mask: int | None = None, *, rel_error: float = 
                    relaxation: bool | None = None, resume: Estimate | None = None, threads: int = 1) -> Estimate:
     """Estimate the number of linear extensions of the subposet induced on ``mask``, with a stated error.
 
-    All the work stops at ``deadline`` (a :class:`~opportune.engine.deadline.Deadline`; a float is a
-    ``time.perf_counter()`` moment; None: none) and ``time_limit`` seconds from now, as below; the
-    call returns within the granularity of the checks after it (milliseconds on 10,000 elements:
-    every loop whose length depends on the order reads the deadline, inside a run or a path too).
+    All the work stops at ``deadline`` and ``time_limit`` seconds from now, as below; the call returns
+    within the granularity of the checks after it (every loop whose length depends on the order
+    reads the deadline, inside a run or a path too).  The steps, the first with the answer giving it:
 
-    Tries the exact counter first (at most ``exact_memo`` new memo entries and
-    a quarter of ``time_limit``); if it finishes, returns the exact count with
-    ``rel_error=0``.  Otherwise takes one pass over the order (:class:`OrderSketch`:
-    certain bounds, and one path of Knuth's estimator, so that an estimate exists from the first
-    milliseconds on), then splits the set into pieces as the counter does and tries to count each
-    hard piece exactly through a hub
-    (:func:`~opportune.engine.hub.hub_split`) until the fraction ``hub`` of
-    ``time_limit`` has passed (0 disables this).  What is still not counted
-    is estimated by sequential Monte Carlo (see the module doc) with ``particles`` sets per step, finishing sets of at most ``tail``
-    elements exactly (default: the largest size the counter handles within
-    ``tail_memo`` new entries, found by probing), and repeats independent runs
-    until the stated ``confidence`` interval of their mean (see
-    :func:`_stated_error`) is within ``rel_error`` of it (after at least
-    ``min_runs`` runs: stopping as soon as a few runs happen to agree would
-    make the interval optimistic) or ``time_limit`` seconds have passed (the
-    first two runs may go on ``overrun`` seconds longer, never past ``deadline``: without two runs
-    no error can be stated).  A run predicted (``SMC_COST``) to take longer than the time left is not
-    started (and one that would take more than a quarter of the time left has fewer particles,
-    down to 64): the time, up to the end of the first two runs', goes to more paths of Knuth's estimator,
-    whose mean is then the estimate (method ``"sis"``, no stated error).  The returned ``rel_error`` is the half-width actually achieved
-    (infinite with fewer than two runs) — it may exceed the requested one by
-    far (hundreds of percent from 2–3 runs of a variable estimator), and is
-    then the honest statement of the error.
+    1. the exact counter (at most ``exact_memo`` new memo entries and a quarter of ``time_limit``):
+       the exact count with ``rel_error=0`` if it finishes;
+    2. one pass over the order (:class:`OrderSketch`: certain bounds, and one path of Knuth's
+       estimator, so that an estimate exists from that pass on);
+    3. the set split into pieces as the counter does, each hard piece counted exactly through a hub
+       (:func:`~opportune.engine.hub.hub_split`) until the fraction ``hub`` of ``time_limit`` has
+       passed;
+    4. with the compiled core, on a set of :data:`ARMC_MIN_N` to :data:`ARMC_MAX_N` elements, with
+       ``exact_memo > 0`` (its relaxations are exact counts) and a time limit or deadline (without
+       one its draws could go on for ever where hits are rare): adaptive relaxation Monte Carlo on
+       the whole set (:mod:`opportune.engine.relaxmc`), with the share :data:`ARMC_SHARE` of the
+       time left.  Its estimate (method ``"armc"``, ``samples`` its draws) is returned at once if
+       its stated interval is within ``rel_error``, else at the end if it is narrower than the
+       runs';
+    5. what is still not counted is estimated by sequential Monte Carlo (see the module doc),
+       repeating independent runs until the stated ``confidence`` interval of their mean (see
+       :func:`_stated_error`) is within ``rel_error`` of it (after at least ``min_runs`` runs:
+       stopping as soon as a few runs happen to agree would make the interval optimistic) or
+       ``time_limit`` seconds have passed (the first two runs may go on ``overrun`` seconds longer,
+       never past ``deadline``: without two runs no error can be stated).  A run predicted
+       (``SMC_COST``) to take longer than the time left is not started (and one that would take
+       more than a quarter of the time left has fewer particles, down to 64): the time, up to the
+       end of the first two runs', goes to more paths of Knuth's estimator, whose mean is then the
+       estimate (method ``"sis"``, no stated error).
 
-    With the compiled core, on a set of :data:`ARMC_MIN_N` to :data:`ARMC_MAX_N` elements, with
-    ``exact_memo > 0`` (its relaxations are exact counts: ``exact_memo=0`` asks for sampling alone,
-    unless ``relaxation`` is True; False turns it off) and a time limit or deadline (without one its
-    draws could go on for ever where hits are rare), adaptive relaxation Monte Carlo on the whole set (:mod:`opportune.engine.relaxmc`) comes before the
-    runs, with the share :data:`ARMC_SHARE` of the time left: its estimate (method ``"armc"``,
-    ``samples`` its draws) is returned at once if its stated interval is within ``rel_error``, else at
-    the end if it is narrower than the runs' (``resume``: an earlier ``"armc"`` estimate of the same
-    set, whose relaxation and draws it goes on with).  ``log10_low``/``log10_high`` always hold finite
-    bounds (the stated interval within the order's certain bounds), and ``value`` is never nan.
+    The returned ``rel_error`` is the half-width actually achieved (infinite with fewer than two
+    runs): it may exceed the requested one by far (hundreds of percent from 2–3 runs of a variable
+    estimator), and is then the honest statement of the error.  ``log10_low``/``log10_high`` always
+    hold finite bounds (the stated interval within the order's certain bounds), and ``value`` is
+    never nan.  Deterministic given ``seed`` when it stops on accuracy; a stop on the clock depends
+    on machine speed.
 
-    Pass the plan's ``counter`` to reuse (and extend) its memo.  Deterministic
-    given ``seed`` when it stops on accuracy; a stop on the clock depends on
-    machine speed.
+    Parameters
+    ----------
+    poset : Poset
+        The order.
+    mask : int or None, optional
+        The elements to count the orders of (a bitmask; None: all of them).
+    rel_error : float, default 0.01
+        The relative error to stop at (the interval's half-width over the estimate).
+    time_limit : float or None, default 10.0
+        Seconds for the whole estimate (None: none but ``deadline``).
+    seed : int, default 0
+        Seed of every random draw.
+    confidence : float, default 0.95
+        The probability the stated interval should hold, in (0, 1).
+    counter : Counter or None, optional
+        The plan's counter of ``poset``, to reuse (and extend) its memo (None, or one of another
+        order: a new one).
+    exact_memo : int, default 300,000
+        New memo entries the first exact try may add (0: no exact try, and no relaxation Monte
+        Carlo unless ``relaxation`` is True).
+    particles : int, default 1024
+        Sets per step of each sequential Monte Carlo run.
+    tail : int or None, optional
+        Sets of at most this many elements are finished exactly (None: the largest size the
+        counter handles within ``tail_memo`` new entries, found by probing).
+    tail_memo : int, default 500
+        The memo entries that probe allows.
+    min_runs : int, default 20
+        Runs before the error may stop the estimate.
+    hub : float, default 0.85
+        The share of ``time_limit`` the hub split may use (0 disables it).
+    overrun : float, default inf
+        Seconds the first two runs may go on past ``time_limit`` (never past ``deadline``).
+    deadline : Deadline or float or None, optional
+        When all the work stops (a :class:`~opportune.engine.deadline.Deadline`; a float is a
+        ``time.perf_counter()`` moment; None: none).
+    relaxation : bool or None, optional
+        Relaxation Monte Carlo on or off (None: on when ``exact_memo > 0``).
+    resume : Estimate or None, optional
+        An earlier ``"armc"`` estimate of the same set, whose relaxation and draws it goes on with.
+    threads : int, default 1
+        Threads that count and draw in relaxation Monte Carlo (the same answer for any number, but
+        for a stop on the clock).
 
+    Returns
+    -------
+    Estimate
+        The estimate: ``value``, ``rel_error``, ``confidence``, ``method`` (``"exact"``, ``"smc"``,
+        ``"armc"``, ``"sis"`` or ``"bounds"``), ``log10_low``/``log10_high``, and the count itself
+        in ``exact`` when exact.
+
+    Raises
+    ------
+    ValueError
+        ``mask`` is not a subset of ``0..n-1``, or ``confidence`` is not in (0, 1).
+
+    Examples
+    --------
     >>> p = Poset.from_pairs(4, [(0, 1), (2, 3)])
     >>> e = estimate_count(p)
     >>> e.value, e.rel_error, e.method

@@ -26,7 +26,31 @@ class ExactCounting:
     """Exact counting for an :class:`~opportune.engine.schedule.OrderEngine` (its base class)."""
 
     def counter(self, strategies: int) -> Counter | None:
-        """Counter for the sequences admissible under *every* strategy in the bitmask (None: none are)."""
+        """Counter for the sequences admissible under *every* strategy in the bitmask.
+
+        Made once per set of strategies (their orders united) and kept, with its memo, for the
+        engine's life.
+
+        Parameters
+        ----------
+        strategies : int
+            A non-empty set of strategies (bit *k* for ``plan.strategies[k]``).
+
+        Returns
+        -------
+        Counter or None
+            The :class:`~opportune.engine.count.Counter` of the united order, or None where the
+            strategies contradict each other (no sequence is admissible under all of them).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], strategies={"x": {"c": ["a"]}, "y": {"c": ["b"]}}))
+        >>> engine.counter(0b01).count(engine.full), engine.counter(0b11).count(engine.full)
+        (3, 2)
+        >>> OrderEngine(make_plan(["a", "c"], strategies={"x": {"c": ["a"]}, "y": {"a": ["c"]}})).counter(0b11) is None
+        True
+        """
         if strategies not in self._counters:
             members = [self.posets[s] for s in range(self.k) if strategies >> s & 1]
             poset = members[0]
@@ -66,26 +90,137 @@ class ExactCounting:
         return terms
 
     def terms(self, consistent: int, deadline: Deadline | None = None) -> list:
-        """The inclusion–exclusion terms ``(sign, counter)`` of a set of strategies (the single
-        strategies first; cached): what :mod:`opportune.engine.phases` counts term by term.  Past
-        ``deadline``, :class:`BudgetExceeded`; more than ``MAX_STRATEGIES_EXACT`` strategies too."""
+        """The inclusion–exclusion terms ``(sign, counter)`` of a set of strategies.
+
+        What :mod:`opportune.engine.phases` counts term by term: the admissible sequences under any
+        of the strategies are the signed sum of the terms' counts.  Cached per set.
+
+        Parameters
+        ----------
+        consistent : int
+            The strategies (a bitmask).
+        deadline : Deadline or None, optional
+            Read before each union of orders (None: none).
+
+        Returns
+        -------
+        list of (int, Counter)
+            One term per non-empty subset whose orders agree, the single strategies first; the sign
+            ``+1`` for odd subsets, ``-1`` for even ones.
+
+        Raises
+        ------
+        BudgetExceeded
+            Past ``deadline`` (the counters made so far are kept), or more than
+            ``MAX_STRATEGIES_EXACT`` strategies (:mod:`opportune.engine.tuning`).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], strategies={"x": {"c": ["a"]}, "y": {"c": ["b"]}}))
+        >>> [(sign, c.count(engine.full)) for sign, c in engine.terms(0b11)]     # 3 + 3 - 2
+        [(1, 3), (1, 3), (-1, 2)]
+        """
         return self._terms(consistent, deadline)
 
     def hub_found_in(self, terms: list) -> bool:
-        """Whether a counter of the terms ``(sign, counter)`` counts through a hub it found.  O(terms)."""
+        """Whether a counter of the terms ``(sign, counter)`` counts through a hub it found.  O(terms).
+
+        Parameters
+        ----------
+        terms : list of (int, Counter)
+            Terms of :meth:`terms`.
+
+        Returns
+        -------
+        bool
+            True if one of them has a hub (never on orders the plain counter handles).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> engine.count(0, engine.all_strategies), engine.hub_found_in(engine.terms(engine.all_strategies))
+        (3, False)
+        """
         hubs = self._hubs
         return any(hubs.get(c) is not None for _, c in terms)
 
     def hub_looked_for(self, counter: Counter) -> bool:
-        """Whether a hub was looked for on ``counter`` (found, not found, or a search cut short).  O(1)."""
+        """Whether a hub was looked for on ``counter`` (found, not found, or a search cut short).  O(1).
+
+        Parameters
+        ----------
+        counter : Counter
+            A counter of this engine.
+
+        Returns
+        -------
+        bool
+            True once its plain count ran out of its probe and a hub was searched for.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> engine.hub_looked_for(engine.counter(engine.all_strategies))     # a small order: never
+        False
+        """
         return counter in self._hubs or counter in self._hub_search
 
     def end_probe(self, counter: Counter) -> None:
-        """End the plain count's probe on ``counter``: its next count looks for a hub at once.  O(1)."""
+        """End the plain count's probe on ``counter``: its next count looks for a hub at once.  O(1).
+
+        What the exact phases do after a plain turn that did not finish, so that the engine's turn
+        goes to the hub.
+
+        Parameters
+        ----------
+        counter : Counter
+            A counter of this engine.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> engine.end_probe(engine.counter(engine.all_strategies))
+        >>> engine.count(0, engine.all_strategies)           # exact either way
+        3
+        """
         self._probe_left[counter] = 0
 
     def count(self, mask: int, consistent: int) -> int:
-        """Exact number of admissible completions after installing ``mask`` (raises BudgetExceeded)."""
+        """Exact number of admissible completions after installing ``mask``.
+
+        Inclusion–exclusion over the strategies still consistent, each term counted plainly or
+        through its hub; cached per state.  Callers above the engine use :meth:`Schedule.count
+        <opportune.engine.schedule.Schedule.count>`.
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        int
+            The number of admissible completions.
+
+        Raises
+        ------
+        BudgetExceeded
+            The count did not fit the memo or time budget, or the deadline of :meth:`deadline`
+            (what was counted stays in the memos: a later call goes on from there).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], strategies={"x": {"c": ["a"]}, "y": {"c": ["b"]}}))
+        >>> engine.count(0, 0b11), engine.count(0, 0b01), engine.count(0b001, 0b11)
+        (4, 3, 2)
+        """
         terms = self._terms_cache.get(consistent)
         if terms is None:
             terms = self._terms(consistent)
@@ -184,10 +319,38 @@ class ExactCounting:
 
     @contextmanager
     def deadline(self, until: float | None):
-        """Within the block, every exact count of this engine stops at ``until`` (a
-        ``time.perf_counter()`` value), raising :class:`BudgetExceeded`: one deadline for
-        all the counts of a decision, not a limit per count.  What was counted stays in
-        the memos, so a later call continues from there.
+        """Within the block, every exact count of this engine stops at ``until``.
+
+        One deadline for all the counts of a decision, not a limit per count.  What was counted
+        stays in the memos, so a later call continues from there.
+
+        Parameters
+        ----------
+        until : float or None
+            A ``time.perf_counter()`` moment (None: none within the block).
+
+        Yields
+        ------
+        OrderEngine
+            This engine.
+
+        Raises
+        ------
+        BudgetExceeded
+            From a count inside the block, once ``until`` has passed.
+
+        Examples
+        --------
+        >>> import time
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> with engine.deadline(time.perf_counter() - 1.0):      # already passed
+        ...     engine.count(0, engine.all_strategies)
+        Traceback (most recent call last):
+        ...
+        opportune.engine.deadline.BudgetExceeded: the deadline has passed
+        >>> engine.count(0, engine.all_strategies)
+        3
         """
         # An absolute stop (Counter.deadline), not a time limit from each count's start: work done
         # before a count (a probe, a hub search) must not push the end of the decision later.
@@ -203,11 +366,36 @@ class ExactCounting:
 
     @contextmanager
     def time_limited(self, seconds: float | None):
-        """Within the block, every exact count of this engine gives up after ``seconds``
-        (raising :class:`BudgetExceeded`; what it counted stays in the memo).
+        """Within the block, every exact count of this engine gives up after ``seconds``.
 
         For a caller that must know early whether exact counting is affordable on a plan,
-        without waiting for the memo budget to run out.
+        without waiting for the memo budget to run out.  The engine's and its counters' own limits
+        come back after the block.
+
+        Parameters
+        ----------
+        seconds : float or None
+            Seconds per count (None: no limit within the block).
+
+        Yields
+        ------
+        OrderEngine
+            This engine.
+
+        Raises
+        ------
+        BudgetExceeded
+            From a count inside the block that took longer (what it counted stays in the memo).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> with engine.time_limited(5.0):
+        ...     engine.time_limit, engine.count(0, engine.all_strategies)
+        (5.0, 3)
+        >>> engine.time_limit is None
+        True
         """
         saved = self.time_limit, {key: c.time_limit for key, c in self._counters.items() if c is not None}
         self.time_limit = seconds
@@ -223,10 +411,32 @@ class ExactCounting:
                     c.time_limit = saved[1].get(key, saved[0])
 
     def warm_up(self, time_limit: float | None = None, mask: int = 0, consistent: int | None = None) -> bool:
-        """Build what every decision uses (:meth:`prepare`), then count a state exactly (default: the
-        first), within ``time_limit`` seconds in all: this chooses how the plan is counted (finding a
-        hub if it has one) and fills the memos every later question uses.  True if it finished; if
-        not, what it built and counted is kept.  Callers above the engine use :meth:`Schedule.warm_up`.
+        """Build what every decision uses (:meth:`prepare`), then count a state exactly.
+
+        This chooses how the plan is counted (finding a hub if it has one) and fills the memos every
+        later question uses.  If it does not finish, what it built and counted is kept.  Callers
+        above the engine use :meth:`Schedule.warm_up <opportune.engine.schedule.Schedule.warm_up>`.
+
+        Parameters
+        ----------
+        time_limit : float or None, optional
+            Seconds for all of it (None: no limit).
+        mask : int, default 0
+            The state's installed units (default: the first state).
+        consistent : int or None, optional
+            The state's open strategies (None: all).
+
+        Returns
+        -------
+        bool
+            True if it finished in time.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> engine.warm_up(1.0), engine.warm_up(1.0, mask=0b001, consistent=engine.all_strategies)
+        (True, True)
         """
         until = time.perf_counter() + time_limit if time_limit is not None else None
         try:
@@ -241,8 +451,22 @@ class ExactCounting:
         """Build the plan's tables that any decision needs, so that none is built inside one: the tables
         that find installable units, and each strategy's cover pairs (where the chains of an estimate
         move).  O(n / 4 · 16 + covers) big-integer operations per strategy, once per engine; each
-        table is kept when finished, the rest raises ``BudgetExceeded`` past ``deadline``.
+        table is kept when finished.
 
+        Parameters
+        ----------
+        deadline : Deadline or float or None, optional
+            When to stop (a :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()``
+            moment; None: never).
+
+        Raises
+        ------
+        BudgetExceeded
+            Past ``deadline`` (:class:`~opportune.engine.deadline.BudgetExceeded`); the tables
+            finished so far are kept.
+
+        Examples
+        --------
         >>> from opportune import OrderEngine, make_plan
         >>> OrderEngine(make_plan(["a", "b"], {"b": ["a"]})).prepare()
         """

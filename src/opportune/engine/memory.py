@@ -166,6 +166,13 @@ class MemoryUpkeep:
         hub paths and the per-state caches (sampled, so O(counters + caches), not O(entries); see
         :mod:`opportune.engine.memory`).  What a service accounts per plan.
 
+        Returns
+        -------
+        int
+            The estimated bytes, the programmes' grants (:meth:`reserve_programme`) included.
+
+        Examples
+        --------
         >>> from opportune import OrderEngine, make_plan
         >>> OrderEngine(make_plan(["a", "b"], {"b": ["a"]})).nbytes() > 0
         True
@@ -192,6 +199,20 @@ class MemoryUpkeep:
         (what a service accounts per plan) and are not shrunk: :meth:`maintain` keeps the memos within
         the rest of the limit.  O(programmes).
 
+        Parameters
+        ----------
+        name : hashable
+            The programme's name.
+        nbytes : int
+            The bytes it needs.
+
+        Returns
+        -------
+        bool
+            True if granted.
+
+        Examples
+        --------
         >>> from opportune import OrderEngine, make_plan
         >>> e = OrderEngine(make_plan(["a"], {}), memory_limit=1000)
         >>> e.reserve_programme("optimum", 400), e.reserve_programme("other", 400), e.nbytes() > 400
@@ -206,7 +227,18 @@ class MemoryUpkeep:
     def clear_state_caches(self) -> None:
         """Forget the per-state caches (options, positions, installable sets; not the counters' memos):
         what a service does to a plan over its memory share between requests.  Later questions about
-        those states are counted again (from the memos).  O(1) per cache."""
+        those states are counted again (from the memos).  O(1) per cache.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> e = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> e.options(0, e.all_strategies)
+        {'a': 2, 'b': 1}
+        >>> e.clear_state_caches()
+        >>> e.options(0, e.all_strategies)       # counted again, from the memo
+        {'a': 2, 'b': 1}
+        """
         for cache in (self._count_cache, self._option_cache, self._options_cache, self._positions_cache,
                       self._installable_cache):
             cache.clear()
@@ -222,10 +254,17 @@ class MemoryUpkeep:
     def deciding(self):
         """Within the block (a decision), memos and per-state caches may grow past their caps but are
         never evicted, trimmed or restarted: dropping hundreds of thousands of entries took a decision
-        of a long-running cell past its budget (207 ms against 50).  :meth:`maintain`, called between
-        looks (the sequencer does it after each outcome), does that work.  What piles up meanwhile is
-        bounded by the decision's budget.  Blocks may nest and overlap (threads sharing the engine).
+        of a long-running cell past its budget.  :meth:`maintain`, called between looks (the
+        sequencer does it after each outcome), does that work.  What piles up meanwhile is bounded by
+        the decision's budget.  Blocks may nest and overlap (threads sharing the engine).
 
+        Yields
+        ------
+        OrderEngine
+            This engine.
+
+        Examples
+        --------
         >>> from opportune import OrderEngine, make_plan
         >>> e = OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))
         >>> with e.deciding():
@@ -250,8 +289,23 @@ class MemoryUpkeep:
     def maintain(self) -> bool:
         """Between decisions: clear the per-state caches over their cap and evict or restart every
         counter's memo over its own (:meth:`Counter.maintain`).  Does nothing while a decision is under
-        way (another thread's); True if anything was dropped.  Complexity: O(counters + caches) when
-        all are under their caps, else O(entries dropped)."""
+        way (another thread's).  With a ``memory_limit``, also shrinks the memos when the engine's
+        bytes are over it (measured at most every ``measure_every`` seconds; a shrink works in slices
+        of ``SHRINK_SECONDS`` and goes on at the next call).  Complexity: O(counters + caches) when
+        all are under their caps, else O(entries dropped).
+
+        Returns
+        -------
+        bool
+            True if anything was dropped.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> e = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> e.count(0, e.all_strategies), e.maintain()     # all under their caps: nothing to drop
+        (3, False)
+        """
         with self._upkeep_lock:
             if self._deciding:
                 return False
@@ -302,7 +356,32 @@ class MemoryUpkeep:
         """Drop all but the newest ``keep`` share of every memo and clear the per-state caches, now
         (between decisions): what a service does when the whole process is over its memory cap.
         Later questions are counted again.  Stops at ``deadline`` (what is left is valid; the next
-        call with the same ``keep`` goes on where it stopped); True if it finished.  O(entries dropped)."""
+        call with the same ``keep`` goes on where it stopped).  Does nothing during a decision
+        (:meth:`deciding`).  O(entries dropped).
+
+        Parameters
+        ----------
+        keep : float, default 0.0
+            The share of each memo's entries to keep (the newest).
+        deadline : Deadline or float or None, optional
+            When to stop (a :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()``
+            moment; None: never).
+
+        Returns
+        -------
+        bool
+            True if it finished (False too when a decision is under way).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> e = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> e.count(0, e.all_strategies), e.shrink(), e.count(0, e.all_strategies)   # counted again
+        (3, True, 3)
+        >>> with e.deciding():
+        ...     e.shrink()
+        False
+        """
         with self._upkeep_lock:
             if self._deciding:
                 return False

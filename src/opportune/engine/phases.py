@@ -35,7 +35,37 @@ __all__ = ["PHASES", "CertainBounds", "CountQuestion", "EarlyRelaxation", "Exact
 
 
 class StopReason(enum.Enum):
-    """Why a phase stopped."""
+    """Why a phase stopped: what :attr:`PhaseResult.stop` says.
+
+    A reason is also found from its text: ``StopReason("time")`` is ``StopReason.OUT_OF_TIME``.
+
+    Attributes
+    ----------
+    EXACT
+        It counted exactly: the answer.
+    OUT_OF_TIME
+        Its deadline came first.
+    OUT_OF_MEMORY
+        Its memo budget ran out.
+    ESTIMATED
+        It stated an estimate (the answer, or a step towards it).
+    SKIPPED
+        It does not apply to this question.
+
+    Raises
+    ------
+    ValueError
+        Looking up a text that is no reason's.
+
+    Examples
+    --------
+    >>> StopReason("time") is StopReason.OUT_OF_TIME, StopReason.EXACT.value
+    (True, 'exact')
+    >>> StopReason("late")
+    Traceback (most recent call last):
+    ...
+    ValueError: 'late' is not a valid StopReason
+    """
 
     EXACT = "exact"                 # it counted exactly: the answer
     OUT_OF_TIME = "time"            # its deadline came first
@@ -46,7 +76,21 @@ class StopReason(enum.Enum):
 
 @dataclass(slots=True)
 class PhaseResult:
-    """What a phase gives back: why it stopped, and the answer if it has one."""
+    """What a phase gives back: why it stopped, and the answer if it has one.
+
+    Parameters
+    ----------
+    stop : StopReason
+        Why the phase stopped.
+    answer : CountResult or None, optional
+        The count, if this phase has the answer (:func:`count_in_phases` returns the first).
+
+    Examples
+    --------
+    >>> r = PhaseResult(StopReason.EXACT, CountResult(3))
+    >>> r.stop.value, r.answer.value, PhaseResult(StopReason.SKIPPED).answer
+    ('exact', 3, None)
+    """
 
     stop: StopReason
     answer: CountResult | None = None
@@ -56,8 +100,47 @@ class PhaseResult:
 class CountQuestion:
     """One call of ``count_result``: the state asked about, the error asked, and what the phases
     leave for one another (the inclusion–exclusion terms, the first relaxation estimate, the terms'
-    estimates).  ``end`` is the call's one deadline; ``exact_end`` (a ``time.perf_counter()`` moment)
-    ends the exact phases."""
+    estimates).  Made by :meth:`ask`; the phases read and fill it.
+
+    Parameters
+    ----------
+    schedule : Schedule
+        The state asked about (:class:`~opportune.engine.schedule.Schedule`).
+    rel_error : float
+        The relative error an estimate aims at.
+    seed : int
+        Seed of the estimates' draws.
+    threads : int
+        Threads for relaxation Monte Carlo.
+    start : float
+        When the call began (a ``time.perf_counter()`` moment).
+    end : Deadline
+        The call's one deadline.
+    terms : list or None
+        The inclusion–exclusion terms, ``(sign, counter)`` each (None: they did not fit the time, or
+        too many strategies; :meth:`grace` then takes the single strategies).
+    remaining : int
+        The units still to install (a bitmask).
+    exact_end : float, default 0.0
+        When the exact phases end (a ``time.perf_counter()`` moment).
+    union_only : bool, default False
+        True once the terms are the single strategies only: the answer is bounds on their union.
+    early : Estimate or None, optional
+        Relaxation Monte Carlo's first estimate, once made.
+    ests : list of Estimate, optional
+        Each term's estimate, in order, once made.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine.deadline import Deadline
+    >>> from opportune.engine.schedule import Schedule
+    >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+    >>> q = CountQuestion.ask(s, rel_error=0.01, time_limit=1.0, seed=0, exact_share=0.65,
+    ...                       deadline=Deadline.NEVER, threads=1)
+    >>> q.remaining == 0b111, len(q.terms), q.start < q.exact_end < q.end.at
+    (True, 1, True)
+    """
 
     schedule: object
     rel_error: float
@@ -75,9 +158,46 @@ class CountQuestion:
     @classmethod
     def ask(cls, schedule, rel_error: float, time_limit: float, seed: int, exact_share: float,
             deadline: Deadline, threads: int) -> "CountQuestion":
-        """The question of one ``count_result`` call: its deadline (``plain + time_limit`` seconds
-        from now, or ``deadline`` if sooner), its terms (built within it; None if they do not fit) and
-        when its exact phases end."""
+        """The question of one ``count_result`` call: its deadline, its terms and when its exact
+        phases end.
+
+        The deadline is ``plain + time_limit`` seconds from now, or ``deadline`` if sooner, where
+        ``plain`` is the engine's own time limit, or a tenth of ``time_limit``; the terms are built
+        within it.
+
+        Parameters
+        ----------
+        schedule : Schedule
+            The state to count (:class:`~opportune.engine.schedule.Schedule`).
+        rel_error : float
+            The relative error an estimate aims at.
+        time_limit : float
+            Seconds beyond the engine's own exact time.
+        seed : int
+            Seed of the estimates' draws.
+        exact_share : float
+            The share of ``time_limit`` the exact phases may run.
+        deadline : Deadline
+            A moment to stop at if sooner (``Deadline.NEVER``: none).
+        threads : int
+            Threads for relaxation Monte Carlo.
+
+        Returns
+        -------
+        CountQuestion
+            The question, its terms None if they did not fit the deadline.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine.deadline import Deadline
+        >>> from opportune.engine.schedule import Schedule
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> q = CountQuestion.ask(s, rel_error=0.01, time_limit=1.0, seed=0, exact_share=0.65,
+        ...                       deadline=Deadline.NEVER, threads=1)
+        >>> q.rel_error, round(q.end.remaining())      # 0.1 s of plain time + 1 s
+        (0.01, 1)
+        """
         start = time.perf_counter()
         engine = schedule.engine
         plain = engine.time_limit if engine.time_limit is not None else time_limit / 10
@@ -99,7 +219,25 @@ class CountQuestion:
 
     def grace(self) -> None:
         """Once the exact phases are over: the estimate gets at least ``GRACE`` seconds (its pass over
-        the orders, if they are small), and without the terms, the single strategies."""
+        the orders, if they are small), and without the terms, the single strategies.
+
+        Changes the question in place: ``end`` moves to ``GRACE`` seconds from now if it was sooner;
+        ``terms`` becomes one ``(1, counter)`` per consistent strategy if it was None
+        (``union_only`` then True).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine.deadline import Deadline
+        >>> from opportune.engine.schedule import Schedule
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> q = CountQuestion.ask(s, rel_error=0.01, time_limit=1.0, seed=0, exact_share=0.65,
+        ...                       deadline=Deadline.after(0.0), threads=1)
+        >>> q.terms = None          # as when the terms did not fit the time
+        >>> q.grace()
+        >>> q.union_only, len(q.terms), q.end.remaining() > 0
+        (True, 1, True)
+        """
         if self.end.remaining() < tuning.GRACE:
             self.end = Deadline.after(tuning.GRACE)
         if self.terms is None:
@@ -171,8 +309,8 @@ class ExactTurns:
     plain count a ``PLAIN_SHARE`` of the engine's turn once a hub is found.  After the second round
     (or when the memo budget ends the exact count), :class:`EarlyRelaxation`.  No turn's length
     depends on the time limit, which only cuts the sequence short: a count that finishes within a
-    limit finishes at the same moment within any longer one (a plain phase of a tenth of the limit
-    made an order that its hub counts in 0.05 s exact in 1.4 s with 3 s and in 3.2 s with 20 s)."""
+    limit finishes at the same moment within any longer one (what a share of the limit did
+    instead, measured: the documentation's page on time limits)."""
 
     exact = True
     turns = (ExactPlain(), ExactHub())
@@ -320,8 +458,40 @@ PHASES = (ExactTurns(), RelaxationMonteCarlo(), SequentialMonteCarlo(), CertainB
 
 
 def count_in_phases(q: CountQuestion) -> CountResult:
-    """Run :data:`PHASES` on ``q`` in order: the first answer is the count.  The exact phases end at
-    ``q.exact_end``, the others at ``q.end`` (at least ``GRACE`` seconds after the exact ones)."""
+    """Run :data:`PHASES` on ``q`` in order: the first answer is the count.
+
+    The exact phases end at ``q.exact_end``, the others at ``q.end`` (at least ``GRACE`` seconds after
+    the exact ones).  What ``Schedule.count_result`` does with an estimate allowed.
+
+    Parameters
+    ----------
+    q : CountQuestion
+        The question (:meth:`CountQuestion.ask`); the phases fill it as they go.
+
+    Returns
+    -------
+    CountResult
+        The first answer a phase gives: exact, or an estimate with its interval
+        (:class:`CertainBounds` always answers).
+
+    Raises
+    ------
+    AssertionError
+        Never with :data:`PHASES` as they are: only if no phase answered (a guard, should the last
+        phase ever be one that may not answer).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine.deadline import Deadline
+    >>> from opportune.engine.schedule import Schedule
+    >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+    >>> q = CountQuestion.ask(s, rel_error=0.01, time_limit=1.0, seed=0, exact_share=0.65,
+    ...                       deadline=Deadline.NEVER, threads=1)
+    >>> r = count_in_phases(q)
+    >>> r.value, r.exact
+    (3, True)
+    """
     for phase in PHASES:
         if phase.exact:
             result = phase.run(q, Deadline(q.exact_end))

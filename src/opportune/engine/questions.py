@@ -28,7 +28,30 @@ class StateQuestions:
     """Questions about a state for an :class:`~opportune.engine.schedule.OrderEngine` (its base class)."""
 
     def consistent_after(self, mask: int, consistent: int, unit: int) -> int:
-        """Strategies (bitmask) in which ``unit`` can be installed on top of ``mask``."""
+        """Strategies (bitmask) in which ``unit`` can be installed on top of ``mask``.  O(strategies).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+        unit : int
+            The unit to install next.
+
+        Returns
+        -------
+        int
+            Those of ``consistent`` whose order has every unit before ``unit`` installed (0: none).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], strategies={"x": {"c": ["a"]}, "y": {"c": ["b"]}}))
+        >>> c = engine.first[2]                # the unit of part c
+        >>> engine.consistent_after(0, 0b11, c), engine.consistent_after(0b001, 0b11, c)
+        (0, 1)
+        """
         if self.k == 1:  # the common case: no loop
             return consistent if self.posets[0].below[unit] & ~mask == 0 else 0
         out = 0
@@ -38,7 +61,27 @@ class StateQuestions:
         return out
 
     def next_unit(self, mask: int, part: int) -> int | None:
-        """The next uninstalled unit of a part, or None if all are installed."""
+        """The next uninstalled unit of a part, or None if all are installed.  O(quantity).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        part : int
+            The part's index in ``plan.parts``.
+
+        Returns
+        -------
+        int or None
+            The unit's number (a part's units go in lowest first).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan([{"id": "s", "quantity": 2}, "a"], {}))
+        >>> engine.next_unit(0, 0), engine.next_unit(0b01, 0), engine.next_unit(0b11, 0)
+        (0, 1, None)
+        """
         first = self.first[part]
         q = self._quantity[part]
         if q == 1:
@@ -49,7 +92,37 @@ class StateQuestions:
         return None
 
     def options(self, mask: int, consistent: int) -> dict[str, int]:
-        """For each part installable now: admissible completions left after installing it (declaration order)."""
+        """For each part installable now: admissible completions left after installing it.
+
+        Cached per state.  Callers above the engine use :meth:`Schedule.options
+        <opportune.engine.schedule.Schedule.options>`.
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        dict of str to int
+            Part id → completions after it, in declaration order (the caller must not change it:
+            it is the cached one).
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> engine.options(0, engine.all_strategies)
+        {'a': 2, 'b': 1}
+        """
         key = mask | consistent << self.n_units
         cached = self._options_cache.get(key)
         if cached is not None:
@@ -66,7 +139,27 @@ class StateQuestions:
         return out
 
     def installable_set(self, mask: int, consistent: int) -> frozenset[str]:
-        """The parts installable in a state, as a set (cached; no counting)."""
+        """The parts installable in a state, as a set (cached; no counting).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        frozenset of str
+            Their ids.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> sorted(engine.installable_set(0, engine.all_strategies))
+        ['a', 'b']
+        """
         key = mask | consistent << self.n_units
         out = self._installable_cache.get(key)
         if out is None:
@@ -82,6 +175,33 @@ class StateQuestions:
         found once and each count is cached; the parts asked about are then looked up
         one by one (O(k) big-integer operations for k parts asked about, not O(n) for the
         n installable parts).  Declaration order, like :meth:`options`.
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+        parts : collection of str
+            Part ids (those not installable are left out).
+
+        Returns
+        -------
+        dict of str to int
+            Part id → completions after it, for those of ``parts`` installable now.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> engine.options_for(0, engine.all_strategies, ["c", "b"])
+        {'b': 1}
         """
         key = mask | consistent << self.n_units
         entry = self._option_cache.get(key)
@@ -103,6 +223,20 @@ class StateQuestions:
     def installable(self, mask: int, consistent: int) -> tuple[str, ...]:
         """The parts installable in a state, in declaration order, without counting anything.
 
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        tuple of str
+            Their ids.
+
+        Examples
+        --------
         >>> from opportune import OrderEngine, make_plan
         >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"a": ["c"]}))
         >>> engine.installable(0, engine.all_strategies)
@@ -121,6 +255,22 @@ class StateQuestions:
         options next costs one scan of the state.  A decision with a single candidate
         needs no count at all.
 
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+        parts : collection of str
+            Part ids.
+
+        Returns
+        -------
+        list of str
+            Those installable now.
+
+        Examples
+        --------
         >>> from opportune import OrderEngine, make_plan
         >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
         >>> engine.installable_among(0, engine.all_strategies, ("c", "b"))
@@ -175,7 +325,27 @@ class StateQuestions:
         consistent strategy (at most one per part, its next unit: a part's units are chained).
 
         A unit is minimal unless it is above some remaining unit; the union of what lies above
-        the remaining units is gathered a byte of the set at a time from :meth:`_above_tables`.
+        the remaining units is gathered a byte of the set at a time from per-strategy tables built
+        on first use (:meth:`prepare`).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        int
+            The installable units (a bitmask).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> bin(engine.installable_units(0, engine.all_strategies))      # units of a and b
+        '0b11'
         """
         remaining = self.full & ~mask
         data = remaining.to_bytes(self._nbytes, "little")
@@ -206,7 +376,33 @@ class StateQuestions:
         return tables
 
     def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
-        """Expected position (1 = next) of each remaining part's next unit (declaration order)."""
+        """Expected position (1 = next) of each remaining part's next unit (declaration order).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        dict of str to Fraction
+            Part id → its exact expected position over the admissible completions.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> {part: str(f) for part, f in engine.expected_positions(0b001, engine.all_strategies).items()}
+        {'b': '3/2', 'c': '3/2'}
+        """
         total, sums = self.position_sums_for(mask, consistent, (p.id for p in self.plan.parts))
         from fractions import Fraction
 
@@ -218,6 +414,33 @@ class StateQuestions:
         Each sum over the completions count is an expected position: one denominator for
         all, so comparing sums compares expected positions, without fractions.  Computed
         once per state (a buffer decision compares the two or three visible parts).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+        parts : iterable of str
+            Part ids (those with no unit left are left out).
+
+        Returns
+        -------
+        tuple of (int, dict of str to int)
+            The completions, and part id → the sum of its next unit's positions over them.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> engine.position_sums_for(0, engine.all_strategies, ["c", "a"])
+        (3, {'c': 8, 'a': 4})
         """
         key = mask | consistent << self.n_units
         table = self._positions_cache.get(key)
@@ -255,7 +478,33 @@ class StateQuestions:
                    for sign, counter in self._terms(consistent))
 
     def position_sums(self, mask: int, consistent: int) -> dict[int, int]:
-        """Sum over all admissible completions of each remaining unit's 1-based position."""
+        """Sum over all admissible completions of each remaining unit's 1-based position.
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+
+        Returns
+        -------
+        dict of int to int
+            Unit → its position sum (divided by the count: its expected position).
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))       # a b c, a c b, b a c
+        >>> sorted(engine.position_sums(0, engine.all_strategies).items())    # units of a, b, c
+        [(0, 4), (1, 6), (2, 8)]
+        """
         remaining = self.full & ~mask
         terms = self._terms(consistent)
         if len(terms) == 1:  # one strategy: the counter's own (fresh) table

@@ -22,7 +22,39 @@ class CountResult:
 
     ``value`` is an ``int`` when ``exact``; otherwise a float estimate whose
     true value lies within ``value * (1 ± rel_error)`` with probability
-    ``confidence``.
+    ``confidence``.  What :meth:`~opportune.engine.schedule.Schedule.count_result` answers.
+
+    Parameters
+    ----------
+    value : int or float
+        The count (an ``int`` when exact), or the estimate (a float, ``inf`` past 1.8e308).
+    exact : bool, default True
+        Whether ``value`` is the exact count.
+    rel_error : float, default 0.0
+        The stated relative error of an estimate (``inf``: none could be stated).
+    confidence : float, default 1.0
+        The probability the stated interval holds.
+    method : str, default "exact"
+        How it was found (``"exact"``; for an estimate e.g. ``"smc"``, ``"armc"``, ``"sis"``,
+        ``"bounds"``, several joined by ``+``, ``"union:"`` first when only the strategies' union
+        was bounded).
+    log10_value : float or None, optional
+        ``log10`` of an estimate, kept beside ``value``: an estimate past 1.8e308 (a plan of a few
+        hundred steps) is ``inf`` as a float.
+    log10_low, log10_high : float or None, optional
+        ``log10`` of the ends of an interval holding the count: the stated one within the certain
+        bounds the orders give (so finite for every estimate
+        :meth:`~opportune.engine.schedule.Schedule.count_result` makes; None where nobody gave one).
+
+    Examples
+    --------
+    >>> exact = CountResult(336)
+    >>> exact.value, exact.exact, exact.interval_log10 == (exact.log10, exact.log10)
+    (336, True, True)
+    >>> big = CountResult(math.inf, exact=False, rel_error=0.05, confidence=0.95, method="smc",
+    ...                   log10_value=400.0, log10_low=399.98, log10_high=400.02)
+    >>> big.log10, big.interval_log10
+    (400.0, (399.98, 400.02))
     """
 
     value: int | float
@@ -30,17 +62,13 @@ class CountResult:
     rel_error: float = 0.0
     confidence: float = 1.0
     method: str = "exact"
-    #: ``log10`` of an estimate, kept beside ``value``: an estimate past 1.8e308 (a plan of a few
-    #: hundred steps) is ``inf`` as a float
     log10_value: float | None = None
-    #: ``log10`` of the ends of an interval holding the count: the stated one within the certain
-    #: bounds the orders give (so finite for every estimate :meth:`Schedule.count_result` makes;
-    #: None where nobody gave one)
     log10_low: float | None = None
     log10_high: float | None = None
 
     @property
     def log10(self) -> float:
+        """``log10`` of the count (of the estimate; ``-inf`` for 0), from an ``int`` of any size."""
         if self.log10_value is not None:
             return self.log10_value
         return log10_int(self.value) if isinstance(self.value, int) else (
@@ -116,8 +144,8 @@ def decimal(n: int) -> str:
 
 
 #: Counts of more digits than this are written rounded by :func:`count_text`: the same bound as Python's
-#: own guard on int-to-text conversion, and for the same reason (exact text is quadratic in the digits:
-#: 20 ms for the 35,660 digits of 10,000!, more than a look's budget when an answer holds several).
+#: own guard on int-to-text conversion, and for the same reason (exact text is quadratic in the digits,
+#: and an answer holds several counts within a look's budget).
 EXACT_DIGITS = 4_300
 
 
@@ -126,6 +154,20 @@ def count_text(n: int, exact_digits: int = EXACT_DIGITS) -> str:
     significant digits (truncated, not rounded) in scientific notation.  O(d) in the digits d beyond
     the bound (one power of ten and one division), O(d²) within it.
 
+    Parameters
+    ----------
+    n : int
+        The count (a negative one gets its sign).
+    exact_digits : int, default EXACT_DIGITS
+        Most digits written exactly.
+
+    Returns
+    -------
+    str
+        The decimal text, or the scientific notation past ``exact_digits`` digits.
+
+    Examples
+    --------
     >>> count_text(336)
     '336'
     >>> count_text(10 ** 5000 + 123, exact_digits=100)

@@ -51,7 +51,29 @@ DEFAULT_MEMORY = memory_total() // 4
 
 
 class NotAdmissible(ValueError):
-    """Installing a part would leave no admissible sequence (or the part is unknown / used up)."""
+    """Installing a part would leave no admissible sequence (or the part is unknown / used up).
+
+    Raised by :meth:`Schedule.install` (and by :class:`Schedule` for its ``installed`` parts); its
+    message says which part and why, for a person to read.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in words: the part is unknown, already installed, or still needs other parts
+        first (named).
+    part : str, optional
+        The part's id, kept as ``error.part`` for a caller to act on.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+    >>> try:
+    ...     s.install("c")
+    ... except NotAdmissible as error:
+    ...     print(error.part, "|", error)
+    c | part 'c' cannot be installed yet: it requires a first
+    """
 
     def __init__(self, message: str, part: str | None = None):
         self.part = part
@@ -63,20 +85,49 @@ class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
 
     Create one per plan and share it between all schedules, sequencers and
     simulations of that plan: the memo (and the per-state caches below) is
-    what makes repeated questions cheap.
+    what makes repeated questions cheap.  A part of quantity *q* is *q* units, chained; each strategy
+    is one :class:`~opportune.engine.poset.Poset` on the units (``posets``, ``n_units`` units, ``k``
+    strategies).  Building them is O(units × covers) big-integer operations per strategy.
 
-    ``max_memo`` and ``time_limit`` bound each exact count; beyond them
-    :meth:`Schedule.count_result` falls back to an estimate and says so.  ``max_memo=0``: as many
-    entries as ``memory_limit`` (or :data:`DEFAULT_MEMORY`) holds at the order's entry size
-    (:func:`~opportune.engine.count.entries_within`), what ``opportune count`` uses.
+    Parameters
+    ----------
+    plan : Plan
+        The plan (checked, as :func:`~opportune.formats.loader.make_plan` and
+        :func:`~opportune.formats.loader.load_plan` make them).
+    max_memo : int or None, default 2,000,000
+        Memo entries each exact count may add; beyond them (or ``time_limit``)
+        :meth:`Schedule.count_result` falls back to an estimate and says so.  ``0``: as many entries
+        as ``memory_limit`` (or :data:`DEFAULT_MEMORY`) holds at the order's entry size
+        (:func:`~opportune.engine.count.entries_within`), what ``opportune count`` uses; None: no cap.
+    time_limit : float or None, optional
+        Seconds each exact count may take (None: no limit of its own).
+    deadline : Deadline or float or None, optional
+        When building the strategies' orders must stop (a
+        :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()`` moment; None:
+        never).
+    memory_limit : int or None, default DEFAULT_MEMORY
+        Bytes the memos and caches may hold between decisions (see :meth:`maintain`; None: only each
+        memo's entry cap).
+
+    Raises
+    ------
+    BudgetExceeded
+        Building the orders went past ``deadline``
+        (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> plan = make_plan(["a", {"id": "b", "quantity": 2}, "c"], {"c": ["a"]})
+    >>> engine = OrderEngine(plan)
+    >>> engine.n_units, engine.k
+    (4, 1)
+    >>> Schedule(engine).count(), Schedule(engine).install("b").count()     # one memo for both
+    (6, 3)
     """
 
     def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
                  deadline: Deadline | float | None = None, memory_limit: int | None = DEFAULT_MEMORY):
-        """``deadline``: building the strategies' orders (a closure per strategy: O(units × covers)
-        big-integer operations each, seconds for 64 strategies over 10,000 parts) stops past it with
-        ``BudgetExceeded``.  ``memory_limit``: bytes the memos and caches may hold between decisions
-        (see :meth:`maintain`; None: only each memo's entry cap)."""
         dl = as_deadline(deadline)
         self.plan = plan
         self.time_limit = time_limit
@@ -139,6 +190,21 @@ class Schedule:
     Immutable: :meth:`install` returns a new schedule sharing the plan's
     :class:`OrderEngine` (and so its memo), which makes branching cheap.
 
+    Parameters
+    ----------
+    plan_or_engine : Plan or OrderEngine
+        The plan (a new engine is built for it), or the plan's engine, to share its memo with every
+        other schedule of the plan.
+    installed : iterable of str, optional
+        Part ids installed so far, in order (a part of quantity *q* may appear up to *q* times).
+
+    Raises
+    ------
+    NotAdmissible
+        A part of ``installed`` is unknown, used up, or cannot come where it does.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
     >>> s.count(), s.installable()
@@ -171,11 +237,30 @@ class Schedule:
 
     @classmethod
     def at(cls, engine: OrderEngine, mask: int, consistent: int, installed: tuple[str, ...] = ()) -> "Schedule":
-        """The schedule of ``engine`` at a state given as bitmasks: ``mask`` the installed units,
-        ``consistent`` the strategies still open (``installed`` the sequence, if the caller keeps it).
+        """The schedule of ``engine`` at a state given as bitmasks.
+
         What a policy deciding on masks asks its counting questions through, so that every count goes
         through this class.  O(1): no check that the state is reachable (the caller's states are).
 
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask : int
+            The installed units (bit *u* for unit *u*; a part's units are numbered from
+            ``engine.first[i]``, and installed lowest first).
+        consistent : int
+            The strategies still open (bit *k* for ``plan.strategies[k]``).
+        installed : tuple of str, optional
+            The installed sequence, if the caller keeps it (only :attr:`installed` shows it).
+
+        Returns
+        -------
+        Schedule
+            The schedule at that state, sharing ``engine``.
+
+        Examples
+        --------
         >>> from opportune import make_plan
         >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
         >>> Schedule.at(engine, 0b001, engine.all_strategies).options()
@@ -208,7 +293,35 @@ class Schedule:
         self._left = None
 
     def install(self, part: str) -> "Schedule":
-        """The schedule after installing one unit of ``part``; raises :class:`NotAdmissible`."""
+        """The schedule after installing one unit of ``part`` (this one is unchanged).
+
+        Parameters
+        ----------
+        part : str
+            The part's id.
+
+        Returns
+        -------
+        Schedule
+            The new schedule, sharing this one's engine.
+
+        Raises
+        ------
+        NotAdmissible
+            ``part`` is unknown, already installed (every unit), or would leave no admissible
+            sequence; the message names the parts it still needs.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> s.install("a").installed, s.install("a").install("c").count()
+        (('a',), 1)
+        >>> s.install("c")
+        Traceback (most recent call last):
+        ...
+        opportune.engine.schedule.NotAdmissible: part 'c' cannot be installed yet: it requires a first
+        """
         _, u, after = self._locate(part)
         s = Schedule._make(self.engine, self.installed + (part,), self.mask | 1 << u, after)
         left = self._left
@@ -222,6 +335,25 @@ class Schedule:
         return s
 
     def can_install(self, part: str) -> bool:
+        """Whether :meth:`install` would accept ``part`` now (never raises).
+
+        Parameters
+        ----------
+        part : str
+            A part id (an unknown one is simply not installable).
+
+        Returns
+        -------
+        bool
+            True if installing one unit of it leaves an admissible sequence.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> s.can_install("a"), s.can_install("c"), s.can_install("z")
+        (True, False, False)
+        """
         try:
             self._locate(part)
         except NotAdmissible:
@@ -229,7 +361,32 @@ class Schedule:
         return True
 
     def missing_before(self, part: str) -> list[str]:
-        """Parts still to install before ``part`` in the consistent strategy that misses the fewest."""
+        """Parts still to install before ``part`` in the consistent strategy that misses the fewest.
+
+        What a message says when ``part`` cannot go in yet.
+
+        Parameters
+        ----------
+        part : str
+            A part id of the plan.
+
+        Returns
+        -------
+        list of str
+            Those parts' ids in declaration order (empty if ``part`` can go in now or is used up).
+
+        Raises
+        ------
+        KeyError
+            ``part`` is not in the plan.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> s.missing_before("c"), s.install("b").missing_before("c"), s.missing_before("a")
+        (['a', 'b'], ['a'], [])
+        """
         i = self.plan.index(part)
         u = self.engine.next_unit(self.mask, i)
         if u is None:
@@ -267,6 +424,7 @@ class Schedule:
 
     @property
     def is_complete(self) -> bool:
+        """Whether every unit of the plan is installed (then :meth:`count` is 1).  O(1)."""
         return self.mask == self.engine.full
 
     @property
@@ -275,20 +433,64 @@ class Schedule:
         return tuple(s.name for k, s in enumerate(self.plan.strategies) if self.consistent >> k & 1)
 
     def installable(self) -> tuple[str, ...]:
-        """Parts that can be installed now (all their required parts installed in some consistent strategy)."""
+        """Parts that can be installed now (all their required parts installed in some consistent strategy).
+
+        Returns
+        -------
+        tuple of str
+            Their ids, in declaration order (empty once complete).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> s.installable(), s.install("a").installable()
+        (('a', 'b'), ('b', 'c'))
+        """
         return self.engine.installable(self.mask, self.consistent)
 
     def count(self) -> int:
-        """Exact number of admissible completions (raises BudgetExceeded if over budget): the value of
-        ``count_result(estimate=False)``."""
+        """Exact number of admissible completions: the value of ``count_result(estimate=False)``.
+
+        Returns
+        -------
+        int
+            The number of admissible ways to finish (1 once complete).
+
+        Raises
+        ------
+        BudgetExceeded
+            The exact count did not fit the engine's memo or time budget, or a deadline the caller
+            holds (:class:`~opportune.engine.deadline.BudgetExceeded`); what was counted stays in the
+            memos.  :meth:`count_result` estimates instead.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> s.count(), s.install("b").count(), s.install("b").install("a").install("c").count()
+        (3, 1, 1)
+        """
         return self.engine.count(self.mask, self.consistent)
 
     def warm_up(self, time_limit: float | None = None) -> bool:
-        """Prepare the engine's tables and count this state exactly within ``time_limit`` seconds
-        (:meth:`OrderEngine.warm_up`): how the plan is counted (a hub or not) is chosen here, once,
-        and the memos every later question uses are filled.  True if it finished in time; what was
-        built and counted is kept either way.  O(one exact count).
+        """Prepare the engine's tables and count this state exactly (:meth:`OrderEngine.warm_up`).
 
+        How the plan is counted (a hub or not) is chosen here, once, and the memos every later
+        question uses are filled.  What was built and counted is kept either way.  O(one exact count).
+
+        Parameters
+        ----------
+        time_limit : float or None, optional
+            Seconds it may take (None: no limit).
+
+        Returns
+        -------
+        bool
+            True if the exact count finished in time.
+
+        Examples
+        --------
         >>> from opportune import make_plan
         >>> Schedule(make_plan(["a", "b"], {"b": ["a"]})).warm_up(1.0)
         True
@@ -296,10 +498,28 @@ class Schedule:
         return self.engine.warm_up(time_limit, self.mask, self.consistent)
 
     def chains(self, strategy: int, *, chains: int = 8, seed: int = 0):
-        """A population of Markov chains on this state's completions under one strategy (its index),
-        for estimates when the exact counts do not fit a decision's budget
-        (:class:`~opportune.engine.sampling.CompletionChains`).  O(steps left × chains) to start.
+        """A population of Markov chains on this state's completions under one strategy.
 
+        For estimates when the exact counts do not fit a decision's budget.  O(steps left × chains)
+        to start.
+
+        Parameters
+        ----------
+        strategy : int
+            The strategy's index in ``plan.strategies``.
+        chains : int, default 8
+            Independent chains (their spread states the estimates' error).
+        seed : int, default 0
+            Seed of the chains' random streams.
+
+        Returns
+        -------
+        CompletionChains
+            The chains, each started at a completion of this state
+            (:class:`~opportune.engine.sampling.CompletionChains`).
+
+        Examples
+        --------
         >>> from opportune import make_plan
         >>> pop = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).chains(0, seed=1)
         >>> est = pop.estimate(first=[0, 1], steps=20_000)
@@ -313,28 +533,61 @@ class Schedule:
     def count_result(self, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
                      exact_share: float = 0.65, deadline=None, threads: int = 1, estimate: bool = True) -> CountResult:
         """Number of completions: exact within the engine's budget, else a clearly marked estimate
-        with an interval.  The one way to count a state: the exact methods, the hub split and the
-        estimates are chosen here (and in :meth:`OrderEngine.count` for the exact part), never by
-        the caller.
+        with an interval.
 
-        ``estimate=False``: the exact count alone, the same way, within ``deadline`` (a
-        :class:`~opportune.engine.deadline.Deadline` or a ``time.perf_counter()`` moment), or with
-        ``deadline=None`` within whatever :meth:`OrderEngine.deadline` the caller holds, else the
-        engine's time limit per count; :class:`~opportune.engine.deadline.BudgetExceeded` if it does
-        not fit (what was counted stays in the memos).  ``time_limit`` and the estimate's settings
-        are then unused.  :meth:`count` is the same, as a plain ``int``.
-
+        The one way to count a state: the exact methods, the hub split and the estimates are chosen
+        here (and in :meth:`OrderEngine.count` for the exact part), never by the caller.
         Everything stops at one :class:`~opportune.engine.deadline.Deadline`: ``plain + time_limit``
         seconds from the call, or ``deadline`` if sooner, where ``plain`` is the engine's own time
         limit, or a tenth of ``time_limit`` if it has none.  The call returns within that plus
-        ``COUNT_MARGIN`` (0.25 s of CPU time, measured at most 0.1 s past it on orders of up to
-        10,000 elements: the granularity of the deadline checks and assembling the answer; no automatic
-        cycle collection runs inside it, see :func:`~opportune.engine.deadline.no_collection`).  Phases:
+        ``COUNT_MARGIN`` seconds (:mod:`opportune.engine.tuning`: the granularity of the deadline
+        checks and assembling the answer; no automatic cycle collection runs inside it, see
+        :func:`~opportune.engine.deadline.no_collection`; how far past the deadline it was measured
+        to end: the documentation's page on time limits).  Building the inclusion–exclusion terms is
+        inside the budget (a deadline between unions); building the engine's orders is the caller's
+        (O(units + pairs) big-integer operations, in :class:`OrderEngine`).
 
-        (The phases' times below are scaled down if ``deadline`` leaves less than ``plain +
-        time_limit``, and the exact phases end early enough to leave the estimate its pass over
-        each order, ``ESTIMATE_RESERVE`` seconds per element.  A deadline already passed still
-        gives the first turn and the estimate ``GRACE`` seconds each: a small plan is exact.)
+        Parameters
+        ----------
+        rel_error : float, default 0.01
+            The relative error an estimate aims at: the estimate stops early once its 95% interval is
+            within it.
+        time_limit : float, default 10.0
+            Seconds the call may take beyond the engine's own exact time (see above).
+        seed : int, default 0
+            Seed of the estimates' random draws (the answer is the same for the same seed, but for a
+            stop on the clock).
+        exact_share : float, default 0.65
+            The share of ``time_limit`` the exact phases may run before the estimate takes over.
+        deadline : Deadline or float or None, optional
+            A moment everything stops at if sooner (a :class:`~opportune.engine.deadline.Deadline` or
+            a ``time.perf_counter()`` moment).
+        threads : int, default 1
+            Threads that count and draw in relaxation Monte Carlo (its counts, draws and answer are
+            the same for any number, but for a stop on the clock; the exact phases use one).
+        estimate : bool, default True
+            False: the exact count alone, the same way, within ``deadline``, or with ``deadline=None``
+            within whatever :meth:`OrderEngine.deadline` the caller holds, else the engine's time
+            limit per count; ``time_limit`` and the estimate's settings are then unused.
+            :meth:`count` is the same, as a plain ``int``.
+
+        Returns
+        -------
+        CountResult
+            Always with a value.  ``exact`` and an ``int`` value, or an estimate with a finite
+            interval (``log10_low``/``log10_high``: the stated interval within the order's certain
+            bounds, ``1 <= count <= n!`` at the very least) and its ``rel_error`` (infinite when no
+            error could be stated from the runs) and ``method``.
+
+        Raises
+        ------
+        BudgetExceeded
+            Only with ``estimate=False``: the exact count did not fit
+            (:class:`~opportune.engine.deadline.BudgetExceeded`; what was counted stays in the memos).
+
+        Notes
+        -----
+        The phases (:mod:`opportune.engine.phases`; their times and why: :mod:`opportune.engine.tuning`):
 
         1. the exact count until ``plain + exact_share * time_limit`` seconds: the plain count and the
            engine's count through a hub in turns of ``FIRST_TURN`` seconds, doubling every round, with
@@ -345,17 +598,13 @@ class Schedule:
            terms (certain bounds, Knuth's estimator, sequential Monte Carlo runs), stopping early once
            the 95% interval is within ``rel_error``.
 
-        Each phase and its times: :mod:`opportune.engine.phases` and :mod:`opportune.engine.tuning`.
+        The phases' times are scaled down if ``deadline`` leaves less than ``plain + time_limit``, and
+        the exact phases end early enough to leave the estimate its pass over each order,
+        ``ESTIMATE_RESERVE`` seconds per element.  A deadline already passed still gives the first
+        turn and the estimate ``GRACE`` seconds each: a small plan is exact.
 
-        The answer always has a value, and an estimate always has a finite interval
-        (``log10_low``/``log10_high``: the stated interval within the order's certain bounds,
-        ``1 <= count <= n!`` at the very least); ``rel_error`` is infinite when no error could be
-        stated from the runs.  Building the inclusion–exclusion terms is inside the budget (a
-        deadline between unions); building the engine's orders is the caller's (O(units + pairs)
-        big-int operations, ~0.1 s for 10,000 units).  ``threads``: threads that count and draw in
-        relaxation Monte Carlo (its counts, draws and answer are the same for any number, but for a
-        stop on the clock; the exact phases use one).
-
+        Examples
+        --------
         >>> from opportune import make_plan
         >>> r = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]})).count_result(time_limit=1.0)
         >>> r.value, r.exact, r.interval_log10 == (r.log10, r.log10)
@@ -382,15 +631,79 @@ class Schedule:
 
         These are the paper's "future sequencing options" that the opportunistic
         policy maximises.  Cached per state, so repeated questions are dict look-ups.
+
+        Returns
+        -------
+        dict of str to int
+            Part id → completions after installing one unit of it, for each installable part in
+            declaration order; the counts add up to :meth:`count`.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> s.options()
+        {'a': 2, 'b': 1}
         """
         return self.engine.options(self.mask, self.consistent)
 
     def options_for(self, parts: Collection[str]) -> dict[str, int]:
-        """:meth:`options` for just these parts (those of them installable now; declaration order)."""
+        """:meth:`options` for just these parts: fewer counts when a look shows only a few.
+
+        Parameters
+        ----------
+        parts : collection of str
+            Part ids (those not installable now are left out of the answer).
+
+        Returns
+        -------
+        dict of str to int
+            Part id → completions after installing it, for those of ``parts`` installable now, in
+            declaration order.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> s.options_for(["c", "b"])       # c cannot go in yet
+        {'b': 1}
+        """
         return self.engine.options_for(self.mask, self.consistent, parts)
 
     def next_probabilities(self) -> dict[str, Fraction]:
-        """Probability that each installable part comes next in a uniformly random admissible completion."""
+        """Probability that each installable part comes next in a uniformly random admissible completion.
+
+        Returns
+        -------
+        dict of str to Fraction
+            Part id → its exact probability (:meth:`options` over :meth:`count`), for each
+            installable part in declaration order.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> {part: str(p) for part, p in s.next_probabilities().items()}
+        {'a': '2/3', 'b': '1/3'}
+        """
         total = self.count()
         from fractions import Fraction
 
@@ -400,16 +713,87 @@ class Schedule:
         """Expected position (1 = next) of each remaining part in a uniformly random admissible completion.
 
         For a part with several units left, the position of its next unit: when it is first needed.
+
+        Returns
+        -------
+        dict of str to Fraction
+            Part id → its exact expected position, for each part with units left.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> {part: str(p) for part, p in s.expected_positions().items()}
+        {'a': '4/3', 'b': '2', 'c': '8/3'}
         """
         return self.engine.expected_positions(self.mask, self.consistent)
 
     def position_sums_for(self, parts: Iterable[str]) -> tuple[int, dict[str, int]]:
-        """``(completions, position sums)`` of these parts (those remaining): each sum divided by
-        the completions is the part's expected position (see :meth:`expected_positions`)."""
+        """The completions and each part's position summed over them, for these parts.
+
+        Each sum divided by the completions is the part's expected position (see
+        :meth:`expected_positions`), without the fractions and for fewer parts.
+
+        Parameters
+        ----------
+        parts : iterable of str
+            Part ids (those with no unit left are left out of the answer).
+
+        Returns
+        -------
+        tuple of (int, dict of str to int)
+            ``(completions, position sums)``: part id → the sum over all admissible completions of
+            the position (1 = next) of its next unit.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> s.position_sums_for(["c", "a"])      # c: 3 + 2 + 3, a: 1 + 1 + 2
+        (3, {'c': 8, 'a': 4})
+        """
         return self.engine.position_sums_for(self.mask, self.consistent, parts)
 
     def sample(self, seed: int | random.Random | None = 0) -> list[str]:
-        """One admissible completion drawn uniformly at random (exactly, from the counts)."""
+        """One admissible completion drawn uniformly at random (exactly, from the counts).
+
+        Parameters
+        ----------
+        seed : int or random.Random or None, default 0
+            A seed, or the random stream to draw from (None: a fresh unseeded one).
+
+        Returns
+        -------
+        list of str
+            The part ids still to install, in the drawn order.
+
+        Raises
+        ------
+        BudgetExceeded
+            An exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> tuple(s.sample(seed=1)) in s.completions()
+        True
+        >>> s.sample(seed=1) == s.sample(seed=1)
+        True
+        """
         import random     # here: a count never draws
 
         rng = seed if isinstance(seed, random.Random) else random.Random(seed)
@@ -426,7 +810,37 @@ class Schedule:
         return out
 
     def completions(self, limit: int = 100_000) -> list[tuple[str, ...]]:
-        """Every admissible completion, in lexicographic order of declaration; refuses above ``limit``."""
+        """Every admissible completion, in lexicographic order of declaration.
+
+        Parameters
+        ----------
+        limit : int, default 100,000
+            Most completions it lists.
+
+        Returns
+        -------
+        list of tuple of str
+            Each completion as the part ids still to install, in order.
+
+        Raises
+        ------
+        ValueError
+            There are more than ``limit`` completions (count or sample them instead).
+        BudgetExceeded
+            The exact count did not fit the engine's budget
+            (:class:`~opportune.engine.deadline.BudgetExceeded`).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> s = Schedule(make_plan(["a", "b", "c"], {"c": ["a"]}))      # a b c, a c b, b a c
+        >>> s.completions()
+        [('a', 'b', 'c'), ('a', 'c', 'b'), ('b', 'a', 'c')]
+        >>> s.completions(limit=2)
+        Traceback (most recent call last):
+        ...
+        ValueError: 3 completions is more than the limit of 2: count or sample them instead
+        """
         total = self.count()
         if total > limit:
             raise ValueError(f"{total} completions is more than the limit of {limit}: count or sample them instead")
