@@ -39,10 +39,8 @@ SECTION = re.compile(r"^(?P<name>[A-Z][A-Za-z ]+)\n-{3,}[ \t]*$", re.M)
 PARAMETER = re.compile(r"^(?P<names>\*{0,2}\w+(?:\s*,\s*\*{0,2}\w+)*)(?:\s*:.*)?$")
 
 #: Modules of the reference whose docstrings are being rewritten with their code (the order engine,
-#: the look-ahead, the optimum and pile programmes, the lower bounds).
-PENDING_MODULES = ("opportune.engine", "opportune.policies.lookahead",
-                   "opportune.policies.optimal", "opportune.policies.pile", "opportune.policies.window",
-                   "opportune.study.bounds")
+#: the lower bounds).
+PENDING_MODULES = ("opportune.engine", "opportune.study.bounds")
 
 #: Single objects of the other modules that still lack a section (``module:qualified.name``).
 PENDING: frozenset[str] = frozenset()
