@@ -82,11 +82,35 @@ COMPILED_LOOK_ENTRY_BYTES = 96
 
 
 class OptimalTooLarge(RuntimeError):
-    """The state space is over the limit: the optimum is not computed."""
+    """The state space is over the limit: the optimum is not computed.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {})), max_states=3).value()
+    Traceback (most recent call last):
+    ...
+    opportune.policies.optimal.OptimalTooLarge: the optimum needs more than 3 states for this plan; ...
+    """
 
 
 class OutOfTime(RuntimeError):
-    """The programme passed its ``deadline``; the states it finished stay memoised."""
+    """The programme passed its ``deadline``; the states it finished stay memoised.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine.deadline import Deadline
+    >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {})))
+    >>> solver.deadline = Deadline(0.0)         # a moment long past
+    >>> solver.value()
+    Traceback (most recent call last):
+    ...
+    opportune.policies.optimal.OutOfTime: the optimum's programme passed its deadline
+    >>> solver.deadline = None                  # no deadline: it goes on from where it stopped
+    >>> solver.value()
+    3.0
+    """
 
 
 class OptimalSolver:
@@ -736,9 +760,29 @@ def optimal_solver(engine: OrderEngine, *, merge: bool = True, **settings) -> Op
     to rounding), through a :class:`MergedOptimalSolver` whose decisions name the plan's parts.
     O(strategies × parts × units / 64) before the work.
 
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    merge : bool
+        Solve the plan with its interchangeable parts merged (fewer states).
+    **settings
+        As :class:`OptimalSolver`'s: ``visible``, ``capacity``, ``costs``, ``weights``, ``max_states``.
+
+    Returns
+    -------
+    OptimalSolver
+        The programme (compiled, merged or both where they apply); its values are computed as asked.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> round(optimal_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
     2.5
+    >>> screws = OrderEngine(make_plan(["base", "s1", "s2", "s3"], {"s1": ["base"], "s2": ["base"], "s3": ["base"]}))
+    >>> merged, whole = optimal_solver(screws, capacity=1), optimal_solver(screws, capacity=1, merge=False)
+    >>> round(merged.value(), 6) == round(whole.value(), 6), merged.states < whole.states
+    (True, True)
     """
     if merge:
         merged = merge_interchangeable(engine, settings.get("costs"), settings.get("weights"))

@@ -233,6 +233,22 @@ def pile_solver(engine, policy=None, **settings) -> PileSolver:
     the plan, else :class:`PileSolver` (a policy's value, or no compiled core); the same values either
     way.  O(1) before the work.
 
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    policy : Policy, optional
+        A policy whose exact value to compute (then always :class:`PileSolver`); None: the optimum.
+    **settings
+        As :class:`PileSolver`'s: ``visible``, ``capacity``, ``costs``, ``max_states``.
+
+    Returns
+    -------
+    PileSolver
+        The programme; its values are computed as asked.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> round(pile_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
