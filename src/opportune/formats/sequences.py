@@ -227,7 +227,7 @@ def read_sequences(source: str | Path, *, like: Sequences | None = None, what: s
     12
     >>> read_sequences("a b c\\nb a c\\n").quantities
     {'a': 1, 'b': 1, 'c': 1}
-    >>> read_sequences("example:nothing")
+    >>> read_sequences("example:nothing")     # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
     opportune.formats.sequences.SequenceError: error: no example sequences named 'nothing': ...
