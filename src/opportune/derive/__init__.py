@@ -38,7 +38,47 @@ DIRECTION_SETS = {"axes": AXES}
 @dataclass(frozen=True)
 class Derivation:
     """A derived plan with what it was derived from: the blocking relation, the contacts, the supports
-    each part needed, the strategies with each part's way in, and the CPU seconds taken."""
+    each part needed, the strategies with each part's way in, and the CPU seconds taken.
+
+    :func:`derive` makes it; it is data (frozen), read by ``derive --json`` (:meth:`to_dict`), by
+    :func:`~opportune.derive.explain.explain` and by :func:`~opportune.derive.figure.exploded`.
+
+    Parameters
+    ----------
+    plan : Plan
+        The derived plan (:class:`~opportune.planning.plan.Plan`): exactly the feasible sequences.
+    blocking : Blocking
+        The blocking relation: for each part and direction, the parts in the way of its straight
+        insertion (:class:`~opportune.derive.blocking.Blocking`).
+    strategies : tuple of DerivedStrategy
+        The plan's strategies with each part's way in (a direction, and the parts it rests on or
+        touches) and their constraints as ``(before, after)`` pairs.
+    seconds : float
+        CPU seconds the derivation took.
+    contacts : tuple of Contact
+        The contacts between parts (found only where the directions or the supports need them).
+    conditions : Conditions
+        The supports each part needed (``gravity``, ``connected``) and the base.
+    assembly : Assembly, optional
+        The parts' geometry (the figure and the explanation's added directions read it).
+    notes : tuple of str
+        What the plan does not carry of the shapes (said on standard error by the command).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from opportune.derive.examples import box, cut, obj_text
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> _ = (Path(tmp.name) / "cup.obj").write_text(obj_text(cut((0, 0, 0), (3, 3, 2), [((1, 1, 1), (2, 2, 3))])))
+    >>> _ = (Path(tmp.name) / "peg.obj").write_text(obj_text([box((1, 1, 1), (2, 2, 2))]))
+    >>> d = derive(tmp.name, directions="axes", gravity="-z")     # the peg rests in the cup
+    >>> d.strategies[0]
+    DerivedStrategy(directions={'cup': '+z', 'peg': '-z on cup'}, pairs=(('cup', 'peg'),))
+    >>> sorted(d.blocking.blockers["peg"]["+x"]), d.plan.parts[1].id
+    (['cup'], 'peg')
+    >>> tmp.cleanup()
+    """
 
     plan: Plan
     blocking: Blocking
@@ -50,7 +90,22 @@ class Derivation:
     notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
-        """The numbers of the derivation, as ``derive --json`` prints them (the plan aside)."""
+        """The numbers of the derivation, as ``derive --json`` prints them (the plan aside).
+
+        Returns
+        -------
+        dict
+            Parts, directions, tolerance (metres), blocking checks, contacts, strategies, constraints,
+            CPU seconds, the base, each part's supports and blockers, and each strategy's directions: plain
+            data (lists, not sets), ready for JSON.
+
+        Examples
+        --------
+        >>> d = derive("geometry:gearbox")
+        >>> row = d.to_dict()
+        >>> row["parts"], row["strategies"], row["blockers"]["cover"]["+x"]
+        (14, 7, ['screw_1', 'screw_2', 'screw_3', 'screw_4'])
+        """
         b = self.blocking
         return {"parts": len(b.parts), "directions": list(b.directions), "tolerance_m": b.tolerance,
                 "blocking_checks": b.checks, "contacts": len(self.contacts), "strategies": len(self.strategies),
@@ -115,6 +170,30 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
 
     Examples
     --------
+    A cup and a peg that stands in it, written as two OBJ files (a shipped assembly, ``geometry:gearbox``,
+    is used the same way).  Along the six axes each can go in by itself (the cup from below, the peg from
+    above), so the plan admits both orders; under gravity the peg rests on the cup, which goes first:
+
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from opportune.derive.examples import box, cut, obj_text
+    >>> from opportune.engine import Schedule
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> _ = (Path(tmp.name) / "cup.obj").write_text(obj_text(cut((0, 0, 0), (3, 3, 2), [((1, 1, 1), (2, 2, 3))])))
+    >>> _ = (Path(tmp.name) / "peg.obj").write_text(obj_text([box((1, 1, 1), (2, 2, 2))]))
+    >>> Schedule(derive(tmp.name, directions="axes").plan).count()
+    2
+    >>> derived = derive(tmp.name, directions="axes", gravity="-z", names={"peg": "locating peg"})
+    >>> [s.pairs for s in derived.strategies], Schedule(derived.plan).count(), derived.plan.parts[1].name
+    ([(('cup', 'peg'),)], 1, 'locating peg')
+
+    A process constraint against the geometry is refused, and so is a folder that is not there:
+
+    >>> derive(tmp.name, directions="axes", gravity="-z", requires={"cup": ["peg"]})
+    Traceback (most recent call last):
+    ...
+    opportune.derive.plan.DeriveError: no feasible sequence keeps the process constraints (1 order, ...
+    >>> tmp.cleanup()
     >>> derive("no-such-folder")
     Traceback (most recent call last):
     ...

@@ -48,8 +48,23 @@ _CONTROL = re.compile(f"[{CONTROL_CHARS}]")
 def printable(text: str) -> str:
     """``text`` with every control character written as an escape (``\\x1b``), lone surrogates too.
 
+    Parameters
+    ----------
+    text : str
+        Any text (a part id, a plan's name).
+
+    Returns
+    -------
+    str
+        The same text, safe to print on a terminal: control characters and lone surrogates as their
+        Python escapes, every other character kept.
+
+    Examples
+    --------
     >>> printable("gear\\x1b[2J")
     'gear\\\\x1b[2J'
+    >>> printable("Zahnrad ü")
+    'Zahnrad ü'
     """
     text = _CONTROL.sub(lambda m: ascii(m.group())[1:-1], text)
     return text.encode("utf-8", "backslashreplace").decode("utf-8")
@@ -57,7 +72,42 @@ def printable(text: str) -> str:
 
 @dataclass
 class Explanation:
-    """What :func:`explain` found; :meth:`to_dict` is the ``--json`` form, :meth:`text` the report."""
+    """What :func:`explain` found; :meth:`to_dict` is the ``--json`` form, :meth:`text` the report.
+
+    Parameters
+    ----------
+    name : str
+        The plan's name.
+    parts : tuple of str
+        The part ids.
+    orders : list of dict
+        Per strategy, each part's direction and its constraints, each with the direction that forces it
+        and what blocks the earlier part's other directions.
+    usable : dict
+        Part id → its insertion directions: those along which it goes in in some feasible sequence.
+    count : dict
+        The feasible sequences: ``value`` (exact, or an estimate with ``exact`` False), their ``log10``
+        with its interval, and their share of all orders of the parts (``share_log10``).
+    forced : list of (str, str)
+        The orders in every strategy.
+    frees : list of dict
+        The changes tried, the largest count first: a part out of everyone's way (``kind`` ``"part"``)
+        or a direction added (``"direction"``), each with its count.
+    unfinished : list of str
+        What the time limit did not reach, in words.
+
+    Examples
+    --------
+    Part ``a`` is blocked by ``b`` along both directions, so it goes in first:
+
+    >>> from opportune.derive import Derivation, plan_of
+    >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0), "-x": (-1, 0, 0)},
+    ...              {"a": {"+x": frozenset("b"), "-x": frozenset("b")}, "b": {"+x": frozenset(), "-x": frozenset()}}, 0, 0)
+    >>> strategies = tuple(exact_strategies(b))
+    >>> e = explain(Derivation(plan_of(b, strategies, "pin", "axes"), b, strategies, 0.0))
+    >>> e.forced, e.count["value"], [(f["name"], f["count"]["value"]) for f in e.frees]
+    ([('a', 'b')], 1, [('b', 2)])
+    """
 
     name: str
     parts: tuple[str, ...]
@@ -69,7 +119,23 @@ class Explanation:
     unfinished: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        """The explanation as plain data (``derive --explain --json``)."""
+        """The explanation as plain data (``derive --explain --json``).
+
+        Returns
+        -------
+        dict
+            The fields, with each part's single direction (where it has one), the constraints grouped by
+            reason (:func:`reasons`) and every change tried: lists and dicts only, ready for JSON.
+
+        Examples
+        --------
+        >>> from opportune.derive import Derivation, plan_of
+        >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
+        >>> strategies = tuple(exact_strategies(b))
+        >>> doc = explain(Derivation(plan_of(b, strategies, "pin", "axes"), b, strategies, 0.0)).to_dict()
+        >>> doc["single_direction"], doc["forced_in_every_strategy"], doc["reasons"][0]["before"]
+        ({'a': '+x', 'b': '+x'}, [['a', 'b']], ['b'])
+        """
         return {"name": self.name, "parts": list(self.parts), "orders": self.orders,
                 "insertion_directions": self.usable,
                 "single_direction": {p: d[0] for p, d in self.usable.items() if len(d) == 1},
@@ -78,7 +144,29 @@ class Explanation:
                 "frees": self.frees, "unfinished": self.unfinished}
 
     def text(self) -> str:
-        """The explanation as a report, one statement a line (control characters escaped)."""
+        """The explanation as a report, one statement a line (control characters escaped).
+
+        Returns
+        -------
+        str
+            What ``derive --explain`` prints: the forced orders with their reasons, the insertion
+            directions, the count of feasible sequences and what frees the most.
+
+        Examples
+        --------
+        >>> from opportune.derive import Derivation, plan_of
+        >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
+        >>> strategies = tuple(exact_strategies(b))
+        >>> print(explain(Derivation(plan_of(b, strategies, "pin", "axes"), b, strategies, 0.0)).text())
+        pin: 2 parts, 1 strategy
+        forced orders:
+          b after a: along +x b would be in a's way; no other direction
+        insertion directions (in some feasible sequence): a +x; b +x
+        one insertion direction only (2 of 2 parts): a +x, b +x
+        feasible sequences: 1 of 10^0.30 orders of the parts (1 in 10^0.30); 1 orders forced in every strategy
+        frees the most: b out of everyone's way: 2 sequences (× 10^0.30)
+        <BLANKLINE>
+        """
         return printable("\n".join(_report(self)) + "\n")
 
 

@@ -54,7 +54,15 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 class GeometryError(ValueError):
-    """An assembly that cannot be read or used: the message names the part and says what to do."""
+    """An assembly that cannot be read or used: the message names the part and says what to do.
+
+    Examples
+    --------
+    >>> read_assembly("no-such-folder", units="inch")
+    Traceback (most recent call last):
+    ...
+    opportune.derive.geometry.GeometryError: units 'inch': give one of m, mm
+    """
 
 
 @dataclass(frozen=True)
@@ -89,7 +97,28 @@ class PartShape:
 
 @dataclass(frozen=True)
 class Assembly:
-    """The parts in their assembled pose (sorted by id) and the penetration tolerance in metres."""
+    """The parts in their assembled pose (sorted by id) and the penetration tolerance in metres.
+
+    :func:`read_assembly` (a folder of meshes), :func:`~opportune.derive.scene.read_scene_assembly` (glTF,
+    GLB, STEP) and :func:`~opportune.derive.mjcf.read_mjcf_assembly` (MJCF) make it;
+    :func:`~opportune.derive.derive` takes one in place of a path.
+
+    Parameters
+    ----------
+    parts : tuple of PartShape
+        Each part's id, file and closed bodies, in metres.
+    tolerance : float
+        How far two parts may overlap and still count as touching, in metres.
+    units : str
+        The files' unit of length (a key of :data:`UNITS`).
+
+    Examples
+    --------
+    >>> from opportune.datasets import geometry_path
+    >>> a = read_assembly(geometry_path("gearbox"))
+    >>> len(a.parts), a.parts[0].id, round(a.size, 3), a.units
+    (14, 'bearing_a1', 0.134, 'm')
+    """
 
     parts: tuple[PartShape, ...]
     tolerance: float

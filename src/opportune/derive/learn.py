@@ -64,11 +64,25 @@ MAX_REPAIR_WORK = 20_000_000
 class LearnedConstraint:
     """One cover constraint of the learned plan: ``before`` is installed before ``after``.
 
-    ``support``: observed successful sequences that satisfy it (all of them: that is why it was
-    learned).  ``chance``: the probability ``p`` that one uniformly random admissible sequence of
-    the plan without this constraint satisfies it; ``accident_probability = p ** support`` (None
-    when the count was over budget).  ``confirmed_by``: where the failed sequences that violate it
-    came from (``file:line``).
+    Parameters
+    ----------
+    before, after : str
+        The part ids: ``before`` is installed before ``after``.
+    support : int
+        Observed successful sequences that satisfy it (all of them: that is why it was learned).
+    chance : float or None
+        The probability ``p`` that one uniformly random admissible sequence of the plan without this
+        constraint satisfies it (None when the count was over budget).
+    accident_probability : float or None
+        ``p ** support``: the chance that the constraint is an accident of too few observations.
+    confirmed_by : tuple of str
+        Where the failed sequences that violate it came from (``file:line``).
+
+    Examples
+    --------
+    >>> c = learn_plan(["a b c", "a c b"], failed=["b a c"]).constraints[0]
+    >>> c.before, c.after, c.support, round(c.chance, 4), round(c.accident_probability, 4), c.confirmed
+    ('a', 'b', 2, 0.6667, 0.4444, True)
     """
 
     before: str
@@ -83,6 +97,26 @@ class LearnedConstraint:
         return bool(self.confirmed_by)
 
     def to_dict(self, max_accident: float | None = None) -> dict:
+        """The constraint as plain data (an entry of ``learn --json``'s ``constraints``).
+
+        Parameters
+        ----------
+        max_accident : float, optional
+            With it, ``flagged`` says whether the accident probability is above it.
+
+        Returns
+        -------
+        dict
+            ``before``, ``after``, ``support``, ``accident_probability``, ``chance``, ``confirmed``,
+            ``confirmed_by`` (and ``flagged``).
+
+        Examples
+        --------
+        >>> c = learn_plan(["a b", "a b"]).constraints[0]
+        >>> doc = c.to_dict(0.05)
+        >>> doc["before"], doc["after"], doc["accident_probability"], doc["chance"], doc["flagged"]
+        ('a', 'b', 0.25, 0.5, True)
+        """
         doc = {"before": self.before, "after": self.after, "support": self.support,
                "accident_probability": self.accident_probability, "chance": self.chance,
                "confirmed": self.confirmed, "confirmed_by": list(self.confirmed_by)}
@@ -95,8 +129,23 @@ class LearnedConstraint:
 class FailedSequence:
     """A failed sequence and the learned constraints it violates (``(before, after)`` pairs).
 
-    ``excluded`` is False when it violates none: the learned plan admits it.  ``succeeded`` is True
-    when the very same sequence was also observed as a success (no plan can exclude it).
+    ``excluded`` is False when it violates none: the learned plan admits it.
+
+    Parameters
+    ----------
+    sequence : tuple of str
+        The failed sequence's part ids, in order.
+    where : str
+        Where it came from (``file:line``, or ``sequence N`` for one given in Python).
+    violates : tuple of (str, str)
+        The learned constraints it breaks, as ``(before, after)`` pairs.
+    succeeded : bool
+        True when the very same sequence was also observed as a success (no plan can exclude it).
+
+    Examples
+    --------
+    >>> learn_plan(["a b c", "a c b"], failed=["b a c"]).failed[0]
+    FailedSequence(sequence=('b', 'a', 'c'), where='sequence 1', violates=(('a', 'b'),), succeeded=False)
     """
 
     sequence: tuple[str, ...]
@@ -109,6 +158,18 @@ class FailedSequence:
         return bool(self.violates)
 
     def to_dict(self) -> dict:
+        """The failed sequence as plain data (an entry of ``learn --json``'s ``failed``).
+
+        Returns
+        -------
+        dict
+            ``where``, ``sequence``, ``excluded``, ``violates`` and ``also_succeeded``.
+
+        Examples
+        --------
+        >>> learn_plan(["a b c", "a c b"], failed=["a b c"]).failed[0].to_dict()
+        {'where': 'sequence 1', 'sequence': ['a', 'b', 'c'], 'excluded': False, 'violates': [], 'also_succeeded': True}
+        """
         return {"where": self.where, "sequence": list(self.sequence), "excluded": self.excluded,
                 "violates": [list(p) for p in self.violates], "also_succeeded": self.succeeded}
 
@@ -117,13 +178,35 @@ class FailedSequence:
 class LearnedPlan:
     """What :func:`learn_plan` learned.
 
-    ``plan``: the single-strategy :class:`~opportune.planning.plan.Plan` (cover constraints only);
-    ``constraints``: one :class:`LearnedConstraint` per cover, in the plan's order;
-    ``sequences`` / ``distinct``: how many successful sequences (and different ones) it learned from;
-    ``failed``: one :class:`FailedSequence` per failed sequence given; ``repair``: a two-strategy plan
-    that admits every success and excludes every failure, when the single plan cannot and one was
-    found (else None), with ``repair_note`` saying what was found or why not; ``complete``: False when
-    some accident probabilities were over the counting budget (they are None).
+    Parameters
+    ----------
+    plan : Plan
+        The single-strategy :class:`~opportune.planning.plan.Plan` (cover constraints only).
+    constraints : tuple of LearnedConstraint
+        One per cover, in the plan's order.
+    sequences, distinct : int
+        How many successful sequences (and different ones) it learned from.
+    failed : tuple of FailedSequence
+        One per failed sequence given.
+    repair : Plan, optional
+        A two-strategy plan that admits every success and excludes every failure, when the single plan
+        cannot and one was found (else None).
+    repair_note : str
+        What was found, or why not.
+    max_accident : float
+        Constraints with a larger accident probability are flagged (:attr:`flagged`).
+    complete : bool
+        False when some accident probabilities were over the counting budget (they are None).
+    source : str, optional
+        The sequences' file, if they came from one.
+
+    Examples
+    --------
+    >>> learned = learn_plan(["a b c", "b a c"], failed=["a b c"])
+    >>> learned.sequences, learned.distinct, [f.where for f in learned.unexcluded], learned.repair
+    (2, 2, ['sequence 1'], None)
+    >>> learned.repair_note
+    'no plan can exclude sequence 1: the same sequence is also among the successes'
     """
 
     plan: Plan
@@ -149,7 +232,20 @@ class LearnedPlan:
                      if c.accident_probability is not None and c.accident_probability > self.max_accident)
 
     def to_json(self) -> dict:
-        """The JSON document of ``opportune learn --json``."""
+        """The JSON document of ``opportune learn --json``.
+
+        Returns
+        -------
+        dict
+            The plan (as a plan file's dict), the counts of sequences, ``max_accident``, ``complete``, the
+            constraints, the failed sequences, those no single plan excludes, and the repair with its note.
+
+        Examples
+        --------
+        >>> doc = learn_plan(["a b c", "a c b"]).to_json()
+        >>> doc["plan"]["strategies"], doc["sequences"], doc["repair"]
+        ([{'name': 'default', 'requires': {'b': ['a'], 'c': ['a']}}], 2, None)
+        """
         return {"plan": self.plan.to_dict(), "sequences": self.sequences, "distinct": self.distinct,
                 "max_accident": self.max_accident, "complete": self.complete,
                 "constraints": [c.to_dict(self.max_accident) for c in self.constraints],
@@ -160,7 +256,30 @@ class LearnedPlan:
 
     def to_yaml(self, *, repaired: bool = False) -> str:
         """The learned plan as a YAML plan file, each constraint commented with its support and accident
-        probability (``repaired``: the two-strategy repair instead, when there is one).  O(parts + constraints).
+        probability.  O(parts + constraints).
+
+        Parameters
+        ----------
+        repaired : bool
+            The two-strategy repair instead, when there is one.
+
+        Returns
+        -------
+        str
+            A plan file that :func:`~opportune.formats.loader.read_plan` reads back.
+
+        Examples
+        --------
+        >>> text = learn_plan(["a b c", "a c b"]).to_yaml()
+        >>> print(text[text.index("name:"):])
+        name: learned
+        parts: [a, b, c]
+        requires:            # X: parts that must be installed before X
+          b:
+            - a  # ! support 2/2, accident 0.444
+          c:
+            - a  # ! support 2/2, accident 0.444
+        <BLANKLINE>
         """
         return _yaml(self, repaired and self.repair is not None)
 
@@ -172,8 +291,24 @@ def learned_order(sequences: Iterable[Iterable[str]], parts: list[str]) -> Poset
     Each sequence's relation is a (closed) interval order, and an intersection of closed orders is
     closed.  O(total length + sequences × parts) mask operations on masks of ``len(parts)`` bits.
 
+    Parameters
+    ----------
+    sequences : iterable of sequences of str
+        The sequences, each of part ids (every one of ``parts``, a part's id as often as its units).
+    parts : list of str
+        The part ids: the poset's elements, in this order.
+
+    Returns
+    -------
+    Poset
+        ``a < b`` (indices into ``parts``) exactly when every sequence has ``a`` wholly before ``b``.
+
+    Examples
+    --------
     >>> learned_order([["a", "b", "c"], ["b", "a", "c"]], ["a", "b", "c"]).cover_pairs()
     [(0, 2), (1, 2)]
+    >>> learned_order([["a", "b", "a"], ["a", "a", "b"]], ["a", "b"]).cover_pairs()    # a's units around b
+    []
     """
     index = {p: i for i, p in enumerate(parts)}
     seen = set()
@@ -251,9 +386,14 @@ def learn_plan(sequences, failed=(), *, name: str = "learned", max_accident: flo
     Returns
     -------
     LearnedPlan
+        The plan, each constraint's support and accident probability, the failed sequences with what
+        they violate, and a two-strategy repair where one plan cannot exclude every failure.
 
-    Raises :class:`~opportune.formats.sequences.SequenceError` for sequences of different parts, an
-    empty input or one over the limits (naming the line).
+    Raises
+    ------
+    SequenceError
+        Sequences of different parts, an empty input or one over the limits (naming the line;
+        :class:`~opportune.formats.sequences.SequenceError`).
 
     Complexity: the order is O(total length + distinct sequences × parts) mask operations; each
     accident probability is one exact count of linear extensions (per cover constraint: #P-hard in
@@ -264,6 +404,10 @@ def learn_plan(sequences, failed=(), *, name: str = "learned", max_accident: flo
     >>> learned = learn_plan(["a b c", "a c b"], failed=["b a c"])
     >>> learned.plan.strategies[0].pairs(), learned.constraints[0].confirmed
     ([('a', 'b'), ('a', 'c')], True)
+    >>> learn_plan(["a b", "a c"])     # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    opportune.formats.sequences.SequenceError: error: sequence 2: unknown part 'c': ...
     """
     good = _as_sequences(sequences, None, "sequences")
     if not good.sequences:

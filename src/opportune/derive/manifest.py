@@ -51,7 +51,22 @@ _BAD_CHAR = re.compile(f"[\ud800-\udfff{CONTROL_CHARS}]")
 
 
 class ManifestError(ValueError):
-    """A manifest that cannot be used: every problem, each saying where and what to do."""
+    """A manifest that cannot be used: every problem, each saying where and what to do.
+
+    Parameters
+    ----------
+    problems : sequence of Problem
+        Every problem found (kept as ``.problems``); the message lists the first :data:`SHOWN`, each
+        with its file, line and key where known and what to give instead.
+
+    Examples
+    --------
+    >>> manifest_from({"base": 3, "colours": {}})
+    Traceback (most recent call last):
+    ...
+    opportune.derive.manifest.ManifestError: unknown key 'colours' — the keys are names, quantities, base, ...
+    base: 3 is not a part id — give one part id of 1 to 200 printable characters
+    """
 
     def __init__(self, problems: Sequence[Problem]):
         self.problems = list(problems)

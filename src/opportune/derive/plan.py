@@ -27,7 +27,19 @@ from opportune.limits import MAX_STRATEGIES, MAX_WORKING
 
 
 class DeriveError(ValueError):
-    """An assembly whose plan cannot be written: no feasible sequence, or more strategies than a plan holds."""
+    """An assembly whose plan cannot be written: no feasible sequence, or more strategies than a plan holds.
+
+    Its message names the parts that lock each other (with what blocks each along each direction), or
+    says how large the plan would be and what to give instead; no plan is written.
+
+    Examples
+    --------
+    >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset("a")}}, 0, 0)
+    >>> exact_strategies(b)
+    Traceback (most recent call last):
+    ...
+    opportune.derive.plan.DeriveError: no feasible sequence: parts a, b lock each other (none of them can go in last among them along any direction): a: +x by b; b: +x by a
+    """
 
 
 @dataclass(frozen=True)

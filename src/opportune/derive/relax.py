@@ -19,7 +19,7 @@ constraint between two components lies on no cycle and is never dropped):
   sharing each cycle's price among its constraints), checked against the whole component; the
   cycles that survive it join the family, until the answer leaves no cycle (then it is minimal) or
   no set meets the family more cheaply than the best complete answer known (then that one is).
-  Knots of real plans are sparse and settle in milliseconds; a dense one of at most
+  Knots of real plans are sparse and settle quickly; a dense one of at most
   :data:`DP_MAX_PARTS` parts that has not settled within :data:`BB_FIRST_SECONDS` seconds goes to
   the DP.
 
@@ -67,12 +67,39 @@ _EPS = 1e-9                  # weights are floats: "cheaper" means cheaper by mo
 
 
 class RelaxRefused(ValueError):
-    """A plan over the relaxation's limits (the message states the limit and what to do)."""
+    """A plan over the relaxation's limits (the message states the limit and what to do).
+
+    Examples
+    --------
+    >>> ring = [(i, (i + 1) % 201, 1) for i in range(201)]       # 201 parts in one cycle
+    >>> min_feedback_arc_set(range(201), ring)
+    Traceback (most recent call last):
+    ...
+    opportune.derive.relax.RelaxRefused: a knot of 201 mutually dependent parts joined by 201 constraints ...
+    """
 
 
 class RelaxTimeout(Exception):
     """The search ran out of time: ``weight`` and ``arcs`` are the best feedback arc set found,
-    feasible (it breaks every cycle) but not proven minimal."""
+    feasible (it breaks every cycle) but not proven minimal.
+
+    Parameters
+    ----------
+    message : str
+        What ran out, in words.
+    weight : float
+        The total weight of ``arcs``.
+    arcs : list of tuple
+        The best set found, ``(u, v)`` pairs in the order given.
+
+    Examples
+    --------
+    >>> try:
+    ...     min_feedback_arc_set("abc", {("a", "b"): 1, ("b", "c"): 1, ("c", "a"): 3, ("b", "a"): 1}, time_limit=0)
+    ... except RelaxTimeout as exc:
+    ...     print(exc.weight, exc.arcs)        # breaks every cycle; the minimum is 1.0
+    2.0 [('b', 'c'), ('b', 'a')]
+    """
 
     def __init__(self, message: str, weight: float, arcs: list):
         super().__init__(message)
@@ -87,6 +114,23 @@ def strongly_connected_components(n: int, succ: Sequence[Sequence[int]]) -> list
 
     O(n + arcs).
 
+    Parameters
+    ----------
+    n : int
+        The number of vertices.
+    succ : sequence of sequences of int
+        Each vertex's successors.
+
+    Returns
+    -------
+    list of list of int
+        The components, each a list of vertices; a component comes before the components that reach it
+        (reverse topological order).
+
+    Examples
+    --------
+    >>> strongly_connected_components(3, [[1], [2], []])
+    [[2], [1], [0]]
     >>> sorted(map(sorted, strongly_connected_components(4, [[1], [0, 2], [3], []])))
     [[0, 1], [2], [3]]
     """
@@ -440,21 +484,44 @@ def min_feedback_arc_set(nodes: Iterable[Hashable], weighted_arcs, *, time_limit
                          method: str = "auto", deadline: Deadline | float | None = None) -> tuple[float, list[tuple]]:
     """The cheapest set of arcs whose removal leaves no cycle: ``(total weight, arcs)``.
 
-    ``weighted_arcs`` is a mapping ``{(u, v): weight}`` or an iterable of ``(u, v, weight)`` (parallel
-    arcs add their weights; a loop ``(u, u)`` is always dropped); weights are numbers > 0.  The arcs
-    returned are ``(u, v)`` pairs in the order given.  Exact: each strongly connected component is
-    solved on its own, by the subset DP (O(2^k · k) for k vertices) up to :data:`DP_FIRST_PARTS`
-    vertices, else by the lazy cycle hitting set above (exponential in the worst case, milliseconds
-    when cycles are few), falling back to the DP up to :data:`DP_MAX_PARTS` vertices if that has not
-    finished in :data:`BB_FIRST_SECONDS`; ``method`` ``"dp"`` or ``"bb"`` forces one (the DP up to 22
-    vertices).  Finding the components is O(nodes + arcs).
+    Exact: each strongly connected component is solved on its own, by the subset DP (O(2^k · k) for k
+    vertices) up to :data:`DP_FIRST_PARTS` vertices, else by the lazy cycle hitting set above
+    (exponential in the worst case, quick when cycles are few), falling back to the DP up to
+    :data:`DP_MAX_PARTS` vertices if that has not finished in :data:`BB_FIRST_SECONDS`.  Finding the
+    components is O(nodes + arcs).
 
-    Raises :class:`RelaxRefused` for a component over :data:`MAX_COMPONENT_PARTS` vertices or
-    :data:`MAX_COMPONENT_ARCS` arcs, and :class:`RelaxTimeout` (carrying the best set found, which is
-    a feedback arc set but not proven minimal) when ``time_limit`` seconds pass first, or the
-    caller's ``deadline`` (a :class:`~opportune.engine.deadline.Deadline` or a
-    ``time.perf_counter()`` moment), whichever is sooner.
+    Parameters
+    ----------
+    nodes : iterable of hashable
+        The vertices (those of the arcs are added).
+    weighted_arcs : mapping or iterable
+        ``{(u, v): weight}`` or ``(u, v, weight)`` triples (parallel arcs add their weights; a loop
+        ``(u, u)`` is always dropped); weights are finite numbers > 0.
+    time_limit : float or None
+        Seconds for the whole search (:data:`DEFAULT_TIME_LIMIT`; None: no limit).
+    method : {"auto", "dp", "bb"}
+        ``"dp"`` or ``"bb"`` forces the subset DP (up to 22 vertices) or the branch and bound.
+    deadline : Deadline or float, optional
+        The caller's deadline (a :class:`~opportune.engine.deadline.Deadline` or a
+        ``time.perf_counter()`` moment); the search stops at the sooner of it and ``time_limit``.
 
+    Returns
+    -------
+    (float, list of tuple)
+        The total weight and the arcs dropped, ``(u, v)`` pairs in the order given.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``method``, or a weight that is not a finite number > 0.
+    RelaxRefused
+        A component over :data:`MAX_COMPONENT_PARTS` vertices or :data:`MAX_COMPONENT_ARCS` arcs, or one
+        over 22 vertices for the forced DP.
+    RelaxTimeout
+        The time ran out first; it carries the best set found (a feedback arc set, not proven minimal).
+
+    Examples
+    --------
     >>> min_feedback_arc_set("abc", {("a", "b"): 1, ("b", "c"): 1, ("c", "a"): 3, ("b", "a"): 1})
     (1.0, [('a', 'b')])
     >>> min_feedback_arc_set("ab", [("a", "b", 1)])
@@ -541,8 +608,28 @@ def _sooner(time_limit: float | None, deadline: Deadline | float | None) -> floa
 
 @dataclass(frozen=True)
 class Dropped:
-    """One declared constraint dropped: ``before -> after`` of strategy ``strategy``, with its weight;
-    ``forced`` if the installed prefix violates it; ``line`` in the plan file when known."""
+    """One declared constraint dropped.
+
+    Parameters
+    ----------
+    strategy : str
+        The strategy's name.
+    before, after : str
+        The constraint ``before -> after``.
+    weight : float
+        Its weight: the price of dropping it.
+    forced : bool
+        True if the installed prefix violates it (it had to go).
+    line : int, optional
+        Its line in the plan file, when known (:func:`constraint_lines`).
+
+    Examples
+    --------
+    >>> from opportune.formats.loader import check_text
+    >>> plan = check_text("parts: [a, b, c]\\nrequires: {b: [a]}").plan
+    >>> relax(plan, ["b"]).dropped
+    (Dropped(strategy='default', before='a', after='b', weight=1.0, forced=True, line=None),)
+    """
 
     strategy: str
     before: str
@@ -552,6 +639,18 @@ class Dropped:
     line: int | None = None
 
     def to_dict(self) -> dict:
+        """The dropped constraint as plain data (an entry of ``relax --json``'s ``dropped``).
+
+        Returns
+        -------
+        dict
+            ``strategy``, ``before``, ``after``, ``weight`` (an integer where it is one), ``forced``, ``line``.
+
+        Examples
+        --------
+        >>> Dropped("default", "a", "b", 1.0).to_dict()
+        {'strategy': 'default', 'before': 'a', 'after': 'b', 'weight': 1, 'forced': False, 'line': None}
+        """
         return {"strategy": self.strategy, "before": self.before, "after": self.after,
                 "weight": _number(self.weight), "forced": self.forced, "line": self.line}
 
@@ -560,9 +659,31 @@ class Dropped:
 class Relaxation:
     """The relaxed plan, the constraints dropped and their total weight, and whether it is proven minimal.
 
-    ``removed`` lists ``(strategy, same_as)`` for strategies dropped because, relaxed, they admit
-    exactly the sequences of an earlier one; ``repaired`` names the strategy relaxed to admit the
-    installed prefix (None when none needed it).
+    Parameters
+    ----------
+    plan : Plan
+        The relaxed plan: valid (``opportune check`` passes) and admitting the installed prefix.
+    dropped : tuple of Dropped
+        The declared constraints dropped, strategy by strategy.
+    weight : float
+        Their total weight.
+    minimal : bool
+        False when the time ran out before the minimum was proven (the relaxation is still valid).
+    removed : tuple of (str, str)
+        ``(strategy, same_as)`` for strategies dropped because, relaxed, they admit exactly the
+        sequences of an earlier one.
+    repaired : str, optional
+        The strategy relaxed to admit the installed prefix (None when none needed it).
+    notes : tuple of str
+        Remarks for the user.
+
+    Examples
+    --------
+    >>> from opportune.formats.loader import check_text
+    >>> cyclic = check_text("parts: [a, b]\\nrequires: {b: [a], a: [{part: b, weight: 2}]}", allow_cycles=True).plan
+    >>> r = relax(cyclic)
+    >>> r.weight, r.minimal, r.changed, r.plan.strategies[0].pairs()
+    (1.0, True, True, [('b', 'a')])
     """
 
     plan: Plan
@@ -578,6 +699,22 @@ class Relaxation:
         return bool(self.dropped or self.removed)
 
     def to_dict(self) -> dict:
+        """The relaxation as plain data (``relax --json``).
+
+        Returns
+        -------
+        dict
+            The relaxed plan (a plan file's dict), the constraints dropped, their weight, ``minimal``,
+            the strategies removed and the strategy repaired.
+
+        Examples
+        --------
+        >>> from opportune.formats.loader import check_text
+        >>> cyclic = check_text("parts: [a, b]\\nrequires: {b: [a], a: [b]}", allow_cycles=True).plan
+        >>> doc = relax(cyclic).to_dict()
+        >>> doc["plan"]["strategies"], doc["weight"], doc["minimal"]
+        ([{'name': 'default', 'requires': {'a': ['b']}}], 1, True)
+        """
         return {"plan": self.plan.to_dict(), "dropped": [d.to_dict() for d in self.dropped],
                 "weight": _number(self.weight), "minimal": self.minimal,
                 "removed": [{"strategy": a, "same_as": b} for a, b in self.removed], "repaired": self.repaired}
@@ -622,21 +759,54 @@ def relax(plan: Plan, installed: Sequence[str] = (), *, time_limit: float | None
           deadline: Deadline | float | None = None) -> Relaxation:
     """The cheapest rational relaxation of ``plan`` (see the module's docstring for the rule).
 
-    ``plan`` may hold cyclic strategies (read it with ``read_plan(path, allow_cycles=True)``);
-    ``installed`` is the prefix of part ids already installed, in order; ``lines`` maps
-    ``(strategy, before, after)`` to the line of the constraint in its file
-    (:func:`constraint_lines`).  Returns a :class:`Relaxation` whose plan is valid (``opportune check``
-    passes) and admits ``installed``.  Cost: one :func:`min_feedback_arc_set` per cyclic strategy (two
-    for a strategy that contradicts the prefix), within ``time_limit`` seconds in all (and before
-    ``deadline``, as in :func:`min_feedback_arc_set`).  Raises
-    ``ValueError`` for a bad prefix and :class:`RelaxRefused` over the limits.
+    Cost: one :func:`min_feedback_arc_set` per cyclic strategy (two for a strategy that contradicts the
+    prefix), within ``time_limit`` seconds in all.
 
+    Parameters
+    ----------
+    plan : Plan
+        The plan; it may hold cyclic strategies (read it with ``read_plan(path, allow_cycles=True)``).
+    installed : sequence of str
+        The prefix of part ids already installed, in order.
+    time_limit : float or None
+        Seconds for the whole relaxation (:data:`DEFAULT_TIME_LIMIT`; None: no limit); past it the best
+        relaxation found is answered with ``minimal`` False.
+    lines : mapping, optional
+        ``(strategy, before, after)`` → the constraint's line in its file (:func:`constraint_lines`),
+        carried into :class:`Dropped`.
+    deadline : Deadline or float, optional
+        The caller's deadline, as in :func:`min_feedback_arc_set`.
+
+    Returns
+    -------
+    Relaxation
+        Its plan is valid (``opportune check`` passes) and admits ``installed``.
+
+    Raises
+    ------
+    ValueError
+        A prefix with an unknown part, or a part installed more often than its quantity.
+    RelaxRefused
+        A knot of constraints over the limits (:data:`MAX_COMPONENT_PARTS`, :data:`MAX_COMPONENT_ARCS`).
+
+    Examples
+    --------
     >>> from opportune.formats.loader import check_text
     >>> cyclic = check_text("parts: [a, b, c]\\nrequires: {b: [a], c: [b], a: [{part: c, weight: 3}]}",
     ...                     allow_cycles=True).plan
     >>> r = relax(cyclic)
     >>> [(d.before, d.after, d.weight) for d in r.dropped], r.weight, r.minimal
     ([('a', 'b', 1.0)], 1.0, True)
+
+    With ``b`` already installed, a plan that asks ``a`` first is relaxed to admit that prefix:
+
+    >>> r = relax(check_text("parts: [a, b, c]\\nrequires: {b: [a]}").plan, ["b"])
+    >>> [(d.before, d.after, d.forced) for d in r.dropped], r.repaired
+    ([('a', 'b', True)], 'default')
+    >>> relax(r.plan, ["d"])
+    Traceback (most recent call last):
+    ...
+    ValueError: --installed: unknown part 'd' (position 1); the plan's parts are a, b, c
     """
     from opportune.planning.plan import Plan, Strategy
 
@@ -707,6 +877,27 @@ def constraint_lines(path) -> dict[tuple[str, str, str], int]:
     """The line of each declared constraint of a YAML or JSON plan file: ``(strategy, before, after) -> line``.
 
     Best effort (empty for other formats, standard input or an unreadable file); O(size of the file).
+
+    Parameters
+    ----------
+    path : str or Path
+        The plan file (``example:NAME`` and ``salbp:NAME`` too; ``-`` gives nothing).
+
+    Returns
+    -------
+    dict
+        ``(strategy, before, after)`` → line, from 1.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> path = Path(tempfile.mkdtemp()) / "plan.yaml"
+    >>> _ = path.write_text("parts: [a, b, c]\\nrequires:\\n  b: [a]\\n  c: [b, a]\\n")
+    >>> constraint_lines(path)
+    {('default', 'a', 'b'): 3, ('default', 'b', 'c'): 4, ('default', 'a', 'c'): 4}
+    >>> constraint_lines("no-such-file.yaml")
+    {}
     """
     from pathlib import Path
 

@@ -197,15 +197,40 @@ def parse_sequences(text: str, *, file: str | None = None, like: Sequences | Non
 
 
 def read_sequences(source: str | Path, *, like: Sequences | None = None, what: str = "sequences") -> Sequences:
-    """Read and check a sequences file.
+    """Read and check a sequences file.  Reads at most ``MAX_SEQUENCE_BYTES``; O(size of the file).
 
-    ``source`` is a :class:`~pathlib.Path` or a file name; ``-`` for standard input; ``example:NAME``
-    for a shipped example (``src/opportune/datasets/examples/NAME.seq``); a ``str`` holding a newline
-    is the text itself.  Reads at most ``MAX_SEQUENCE_BYTES``; O(size of the file).  Raises
-    :class:`SequenceError` (a missing file included).
+    Parameters
+    ----------
+    source : str or Path
+        A :class:`~pathlib.Path` or a file name; ``-`` for standard input; ``example:NAME`` for a shipped
+        example (``src/opportune/datasets/examples/NAME.seq``); a ``str`` holding a newline is the text itself.
+    like : Sequences, optional
+        Sequences the new ones must match (the same parts, as many units each): the successes, when
+        reading the failures.
+    what : str
+        What the sequences are, as the messages name them.
 
+    Returns
+    -------
+    Sequences
+        The sequences (tuples of part ids), their lines, each part's units and the file.
+
+    Raises
+    ------
+    SequenceError
+        A missing or unreadable file, one over the size limit or not UTF-8, an unknown example, or
+        sequences that do not match (every problem with its line).
+
+    Examples
+    --------
     >>> len(read_sequences("example:gearbox-observed"))
     12
+    >>> read_sequences("a b c\\nb a c\\n").quantities
+    {'a': 1, 'b': 1, 'c': 1}
+    >>> read_sequences("example:nothing")     # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    opportune.formats.sequences.SequenceError: error: no example sequences named 'nothing': ...
     """
     if isinstance(source, str) and "\n" in source:
         return parse_sequences(source, like=like, what=what)

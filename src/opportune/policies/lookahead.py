@@ -79,17 +79,15 @@ class Lookahead(DecidesOnMasks):
     pile and weighted bins one step of policy improvement over ``base`` (default :class:`Slack`); on plans
     too large for that, the base's action.
 
-    ``solver_settings`` are the bin and costs of the world it acts in (``visible``, ``capacity``,
-    ``costs``, ``weights``; see :class:`~opportune.policies.evaluate.PolicyEvaluator`): the scores
-    are expected costs in that world.  ``max_states`` bounds either programme: the optimum's
-    (:class:`~opportune.policies.optimal.OptimalSolver`, every state any policy reaches, counted
-    before it starts by :func:`~opportune.policies.states.estimate_states`) is used when it holds
-    at most that many states, else the base policy's (the states the base reaches, fewer: its values
-    after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
+    The scores are expected costs in the world of ``solver_settings``.  ``max_states`` bounds either
+    programme: the optimum's (:class:`~opportune.policies.optimal.OptimalSolver`, every state any policy
+    reaches, counted before it starts by :func:`~opportune.policies.states.estimate_states`) is used when
+    it holds at most that many states, else the base policy's (the states the base reaches, fewer: its
+    values after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
     ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its
     fallback: the window, or in the pile and weighted bins the improvement step (the base past
-    :attr:`STEP_UNITS` units).  (The window was within 0.24% of the optimum on 16-30-part plans, 1-3
-    visible and 1-2 locations, where the step alone was +1.6% and slack +5% to +24%: docs/decisions.md.)
+    :attr:`STEP_UNITS` units).  How near the optimum the window and the step come, against the rules
+    alone, is measured in docs/decisions.md (``benchmarks/bench_fallback.py``).
     The window's work is counted (``self.window.work``), at most
     :data:`~opportune.policies.window.WINDOW_STATES` states a size tried; with a budget it also stops at
     :attr:`WINDOW_SHARE` of it and the base decides within the rest.  The pile bin likewise, with its own programmes
@@ -99,6 +97,37 @@ class Lookahead(DecidesOnMasks):
     :class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states
     and within the bytes the engine grants, whatever the plan's units; the step over the base is tried
     on plans of up to :attr:`STEP_UNITS` units.
+
+    Parameters
+    ----------
+    base : Policy, optional
+        The rule it improves on and falls back to (default :class:`~opportune.policies.variants.Slack`).
+    budget : float, optional
+        Seconds a decision may take (None: exact, with no time limit; the decisions are then the same on
+        every machine).  The programme gets most of it at each decision, resuming where it stopped; a
+        decision it does not finish in time is the base's, within the rest.
+    max_states : int
+        States either programme may hold (see above).
+    optimal : bool
+        Whether its exact optimum may decide where it fits (False: its fallback alone).
+    **solver_settings
+        The world it acts in: ``visible``, ``capacity``, ``costs``, ``weights`` (see
+        :class:`~opportune.policies.evaluate.PolicyEvaluator`), and ``bin`` (``"pile"`` for the pile's
+        programmes; any other value or none: the uniform or weighted bin).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.sequencer import Sequencer
+    >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+    >>> d = Sequencer(plan, Lookahead(visible=1, capacity=1), buffer_capacity=1).decide(["c"])
+    >>> d.action, d.note
+    (Action(kind='buffer', part='c', source=None), "expected remaining cost 4.0000 (the optimum's)")
+    >>> without = Lookahead(visible=1, capacity=1, optimal=False)      # the frontier window decides
+    >>> print(Sequencer(plan, without, buffer_capacity=1).decide(["c"]).rule)
+    by its frontier window, because its exact optimum is switched off: the action of least expected cost ...
+    >>> without.window.work["windows"]
+    1
     """
 
     name = "lookahead"
@@ -180,8 +209,30 @@ class Lookahead(DecidesOnMasks):
         return bool(getattr(self.base, "uses_buffer_order", False))
 
     def buffer_ties_at(self, engine, mask: int, consistent: int):
-        """The base's (the look-ahead's own tie-breaks are by kind and declaration order, not by the buffer's;
-        its scores differ only through the base's values).  None: any pair's order may decide."""
+        """The pairs of parts whose order in the buffer can decide an action at a state: the base's (the
+        look-ahead's own tie-breaks are by kind and declaration order, not by the buffer's; its scores
+        differ only through the base's values).
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+
+        Returns
+        -------
+        list of (int, int) or None
+            Declaration indices, the lower first; None (a base that does not say): any pair's order may decide.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> Lookahead().buffer_ties_at(engine, 0, 1)
+        [(0, 1)]
+        """
         ties = getattr(self.base, "buffer_ties_at", None)
         return None if ties is None else ties(engine, mask, consistent)
 
@@ -259,8 +310,8 @@ class Lookahead(DecidesOnMasks):
 
     def _merges(self, engine) -> bool:
         """Whether its optimum merges interchangeable parts: not in the pile, and with a budget only on plans
-        the compiled programme takes (at most 64 units): merging builds the merged plan's orders, 50 ms on a
-        2,000-part plan, inside the first budgeted decision.  O(1)."""
+        the compiled programme takes (at most 64 units): merging builds the merged plan's orders, work that
+        grows with the plan, inside the first budgeted decision.  O(1)."""
         return not self.pile and (self.lookahead_budget is None or engine.n_units <= 64)
 
     def _weighted(self, engine) -> bool:
@@ -287,7 +338,7 @@ class Lookahead(DecidesOnMasks):
         listed before it starts, at most its cap (:meth:`_optimum_cap`), and its bytes
         (:meth:`_optimum_bytes`) granted by the engine (:meth:`~opportune.engine.schedule.OrderEngine.
         reserve_programme`).  Without a budget the listing is bounded by counted work only (it stops once
-        the states pass the cap: about 3 CPU seconds at most on the SALBP graphs), so the choice is the
+        the states pass the cap), so the choice is the
         same on a loaded machine as on an idle one; with a budget it gets a third of it (it runs inside
         the first decision on the plan), and where it cannot tell in that time the optimum does not fit
         and the fallback decides."""
@@ -322,7 +373,36 @@ class Lookahead(DecidesOnMasks):
         the uniform bin of ``visible`` parts, ``capacity`` locations and ``costs``: its world is that one,
         without a budget, and the programme that decides is the optimum's (prepared here, as its first
         decision would).  Its expected cost there is then the optimum's (ties within 1e-12 a move).
-        O(1) once prepared."""
+        O(1) once prepared.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        visible : int
+            Units seen at a look in the uniform bin asked about.
+        capacity : int or None
+            Buffer locations (None: unlimited).
+        costs : TimeModel or None
+            The time model (None: the default one).
+
+        Returns
+        -------
+        bool
+            True when the optimum's programme decides in that world.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> Lookahead(visible=1, capacity=1).decides_by_optimum(engine, 1, 1, None)
+        True
+        >>> Lookahead(visible=1, capacity=1).decides_by_optimum(engine, 2, 1, None)    # another world
+        False
+        >>> Lookahead(visible=1, capacity=1, optimal=False).decides_by_optimum(engine, 1, 1, None)
+        False
+        """
         from opportune.planning.costs import TimeModel
 
         world = (self.settings.get("visible", 2), self.settings.get("capacity"), self.settings.get("costs") or TimeModel())
@@ -353,6 +433,41 @@ class Lookahead(DecidesOnMasks):
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
+        """The action at a state, on its machine form: the programme's (the optimum's, or the step over
+        the base), else the frontier window's or the base's (see the class).
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : tuple of str
+            The buffered parts.
+        free : float
+            Free buffer locations (``inf``: unlimited), as the base rule reads them.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        Action
+            The action (``DONE`` once every unit is installed).
+
+        Raises
+        ------
+        OutOfTime
+            Without a budget, past the caller's :attr:`deadline` (what the programme finished stays).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> lookahead = Lookahead(visible=1, capacity=1)
+        >>> lookahead.choose_at(engine, 0, 1, (), 1.0, ("c",)), lookahead.choose_at(engine, 0, 1, (), 1.0, ("a",))
+        (Action(kind='buffer', part='c', source=None), Action(kind='install', part='a', source='bin'))
+        """
         if mask == engine.full:
             return DONE
         if self.lookahead_budget is None:
@@ -448,6 +563,31 @@ class Lookahead(DecidesOnMasks):
         return best, best_cost
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
+        """The decision with its reasons: the rule that decided (the optimum, the step over the base, the
+        frontier window or the base, and why), and the expected remaining cost where a programme decided.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        Decision
+            The decision; where the base decides, the base's own (its candidates and estimates), its rule
+            saying why the look-ahead did not.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.sequencer import Sequencer
+        >>> state = Sequencer(make_plan(["a", "b", "c"], {"c": ["a", "b"]}), buffer_capacity=1).state
+        >>> d = Lookahead(visible=1, capacity=1).decide(state, ("c",))
+        >>> d.action.kind, d.rule
+        ('buffer', 'the action with the least expected cost of finishing (the exact optimum)')
+        """
         sched = state.schedule
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")

@@ -23,9 +23,9 @@ looks' values are order statistics (:meth:`OptimalSolver._order_statistics`), O(
 The weighted bin ranks its parts the same way and sums, per part, the probabilities of the looks
 whose best-ranked part it is (its looks enumerated, once per bin content): O(looks) a state, no sort.
 :class:`CompiledOptimalSolver` runs the recursion of either bin in the compiled core
-(``src/native/optimal.cpp``) with the same operations in the same order: the same doubles, about 25
-times faster (25 to 30 in a weighted bin), at most 64 bytes a state (:func:`optimum_bytes`; and a
-bounded look cache in a weighted bin); :func:`optimal_solver` picks it where the core is built (not
+(``src/native/optimal.cpp``) with the same operations in the same order: the same doubles, many times
+faster (docs/decisions.md gives the measured factors), at most 64 bytes a state (:func:`optimum_bytes`;
+and a bounded look cache in a weighted bin); :func:`optimal_solver` picks it where the core is built (not
 with ``OPPORTUNE_PURE_PYTHON=1``), on the plan with its interchangeable parts merged
 (:mod:`.interchangeable`: parts no strategy, cost or weight tells apart counted as one part's units).
 
@@ -34,8 +34,7 @@ Bounds: the states stored never exceed ``max_states`` (:class:`OptimalTooLarge`)
 (:class:`OutOfTime`; what was finished stays memoised, so a later call goes on from there).  How
 many states a plan needs is known before the programme starts: :mod:`.states`.  Memory grows with
 the states only: at most about :data:`~opportune.policies.states.BYTES_PER_STATE` bytes per state,
-plus the look cache, which is bounded (:data:`LOOK_CACHE_LOOKS` looks in all; it used to keep every
-bin's looks, ~20 kB per state on KILBRID).
+plus the look cache, which is bounded (:data:`LOOK_CACHE_LOOKS` looks in all).
 """
 
 from __future__ import annotations
@@ -83,19 +82,71 @@ COMPILED_LOOK_ENTRY_BYTES = 96
 
 
 class OptimalTooLarge(RuntimeError):
-    """The state space is over the limit: the optimum is not computed."""
+    """The state space is over the limit: the optimum is not computed.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {})), max_states=3).value()
+    Traceback (most recent call last):
+    ...
+    opportune.policies.optimal.OptimalTooLarge: the optimum needs more than 3 states for this plan; ...
+    """
 
 
 class OutOfTime(RuntimeError):
-    """The programme passed its ``deadline``; the states it finished stay memoised."""
+    """The programme passed its ``deadline``; the states it finished stay memoised.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine.deadline import Deadline
+    >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {})))
+    >>> solver.deadline = Deadline(0.0)         # a moment long past
+    >>> solver.value()
+    Traceback (most recent call last):
+    ...
+    opportune.policies.optimal.OutOfTime: the optimum's programme passed its deadline
+    >>> solver.deadline = None                  # no deadline: it goes on from where it stopped
+    >>> solver.value()
+    3.0
+    """
 
 
 class OptimalSolver:
     """Exact minimum expected cost of assembling ``engine.plan`` from a Markov bin.
 
-    ``weights`` gives per-part visibility weights (``None``: uniform bin).
     Complexity: O(states × parts) in a uniform bin (the looks as order statistics), else
     O(states × (looks × visible + parts)); states ≤ down-sets × buffer contents.
+    :func:`optimal_solver` gives the compiled programme where it is built (the same values).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    visible : int
+        Units seen at a look.
+    capacity : int or None
+        Buffer locations (None: unlimited).
+    costs : TimeModel, optional
+        The costs of a look, a shake and each part's move (default :class:`~opportune.planning.costs.TimeModel`).
+    weights : dict, optional
+        Per-part visibility weights (None, or all equal: the uniform bin).
+    max_states : int
+        States the programme may store (:class:`OptimalTooLarge` past it).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> [round(OptimalSolver(engine, visible=1, capacity=k).value(), 4) for k in (0, 1)]   # a location helps
+    [4.5, 3.6667]
+    >>> round(OptimalSolver(engine, visible=1, weights={"c": 3.0}).value(), 4)          # c seen most often
+    3.9
+    >>> OptimalSolver(engine, visible=1, capacity=1, max_states=2).value()
+    Traceback (most recent call last):
+    ...
+    opportune.policies.optimal.OptimalTooLarge: the optimum needs more than 2 states for this plan; ...
     """
 
     #: The policy whose value a subclass computes (None: the optimum).
@@ -153,25 +204,114 @@ class OptimalSolver:
     def reserve(self, states: int) -> None:
         """Make room for ``states`` values before the work (the count from
         :func:`~opportune.policies.states.estimate_states`).  The Python programme's dictionary grows
-        as it goes: nothing to do here (the compiled programmes size their tables).  O(1)."""
+        as it goes: nothing to do here (the compiled programmes size their tables).  O(1).
+
+        Parameters
+        ----------
+        states : int
+            The states the programme will store.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})))
+        >>> solver.reserve(100)
+        >>> solver.states
+        0
+        """
 
     # ------------------------------------------------------------ states
 
     def start_key(self) -> tuple:
+        """The key of the start: nothing installed, every strategy open, the buffer empty.
+
+        Returns
+        -------
+        tuple
+            ``(installed units, open strategies, units buffered per part)``.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))).start_key()
+        (0, 1, (0, 0, 0))
+        """
         return (0, self.engine.all_strategies, (0,) * len(self.ids))
 
     def key_of(self, state) -> tuple:
-        """The solver's key for a sequencer :class:`~opportune.sequencer.State`."""
+        """The solver's key for a sequencer :class:`~opportune.sequencer.State`.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+
+        Returns
+        -------
+        tuple
+            ``(installed units, open strategies, units buffered per part)``.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.sequencer import Sequencer
+        >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+        >>> seq = Sequencer(plan, buffer_capacity=1)
+        >>> seq.step(["c"]).action.kind
+        'buffer'
+        >>> OptimalSolver(OrderEngine(plan)).key_of(seq.state)
+        (0, 1, (0, 0, 1))
+        """
         return (state.schedule.mask, state.schedule.consistent, self.buffer_counts(state.buffer))
 
     def policy_key(self, mask: int, consistent: int, buffer) -> tuple:
         """The key a policy's programme keeps for a state: here the optimum's, with the buffer as counts
         (:class:`~opportune.policies.evaluate.PolicyEvaluator` keeps the buffer's order where the policy
-        uses it)."""
+        uses it).
+
+        Parameters
+        ----------
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+
+        Returns
+        -------
+        tuple
+            The key.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))).policy_key(0b011, 1, ["c"])
+        (3, 1, (0, 0, 1))
+        """
         return (mask, consistent, self.buffer_counts(buffer))
 
     def policy_moves(self, key: tuple, look: tuple[int, ...]):
-        """The moves of :meth:`_moves` between the keys of :meth:`policy_key` (here the same)."""
+        """The moves of :meth:`_moves` between the keys of :meth:`policy_key` (here the same): every
+        installation and buffering a look allows, and every installation from the buffer.
+
+        Parameters
+        ----------
+        key : tuple
+            The state (:meth:`policy_key`).
+        look : tuple of int
+            The visible units' parts, as plan indices (sorted).
+
+        Returns
+        -------
+        iterator of (float, tuple, Action)
+            Each move's cost now, the key after it and the action.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), capacity=1)
+        >>> [(str(action), key) for _, key, action in solver.policy_moves(solver.start_key(), (0, 2))]
+        [('install a', (1, 1, (0, 0, 0))), ('buffer a', (0, 1, (1, 0, 0))), ('buffer c', (0, 1, (0, 0, 1)))]
+        """
         return self._moves(key, look)
 
     def _buffered(self, key: tuple) -> tuple[str, ...]:
@@ -179,7 +319,24 @@ class OptimalSolver:
         return tuple(self.ids[i] for i, c in enumerate(key[2]) for _ in range(c))
 
     def buffer_counts(self, buffer) -> tuple[int, ...]:
-        """The buffer as the solver keeps it: units buffered per part, in declaration order."""
+        """The buffer as the solver keeps it: units buffered per part, in declaration order.
+
+        Parameters
+        ----------
+        buffer : iterable of str
+            The buffered parts' ids.
+
+        Returns
+        -------
+        tuple of int
+            Units buffered per part.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))).buffer_counts(["c"])
+        (0, 0, 1)
+        """
         buf = [0] * len(self.ids)
         for p in buffer:
             buf[self.plan.index(p)] += 1
@@ -302,7 +459,32 @@ class OptimalSolver:
     # ------------------------------------------------------------ values
 
     def value(self, key: tuple | None = None) -> float:
-        """Minimum expected remaining cost from a state (default: the start)."""
+        """Minimum expected remaining cost from a state (default: the start).
+
+        Parameters
+        ----------
+        key : tuple, optional
+            The state (:meth:`policy_key`); default :meth:`start_key`.
+
+        Returns
+        -------
+        float
+            The expected cost, in the time model's units (looks, moves and shakes to the end).
+
+        Raises
+        ------
+        OptimalTooLarge
+            More than ``max_states`` states.
+        OutOfTime
+            Past the :attr:`deadline` (what was finished stays: a later call goes on from there).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), visible=1, capacity=1)
+        >>> round(solver.value(), 4), round(solver.value((0, 1, (0, 0, 1))), 4), solver.states   # c buffered
+        (3.6667, 3.0, 13)
+        """
         return self._deep(self._value, key)
 
     def _value(self, key: tuple) -> float:
@@ -409,7 +591,30 @@ class OptimalSolver:
         return len(self._values)
 
     def best_action(self, key: tuple, look: tuple[int, ...]) -> tuple[Action, float]:
-        """The optimal action for a state and look (ties: install, then buffer, then declaration order)."""
+        """The optimal action for a state and look (ties: install, then buffer, then declaration order).
+
+        Parameters
+        ----------
+        key : tuple
+            The state (:meth:`policy_key`).
+        look : tuple of int
+            The visible units' parts, as plan indices (sorted).
+
+        Returns
+        -------
+        (Action, float)
+            The action (a shake where no move is cheaper than shaking by 1e-12) and its expected cost to
+            the end.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), visible=1, capacity=1)
+        >>> solver.best_action(solver.start_key(), (2,))        # c seen first: buffered
+        (Action(kind='buffer', part='c', source=None), 4.0)
+        >>> solver.best_action((0, 1, (0, 0, 1)), (0,))
+        (Action(kind='install', part='a', source='bin'), 3.0)
+        """
         v = self._after_shake(key)
         best, best_cost = None, float("inf")
         kind_rank = {"install": 0, "buffer": 1}
@@ -441,7 +646,23 @@ def check_evaluable(policy, bin_name: str = "") -> None:
 
 
 class Optimal:
-    """The optimal online policy: at each look, the action of least expected total cost."""
+    """The optimal online policy: at each look, the action of least expected total cost.
+
+    Parameters
+    ----------
+    solver : OptimalSolver
+        The optimum's programme for the plan and the world the policy acts in (its values are computed
+        as the decisions need them, and kept).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.sequencer import Sequencer
+    >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+    >>> policy = Optimal(OptimalSolver(OrderEngine(plan), visible=1, capacity=1))
+    >>> [str(row.action) for row in Sequencer(plan, policy, buffer_capacity=1).run([["c"], ["a"], ["b"], []])]
+    ['buffer c', 'install a', 'install b', 'install c (from buffer)', 'done']
+    """
 
     name = "optimal"
     deterministic = True
@@ -450,6 +671,30 @@ class Optimal:
         self.solver = solver
 
     def decide(self, state, visible) -> Decision:
+        """The action of least expected remaining cost at the state on the look.
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state (in the solver's world: its plan, visible parts and buffer).
+        visible : iterable of str
+            The look.
+
+        Returns
+        -------
+        Decision
+            The action, with its expected remaining cost in the note.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.sequencer import Sequencer
+        >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+        >>> state = Sequencer(plan, buffer_capacity=1).state
+        >>> d = Optimal(OptimalSolver(OrderEngine(plan), visible=1, capacity=1)).decide(state, ["c"])
+        >>> d.action, d.note
+        (Action(kind='buffer', part='c', source=None), 'expected remaining cost 4.0000')
+        """
         if state.is_complete:
             return Decision(DONE, "the assembly is complete")
         key = self.solver.key_of(state)
@@ -515,9 +760,29 @@ def optimal_solver(engine: OrderEngine, *, merge: bool = True, **settings) -> Op
     to rounding), through a :class:`MergedOptimalSolver` whose decisions name the plan's parts.
     O(strategies × parts × units / 64) before the work.
 
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    merge : bool
+        Solve the plan with its interchangeable parts merged (fewer states).
+    **settings
+        As :class:`OptimalSolver`'s: ``visible``, ``capacity``, ``costs``, ``weights``, ``max_states``.
+
+    Returns
+    -------
+    OptimalSolver
+        The programme (compiled, merged or both where they apply); its values are computed as asked.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> round(optimal_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
     2.5
+    >>> screws = OrderEngine(make_plan(["base", "s1", "s2", "s3"], {"s1": ["base"], "s2": ["base"], "s3": ["base"]}))
+    >>> merged, whole = optimal_solver(screws, capacity=1), optimal_solver(screws, capacity=1, merge=False)
+    >>> round(merged.value(), 6) == round(whole.value(), 6), merged.states < whole.states
+    (True, True)
     """
     if merge:
         merged = merge_interchangeable(engine, settings.get("costs"), settings.get("weights"))

@@ -21,8 +21,8 @@ Example (the gearbox, 2 visible, unlimited buffer):
 
 The optimum alone (no policy) is also compiled: :class:`CompiledPileSolver` runs the same recursion in
 C++ (``_native.PileCore``, ``src/native/pile.cpp``) with the same floating-point operations in the same
-order, so its values are the same doubles, 32-46 times faster and in at most
-:data:`COMPILED_BYTES_PER_STATE` bytes per stored value.  :func:`pile_solver` picks it where the
+order, so its values are the same doubles, many times faster (docs/decisions.md gives the measured
+factor) and in at most :data:`COMPILED_BYTES_PER_STATE` bytes per stored value.  :func:`pile_solver` picks it where the
 compiled core is there (not with ``OPPORTUNE_PURE_PYTHON=1``), else PileSolver.
 """
 
@@ -49,10 +49,43 @@ COMPILED_BYTES_PER_STATE = 64
 class PileSolver(BufferOrder, OptimalSolver):
     """Exact least expected cost in the pile bin, and (with ``policy``) the exact cost of a policy.
 
-    Same settings as :class:`OptimalSolver` (the weights do not apply: a pile has none);
-    ``max_states`` bounds the (state, window) pairs.  A policy that uses the buffer's order is scored on
-    states that keep it (:class:`~opportune.policies.evaluate.BufferOrder`).
-    Complexity: O(states × windows × moves).
+    A policy that uses the buffer's order is scored on states that keep it
+    (:class:`~opportune.policies.evaluate.BufferOrder`).  Complexity: O(states × windows × moves).
+    :func:`pile_solver` gives the compiled programme for the optimum where it is built.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    policy : Policy, optional
+        A deterministic policy that decides on the state alone (``choose_at``): its exact expected cost
+        instead of the optimum.
+    **settings
+        As :class:`~opportune.policies.optimal.OptimalSolver`'s: ``visible`` (the units on top of the
+        pile the robot sees), ``capacity``, ``costs`` and ``max_states`` (which bounds the (state,
+        window) pairs); ``weights`` is ignored (a pile has none).
+
+    Raises
+    ------
+    ValueError
+        A policy whose exact value is not defined (it chooses at random) or not computable (no
+        ``choose_at``).
+
+    Examples
+    --------
+    On a chain of four parts, with two visible and one buffer location, the pile costs more than the
+    uniform bin (its window stays until a unit is taken); the paper's rule reaches the pile's optimum here:
+
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> from opportune.policies.opportunistic import Opportunistic
+    >>> engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"b": ["a"], "c": ["b"], "d": ["c"]}))
+    >>> round(OptimalSolver(engine, visible=2, capacity=1).value(), 4)
+    4.9167
+    >>> round(PileSolver(engine, visible=2, capacity=1).value(), 4)
+    5.0417
+    >>> round(PileSolver(engine, Opportunistic(), visible=2, capacity=1).value(), 4)
+    5.0417
     """
 
     def __init__(self, engine, policy=None, **settings):
@@ -71,7 +104,34 @@ class PileSolver(BufferOrder, OptimalSolver):
 
     def value(self, key: tuple | None = None) -> float:
         """Expected cost from a freshly shaken pile at ``key`` (default: the start): the optimum, or
-        the policy's if one was given."""
+        the policy's if one was given.
+
+        Parameters
+        ----------
+        key : tuple, optional
+            A state as the programme keys it (:meth:`~opportune.policies.optimal.OptimalSolver.policy_key`:
+            installed units, open strategies, the buffer); default: the start.
+
+        Returns
+        -------
+        float
+            The expected cost, in the time model's units (the looks, moves and shakes to the end).
+
+        Raises
+        ------
+        OptimalTooLarge
+            More than ``max_states`` (state, window) pairs.
+        OutOfTime
+            Past the ``deadline`` (what was finished stays: a later call goes on from there).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> solver = PileSolver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1)
+        >>> round(solver.value(), 4), round(solver.value(solver.policy_key(1, 1, ())), 4)   # a installed
+        (2.5, 1.0)
+        """
         return self._deep(self._shake_value, self.policy_start() if key is None else key)
 
     def _bin_counts(self, key: tuple) -> tuple[int, ...]:
@@ -173,6 +233,22 @@ def pile_solver(engine, policy=None, **settings) -> PileSolver:
     the plan, else :class:`PileSolver` (a policy's value, or no compiled core); the same values either
     way.  O(1) before the work.
 
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    policy : Policy, optional
+        A policy whose exact value to compute (then always :class:`PileSolver`); None: the optimum.
+    **settings
+        As :class:`PileSolver`'s: ``visible``, ``capacity``, ``costs``, ``max_states``.
+
+    Returns
+    -------
+    PileSolver
+        The programme; its values are computed as asked.
+
+    Examples
+    --------
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> round(pile_solver(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1).value(), 4)
@@ -193,7 +269,7 @@ class CompiledPileSolver(CompiledCore, PileSolver):
     (:class:`OptimalTooLarge`), the ``deadline`` is read at every new state (:class:`OutOfTime`; what
     was finished stays).  Memory: :data:`COMPILED_BYTES_PER_STATE` bytes per value.  A ``ValueError``
     where the core does not take the plan (see :func:`compiled_pile_available`).
-    Complexity: O(states × windows × moves), as PileSolver, 32-46 times faster.
+    Complexity: O(states × windows × moves), as PileSolver (how much faster: docs/decisions.md).
     """
 
     def __init__(self, engine, policy=None, **settings):

@@ -79,10 +79,33 @@ def window_available(engine, weights: dict[str, float] | None = None) -> bool:
 
 @dataclass(frozen=True)
 class WindowTable:
-    """What a decision at one state needs, whatever its look: the window's parts (plan indices, declaration
-    order), the expected costs after each move (``WindowCore.moves``), how many remaining parts are outside
-    the window, the window's size and the states its programme held.  Under 1 kB for a window of 12 parts,
-    whatever the plan (the parts outside are a count: a look's are ranked when it comes)."""
+    """What a decision at one state needs, whatever its look.  Under 1 kB for a window of 12 parts,
+    whatever the plan (the parts outside are a count: a look's are ranked when it comes).
+
+    Parameters
+    ----------
+    parts : tuple of int
+        The window's parts (plan indices, declaration order).
+    values : tuple of float
+        The expected costs after each move (``WindowCore.moves``): three per part of ``parts`` (install
+        it from the bin, buffer it, install it from the buffer; ``inf`` where that is no move), then
+        buffering a part from outside the window, then the window's expected cost from the state.
+    outside : int
+        How many remaining parts are outside the window.
+    size : int
+        The window's size, as tried (:data:`WINDOW_PARTS`).
+    states : int
+        The states its programme held.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(list("abcdefghij"), {"j": list("abcdefghi")}))
+    >>> table = FrontierWindow(visible=2, capacity=1, sizes=(3,)).table(engine, 0, 1, ())
+    >>> table.parts, table.outside, len(table.values) == 3 * len(table.parts) + 2
+    ((0, 1, 2), 7, True)
+    """
 
     parts: tuple[int, ...]
     values: tuple[float, ...]
@@ -249,6 +272,18 @@ class FrontierWindow(DecidesOnMasks):
         -------
         WindowTable or None
             The largest window's table that fitted, or None where none did.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> window = FrontierWindow(visible=1, capacity=1)
+        >>> table = window.table(engine, 0, 1, ())
+        >>> table.parts, table.outside, round(table.values[-1], 4), window.work["windows"]
+        ((0, 1, 2), 0, 3.6667, 1)
+        >>> FrontierWindow(visible=1, capacity=1, max_states=1).table(engine, 0, 1, ()) is None
+        True
         """
         if self._engine is not engine:
             self._engine, self._tables = engine, OrderedDict()
@@ -325,6 +360,35 @@ class FrontierWindow(DecidesOnMasks):
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
+        """The action at a state, on its machine form: the window's best (:func:`best_in_window`), or the
+        base's where no window fits.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : tuple of str
+            The buffered parts.
+        free : float
+            Free buffer locations (``inf``: unlimited), as the base rule reads them.
+        visible : tuple of str
+            The look.
+
+        Returns
+        -------
+        Action
+            The action (``DONE`` once every unit is installed).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> FrontierWindow(visible=1, capacity=1).choose_at(engine, 0, 1, (), 1.0, ("a",))
+        Action(kind='install', part='a', source='bin')
+        """
         if mask == engine.full:
             return DONE
         table = self.table(engine, mask, consistent, buffer)
@@ -350,6 +414,18 @@ class FrontierWindow(DecidesOnMasks):
         -------
         Decision
             The window's decision, or the base's (saying that no window fitted).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.sequencer import Sequencer
+        >>> plan = make_plan(["a", "b", "c"], {"c": ["a", "b"]})
+        >>> d = FrontierWindow(visible=1, capacity=1).decide(Sequencer(plan, buffer_capacity=1).state, ("c",))
+        >>> d.action, d.note
+        (Action(kind='buffer', part='c', source=None), 'a window of 3 parts, 13 states; expected cost of the window 3.6667')
+        >>> tiny = FrontierWindow(visible=1, capacity=1, max_states=1)     # no window fits: the base decides
+        >>> tiny.decide(Sequencer(plan, buffer_capacity=1).state, ("c",)).rule
+        'as the base rule (slack), because no frontier window fitted its state cap (1) or its time: ...'
         """
         sched = state.schedule
         if sched.mask == sched.engine.full:
@@ -401,6 +477,15 @@ def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffe
     -------
     Action
         The action.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> table = FrontierWindow(visible=1, capacity=1).table(engine, 0, 1, ())
+    >>> best_in_window(engine, 0, 1, table, (), ("c",), 1.0), best_in_window(engine, 0, 1, table, (), ("a",), 1.0)
+    (Action(kind='buffer', part='c', source=None), Action(kind='install', part='a', source='bin'))
     """
     plan = engine.plan
     values = table.values
