@@ -3,4 +3,5 @@ of ``count``)."""
 
 from opportune.cli import main
 
-main()
+if __name__ == "__main__":    # run as a script only: importing the module (a doctest walk) runs nothing
+    main()

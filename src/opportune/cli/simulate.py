@@ -141,9 +141,8 @@ def simulate(
     settings.update(training_runs=training_runs, optimal_states=optimal_states, count_time_limit=count_time_limit)
     plan, recorded, given = _study_plan(ctx, plan_file, from_results, as_json)
     explicit, names = _strategy_names(plan, strategies, bin_model or plan.simulation.get("bin", "uniform"))
+    explicit = explicit or recorded is not None   # the recorded strategies, all of them: none is quietly left out
     try:
-        if recorded is not None:
-            explicit = True   # the recorded strategies, all of them: none is quietly left out this time
         config = _study_config(plan, recorded, given, names, explicit, settings)
         _check_study_bound(config, bound, penalty, as_json)
         config, prepared, decision_budget = _prepare(config, explicit, decision_budget, from_results is None)
