@@ -115,10 +115,11 @@ def _evaluation_config(plan, policy: str, chosen_bin: str, visible: Optional[int
     from opportune.worlds import TimeModel
 
     sim = plan.simulation
+    if buffer_capacity is None:
+        buffer_capacity = sim.get("buffer_capacity")
     try:
         return StudyConfig(plan=plan, strategies=(policy,), trials=1, bin=chosen_bin,
-                           visible=visible or sim.get("visible", 2),
-                           buffer_capacity=buffer_capacity if buffer_capacity is not None else sim.get("buffer_capacity"),
+                           visible=visible or sim.get("visible", 2), buffer_capacity=buffer_capacity,
                            costs=TimeModel.from_plan(plan), optimal_states=max_states).validate()
     except (StudyError, ValueError) as exc:
         fail(str(exc))
@@ -222,8 +223,8 @@ class _Run:
             if estimate.exact:
                 self.optimum.reserve(estimate.states)    # a compiled table sized at once: it never doubles
         else:
-            self.ev = PolicyEvaluator(engine, chosen, weights=config.weights if self.chosen_bin == "weighted" else None,
-                                      **settings)
+            weights = config.weights if self.chosen_bin == "weighted" else None
+            self.ev = PolicyEvaluator(engine, chosen, weights=weights, **settings)
         ev = self.ev
         ev.deadline = until         # finding where the buffer's order decides counts options: within it too
         # a policy deciding by the optimum is worth the optimum: none of its own states are evaluated

@@ -22,6 +22,7 @@ from opportune.cli.common import (PLAN_ARG, complete_plan, err, escape, fail, fa
                                   out, policy_names, print_error, print_problems, write_text, wrote)
 from opportune.limits import MAX_BUFFER
 
+
 # ---------------------------------------------------------------- check
 
 
