@@ -11,9 +11,8 @@ Imports: typer only; the programmes load when the command runs.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional
+from typing import Optional
 
 import typer
 
@@ -154,25 +153,18 @@ def _estimate(engine, config, chosen_bin: str, max_states: int):
     return estimate
 
 
-@dataclass
 class _Run:
     """One evaluation: its request, its programmes (the policy's and the optimum's; kept as they are made, so
-    that a stop can say how far they got) and what they found."""
+    that a stop can say how far they got) and what they found.  (A plain class: ``dataclasses`` is not
+    loaded at the command line's start-up for this one.)"""
 
-    plan: Any
-    policy: str
-    chosen_bin: str
-    max_states: int
-    time_limit: Optional[float]
-    estimate: Any
-    ev: Any = None
-    optimum: Any = None
-    policy_bound: int = 0
-    ordered: bool = False
-    value: float = 0.0
-    best: float = 0.0
-    states: int = 0
-    policy_states: int = 0
+    def __init__(self, plan, policy: str, chosen_bin: str, max_states: int, time_limit: Optional[float], estimate):
+        self.plan, self.policy, self.chosen_bin, self.estimate = plan, policy, chosen_bin, estimate
+        self.max_states, self.time_limit = max_states, time_limit
+        self.ev = self.optimum = None
+        self.policy_bound, self.ordered = 0, False
+        self.value = self.best = 0.0
+        self.states = self.policy_states = 0
 
     def solve(self, engine, config, without_optimum: bool, as_json: bool) -> None:
         """Run the programmes, or exit saying why they stopped and how far they got."""
