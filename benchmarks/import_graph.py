@@ -5,7 +5,7 @@ A *room* is one entry of the layer table ``tests/test_layers.py`` checks (``oppo
 bottom), lists the modules it holds, and draws an arrow from a room to every room it imports (the
 import walk of ``tests/test_layers.py``: every import, at module level or in a function, and the lazy
 name tables), the wider the more module-to-module imports stand behind it.  The command line's
-modules (``cli``, ``cli_count``, ``launch``, ``__main__``) are one room.  The package's root (its lazy
+modules (the ``cli`` package, ``cli_count``, ``launch``, ``__main__``) are one room.  The package's root (its lazy
 names only) and the compiled core (``opportune._native``, which imports nothing) are left out, as is
 ``opportune._lazy`` (the lazy-name helper every package's ``__init__`` imports, which imports
 nothing): arrows to them say nothing about where a change goes.

@@ -174,15 +174,15 @@ def test_a_progress_bar_only_on_a_terminal(monkeypatch, tmp_path):
     import yaml
     from rich.console import Console
 
-    from opportune import cli
+    from opportune.cli import common
 
     path = tmp_path / "x.yaml"
     path.write_text(yaml.safe_dump(make_plan(["a", "b", "c"], {"c": ["a"]}).to_dict()))
     out = runner.invoke(app(), ["evaluate", str(path), "--policy", "paper"])    # not a terminal: no bar
     assert out.exit_code == 0 and "states" in out.output and "━" not in out.output
     err = io.StringIO()
-    monkeypatch.setattr(cli, "_consoles", {"out": Console(file=io.StringIO(), force_terminal=True),
-                                           "err": Console(file=err, force_terminal=True)})
+    monkeypatch.setattr(common, "_consoles", {"out": Console(file=io.StringIO(), force_terminal=True),
+                                              "err": Console(file=err, force_terminal=True)})
     out = runner.invoke(app(), ["evaluate", str(path), "--policy", "paper"])
     assert out.exit_code == 0, out.output
     assert "optimum" in err.getvalue() and "states" in err.getvalue()

@@ -258,7 +258,7 @@ def test_a_report_that_cannot_be_written_is_refused_before_the_study(tmp_path):
         assert r.exit_code == 2 and words in r.output and "error:" in r.output, r.output
         assert not (tmp_path / "missing").exists()
     # but a report inside --out's directory, which the command makes before writing the report, is fine
-    from opportune.cli import _check_report_path
+    from opportune.cli.simulate import _check_report_path
 
     _check_report_path(tmp_path / "new" / "report.html", None, tmp_path / "new", False)   # no exit
     r = run_cli("simulate", GEARBOX, "--products", 2, "--report", tmp_path / "r.html", "--json")

@@ -19,7 +19,7 @@ def invoke(*args):
 
 
 def test_register_imports_only_typer():
-    code = ("import sys, typer; import opportune.service.commands as c; app = typer.Typer(); c.register(app); "
+    code = ("import sys, typer; import opportune.cli.service as c; app = typer.Typer(); c.register(app); "
             "heavy = [m for m in ('fastapi', 'uvicorn', 'sqlalchemy', 'starlette', 'httpx') if m in sys.modules]; "
             "print(','.join(heavy))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

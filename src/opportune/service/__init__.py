@@ -23,9 +23,9 @@ Modules, one job each:
   (the request bodies), :mod:`~opportune.service.middleware` (limits, headers, timing, the last-resort
   500) and :mod:`~opportune.service.handlers` (refusals as JSON errors);
 * :mod:`~opportune.service.server` — uvicorn with logs that never show a credential;
-* :mod:`~opportune.service.commands` — ``opportune serve`` and ``opportune token ...``;
 * :mod:`~opportune.service.testing` — a real server on a loopback port, for integration tests.
 
-Nothing here is imported by the library: FastAPI, uvicorn and SQLAlchemy are
-the ``service`` extra.
+Its commands (``opportune serve``, ``opportune token ...``, ``opportune opcua cert``) are the command
+line's, in :mod:`opportune.cli.service`.  Nothing here is imported by the library: FastAPI, uvicorn and
+SQLAlchemy are the ``service`` extra.
 """

@@ -148,7 +148,7 @@ def app_from_environment():
 def serve(*, db_url: str, host: str, port: int, max_body: int, access_log: bool = True, workers: int = 1,
           settings: dict | None = None, opcua=None, http: bool = True) -> None:
     """Open the store, build the app and serve until interrupted; with ``workers`` > 1, that many processes
-    sharing the port and the database (PostgreSQL: :func:`opportune.service.commands.serve` refuses SQLite).
+    sharing the port and the database (PostgreSQL: :func:`opportune.cli.service.serve` refuses SQLite).
     ``settings``: further :class:`~opportune.service.config.Settings` fields by name.  ``opcua``: an
     :class:`~opportune.service.opcua.OpcUaOptions` to serve OPC UA too, on the same run manager (it
     listens before HTTP does), or alone with ``http=False``."""

@@ -1,4 +1,5 @@
-"""``opportune serve``, ``opportune token create|list|revoke`` and ``opportune opcua cert``, added to the main command line by :func:`register`.
+"""The service's commands: ``opportune serve``, ``opportune token create|list|revoke`` and ``opportune opcua
+cert``, added to the main command line by :func:`register`.
 
 Only typer is imported here at import time: FastAPI, uvicorn and SQLAlchemy
 (the ``service`` extra) load inside the commands, so the rest of the command
