@@ -25,8 +25,8 @@ share of the budget, and otherwise to estimates that fill the rest of it.  The d
 so: ``exact=False``, the method, each candidate's estimated share of completions or expected
 position with its standard error, and the estimated probability that the action is the exact
 rule's.  An estimate ends early, keeping the rest of the budget, once it is sure (that probability
-at least :data:`SURE`) or once, as surely, no other candidate is better by more than
-:data:`INDIFFERENT` (of the best share of options, or of the steps remaining for an expected
+at least :data:`~opportune.engine.tuning.SURE`) or once, as surely, no other candidate is better by more than
+:data:`~opportune.engine.tuning.INDIFFERENT` (of the best share of options, or of the steps remaining for an expected
 position): candidates that close are a toss-up the samples would take the whole budget to settle,
 for no measurable difference in the outcome.  The chains' readings at a state are kept from look to
 look while nothing is installed, so a run of buffer choices builds on itself.  Steps that are
@@ -36,10 +36,12 @@ exact values, so estimates treat them as tied and the exact tie-breaks decide be
 Exact counts first while they have been quick; where they have been slow (a large plan's early
 states), a short estimate (a probe) first, which ends the decision if it settles it, then the exact
 attempt, then the estimate again with what is left of the budget.  How slow exact attempts have
-been is kept per kind of question and per band of :data:`SIZE_BAND` steps remaining (the readings):
+been is kept per kind of question and per band of steps remaining (the readings):
 on an assembly the cost of exact counts follows how far it has come (docs/decisions.md gives
 ARC111's measurements), so each trial's early states
-learn from the last trial's early states rather than from its late ones.
+learn from the last trial's early states rather than from its late ones.  Every share and margin of
+this split is decided by one frozen :class:`~opportune.policies.budget.Budget` the rule makes, whose
+defaults :mod:`opportune.engine.tuning` documents; the engine receives deadlines only.
 
 >>> from opportune import make_plan
 >>> from opportune.engine import OrderEngine
@@ -61,6 +63,7 @@ from opportune.engine import Schedule
 from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.stats import prob_positive
+from opportune.engine.tuning import EXACT_SHARE, MIXED_STEPS
 from opportune.policies.base import (
     DONE,
     INDIFFERENT,
@@ -75,26 +78,12 @@ from opportune.policies.base import (
     resume_collector,
     shared_action,
 )
+from opportune.policies.budget import Budget
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.engine.sampling import CompletionChains   # made by Schedule.chains
-
-MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
-EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
-# SURE (0.999): an estimate this sure of its choice stops early, keeping the rest of the budget (policies.base)
-MIXED_STEPS = 20       # moves per chain, per step remaining, before an early stop is trusted
-EXACT_FIRST = 0.2      # exact attempts first while they have taken under this share of the budget
-PROBE_SHARE = 0.3      # else a first estimate gets this share (and ends the decision if it is sure)
-SLOW_WEIGHT = 0.3      # weight of the last exact attempt in the moving average of their time
-SLOW_DECAY = 0.97      # that average shrinks after each sure estimate, so exact counts are tried again
-SIZE_BAND = 5          # ... kept per band of this many steps remaining
-# INDIFFERENT (0.01): estimates stop once no other candidate is better by more than this (policies.base)
-FAILING = 0.4          # an average above this share of the budget: exact attempts have been failing there
-#: With a question after the rule (:meth:`CountBasedRule.then`): the share of the budget the rule gets,
-#: and the share the exact answer to the question may take before it is estimated with what is left.
-THEN_SHARES = (0.6, 0.3)
 
 MODES = ("order", "exact", "estimate", "then")
 
@@ -124,7 +113,7 @@ class How:
     note : str, default ""
         More about the choice.
     close : bool, default False
-        Estimated: no other candidate better by more than :data:`INDIFFERENT`
+        Estimated: no other candidate better by more than :data:`~opportune.engine.tuning.INDIFFERENT`
         (:meth:`Decision.certainty <opportune.policies.base.Decision.certainty>`).
 
     Examples
@@ -792,10 +781,11 @@ class CountBasedRule(DecidesOnMasks):
     """A policy whose rule is a function of :class:`Answers` (:meth:`rule`, and optionally a question
     after it, :meth:`then`), decided exactly or within ``budget`` seconds per decision.
 
-    A rule with a question after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the
-    whole is ``total_budget``).  A decision costs what its answers cost; within a budget, at most
-    about the budget (the estimates' and counts' checks of the clock, and building the reasons, are
-    the rest).
+    A rule with a question after it gets :data:`~opportune.engine.tuning.THEN_SHARES`\\ ``[0]`` of the
+    budget (``budget``; the whole is ``total_budget``).  A decision costs what its answers cost; within a
+    budget, at most about the budget (the estimates' and counts' checks of the clock, and building the
+    reasons, are the rest).  Every split is decided by one frozen
+    :class:`~opportune.policies.budget.Budget` (``limits``), made here.
 
     Parameters
     ----------
@@ -825,15 +815,11 @@ class CountBasedRule(DecidesOnMasks):
     #: The rules in words, as the decisions give them.
     rule_install = ""
     rule_buffer = ""
-    #: With a question after the rule: the share of the whole budget its exact answer may take.
-    EXACT_SLACK_SHARE = THEN_SHARES[1]
 
     def __init__(self, budget: float | None = None, *, seed: int = 0, chains: int = 8):
-        if budget is not None and not budget > 0:
-            raise ValueError("the decision budget must be a positive number of seconds (or None)")
-        self.total_budget = budget
-        # the rule's share, so that with the question after it the decision keeps the whole budget
-        self.budget = budget * THEN_SHARES[0] if budget is not None and self._asks_after() else budget
+        # the one place a decision's budget is split: the rule's share, so that with the question after
+        # it the decision keeps the whole budget (ValueError if not a positive number of seconds)
+        self.limits = Budget.for_rule(budget, asks_after=self._asks_after())
         self.seed = seed
         self.chains = chains
         # Exact decisions depend only on the state and the look, so a simulation may cache them.
@@ -843,6 +829,24 @@ class CountBasedRule(DecidesOnMasks):
     @classmethod
     def _asks_after(cls) -> bool:
         return cls.then is not CountBasedRule.then
+
+    @property
+    def total_budget(self) -> float | None:
+        """Seconds per decision, the question after the rule included (``None``: exact decisions)."""
+        return self.limits.seconds
+
+    @total_budget.setter
+    def total_budget(self, seconds: float | None) -> None:     # the service scales a look's budget
+        self.limits = self.limits.with_seconds(seconds)
+
+    @property
+    def budget(self) -> float | None:
+        """The rule's seconds per decision (``None``: exact decisions)."""
+        return self.limits.rule_seconds
+
+    @budget.setter
+    def budget(self, seconds: float | None) -> None:
+        self.limits = self.limits.with_seconds(None if seconds is None else seconds / self.limits.rule_share)
 
     def rule(self, ask: Answers) -> Action:
         """The action, from the answers to the rule's questions.
@@ -952,8 +956,7 @@ class CountBasedRule(DecidesOnMasks):
             if not self._asks_after():
                 return action, how
             ask = Answers(engine, mask, consistent, buffer, free, visible, mode="then", readings=self.readings,
-                          end=start + self.total_budget * (1 - MARGIN), after=how,
-                          exact_seconds=self.total_budget * self.EXACT_SLACK_SHARE)
+                          end=self.limits.then_end(start), after=how, exact_seconds=self.limits.then_exact_seconds)
             action = self.then(ask, action)
             return action, ask.how()
         finally:
@@ -965,40 +968,40 @@ class CountBasedRule(DecidesOnMasks):
         it (:attr:`How.settled`), then the exact attempt, then the estimate again with what is left of the
         budget.  Where exact attempts have been failing, the estimate goes on instead of trying them;
         where probes have mostly not settled and exact attempts still fit, they are skipped."""
+        limits = self.limits
         start = time.perf_counter()
-        end = start + self.budget * (1 - MARGIN)
+        end = limits.end(start)
         try:    # one candidate, one part to buffer, a shake, or what the order settles: nothing to count
             return self.rule(Answers(engine, mask, consistent, buffer, free, visible, mode="order")), EXACT
         except MustCount as need:
             kind = need.kind
         r = self.readings
-        key = (kind, (engine.full & ~mask).bit_count() // SIZE_BAND)
+        key = limits.band(kind, (engine.full & ~mask).bit_count())
         slow = r.slow.get(key, 0.0)
         probe = None
-        failing = slow > FAILING * self.budget
-        if slow > EXACT_FIRST * self.budget and (failing or r.probe_ok.get(key, 1.0) >= 0.5):
+        if limits.probe_first(slow, r.probe_ok.get(key, 1.0)):
             # a probe where exact counts are slow, unless probes have mostly been unsure here (many
             # close candidates) while the exact counts still fit
-            probe = self._estimate(engine, mask, consistent, buffer, visible, None, start + self.budget * PROBE_SHARE,
+            probe = self._estimate(engine, mask, consistent, buffer, visible, None, limits.probe_end(start),
                                    stop_when_sure=True, free=free)
             ok = probe[1].settled
-            r.probe_ok[key] = (1 - SLOW_WEIGHT) * r.probe_ok.get(key, 1.0) + SLOW_WEIGHT * ok
+            r.probe_ok[key] = limits.averaged(r.probe_ok.get(key, 1.0), ok)
             if ok:
-                r.slow[key] = slow * SLOW_DECAY   # try the exact counts again some day
+                r.slow[key] = slow * limits.slow_decay   # try the exact counts again some day
                 return probe
-            if failing:   # exact attempts here have been failing: estimate on instead
+            if limits.is_failing(slow):   # exact attempts here have been failing: estimate on instead
                 return self._estimate(engine, mask, consistent, buffer, visible, None, end, stop_when_sure=True,
                                       free=free)
         began = time.perf_counter()
         try:
-            with engine.deadline(began + self.budget * r.share[kind]):
+            with engine.deadline(limits.exact_end(began, r.share[kind])):
                 action = self.rule(Answers(engine, mask, consistent, buffer, free, visible, order_first=False))
-            r.share[kind] = EXACT_SHARE[1]
-            r.slow[key] = (1 - SLOW_WEIGHT) * slow + SLOW_WEIGHT * (time.perf_counter() - began)
+            r.share[kind] = limits.exact_share[1]
+            r.slow[key] = limits.averaged(slow, time.perf_counter() - began)
             return action, EXACT
         except BudgetExceeded:
-            r.share[kind] = EXACT_SHARE[0]
-            r.slow[key] = (1 - SLOW_WEIGHT) * slow + SLOW_WEIGHT * 2 * self.budget
+            r.share[kind] = limits.exact_share[0]
+            r.slow[key] = limits.averaged(slow, limits.failed_reading)
         if time.perf_counter() >= end and probe is not None:
             return probe
         return self._estimate(engine, mask, consistent, buffer, visible, None, end, stop_when_sure=True, free=free)
@@ -1116,8 +1119,7 @@ class CountBasedRule(DecidesOnMasks):
         if action.kind == "install":
             rule = self.rule_install
             try:   # options not needed to decide (a lone candidate, or settled by the order): count them if they fit
-                with state.schedule.engine.deadline(None if self.budget is None
-                                                    else start + self.budget * (1 - MARGIN)):
+                with state.schedule.engine.deadline(self.limits.end(start)):
                     ranked = self.rank_candidates(state, visible)
             except BudgetExceeded:
                 sched = state.schedule
@@ -1133,8 +1135,7 @@ class CountBasedRule(DecidesOnMasks):
         if action.kind == "buffer":
             rule = self.rule_buffer
             try:
-                with state.schedule.engine.deadline(None if self.budget is None
-                                                    else start + self.budget * (1 - MARGIN)):
+                with state.schedule.engine.deadline(self.limits.end(start)):
                     ranked = self.rank_positions(state, visible)
             except BudgetExceeded:   # a lone visible part: decided without them, and they do not fit
                 return Decision(action, rule, note="its expected position was not computed within the budget",
@@ -1149,6 +1150,6 @@ class CountBasedRule(DecidesOnMasks):
         if self.budget is None:
             return state.schedule.count_result(estimate=False).value
         try:
-            return state.schedule.count_result(estimate=False, deadline=start + self.budget * (1 - MARGIN)).value
+            return state.schedule.count_result(estimate=False, deadline=self.limits.end(start)).value
         except BudgetExceeded:
             return None

@@ -1,0 +1,115 @@
+"""The code's shape where a budget change goes: one module holds the tuning constants, one frozen value
+holds a decision's budget.
+
+The engine's and the policies' modules are read with :mod:`ast`: a module-level name in upper case
+bound to a number (an int or float literal, an arithmetic of them, or a tuple of them) is a tuning
+constant unless it is in ``engine/tuning.py``.  At most :data:`MOST_OUTSIDE` may stay outside (true
+unit or format constants, such as a 64-bit mask), so that "make the exact counts run longer" or "give
+the probe more of the budget" is one edit in one file.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import re
+from pathlib import Path
+
+import pytest
+
+from opportune.engine import tuning
+from opportune.policies.budget import Budget
+
+PACKAGE = Path(__file__).resolve().parents[1] / "src" / "opportune"
+ROOMS = ("engine", "policies")
+TUNING = PACKAGE / "engine" / "tuning.py"
+MOST_OUTSIDE = 5
+UPPER = re.compile(r"_?[A-Z][A-Z0-9_]*")
+
+
+def numeric(node: ast.AST) -> bool:
+    """Whether an expression is a number written in the code: a literal, or arithmetic or a tuple of them."""
+    if isinstance(node, ast.Constant):
+        return type(node.value) in (int, float)
+    if isinstance(node, ast.UnaryOp):
+        return numeric(node.operand)
+    if isinstance(node, ast.BinOp):
+        return numeric(node.left) and numeric(node.right)
+    if isinstance(node, ast.Tuple):
+        return bool(node.elts) and all(numeric(e) for e in node.elts)
+    return False
+
+
+def numeric_constants(path: Path) -> list[tuple[int, str]]:
+    """(line, name) of each module-level upper-case name bound to a number in the module at ``path``."""
+    found = []
+    for statement in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(statement, ast.Assign):
+            targets, value = statement.targets, statement.value
+        elif isinstance(statement, ast.AnnAssign) and statement.value is not None:
+            targets, value = [statement.target], statement.value
+        else:
+            continue
+        if not numeric(value):
+            continue
+        for target in targets:
+            names = target.elts if isinstance(target, ast.Tuple) else [target]
+            found += [(statement.lineno, n.id) for n in names if isinstance(n, ast.Name) and UPPER.fullmatch(n.id)]
+    return found
+
+
+def outside_tuning() -> list[str]:
+    return [f"{path.relative_to(PACKAGE)}:{line} {name}"
+            for room in ROOMS for path in sorted((PACKAGE / room).rglob("*.py")) if path != TUNING
+            for line, name in numeric_constants(path)]
+
+
+def test_the_walk_finds_what_it_counts():
+    """The walk is not blind: it finds the tuning module's own constants, tuples and arithmetic included."""
+    names = {name for _, name in numeric_constants(TUNING)}
+    assert {"COUNT_MARGIN", "EXACT_SHARE", "NATIVE_MAX_BYTES", "RELAX_K_START", "RELAX_K_MAX", "WINDOW_PARTS"} <= names
+    assert len(names) > 60
+
+
+def test_tuning_constants_live_in_one_module():
+    outside = outside_tuning()
+    assert len(outside) <= MOST_OUTSIDE, "tuning constants outside engine/tuning.py:\n" + "\n".join(outside)
+
+
+def test_every_tuning_constant_says_why():
+    """Each constant of the tuning module has a line saying why: a ``#:`` block above it (one block may
+    document a run of constants written together) or a comment on its own line."""
+    lines = TUNING.read_text(encoding="utf-8").splitlines()
+    silent = []
+    for line, name in numeric_constants(TUNING):
+        if "#" in lines[line - 1]:
+            continue
+        above = line - 2
+        while above >= 0 and UPPER.match(lines[above]) and "=" in lines[above]:
+            above -= 1      # a constant of the same run
+        if above < 0 or not lines[above].startswith("#:"):
+            silent.append(name)
+    assert not silent, f"tuning constants without a line on why: {silent}"
+
+
+def test_the_budget_is_frozen_and_made_from_the_tuning_module():
+    assert dataclasses.is_dataclass(Budget) and Budget.__dataclass_params__.frozen
+    budget = Budget.for_rule(0.05, asks_after=True)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        budget.seconds = 1.0
+    assert budget.rule_seconds == 0.05 * tuning.THEN_SHARES[0]
+    assert budget.margin == tuning.DECISION_MARGIN and budget.exact_share == tuning.EXACT_SHARE
+    assert budget.with_seconds(0.1) == Budget.for_rule(0.1, asks_after=True)
+
+
+def test_a_rule_keeps_its_budget_in_one_frozen_value():
+    """A count-based rule's seconds are its Budget's: changing them (as the service does for a look)
+    makes a new value, with the same split."""
+    from opportune.policies.variants import Slack
+
+    policy = Slack(budget=0.05)
+    held = policy.limits
+    assert isinstance(held, Budget) and policy.total_budget == 0.05 and policy.budget == held.rule_seconds
+    policy.total_budget = 0.1
+    assert policy.limits is not held and held.seconds == 0.05
+    assert policy.limits.rule_share == held.rule_share and policy.budget == pytest.approx(0.06)
