@@ -59,7 +59,6 @@ import math
 import time
 from dataclasses import dataclass
 
-from opportune.engine import Schedule
 from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.stats import prob_positive
@@ -79,6 +78,7 @@ from opportune.policies.base import (
     shared_action,
 )
 from opportune.policies.budget import Budget
+from opportune.policies.look import LookState
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
@@ -152,10 +152,11 @@ class Readings:
         self.slow: dict[tuple[str, int], float] = {}
         self.probe_ok: dict[tuple[str, int], float] = {}
 
-    def population_for(self, engine, mask: int, consistent: int, candidates=()) -> tuple[CompletionChains, str]:
+    def population_for(self, look: LookState, candidates=()) -> tuple[CompletionChains, str]:
         """The population of chains for this state: carried on from the last look if the state
         only moved forward, else started afresh.  With several consistent strategies the chains follow
         the one in which most ``candidates`` (units) can come next (the current one on a tie)."""
+        engine, mask, consistent = look.engine, look.mask, look.consistent
         strategies = [s for s in range(engine.k) if consistent >> s & 1]
         strategy = strategies[0]
         if len(strategies) > 1 and candidates:
@@ -170,12 +171,16 @@ class Readings:
         pop = self.population
         if pop is None or pop[0] is not engine or pop[1] != strategy or remaining & ~pop[2].remaining:
             self.starts += 1
-            chains = Schedule.at(engine, mask, consistent).chains(strategy, chains=self.chains,
-                                                                  seed=self.seed * 1_000_003 + self.starts)
+            chains = look.schedule.chains(strategy, chains=self.chains, seed=self.seed * 1_000_003 + self.starts)
             self.population = pop = (engine, strategy, chains)
         else:
             pop[2].advance(remaining)
         return pop[2], note
+
+
+def _of_look(name: str, doc: str) -> property:
+    """A read-only attribute of :class:`Answers` that is its look state's ``name``."""
+    return property(lambda self: getattr(self.look, name), doc=doc)
 
 
 class Answers:
@@ -232,26 +237,54 @@ class Answers:
     __slots__ = (
         "_record",
         "after",
-        "buffer",
-        "consistent",
         "end",
-        "engine",
         "exact_seconds",
-        "free",
-        "mask",
+        "look",
         "mode",
         "order_first",
         "readings",
         "stop_when_sure",
-        "visible",
     )
 
     def __init__(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                  visible: tuple[str, ...], *, mode: str = "exact", order_first: bool = True,
                  readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True,
                  after: How = EXACT, exact_seconds: float = math.inf):
-        self.engine, self.mask, self.consistent = engine, mask, consistent
-        self.buffer, self.free, self.visible = buffer, free, visible
+        self._start(LookState(engine, mask, consistent, buffer, free, visible), mode, order_first, readings, end,
+                    stop_when_sure, after, exact_seconds)
+
+    @classmethod
+    def on(cls, look: LookState, *, mode: str = "exact", order_first: bool = True,
+           readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True,
+           after: How = EXACT, exact_seconds: float = math.inf) -> Answers:
+        """The answers at a :class:`~opportune.policies.look.LookState` (the constructor's settings).
+
+        Parameters
+        ----------
+        look : LookState
+            The state and look.
+        mode, order_first, readings, end, stop_when_sure, after, exact_seconds
+            As for the constructor.
+
+        Returns
+        -------
+        Answers
+            The answers.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Answers.on(LookState(engine, 0, 1, (), 1.0, ("a", "b")), order_first=False).options(["a", "b"])
+        {'a': 2, 'b': 1}
+        """
+        ask = cls.__new__(cls)
+        ask._start(look, mode, order_first, readings, end, stop_when_sure, after, exact_seconds)
+        return ask
+
+    def _start(self, look, mode, order_first, readings, end, stop_when_sure, after, exact_seconds) -> None:
+        self.look = look
         self.mode, self.order_first = mode, order_first
         if readings is None and mode in ("estimate", "then"):
             readings = Readings(0, 8)   # a population of its own (a policy passes the one it keeps)
@@ -265,14 +298,16 @@ class Answers:
 
     # ------------------------------------------------------------ the state
 
-    @property
-    def schedule(self) -> Schedule:
-        """The state as a :class:`~opportune.engine.Schedule`: every exact count goes through it."""
-        return Schedule.at(self.engine, self.mask, self.consistent)
-
-    @property
-    def complete(self) -> bool:
-        return self.mask == self.engine.full
+    # what a rule reads of the state, as the look state has it
+    engine = _of_look("engine", "The plan's engine.")
+    mask = _of_look("mask", "The installed units, as the engine's bit mask.")
+    consistent = _of_look("consistent", "The strategies still consistent, as a bit mask.")
+    buffer = _of_look("buffer", "The buffered parts, in buffer order.")
+    free = _of_look("free", "Free buffer locations (``math.inf``: unlimited).")
+    visible = _of_look("visible", "The look.")
+    schedule = _of_look("schedule", "The state as a :class:`~opportune.engine.Schedule`: every exact count goes "
+                                    "through it.")
+    complete = _of_look("complete", "Whether every unit is installed.")
 
     def installable(self) -> list[str]:
         """The installable parts among the visible and the buffered ones.
@@ -291,7 +326,7 @@ class Answers:
         >>> ask.installable()
         ['a', 'b']
         """
-        return self.engine.installable_among(self.mask, self.consistent, (*self.visible, *self.buffer))
+        return self.look.installable()
 
     def installable_in_bin(self) -> list[str]:
         """The installable parts among the visible ones.
@@ -310,7 +345,7 @@ class Answers:
         >>> ask.installable_in_bin()
         ['a']
         """
-        return self.engine.installable_among(self.mask, self.consistent, self.visible)
+        return self.look.installable_in_bin()
 
     def visible_parts(self) -> list[str]:
         """The visible parts, each once, in the look's order.
@@ -329,7 +364,7 @@ class Answers:
         >>> ask.visible_parts()
         ['a', 'c']
         """
-        return list(dict.fromkeys(self.visible))
+        return self.look.visible_parts()
 
     def without_buffer(self) -> Answers:
         """The same answers with the buffered parts out of sight (the bin's candidates only).
@@ -348,9 +383,9 @@ class Answers:
         >>> ask.without_buffer().installable()
         ['a']
         """
-        other = Answers(self.engine, self.mask, self.consistent, (), self.free, self.visible, mode=self.mode,
-                        order_first=self.order_first, readings=self.readings, end=self.end,
-                        stop_when_sure=self.stop_when_sure, after=self.after, exact_seconds=self.exact_seconds)
+        other = Answers.on(self.look.without_buffer(), mode=self.mode, order_first=self.order_first,
+                           readings=self.readings, end=self.end, stop_when_sure=self.stop_when_sure, after=self.after,
+                           exact_seconds=self.exact_seconds)
         other._record = self._record
         return other
 
@@ -405,11 +440,12 @@ class Answers:
     def _settled(self, parts: list[str], rule) -> list[str] | None:
         """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
         or None: only with one consistent strategy (a union's counts do not follow one order)."""
-        consistent, engine = self.consistent, self.engine
+        look = self.look
+        consistent = look.consistent
         if consistent & (consistent - 1):
             return None
-        unit_of = {engine.next_unit(self.mask, self.index(p)): p for p in parts}
-        best = rule(engine.posets[consistent.bit_length() - 1], engine.full & ~self.mask, list(unit_of))
+        unit_of = {look.unit(p): p for p in parts}
+        best = rule(look.engine.posets[consistent.bit_length() - 1], look.remaining, list(unit_of))
         return None if best is None else [unit_of[u] for u in best]
 
     # ------------------------------------------------------------ the questions
@@ -609,9 +645,10 @@ class Answers:
     def _needed_after(self, part: str) -> tuple[int, int]:
         """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
         consistent strategy that frees it soonest)."""
-        engine, remaining = self.engine, self.engine.full & ~self.mask
-        posets = [engine.posets[i] for i in range(engine.k) if self.consistent >> i & 1]
-        u = engine.next_unit(self.mask, self.index(part))
+        look = self.look
+        engine, remaining = look.engine, look.remaining
+        posets = [engine.posets[i] for i in range(engine.k) if look.consistent >> i & 1]
+        u = look.unit(part)
         return (min((p.below[u] & remaining).bit_count() for p in posets),
                 min((p.above[u] & remaining).bit_count() for p in posets))
 
@@ -626,10 +663,10 @@ class Answers:
     # ------------------------------------------------------------ estimated
 
     def _estimated_options(self, can: list[str]) -> dict:
-        engine, mask = self.engine, self.mask
-        remaining = engine.full & ~mask
-        units = {p: engine.next_unit(mask, self.index(p)) for p in can}
-        chains, note = self.readings.population_for(engine, mask, self.consistent, tuple(units.values()))
+        look = self.look
+        remaining = look.remaining
+        units = {p: look.unit(p) for p in can}
+        chains, note = self.readings.population_for(look, tuple(units.values()))
         # a candidate that cannot come next in the chains' strategy has no share there
         first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
 
@@ -659,10 +696,10 @@ class Answers:
         return value
 
     def _estimated_positions(self, parts: list[str]) -> dict:
-        engine, mask = self.engine, self.mask
-        remaining = engine.full & ~mask
-        chains, note = self.readings.population_for(engine, mask, self.consistent)
-        at = {p: engine.next_unit(mask, self.index(p)) for p in parts}
+        look = self.look
+        remaining = look.remaining
+        chains, note = self.readings.population_for(look)
+        at = {p: look.unit(p) for p in parts}
         margin = INDIFFERENT * remaining.bit_count()
 
         def sure(e):
@@ -691,9 +728,9 @@ class Answers:
     def _estimated_slack(self, parts: list[str], weight: float) -> dict:
         """The slack with the expected positions estimated by the population of chains, until ``end`` or
         until sure."""
-        engine, mask = self.engine, self.mask
-        chains, note = self.readings.population_for(engine, mask, self.consistent)
-        at = {p: engine.next_unit(mask, self.index(p)) for p in parts}
+        look = self.look
+        chains, note = self.readings.population_for(look)
+        at = {p: look.unit(p) for p in parts}
         offset = {}
         for part in parts:
             needed, after = self._needed_after(part)
@@ -703,7 +740,7 @@ class Answers:
         def best_of(e):
             return min(parts, key=lambda p: (e.positions[at[p]][0] + offset[p], index(p)))
 
-        margin = INDIFFERENT * (engine.full & ~mask).bit_count()
+        margin = INDIFFERENT * look.steps_left
 
         def confidence(e, best, margin=0.0):
             """P(``best`` has the least slack), or with ``margin``: P(no other part's slack is less by
@@ -936,33 +973,57 @@ class CountBasedRule(DecidesOnMasks):
         >>> Opportunistic().choose_at(engine, 0, engine.all_strategies, (), 1.0, ("c",))
         Action(kind='buffer', part='c', source=None)
         """
-        return self._how(engine, mask, consistent, buffer, free, visible)[0]
+        return self._how(LookState(engine, mask, consistent, buffer, free, visible))[0]
 
-    def _how(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
+    def choose_look(self, look: LookState) -> Action:
+        """:meth:`choose_at` on the six as one value (what the rules that fall back on this one call).
+
+        Parameters
+        ----------
+        look : LookState
+            The state and look.
+
+        Returns
+        -------
+        Action
+            The action (no reasons).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Opportunistic().choose_look(LookState(engine, 0, engine.all_strategies, (), 1.0, ("c",)))
+        Action(kind='buffer', part='c', source=None)
+        """
+        return self._how(look)[0]
+
+    def _how(self, look: LookState) -> tuple[Action, How]:
         """The action and how it was reached, for ``choose_at`` and ``decide`` alike."""
         if self.total_budget is None:
-            ask = Answers(engine, mask, consistent, buffer, free, visible)
+            ask = Answers.on(look)
             return self.then(ask, self.rule(ask)), EXACT
-        return self._budgeted(engine, mask, consistent, buffer, free, visible)
+        return self._budgeted(look)
 
-    def _budgeted(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
+    def _budgeted(self, look: LookState) -> tuple[Action, How]:
         """The rule within the budget (:meth:`_within_budget`), then its question after, with the garbage
         collector paused: a collection waits for the next look (see
         :func:`~opportune.policies.base.pause_collector`)."""
         pause_collector()       # before anything allocates, resumed after the answer is built
         try:
             start = time.perf_counter()
-            action, how = self._within_budget(engine, mask, consistent, buffer, free, visible)
+            action, how = self._within_budget(look)
             if not self._asks_after():
                 return action, how
-            ask = Answers(engine, mask, consistent, buffer, free, visible, mode="then", readings=self.readings,
-                          end=self.limits.then_end(start), after=how, exact_seconds=self.limits.then_exact_seconds)
+            ask = Answers.on(look, mode="then", readings=self.readings, end=self.limits.then_end(start), after=how,
+                             exact_seconds=self.limits.then_exact_seconds)
             action = self.then(ask, action)
             return action, ask.how()
         finally:
             resume_collector()
 
-    def _within_budget(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
+    def _within_budget(self, look: LookState) -> tuple[Action, How]:
         """The rule within the budget: what the order alone settles, else exact counts first while they
         have been quick; where they have been slow, a probe first, which ends the decision if it settles
         it (:attr:`How.settled`), then the exact attempt, then the estimate again with what is left of the
@@ -972,30 +1033,28 @@ class CountBasedRule(DecidesOnMasks):
         start = time.perf_counter()
         end = limits.end(start)
         try:    # one candidate, one part to buffer, a shake, or what the order settles: nothing to count
-            return self.rule(Answers(engine, mask, consistent, buffer, free, visible, mode="order")), EXACT
+            return self.rule(Answers.on(look, mode="order")), EXACT
         except MustCount as need:
             kind = need.kind
         r = self.readings
-        key = limits.band(kind, (engine.full & ~mask).bit_count())
+        key = limits.band(kind, look.steps_left)
         slow = r.slow.get(key, 0.0)
         probe = None
         if limits.probe_first(slow, r.probe_ok.get(key, 1.0)):
             # a probe where exact counts are slow, unless probes have mostly been unsure here (many
             # close candidates) while the exact counts still fit
-            probe = self._estimate(engine, mask, consistent, buffer, visible, None, limits.probe_end(start),
-                                   stop_when_sure=True, free=free)
+            probe = self._estimate(look, limits.probe_end(start))
             ok = probe[1].settled
             r.probe_ok[key] = limits.averaged(r.probe_ok.get(key, 1.0), ok)
             if ok:
                 r.slow[key] = slow * limits.slow_decay   # try the exact counts again some day
                 return probe
             if limits.is_failing(slow):   # exact attempts here have been failing: estimate on instead
-                return self._estimate(engine, mask, consistent, buffer, visible, None, end, stop_when_sure=True,
-                                      free=free)
+                return self._estimate(look, end)
         began = time.perf_counter()
         try:
-            with engine.deadline(limits.exact_end(began, r.share[kind])):
-                action = self.rule(Answers(engine, mask, consistent, buffer, free, visible, order_first=False))
+            with look.engine.deadline(limits.exact_end(began, r.share[kind])):
+                action = self.rule(Answers.on(look, order_first=False))
             r.share[kind] = limits.exact_share[1]
             r.slow[key] = limits.averaged(slow, time.perf_counter() - began)
             return action, EXACT
@@ -1004,15 +1063,13 @@ class CountBasedRule(DecidesOnMasks):
             r.slow[key] = limits.averaged(slow, limits.failed_reading)
         if time.perf_counter() >= end and probe is not None:
             return probe
-        return self._estimate(engine, mask, consistent, buffer, visible, None, end, stop_when_sure=True, free=free)
+        return self._estimate(look, end)
 
-    def _estimate(self, engine, mask, consistent, buffer, visible, can, end: float, *,
-                  stop_when_sure: bool, free: float = math.inf) -> tuple[Action, How]:
+    def _estimate(self, look: LookState, end: float) -> tuple[Action, How]:
         """The rule applied to estimates from the population of chains, run until ``end`` (or until sure).
         The readings are kept while the state stays: a decision's second estimate, and the next look's
-        at the same state, continue them.  (``can``: unused, the rule asks.)"""
-        ask = Answers(engine, mask, consistent, buffer, free, visible, mode="estimate", readings=self.readings,
-                      end=end, stop_when_sure=stop_when_sure)
+        at the same state, continue them."""
+        ask = Answers.on(look, mode="estimate", readings=self.readings, end=end)
         action = self.rule(ask)
         return action, ask.how()
 
@@ -1108,8 +1165,8 @@ class CountBasedRule(DecidesOnMasks):
         (Action(kind='buffer', part='c', source=None), (('c', Fraction(8, 3)),))
         """
         start = time.perf_counter()
-        sched = state.schedule
-        action, how = self._how(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        look = LookState.of(state, visible)
+        action, how = self._how(look)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         if not how.exact:
@@ -1119,11 +1176,10 @@ class CountBasedRule(DecidesOnMasks):
         if action.kind == "install":
             rule = self.rule_install
             try:   # options not needed to decide (a lone candidate, or settled by the order): count them if they fit
-                with state.schedule.engine.deadline(self.limits.end(start)):
+                with look.engine.deadline(self.limits.end(start)):
                     ranked = self.rank_candidates(state, visible)
             except BudgetExceeded:
-                sched = state.schedule
-                lone = len(sched.engine.installable_among(sched.mask, sched.consistent, (*visible, *state.buffer))) == 1
+                lone = len(look.installable()) == 1
                 why = ("the only candidate" if lone else
                        "settled by the partial order alone: no other candidate is followed by every step that must "
                        "follow it")
@@ -1135,7 +1191,7 @@ class CountBasedRule(DecidesOnMasks):
         if action.kind == "buffer":
             rule = self.rule_buffer
             try:
-                with state.schedule.engine.deadline(self.limits.end(start)):
+                with look.engine.deadline(self.limits.end(start)):
                     ranked = self.rank_positions(state, visible)
             except BudgetExceeded:   # a lone visible part: decided without them, and they do not fit
                 return Decision(action, rule, note="its expected position was not computed within the budget",

@@ -423,6 +423,8 @@ class DecidesOnMasks:
     locations and the look.  A simulation calls it directly, with no
     :class:`~opportune.sequencer.State` per look; :meth:`choose` adapts a ``State`` to it,
     and the policy's ``decide`` adds the reasons, so every world takes the same decision.
+    Inside the package the six travel as one :class:`~opportune.policies.look.LookState`
+    (:meth:`choose_look`).
 
     ``uses_buffer_order``: whether the action depends on the order of ``buffer`` (the order of
     buffering, as the sequencer keeps it), not only on its contents.  The exact evaluation
@@ -435,6 +437,11 @@ class DecidesOnMasks:
         """The action alone (what ``decide`` decides, without building its reasons)."""
         sched = state.schedule
         return self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+
+    def choose_look(self, look) -> Action:
+        """``choose_at`` on a :class:`~opportune.policies.look.LookState` (the six as one value): what the
+        rules that fall back on another policy call; a policy that takes the value itself overrides it."""
+        return self.choose_at(*look.clump)
 
 
 @runtime_checkable

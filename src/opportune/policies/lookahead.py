@@ -20,6 +20,7 @@ from opportune.policies.base import (
     resume_collector,
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
+from opportune.policies.look import LookState
 from opportune.policies.optimal import (
     COMPILED_WEIGHTED_LOOKS,
     OptimalTooLarge,
@@ -355,23 +356,23 @@ class Lookahead(DecidesOnMasks):
                   visible: tuple[str, ...]) -> Action:
         if mask == engine.full:
             return DONE
+        look = LookState(engine, mask, consistent, buffer, free, visible)
         if self.lookahead_budget is None:
-            return self._choose(engine, mask, consistent, buffer, free, visible)
+            return self._choose(look)
         # the whole budgeted decision with the collector paused, the programme's part and the base's:
         # a full collection that started in it took 74 ms on a 1,000-task plan against 50
         pause_collector()
         try:
-            return self._choose(engine, mask, consistent, buffer, free, visible)
+            return self._choose(look)
         finally:
             resume_collector()
 
-    def _choose(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
-                visible: tuple[str, ...]) -> Action:
+    def _choose(self, look: LookState) -> Action:
         start = time.perf_counter()
-        action = self._programme(engine, mask, consistent, buffer, visible)
+        action = self._programme(look)
         if action is not None:
             return action
-        return self._fallback(engine, start).choose_at(engine, mask, consistent, buffer, free, visible)
+        return self._fallback(look.engine, start).choose_look(look)
 
     def _fallback(self, engine=None, start: float | None = None):
         """What decides where the programme does not: the frontier window (within its share of the budget
@@ -385,8 +386,9 @@ class Lookahead(DecidesOnMasks):
             return self.window
         return self.fallback_alone if self._too_large else self.fallback
 
-    def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
+    def _programme(self, look: LookState):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
+        engine, mask, consistent, buffer, _, visible = look.clump
         self.last_cost = None
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
@@ -452,7 +454,7 @@ class Lookahead(DecidesOnMasks):
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
         start = time.perf_counter()
-        action = self._programme(sched.engine, sched.mask, sched.consistent, state.buffer, visible)
+        action = self._programme(LookState.of(state, visible))
         if action is None and self._by_window and self._too_large:
             return self._fallback(sched.engine, start).decide(state, visible, because=self._why_too_large())
         if action is None:

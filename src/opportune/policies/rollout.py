@@ -32,6 +32,7 @@ import time
 import zlib
 
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
+from opportune.policies.look import LookState
 
 __all__ = ["Rollout"]
 
@@ -107,9 +108,10 @@ class Rollout(DecidesOnMasks):
         if mask == engine.full:
             return DONE
         self.last = None
+        look = LookState(engine, mask, consistent, buffer, free, visible)
         if engine.n_units <= self.exact_below:
-            return self._exact_policy().choose_at(engine, mask, consistent, buffer, free, visible)
-        actions = self._actions(engine, mask, consistent, buffer, free, visible)
+            return self._exact_policy().choose_look(look)
+        actions = self._actions(look)
         base = actions[0]
         if len(actions) == 1:
             return base
@@ -150,9 +152,10 @@ class Rollout(DecidesOnMasks):
                                    costs=self.costs)
         return self.exact
 
-    def _actions(self, engine, mask, consistent, buffer, free, visible) -> list[Action]:
+    def _actions(self, look: LookState) -> list[Action]:
         """The candidate actions, the base rule's first: installs if any (bin before buffer), else
         buffering each distinct visible part (with room) and shaking."""
+        engine, mask, consistent, buffer, free, visible = look.clump
         tables = self._prepare(engine)
         _, first, _, waiting, _, index = tables
 
