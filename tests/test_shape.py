@@ -113,3 +113,47 @@ def test_a_rule_keeps_its_budget_in_one_frozen_value():
     policy.total_budget = 0.1
     assert policy.limits is not held and held.seconds == 0.05
     assert policy.limits.rule_share == held.rule_share and policy.budget == pytest.approx(0.06)
+
+
+def _tree(relative: str) -> ast.Module:
+    return ast.parse((PACKAGE / relative).read_text(encoding="utf-8"))
+
+
+def test_the_answering_layer_chooses_its_kind_of_answers_once():
+    """No method of the answering layer asks which kind of answers it gives (no ``mode == "..."``): each
+    kind is a class of one interface, chosen when the answers are made."""
+    from opportune.policies.answers import MODES, Answers
+
+    def names_mode(node):
+        return (isinstance(node, ast.Attribute) and node.attr == "mode") or (isinstance(node, ast.Name)
+                                                                             and node.id == "mode")
+
+    def names_kinds(node):     # a kind's name, names, or the table of them
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return any(names_kinds(e) for e in node.elts)
+        return (isinstance(node, ast.Constant) and isinstance(node.value, str)) or (isinstance(node, ast.Name)
+                                                                                     and node.id == "MODES")
+
+    switches = [node.lineno for node in ast.walk(_tree("policies/answers.py")) if isinstance(node, ast.Compare)
+                and any(names_mode(o) for o in (node.left, *node.comparators))
+                and any(names_kinds(o) for o in (node.left, *node.comparators))]
+    assert switches == [], f"answers.py switches on its mode at lines {switches}"
+    assert list(MODES) == ["order", "exact", "estimate", "then"]
+    interface = ("options", "positions", "slack", "picked", "how")
+    for name, kind in MODES.items():
+        assert kind.name == name and all(callable(getattr(kind, m)) for m in interface)
+        ask = Answers(None, 0, 1, (), 1.0, (), mode=name)
+        assert type(ask.mode) is kind
+
+
+def test_the_rules_take_the_state_as_one_value():
+    """Inside the policies the six (engine, mask, consistent, buffer, free, visible) travel as one
+    LookState: only the public ``choose_at`` form (what a simulation calls), the answering layer's public
+    constructor and ``choose_exact`` still take them one by one."""
+    clump = {"engine", "mask", "consistent", "buffer", "free", "visible"}
+    takers = sorted({f"{path.name}:{node.name}" for path in (PACKAGE / "policies").glob("*.py")
+                     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+                     if isinstance(node, ast.FunctionDef)
+                     and clump <= {a.arg for a in node.args.args + node.args.kwonlyargs}})
+    assert {t.split(":")[1] for t in takers} <= {"choose_at", "__init__", "choose_exact"}, takers
+    assert "answers.py:__init__" in takers and "answers.py:choose_at" in takers   # the walk sees them

@@ -8,30 +8,32 @@ parts' expected positions or slack, and names its choice with :meth:`Answers.pic
 budget, clock or estimate: a :class:`CountBasedRule` (the class those rules derive from) runs it
 over answers of one kind at a time and keeps what it learns from look to look.
 
-Answers come in four kinds (``Answers.mode``):
+Answers come in four kinds (``Answers.mode``), each a small class with one interface, chosen once
+when the answers are made (by name in :data:`MODES`):
 
-* ``"order"``: only what needs no counting (one candidate, one part to buffer, or what the partial
-  order alone settles, :mod:`opportune.engine.dominance`); anything else raises :class:`MustCount`;
-* ``"exact"``: exact counts, the order's shortcuts first unless ``order_first=False`` (within the
-  engine's deadline, if the caller set one: :class:`~opportune.engine.deadline.BudgetExceeded`);
-* ``"estimate"``: from a population of random completions
+* :class:`ByOrder` (``"order"``): only what needs no counting (one candidate, one part to buffer, or
+  what the partial order alone settles, :mod:`opportune.engine.dominance`); anything else raises
+  :class:`MustCount`;
+* :class:`Exact` (``"exact"``): exact counts, the order's shortcuts first unless ``order_first=False``
+  (within the engine's deadline, if the caller set one: :class:`~opportune.engine.deadline.BudgetExceeded`);
+* :class:`Estimated` (``"estimate"``): from a population of random completions
   (:class:`~opportune.engine.sampling.CompletionChains`), run until ``end`` or until sure;
-* ``"then"``: a question asked after the rule has decided (the slack after the paper's buffer
-  choice): exact if that fits a share of the budget, else estimated with what is left, else
-  unanswered (None).
+* :class:`After` (``"then"``): a question asked after the rule has decided (the slack after the
+  paper's buffer choice): exact if that fits a share of the budget, else estimated with what is left,
+  else unanswered (None).
 
-With a decision budget (seconds per decision) the rule is applied to exact counts when they fit a
-share of the budget, and otherwise to estimates that fill the rest of it.  The decision then says
-so: ``exact=False``, the method, each candidate's estimated share of completions or expected
-position with its standard error, and the estimated probability that the action is the exact
-rule's.  An estimate ends early, keeping the rest of the budget, once it is sure (that probability
-at least :data:`~opportune.engine.tuning.SURE`) or once, as surely, no other candidate is better by more than
-:data:`~opportune.engine.tuning.INDIFFERENT` (of the best share of options, or of the steps remaining for an expected
-position): candidates that close are a toss-up the samples would take the whole budget to settle,
-for no measurable difference in the outcome.  The chains' readings at a state are kept from look to
-look while nothing is installed, so a run of buffer choices builds on itself.  Steps that are
-interchangeable in the state (the same predecessors and successors among what remains) have equal
-exact values, so estimates treat them as tied and the exact tie-breaks decide between them.
+With a decision budget (seconds per decision) the rule is applied to exact counts when they fit a share
+of the budget, and otherwise to estimates that fill the rest of it.  The decision then says so:
+``exact=False``, the method, each candidate's estimated share of completions or expected position with
+its standard error, and the estimated probability that the action is the exact rule's.  An estimate ends
+early, keeping the rest of the budget, once it is sure (that probability at least
+:data:`~opportune.engine.tuning.SURE`) or once, as surely, no other candidate is better by more than
+:data:`~opportune.engine.tuning.INDIFFERENT` (of the best share of options, or of the steps remaining
+for an expected position): candidates that close are a toss-up the samples would take the whole budget
+to settle, for no measurable difference in the outcome.  The chains' readings at a state are kept from
+look to look while nothing is installed, so a run of buffer choices builds on itself.  Steps that are
+interchangeable in the state (the same predecessors and successors among what remains) have equal exact
+values, so estimates treat them as tied and the exact tie-breaks decide between them.
 
 Exact counts first while they have been quick; where they have been slow (a large plan's early
 states), a short estimate (a probe) first, which ends the decision if it settles it, then the exact
@@ -85,7 +87,6 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.engine.sampling import CompletionChains   # made by Schedule.chains
 
-MODES = ("order", "exact", "estimate", "then")
 
 
 class MustCount(Exception):
@@ -178,6 +179,282 @@ class Readings:
         return pop[2], note
 
 
+# ------------------------------------------------------------ the kinds of answers
+
+
+class Exact:
+    """Exact answers, and the one interface of every kind of answers (chosen once, when the answers are
+    made): the rule's questions on a :class:`~opportune.policies.look.LookState` (:meth:`options`,
+    :meth:`positions`, :meth:`slack`), the ranking the rule picked from (:meth:`picked`) and how the
+    choice was reached (:meth:`how`).
+
+    Exact answers try what the partial order alone settles first (unless ``order_first`` is False), then
+    count (within the engine's deadline, if the caller set one).
+    """
+
+    name = "exact"
+    #: The settings of :class:`Answers` this kind takes.
+    SETTINGS: tuple[str, ...] = ("order_first",)
+    #: How the rule decided, when nothing was estimated here.
+    after = EXACT
+    #: The estimate that decided and the ranking picked, for :meth:`how` (None: nothing is estimated).
+    record: dict | None = None
+
+    def __init__(self, order_first: bool = True):
+        self.order_first = order_first
+
+    @classmethod
+    def made(cls, settings: dict) -> Exact:
+        """This kind, from the settings of :class:`Answers` (those it takes)."""
+        return cls(**{name: settings[name] for name in cls.SETTINGS})
+
+    def options(self, look: LookState, parts: list[str]) -> dict:
+        known = self._uncounted(look, parts, most_options_by_order, "install")
+        return known if known is not None else look.schedule.options_for(parts)
+
+    def positions(self, look: LookState, parts: list[str]) -> dict:
+        known = self._uncounted(look, parts, earliest_by_order, "buffer")
+        return known if known is not None else look.schedule.position_sums_for(set(parts))[1]
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        return _exact_slack(look, parts, weight)
+
+    def picked(self, ranked: list) -> None:
+        if self.record is not None:
+            self.record["ranked"] = ranked
+
+    def how(self) -> How:
+        rec = self.record
+        if not rec or "how" not in rec:     # nothing was estimated
+            return self.after
+        return rec["how"](rec["ranked"])
+
+    def _uncounted(self, look: LookState, parts: list[str], by_order, kind: str) -> dict | None:
+        """What needs no count: the one part asked (nothing to compare), or the best parts the order alone
+        proves (``by_order``), tied at 0; else :meth:`_counted`."""
+        if len(parts) == 1:
+            return {parts[0]: 0}
+        if self.order_first:
+            settled = _settled(look, parts, by_order)
+            if settled is not None:
+                return dict.fromkeys(settled, 0)
+        return self._counted(kind)
+
+    def _counted(self, kind: str) -> None:
+        """Where the order does not settle a question: None, it is counted."""
+        return None
+
+
+class ByOrder(Exact):
+    """Only what needs no counting: one candidate, one part to buffer, or what the partial order alone
+    settles; any other question raises :class:`MustCount`."""
+
+    name = "order"
+
+    def _counted(self, kind: str) -> None:
+        raise MustCount(kind)
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        raise MustCount("buffer")
+
+
+class Estimated(Exact):
+    """Estimates from a population of random completions (the ``readings``' chains), run until ``end``
+    or, with ``stop_when_sure``, until sure."""
+
+    name = "estimate"
+    SETTINGS = ("readings", "end", "stop_when_sure")
+
+    def __init__(self, readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True):
+        super().__init__()
+        self.record = {}    # shared with the answers without the buffer (the same kind)
+        self.estimates = Estimates(readings, end, stop_when_sure, self.record)
+
+    def options(self, look: LookState, parts: list[str]) -> dict:
+        return self.estimates.options(look, parts)
+
+    def positions(self, look: LookState, parts: list[str]) -> dict:
+        return self.estimates.positions(look, parts)
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        return self.estimates.slack(look, parts, weight)
+
+
+class After(Exact):
+    """A question asked after the rule decided (``after``: how): the rule's own questions exact, the
+    slack exact if that fits ``exact_seconds`` (and the rule was exact), else estimated until ``end``,
+    else unanswered (None)."""
+
+    name = "then"
+    SETTINGS = ("order_first", "readings", "end", "stop_when_sure", "after", "exact_seconds")
+
+    def __init__(self, order_first: bool = True, readings: Readings | None = None, end: float = math.inf,
+                 stop_when_sure: bool = True, after: How = EXACT, exact_seconds: float = math.inf):
+        super().__init__(order_first)
+        self.end, self.after, self.exact_seconds = end, after, exact_seconds
+        self.record = {}
+        self.estimates = Estimates(readings, end, stop_when_sure, self.record)
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        if self.after.exact:    # else the rule's positions did not fit just now: the slack's will not either
+            try:
+                with look.engine.deadline(min(self.end, time.perf_counter() + self.exact_seconds)):
+                    return _exact_slack(look, parts, weight)
+            except BudgetExceeded:
+                pass
+        if time.perf_counter() >= self.end:
+            return None
+        return self.estimates.slack(look, parts, weight)
+
+
+#: The kinds of answers by name (:class:`Answers`' ``mode``).
+MODES: dict[str, type[Exact]] = {kind.name: kind for kind in (ByOrder, Exact, Estimated, After)}
+
+
+def _settled(look: LookState, parts: list[str], rule) -> list[str] | None:
+    """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
+    or None: only with one consistent strategy (a union's counts do not follow one order)."""
+    consistent = look.consistent
+    if consistent & (consistent - 1):
+        return None
+    unit_of = {look.unit(p): p for p in parts}
+    best = rule(look.engine.posets[consistent.bit_length() - 1], look.remaining, list(unit_of))
+    return None if best is None else [unit_of[u] for u in best]
+
+
+def _needed_after(look: LookState, part: str) -> tuple[int, int]:
+    """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
+    consistent strategy that frees it soonest)."""
+    engine, remaining = look.engine, look.remaining
+    posets = [engine.posets[i] for i in range(engine.k) if look.consistent >> i & 1]
+    u = look.unit(part)
+    return (min((p.below[u] & remaining).bit_count() for p in posets),
+            min((p.above[u] & remaining).bit_count() for p in posets))
+
+
+def _exact_slack(look: LookState, parts: list[str], weight: float) -> dict:
+    total, sums = look.schedule.position_sums_for(set(parts))
+    out = {}
+    for part, s in sums.items():
+        needed, after = _needed_after(look, part)
+        out[part] = s / total - needed - weight * after
+    return out
+
+
+class Estimates:
+    """The estimated answers: from the ``readings``' population of chains (a population of its own if
+    None), until ``end`` or, with ``stop_when_sure``, until sure; each answer writes into ``record`` how
+    it would say how sure the rule's choice is."""
+
+    def __init__(self, readings: Readings | None, end: float, stop_when_sure: bool, record: dict):
+        # a population of its own unless a policy passes the one it keeps
+        self.readings = Readings(0, 8) if readings is None else readings
+        self.end, self.stop_when_sure, self.record = end, stop_when_sure, record
+
+    def options(self, look: LookState, can: list[str]) -> dict:
+        remaining = look.remaining
+        units = {p: look.unit(p) for p in can}
+        chains, note = self.readings.population_for(look, tuple(units.values()))
+        # a candidate that cannot come next in the chains' strategy has no share there
+        first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
+
+        def sure(e):   # the best so far is the exact rule's choice, or none other is better by the margin
+            if not _mixed(chains):
+                return False
+            v = _tied_means(chains, remaining, first, e.first)
+            top = max(first, key=v.__getitem__)
+            return (_confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE or
+                    _confidence(e, "first", first, top, chains, remaining, higher=True,
+                                margin=INDIFFERENT * v[top]) >= SURE)
+
+        est = chains.estimate(first=set(first.values()), deadline=self.end, clock=time.perf_counter,
+                              settled=sure if self.stop_when_sure else None, keep=True)
+        value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
+
+        def how(ranked) -> How:
+            best = ranked[0][0]
+            conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
+            close = conf < SURE and best in first and _confidence(
+                est, "first", first, best, chains, remaining, higher=True, margin=INDIFFERENT * value[best]) >= SURE
+            estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1] if part in first else 0.0,
+                                       source) for part, source in ranked)
+            return How(False, "mcmc", estimates, conf, note, close)
+
+        self.record.update(how=how, ranked=None)
+        return value
+
+    def positions(self, look: LookState, parts: list[str]) -> dict:
+        remaining = look.remaining
+        chains, note = self.readings.population_for(look)
+        at = {p: look.unit(p) for p in parts}
+        margin = INDIFFERENT * remaining.bit_count()
+
+        def sure(e):
+            if not _mixed(chains):
+                return False
+            v = _tied_means(chains, remaining, at, e.positions)
+            top = min(parts, key=v.__getitem__)
+            return (_confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE or
+                    _confidence(e, "positions", at, top, chains, remaining, higher=False, margin=margin) >= SURE)
+
+        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter,
+                              settled=sure if self.stop_when_sure else None, keep=True)
+        value = _tied_means(chains, remaining, at, est.positions)
+
+        def how(ranked) -> How:
+            best = ranked[0][0]
+            conf = _confidence(est, "positions", at, best, chains, remaining, higher=False)
+            close = conf < SURE and _confidence(est, "positions", at, best, chains, remaining, higher=False,
+                                                margin=margin) >= SURE
+            estimates = tuple(Estimate(p, "position", value[p], est.positions[at[p]][1]) for p, _ in ranked)
+            return How(False, "mcmc", estimates, conf, note, close)
+
+        self.record.update(how=how, ranked=None)
+        return value
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict:
+        """The slack with the expected positions estimated by the population of chains, until ``end`` or
+        until sure."""
+        chains, note = self.readings.population_for(look)
+        at = {p: look.unit(p) for p in parts}
+        offset = {}
+        for part in parts:
+            needed, after = _needed_after(look, part)
+            offset[part] = -needed - weight * after
+        index = look.engine.plan.index
+
+        def best_of(e):
+            return min(parts, key=lambda p: (e.positions[at[p]][0] + offset[p], index(p)))
+
+        margin = INDIFFERENT * look.steps_left
+
+        def confidence(e, best, margin=0.0):
+            """P(``best`` has the least slack), or with ``margin``: P(no other part's slack is less by
+            more than ``margin``); paired over the chains, a union bound over the parts."""
+            miss = 0.0
+            for p in parts:
+                if p != best:   # slack of p - slack of best, per chain
+                    diffs = [x - y + offset[p] - offset[best] for x, y in
+                             zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
+                    miss += prob_positive([-d - margin for d in diffs]) if margin else 1 - prob_positive(diffs)
+            return max(0.0, 1 - miss)
+
+        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter, keep=True,
+                              settled=lambda e: _mixed(chains) and (confidence(e, best_of(e)) >= SURE or
+                                                                    confidence(e, best_of(e), margin) >= SURE))
+        value = {p: est.positions[at[p]][0] + offset[p] for p in parts}
+
+        def how(ranked) -> How:
+            best = ranked[0][0]
+            estimates = tuple(Estimate(p, "slack", value[p], est.positions[at[p]][1]) for p, _ in ranked)
+            conf = confidence(est, best)
+            close = conf < SURE and confidence(est, best, margin) >= SURE
+            return How(False, "mcmc", estimates, conf, note, close)
+
+        self.record.update(how=how, ranked=None)
+        return value
+
+
 def _of_look(name: str, doc: str) -> property:
     """A read-only attribute of :class:`Answers` that is its look state's ``name``."""
     return property(lambda self: getattr(self.look, name), doc=doc)
@@ -205,7 +482,8 @@ class Answers:
         The look.
     mode : {"order", "exact", "estimate", "then"}, default "exact"
         The kind of answers (see the module's text): what needs no counting, exact counts,
-        estimates, or a question asked after the rule.
+        estimates, or a question asked after the rule; the name of one of the :data:`MODES` classes,
+        made once from the settings below that it takes (:meth:`on` takes one made already).
     order_first : bool, default True
         Exact answers try what the partial order alone settles before counting.
     readings : Readings, optional
@@ -234,37 +512,30 @@ class Answers:
     (['a', 'b'], {'a': 0})
     """
 
-    __slots__ = (
-        "_record",
-        "after",
-        "end",
-        "exact_seconds",
-        "look",
-        "mode",
-        "order_first",
-        "readings",
-        "stop_when_sure",
-    )
+    __slots__ = ("look", "mode")
 
     def __init__(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                  visible: tuple[str, ...], *, mode: str = "exact", order_first: bool = True,
                  readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True,
                  after: How = EXACT, exact_seconds: float = math.inf):
-        self._start(LookState(engine, mask, consistent, buffer, free, visible), mode, order_first, readings, end,
-                    stop_when_sure, after, exact_seconds)
+        kind = MODES.get(mode) if isinstance(mode, str) else None
+        if kind is None:
+            raise ValueError(f"answers are asked in one of the modes {', '.join(MODES)}, not {mode!r}")
+        self.look = LookState(engine, mask, consistent, buffer, free, visible)
+        self.mode = kind.made({"order_first": order_first, "readings": readings, "end": end,
+                               "stop_when_sure": stop_when_sure, "after": after, "exact_seconds": exact_seconds})
 
     @classmethod
-    def on(cls, look: LookState, *, mode: str = "exact", order_first: bool = True,
-           readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True,
-           after: How = EXACT, exact_seconds: float = math.inf) -> Answers:
-        """The answers at a :class:`~opportune.policies.look.LookState` (the constructor's settings).
+    def on(cls, look: LookState, mode: Exact | None = None) -> Answers:
+        """The answers at a :class:`~opportune.policies.look.LookState`, of a kind made already.
 
         Parameters
         ----------
         look : LookState
             The state and look.
-        mode, order_first, readings, end, stop_when_sure, after, exact_seconds
-            As for the constructor.
+        mode : Exact, optional
+            The kind of answers: :class:`Exact` (the default, ``Exact()``), :class:`ByOrder`,
+            :class:`Estimated` or :class:`After`.
 
         Returns
         -------
@@ -276,25 +547,13 @@ class Answers:
         >>> from opportune import make_plan
         >>> from opportune.engine import OrderEngine
         >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
-        >>> Answers.on(LookState(engine, 0, 1, (), 1.0, ("a", "b")), order_first=False).options(["a", "b"])
+        >>> Answers.on(LookState(engine, 0, 1, (), 1.0, ("a", "b")), Exact(order_first=False)).options(["a", "b"])
         {'a': 2, 'b': 1}
         """
         ask = cls.__new__(cls)
-        ask._start(look, mode, order_first, readings, end, stop_when_sure, after, exact_seconds)
+        ask.look = look
+        ask.mode = Exact() if mode is None else mode
         return ask
-
-    def _start(self, look, mode, order_first, readings, end, stop_when_sure, after, exact_seconds) -> None:
-        self.look = look
-        self.mode, self.order_first = mode, order_first
-        if readings is None and mode in ("estimate", "then"):
-            readings = Readings(0, 8)   # a population of its own (a policy passes the one it keeps)
-        self.readings, self.end, self.stop_when_sure = readings, end, stop_when_sure
-        if mode not in MODES:
-            raise ValueError(f"answers are asked in one of the modes {', '.join(MODES)}, not {mode!r}")
-        # "then": how the rule decided, and the seconds the exact answer may take
-        self.after, self.exact_seconds = after, exact_seconds
-        # the estimate that decided, for how(); shared with without_buffer() (exact answers need none)
-        self._record: dict | None = {} if mode in ("estimate", "then") else None
 
     # ------------------------------------------------------------ the state
 
@@ -383,11 +642,7 @@ class Answers:
         >>> ask.without_buffer().installable()
         ['a']
         """
-        other = Answers.on(self.look.without_buffer(), mode=self.mode, order_first=self.order_first,
-                           readings=self.readings, end=self.end, stop_when_sure=self.stop_when_sure, after=self.after,
-                           exact_seconds=self.exact_seconds)
-        other._record = self._record
-        return other
+        return Answers.on(self.look.without_buffer(), self.mode)
 
     def index(self, part: str) -> int:
         """A part's declaration position (the last tie-break of every rule).
@@ -437,18 +692,7 @@ class Answers:
         """
         return self.engine.plan.part(part).cost
 
-    def _settled(self, parts: list[str], rule) -> list[str] | None:
-        """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
-        or None: only with one consistent strategy (a union's counts do not follow one order)."""
-        look = self.look
-        consistent = look.consistent
-        if consistent & (consistent - 1):
-            return None
-        unit_of = {look.unit(p): p for p in parts}
-        best = rule(look.engine.posets[consistent.bit_length() - 1], look.remaining, list(unit_of))
-        return None if best is None else [unit_of[u] for u in best]
-
-    # ------------------------------------------------------------ the questions
+    # ------------------------------------------------------------ the questions (the kind answers them)
 
     def options(self, parts: list[str]) -> dict:
         """Each candidate's options: the completions left after installing it.
@@ -483,10 +727,7 @@ class Answers:
         >>> Answers(engine, 0, engine.all_strategies, (), 1.0, ("a", "b"), order_first=False).options(["a", "b"])
         {'a': 3, 'b': 1}
         """
-        if self.mode == "estimate":
-            return self._estimated_options(parts)
-        known = self._uncounted(parts, most_options_by_order, "install")
-        return known if known is not None else self.schedule.options_for(parts)
+        return self.mode.options(self.look, parts)
 
     def positions(self, parts: list[str]) -> dict:
         """Each part's expected position in a uniformly random completion (1 = next).
@@ -519,23 +760,7 @@ class Answers:
         >>> sorted(answers.positions(["a", "b"]).items())
         [('a', 5), ('b', 10)]
         """
-        if self.mode == "estimate":
-            return self._estimated_positions(parts)
-        known = self._uncounted(parts, earliest_by_order, "buffer")
-        return known if known is not None else self.schedule.position_sums_for(set(parts))[1]
-
-    def _uncounted(self, parts: list[str], by_order, kind: str) -> dict | None:
-        """What needs no count: the one part asked (nothing to compare), or the best parts the order alone
-        proves (``by_order``), tied at 0; else None, or :class:`MustCount` where answers may not count."""
-        if len(parts) == 1:
-            return {parts[0]: 0}
-        if self.order_first:
-            settled = self._settled(parts, by_order)
-            if settled is not None:
-                return dict.fromkeys(settled, 0)
-        if self.mode == "order":
-            raise MustCount(kind)
-        return None
+        return self.mode.positions(self.look, parts)
 
     def slack(self, parts: list[str], weight: float) -> dict | None:
         """Each part's slack: expected position, minus the installs still needed before it can go in, minus
@@ -571,21 +796,7 @@ class Answers:
         >>> ask.slack(["c"], 0.1)
         {'c': 1.4}
         """
-        if self.mode == "order":
-            raise MustCount("buffer")
-        if self.mode == "estimate":
-            return self._estimated_slack(parts, weight)
-        if self.mode == "exact":
-            return self._exact_slack(parts, weight)
-        if self.after.exact:    # else the rule's positions did not fit just now: the slack's will not either
-            try:
-                with self.engine.deadline(min(self.end, time.perf_counter() + self.exact_seconds)):
-                    return self._exact_slack(parts, weight)
-            except BudgetExceeded:
-                pass
-        if time.perf_counter() >= self.end:
-            return None
-        return self._estimated_slack(parts, weight)
+        return self.mode.slack(self.look, parts, weight)
 
     def pick(self, kind: str, ranked: list[tuple[str, str | None]]) -> Action:
         """The action for the first of ``ranked``: the rule's choice.
@@ -613,8 +824,7 @@ class Answers:
         >>> ask.pick("install", [("a", "bin"), ("b", "buffer")])
         Action(kind='install', part='a', source='bin')
         """
-        if self._record is not None:
-            self._record["ranked"] = ranked
+        self.mode.picked(ranked)
         part, source = ranked[0]
         return shared_action(kind, part, source)
 
@@ -635,139 +845,7 @@ class Answers:
         >>> ask.pick("install", [("a", "bin")]).part, ask.how().exact
         ('a', True)
         """
-        rec = self._record
-        if not rec or "how" not in rec:     # nothing was estimated
-            return self.after
-        return rec["how"](rec["ranked"])
-
-    # ------------------------------------------------------------ exact
-
-    def _needed_after(self, part: str) -> tuple[int, int]:
-        """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
-        consistent strategy that frees it soonest)."""
-        look = self.look
-        engine, remaining = look.engine, look.remaining
-        posets = [engine.posets[i] for i in range(engine.k) if look.consistent >> i & 1]
-        u = look.unit(part)
-        return (min((p.below[u] & remaining).bit_count() for p in posets),
-                min((p.above[u] & remaining).bit_count() for p in posets))
-
-    def _exact_slack(self, parts, weight: float) -> dict:
-        total, sums = self.schedule.position_sums_for(set(parts))
-        out = {}
-        for part, s in sums.items():
-            needed, after = self._needed_after(part)
-            out[part] = s / total - needed - weight * after
-        return out
-
-    # ------------------------------------------------------------ estimated
-
-    def _estimated_options(self, can: list[str]) -> dict:
-        look = self.look
-        remaining = look.remaining
-        units = {p: look.unit(p) for p in can}
-        chains, note = self.readings.population_for(look, tuple(units.values()))
-        # a candidate that cannot come next in the chains' strategy has no share there
-        first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
-
-        def sure(e):   # the best so far is the exact rule's choice, or none other is better by the margin
-            if not _mixed(chains):
-                return False
-            v = _tied_means(chains, remaining, first, e.first)
-            top = max(first, key=v.__getitem__)
-            return (_confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE or
-                    _confidence(e, "first", first, top, chains, remaining, higher=True,
-                                margin=INDIFFERENT * v[top]) >= SURE)
-
-        est = chains.estimate(first=set(first.values()), deadline=self.end, clock=time.perf_counter,
-                              settled=sure if self.stop_when_sure else None, keep=True)
-        value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
-
-        def how(ranked) -> How:
-            best = ranked[0][0]
-            conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
-            close = conf < SURE and best in first and _confidence(
-                est, "first", first, best, chains, remaining, higher=True, margin=INDIFFERENT * value[best]) >= SURE
-            estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1] if part in first else 0.0,
-                                       source) for part, source in ranked)
-            return How(False, "mcmc", estimates, conf, note, close)
-
-        self._record.update(how=how, ranked=None)
-        return value
-
-    def _estimated_positions(self, parts: list[str]) -> dict:
-        look = self.look
-        remaining = look.remaining
-        chains, note = self.readings.population_for(look)
-        at = {p: look.unit(p) for p in parts}
-        margin = INDIFFERENT * remaining.bit_count()
-
-        def sure(e):
-            if not _mixed(chains):
-                return False
-            v = _tied_means(chains, remaining, at, e.positions)
-            top = min(parts, key=v.__getitem__)
-            return (_confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE or
-                    _confidence(e, "positions", at, top, chains, remaining, higher=False, margin=margin) >= SURE)
-
-        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter,
-                              settled=sure if self.stop_when_sure else None, keep=True)
-        value = _tied_means(chains, remaining, at, est.positions)
-
-        def how(ranked) -> How:
-            best = ranked[0][0]
-            conf = _confidence(est, "positions", at, best, chains, remaining, higher=False)
-            close = conf < SURE and _confidence(est, "positions", at, best, chains, remaining, higher=False,
-                                                margin=margin) >= SURE
-            estimates = tuple(Estimate(p, "position", value[p], est.positions[at[p]][1]) for p, _ in ranked)
-            return How(False, "mcmc", estimates, conf, note, close)
-
-        self._record.update(how=how, ranked=None)
-        return value
-
-    def _estimated_slack(self, parts: list[str], weight: float) -> dict:
-        """The slack with the expected positions estimated by the population of chains, until ``end`` or
-        until sure."""
-        look = self.look
-        chains, note = self.readings.population_for(look)
-        at = {p: look.unit(p) for p in parts}
-        offset = {}
-        for part in parts:
-            needed, after = self._needed_after(part)
-            offset[part] = -needed - weight * after
-        index = self.index
-
-        def best_of(e):
-            return min(parts, key=lambda p: (e.positions[at[p]][0] + offset[p], index(p)))
-
-        margin = INDIFFERENT * look.steps_left
-
-        def confidence(e, best, margin=0.0):
-            """P(``best`` has the least slack), or with ``margin``: P(no other part's slack is less by
-            more than ``margin``); paired over the chains, a union bound over the parts."""
-            miss = 0.0
-            for p in parts:
-                if p != best:   # slack of p - slack of best, per chain
-                    diffs = [x - y + offset[p] - offset[best] for x, y in
-                             zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
-                    miss += prob_positive([-d - margin for d in diffs]) if margin else 1 - prob_positive(diffs)
-            return max(0.0, 1 - miss)
-
-        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter, keep=True,
-                              settled=lambda e: _mixed(chains) and (confidence(e, best_of(e)) >= SURE or
-                                                                    confidence(e, best_of(e), margin) >= SURE))
-        value = {p: est.positions[at[p]][0] + offset[p] for p in parts}
-
-        def how(ranked) -> How:
-            best = ranked[0][0]
-            estimates = tuple(Estimate(p, "slack", value[p], est.positions[at[p]][1]) for p, _ in ranked)
-            conf = confidence(est, best)
-            close = conf < SURE and confidence(est, best, margin) >= SURE
-            return How(False, "mcmc", estimates, conf, note, close)
-
-        self._record.update(how=how, ranked=None)
-        return value
-
+        return self.mode.how()
 
 
 def _mixed(chains: CompletionChains) -> bool:
@@ -1016,8 +1094,8 @@ class CountBasedRule(DecidesOnMasks):
             action, how = self._within_budget(look)
             if not self._asks_after():
                 return action, how
-            ask = Answers.on(look, mode="then", readings=self.readings, end=self.limits.then_end(start), after=how,
-                             exact_seconds=self.limits.then_exact_seconds)
+            ask = Answers.on(look, After(readings=self.readings, end=self.limits.then_end(start), after=how,
+                                         exact_seconds=self.limits.then_exact_seconds))
             action = self.then(ask, action)
             return action, ask.how()
         finally:
@@ -1033,7 +1111,7 @@ class CountBasedRule(DecidesOnMasks):
         start = time.perf_counter()
         end = limits.end(start)
         try:    # one candidate, one part to buffer, a shake, or what the order settles: nothing to count
-            return self.rule(Answers.on(look, mode="order")), EXACT
+            return self.rule(Answers.on(look, ByOrder())), EXACT
         except MustCount as need:
             kind = need.kind
         r = self.readings
@@ -1054,7 +1132,7 @@ class CountBasedRule(DecidesOnMasks):
         began = time.perf_counter()
         try:
             with look.engine.deadline(limits.exact_end(began, r.share[kind])):
-                action = self.rule(Answers.on(look, order_first=False))
+                action = self.rule(Answers.on(look, Exact(order_first=False)))
             r.share[kind] = limits.exact_share[1]
             r.slow[key] = limits.averaged(slow, time.perf_counter() - began)
             return action, EXACT
@@ -1069,7 +1147,7 @@ class CountBasedRule(DecidesOnMasks):
         """The rule applied to estimates from the population of chains, run until ``end`` (or until sure).
         The readings are kept while the state stays: a decision's second estimate, and the next look's
         at the same state, continue them."""
-        ask = Answers.on(look, mode="estimate", readings=self.readings, end=end)
+        ask = Answers.on(look, Estimated(self.readings, end))
         action = self.rule(ask)
         return action, ask.how()
 

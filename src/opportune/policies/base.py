@@ -245,8 +245,9 @@ class Decision:
     seconds : float, default 0.0
         The time the decision took.
     close : bool, default False
-        The estimate stopped on a near tie, being at least :data:`~opportune.engine.tuning.SURE` sure that no other candidate
-        is better by more than :data:`~opportune.engine.tuning.INDIFFERENT`; that is then what the decision states.
+        The estimate stopped on a near tie, being at least :data:`~opportune.engine.tuning.SURE` sure that
+        no other candidate is better by more than :data:`~opportune.engine.tuning.INDIFFERENT`; that is then
+        what the decision states.
 
     Examples
     --------

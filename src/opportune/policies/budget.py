@@ -280,7 +280,8 @@ class Budget:
         >>> Budget(1.0).probe_first(0.1, 1.0), Budget(1.0).probe_first(0.3, 1.0), Budget(1.0).probe_first(0.3, 0.0)
         (False, True, False)
         """
-        return slow > self.exact_first * self.rule_seconds and (self.is_failing(slow) or probe_ok >= self.probes_settling)
+        return (slow > self.exact_first * self.rule_seconds
+                and (self.is_failing(slow) or probe_ok >= self.probes_settling))
 
     def is_failing(self, slow: float) -> bool:
         """Whether exact attempts have been failing here (their average over :attr:`failing` of the rule's
