@@ -157,3 +157,16 @@ def test_the_rules_take_the_state_as_one_value():
                      and clump <= {a.arg for a in node.args.args + node.args.kwonlyargs}})
     assert {t.split(":")[1] for t in takers} <= {"choose_at", "__init__", "choose_exact"}, takers
     assert "answers.py:__init__" in takers and "answers.py:choose_at" in takers   # the walk sees them
+
+
+def test_the_state_value_is_frozen():
+    from opportune import make_plan
+    from opportune.engine import OrderEngine
+    from opportune.policies.look import LookState
+
+    engine = OrderEngine(make_plan(["a", "b"], {"b": ["a"]}))
+    look = LookState(engine, 0, 1, ("b",), 1.0, ("a",))
+    with pytest.raises(AttributeError):
+        look.mask = 1
+    assert look.without_buffer().buffer == () and look.buffer == ("b",)     # a new value; this one kept
+    assert tuple(look) == (engine, 0, 1, ("b",), 1.0, ("a",))               # choose_at(*look)

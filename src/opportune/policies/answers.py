@@ -60,6 +60,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from operator import attrgetter
 
 from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
@@ -309,6 +310,8 @@ class After(Exact):
 
 #: The kinds of answers by name (:class:`Answers`' ``mode``).
 MODES: dict[str, type[Exact]] = {kind.name: kind for kind in (ByOrder, Exact, Estimated, After)}
+# the kinds that keep nothing, made once (a decision makes answers of one or two of them)
+_EXACT, _COUNTED, _BY_ORDER = Exact(), Exact(order_first=False), ByOrder()
 
 
 def _settled(look: LookState, parts: list[str], rule) -> list[str] | None:
@@ -457,7 +460,7 @@ class Estimates:
 
 def _of_look(name: str, doc: str) -> property:
     """A read-only attribute of :class:`Answers` that is its look state's ``name``."""
-    return property(lambda self: getattr(self.look, name), doc=doc)
+    return property(attrgetter(f"look.{name}"), doc=doc)
 
 
 class Answers:
@@ -552,7 +555,7 @@ class Answers:
         """
         ask = cls.__new__(cls)
         ask.look = look
-        ask.mode = Exact() if mode is None else mode
+        ask.mode = _EXACT if mode is None else mode
         return ask
 
     # ------------------------------------------------------------ the state
@@ -1111,7 +1114,7 @@ class CountBasedRule(DecidesOnMasks):
         start = time.perf_counter()
         end = limits.end(start)
         try:    # one candidate, one part to buffer, a shake, or what the order settles: nothing to count
-            return self.rule(Answers.on(look, ByOrder())), EXACT
+            return self.rule(Answers.on(look, _BY_ORDER)), EXACT
         except MustCount as need:
             kind = need.kind
         r = self.readings
@@ -1132,7 +1135,7 @@ class CountBasedRule(DecidesOnMasks):
         began = time.perf_counter()
         try:
             with look.engine.deadline(limits.exact_end(began, r.share[kind])):
-                action = self.rule(Answers.on(look, Exact(order_first=False)))
+                action = self.rule(Answers.on(look, _COUNTED))
             r.share[kind] = limits.exact_share[1]
             r.slow[key] = limits.averaged(slow, time.perf_counter() - began)
             return action, EXACT

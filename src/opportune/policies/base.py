@@ -442,7 +442,7 @@ class DecidesOnMasks:
     def choose_look(self, look) -> Action:
         """``choose_at`` on a :class:`~opportune.policies.look.LookState` (the six as one value): what the
         rules that fall back on another policy call; a policy that takes the value itself overrides it."""
-        return self.choose_at(*look.clump)
+        return self.choose_at(*look)
 
 
 @runtime_checkable

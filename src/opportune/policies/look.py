@@ -15,16 +15,18 @@ which also answers what each of them derives (the units remaining, the candidate
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections import namedtuple
 
 from opportune.engine import Schedule
 
 __all__ = ["LookState"]
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class LookState:
+class LookState(namedtuple("LookState", "engine mask consistent buffer free visible")):
     """One state at one look, in the engine's terms (frozen: a changed state is a new value).
+
+    A named tuple of the six, in ``choose_at``'s order (``policy.choose_at(*look)``): made at every
+    decision, so as cheap to make as a tuple.
 
     Parameters
     ----------
@@ -50,12 +52,7 @@ class LookState:
     ['c']
     """
 
-    engine: object
-    mask: int
-    consistent: int
-    buffer: tuple[str, ...]
-    free: float
-    visible: tuple[str, ...]
+    __slots__ = ()
 
     @classmethod
     def of(cls, state, visible: tuple[str, ...]) -> LookState:
@@ -81,11 +78,6 @@ class LookState:
         """
         sched = state.schedule
         return cls(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
-
-    @property
-    def clump(self) -> tuple:
-        """``(engine, mask, consistent, buffer, free, visible)``: the arguments of ``choose_at``."""
-        return self.engine, self.mask, self.consistent, self.buffer, self.free, self.visible
 
     @property
     def remaining(self) -> int:
@@ -200,4 +192,4 @@ class LookState:
         >>> LookState(engine, 0, 1, ("a",), 1.0, ("b",)).without_buffer().installable()
         ['b']
         """
-        return replace(self, buffer=())
+        return self._replace(buffer=())

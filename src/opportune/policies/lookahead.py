@@ -388,7 +388,7 @@ class Lookahead(DecidesOnMasks):
 
     def _programme(self, look: LookState):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
-        engine, mask, consistent, buffer, _, visible = look.clump
+        engine, mask, consistent, buffer, _, visible = look
         self.last_cost = None
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside

@@ -155,7 +155,7 @@ class Rollout(DecidesOnMasks):
     def _actions(self, look: LookState) -> list[Action]:
         """The candidate actions, the base rule's first: installs if any (bin before buffer), else
         buffering each distinct visible part (with room) and shaking."""
-        engine, mask, consistent, buffer, free, visible = look.clump
+        engine, mask, consistent, buffer, free, visible = look
         tables = self._prepare(engine)
         _, first, _, waiting, _, index = tables
 
