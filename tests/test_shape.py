@@ -76,6 +76,17 @@ def test_tuning_constants_live_in_one_module():
     assert len(outside) <= MOST_OUTSIDE, "tuning constants outside engine/tuning.py:\n" + "\n".join(outside)
 
 
+def test_no_class_holds_a_tuning_constant_of_its_own():
+    """A class's upper-case attributes (``Lookahead.COMPILED_STATES``, ``Rollout.EXACT_UNITS``) name a line
+    of the tuning module, never a number of their own (a test may still patch them on the class)."""
+    own = [f"{path.relative_to(PACKAGE)}:{statement.lineno} {node.name}.{target.id}"
+           for room in ROOMS for path in sorted((PACKAGE / room).rglob("*.py"))
+           for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))) if isinstance(node, ast.ClassDef)
+           for statement in node.body if isinstance(statement, ast.Assign) and numeric(statement.value)
+           for target in statement.targets if isinstance(target, ast.Name) and UPPER.fullmatch(target.id)]
+    assert own == [], "tuning constants in classes:\n" + "\n".join(own)
+
+
 def test_every_tuning_constant_says_why():
     """Each constant of the tuning module has a line saying why: a ``#:`` block above it (one block may
     document a run of constants written together) or a comment on its own line."""

@@ -290,6 +290,33 @@ BYTES_PER_STATE = 1_000
 #: a lower bound is given (:func:`~opportune.policies.states.downset_profile`).
 PROFILE_MAX_UNITS = 2_000
 
+# ------------------------------------------------------------ the look-ahead and the rollout (policies/lookahead.py, rollout.py)
+# Measured with benchmarks/bench_optimum.py, benchmarks/policy_lab.py and tests/test_pile_compiled.py.
+
+#: The compiled optimum decides on plans of up to this many states (about a million states a second
+#: without a budget: a warm-up of seconds); :attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`.
+LOOKAHEAD_COMPILED_STATES = 5_000_000
+#: Where the optimum does not fit in a pile or weighted bin, plans of more units than this decide as the
+#: base does: the step over the base evaluates the base look by look in Python, hours on a 45-part plan.
+LOOKAHEAD_STEP_UNITS = 16
+#: With a budget, the share of it the look-ahead's programme takes at each decision (it resumes where it
+#: stopped), and the share the frontier window may take where the optimum does not fit; the base decides
+#: within a quarter (:data:`LOOKAHEAD_BASE_SHARE`) when they do not finish.
+LOOKAHEAD_PROGRAMME_SHARE = 0.7
+LOOKAHEAD_WINDOW_SHARE = 0.7
+LOOKAHEAD_BASE_SHARE = 0.25
+#: With a budget, listing the states before the programme starts gets the budget divided by this (it runs
+#: inside the first decision).
+LOOKAHEAD_LISTING_PARTS = 3
+#: The exact evaluation lists the buffer ties of at most this many (installed, strategies) states; past it
+#: any pair's order may decide (:attr:`~opportune.policies.evaluate.BufferOrder.TIES_MAX_KEYS`).
+TIES_MAX_KEYS = 100_000
+#: The rollout decides plans of at most this many units by the exact look-ahead (an expectation, not a
+#: sample: its programme finishes within seconds on them), and with a budget samples rounds of futures
+#: until this share of it is spent.
+ROLLOUT_EXACT_UNITS = 16
+ROLLOUT_SHARE = 0.8
+
 # ------------------------------------------------------------ the frontier window (policies/window.py)
 # Measured with benchmarks/policy_lab.py (16-30-part plans, docs/policy-lab.md).
 

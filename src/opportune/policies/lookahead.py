@@ -10,6 +10,8 @@ import time
 from dataclasses import replace
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
+from opportune.engine.tuning import (LOOKAHEAD_BASE_SHARE, LOOKAHEAD_COMPILED_STATES, LOOKAHEAD_LISTING_PARTS,
+                                     LOOKAHEAD_PROGRAMME_SHARE, LOOKAHEAD_STEP_UNITS, LOOKAHEAD_WINDOW_SHARE)
 from opportune.policies.base import (
     DONE,
     SHAKE,
@@ -118,16 +120,16 @@ class Lookahead(DecidesOnMasks):
     #: shared by the look-aheads of the same settings; with one, each decision goes on with it within its
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
     #: core) is held to ``max_states``.
-    COMPILED_STATES = 5_000_000
+    COMPILED_STATES = LOOKAHEAD_COMPILED_STATES
     #: Where the optimum does not fit in a pile or weighted bin (the window serves the uniform bin), plans
     #: of more units than this decide as the base does: the step over the base evaluates the base look by
     #: look in Python (every look of every state asks the base rule), hours on a 45-part plan.  The optimum
     #: itself is never refused by units, only by its states and bytes.
-    STEP_UNITS = 16
+    STEP_UNITS = LOOKAHEAD_STEP_UNITS
     #: With a budget, the share of it the frontier window may take (its programme is stopped there and the
     #: base decides within the rest, :attr:`fallback`'s quarter): its states are capped
     #: (:data:`~opportune.policies.window.WINDOW_STATES`), so this binds only on a very slow machine.
-    WINDOW_SHARE = 0.7
+    WINDOW_SHARE = LOOKAHEAD_WINDOW_SHARE
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
@@ -144,7 +146,7 @@ class Lookahead(DecidesOnMasks):
         self.base = base if base is not None else Slack()      # exact: the programme evaluates it
         # the base within what the programme leaves of the budget; on a plan too large for the programme,
         # within the whole budget (nothing else runs then)
-        self.fallback = self.base if budget is None else Slack(budget=budget / 4)
+        self.fallback = self.base if budget is None else Slack(budget=budget * LOOKAHEAD_BASE_SHARE)
         self.fallback_alone = self.base if budget is None else Slack(budget=budget)
         #: The frontier window that decides where the optimum does not fit, in a uniform bin (its ``work``
         #: counts its windows and states); its base is the fallback within what it leaves of the budget.
@@ -298,7 +300,7 @@ class Lookahead(DecidesOnMasks):
             return False
         from opportune.policies.states import big, estimate_states
 
-        seconds = None if self.lookahead_budget is None else self.lookahead_budget / 3
+        seconds = None if self.lookahead_budget is None else self.lookahead_budget / LOOKAHEAD_LISTING_PARTS
         cap = self._optimum_cap(engine)
         est = estimate_states(self._sized(engine), visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
@@ -396,7 +398,7 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 self._too_large = True
                 return None
-            own = as_deadline(start + 0.7 * self.lookahead_budget if self.lookahead_budget is not None
+            own = as_deadline(start + LOOKAHEAD_PROGRAMME_SHARE * self.lookahead_budget if self.lookahead_budget is not None
                               else self.deadline)
             # the decision's deadline on the engine (a service look's) binds the programme too, as it binds
             # the engine's counts: past it the base decides, budget or not

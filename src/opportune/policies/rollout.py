@@ -31,6 +31,7 @@ import random
 import time
 import zlib
 
+from opportune.engine.tuning import ROLLOUT_EXACT_UNITS, ROLLOUT_SHARE
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
 from opportune.policies.look import LookState
 
@@ -51,7 +52,7 @@ class Rollout(DecidesOnMasks):
     decision_key = None
     #: Plans of at most this many units are decided by the exact look-ahead (an expectation, not a sample):
     #: its programme (the optimum's where it fits) finishes within seconds on them.
-    EXACT_UNITS = 16
+    EXACT_UNITS = ROLLOUT_EXACT_UNITS
     #: The futures' seed is drawn from the state with its buffer in order (and small plans decide as the
     #: look-ahead, which keeps it too).
     uses_buffer_order = True
@@ -115,7 +116,7 @@ class Rollout(DecidesOnMasks):
         base = actions[0]
         if len(actions) == 1:
             return base
-        deadline = None if self.budget is None else time.perf_counter() + 0.8 * self.budget
+        deadline = None if self.budget is None else time.perf_counter() + ROLLOUT_SHARE * self.budget
         tables = self._prepare(engine)
         index = tables[5]
         bin_parts = self._bin_parts(engine, mask, buffer, tables)
