@@ -16,6 +16,8 @@ import re
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from opportune.engine import tuning
 from opportune.policies.budget import Budget
@@ -181,3 +183,27 @@ def test_the_state_value_is_frozen():
         look.mask = 1
     assert look.without_buffer().buffer == () and look.buffer == ("b",)     # a new value; this one kept
     assert tuple(look) == (engine, 0, 1, ("b",), 1.0, ("a",))               # choose_at(*look)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(1e-4, 100.0), st.booleans(), st.floats(0.0, 1e6), st.floats(0.0, 10.0), st.sampled_from([0, 1]))
+def test_the_budget_splits_as_the_rule_did_before_it(seconds, asks_after, start, slow, failed):
+    """Every moment and average the Budget gives is the float the rule computed from the module constants
+    before the Budget held them (the same operations in the same order), so budgeted decisions keep
+    their deadlines to the last bit."""
+    b = Budget.for_rule(seconds, asks_after=asks_after)
+    rule = seconds * tuning.THEN_SHARES[0] if asks_after else seconds     # the old CountBasedRule.budget
+    assert b.rule_seconds == rule
+    assert b.end(start) == start + rule * (1 - tuning.DECISION_MARGIN)
+    assert b.then_end(start) == start + seconds * (1 - tuning.DECISION_MARGIN)
+    assert b.then_exact_seconds == seconds * tuning.THEN_SHARES[1]
+    assert b.probe_end(start) == start + rule * tuning.PROBE_SHARE
+    share = tuning.EXACT_SHARE[failed]
+    assert b.exact_end(start, share) == start + rule * share
+    assert b.averaged(slow, 2 * rule) == (1 - tuning.SLOW_WEIGHT) * slow + tuning.SLOW_WEIGHT * 2 * rule
+    assert b.averaged(slow, b.failed_reading) == (1 - tuning.SLOW_WEIGHT) * slow + tuning.SLOW_WEIGHT * 2 * rule
+    failing = slow > tuning.FAILING * rule
+    assert b.is_failing(slow) == failing
+    for probe_ok in (0.0, 0.5, 1.0):
+        assert b.probe_first(slow, probe_ok) == (slow > tuning.EXACT_FIRST * rule and (failing or probe_ok >= 0.5))
+    assert b.band("buffer", int(slow * 10)) == ("buffer", int(slow * 10) // tuning.SIZE_BAND)
