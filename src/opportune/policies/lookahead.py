@@ -398,8 +398,8 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 self._too_large = True
                 return None
-            own = as_deadline(start + LOOKAHEAD_PROGRAMME_SHARE * self.lookahead_budget if self.lookahead_budget is not None
-                              else self.deadline)
+            own = as_deadline(self.deadline if self.lookahead_budget is None
+                              else start + LOOKAHEAD_PROGRAMME_SHARE * self.lookahead_budget)
             # the decision's deadline on the engine (a service look's) binds the programme too, as it binds
             # the engine's counts: past it the base decides, budget or not
             engine_stops = engine.decision_deadline.at < own.at
