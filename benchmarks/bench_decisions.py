@@ -34,6 +34,7 @@ from rich.table import Table
 from opportune import load_plan
 from opportune.engine import OrderEngine
 from opportune.engine.count import BudgetExceeded
+from opportune.policies.look import LookState
 from opportune.policies.opportunistic import choose_exact
 from opportune.study.simulate import StudyConfig, TrialRunner, prepare
 
@@ -83,7 +84,7 @@ def run_plan(spec: str, args, visible: int, capacity: int | None = None, bin: st
     def timed(engine_, mask, cons, buffer, free, look):
         s = time.perf_counter()
         if paper:       # the paper's rule says how it decided: exact, or estimated with a confidence
-            action, how = policy._budgeted(engine_, mask, cons, buffer, free, look)
+            action, how = policy._budgeted(LookState(engine_, mask, cons, buffer, free, look))
             exact, confidence = how.exact, how.confidence
         else:           # another policy: its latency (and, for the look-ahead, whether its programme decided)
             action = choose_at(engine_, mask, cons, buffer, free, look)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import random
 import time
 
@@ -15,6 +16,7 @@ from opportune import load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.engine.count import BudgetExceeded, Counter
 from opportune.engine.sampling import CompletionChains, _t_cdf, t_quantile
+from opportune.policies.look import LookState
 from opportune.policies.opportunistic import Opportunistic, choose_exact
 from opportune.sequencer import LookError, Sequencer
 
@@ -86,8 +88,8 @@ def test_an_estimate_stops_early_when_no_candidate_is_better_by_more_than_the_ma
     engine = OrderEngine(plan)
     policy = Opportunistic(budget=10.0, seed=3)
     with CpuTime() as cpu:
-        action, how = policy._estimate(engine, 0, engine.all_strategies, (), ("a", "b"), [],
-                                       time.perf_counter() + 60.0, stop_when_sure=True)
+        action, how = policy._estimate(LookState(engine, 0, engine.all_strategies, (), math.inf, ("a", "b")),
+                                       time.perf_counter() + 60.0)
     assert cpu.seconds < 2.0                     # long before its deadline, however busy the machine
     assert action.kind == "buffer" and not how.exact
     assert how.close and how.confidence < 0.999   # the decision then states the near tie (test_dashboard_text.py)
@@ -254,6 +256,7 @@ def test_no_collection_starts_inside_a_budgeted_decision():
     policy = Opportunistic(budget=0.05)
     look = tuple(plan.part_ids[:2])
     policy.choose_at(engine, 0, engine.all_strategies, (), 1, look)    # warm: the same work each time
+    state = LookState(engine, 0, engine.all_strategies, (), 1, look)
     inside = [False]
     started = []
 
@@ -269,7 +272,7 @@ def test_no_collection_starts_inside_a_budgeted_decision():
         for _ in range(20):
             gc.set_threshold(1)
             inside[0] = True
-            policy._budgeted(engine, 0, engine.all_strategies, (), 1, look)
+            policy._budgeted(state)
             inside[0] = False
             gc.set_threshold(*threshold)
     finally:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import random
+from dataclasses import replace
 
 import pytest
 from hypothesis import given, settings
@@ -186,15 +187,16 @@ def test_lookahead_past_the_engines_deadline_decides_as_its_base():
     assert "base rule" in decision.rule and "did not finish" in decision.rule
 
 
-def test_slack_estimates_its_positions_when_they_do_not_fit_and_says_so(monkeypatch):
+def test_slack_estimates_its_positions_when_they_do_not_fit_and_says_so():
     """Within a budget the slack's expected positions may be estimated: the decision is then marked
     estimated, with each visible part's slack and an error, and it mostly agrees with the exact slack."""
-    monkeypatch.setattr(Slack, "EXACT_SLACK_SHARE", 0.0)   # no time for exact positions: always estimate
     plan = load_plan("salbp:TONGE70")
     engine = OrderEngine(plan)
     exact = Slack()
     rng = random.Random(4)
-    seq = Sequencer(engine, Slack(budget=0.05, seed=1), warm_up=0)
+    policy = Slack(budget=0.05, seed=1)
+    policy.limits = replace(policy.limits, then_exact_share=0.0)   # no time for exact positions: always estimate
+    seq = Sequencer(engine, policy, warm_up=0)
     estimated = agree = 0
     while not seq.state.is_complete and estimated < 12:
         state = seq.state

@@ -22,10 +22,8 @@ import os
 
 from opportune.engine.deadline import Deadline
 from opportune.engine.poset import Poset
+from opportune.engine.tuning import CORE_MAX_ELEMENTS  # noqa: F401 (what the core itself can take)
 from opportune.engine.tuning import NATIVE_MAX_ELEMENTS as MAX_ELEMENTS, NATIVE_MAX_BYTES as MAX_BYTES
-
-#: What the core itself can take (``NativeCounter`` directly, e.g. in tests).
-CORE_MAX_ELEMENTS = 1024
 
 
 try:

@@ -69,12 +69,10 @@ from opportune.engine.tuning import (
     RELAX_MAX_N as MAX_N, RELAX_K_START as K_START, RELAX_K_STEP as K_STEP, RELAX_K_MAX as K_MAX,
     RELAX_TRIES as TRIES, RELAX_MAX_BYTES as MAX_BYTES, RELAX_COUNT_GROWTH as COUNT_GROWTH,
     RELAX_PILOT_DRAWS as PILOT_DRAWS, RELAX_PILOT_HITS as PILOT_HITS, RELAX_ENTRY_SECONDS as
-    ENTRY_SECONDS, RELAX_STEP_SECONDS as STEP_SECONDS, RELAX_COUNT_SHARE as COUNT_SHARE)
+    ENTRY_SECONDS, RELAX_STEP_SECONDS as STEP_SECONDS, RELAX_COUNT_SHARE as COUNT_SHARE,
+    RELAX_MAX_THREADS as MAX_THREADS)
 
 __all__ = ["MAX_N", "RelaxEstimate", "clopper_pearson", "estimate", "target_hits"]
-
-#: Threads that count and draw, at most (the core's own bound).
-MAX_THREADS = 256
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,8 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 
+from opportune.engine.tuning import EXACT_DIGITS, STR_BITS
+
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -135,24 +137,18 @@ def decimal(n: int) -> str:
     """
     if n < 0:
         return "-" + decimal(-n)
-    if n.bit_length() < 14_000:            # fewer than 4,215 digits
+    if n.bit_length() < STR_BITS:            # fewer than 4,215 digits
         return str(n)
     half = int(n.bit_length() * 0.30103) // 2
     high, low = divmod(n, 10 ** half)
     return decimal(high) + decimal(low).zfill(half)
 
 
-
-#: Counts of more digits than this are written rounded by :func:`count_text`: the same bound as Python's
-#: own guard on int-to-text conversion, and for the same reason (exact text is quadratic in the digits,
-#: and an answer holds several counts within a look's budget).
-EXACT_DIGITS = 4_300
-
-
 def count_text(n: int, exact_digits: int = EXACT_DIGITS) -> str:
-    """A count as text: exact decimal when it has at most ``exact_digits`` digits, otherwise its first 17
-    significant digits (truncated, not rounded) in scientific notation.  O(d) in the digits d beyond
-    the bound (one power of ten and one division), O(d²) within it.
+    """A count as text: exact decimal when it has at most ``exact_digits`` digits
+    (:data:`~opportune.engine.tuning.EXACT_DIGITS` by default: Python's own guard on int-to-text
+    conversion), otherwise its first 17 significant digits (truncated, not rounded) in scientific
+    notation.  O(d) in the digits d beyond the bound (one power of ten and one division), O(d²) within it.
 
     Parameters
     ----------

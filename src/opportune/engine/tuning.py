@@ -2,6 +2,12 @@
 and what measured it (``benchmarks/bench_count.py`` on the SALBP graphs and the random sparse orders,
 ``benchmarks/bench_decisions.py`` on KILBRID, TONGE70 and ARC111, unless a line says otherwise).
 
+The policies' constants live here too (the answering layer's budget, the optimum's and the frontier
+window's bounds, how counts are written): the policies sit above the engine and read this module, the
+engine never reads theirs.  The answering layer's decision budget is split by one object,
+:class:`~opportune.policies.budget.Budget`, whose defaults are the ``DECISION_*`` and ``*_SHARE``
+lines below; the engine receives a deadline and nothing else about time.
+
 The modules of the engine read them from here: a budget change is one edit in this file.  The
 schedule's counting entry and its memory upkeep read ``tuning.NAME`` when they use it, so a test may
 patch those here (``monkeypatch.setattr(tuning, "SHRINK_SECONDS", 0.0)``); the other modules import
@@ -197,3 +203,156 @@ RELAX_COUNT_SHARE = 0.5
 #: populations of at most START_KEEP_UNITS steps are kept.
 START_KEEP = 4
 START_KEEP_UNITS = 20_000
+
+
+# ------------------------------------------------------------ the answering layer's budget (policies/answers.py)
+# Measured with benchmarks/bench_decisions.py (50 ms budgets on KILBRID, TONGE70 and ARC111) and
+# tests/test_decision_budget.py; policies/budget.py's Budget takes its defaults from these lines.
+
+#: Share of the decision budget kept for building the answer (the reasons) after the rule's estimate.
+DECISION_MARGIN = 0.1
+#: Share of the budget the exact attempt gets: after a failure, after a success (a success is tried
+#: with more; a failure gives the estimate most of the budget at the next look).
+EXACT_SHARE = (0.25, 0.6)
+#: Exact attempts come first while their moving average took under this share of the budget.
+EXACT_FIRST = 0.2
+#: Otherwise a first estimate (a probe) gets this share, and ends the decision if it is sure.
+PROBE_SHARE = 0.3
+#: Weight of the last exact attempt (or probe) in the moving averages the readings keep.
+SLOW_WEIGHT = 0.3
+#: That average shrinks by this factor after each sure probe, so exact counts are tried again some day.
+SLOW_DECAY = 0.97
+#: The averages are kept per band of this many steps remaining (ARC111's early states are slow, its
+#: late ones quick: docs/decisions.md).
+SIZE_BAND = 5
+#: Where exact attempts are slow but not failing, a probe comes first only while at least this share of
+#: the probes there settled (else many close candidates: the exact counts decide better while they fit).
+PROBES_SETTLING = 0.5
+#: An average above this share of the budget: exact attempts have been failing there (the estimate
+#: goes on instead of trying them).
+FAILING = 0.4
+#: With a question after the rule (:meth:`~opportune.policies.answers.CountBasedRule.then`): the share
+#: of the budget the rule gets, and the share the question's exact answer may take before it is
+#: estimated with what is left.
+THEN_SHARES = (0.6, 0.3)
+
+# ------------------------------------------------------------ the estimates' early stop (policies/base.py, answers.py)
+# Measured with benchmarks/bench_decisions.py's agreement with the exact rule.
+
+#: An estimated decision stops early, keeping the rest of its budget, once it is this sure of its choice,
+#: or this sure that no other candidate is better by more than :data:`INDIFFERENT` (a near tie: the
+#: samples would take the whole budget to settle it, for no measurable difference in the outcome).
+SURE = 0.999
+#: The margin of a near tie: a share of the best candidate's share of completions, or of the steps
+#: remaining for an expected position.
+INDIFFERENT = 0.01
+#: Moves per chain, per step remaining, before an early stop is trusted (a population just started
+#: from spread-out sequences is not yet uniform).
+MIXED_STEPS = 20
+
+# ------------------------------------------------------------ the exact optimum (policies/optimal.py, pile.py, states.py)
+# Measured with benchmarks/bench_optimum.py and tests/test_evaluate_bounds.py's memory bounds.
+
+#: Looks (with their probabilities) the look cache keeps, over all the bin contents it holds: about
+#: 150 bytes each, so at most about 30 MB whatever the plan (it used to grow with the states × looks).
+LOOK_CACHE_LOOKS = 200_000
+#: Bytes of an (installed, strategies) pair the compiled optimum interns: the pair in a vector and a
+#: node of the hash map that finds it (what ``OptimalCore.bytes`` counts).
+COMPILED_PAIR_BYTES = 64
+#: The compiled optimum's cache of a weighted bin's looks (by bin content) holds at most this many
+#: bytes, and is cleared whole before it would hold more (a bin's looks are enumerated again when needed).
+COMPILED_LOOK_CACHE_BYTES = 4 << 20
+#: Visible parts the compiled optimum of a weighted bin takes at most: a look is coded in 6 bits a part.
+COMPILED_WEIGHTED_VISIBLE = 10
+#: The compiled optimum of a weighted bin enumerates a bin's looks at every state (about 7 ns a look,
+#: measured on 12 parts, 3 visible): the look-ahead takes it on plans of at most this many looks at the
+#: start times states (the start has the most looks), about ten seconds' work like its uniform bin's
+#: cap (:attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`).
+COMPILED_WEIGHTED_LOOKS = 1_000_000_000
+#: Bytes a look of a weighted bin takes in the compiled cache besides its parts (one byte each): its
+#: probability (8), and while the bin's looks are enumerated, its sum and its sorted parts by code (128).
+COMPILED_LOOK_BYTES = 136
+#: Bytes a bin's entry takes in the compiled look cache (its hash node and vectors; ``ENTRY_BYTES``
+#: in ``src/native/optimal.cpp``).
+COMPILED_LOOK_ENTRY_BYTES = 96
+#: Bytes the compiled pile optimum holds per stored value: a 16-byte slot (the state and window as one
+#: 64-bit code, the value) in a table at most half full, so 32-64 bytes when the table is reserved
+#: for the count known before (96 for a moment while an unreserved table doubles).  The (installed,
+#: strategies) pairs it interns are fewer by the buffers and windows of each, and add a few percent.
+#: The Python programme takes 220-260 bytes per value.
+PILE_COMPILED_BYTES_PER_STATE = 64
+#: Memory a programme uses per state, rounded up: the dict entry, the key and buffer tuples and the
+#: value (measured: 574 bytes per state for the optimum of KILBRID, 716 on the gearbox, 220-260 per
+#: stored value in the pile).  The memo is the only thing that grows with the states; beside it the
+#: look cache holds at most :data:`LOOK_CACHE_LOOKS` looks (~30 MB).
+BYTES_PER_STATE = 1_000
+#: The state estimate's decomposition packs polynomials that grow as units²; past this many units only
+#: a lower bound is given (:func:`~opportune.policies.states.downset_profile`).
+PROFILE_MAX_UNITS = 2_000
+
+# ------------------------------------------------------------ the look-ahead and the rollout (policies/lookahead.py, rollout.py)
+# Measured with benchmarks/bench_optimum.py, benchmarks/policy_lab.py and tests/test_pile_compiled.py.
+
+#: The compiled optimum decides on plans of up to this many states (about a million states a second
+#: without a budget: a warm-up of seconds); :attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`.
+LOOKAHEAD_COMPILED_STATES = 5_000_000
+#: Where the optimum does not fit in a pile or weighted bin, plans of more units than this decide as the
+#: base does: the step over the base evaluates the base look by look in Python, hours on a 45-part plan.
+LOOKAHEAD_STEP_UNITS = 16
+#: With a budget, the share of it the look-ahead's programme takes at each decision (it resumes where it
+#: stopped), and the share the frontier window may take where the optimum does not fit; the base decides
+#: within a quarter (:data:`LOOKAHEAD_BASE_SHARE`) when they do not finish.
+LOOKAHEAD_PROGRAMME_SHARE = 0.7
+LOOKAHEAD_WINDOW_SHARE = 0.7
+LOOKAHEAD_BASE_SHARE = 0.25
+#: With a budget, listing the states before the programme starts gets the budget divided by this (it runs
+#: inside the first decision).
+LOOKAHEAD_LISTING_PARTS = 3
+#: The exact evaluation lists the buffer ties of at most this many (installed, strategies) states; past it
+#: any pair's order may decide (:attr:`~opportune.policies.evaluate.BufferOrder.TIES_MAX_KEYS`).
+TIES_MAX_KEYS = 100_000
+#: The rollout decides plans of at most this many units by the exact look-ahead (an expectation, not a
+#: sample: its programme finishes within seconds on them), and with a budget samples rounds of futures
+#: until this share of it is spent.
+ROLLOUT_EXACT_UNITS = 16
+ROLLOUT_SHARE = 0.8
+
+# ------------------------------------------------------------ the frontier window (policies/window.py)
+# Measured with benchmarks/policy_lab.py (16-30-part plans, docs/policy-lab.md).
+
+#: The window's sizes (parts, buffered ones and ancestors included) tried at a state in increasing size,
+#: the largest that fits :data:`WINDOW_STATES` (and the deadline, where there is one) deciding: 12 was
+#: within 0.24% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
+#: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
+WINDOW_PARTS = (5, 8, 12)
+#: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
+#: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
+#: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
+WINDOW_STATES = 20_000
+#: Windows kept, by state (a decision table is under 1 kB for a window of 12 parts, so at most about
+#: 4 MB a policy): a state's looks share it.
+WINDOW_CACHE = 4096
+
+# ------------------------------------------------------------ counts written as text (engine/result.py, policies/printable.py)
+# Not tuned for speed but set by what people and Python read.
+
+#: Counts of more digits than this are written rounded by :func:`~opportune.engine.result.count_text`:
+#: the same bound as Python's own guard on int-to-text conversion, and for the same reason (exact text
+#: is quadratic in the digits: 20 ms for the 35,660 digits of 10,000!, more than a look's budget when an
+#: answer holds several).
+EXACT_DIGITS = 4_300
+#: Bits of the largest count :func:`str` writes at once (fewer than 4,215 decimal digits, under
+#: Python's guard of 4,300); larger ones are written in halves.
+STR_BITS = 14_000
+#: Counts of at most this many digits are written in full for people (``40,320``), longer ones as three
+#: significant digits and an exponent (``6.13e98``): 15 digits still read at a glance, grouped, and
+#: any count fits a dashboard's panel (the exponent of a count of 10,000 free parts has 5 digits).
+LABEL_DIGITS = 15
+
+# ------------------------------------------------------------ the compiled core's own bounds (fixed by its code)
+# Not tuned: src/native sets them, and these lines must agree with it.
+
+#: What the compiled counter itself can take (``NativeCounter`` directly, e.g. in tests).
+CORE_MAX_ELEMENTS = 1024
+#: Threads that count and draw in relaxation Monte Carlo, at most (``MAX_THREADS`` in ``src/native/relax.cpp``).
+RELAX_MAX_THREADS = 256

@@ -8,38 +8,42 @@ parts' expected positions or slack, and names its choice with :meth:`Answers.pic
 budget, clock or estimate: a :class:`CountBasedRule` (the class those rules derive from) runs it
 over answers of one kind at a time and keeps what it learns from look to look.
 
-Answers come in four kinds (``Answers.mode``):
+Answers come in four kinds (``Answers.mode``), each a small class with one interface, chosen once
+when the answers are made (by name in :data:`MODES`):
 
-* ``"order"``: only what needs no counting (one candidate, one part to buffer, or what the partial
-  order alone settles, :mod:`opportune.engine.dominance`); anything else raises :class:`MustCount`;
-* ``"exact"``: exact counts, the order's shortcuts first unless ``order_first=False`` (within the
-  engine's deadline, if the caller set one: :class:`~opportune.engine.deadline.BudgetExceeded`);
-* ``"estimate"``: from a population of random completions
+* :class:`ByOrder` (``"order"``): only what needs no counting (one candidate, one part to buffer, or
+  what the partial order alone settles, :mod:`opportune.engine.dominance`); anything else raises
+  :class:`MustCount`;
+* :class:`Exact` (``"exact"``): exact counts, the order's shortcuts first unless ``order_first=False``
+  (within the engine's deadline, if the caller set one: :class:`~opportune.engine.deadline.BudgetExceeded`);
+* :class:`Estimated` (``"estimate"``): from a population of random completions
   (:class:`~opportune.engine.sampling.CompletionChains`), run until ``end`` or until sure;
-* ``"then"``: a question asked after the rule has decided (the slack after the paper's buffer
-  choice): exact if that fits a share of the budget, else estimated with what is left, else
-  unanswered (None).
+* :class:`After` (``"then"``): a question asked after the rule has decided (the slack after the
+  paper's buffer choice): exact if that fits a share of the budget, else estimated with what is left,
+  else unanswered (None).
 
-With a decision budget (seconds per decision) the rule is applied to exact counts when they fit a
-share of the budget, and otherwise to estimates that fill the rest of it.  The decision then says
-so: ``exact=False``, the method, each candidate's estimated share of completions or expected
-position with its standard error, and the estimated probability that the action is the exact
-rule's.  An estimate ends early, keeping the rest of the budget, once it is sure (that probability
-at least :data:`SURE`) or once, as surely, no other candidate is better by more than
-:data:`INDIFFERENT` (of the best share of options, or of the steps remaining for an expected
-position): candidates that close are a toss-up the samples would take the whole budget to settle,
-for no measurable difference in the outcome.  The chains' readings at a state are kept from look to
-look while nothing is installed, so a run of buffer choices builds on itself.  Steps that are
-interchangeable in the state (the same predecessors and successors among what remains) have equal
-exact values, so estimates treat them as tied and the exact tie-breaks decide between them.
+With a decision budget (seconds per decision) the rule is applied to exact counts when they fit a share
+of the budget, and otherwise to estimates that fill the rest of it.  The decision then says so:
+``exact=False``, the method, each candidate's estimated share of completions or expected position with
+its standard error, and the estimated probability that the action is the exact rule's.  An estimate ends
+early, keeping the rest of the budget, once it is sure (that probability at least
+:data:`~opportune.engine.tuning.SURE`) or once, as surely, no other candidate is better by more than
+:data:`~opportune.engine.tuning.INDIFFERENT` (of the best share of options, or of the steps remaining
+for an expected position): candidates that close are a toss-up the samples would take the whole budget
+to settle, for no measurable difference in the outcome.  The chains' readings at a state are kept from
+look to look while nothing is installed, so a run of buffer choices builds on itself.  Steps that are
+interchangeable in the state (the same predecessors and successors among what remains) have equal exact
+values, so estimates treat them as tied and the exact tie-breaks decide between them.
 
 Exact counts first while they have been quick; where they have been slow (a large plan's early
 states), a short estimate (a probe) first, which ends the decision if it settles it, then the exact
 attempt, then the estimate again with what is left of the budget.  How slow exact attempts have
-been is kept per kind of question and per band of :data:`SIZE_BAND` steps remaining (the readings):
+been is kept per kind of question and per band of steps remaining (the readings):
 on an assembly the cost of exact counts follows how far it has come (docs/decisions.md gives
 ARC111's measurements), so each trial's early states
-learn from the last trial's early states rather than from its late ones.
+learn from the last trial's early states rather than from its late ones.  Every share and margin of
+this split is decided by one frozen :class:`~opportune.policies.budget.Budget` the rule makes, whose
+defaults :mod:`opportune.engine.tuning` documents; the engine receives deadlines only.
 
 >>> from opportune import make_plan
 >>> from opportune.engine import OrderEngine
@@ -56,11 +60,12 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from operator import attrgetter
 
-from opportune.engine import Schedule
 from opportune.engine.deadline import BudgetExceeded
 from opportune.engine.dominance import earliest_by_order, most_options_by_order
 from opportune.engine.stats import prob_positive
+from opportune.engine.tuning import EXACT_SHARE, MIXED_STEPS
 from opportune.policies.base import (
     DONE,
     INDIFFERENT,
@@ -75,28 +80,14 @@ from opportune.policies.base import (
     resume_collector,
     shared_action,
 )
+from opportune.policies.budget import Budget
+from opportune.policies.look import LookState
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.engine.sampling import CompletionChains   # made by Schedule.chains
 
-MARGIN = 0.1            # share of the budget kept for building the answer after the estimate
-EXACT_SHARE = (0.25, 0.6)  # share of the budget the exact attempt gets (after a failure, after a success)
-# SURE (0.999): an estimate this sure of its choice stops early, keeping the rest of the budget (policies.base)
-MIXED_STEPS = 20       # moves per chain, per step remaining, before an early stop is trusted
-EXACT_FIRST = 0.2      # exact attempts first while they have taken under this share of the budget
-PROBE_SHARE = 0.3      # else a first estimate gets this share (and ends the decision if it is sure)
-SLOW_WEIGHT = 0.3      # weight of the last exact attempt in the moving average of their time
-SLOW_DECAY = 0.97      # that average shrinks after each sure estimate, so exact counts are tried again
-SIZE_BAND = 5          # ... kept per band of this many steps remaining
-# INDIFFERENT (0.01): estimates stop once no other candidate is better by more than this (policies.base)
-FAILING = 0.4          # an average above this share of the budget: exact attempts have been failing there
-#: With a question after the rule (:meth:`CountBasedRule.then`): the share of the budget the rule gets,
-#: and the share the exact answer to the question may take before it is estimated with what is left.
-THEN_SHARES = (0.6, 0.3)
-
-MODES = ("order", "exact", "estimate", "then")
 
 
 class MustCount(Exception):
@@ -124,7 +115,7 @@ class How:
     note : str, default ""
         More about the choice.
     close : bool, default False
-        Estimated: no other candidate better by more than :data:`INDIFFERENT`
+        Estimated: no other candidate better by more than :data:`~opportune.engine.tuning.INDIFFERENT`
         (:meth:`Decision.certainty <opportune.policies.base.Decision.certainty>`).
 
     Examples
@@ -163,10 +154,11 @@ class Readings:
         self.slow: dict[tuple[str, int], float] = {}
         self.probe_ok: dict[tuple[str, int], float] = {}
 
-    def population_for(self, engine, mask: int, consistent: int, candidates=()) -> tuple[CompletionChains, str]:
+    def population_for(self, look: LookState, candidates=()) -> tuple[CompletionChains, str]:
         """The population of chains for this state: carried on from the last look if the state
         only moved forward, else started afresh.  With several consistent strategies the chains follow
         the one in which most ``candidates`` (units) can come next (the current one on a tie)."""
+        engine, mask, consistent = look.engine, look.mask, look.consistent
         strategies = [s for s in range(engine.k) if consistent >> s & 1]
         strategy = strategies[0]
         if len(strategies) > 1 and candidates:
@@ -181,12 +173,294 @@ class Readings:
         pop = self.population
         if pop is None or pop[0] is not engine or pop[1] != strategy or remaining & ~pop[2].remaining:
             self.starts += 1
-            chains = Schedule.at(engine, mask, consistent).chains(strategy, chains=self.chains,
-                                                                  seed=self.seed * 1_000_003 + self.starts)
+            chains = look.schedule.chains(strategy, chains=self.chains, seed=self.seed * 1_000_003 + self.starts)
             self.population = pop = (engine, strategy, chains)
         else:
             pop[2].advance(remaining)
         return pop[2], note
+
+
+# ------------------------------------------------------------ the kinds of answers
+
+
+class Exact:
+    """Exact answers, and the one interface of every kind of answers (chosen once, when the answers are
+    made): the rule's questions on a :class:`~opportune.policies.look.LookState` (:meth:`options`,
+    :meth:`positions`, :meth:`slack`), the ranking the rule picked from (:meth:`picked`) and how the
+    choice was reached (:meth:`how`).
+
+    Exact answers try what the partial order alone settles first (unless ``order_first`` is False), then
+    count (within the engine's deadline, if the caller set one).
+    """
+
+    name = "exact"
+    #: The settings of :class:`Answers` this kind takes.
+    SETTINGS: tuple[str, ...] = ("order_first",)
+    #: How the rule decided, when nothing was estimated here.
+    after = EXACT
+    #: The estimate that decided and the ranking picked, for :meth:`how` (None: nothing is estimated).
+    record: dict | None = None
+
+    def __init__(self, order_first: bool = True):
+        self.order_first = order_first
+
+    @classmethod
+    def made(cls, settings: dict) -> Exact:
+        """This kind, from the settings of :class:`Answers` (those it takes)."""
+        return cls(**{name: settings[name] for name in cls.SETTINGS})
+
+    def options(self, look: LookState, parts: list[str]) -> dict:
+        known = self._uncounted(look, parts, most_options_by_order, "install")
+        return known if known is not None else look.schedule.options_for(parts)
+
+    def positions(self, look: LookState, parts: list[str]) -> dict:
+        known = self._uncounted(look, parts, earliest_by_order, "buffer")
+        return known if known is not None else look.schedule.position_sums_for(set(parts))[1]
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        return _exact_slack(look, parts, weight)
+
+    def picked(self, ranked: list) -> None:
+        if self.record is not None:
+            self.record["ranked"] = ranked
+
+    def how(self) -> How:
+        rec = self.record
+        if not rec or "how" not in rec:     # nothing was estimated
+            return self.after
+        return rec["how"](rec["ranked"])
+
+    def _uncounted(self, look: LookState, parts: list[str], by_order, kind: str) -> dict | None:
+        """What needs no count: the one part asked (nothing to compare), or the best parts the order alone
+        proves (``by_order``), tied at 0; else :meth:`_counted`."""
+        if len(parts) == 1:
+            return {parts[0]: 0}
+        if self.order_first:
+            settled = _settled(look, parts, by_order)
+            if settled is not None:
+                return dict.fromkeys(settled, 0)
+        return self._counted(kind)
+
+    def _counted(self, kind: str) -> None:
+        """Where the order does not settle a question: None, it is counted."""
+        return None
+
+
+class ByOrder(Exact):
+    """Only what needs no counting: one candidate, one part to buffer, or what the partial order alone
+    settles; any other question raises :class:`MustCount`."""
+
+    name = "order"
+
+    def _counted(self, kind: str) -> None:
+        raise MustCount(kind)
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        raise MustCount("buffer")
+
+
+class Estimated(Exact):
+    """Estimates from a population of random completions (the ``readings``' chains), run until ``end``
+    or, with ``stop_when_sure``, until sure."""
+
+    name = "estimate"
+    SETTINGS = ("readings", "end", "stop_when_sure")
+
+    def __init__(self, readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True):
+        super().__init__()
+        self.record = {}    # shared with the answers without the buffer (the same kind)
+        self.estimates = Estimates(readings, end, stop_when_sure, self.record)
+
+    def options(self, look: LookState, parts: list[str]) -> dict:
+        return self.estimates.options(look, parts)
+
+    def positions(self, look: LookState, parts: list[str]) -> dict:
+        return self.estimates.positions(look, parts)
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        return self.estimates.slack(look, parts, weight)
+
+
+class After(Exact):
+    """A question asked after the rule decided (``after``: how): the rule's own questions exact, the
+    slack exact if that fits ``exact_seconds`` (and the rule was exact), else estimated until ``end``,
+    else unanswered (None)."""
+
+    name = "then"
+    SETTINGS = ("order_first", "readings", "end", "stop_when_sure", "after", "exact_seconds")
+
+    def __init__(self, order_first: bool = True, readings: Readings | None = None, end: float = math.inf,
+                 stop_when_sure: bool = True, after: How = EXACT, exact_seconds: float = math.inf):
+        super().__init__(order_first)
+        self.end, self.after, self.exact_seconds = end, after, exact_seconds
+        self.record = {}
+        self.estimates = Estimates(readings, end, stop_when_sure, self.record)
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict | None:
+        if self.after.exact:    # else the rule's positions did not fit just now: the slack's will not either
+            try:
+                with look.engine.deadline(min(self.end, time.perf_counter() + self.exact_seconds)):
+                    return _exact_slack(look, parts, weight)
+            except BudgetExceeded:
+                pass
+        if time.perf_counter() >= self.end:
+            return None
+        return self.estimates.slack(look, parts, weight)
+
+
+#: The kinds of answers by name (:class:`Answers`' ``mode``).
+MODES: dict[str, type[Exact]] = {kind.name: kind for kind in (ByOrder, Exact, Estimated, After)}
+# the kinds that keep nothing, made once (a decision makes answers of one or two of them)
+_EXACT, _COUNTED, _BY_ORDER = Exact(), Exact(order_first=False), ByOrder()
+
+
+def _settled(look: LookState, parts: list[str], rule) -> list[str] | None:
+    """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
+    or None: only with one consistent strategy (a union's counts do not follow one order)."""
+    consistent = look.consistent
+    if consistent & (consistent - 1):
+        return None
+    unit_of = {look.unit(p): p for p in parts}
+    best = rule(look.engine.posets[consistent.bit_length() - 1], look.remaining, list(unit_of))
+    return None if best is None else [unit_of[u] for u in best]
+
+
+def _needed_after(look: LookState, part: str) -> tuple[int, int]:
+    """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
+    consistent strategy that frees it soonest)."""
+    engine, remaining = look.engine, look.remaining
+    posets = [engine.posets[i] for i in range(engine.k) if look.consistent >> i & 1]
+    u = look.unit(part)
+    return (min((p.below[u] & remaining).bit_count() for p in posets),
+            min((p.above[u] & remaining).bit_count() for p in posets))
+
+
+def _exact_slack(look: LookState, parts: list[str], weight: float) -> dict:
+    total, sums = look.schedule.position_sums_for(set(parts))
+    out = {}
+    for part, s in sums.items():
+        needed, after = _needed_after(look, part)
+        out[part] = s / total - needed - weight * after
+    return out
+
+
+class Estimates:
+    """The estimated answers: from the ``readings``' population of chains (a population of its own if
+    None), until ``end`` or, with ``stop_when_sure``, until sure; each answer writes into ``record`` how
+    it would say how sure the rule's choice is."""
+
+    def __init__(self, readings: Readings | None, end: float, stop_when_sure: bool, record: dict):
+        # a population of its own unless a policy passes the one it keeps
+        self.readings = Readings(0, 8) if readings is None else readings
+        self.end, self.stop_when_sure, self.record = end, stop_when_sure, record
+
+    def options(self, look: LookState, can: list[str]) -> dict:
+        remaining = look.remaining
+        units = {p: look.unit(p) for p in can}
+        chains, note = self.readings.population_for(look, tuple(units.values()))
+        # a candidate that cannot come next in the chains' strategy has no share there
+        first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
+
+        def sure(e):   # the best so far is the exact rule's choice, or none other is better by the margin
+            if not _mixed(chains):
+                return False
+            v = _tied_means(chains, remaining, first, e.first)
+            top = max(first, key=v.__getitem__)
+            return (_confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE or
+                    _confidence(e, "first", first, top, chains, remaining, higher=True,
+                                margin=INDIFFERENT * v[top]) >= SURE)
+
+        est = chains.estimate(first=set(first.values()), deadline=self.end, clock=time.perf_counter,
+                              settled=sure if self.stop_when_sure else None, keep=True)
+        value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
+
+        def how(ranked) -> How:
+            best = ranked[0][0]
+            conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
+            close = conf < SURE and best in first and _confidence(
+                est, "first", first, best, chains, remaining, higher=True, margin=INDIFFERENT * value[best]) >= SURE
+            estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1] if part in first else 0.0,
+                                       source) for part, source in ranked)
+            return How(False, "mcmc", estimates, conf, note, close)
+
+        self.record.update(how=how, ranked=None)
+        return value
+
+    def positions(self, look: LookState, parts: list[str]) -> dict:
+        remaining = look.remaining
+        chains, note = self.readings.population_for(look)
+        at = {p: look.unit(p) for p in parts}
+        margin = INDIFFERENT * remaining.bit_count()
+
+        def sure(e):
+            if not _mixed(chains):
+                return False
+            v = _tied_means(chains, remaining, at, e.positions)
+            top = min(parts, key=v.__getitem__)
+            return (_confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE or
+                    _confidence(e, "positions", at, top, chains, remaining, higher=False, margin=margin) >= SURE)
+
+        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter,
+                              settled=sure if self.stop_when_sure else None, keep=True)
+        value = _tied_means(chains, remaining, at, est.positions)
+
+        def how(ranked) -> How:
+            best = ranked[0][0]
+            conf = _confidence(est, "positions", at, best, chains, remaining, higher=False)
+            close = conf < SURE and _confidence(est, "positions", at, best, chains, remaining, higher=False,
+                                                margin=margin) >= SURE
+            estimates = tuple(Estimate(p, "position", value[p], est.positions[at[p]][1]) for p, _ in ranked)
+            return How(False, "mcmc", estimates, conf, note, close)
+
+        self.record.update(how=how, ranked=None)
+        return value
+
+    def slack(self, look: LookState, parts: list[str], weight: float) -> dict:
+        """The slack with the expected positions estimated by the population of chains, until ``end`` or
+        until sure."""
+        chains, note = self.readings.population_for(look)
+        at = {p: look.unit(p) for p in parts}
+        offset = {}
+        for part in parts:
+            needed, after = _needed_after(look, part)
+            offset[part] = -needed - weight * after
+        index = look.engine.plan.index
+
+        def best_of(e):
+            return min(parts, key=lambda p: (e.positions[at[p]][0] + offset[p], index(p)))
+
+        margin = INDIFFERENT * look.steps_left
+
+        def confidence(e, best, margin=0.0):
+            """P(``best`` has the least slack), or with ``margin``: P(no other part's slack is less by
+            more than ``margin``); paired over the chains, a union bound over the parts."""
+            miss = 0.0
+            for p in parts:
+                if p != best:   # slack of p - slack of best, per chain
+                    diffs = [x - y + offset[p] - offset[best] for x, y in
+                             zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
+                    miss += prob_positive([-d - margin for d in diffs]) if margin else 1 - prob_positive(diffs)
+            return max(0.0, 1 - miss)
+
+        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter, keep=True,
+                              settled=lambda e: _mixed(chains) and (confidence(e, best_of(e)) >= SURE or
+                                                                    confidence(e, best_of(e), margin) >= SURE))
+        value = {p: est.positions[at[p]][0] + offset[p] for p in parts}
+
+        def how(ranked) -> How:
+            best = ranked[0][0]
+            estimates = tuple(Estimate(p, "slack", value[p], est.positions[at[p]][1]) for p, _ in ranked)
+            conf = confidence(est, best)
+            close = conf < SURE and confidence(est, best, margin) >= SURE
+            return How(False, "mcmc", estimates, conf, note, close)
+
+        self.record.update(how=how, ranked=None)
+        return value
+
+
+def _of_look(name: str, doc: str) -> property:
+    """A read-only attribute of :class:`Answers` that is its look state's ``name``."""
+    return property(attrgetter(f"look.{name}"), doc=doc)
 
 
 class Answers:
@@ -211,7 +485,8 @@ class Answers:
         The look.
     mode : {"order", "exact", "estimate", "then"}, default "exact"
         The kind of answers (see the module's text): what needs no counting, exact counts,
-        estimates, or a question asked after the rule.
+        estimates, or a question asked after the rule; the name of one of the :data:`MODES` classes,
+        made once from the settings below that it takes (:meth:`on` takes one made already).
     order_first : bool, default True
         Exact answers try what the partial order alone settles before counting.
     readings : Readings, optional
@@ -240,50 +515,61 @@ class Answers:
     (['a', 'b'], {'a': 0})
     """
 
-    __slots__ = (
-        "_record",
-        "after",
-        "buffer",
-        "consistent",
-        "end",
-        "engine",
-        "exact_seconds",
-        "free",
-        "mask",
-        "mode",
-        "order_first",
-        "readings",
-        "stop_when_sure",
-        "visible",
-    )
+    __slots__ = ("look", "mode")
 
     def __init__(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                  visible: tuple[str, ...], *, mode: str = "exact", order_first: bool = True,
                  readings: Readings | None = None, end: float = math.inf, stop_when_sure: bool = True,
                  after: How = EXACT, exact_seconds: float = math.inf):
-        self.engine, self.mask, self.consistent = engine, mask, consistent
-        self.buffer, self.free, self.visible = buffer, free, visible
-        self.mode, self.order_first = mode, order_first
-        if readings is None and mode in ("estimate", "then"):
-            readings = Readings(0, 8)   # a population of its own (a policy passes the one it keeps)
-        self.readings, self.end, self.stop_when_sure = readings, end, stop_when_sure
-        if mode not in MODES:
+        kind = MODES.get(mode) if isinstance(mode, str) else None
+        if kind is None:
             raise ValueError(f"answers are asked in one of the modes {', '.join(MODES)}, not {mode!r}")
-        # "then": how the rule decided, and the seconds the exact answer may take
-        self.after, self.exact_seconds = after, exact_seconds
-        # the estimate that decided, for how(); shared with without_buffer() (exact answers need none)
-        self._record: dict | None = {} if mode in ("estimate", "then") else None
+        self.look = LookState(engine, mask, consistent, buffer, free, visible)
+        self.mode = kind.made({"order_first": order_first, "readings": readings, "end": end,
+                               "stop_when_sure": stop_when_sure, "after": after, "exact_seconds": exact_seconds})
+
+    @classmethod
+    def on(cls, look: LookState, mode: Exact | None = None) -> Answers:
+        """The answers at a :class:`~opportune.policies.look.LookState`, of a kind made already.
+
+        Parameters
+        ----------
+        look : LookState
+            The state and look.
+        mode : Exact, optional
+            The kind of answers: :class:`Exact` (the default, ``Exact()``), :class:`ByOrder`,
+            :class:`Estimated` or :class:`After`.
+
+        Returns
+        -------
+        Answers
+            The answers.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Answers.on(LookState(engine, 0, 1, (), 1.0, ("a", "b")), Exact(order_first=False)).options(["a", "b"])
+        {'a': 2, 'b': 1}
+        """
+        ask = cls.__new__(cls)
+        ask.look = look
+        ask.mode = _EXACT if mode is None else mode
+        return ask
 
     # ------------------------------------------------------------ the state
 
-    @property
-    def schedule(self) -> Schedule:
-        """The state as a :class:`~opportune.engine.Schedule`: every exact count goes through it."""
-        return Schedule.at(self.engine, self.mask, self.consistent)
-
-    @property
-    def complete(self) -> bool:
-        return self.mask == self.engine.full
+    # what a rule reads of the state, as the look state has it
+    engine = _of_look("engine", "The plan's engine.")
+    mask = _of_look("mask", "The installed units, as the engine's bit mask.")
+    consistent = _of_look("consistent", "The strategies still consistent, as a bit mask.")
+    buffer = _of_look("buffer", "The buffered parts, in buffer order.")
+    free = _of_look("free", "Free buffer locations (``math.inf``: unlimited).")
+    visible = _of_look("visible", "The look.")
+    schedule = _of_look("schedule", "The state as a :class:`~opportune.engine.Schedule`: every exact count goes "
+                                    "through it.")
+    complete = _of_look("complete", "Whether every unit is installed.")
 
     def installable(self) -> list[str]:
         """The installable parts among the visible and the buffered ones.
@@ -302,7 +588,7 @@ class Answers:
         >>> ask.installable()
         ['a', 'b']
         """
-        return self.engine.installable_among(self.mask, self.consistent, (*self.visible, *self.buffer))
+        return self.look.installable()
 
     def installable_in_bin(self) -> list[str]:
         """The installable parts among the visible ones.
@@ -321,7 +607,7 @@ class Answers:
         >>> ask.installable_in_bin()
         ['a']
         """
-        return self.engine.installable_among(self.mask, self.consistent, self.visible)
+        return self.look.installable_in_bin()
 
     def visible_parts(self) -> list[str]:
         """The visible parts, each once, in the look's order.
@@ -340,7 +626,7 @@ class Answers:
         >>> ask.visible_parts()
         ['a', 'c']
         """
-        return list(dict.fromkeys(self.visible))
+        return self.look.visible_parts()
 
     def without_buffer(self) -> Answers:
         """The same answers with the buffered parts out of sight (the bin's candidates only).
@@ -359,11 +645,7 @@ class Answers:
         >>> ask.without_buffer().installable()
         ['a']
         """
-        other = Answers(self.engine, self.mask, self.consistent, (), self.free, self.visible, mode=self.mode,
-                        order_first=self.order_first, readings=self.readings, end=self.end,
-                        stop_when_sure=self.stop_when_sure, after=self.after, exact_seconds=self.exact_seconds)
-        other._record = self._record
-        return other
+        return Answers.on(self.look.without_buffer(), self.mode)
 
     def index(self, part: str) -> int:
         """A part's declaration position (the last tie-break of every rule).
@@ -413,17 +695,7 @@ class Answers:
         """
         return self.engine.plan.part(part).cost
 
-    def _settled(self, parts: list[str], rule) -> list[str] | None:
-        """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
-        or None: only with one consistent strategy (a union's counts do not follow one order)."""
-        consistent, engine = self.consistent, self.engine
-        if consistent & (consistent - 1):
-            return None
-        unit_of = {engine.next_unit(self.mask, self.index(p)): p for p in parts}
-        best = rule(engine.posets[consistent.bit_length() - 1], engine.full & ~self.mask, list(unit_of))
-        return None if best is None else [unit_of[u] for u in best]
-
-    # ------------------------------------------------------------ the questions
+    # ------------------------------------------------------------ the questions (the kind answers them)
 
     def options(self, parts: list[str]) -> dict:
         """Each candidate's options: the completions left after installing it.
@@ -458,10 +730,7 @@ class Answers:
         >>> Answers(engine, 0, engine.all_strategies, (), 1.0, ("a", "b"), order_first=False).options(["a", "b"])
         {'a': 3, 'b': 1}
         """
-        if self.mode == "estimate":
-            return self._estimated_options(parts)
-        known = self._uncounted(parts, most_options_by_order, "install")
-        return known if known is not None else self.schedule.options_for(parts)
+        return self.mode.options(self.look, parts)
 
     def positions(self, parts: list[str]) -> dict:
         """Each part's expected position in a uniformly random completion (1 = next).
@@ -494,23 +763,7 @@ class Answers:
         >>> sorted(answers.positions(["a", "b"]).items())
         [('a', 5), ('b', 10)]
         """
-        if self.mode == "estimate":
-            return self._estimated_positions(parts)
-        known = self._uncounted(parts, earliest_by_order, "buffer")
-        return known if known is not None else self.schedule.position_sums_for(set(parts))[1]
-
-    def _uncounted(self, parts: list[str], by_order, kind: str) -> dict | None:
-        """What needs no count: the one part asked (nothing to compare), or the best parts the order alone
-        proves (``by_order``), tied at 0; else None, or :class:`MustCount` where answers may not count."""
-        if len(parts) == 1:
-            return {parts[0]: 0}
-        if self.order_first:
-            settled = self._settled(parts, by_order)
-            if settled is not None:
-                return dict.fromkeys(settled, 0)
-        if self.mode == "order":
-            raise MustCount(kind)
-        return None
+        return self.mode.positions(self.look, parts)
 
     def slack(self, parts: list[str], weight: float) -> dict | None:
         """Each part's slack: expected position, minus the installs still needed before it can go in, minus
@@ -546,21 +799,7 @@ class Answers:
         >>> ask.slack(["c"], 0.1)
         {'c': 1.4}
         """
-        if self.mode == "order":
-            raise MustCount("buffer")
-        if self.mode == "estimate":
-            return self._estimated_slack(parts, weight)
-        if self.mode == "exact":
-            return self._exact_slack(parts, weight)
-        if self.after.exact:    # else the rule's positions did not fit just now: the slack's will not either
-            try:
-                with self.engine.deadline(min(self.end, time.perf_counter() + self.exact_seconds)):
-                    return self._exact_slack(parts, weight)
-            except BudgetExceeded:
-                pass
-        if time.perf_counter() >= self.end:
-            return None
-        return self._estimated_slack(parts, weight)
+        return self.mode.slack(self.look, parts, weight)
 
     def pick(self, kind: str, ranked: list[tuple[str, str | None]]) -> Action:
         """The action for the first of ``ranked``: the rule's choice.
@@ -588,8 +827,7 @@ class Answers:
         >>> ask.pick("install", [("a", "bin"), ("b", "buffer")])
         Action(kind='install', part='a', source='bin')
         """
-        if self._record is not None:
-            self._record["ranked"] = ranked
+        self.mode.picked(ranked)
         part, source = ranked[0]
         return shared_action(kind, part, source)
 
@@ -610,138 +848,7 @@ class Answers:
         >>> ask.pick("install", [("a", "bin")]).part, ask.how().exact
         ('a', True)
         """
-        rec = self._record
-        if not rec or "how" not in rec:     # nothing was estimated
-            return self.after
-        return rec["how"](rec["ranked"])
-
-    # ------------------------------------------------------------ exact
-
-    def _needed_after(self, part: str) -> tuple[int, int]:
-        """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
-        consistent strategy that frees it soonest)."""
-        engine, remaining = self.engine, self.engine.full & ~self.mask
-        posets = [engine.posets[i] for i in range(engine.k) if self.consistent >> i & 1]
-        u = engine.next_unit(self.mask, self.index(part))
-        return (min((p.below[u] & remaining).bit_count() for p in posets),
-                min((p.above[u] & remaining).bit_count() for p in posets))
-
-    def _exact_slack(self, parts, weight: float) -> dict:
-        total, sums = self.schedule.position_sums_for(set(parts))
-        out = {}
-        for part, s in sums.items():
-            needed, after = self._needed_after(part)
-            out[part] = s / total - needed - weight * after
-        return out
-
-    # ------------------------------------------------------------ estimated
-
-    def _estimated_options(self, can: list[str]) -> dict:
-        engine, mask = self.engine, self.mask
-        remaining = engine.full & ~mask
-        units = {p: engine.next_unit(mask, self.index(p)) for p in can}
-        chains, note = self.readings.population_for(engine, mask, self.consistent, tuple(units.values()))
-        # a candidate that cannot come next in the chains' strategy has no share there
-        first = {p: u for p, u in units.items() if not chains.below[u] & remaining}
-
-        def sure(e):   # the best so far is the exact rule's choice, or none other is better by the margin
-            if not _mixed(chains):
-                return False
-            v = _tied_means(chains, remaining, first, e.first)
-            top = max(first, key=v.__getitem__)
-            return (_confidence(e, "first", first, top, chains, remaining, higher=True) >= SURE or
-                    _confidence(e, "first", first, top, chains, remaining, higher=True,
-                                margin=INDIFFERENT * v[top]) >= SURE)
-
-        est = chains.estimate(first=set(first.values()), deadline=self.end, clock=time.perf_counter,
-                              settled=sure if self.stop_when_sure else None, keep=True)
-        value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
-
-        def how(ranked) -> How:
-            best = ranked[0][0]
-            conf = _confidence(est, "first", first, best, chains, remaining, higher=True)
-            close = conf < SURE and best in first and _confidence(
-                est, "first", first, best, chains, remaining, higher=True, margin=INDIFFERENT * value[best]) >= SURE
-            estimates = tuple(Estimate(part, "share", value[part], est.first[first[part]][1] if part in first else 0.0,
-                                       source) for part, source in ranked)
-            return How(False, "mcmc", estimates, conf, note, close)
-
-        self._record.update(how=how, ranked=None)
-        return value
-
-    def _estimated_positions(self, parts: list[str]) -> dict:
-        engine, mask = self.engine, self.mask
-        remaining = engine.full & ~mask
-        chains, note = self.readings.population_for(engine, mask, self.consistent)
-        at = {p: engine.next_unit(mask, self.index(p)) for p in parts}
-        margin = INDIFFERENT * remaining.bit_count()
-
-        def sure(e):
-            if not _mixed(chains):
-                return False
-            v = _tied_means(chains, remaining, at, e.positions)
-            top = min(parts, key=v.__getitem__)
-            return (_confidence(e, "positions", at, top, chains, remaining, higher=False) >= SURE or
-                    _confidence(e, "positions", at, top, chains, remaining, higher=False, margin=margin) >= SURE)
-
-        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter,
-                              settled=sure if self.stop_when_sure else None, keep=True)
-        value = _tied_means(chains, remaining, at, est.positions)
-
-        def how(ranked) -> How:
-            best = ranked[0][0]
-            conf = _confidence(est, "positions", at, best, chains, remaining, higher=False)
-            close = conf < SURE and _confidence(est, "positions", at, best, chains, remaining, higher=False,
-                                                margin=margin) >= SURE
-            estimates = tuple(Estimate(p, "position", value[p], est.positions[at[p]][1]) for p, _ in ranked)
-            return How(False, "mcmc", estimates, conf, note, close)
-
-        self._record.update(how=how, ranked=None)
-        return value
-
-    def _estimated_slack(self, parts: list[str], weight: float) -> dict:
-        """The slack with the expected positions estimated by the population of chains, until ``end`` or
-        until sure."""
-        engine, mask = self.engine, self.mask
-        chains, note = self.readings.population_for(engine, mask, self.consistent)
-        at = {p: engine.next_unit(mask, self.index(p)) for p in parts}
-        offset = {}
-        for part in parts:
-            needed, after = self._needed_after(part)
-            offset[part] = -needed - weight * after
-        index = self.index
-
-        def best_of(e):
-            return min(parts, key=lambda p: (e.positions[at[p]][0] + offset[p], index(p)))
-
-        margin = INDIFFERENT * (engine.full & ~mask).bit_count()
-
-        def confidence(e, best, margin=0.0):
-            """P(``best`` has the least slack), or with ``margin``: P(no other part's slack is less by
-            more than ``margin``); paired over the chains, a union bound over the parts."""
-            miss = 0.0
-            for p in parts:
-                if p != best:   # slack of p - slack of best, per chain
-                    diffs = [x - y + offset[p] - offset[best] for x, y in
-                             zip(e.per_chain["positions"][at[p]], e.per_chain["positions"][at[best]])]
-                    miss += prob_positive([-d - margin for d in diffs]) if margin else 1 - prob_positive(diffs)
-            return max(0.0, 1 - miss)
-
-        est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter, keep=True,
-                              settled=lambda e: _mixed(chains) and (confidence(e, best_of(e)) >= SURE or
-                                                                    confidence(e, best_of(e), margin) >= SURE))
-        value = {p: est.positions[at[p]][0] + offset[p] for p in parts}
-
-        def how(ranked) -> How:
-            best = ranked[0][0]
-            estimates = tuple(Estimate(p, "slack", value[p], est.positions[at[p]][1]) for p, _ in ranked)
-            conf = confidence(est, best)
-            close = conf < SURE and confidence(est, best, margin) >= SURE
-            return How(False, "mcmc", estimates, conf, note, close)
-
-        self._record.update(how=how, ranked=None)
-        return value
-
+        return self.mode.how()
 
 
 def _mixed(chains: CompletionChains) -> bool:
@@ -792,10 +899,11 @@ class CountBasedRule(DecidesOnMasks):
     """A policy whose rule is a function of :class:`Answers` (:meth:`rule`, and optionally a question
     after it, :meth:`then`), decided exactly or within ``budget`` seconds per decision.
 
-    A rule with a question after it gets :data:`THEN_SHARES`\\ ``[0]`` of the budget (``budget``; the
-    whole is ``total_budget``).  A decision costs what its answers cost; within a budget, at most
-    about the budget (the estimates' and counts' checks of the clock, and building the reasons, are
-    the rest).
+    A rule with a question after it gets :data:`~opportune.engine.tuning.THEN_SHARES`\\ ``[0]`` of the
+    budget (``budget``; the whole is ``total_budget``).  A decision costs what its answers cost; within a
+    budget, at most about the budget (the estimates' and counts' checks of the clock, and building the
+    reasons, are the rest).  Every split is decided by one frozen
+    :class:`~opportune.policies.budget.Budget` (``limits``), made here.
 
     Parameters
     ----------
@@ -825,15 +933,11 @@ class CountBasedRule(DecidesOnMasks):
     #: The rules in words, as the decisions give them.
     rule_install = ""
     rule_buffer = ""
-    #: With a question after the rule: the share of the whole budget its exact answer may take.
-    EXACT_SLACK_SHARE = THEN_SHARES[1]
 
     def __init__(self, budget: float | None = None, *, seed: int = 0, chains: int = 8):
-        if budget is not None and not budget > 0:
-            raise ValueError("the decision budget must be a positive number of seconds (or None)")
-        self.total_budget = budget
-        # the rule's share, so that with the question after it the decision keeps the whole budget
-        self.budget = budget * THEN_SHARES[0] if budget is not None and self._asks_after() else budget
+        # the one place a decision's budget is split: the rule's share, so that with the question after
+        # it the decision keeps the whole budget (ValueError if not a positive number of seconds)
+        self.limits = Budget.for_rule(budget, asks_after=self._asks_after())
         self.seed = seed
         self.chains = chains
         # Exact decisions depend only on the state and the look, so a simulation may cache them.
@@ -843,6 +947,24 @@ class CountBasedRule(DecidesOnMasks):
     @classmethod
     def _asks_after(cls) -> bool:
         return cls.then is not CountBasedRule.then
+
+    @property
+    def total_budget(self) -> float | None:
+        """Seconds per decision, the question after the rule included (``None``: exact decisions)."""
+        return self.limits.seconds
+
+    @total_budget.setter
+    def total_budget(self, seconds: float | None) -> None:     # the service scales a look's budget
+        self.limits = self.limits.with_seconds(seconds)
+
+    @property
+    def budget(self) -> float | None:
+        """The rule's seconds per decision (``None``: exact decisions)."""
+        return self.limits.rule_seconds
+
+    @budget.setter
+    def budget(self, seconds: float | None) -> None:
+        self.limits = self.limits.with_seconds(None if seconds is None else seconds / self.limits.rule_share)
 
     def rule(self, ask: Answers) -> Action:
         """The action, from the answers to the rule's questions.
@@ -932,84 +1054,103 @@ class CountBasedRule(DecidesOnMasks):
         >>> Opportunistic().choose_at(engine, 0, engine.all_strategies, (), 1.0, ("c",))
         Action(kind='buffer', part='c', source=None)
         """
-        return self._how(engine, mask, consistent, buffer, free, visible)[0]
+        return self._how(LookState(engine, mask, consistent, buffer, free, visible))[0]
 
-    def _how(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
+    def choose_look(self, look: LookState) -> Action:
+        """:meth:`choose_at` on the six as one value (what the rules that fall back on this one call).
+
+        Parameters
+        ----------
+        look : LookState
+            The state and look.
+
+        Returns
+        -------
+        Action
+            The action (no reasons).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a"]}))
+        >>> Opportunistic().choose_look(LookState(engine, 0, engine.all_strategies, (), 1.0, ("c",)))
+        Action(kind='buffer', part='c', source=None)
+        """
+        return self._how(look)[0]
+
+    def _how(self, look: LookState) -> tuple[Action, How]:
         """The action and how it was reached, for ``choose_at`` and ``decide`` alike."""
         if self.total_budget is None:
-            ask = Answers(engine, mask, consistent, buffer, free, visible)
+            ask = Answers.on(look)
             return self.then(ask, self.rule(ask)), EXACT
-        return self._budgeted(engine, mask, consistent, buffer, free, visible)
+        return self._budgeted(look)
 
-    def _budgeted(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
+    def _budgeted(self, look: LookState) -> tuple[Action, How]:
         """The rule within the budget (:meth:`_within_budget`), then its question after, with the garbage
         collector paused: a collection waits for the next look (see
         :func:`~opportune.policies.base.pause_collector`)."""
         pause_collector()       # before anything allocates, resumed after the answer is built
         try:
             start = time.perf_counter()
-            action, how = self._within_budget(engine, mask, consistent, buffer, free, visible)
+            action, how = self._within_budget(look)
             if not self._asks_after():
                 return action, how
-            ask = Answers(engine, mask, consistent, buffer, free, visible, mode="then", readings=self.readings,
-                          end=start + self.total_budget * (1 - MARGIN), after=how,
-                          exact_seconds=self.total_budget * self.EXACT_SLACK_SHARE)
+            ask = Answers.on(look, After(readings=self.readings, end=self.limits.then_end(start), after=how,
+                                         exact_seconds=self.limits.then_exact_seconds))
             action = self.then(ask, action)
             return action, ask.how()
         finally:
             resume_collector()
 
-    def _within_budget(self, engine, mask, consistent, buffer, free, visible) -> tuple[Action, How]:
+    def _within_budget(self, look: LookState) -> tuple[Action, How]:
         """The rule within the budget: what the order alone settles, else exact counts first while they
         have been quick; where they have been slow, a probe first, which ends the decision if it settles
         it (:attr:`How.settled`), then the exact attempt, then the estimate again with what is left of the
         budget.  Where exact attempts have been failing, the estimate goes on instead of trying them;
         where probes have mostly not settled and exact attempts still fit, they are skipped."""
+        limits = self.limits
         start = time.perf_counter()
-        end = start + self.budget * (1 - MARGIN)
+        end = limits.end(start)
         try:    # one candidate, one part to buffer, a shake, or what the order settles: nothing to count
-            return self.rule(Answers(engine, mask, consistent, buffer, free, visible, mode="order")), EXACT
+            return self.rule(Answers.on(look, _BY_ORDER)), EXACT
         except MustCount as need:
             kind = need.kind
         r = self.readings
-        key = (kind, (engine.full & ~mask).bit_count() // SIZE_BAND)
+        key = limits.band(kind, look.steps_left)
         slow = r.slow.get(key, 0.0)
         probe = None
-        failing = slow > FAILING * self.budget
-        if slow > EXACT_FIRST * self.budget and (failing or r.probe_ok.get(key, 1.0) >= 0.5):
+        if limits.probe_first(slow, r.probe_ok.get(key, 1.0)):
             # a probe where exact counts are slow, unless probes have mostly been unsure here (many
             # close candidates) while the exact counts still fit
-            probe = self._estimate(engine, mask, consistent, buffer, visible, None, start + self.budget * PROBE_SHARE,
-                                   stop_when_sure=True, free=free)
+            probe = self._estimate(look, limits.probe_end(start))
             ok = probe[1].settled
-            r.probe_ok[key] = (1 - SLOW_WEIGHT) * r.probe_ok.get(key, 1.0) + SLOW_WEIGHT * ok
+            r.probe_ok[key] = limits.averaged(r.probe_ok.get(key, 1.0), ok)
             if ok:
-                r.slow[key] = slow * SLOW_DECAY   # try the exact counts again some day
+                r.slow[key] = slow * limits.slow_decay   # try the exact counts again some day
                 return probe
-            if failing:   # exact attempts here have been failing: estimate on instead
-                return self._estimate(engine, mask, consistent, buffer, visible, None, end, stop_when_sure=True,
-                                      free=free)
+            if limits.is_failing(slow):   # exact attempts here have been failing: estimate on instead
+                return self._estimate(look, end)
         began = time.perf_counter()
         try:
-            with engine.deadline(began + self.budget * r.share[kind]):
-                action = self.rule(Answers(engine, mask, consistent, buffer, free, visible, order_first=False))
-            r.share[kind] = EXACT_SHARE[1]
-            r.slow[key] = (1 - SLOW_WEIGHT) * slow + SLOW_WEIGHT * (time.perf_counter() - began)
+            with look.engine.deadline(limits.exact_end(began, r.share[kind])):
+                action = self.rule(Answers.on(look, _COUNTED))
+            r.share[kind] = limits.exact_share[1]
+            r.slow[key] = limits.averaged(slow, time.perf_counter() - began)
             return action, EXACT
         except BudgetExceeded:
-            r.share[kind] = EXACT_SHARE[0]
-            r.slow[key] = (1 - SLOW_WEIGHT) * slow + SLOW_WEIGHT * 2 * self.budget
+            r.share[kind] = limits.exact_share[0]
+            r.slow[key] = limits.averaged(slow, limits.failed_reading)
         if time.perf_counter() >= end and probe is not None:
             return probe
-        return self._estimate(engine, mask, consistent, buffer, visible, None, end, stop_when_sure=True, free=free)
+        return self._estimate(look, end)
 
-    def _estimate(self, engine, mask, consistent, buffer, visible, can, end: float, *,
-                  stop_when_sure: bool, free: float = math.inf) -> tuple[Action, How]:
+    def _estimate(self, look: LookState, end: float) -> tuple[Action, How]:
         """The rule applied to estimates from the population of chains, run until ``end`` (or until sure).
         The readings are kept while the state stays: a decision's second estimate, and the next look's
-        at the same state, continue them.  (``can``: unused, the rule asks.)"""
-        ask = Answers(engine, mask, consistent, buffer, free, visible, mode="estimate", readings=self.readings,
-                      end=end, stop_when_sure=stop_when_sure)
+        at the same state, continue them."""
+        ask = Answers.on(look, Estimated(self.readings, end))
         action = self.rule(ask)
         return action, ask.how()
 
@@ -1105,8 +1246,8 @@ class CountBasedRule(DecidesOnMasks):
         (Action(kind='buffer', part='c', source=None), (('c', Fraction(8, 3)),))
         """
         start = time.perf_counter()
-        sched = state.schedule
-        action, how = self._how(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        look = LookState.of(state, visible)
+        action, how = self._how(look)
         if action.kind == "done":
             return Decision(DONE, "the assembly is complete")
         if not how.exact:
@@ -1116,12 +1257,10 @@ class CountBasedRule(DecidesOnMasks):
         if action.kind == "install":
             rule = self.rule_install
             try:   # options not needed to decide (a lone candidate, or settled by the order): count them if they fit
-                with state.schedule.engine.deadline(None if self.budget is None
-                                                    else start + self.budget * (1 - MARGIN)):
+                with look.engine.deadline(self.limits.end(start)):
                     ranked = self.rank_candidates(state, visible)
             except BudgetExceeded:
-                sched = state.schedule
-                lone = len(sched.engine.installable_among(sched.mask, sched.consistent, (*visible, *state.buffer))) == 1
+                lone = len(look.installable()) == 1
                 why = ("the only candidate" if lone else
                        "settled by the partial order alone: no other candidate is followed by every step that must "
                        "follow it")
@@ -1133,8 +1272,7 @@ class CountBasedRule(DecidesOnMasks):
         if action.kind == "buffer":
             rule = self.rule_buffer
             try:
-                with state.schedule.engine.deadline(None if self.budget is None
-                                                    else start + self.budget * (1 - MARGIN)):
+                with look.engine.deadline(self.limits.end(start)):
                     ranked = self.rank_positions(state, visible)
             except BudgetExceeded:   # a lone visible part: decided without them, and they do not fit
                 return Decision(action, rule, note="its expected position was not computed within the budget",
@@ -1149,6 +1287,6 @@ class CountBasedRule(DecidesOnMasks):
         if self.budget is None:
             return state.schedule.count_result(estimate=False).value
         try:
-            return state.schedule.count_result(estimate=False, deadline=start + self.budget * (1 - MARGIN)).value
+            return state.schedule.count_result(estimate=False, deadline=self.limits.end(start)).value
         except BudgetExceeded:
             return None

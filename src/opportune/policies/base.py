@@ -16,20 +16,17 @@ from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any, Literal, Protocol, runtime_checkable
 
+# An estimated decision stops early once it is SURE of its choice, or as sure that no other candidate is
+# better by more than INDIFFERENT (a near tie): engine/tuning.py says why; answers.py uses them and
+# Decision.certainty states them.
+from opportune.engine.tuning import INDIFFERENT, SURE
+
 # A policy reads the sequencer's State (``schedule``, ``buffer``, ``buffer_free``, ``plan``) but does not
 # import it: the sequencer uses the policies, not the other way round.
 State = Any
 
 ActionKind = Literal["install", "buffer", "shake", "done"]
 
-#: An estimated decision stops early, keeping the rest of its budget, once it is this sure of its choice,
-#: or this sure that no other candidate is better by more than :data:`INDIFFERENT` (a near tie: the
-#: samples would take the whole budget to settle it, for no measurable difference in the outcome).
-#: Used by :mod:`~opportune.policies.answers`; stated by :meth:`Decision.certainty`.
-SURE = 0.999
-#: The margin of a near tie: a share of the best candidate's share of completions, or of the steps
-#: remaining for an expected position.
-INDIFFERENT = 0.01
 # how earlier versions wrote a near tie into a decision's note (read back by Decision.recorded)
 _OLD_NEAR_TIE = "stopped early: with probability >= "
 Source = Literal["bin", "buffer"]
@@ -248,8 +245,9 @@ class Decision:
     seconds : float, default 0.0
         The time the decision took.
     close : bool, default False
-        The estimate stopped on a near tie, being at least :data:`SURE` sure that no other candidate
-        is better by more than :data:`INDIFFERENT`; that is then what the decision states.
+        The estimate stopped on a near tie, being at least :data:`~opportune.engine.tuning.SURE` sure that
+        no other candidate is better by more than :data:`~opportune.engine.tuning.INDIFFERENT`; that is then
+        what the decision states.
 
     Examples
     --------
@@ -426,6 +424,8 @@ class DecidesOnMasks:
     locations and the look.  A simulation calls it directly, with no
     :class:`~opportune.sequencer.State` per look; :meth:`choose` adapts a ``State`` to it,
     and the policy's ``decide`` adds the reasons, so every world takes the same decision.
+    Inside the package the six travel as one :class:`~opportune.policies.look.LookState`
+    (:meth:`choose_look`).
 
     ``uses_buffer_order``: whether the action depends on the order of ``buffer`` (the order of
     buffering, as the sequencer keeps it), not only on its contents.  The exact evaluation
@@ -438,6 +438,11 @@ class DecidesOnMasks:
         """The action alone (what ``decide`` decides, without building its reasons)."""
         sched = state.schedule
         return self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+
+    def choose_look(self, look) -> Action:
+        """``choose_at`` on a :class:`~opportune.policies.look.LookState` (the six as one value): what the
+        rules that fall back on another policy call; a policy that takes the value itself overrides it."""
+        return self.choose_at(*look)
 
 
 @runtime_checkable

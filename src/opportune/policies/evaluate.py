@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import heapq
 
+from opportune.engine import tuning
 from opportune.policies.optimal import (
     OptimalSolver,
     OptimalTooLarge,
@@ -72,7 +73,7 @@ class BufferOrder:
         self._ties_known = False
 
     #: :attr:`ties` lists at most this many (installed, strategies) states; past it any pair's order may decide.
-    TIES_MAX_KEYS = 100_000
+    TIES_MAX_KEYS = tuning.TIES_MAX_KEYS
 
     @property
     def ties(self) -> set | None:

@@ -10,6 +10,8 @@ import time
 from dataclasses import replace
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
+from opportune.engine.tuning import (LOOKAHEAD_BASE_SHARE, LOOKAHEAD_COMPILED_STATES, LOOKAHEAD_LISTING_PARTS,
+                                     LOOKAHEAD_PROGRAMME_SHARE, LOOKAHEAD_STEP_UNITS, LOOKAHEAD_WINDOW_SHARE)
 from opportune.policies.base import (
     DONE,
     SHAKE,
@@ -20,6 +22,7 @@ from opportune.policies.base import (
     resume_collector,
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
+from opportune.policies.look import LookState
 from opportune.policies.optimal import (
     COMPILED_WEIGHTED_LOOKS,
     OptimalTooLarge,
@@ -146,16 +149,16 @@ class Lookahead(DecidesOnMasks):
     #: shared by the look-aheads of the same settings; with one, each decision goes on with it within its
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
     #: core) is held to ``max_states``.
-    COMPILED_STATES = 5_000_000
+    COMPILED_STATES = LOOKAHEAD_COMPILED_STATES
     #: Where the optimum does not fit in a pile or weighted bin (the window serves the uniform bin), plans
     #: of more units than this decide as the base does: the step over the base evaluates the base look by
     #: look in Python (every look of every state asks the base rule), hours on a 45-part plan.  The optimum
     #: itself is never refused by units, only by its states and bytes.
-    STEP_UNITS = 16
+    STEP_UNITS = LOOKAHEAD_STEP_UNITS
     #: With a budget, the share of it the frontier window may take (its programme is stopped there and the
     #: base decides within the rest, :attr:`fallback`'s quarter): its states are capped
     #: (:data:`~opportune.policies.window.WINDOW_STATES`), so this binds only on a very slow machine.
-    WINDOW_SHARE = 0.7
+    WINDOW_SHARE = LOOKAHEAD_WINDOW_SHARE
     #: Without a budget, the moment (a :class:`~opportune.engine.deadline.Deadline`) past which its exact
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
@@ -172,7 +175,7 @@ class Lookahead(DecidesOnMasks):
         self.base = base if base is not None else Slack()      # exact: the programme evaluates it
         # the base within what the programme leaves of the budget; on a plan too large for the programme,
         # within the whole budget (nothing else runs then)
-        self.fallback = self.base if budget is None else Slack(budget=budget / 4)
+        self.fallback = self.base if budget is None else Slack(budget=budget * LOOKAHEAD_BASE_SHARE)
         self.fallback_alone = self.base if budget is None else Slack(budget=budget)
         #: The frontier window that decides where the optimum does not fit, in a uniform bin (its ``work``
         #: counts its windows and states); its base is the fallback within what it leaves of the budget.
@@ -348,7 +351,7 @@ class Lookahead(DecidesOnMasks):
             return False
         from opportune.policies.states import big, estimate_states
 
-        seconds = None if self.lookahead_budget is None else self.lookahead_budget / 3
+        seconds = None if self.lookahead_budget is None else self.lookahead_budget / LOOKAHEAD_LISTING_PARTS
         cap = self._optimum_cap(engine)
         est = estimate_states(self._sized(engine), visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
                               pile=self.pile, stop_above=cap, time_limit=seconds)
@@ -470,23 +473,23 @@ class Lookahead(DecidesOnMasks):
         """
         if mask == engine.full:
             return DONE
+        look = LookState(engine, mask, consistent, buffer, free, visible)
         if self.lookahead_budget is None:
-            return self._choose(engine, mask, consistent, buffer, free, visible)
+            return self._choose(look)
         # the whole budgeted decision with the collector paused, the programme's part and the base's:
         # a full collection that started in it took 74 ms on a 1,000-task plan against 50
         pause_collector()
         try:
-            return self._choose(engine, mask, consistent, buffer, free, visible)
+            return self._choose(look)
         finally:
             resume_collector()
 
-    def _choose(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
-                visible: tuple[str, ...]) -> Action:
+    def _choose(self, look: LookState) -> Action:
         start = time.perf_counter()
-        action = self._programme(engine, mask, consistent, buffer, visible)
+        action = self._programme(look)
         if action is not None:
             return action
-        return self._fallback(engine, start).choose_at(engine, mask, consistent, buffer, free, visible)
+        return self._fallback(look.engine, start).choose_look(look)
 
     def _fallback(self, engine=None, start: float | None = None):
         """What decides where the programme does not: the frontier window (within its share of the budget
@@ -500,8 +503,9 @@ class Lookahead(DecidesOnMasks):
             return self.window
         return self.fallback_alone if self._too_large else self.fallback
 
-    def _programme(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], visible: tuple[str, ...]):
+    def _programme(self, look: LookState):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
+        engine, mask, consistent, buffer, _, visible = look
         self.last_cost = None
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
@@ -509,8 +513,8 @@ class Lookahead(DecidesOnMasks):
             if ev is None:
                 self._too_large = True
                 return None
-            own = as_deadline(start + 0.7 * self.lookahead_budget if self.lookahead_budget is not None
-                              else self.deadline)
+            own = as_deadline(self.deadline if self.lookahead_budget is None
+                              else start + LOOKAHEAD_PROGRAMME_SHARE * self.lookahead_budget)
             # the decision's deadline on the engine (a service look's) binds the programme too, as it binds
             # the engine's counts: past it the base decides, budget or not
             engine_stops = engine.decision_deadline.at < own.at
@@ -592,7 +596,7 @@ class Lookahead(DecidesOnMasks):
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
         start = time.perf_counter()
-        action = self._programme(sched.engine, sched.mask, sched.consistent, state.buffer, visible)
+        action = self._programme(LookState.of(state, visible))
         if action is None and self._by_window and self._too_large:
             return self._fallback(sched.engine, start).decide(state, visible, because=self._why_too_large())
         if action is None:

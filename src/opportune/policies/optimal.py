@@ -45,40 +45,20 @@ from math import comb, prod
 
 from opportune.engine import OrderEngine, compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine.tuning import (  # noqa: F401 (the look cache's and the compiled optimum's bounds, by these names)
+    COMPILED_LOOK_BYTES,
+    COMPILED_LOOK_CACHE_BYTES,
+    COMPILED_LOOK_ENTRY_BYTES,
+    COMPILED_PAIR_BYTES,
+    COMPILED_WEIGHTED_LOOKS,
+    COMPILED_WEIGHTED_VISIBLE,
+    LOOK_CACHE_LOOKS,
+)
 from opportune.policies.base import DONE, SHAKE, Action, Decision
 from opportune.policies.interchangeable import merge_interchangeable
 from opportune.planning.costs import TimeModel
 
-#: Looks (with their probabilities) the look cache keeps, over all the bin contents it holds: about
-#: 150 bytes each, so at most about 30 MB whatever the plan (it used to grow with the states × looks).
-LOOK_CACHE_LOOKS = 200_000
-
 _native = compiled_core()   # None: the Python programme only
-
-#: Bytes of an (installed, strategies) pair the compiled optimum interns: the pair in a vector and a
-#: node of the hash map that finds it (what ``OptimalCore.bytes`` counts).
-COMPILED_PAIR_BYTES = 64
-
-#: The compiled optimum's cache of a weighted bin's looks (by bin content) holds at most this many
-#: bytes, and is cleared whole before it would hold more (a bin's looks are enumerated again when needed).
-COMPILED_LOOK_CACHE_BYTES = 4 << 20
-
-#: Visible parts the compiled optimum of a weighted bin takes at most: a look is coded in 6 bits a part.
-COMPILED_WEIGHTED_VISIBLE = 10
-
-#: The compiled optimum of a weighted bin enumerates a bin's looks at every state (about 7 ns a look,
-#: measured on 12 parts, 3 visible): the look-ahead takes it on plans of at most this many looks at the
-#: start times states (the start has the most looks), about ten seconds' work like its uniform bin's
-#: cap (:attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`).
-COMPILED_WEIGHTED_LOOKS = 1_000_000_000
-
-#: Bytes a look of a weighted bin takes in the compiled cache besides its parts (one byte each): its
-#: probability (8), and while the bin's looks are enumerated, its sum and its sorted parts by code (128).
-COMPILED_LOOK_BYTES = 136
-
-#: Bytes a bin's entry takes in the compiled look cache (its hash node and vectors; ``ENTRY_BYTES``
-#: in ``src/native/optimal.cpp``).
-COMPILED_LOOK_ENTRY_BYTES = 96
 
 
 class OptimalTooLarge(RuntimeError):

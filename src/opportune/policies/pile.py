@@ -31,6 +31,7 @@ from __future__ import annotations
 import sys
 
 from opportune.engine import compiled_core
+from opportune.engine.tuning import PILE_COMPILED_BYTES_PER_STATE as COMPILED_BYTES_PER_STATE
 from opportune.policies.evaluate import BufferOrder, OutOfTime
 from opportune.policies.optimal import CompiledCore, OptimalSolver, OptimalTooLarge, check_evaluable
 
@@ -38,12 +39,6 @@ _native = compiled_core()   # None: the Python programme only
 
 __all__ = ["COMPILED_BYTES_PER_STATE", "CompiledPileSolver", "PileSolver", "compiled_pile_available", "pile_solver"]
 
-#: Bytes the compiled optimum holds per stored value: a 16-byte slot (the state and window as one
-#: 64-bit code, the value) in a table at most half full, so 32-64 bytes when the table is reserved
-#: for the count known before (:meth:`CompiledPileSolver.reserve`; 96 for a moment while an unreserved
-#: table doubles).  The (installed, strategies) pairs it interns are fewer by the buffers and windows
-#: of each, and add a few percent.  The Python programme takes 220-260 bytes per value.
-COMPILED_BYTES_PER_STATE = 64
 
 
 class PileSolver(BufferOrder, OptimalSolver):

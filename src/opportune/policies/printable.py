@@ -6,12 +6,9 @@ from __future__ import annotations
 import re
 from functools import lru_cache
 
-_BIG = 14_000  # bits: fewer than 4,215 decimal digits, which str() writes
-
-#: Counts of at most this many digits are written in full for people (``40,320``), longer ones as three
-#: significant digits and an exponent (``6.13e98``): 15 digits still read at a glance, grouped, and
-#: any count fits a dashboard's panel (the exponent of a count of 10,000 free parts has 5 digits).
-LABEL_DIGITS = 15
+# LABEL_DIGITS: counts of at most this many digits are written in full for people, longer ones as three
+# significant digits and an exponent (engine/tuning.py says why); STR_BITS: the largest count str() writes
+from opportune.engine.tuning import LABEL_DIGITS, STR_BITS
 
 _ROUNDED = re.compile(r"(\d)(?:\.(\d*))?e\+?(\d+)", re.IGNORECASE)
 
@@ -109,7 +106,7 @@ def printable_decision(decision, exact_digits: int | None = None):
     decimal = exact if exact_digits is None else partial(count_text, exact_digits=exact_digits)
 
     def large(n) -> bool:
-        return isinstance(n, int) and n.bit_length() >= _BIG
+        return isinstance(n, int) and n.bit_length() >= STR_BITS
 
     if not any(large(c.options) or large(c.total) for c in decision.candidates) and \
             not any(large(v.numerator) or large(v.denominator) for _, v in decision.positions):

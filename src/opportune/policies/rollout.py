@@ -31,7 +31,9 @@ import random
 import time
 import zlib
 
+from opportune.engine.tuning import ROLLOUT_EXACT_UNITS, ROLLOUT_SHARE
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
+from opportune.policies.look import LookState
 
 __all__ = ["Rollout"]
 
@@ -50,7 +52,7 @@ class Rollout(DecidesOnMasks):
     decision_key = None
     #: Plans of at most this many units are decided by the exact look-ahead (an expectation, not a sample):
     #: its programme (the optimum's where it fits) finishes within seconds on them.
-    EXACT_UNITS = 16
+    EXACT_UNITS = ROLLOUT_EXACT_UNITS
     #: The futures' seed is drawn from the state with its buffer in order (and small plans decide as the
     #: look-ahead, which keeps it too).
     uses_buffer_order = True
@@ -107,13 +109,14 @@ class Rollout(DecidesOnMasks):
         if mask == engine.full:
             return DONE
         self.last = None
+        look = LookState(engine, mask, consistent, buffer, free, visible)
         if engine.n_units <= self.exact_below:
-            return self._exact_policy().choose_at(engine, mask, consistent, buffer, free, visible)
-        actions = self._actions(engine, mask, consistent, buffer, free, visible)
+            return self._exact_policy().choose_look(look)
+        actions = self._actions(look)
         base = actions[0]
         if len(actions) == 1:
             return base
-        deadline = None if self.budget is None else time.perf_counter() + 0.8 * self.budget
+        deadline = None if self.budget is None else time.perf_counter() + ROLLOUT_SHARE * self.budget
         tables = self._prepare(engine)
         index = tables[5]
         bin_parts = self._bin_parts(engine, mask, buffer, tables)
@@ -150,9 +153,10 @@ class Rollout(DecidesOnMasks):
                                    costs=self.costs)
         return self.exact
 
-    def _actions(self, engine, mask, consistent, buffer, free, visible) -> list[Action]:
+    def _actions(self, look: LookState) -> list[Action]:
         """The candidate actions, the base rule's first: installs if any (bin before buffer), else
         buffering each distinct visible part (with room) and shaking."""
+        engine, mask, consistent, buffer, free, visible = look
         tables = self._prepare(engine)
         _, first, _, waiting, _, index = tables
 

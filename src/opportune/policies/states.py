@@ -43,18 +43,10 @@ from functools import lru_cache
 
 from opportune.engine.deadline import Deadline, as_deadline, recursion_room
 from opportune.engine.poset import bits
+from opportune.engine.tuning import BYTES_PER_STATE, PROFILE_MAX_UNITS
 
 __all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states",
            "looks_at_start", "orderings_factor", "reachable_keys"]
-
-#: Memory a programme uses per state, rounded up: the dict entry, the key and buffer tuples and the
-#: value (measured: 574 bytes per state for the optimum of KILBRID, 716 on the gearbox, 220-260 per
-#: stored value in the pile).  The memo is the only thing that grows with the states; beside it the
-#: look cache holds at most :data:`~opportune.policies.optimal.LOOK_CACHE_LOOKS` looks (~30 MB).
-BYTES_PER_STATE = 1_000
-
-# the decomposition's packed polynomials grow as units²; past this many units only a lower bound is given
-_PROFILE_MAX_UNITS = 2_000
 
 
 @dataclass(frozen=True)
@@ -361,7 +353,7 @@ def estimate_from_downsets(engine, *, visible: int = 2, capacity: int | None = N
     weigh = weigh or _Weigher(engine, visible, capacity, pile)
     until = as_deadline(deadline)
     n = engine.n_units
-    if n > _PROFILE_MAX_UNITS:
+    if n > PROFILE_MAX_UNITS:
         return None
     weights = [weigh.of_remaining(r) for r in range(n + 1)]
     total = 0

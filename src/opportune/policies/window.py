@@ -28,25 +28,13 @@ from dataclasses import dataclass
 from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
+from opportune.engine.tuning import WINDOW_CACHE, WINDOW_PARTS, WINDOW_STATES  # engine/tuning.py says why
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
 __all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available"]
 
 _native = compiled_core()
-
-#: The window's sizes (parts, buffered ones and ancestors included) tried at a state in increasing size,
-#: the largest that fits :data:`WINDOW_STATES` (and the deadline, where there is one) deciding: 12 was
-#: within 0.24% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
-#: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
-WINDOW_PARTS = (5, 8, 12)
-#: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
-#: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
-#: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
-WINDOW_STATES = 20_000
-#: Windows kept, by state (a decision table is under 1 kB for a window of 12 parts, so at most about
-#: 4 MB a policy): a state's looks share it.
-WINDOW_CACHE = 4096
 
 
 def window_available(engine, weights: dict[str, float] | None = None) -> bool:
