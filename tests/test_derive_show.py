@@ -33,6 +33,12 @@ def derived(name: str):
 
 
 @lru_cache(maxsize=None)
+def held(gravity="-z", base=None):
+    """The shipped gearbox derived under gravity (each part resting on one before it)."""
+    return derive("geometry:gearbox", gravity=gravity, base=base)
+
+
+@lru_cache(maxsize=None)
 def explained(name: str):
     d = derived(name)
     return explain(d, d.assembly, time_limit=20)
@@ -67,7 +73,7 @@ def test_the_shipped_meshes_are_the_scripts_output(tmp_path):
         assert all(a.read_bytes() == b.read_bytes() for a, b in zip(shipped, written)), name
         assert sum(p.stat().st_size for p in shipped) < 32_000      # small in the package
     looks = Path(str(geometry_path("gearbox").parent.parent / "gearbox-meshes.looks"))
-    assert looks.read_text(encoding="utf-8") == ex.looks_text("gearbox", derived("gearbox").plan)
+    assert looks.read_text(encoding="utf-8") == ex.looks_text("gearbox", held().plan, options=" --gravity -z")
 
 
 def test_the_gearbox_derives_and_counts_as_the_brute_force(tmp_path):
@@ -83,7 +89,7 @@ def test_the_gearbox_derives_and_counts_as_the_brute_force(tmp_path):
 
 def test_the_gearbox_replays_its_looks(tmp_path):
     out = tmp_path / "gearbox.yaml"
-    assert runner.invoke(app, ["derive", "geometry:gearbox", "-o", str(out)]).exit_code == 0
+    assert runner.invoke(app, ["derive", "geometry:gearbox", "--gravity", "-z", "-o", str(out)]).exit_code == 0
     replayed = runner.invoke(app, ["replay", str(out), "example:gearbox-meshes", "--json"])
     assert replayed.exit_code == 0, replayed.output
     steps = json.loads(replayed.stdout)
@@ -142,11 +148,6 @@ def held_count(parts, blockers, needs) -> int:
                     grown[built | 1 << i] = grown.get(built | 1 << i, 0) + ways
         layer = grown
     return sum(layer.values())
-
-
-@lru_cache(maxsize=None)
-def held(gravity="-z", base=None):
-    return derive("geometry:gearbox", gravity=gravity, base=base)
 
 
 def test_the_gearbox_derives_under_gravity_and_its_sequences_replay(tmp_path):

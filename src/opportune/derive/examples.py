@@ -371,11 +371,12 @@ def looks(plan, seed: int = 0, visible: int = 2) -> list[list[str]]:
         seq.report("success")
 
 
-def looks_text(name: str, plan, seed: int = 0) -> str:
-    """A looks file for a shipped assembly's derived plan (see :func:`looks`), one look a line."""
+def looks_text(name: str, plan, seed: int = 0, options: str = "") -> str:
+    """A looks file for a shipped assembly's derived plan (see :func:`looks`), one look a line; ``options``
+    are those the plan was derived with, as the file's header states them."""
     rows = looks(plan, seed)
-    return (f"# Looks at a bin of the {name} derived from its meshes (opportune derive geometry:{name}): the parts in\n"
-            f"# a random order (seed {seed}), the camera seeing two; `opportune replay` replays them.\n"
+    return (f"# Looks at a bin of the {name} derived from its meshes (opportune derive geometry:{name}{options}): the\n"
+            f"# parts in a random order (seed {seed}), the camera seeing two; `opportune replay` replays them.\n"
             + "\n".join(" ".join(r) or "-" for r in rows) + "\n")
 
 
@@ -384,5 +385,7 @@ if __name__ == "__main__":   # python -m opportune.derive.examples FOLDER: the s
         write(shipped, Path(sys.argv[1]) / shipped)
     from opportune.derive import derive
 
+    # the looks of the realistic setting: each part rests on what is below it
     (Path(sys.argv[1]).parent / "gearbox-meshes.looks").write_text(
-        looks_text("gearbox", derive(Path(sys.argv[1]) / "gearbox").plan), encoding="utf-8")
+        looks_text("gearbox", derive(Path(sys.argv[1]) / "gearbox", gravity="-z").plan, options=" --gravity -z"),
+        encoding="utf-8")
