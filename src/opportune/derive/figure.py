@@ -163,14 +163,24 @@ def exploded(derivation, path: str | Path, *, strategy: int = 1, gap: float | No
     step = GAP_SHARE * assembly.size if gap is None else float(gap)
     unit = {d: np.asarray(v, float) / np.linalg.norm(v) for d, v in derivation.blocking.directions.items()}
     directions = shown_directions(derivation.blocking, chosen)
-    # the largest part stays (the product's base, most often), every other moves one step more than its level
+    # the largest part stays (the product's base, most often), every other moves one step more than its level,
+    # and its own length along the way it moves (a long shaft drawn clear of the short parts on its line)
     anchor = max(assembly.parts, key=lambda p: float(np.prod(np.ptp(p.bounds, axis=0))) if len(p.bodies) else 0.0).id
-    moves = {p.id: np.zeros(3) if p.id == anchor else -unit[directions[p.id]] * step * (level[p.id] + 1)
+    moves = {p.id: np.zeros(3) if p.id == anchor else
+             -unit[directions[p.id]] * (step * (level[p.id] + 1) + _length(p, unit[directions[p.id]]))
              for p in assembly.parts}
     fig = _draw(assembly, moves, stage, title or f"{derivation.plan.name}: each part moved out along its insertion "
                                                   f"direction (strategy s{strategy})")
     fig.savefig(path, dpi=200, bbox_inches="tight")
     return path
+
+
+def _length(part, unit: np.ndarray) -> float:
+    """The part's extent along a unit vector (its bodies' corners projected)."""
+    if not len(part.bodies):
+        return 0.0
+    along = np.concatenate([b.vertices @ unit for b in part.bodies])
+    return float(along.max() - along.min())
 
 
 def shown_directions(block, strategy) -> dict[str, str]:
