@@ -4,7 +4,8 @@ One strategy of the plan (the first by default) gives each part its insertion di
 order.  A part's **stage** is its earliest position in a sequence the strategy admits (one more than
 the parts that must go in before it); its **level** is the length of the longest chain of
 constraints that ends at it.  The part is drawn moved back along ``-d`` (where it comes from) by
-``(level + 1) × gap``, but for the largest part (the base, most often), which stays: the parts that
+``(level + 1) × gap`` plus its own length along ``d`` (a long shaft clears the short parts on its
+line), but for the largest part (the base, most often), which stays: the parts that
 close the product fly furthest.  A part is drawn coming from above (``-z``) wherever the strategy's
 order allows that (:func:`shown_directions`).  A dashed line joins each moved part to its place; colours (a colour bar) give the stage.
 All the faces are depth-sorted together (one collection), drawn with matplotlib's 3-D axes, in
