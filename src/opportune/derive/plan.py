@@ -411,7 +411,10 @@ def _no_sequence_message(ways: dict[str, list[_Alternative]], conditions: Condit
         alone = [p for p, w in ways.items() if [x.name for x in w] == ["first"]]
         why = (f"parts {', '.join(alone[:12])} rest on nothing and touch nothing that could be in before them, so "
                "each of them could only go in first" if len(alone) > 1 else "")
-    return ("no feasible sequence meets the supports asked (--gravity, --connected, --base)" + (f": {why}" if why else "")
+    asked = sorted({f"--{kind}" for needs in conditions.needs.values() for kind, _ in needs}) if conditions else []
+    asked += ["--base"] if conditions is not None and conditions.base else []
+    return (f"no feasible sequence meets the supports asked ({', '.join(asked) or '--gravity, --connected, --base'})"
+            + (f": {why}" if why else "")
             + "; give a part to rest on or a base part, change the parts named, or derive without the option")
 
 
