@@ -189,6 +189,7 @@ def test_explain_under_gravity_keeps_the_supports():
             one = {**b.blockers, p: {k: b.blockers[p][k]}}
             assert (k in e.usable[p]) == (held_count(b.parts, one, needs) > 0), (p, k)
     assert e.usable["gear_a"] == ["-x"] and e.usable["bearing_a1"] == ["+x"]     # slid onto its shaft; from outside
+    assert "gear_a after shaft_a: resting on shaft_a" in e.text()      # a support, said as gravity's
     for f in e.frees:
         out = {p: {k: s - {f["name"]} for k, s in dirs.items()} for p, dirs in b.blockers.items()}
         assert f["count"]["exact"] and f["count"]["value"] == held_count(b.parts, out, needs), f

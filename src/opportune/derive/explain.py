@@ -121,7 +121,7 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     """
     end = time.perf_counter() + time_limit
     block, strategies = derivation.blocking, derivation.strategies
-    orders = [_order(block, s) for s in strategies]
+    orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
     closures = [_closure(s.pairs) for s in strategies]
     forced = sorted(set.intersection(*closures)) if closures else []
     base = _count(derivation.plan, max(0.001, time_limit / 4), seed)
@@ -156,13 +156,16 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
 
 
-def _order(block: Blocking, strategy) -> dict:
+def _order(block: Blocking, strategy, conditions=None) -> dict:
     """One strategy's constraints, each with its reason: the earlier part's direction, the later part in its way
     there, and the earlier part's other directions with their blockers."""
     pairs = []
     for before, after in strategy.pairs:
         if before in way_supports(strategy.directions[after]):      # after rests on (or touches) before
-            pairs.append({"before": before, "after": after, "direction": None, "support": True,
+            kinds = {k for k, n in (conditions.needs.get(after, ()) if conditions is not None else ()) if before in n}
+            verb = {frozenset({"gravity"}): "resting on", frozenset({"connected"}): "touching"}.get(
+                frozenset(kinds), "resting on or touching")
+            pairs.append({"before": before, "after": after, "direction": None, "support": verb,
                           "other_directions": {}})
             continue
         d = way_direction(block, before, strategy.directions[before])
@@ -349,7 +352,9 @@ def reasons(e: Explanation) -> list[dict]:
     Returns
     -------
     list of dict
-        ``{"part", "direction", "before", "other_directions", "strategies"}`` each (strategies from 1).
+        ``{"part", "direction", "before", "other_directions", "strategies"}`` each (strategies from 1); a
+        support (the later parts rest on or touch the part; ``direction`` None) has ``"support"``: ``resting
+        on``, ``touching`` or ``resting on or touching``.
 
     Examples
     --------
@@ -358,11 +363,12 @@ def reasons(e: Explanation) -> list[dict]:
     >>> next(x["before"] for x in r if x["part"] == "cover" and x["direction"] == "+x")
     ['screw_1', 'screw_2', 'screw_3', 'screw_4']
     """
-    grouped: dict[tuple[str, str], dict] = {}
+    grouped: dict[tuple, dict] = {}
     for k, order in enumerate(e.orders, 1):
         for c in order["constraints"]:
-            r = grouped.setdefault((c["before"], c["direction"]), {
-                "part": c["before"], "direction": c["direction"], "before": [],
+            support = {"support": c["support"]} if c.get("support") else {}
+            r = grouped.setdefault((c["before"], c["direction"], c.get("support")), {
+                "part": c["before"], "direction": c["direction"], **support, "before": [],
                 "other_directions": c["other_directions"], "strategies": []})
             if c["after"] not in r["before"]:
                 r["before"].append(c["after"])
@@ -379,7 +385,8 @@ def _report(e: Explanation) -> list[str]:
         where = "" if len(r["strategies"]) == n else " (strateg" + ("y s" if len(r["strategies"]) == 1 else "ies s") \
             + ", s".join(map(str, r["strategies"])) + ")"
         if r["direction"] is None:      # a support: the later parts rest on (or touch) the earlier one
-            lines.append(f"  {_names(r['before'])} after {r['part']}{where}: resting on or touching {r['part']}")
+            lines.append(f"  {_names(r['before'])} after {r['part']}{where}: "
+                         f"{r.get('support', 'resting on or touching')} {r['part']}")
             continue
         lines.append(f"  {_names(r['before'])} after {r['part']}{where}: along {r['direction']} "
                      f"{_names(r['before'])} would be in {r['part']}'s way; "
