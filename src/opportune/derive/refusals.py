@@ -148,7 +148,7 @@ def _ruled_out(p: str, gone: list, edges: _Edges, above, below, conditions,
     for w in gone:
         late = sorted(w.after & below[p])
         if late:
-            by.setdefault((late[0], "before"), []).append(w.name)
+            by.setdefault((late[0], "first" if w.name == "first" else "before"), []).append(w.name)
             premises += _path(edges, late[0], p)
         else:
             early = sorted(w.before & above[p])[0]
@@ -156,7 +156,9 @@ def _ruled_out(p: str, gone: list, edges: _Edges, above, below, conditions,
             premises += _path(edges, p, early)
     clauses = []
     for (q, side), names in by.items():
-        if side == "before":
+        if side == "first":     # the way of a part that may only go first (nothing holds it)
+            clauses.append(f"going in first, yet {q} must come before it")
+        elif side == "before":
             clauses.append(f"along {_directions(names)} {q} is in its way and must come before it")
         else:
             clauses.append(f"{_kind_verb(p, q, conditions)} {q}, which must come after it")
