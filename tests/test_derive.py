@@ -567,54 +567,6 @@ def test_a_part_nothing_holds_under_gravity_is_refused_naming_it(tmp_path):
     assert Schedule(derived.plan).count() == brute.count() > 0
 
 
-def test_a_tilted_assembly_derives_as_on_the_axes(tmp_path):
-    """One step off the axes: a voxel assembly turned by a random rotation.  The default directions (the
-    axes and the contacts' normals) include the turned axes, and the plan admits exactly the sequences
-    of the brute force on the unturned grid; the axes alone (now off every face) block more; gravity
-    along the turned -z gives the brute force's count with gravity."""
-    parts = partition((2, 2, 3), 5, seed=4)
-    q, r = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))
-    turn = q * np.sign(np.diag(r)) * (1 if np.linalg.det(q * np.sign(np.diag(r))) > 0 else -1)
-    folder = write_assembly(tmp_path / "turned", parts)
-    for f in folder.iterdir():
-        lines = []
-        for line in f.read_text().splitlines():
-            if line.startswith("v "):
-                line = "v " + " ".join(f"{c:.15g}" for c in turn @ np.array(line.split()[1:], float))
-            lines.append(line)
-        f.write_text("\n".join(lines) + "\n")
-    derived = derive(folder)
-    assert len(derived.blocking.directions) == 12          # six axes, six turned face normals
-    assert Schedule(derived.plan).count() == BruteForce(parts, (2, 2, 3)).count()
-    try:
-        fewer = Schedule(derive(folder, directions="axes").plan).count()
-    except DeriveError:
-        fewer = 0
-    assert fewer < Schedule(derived.plan).count()
-    # gravity along the turned -z (a vector, not an axis): resting and the floor found off the axes too
-    down = " ".join(f"{c:.15g}" for c in turn @ np.array([0, 0, -1.0]))
-    held = derive(folder, gravity=down)
-    assert Schedule(held.plan).count() == BruteForce(parts, (2, 2, 3), gravity=True).count() > 0
-
-
-def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monkeypatch):
-    """The default directions grow with the contacts' normals: over the limit, exit 1 saying to give
-    --directions (checked before any blocking test); with --directions axes the same assembly derives."""
-    from opportune.derive import blocking, directions
-
-    folder = write_assembly(tmp_path / "wedge", {"a": [(0, 0, 0)]})
-    # a wedge (a triangular prism, one face tilted) against the cube's +x face
-    (folder / "b.obj").write_text("v 1 0 0\nv 1 1 0\nv 1 0 1\nv 1 1 1\nv 2 0 0\nv 2 1 0\n"
-                                  "f 1 3 2\nf 2 3 4\nf 1 5 3\nf 2 4 6\nf 1 2 6\nf 1 6 5\nf 3 5 6\nf 3 6 4\n")
-    assert len(derive(folder).blocking.directions) == 6            # the contact's normal is +x: an axis
-    monkeypatch.setattr(directions, "MAX_DIRECTIONS", 5)
-    called = []
-    monkeypatch.setattr(blocking, "depth", lambda *a: called.append(1))
-    r = run_cli("derive", folder)
-    assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
-    assert not called
-
-
 # ---------------------------------------------------------------- why no sequence meets the supports
 
 #: A gear that rests only on its shaft, inside a housing: the shaft runs along x through holes in the
@@ -685,3 +637,51 @@ def test_the_orders_a_refusal_states_hold_in_every_feasible_sequence(tmp_path_fa
     for a, b in orders:
         assert all(seq.index(a) < seq.index(b) for seq in feasible), (a, b, orders[a, b])
     assert statement is None or not feasible, statement
+
+
+def test_a_tilted_assembly_derives_as_on_the_axes(tmp_path):
+    """One step off the axes: a voxel assembly turned by a random rotation.  The default directions (the
+    axes and the contacts' normals) include the turned axes, and the plan admits exactly the sequences
+    of the brute force on the unturned grid; the axes alone (now off every face) block more; gravity
+    along the turned -z gives the brute force's count with gravity."""
+    parts = partition((2, 2, 3), 5, seed=4)
+    q, r = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))
+    turn = q * np.sign(np.diag(r)) * (1 if np.linalg.det(q * np.sign(np.diag(r))) > 0 else -1)
+    folder = write_assembly(tmp_path / "turned", parts)
+    for f in folder.iterdir():
+        lines = []
+        for line in f.read_text().splitlines():
+            if line.startswith("v "):
+                line = "v " + " ".join(f"{c:.15g}" for c in turn @ np.array(line.split()[1:], float))
+            lines.append(line)
+        f.write_text("\n".join(lines) + "\n")
+    derived = derive(folder)
+    assert len(derived.blocking.directions) == 12          # six axes, six turned face normals
+    assert Schedule(derived.plan).count() == BruteForce(parts, (2, 2, 3)).count()
+    try:
+        fewer = Schedule(derive(folder, directions="axes").plan).count()
+    except DeriveError:
+        fewer = 0
+    assert fewer < Schedule(derived.plan).count()
+    # gravity along the turned -z (a vector, not an axis): resting and the floor found off the axes too
+    down = " ".join(f"{c:.15g}" for c in turn @ np.array([0, 0, -1.0]))
+    held = derive(folder, gravity=down)
+    assert Schedule(held.plan).count() == BruteForce(parts, (2, 2, 3), gravity=True).count() > 0
+
+
+def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monkeypatch):
+    """The default directions grow with the contacts' normals: over the limit, exit 1 saying to give
+    --directions (checked before any blocking test); with --directions axes the same assembly derives."""
+    from opportune.derive import blocking, directions
+
+    folder = write_assembly(tmp_path / "wedge", {"a": [(0, 0, 0)]})
+    # a wedge (a triangular prism, one face tilted) against the cube's +x face
+    (folder / "b.obj").write_text("v 1 0 0\nv 1 1 0\nv 1 0 1\nv 1 1 1\nv 2 0 0\nv 2 1 0\n"
+                                  "f 1 3 2\nf 2 3 4\nf 1 5 3\nf 2 4 6\nf 1 2 6\nf 1 6 5\nf 3 5 6\nf 3 6 4\n")
+    assert len(derive(folder).blocking.directions) == 6            # the contact's normal is +x: an axis
+    monkeypatch.setattr(directions, "MAX_DIRECTIONS", 5)
+    called = []
+    monkeypatch.setattr(blocking, "depth", lambda *a: called.append(1))
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
+    assert not called
