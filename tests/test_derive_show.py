@@ -33,6 +33,12 @@ def derived(name: str):
 
 
 @lru_cache(maxsize=None)
+def held(gravity="-z", base=None):
+    """The shipped gearbox derived under gravity (each part resting on one before it)."""
+    return derive("geometry:gearbox", gravity=gravity, base=base)
+
+
+@lru_cache(maxsize=None)
 def explained(name: str):
     d = derived(name)
     return explain(d, d.assembly, time_limit=20)
@@ -67,7 +73,7 @@ def test_the_shipped_meshes_are_the_scripts_output(tmp_path):
         assert all(a.read_bytes() == b.read_bytes() for a, b in zip(shipped, written)), name
         assert sum(p.stat().st_size for p in shipped) < 32_000      # small in the package
     looks = Path(str(geometry_path("gearbox").parent.parent / "gearbox-meshes.looks"))
-    assert looks.read_text(encoding="utf-8") == ex.looks_text("gearbox", derived("gearbox").plan)
+    assert looks.read_text(encoding="utf-8") == ex.looks_text("gearbox", held().plan, options=" --gravity -z")
 
 
 def test_the_gearbox_derives_and_counts_as_the_brute_force(tmp_path):
@@ -83,7 +89,7 @@ def test_the_gearbox_derives_and_counts_as_the_brute_force(tmp_path):
 
 def test_the_gearbox_replays_its_looks(tmp_path):
     out = tmp_path / "gearbox.yaml"
-    assert runner.invoke(app, ["derive", "geometry:gearbox", "-o", str(out)]).exit_code == 0
+    assert runner.invoke(app, ["derive", "geometry:gearbox", "--gravity", "-z", "-o", str(out)]).exit_code == 0
     replayed = runner.invoke(app, ["replay", str(out), "example:gearbox-meshes", "--json"])
     assert replayed.exit_code == 0, replayed.output
     steps = json.loads(replayed.stdout)
@@ -125,6 +131,68 @@ def test_the_plan_carries_each_parts_shape_and_the_physical_bin_heaps_them(tmp_p
     result = run_study(StudyConfig(plan, strategies=("paper",), trials=1, bin="physics", seed=2), workers=1)
     trial, = result.trials["paper"]
     assert trial.complete and trial.motions >= len(plan.parts)        # every part picked from the heap
+
+
+def held_count(parts, blockers, needs) -> int:
+    """Feasible sequences with supports, forward over the reachable built sets: a part goes in after a set
+    when each of its supports has a part in the set and some direction's blockers are all outside it."""
+    index = {p: i for i, p in enumerate(parts)}
+    masks = [[sum(1 << index[q] for q in qs) for qs in blockers[p].values()] for p in parts]
+    held = [[sum(1 << index[q] for q in n) for _, n in needs.get(p, ())] for p in parts]
+    layer = {0: 1}
+    for _ in parts:
+        grown: dict[int, int] = {}
+        for built, ways in layer.items():
+            for i in range(len(parts)):
+                if not built >> i & 1 and all(h & built for h in held[i]) and any(m & built == 0 for m in masks[i]):
+                    grown[built | 1 << i] = grown.get(built | 1 << i, 0) + ways
+        layer = grown
+    return sum(layer.values())
+
+
+def test_the_gearbox_derives_under_gravity_and_its_sequences_replay(tmp_path):
+    """Under --gravity -z (and with the housing as the base) every part rests on one placed before it: the
+    plan's count is the brute force's with the supports, every sampled sequence is feasible (each part
+    held and with a free direction when it goes in), and replays part by part to the end."""
+    out = tmp_path / "gearbox.yaml"
+    for extra in ([], ["--base", "housing"]):
+        result = runner.invoke(app, ["derive", "geometry:gearbox", "--gravity", "-z", *extra, "-o", str(out)])
+        assert result.exit_code == 0, result.output
+    d = held()
+    b, needs = d.blocking, d.conditions.needs
+    assert set(needs) == set(b.parts) - {"housing"}          # all but the housing rest on a part
+    assert Schedule(d.plan).count() == held_count(b.parts, b.blockers, needs) > 0
+    assert Schedule(held(base="housing").plan).count() == Schedule(d.plan).count()   # the housing is first anyway
+    for k in range(40):
+        seq = Schedule(d.plan).sample(seed=k)
+        for n, p in enumerate(seq):
+            built = set(seq[:n])
+            assert all(s & built for _, s in needs.get(p, ())), (seq, p)
+            assert any(not (q & built) for q in b.blockers[p].values()), (seq, p)
+        if k < 4:                        # the camera shows the parts one at a time, in this order
+            looks = tmp_path / f"seq{k}.looks"
+            looks.write_text("\n".join(seq) + "\n", encoding="utf-8")
+            replayed = runner.invoke(app, ["replay", str(out), str(looks), "--json"])
+            steps = json.loads(replayed.stdout)
+            assert steps[-1]["action"]["kind"] == "done" and steps[-1]["installed"] == list(seq), replayed.stdout
+
+
+def test_explain_under_gravity_keeps_the_supports():
+    """Insertion directions and recounts under the supports: a direction is one iff the brute force with the
+    part held to it finds a sequence; each part out of everyone's way is recounted with the supports kept."""
+    d = held()
+    e = explain(d, time_limit=20)
+    b, needs = d.blocking, d.conditions.needs
+    assert e.count["value"] == held_count(b.parts, b.blockers, needs)
+    for p in b.parts:
+        for k in b.directions:
+            one = {**b.blockers, p: {k: b.blockers[p][k]}}
+            assert (k in e.usable[p]) == (held_count(b.parts, one, needs) > 0), (p, k)
+    assert e.usable["gear_a"] == ["-x"] and e.usable["bearing_a1"] == ["+x"]     # slid onto its shaft; from outside
+    assert "gear_a after shaft_a: resting on shaft_a" in e.text()      # a support, said as gravity's
+    for f in e.frees:
+        out = {p: {k: s - {f["name"]} for k, s in dirs.items()} for p, dirs in b.blockers.items()}
+        assert f["count"]["exact"] and f["count"]["value"] == held_count(b.parts, out, needs), f
 
 
 def test_explain_states_only_what_the_blocking_relation_says():

@@ -4,8 +4,11 @@ Three products, each written as a folder of OBJ files (one a part, metres) in it
 
 * :func:`gearbox` — in the spirit of Fox & Kempf's gearbox: a housing (base plate and four walls, two
   bearing bores in each end wall), four flanged bearings in the bores, two shafts through them, a
-  pair of meshing gears on the shafts inside, a cover on the walls and four screws through the cover
-  into the end walls.
+  pair of meshing gears on the shafts' ends outside the +x end wall (an external gear train, each gear
+  slid onto its shaft and seated against its bearing's flange), a cover on the walls and four screws
+  through the cover into the end walls.  Under ``--gravity -z`` every part rests on one placed before
+  it: the housing on the fixture, the bearings in their bores, the shafts in their bearings, the
+  gears on their shafts, the cover on the walls, the screws in their holes.
 * :func:`pump` — the centrifugal pump of ``example:pump``: a housing with a bore in its floor, a
   bearing and a seal in the bore, a shaft through them, a key beside the shaft, an impeller keyed on
   it, a cover and four bolts.
@@ -107,7 +110,8 @@ def cut(lo: tuple[float, float, float], hi: tuple[float, float, float],
 @dataclass(frozen=True)
 class Gearbox:
     """The gearbox's dimensions, metres: the housing's outside, its wall, the two shafts' height and
-    places across, the gears' and bearings' apothems (octagons), and the screws."""
+    places across, the gears' and bearings' apothems (octagons), how far the shafts reach past the
+    gears, and the screws."""
 
     length: float = 0.08        # x: the shafts' direction
     width: float = 0.08         # y
@@ -122,6 +126,7 @@ class Gearbox:
     flange_width: float = 0.002
     gears: tuple[float, float] = (0.012, 0.018)   # apothems: they touch, flat on flat, between the shafts
     gear_width: float = 0.01
+    overhang: float = 0.003     # the shafts' ends past the gears' outer faces
     screw: float = 0.003        # the shank's side
     head: float = 0.007         # the head's side
     head_height: float = 0.003
@@ -163,14 +168,15 @@ def gearbox(g: Gearbox = Gearbox()) -> dict[str, list[Body]]:
         holes = [((x0, y - s, H - g.thread), (x0 + t, y + s, H)) for x, y in screws if x < x0 + t and x > x0]
         housing += cut((x0, 0, t), (x0 + t, W, H), bores + holes)
     parts = {"housing": housing}
+    # the gears outside the +x end wall, seated against the flanges of bearings a2 and b2
+    x_gear = L + g.flange_width
     for n, y in zip("ab", g.shaft_y):
-        parts[f"shaft_{n}"] = [rod((y, g.shaft_z), g.shaft, 0, -t, L + t)]
+        parts[f"shaft_{n}"] = [rod((y, g.shaft_z), g.shaft, 0, -t, x_gear + g.gear_width + g.overhang)]
         for k, x0 in enumerate((0.0, L - t), 1):
             # a bearing in its bore, with a flange on the wall's outside: it goes in from outside only
             out = (x0 - g.flange_width, x0) if k == 1 else (x0 + t, x0 + t + g.flange_width)
             parts[f"bearing_{n}{k}"] = (ring((y, g.shaft_z), g.shaft, g.bearing, 0, x0, x0 + t)
                                         + ring((y, g.shaft_z), g.shaft, g.flange, 0, *out))
-    x_gear = (L - g.gear_width) / 2
     for n, y, apothem in zip("ab", g.shaft_y, g.gears):
         parts[f"gear_{n}"] = ring((y, g.shaft_z), g.shaft, apothem, 0, x_gear, x_gear + g.gear_width)
     parts["cover"] = cut((0, 0, H), (L, W, H + g.cover),
@@ -365,11 +371,12 @@ def looks(plan, seed: int = 0, visible: int = 2) -> list[list[str]]:
         seq.report("success")
 
 
-def looks_text(name: str, plan, seed: int = 0) -> str:
-    """A looks file for a shipped assembly's derived plan (see :func:`looks`), one look a line."""
+def looks_text(name: str, plan, seed: int = 0, options: str = "") -> str:
+    """A looks file for a shipped assembly's derived plan (see :func:`looks`), one look a line; ``options``
+    are those the plan was derived with, as the file's header states them."""
     rows = looks(plan, seed)
-    return (f"# Looks at a bin of the {name} derived from its meshes (opportune derive geometry:{name}): the parts in\n"
-            f"# a random order (seed {seed}), the camera seeing two; `opportune replay` replays them.\n"
+    return (f"# Looks at a bin of the {name} derived from its meshes (opportune derive geometry:{name}{options}): the\n"
+            f"# parts in a random order (seed {seed}), the camera seeing two; `opportune replay` replays them.\n"
             + "\n".join(" ".join(r) or "-" for r in rows) + "\n")
 
 
@@ -378,5 +385,7 @@ if __name__ == "__main__":   # python -m opportune.derive.examples FOLDER: the s
         write(shipped, Path(sys.argv[1]) / shipped)
     from opportune.derive import derive
 
+    # the looks of the realistic setting: each part rests on what is below it
     (Path(sys.argv[1]).parent / "gearbox-meshes.looks").write_text(
-        looks_text("gearbox", derive(Path(sys.argv[1]) / "gearbox").plan), encoding="utf-8")
+        looks_text("gearbox", derive(Path(sys.argv[1]) / "gearbox", gravity="-z").plan, options=" --gravity -z"),
+        encoding="utf-8")

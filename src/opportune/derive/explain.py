@@ -6,13 +6,15 @@
   goes in along which direction, which later part would be in its way there, and what blocks the
   part's other directions;
 * each part's **insertion directions**: the directions along which it goes in in at least one feasible
-  sequence (a direction ``d`` of ``p`` is one iff the blocking relation with ``p`` held to ``d`` still
-  lets every part out, last first: :func:`~opportune.derive.plan.locked`); the parts with one;
+  sequence (a direction ``d`` of ``p`` is one iff in some strategy none of ``p``'s blockers along ``d``
+  comes before it: a sequence of that strategy with ``p`` right after its predecessors has it; the
+  supports, the base and the process constraints are in the strategies); the parts with one;
 * for design for assembly: the number of feasible sequences (the engine's count of the plan, exact or
   a marked estimate), their share of all orders, the orders forced in every strategy, and which single
   change frees the most: a **part out of everyone's way** (the blocking relation with that part in no
   blocker set, its own constraints kept) or a **direction added** (the blocking along one more
-  direction, found in the geometry), each measured by deriving the plan again and counting it.
+  direction, found in the geometry), each measured by deriving the plan again (with the same supports
+  and base) and counting it.
 
 Every text is plain (part ids with control characters escaped, as :func:`printable` writes them).
 """
@@ -201,23 +203,25 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     --------
     >>> from opportune.derive import derive
     >>> from opportune.datasets import geometry_path
-    >>> e = explain(derive(geometry_path("gearbox")))
-    >>> e.count["value"], e.usable["shaft_a"]
-    (159160320, ['+x', '-x'])
+    >>> e = explain(derive(geometry_path("gearbox"), gravity="-z"))
+    >>> e.count["value"], e.usable["shaft_a"], e.usable["gear_a"]
+    (54054000, ['+x', '-x'], ['-x'])
     """
     end = time.perf_counter() + time_limit
     block, strategies = derivation.blocking, derivation.strategies
-    orders = [_order(block, s) for s in strategies]
+    orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
     closures = [_closure(s.pairs) for s in strategies]
     forced = sorted(set.intersection(*closures)) if closures else []
     base = _count(derivation.plan, max(0.001, time_limit / 4), seed)
     unfinished = []
     usable: dict[str, list[str]] = {}
+    earlier = [_earlier(s.pairs) for s in strategies]
     for p in block.parts:
         if time.perf_counter() > end:
             unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
             break
-        usable[p] = [d for d in block.directions if _usable(block, p, d)]
+        usable[p] = _insertion_directions(block, p, earlier)
+    held = _held(derivation)
     frees: list[dict] = []
     later = len(_new_directions(block, directions)) if assembly is not None else 0   # their share kept for them
     # the added directions' blocking is geometry, not interruptible: found only if it fits the time left, as
@@ -234,19 +238,22 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
                 unfinished.append(f"{len(trials) - k} changes to try")
                 break
             pending = len(trials) - k + (later if kind == "part" else 0)
-            count = _recount(changed, derivation.plan.name, left / pending, seed)
+            count = _recount(changed, derivation.plan.name, left / pending, seed, held)
             frees.append({"kind": kind, "name": name, **count})
     frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
     return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
 
 
-def _order(block: Blocking, strategy) -> dict:
+def _order(block: Blocking, strategy, conditions=None) -> dict:
     """One strategy's constraints, each with its reason: the earlier part's direction, the later part in its way
     there, and the earlier part's other directions with their blockers."""
     pairs = []
     for before, after in strategy.pairs:
         if before in way_supports(strategy.directions[after]):      # after rests on (or touches) before
-            pairs.append({"before": before, "after": after, "direction": None, "support": True,
+            kinds = {k for k, n in (conditions.needs.get(after, ()) if conditions is not None else ()) if before in n}
+            verb = {frozenset({"gravity"}): "resting on", frozenset({"connected"}): "touching"}.get(
+                frozenset(kinds), "resting on or touching")
+            pairs.append({"before": before, "after": after, "direction": None, "support": verb,
                           "other_directions": {}})
             continue
         d = way_direction(block, before, strategy.directions[before])
@@ -254,6 +261,32 @@ def _order(block: Blocking, strategy) -> dict:
         pairs.append({"before": before, "after": after, "direction": d, "other_directions": others})
     return {"directions": {p: way_direction(block, p, w) for p, w in strategy.directions.items()},
             "constraints": pairs}
+
+
+def _insertion_directions(block: Blocking, part: str, earlier: list[dict[str, set[str]]]) -> list[str]:
+    """The directions along which ``part`` goes in in some feasible sequence.  With the plan's strategies
+    (``earlier``: each one's parts before each part): those whose blockers are all outside the part's
+    predecessors in some strategy, as a sequence of that strategy placing the part right after them has it
+    (exact with supports, a base and process constraints too, the plan admitting exactly the feasible
+    sequences); without: :func:`_usable`'s peeling of the blocking relation."""
+    if not earlier:
+        return [d for d in block.directions if _usable(block, part, d)]
+    return [d for d in block.directions if any(not (block.blockers[part][d] & e.get(part, set())) for e in earlier)]
+
+
+def _earlier(pairs) -> dict[str, set[str]]:
+    """The parts before each part in an order (its pairs' closure)."""
+    out: dict[str, set[str]] = {}
+    for a, b in _closure(pairs):
+        out.setdefault(b, set()).add(a)
+    return out
+
+
+def _held(derivation) -> tuple:
+    """The supports and the base a recount keeps: the derivation's conditions and the base's orders."""
+    conditions = getattr(derivation, "conditions", None)
+    base = conditions.base if conditions is not None else None
+    return conditions, tuple((base, p) for p in derivation.blocking.parts if base is not None and p != base)
 
 
 def _usable(block: Blocking, part: str, direction: str) -> bool:
@@ -350,12 +383,13 @@ def _direction_trials(block: Blocking, assembly, directions: dict | None) -> lis
     return out
 
 
-def _recount(block: Blocking, name: str, seconds: float, seed: int) -> dict:
-    """Derive the plan of a changed blocking relation again and count it (or say why not)."""
+def _recount(block: Blocking, name: str, seconds: float, seed: int, held: tuple = (None, ())) -> dict:
+    """Derive the plan of a changed blocking relation again, with the supports and base ``held``, and count
+    it (or say why not)."""
     from opportune.derive import plan_of
 
     try:
-        plan = plan_of(block, exact_strategies(block), name, "changed")
+        plan = plan_of(block, exact_strategies(block, *held), name, "changed")
     except DeriveError as exc:
         return {"count": None, "why": str(exc)}
     return {"count": _count(plan, seconds, seed)}
@@ -406,7 +440,9 @@ def reasons(e: Explanation) -> list[dict]:
     Returns
     -------
     list of dict
-        ``{"part", "direction", "before", "other_directions", "strategies"}`` each (strategies from 1).
+        ``{"part", "direction", "before", "other_directions", "strategies"}`` each (strategies from 1); a
+        support (the later parts rest on or touch the part; ``direction`` None) has ``"support"``: ``resting
+        on``, ``touching`` or ``resting on or touching``.
 
     Examples
     --------
@@ -415,11 +451,12 @@ def reasons(e: Explanation) -> list[dict]:
     >>> next(x["before"] for x in r if x["part"] == "cover" and x["direction"] == "+x")
     ['screw_1', 'screw_2', 'screw_3', 'screw_4']
     """
-    grouped: dict[tuple[str, str], dict] = {}
+    grouped: dict[tuple, dict] = {}
     for k, order in enumerate(e.orders, 1):
         for c in order["constraints"]:
-            r = grouped.setdefault((c["before"], c["direction"]), {
-                "part": c["before"], "direction": c["direction"], "before": [],
+            support = {"support": c["support"]} if c.get("support") else {}
+            r = grouped.setdefault((c["before"], c["direction"], c.get("support")), {
+                "part": c["before"], "direction": c["direction"], **support, "before": [],
                 "other_directions": c["other_directions"], "strategies": []})
             if c["after"] not in r["before"]:
                 r["before"].append(c["after"])
@@ -436,7 +473,8 @@ def _report(e: Explanation) -> list[str]:
         where = "" if len(r["strategies"]) == n else " (strateg" + ("y s" if len(r["strategies"]) == 1 else "ies s") \
             + ", s".join(map(str, r["strategies"])) + ")"
         if r["direction"] is None:      # a support: the later parts rest on (or touch) the earlier one
-            lines.append(f"  {_names(r['before'])} after {r['part']}{where}: resting on or touching {r['part']}")
+            lines.append(f"  {_names(r['before'])} after {r['part']}{where}: "
+                         f"{r.get('support', 'resting on or touching')} {r['part']}")
             continue
         lines.append(f"  {_names(r['before'])} after {r['part']}{where}: along {r['direction']} "
                      f"{_names(r['before'])} would be in {r['part']}'s way; "

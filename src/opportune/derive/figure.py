@@ -4,7 +4,8 @@ One strategy of the plan (the first by default) gives each part its insertion di
 order.  A part's **stage** is its earliest position in a sequence the strategy admits (one more than
 the parts that must go in before it); its **level** is the length of the longest chain of
 constraints that ends at it.  The part is drawn moved back along ``-d`` (where it comes from) by
-``(level + 1) × gap``, but for the largest part (the base, most often), which stays: the parts that
+``(level + 1) × gap`` plus its own length along ``d`` (a long shaft clears the short parts on its
+line), but for the largest part (the base, most often), which stays: the parts that
 close the product fly furthest.  A part is drawn coming from above (``-z``) wherever the strategy's
 order allows that (:func:`shown_directions`).  A dashed line joins each moved part to its place; colours (a colour bar) give the stage.
 All the faces are depth-sorted together (one collection), drawn with matplotlib's 3-D axes, in
@@ -163,14 +164,24 @@ def exploded(derivation, path: str | Path, *, strategy: int = 1, gap: float | No
     step = GAP_SHARE * assembly.size if gap is None else float(gap)
     unit = {d: np.asarray(v, float) / np.linalg.norm(v) for d, v in derivation.blocking.directions.items()}
     directions = shown_directions(derivation.blocking, chosen)
-    # the largest part stays (the product's base, most often), every other moves one step more than its level
+    # the largest part stays (the product's base, most often), every other moves one step more than its level,
+    # and its own length along the way it moves (a long shaft drawn clear of the short parts on its line)
     anchor = max(assembly.parts, key=lambda p: float(np.prod(np.ptp(p.bounds, axis=0))) if len(p.bodies) else 0.0).id
-    moves = {p.id: np.zeros(3) if p.id == anchor else -unit[directions[p.id]] * step * (level[p.id] + 1)
+    moves = {p.id: np.zeros(3) if p.id == anchor else
+             -unit[directions[p.id]] * (step * (level[p.id] + 1) + _length(p, unit[directions[p.id]]))
              for p in assembly.parts}
     fig = _draw(assembly, moves, stage, title or f"{derivation.plan.name}: each part moved out along its insertion "
                                                   f"direction (strategy s{strategy})")
     fig.savefig(path, dpi=200, bbox_inches="tight")
     return path
+
+
+def _length(part, unit: np.ndarray) -> float:
+    """The part's extent along a unit vector (its bodies' corners projected)."""
+    if not len(part.bodies):
+        return 0.0
+    along = np.concatenate([b.vertices @ unit for b in part.bodies])
+    return float(along.max() - along.min())
 
 
 def shown_directions(block, strategy) -> dict[str, str]:

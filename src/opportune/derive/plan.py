@@ -332,7 +332,7 @@ def exact_strategies(block: Blocking, conditions: Conditions | None = None,
         if working is None:
             raise DeriveError(_wall_message(ways, order[:step + 1], len(ids)))
         if not working:
-            raise DeriveError(_contradiction_message(before) if before else _no_sequence_message(ways))
+            raise DeriveError(_contradiction_message(before, ways, conditions) if before else _no_sequence_message(ways, conditions))
     if len(working) > MAX_STRATEGIES:
         raise DeriveError(f"the exact plan needs {len(working)} strategies (none of whose sequences contain "
                           f"another's); a plan holds at most {MAX_STRATEGIES}: give fewer directions, or derive "
@@ -400,20 +400,34 @@ def _wall_message(ways: dict[str, list[_Alternative]], done: list[str], n: int) 
             "directions, a base part, or derive subassemblies; no approximation is written")
 
 
-def _contradiction_message(before: Sequence[tuple[str, str]]) -> str:
-    """No sequence keeps the orders added to every strategy (process constraints, base, identical parts)."""
+def _contradiction_message(before: Sequence[tuple[str, str]], ways: dict[str, list[_Alternative]] | None = None,
+                           conditions: Conditions | None = None) -> str:
+    """No sequence keeps the orders added to every strategy (process constraints, base, identical parts): the
+    parts named, with the orders that contradict (:func:`~opportune.derive.refusals.why_none`)."""
+    from opportune.derive.refusals import why_none
+
+    why = why_none(ways or {}, conditions, before)
     return (f"no feasible sequence keeps the process constraints ({len(before)} order"
-            f"{'' if len(before) == 1 else 's'}, the base and identical parts' included): every choice of insertion "
-            "directions contradicts them; drop or change a constraint")
+            f"{'' if len(before) == 1 else 's'}, the base and identical parts' included)"
+            + (f": {why}" if why else ": every choice of insertion directions contradicts them")
+            + "; drop or change a constraint, or change the parts named")
 
 
-def _no_sequence_message(ways: dict[str, list[_Alternative]]) -> str:
-    """No sequence meets the supports: the parts that can only go in first (nothing can hold them) named."""
-    alone = [p for p, w in ways.items() if [x.name for x in w] == ["first"]]
-    why = (f": parts {', '.join(alone[:12])} rest on nothing and touch nothing that could be in before them, so "
-           "each of them could only go in first" if len(alone) > 1 else "")
-    return ("no feasible sequence meets the supports asked (--gravity, --connected, --base)" + why
-            + "; give a base part, or derive without the option")
+def _no_sequence_message(ways: dict[str, list[_Alternative]], conditions: Conditions | None = None) -> str:
+    """No sequence meets the supports: the parts named with why (the orders that contradict, or a part
+    nothing can hold), else the parts that can only go in first."""
+    from opportune.derive.refusals import why_none
+
+    why = why_none(ways, conditions)
+    if why is None:
+        alone = [p for p, w in ways.items() if [x.name for x in w] == ["first"]]
+        why = (f"parts {', '.join(alone[:12])} rest on nothing and touch nothing that could be in before them, so "
+               "each of them could only go in first" if len(alone) > 1 else "")
+    asked = sorted({f"--{kind}" for needs in conditions.needs.values() for kind, _ in needs}) if conditions else []
+    asked += ["--base"] if conditions is not None and conditions.base else []
+    return (f"no feasible sequence meets the supports asked ({', '.join(asked) or '--gravity, --connected, --base'})"
+            + (f": {why}" if why else "")
+            + "; give a part to rest on or a base part, change the parts named, or derive without the option")
 
 
 def reduction(ids: tuple[str, ...], reach: tuple[int, ...]) -> tuple[tuple[str, str], ...]:

@@ -46,7 +46,7 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
     >>> from opportune.derive import derive
     >>> shown = show(derive("geometry:gearbox"), explain=True)
     >>> shown.text.splitlines()[0]
-    'gearbox: 14 parts, 7 strategies'
+    'gearbox: 14 parts, 10 strategies'
     """
     out = Shown(notes=list(derivation.notes))
     if figure is not None:
