@@ -71,6 +71,13 @@ class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
     (:func:`~opportune.engine.count.entries_within`), what ``opportune count`` uses.
     """
 
+    def __new__(cls, plan: Plan, **options):
+        if cls is OrderEngine and getattr(plan, "ways", None) is not None:   # a plan written as ways
+            from opportune.engine.waysengine import WaysEngine
+
+            return WaysEngine(plan, **options)
+        return super().__new__(cls)
+
     def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
                  deadline: Deadline | float | None = None, memory_limit: int | None = DEFAULT_MEMORY):
         """``deadline``: building the strategies' orders (a closure per strategy: O(units × covers)
@@ -234,6 +241,8 @@ class Schedule:
         u = self.engine.next_unit(self.mask, i)
         if u is None:
             return []
+        if self.plan.ways is not None:
+            return self.engine.missing_before(self.mask, part)
         best = None
         for s in range(self.engine.k):
             if self.consistent >> s & 1:
@@ -364,6 +373,9 @@ class Schedule:
         3
         """
 
+        if self.plan.ways is not None:      # a plan written as ways: its own exact count and estimate
+            return self.engine.count_result(self.mask, rel_error=rel_error, time_limit=time_limit, seed=seed,
+                                            exact_share=exact_share, deadline=deadline, estimate=estimate)
         if not estimate:
             if deadline is None:
                 return CountResult(self.engine.count(self.mask, self.consistent))
