@@ -185,3 +185,42 @@ def test_a_ways_plans_text_is_escaped_where_a_terminal_shows_it():
     result = check_text("name: \"a\\e]0;x\"\nparts: [a]\nways: {a: [{}]}\n", file="w.yaml")
     assert not result.ok and any(p.code == "text" for p in result.errors)
     assert "\x1b" not in printable("a\x1b]0;x")
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(2, 8), st.integers(0, 10**9))
+def test_the_sequencer_installs_only_admitted_sequences_of_a_ways_plan_and_finishes(n, seed):
+    from opportune.sequencer import Sequencer
+
+    rng = random.Random(seed)
+    plan = random_ways_plan(rng, n)
+    if not WaysCounter(WaysTable.of(plan)).count(0):
+        return
+    seq = Sequencer(plan, buffer_capacity=None, budget=None)
+    for _ in range(20 * n):
+        if seq.state.is_complete:
+            break
+        left = [p for p, k in seq.state.schedule.remaining.items() if p not in seq.state.buffer]
+        seq.step(rng.sample(left, min(len(left), 2)) if left else [])
+    assert seq.state.is_complete
+    assert admitted(plan, seq.state.installed)
+
+
+def test_check_count_and_replay_take_a_ways_file(tmp_path):
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    runner = CliRunner()
+    path = tmp_path / "peg.yaml"
+    path.write_text(WAYS_YAML)
+    checked = runner.invoke(app, ["check", str(path)])
+    assert checked.exit_code == 0 and "written as ways: 3 ways for 2 listed parts" in checked.output
+    counted = runner.invoke(app, ["count", "--json", "--after", "base", str(path)])
+    assert counted.exit_code == 0 and '"sequences": "2"' in counted.output
+    refused = runner.invoke(app, ["count", "--after", "cap", str(path)])
+    assert refused.exit_code == 1 and "requires base first" in refused.output
+    looks = tmp_path / "looks.txt"
+    looks.write_text("peg cap\nbase\ncap\n-\n")
+    replayed = runner.invoke(app, ["replay", str(path), str(looks)])
+    assert replayed.exit_code == 0 and "complete: base,cap,peg" in replayed.output

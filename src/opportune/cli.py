@@ -259,7 +259,7 @@ def check(plan_files: list[Path] = typer.Argument(..., help="Plan files (any for
 
 def _print_check(plan_file: Path, result) -> None:
     """``check``'s report of one file: its problems, or its summary (and warnings)."""
-    from opportune.formats.summary import summarize
+    from opportune.formats.summary import summarize, ways_line
 
     if not result.ok:
         _print_problems(result, _out())
@@ -270,7 +270,10 @@ def _print_check(plan_file: Path, result) -> None:
     s = summarize(result.plan)
     _out().print(f"[bold]{_escape(s['plan'])}[/] ({_escape(str(plan_file))}): [green]valid[/]")
     units = f" ({s['units']} units)" if s["units"] != s["parts"] else ""
-    _out().print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
+    if "ways" in s:      # a plan written as ways (opportune.formats.ways)
+        _out().print(f"  parts: {s['parts']}; written as ways: {_escape(ways_line(s['ways']))}")
+    else:
+        _out().print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
     for st in s["strategies"]:
         _out().print(f"  strategy '{_escape(st['name'])}': {st['declared']} constraints declared, "
                      f"{len(st['minimal'])} minimal, {st['implied']} implied in all (transitive closure)")

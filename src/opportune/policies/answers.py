@@ -417,7 +417,7 @@ class Answers:
         """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
         or None: only with one consistent strategy (a union's counts do not follow one order)."""
         consistent, engine = self.consistent, self.engine
-        if consistent & (consistent - 1):
+        if consistent & (consistent - 1) or not engine.posets:     # (a plan written as ways has no order)
             return None
         unit_of = {engine.next_unit(self.mask, self.index(p)): p for p in parts}
         best = rule(engine.posets[consistent.bit_length() - 1], engine.full & ~self.mask, list(unit_of))
