@@ -125,7 +125,7 @@ def _way(pid: str, i: int, entry: dict, known: set[str], doc: Document, problems
     if bad:
         return None
     return Way(frozenset(blockers), tuple(frozenset([q]) for q in after) + tuple(frozenset(n) for n in needs),
-               name=entry.get("name"))
+               name=entry.get("name"), first=bool(entry.get("first", False)))
 
 
 def _unknown(pid: str, role: str, known: set[str], file, line) -> Problem:

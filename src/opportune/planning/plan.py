@@ -208,6 +208,9 @@ class Way:
         Sets of parts, each of which must already have at least one part installed.
     name : str, optional
         What the way is, for people (a direction such as ``"-z"``).
+    first : bool, default False
+        The way admits the part only as the first part of all (every other part a blocker; written
+        ``first: true``, not as a list of every other part).
 
     Examples
     --------
@@ -219,6 +222,7 @@ class Way:
     blockers: frozenset = frozenset()
     needs: tuple = ()
     name: str | None = None
+    first: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "blockers", frozenset(self.blockers))
@@ -242,6 +246,8 @@ class Way:
         >>> Way(frozenset(), (frozenset({"a"}),)).admits({"a"})
         True
         """
+        if self.first and installed:
+            return False
         return not (self.blockers & installed) and all(n & installed for n in self.needs)
 
     def to_dict(self) -> dict:
@@ -258,6 +264,8 @@ class Way:
         {'blockers': ['c'], 'after': ['a'], 'needs': [['b', 'd']]}
         """
         doc: dict = {"name": self.name} if self.name else {}
+        if self.first:
+            doc["first"] = True
         if self.blockers:
             doc["blockers"] = sorted(self.blockers)
         after = sorted(next(iter(n)) for n in self.needs if len(n) == 1)

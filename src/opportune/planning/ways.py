@@ -88,9 +88,10 @@ class WaysTable:
 
         given = plan.ways or {}
         table = []
-        for p in plan.parts:
-            table.append([(mask(w.blockers), tuple(mask(n) for n in w.needs)) for w in given.get(p.id, ())]
-                         or [(0, ())])
+        full = (1 << len(plan.parts)) - 1
+        for i, p in enumerate(plan.parts):
+            table.append([(full & ~(1 << i) if w.first else mask(w.blockers), tuple(mask(n) for n in w.needs))
+                          for w in given.get(p.id, ())] or [(0, ())])
         return cls(len(plan.parts), table)
 
     def can_go(self, mask: int, i: int) -> bool:
