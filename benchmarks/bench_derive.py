@@ -132,17 +132,25 @@ def row(family: str, n: int, seed: int, markdown: bool = False) -> str:
         except DeriveError as exc:
             total = time.process_time() - start
             if markdown:      # the message's first clause: where the union outgrew the limit
-                return f"{head} | | | {total:.2f} | | refused: {str(exc).split(' (')[0]} |"
+                return f"{head} | | | {total:.2f} | | refused: {str(exc).split(' (')[0]} | |"
             return f"{head} {'':>4} {'':>9} {'':>8} {total:>8.2f}  refused: {exc}"
         total = time.process_time() - start
         d = derived.to_dict()
-        counted = Schedule(derived.plan).count_result(time_limit=10.0)
-        count = f"10^{counted.log10:.2f}" + ("" if counted.exact else " (estimated)")
+        start = time.process_time()
+        counted = Schedule(derived.plan).count_result(time_limit=10.0, seed=seed)
+        counting = time.process_time() - start
+        count = f"10^{counted.log10:.2f}" + ("" if counted.exact else f" (estimated, ±{_percent(counted.rel_error)} "
+                                                                      f"at 95%, {counted.method})")
+        strategies = "ways" if derived.plan.is_ways else d["strategies"]
         if markdown:
             return (f"{head} {len(d['directions'])} | {d['blocking_checks']:,} | {d['contacts']:,} | {total:.2f} | "
-                    f"{d['strategies']} | {count} |")
+                    f"{strategies} | {count} | {counting:.2f} |")
         return (f"{head} {len(d['directions']):>4} {d['blocking_checks']:>9,} {d['contacts']:>8,} {total:>8.2f} "
-                f"{d['strategies']:>5}  {count}")
+                f"{strategies:>5}  {count}  ({counting:.2f} s CPU)")
+
+
+def _percent(rel: float) -> str:
+    return f"{100 * rel:.1f}%" if rel < 10 else "unbounded"
 
 
 def main() -> None:
@@ -153,8 +161,8 @@ def main() -> None:
     parser.add_argument("--markdown", action="store_true", help="print a Markdown table (docs/derive.md)")
     args = parser.parse_args()
     if args.markdown:
-        print("| family | parts | cells | directions | blocking checks | contacts | CPU s | strategies | count |\n"
-              "|---|---:|---|---:|---:|---:|---:|---:|---|")
+        print("| family | parts | cells | directions | blocking checks | contacts | CPU s | strategies | count | "
+              "count CPU s |\n|---|---:|---|---:|---:|---:|---:|---:|---|---:|")
     else:
         print(f"{'family':>6} {'parts':>5} {'block':>8} {'dirs':>4} {'checks':>9} {'contacts':>8} {'cpu_s':>8} "
               f"{'strat':>5}  count")

@@ -31,7 +31,7 @@ def random_ways_plan(rng: random.Random, n: int, max_ways: int = 3, needs: bool 
             need = ()
             if needs and rng.random() < 0.4:
                 need = (frozenset(rng.sample(others, rng.randint(1, min(3, len(others))))),) if others else ()
-            listed.append(Way(blockers, need))
+            listed.append(Way(blockers, need, first=rng.random() < 0.1))
         if rng.random() < 0.85:
             ways[p] = listed
     return ways_plan("random", [Part(p) for p in ids], ways)
@@ -171,6 +171,16 @@ def test_bad_ways_are_refused_with_a_problem_each(text, code):
     result = check_text(text, file="w.yaml")
     assert not result.ok
     assert code in {p.code for p in result.errors}, [str(p) for p in result.errors]
+
+
+def test_more_part_ids_in_the_ways_than_the_limit_are_refused(monkeypatch):
+    from opportune.formats import ways as ways_format
+
+    monkeypatch.setattr(ways_format, "MAX_CONSTRAINTS", 3)
+    result = check_text("parts: [a, b, c]\nways: {a: [{blockers: [b, c]}], b: [{after: [c]}, {needs: [[a, c]]}]}\n",
+                        file="w.yaml")
+    assert not result.ok and [p.code for p in result.errors] == ["limit"]
+    assert "5 parts in all; at most 3" in result.errors[0].message
 
 
 def test_more_ways_than_the_limit_are_refused_before_anything_is_built():
