@@ -109,10 +109,10 @@ def test_the_estimate_is_seeded_and_its_interval_holds_the_count_mostly():
         exact = WaysCounter(WaysTable.of(plan)).count(0)
         table = WaysTable.of(plan)
         for seed in range(4):
-            r = estimate_completions(table, seed=seed, rel_error=0.05, max_walks=200)
-            again = estimate_completions(table, seed=seed, rel_error=0.05, max_walks=200)
+            r = estimate_completions(table, seed=seed, rel_error=0.05, max_runs=40, particles=8)
+            again = estimate_completions(table, seed=seed, rel_error=0.05, max_runs=40, particles=8)
             assert (r.value, r.rel_error) == (again.value, again.rel_error)
-            assert not r.exact and r.method == "ways-sis" and r.confidence == 0.95
+            assert not r.exact and r.method == "ways-smc" and r.confidence == 0.95
             tried += 1
             held += abs(r.value - exact) <= r.rel_error * r.value + 1e-9
     assert held >= 0.8 * tried, (held, tried)
@@ -129,8 +129,8 @@ def test_an_exact_count_over_its_budget_raises_and_count_result_estimates_instea
     assert info.value.reason == "time"
     engine = OrderEngine(plan, max_memo=100)
     r = Schedule(engine).count_result(time_limit=0.5, seed=1)
-    assert not r.exact and r.method == "ways-sis"
-    assert abs(r.log10 - 10.940408) < 1e-6       # every walk weighs 14!: no spread
+    assert not r.exact and r.method == "ways-smc"
+    assert abs(r.log10 - 10.940408) < 1e-6       # every run says 14!: no spread
     assert Schedule(OrderEngine(ways_plan("few", [Part("a"), Part("b")], {}))).count_result().value == 2
 
 

@@ -14,17 +14,17 @@ as a whole, one :class:`~opportune.engine.deadline.Deadline`, :class:`BudgetExce
 not fit (what was counted stays).  A set some remaining part of which has every way blocked is dead at
 once (:meth:`~opportune.planning.ways.WaysTable.shut_out`), without a search.
 
-Where the exact count does not fit, :func:`estimate_completions` estimates it by sequential importance
-sampling (Knuth's estimator): independent random walks from ``S``, each step choosing uniformly among
-the parts that can go in without shutting a part out, a walk's weight the product of its numbers of
-choices (0 if it ends dead; a set whose count the memo holds ends the walk with that count).  The mean
-weight is an unbiased estimate of ``f(S)``; the stated error is the 95% Student-t interval of the mean
-over the walks (in logarithms, the weights of a 300-part plan being far past a float), which like any
-interval from a sample holds only approximately when the weights are heavy-tailed.  Every walk is drawn
-from one seeded generator: the same seed, the same estimate.
+Where the exact count does not fit, :func:`estimate_completions` estimates it by sequential Monte Carlo:
+runs of walks from ``S`` that go forward together a part at a time, each step choosing uniformly among
+the parts that can go in without shutting a part out, the walks drawn again in proportion to their
+numbers of choices (so a walk at a dead end is replaced by a live one).  Each run's product of the mean
+numbers of choices is an unbiased estimate of ``f(S)``; the stated error is the 95% Student-t interval of
+the mean over independent runs (in logarithms, the counts of a 300-part plan being far past a float),
+which like any interval from a sample holds only approximately when the runs' estimates are
+heavy-tailed.  Every draw comes from one seeded generator: the same seed, the same estimate.
 
-Complexity: an exact count is O(reachable live sets × ways) mask operations; a walk O(parts × the ways
-naming each part), kept incremental by :class:`_Walk`.
+Complexity: an exact count is O(reachable live sets × ways) mask operations; a run O(parts × walks ×
+the ways naming a part), kept incremental by :class:`_Walk`.
 """
 
 from __future__ import annotations
@@ -32,7 +32,6 @@ from __future__ import annotations
 import math
 import random
 import time
-from contextlib import contextmanager
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.memory import nbytes
@@ -52,8 +51,19 @@ CHECK_EVERY = 64
 #: Entries the memo of a :class:`WaysCounter` holds at most before its oldest half is dropped (about
 #: 150 bytes an entry on 300 parts: 300 MB).
 MAX_TOTAL = 2_000_000
-#: Walks an estimate draws at least before it may stop on its stated error (fewer say nothing of the spread).
-MIN_WALKS = 32
+#: Runs an estimate makes at least before it may stop on its stated error (fewer say little of the spread).
+MIN_RUNS = 4
+#: Walks of the first sequential Monte Carlo run (more walks, a run of smaller variance and longer time):
+#: few, so that a run finishes on 300 parts within a second of CPU; later runs take as many as the time
+#: allows (:func:`_run_size`).
+PARTICLES = 8
+#: Walks of a run at most, where the time allows more than :data:`PARTICLES` (see :func:`_run_size`).
+MAX_PARTICLES = 4096
+#: Steps between two checks of a walk for parts that lock each other (:meth:`_Walk.locked`, O(ways) mask
+#: operations a pass): a walk past such a lock has no completion but can go on for many steps (on random
+#: blocks of 300 parts, from the 25th part to the 290th); caught, it weighs 0 and the resampling
+#: replaces it.  Every 4th step: a quarter of the checks' time, a walk kept at most 3 steps too long.
+LOCK_EVERY = 4
 
 
 class WaysCounter:
@@ -187,54 +197,118 @@ class WaysCounter:
         return True
 
 
-class _Walk:
-    """One random walk's state, updated as parts go in: which ways are still open (no blocker in),
-    how many needs each way still misses, and so which parts can go in now, in O(ways naming a part)
-    per part installed."""
+class _Ways:
+    """A plan's ways numbered flat (way ``k`` of part ``owner[k]``), with per part ``b`` the ways ``b``
+    blocks and the needs ``(way, bit)`` it meets: what a :class:`_Walk` updates when ``b`` goes in."""
 
-    def __init__(self, table: WaysTable, blocked_by: list, needed_by: list, mask: int):
+    def __init__(self, table: WaysTable):
         self.table = table
-        self.blocked_by, self.needed_by = blocked_by, needed_by
+        self.owner: list[int] = []
+        self.needs: list[int] = []          # per way: how many needs it has
+        self.blockers: list[int] = []       # per way: its blockers' mask
+        self.of_part: list[list[int]] = [[] for _ in range(table.n)]
+        self.blocks: list[list[int]] = [[] for _ in range(table.n)]
+        self.meets: list[list[tuple[int, int]]] = [[] for _ in range(table.n)]
+        for q, ways in enumerate(table.ways):
+            for blockers, needs in ways:
+                k = len(self.owner)
+                self.owner.append(q)
+                self.needs.append(len(needs))
+                self.blockers.append(blockers)
+                self.of_part[q].append(k)
+                for b in _bits(blockers):
+                    self.blocks[b].append(k)
+                for bit, need in enumerate(needs):
+                    for b in _bits(need):
+                        self.meets[b].append((k, 1 << bit))
+
+
+class _Walk:
+    """One walk's state, updated as parts go in, in O(ways naming the part) a part: which ways are still
+    open (no blocker in), which needs each way has met, how many usable ways (open, every need met) and
+    open ways each part has, and the parts ready to go in.  Flat arrays, so a copy (a resampled walk) is
+    a few C-level copies."""
+
+    __slots__ = ("ways", "mask", "open", "met", "usable", "left", "ready")
+
+    def __init__(self, ways: _Ways, mask: int):
+        self.ways = ways
         self.mask = 0
-        self.open = [[True] * len(w) for w in table.ways]
-        self.open_count = [len(w) for w in table.ways]
-        self.missing = [[len(needs) for _, needs in w] for w in table.ways]
-        self.met = [[0] * len(w) for w in table.ways]      # per way: its needs met, as bits
-        self.usable = [len(w) - sum(1 for _, needs in w if needs) for w in table.ways]
+        self.open = bytearray(b"\x01" * len(ways.owner))
+        self.met = [0] * len(ways.owner)
+        self.left = [len(k) for k in ways.of_part]          # open ways per part
+        self.usable = [sum(1 for k in ks if not ways.needs[k]) for ks in ways.of_part]
+        self.ready = {i for i, u in enumerate(self.usable) if u}
         for i in _bits(mask):
             self.add(i)
 
+    def copy(self) -> "_Walk":
+        w = object.__new__(_Walk)
+        w.ways, w.mask, w.open, w.met = self.ways, self.mask, bytearray(self.open), self.met[:]
+        w.usable, w.left, w.ready = self.usable[:], self.left[:], set(self.ready)
+        return w
+
     def add(self, i: int) -> None:
         """Part ``i`` goes in."""
+        ways, is_open, usable, met, ready = self.ways, self.open, self.usable, self.met, self.ready
         self.mask |= 1 << i
-        for q, w in self.blocked_by[i]:
-            if self.open[q][w]:
-                self.open[q][w] = False
-                self.open_count[q] -= 1
-                if not self.missing[q][w]:
-                    self.usable[q] -= 1
-        for q, w, k in self.needed_by[i]:
-            if not self.met[q][w] >> k & 1:
-                self.met[q][w] |= 1 << k
-                self.missing[q][w] -= 1
-                if not self.missing[q][w] and self.open[q][w]:
-                    self.usable[q] += 1
+        ready.discard(i)
+        full_needs = ways.needs
+        for k in ways.blocks[i]:
+            if is_open[k]:
+                is_open[k] = 0
+                q = ways.owner[k]
+                self.left[q] -= 1
+                if met[k].bit_count() == full_needs[k]:
+                    usable[q] -= 1
+                    if not usable[q]:
+                        ready.discard(q)
+        for k, bit in ways.meets[i]:
+            if not met[k] & bit:
+                met[k] |= bit
+                if is_open[k] and met[k].bit_count() == full_needs[k]:
+                    q = ways.owner[k]
+                    usable[q] += 1
+                    if usable[q] == 1 and not self.mask >> q & 1:
+                        ready.add(q)
 
     def shuts_out(self, i: int) -> bool:
-        """Whether installing ``i`` would leave some other remaining part with every way blocked."""
+        """Whether installing ``i`` would leave another remaining part with every way blocked."""
+        ways, is_open, mask, left = self.ways, self.open, self.mask, self.left
         closing: dict[int, int] = {}
-        mask, is_open, left = self.mask, self.open, self.open_count
-        for q, w in self.blocked_by[i]:
-            if is_open[q][w] and q != i and not mask >> q & 1:
-                n = closing[q] = closing.get(q, 0) + 1
-                if n == left[q]:
-                    return True
+        for k in ways.blocks[i]:
+            if is_open[k]:
+                q = ways.owner[k]
+                if q != i and not mask >> q & 1:
+                    n = closing[q] = closing.get(q, 0) + 1
+                    if n == left[q]:
+                        return True
+        return False
+
+    def locked(self) -> bool:
+        """Whether the parts left lock each other: taken out last first while one can be (a part can be
+        last if some way of it is open and none of its blockers is among the others left), some remain.
+        Needs left aside, so a locked set is surely dead (and, in a plan without needs, only a dead set
+        is locked).  O(passes × open ways) mask operations."""
+        ways, is_open, mask = self.ways, self.open, self.mask
+        rest = ways.table.full & ~mask
+        left = [(ways.owner[k], ways.blockers[k]) for k in range(len(ways.owner))
+                if is_open[k] and not mask >> ways.owner[k] & 1]
+        while rest:
+            out = 0
+            for q, blockers in left:
+                if not blockers & rest & ~(1 << q):
+                    out |= 1 << q
+            if not out:
+                return True
+            rest &= ~out
+            left = [(q, b) for q, b in left if rest >> q & 1]
         return False
 
     def choices(self) -> list[int]:
-        """The parts that can go in now without shutting another out."""
-        mask = self.mask
-        return [i for i, u in enumerate(self.usable) if u > 0 and not mask >> i & 1 and not self.shuts_out(i)]
+        """The parts that can go in now without shutting another out (in increasing order: seeded draws
+        do not depend on a set's order)."""
+        return [i for i in sorted(self.ready) if not self.shuts_out(i)]
 
 
 def _bits(mask: int):
@@ -244,42 +318,48 @@ def _bits(mask: int):
         mask ^= b
 
 
-def _indexes(table: WaysTable) -> tuple[list, list]:
-    """Per part ``b``: the ways ``(q, w)`` that ``b`` blocks, and the needs ``(q, w, k)`` it meets."""
-    blocked_by: list = [[] for _ in range(table.n)]
-    needed_by: list = [[] for _ in range(table.n)]
-    for q, ways in enumerate(table.ways):
-        for w, (blockers, needs) in enumerate(ways):
-            for b in _bits(blockers):
-                blocked_by[b].append((q, w))
-            for k, need in enumerate(needs):
-                for b in _bits(need):
-                    needed_by[b].append((q, w, k))
-    return blocked_by, needed_by
+def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: Deadline) -> float:
+    """``log`` of one sequential Monte Carlo estimate of the completions of ``start`` (``-inf``: all dead).
 
-
-def _log_walk(table: WaysTable, memo: dict, start: int, rng: random.Random, indexes: tuple,
-              dl: Deadline) -> float:
-    """``log`` of one walk's weight from ``start`` (``-inf`` if it ends dead)."""
-    walk = _Walk(table, *indexes, start)
-    log_w = 0.0
-    while walk.mask != table.full:
-        known = memo.get(walk.mask)
-        if known is not None:
-            return log_w + math.log(known) if known else -math.inf
-        options = walk.choices()
-        if not options:
+    ``particles`` walks go forward together a part at a time; at each step the estimate is multiplied by
+    the walks' mean number of choices, and the walks are drawn again in proportion to their numbers of
+    choices, each then taking one of its choices at random (a walk with none, or found locked every
+    :data:`LOCK_EVERY` steps, weighs 0 and is replaced).  The product
+    is an unbiased estimate of the number of completions (the normalising constant of sequential
+    importance sampling with multinomial resampling).  O(parts × particles × ways naming a part)."""
+    walks = [_Walk(ways, start)]
+    walks += [walks[0].copy() for _ in range(particles - 1)]
+    log_z = 0.0
+    for step in range(ways.table.n - start.bit_count()):
+        options = [w.choices() for w in walks]
+        if not step % LOCK_EVERY:       # a walk whose parts left lock each other has no completion: 0
+            options = [[] if o and w.locked() else o for w, o in zip(walks, options)]
+        weights = [len(o) for o in options]
+        total = sum(weights)
+        if not total:
             return -math.inf
-        log_w += math.log(len(options))
-        walk.add(options[rng.randrange(len(options))])
+        log_z += math.log(total / particles)
+        picks = rng.choices(range(particles), weights=weights, k=particles)
+        nxt = []
+        for j in picks:
+            w = walks[j].copy()
+            w.add(options[j][rng.randrange(weights[j])])
+            nxt.append(w)
+        walks = nxt
         dl.check("estimating the completions of a plan of ways")
-    return log_w
+    return log_z
 
 
 def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_error: float = 0.01,
-                         deadline: Deadline | float | None = None, max_walks: int = 1_000_000,
-                         memo: dict | None = None) -> CountResult:
-    """An estimate of the completions of ``mask`` by sequential importance sampling (see the module).
+                         deadline: Deadline | float | None = None, max_runs: int = 10_000,
+                         particles: int = PARTICLES) -> CountResult:
+    """An estimate of the completions of ``mask`` by sequential Monte Carlo (see :func:`_smc_run`).
+
+    Independent runs of ``particles`` walks each, until the 95% interval of their mean is within
+    ``rel_error`` (after :data:`MIN_RUNS` runs), ``max_runs`` runs or ``deadline``: a run cut by the
+    deadline is dropped.  With a deadline, the first run's time sets the runs' size: as many walks
+    (doubling, up to :data:`MAX_PARTICLES`) as let :data:`MIN_RUNS` runs fit in the time left.  Each run is unbiased, so their mean is; the interval is Student's t over the
+    runs (approximate where the runs' estimates are heavy-tailed).
 
     Parameters
     ----------
@@ -288,45 +368,60 @@ def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_
     mask : int
         The installed parts.
     seed : int
-        The walks' generator's seed.
+        The generator's seed: the same seed, the same estimate (but for a stop on the clock).
     rel_error : float
-        Stop once the 95% interval's half-width is within this share of the estimate (after
-        :data:`MIN_WALKS` walks).
+        The interval's half-width, as a share of the estimate, at which to stop.
     deadline : Deadline or float, optional
-        Stop drawing past it (at least two walks are drawn).
-    max_walks : int
-        Most walks drawn.
-    memo : dict, optional
-        Exact counts of sets known already (a :class:`WaysCounter`'s): a walk reaching one ends with it.
+        Stop past it.
+    max_runs : int
+        Most runs.
+    particles : int
+        Walks in a run.
 
     Returns
     -------
     CountResult
-        ``exact=False``, ``method="ways-sis"``, the estimate (``log10_value`` beside it), its relative
-        error at ``confidence`` 0.95 and the interval's ends in ``log10``.
+        ``exact=False``, ``method="ways-smc"``, the estimate (``log10_value`` beside it), its relative
+        error at ``confidence`` 0.95 (infinite with fewer than two runs) and the interval's ends in
+        ``log10``; ``nan`` if no run finished.
 
     Examples
     --------
-    >>> t = WaysTable(4, [[(0, ())]] * 4)          # 4 free parts: 24 sequences, every walk weighs 24
+    >>> t = WaysTable(4, [[(0, ())]] * 4)          # 4 free parts: 24 sequences, every run says 24
     >>> r = estimate_completions(t, seed=1)
     >>> round(r.value), r.rel_error, r.exact
     (24, 0.0, False)
     """
     dl = as_deadline(deadline)
     rng = random.Random(seed)
-    memo = memo if memo is not None else {table.full: 1}
-    indexes = _indexes(table)
+    ways = _Ways(table)
     logs: list[float] = []
-    grace = Deadline.NEVER
-    while len(logs) < max_walks:
+    size = particles
+    while len(logs) < max_runs and not dl.expired():
+        start = time.perf_counter()
         try:
-            logs.append(_log_walk(table, memo, mask, rng, indexes, grace if len(logs) < 2 else dl))
+            logs.append(_smc_run(ways, mask, size, rng, dl))
         except BudgetExceeded:
             break
-        # the interval is O(walks) to find: looked at every MIN_WALKS walks
-        if not len(logs) % MIN_WALKS and _interval(logs)[1] <= rel_error or (len(logs) >= 2 and dl.expired()):
+        if len(logs) == 1 and dl.finite:
+            # more walks a run where the time allows MIN_RUNS runs of them: the spread of a run's logarithm
+            # falls as its walks grow; the first run (of the default size) is kept only if the size stays
+            grown = _run_size(particles, time.perf_counter() - start, dl.remaining())
+            if grown > size:
+                size, logs = grown, []
+                continue
+        if len(logs) >= MIN_RUNS and _interval(logs)[1] <= rel_error:
             break
     return _result(logs)
+
+
+def _run_size(particles: int, seconds: float, left: float) -> int:
+    """Walks a run may take so that :data:`MIN_RUNS` runs fit in ``left`` seconds, a first run of
+    ``particles`` walks having taken ``seconds`` (at most :data:`MAX_PARTICLES`, a power of two)."""
+    size = particles
+    while size < MAX_PARTICLES and 2 * size / particles * seconds * MIN_RUNS <= left:
+        size *= 2
+    return size
 
 
 def _interval(logs: list[float]) -> tuple[float, float]:
@@ -344,12 +439,15 @@ def _interval(logs: list[float]) -> tuple[float, float]:
 
 
 def _result(logs: list[float]) -> CountResult:
+    if not logs:
+        return CountResult(math.nan, exact=False, rel_error=math.inf, confidence=0.95, method="ways-smc",
+                           log10_value=math.nan)
     log_mean, rel = _interval(logs)
     if log_mean == -math.inf:
-        return CountResult(0.0, exact=False, rel_error=math.inf, confidence=0.95, method="ways-sis",
+        return CountResult(0.0, exact=False, rel_error=math.inf, confidence=0.95, method="ways-smc",
                            log10_value=-math.inf)
     l10 = log_mean / math.log(10)
     low = l10 + math.log10(max(1e-300, 1 - rel)) if rel < 1 else 0.0
     high = l10 + math.log10(1 + rel) if math.isfinite(rel) else math.inf
     return CountResult(10.0 ** l10 if l10 < 308 else math.inf, exact=False, rel_error=rel, confidence=0.95,
-                       method="ways-sis", log10_value=l10, log10_low=max(0.0, low), log10_high=high)
+                       method="ways-smc", log10_value=l10, log10_low=max(0.0, low), log10_high=high)

@@ -36,6 +36,10 @@ if TYPE_CHECKING:
 
 __all__ = ["LIVE_WORK", "WaysEngine"]
 
+#: Share of a count's time the exact count may take at most before the estimate gets the rest: the
+#: reachable sets of a plan whose parts have several ways each grow so fast that an exact count either
+#: fits quickly or not at all (a plan of 30 random blocks: never in minutes), so the estimate gets most.
+EXACT_SHARE = 0.3
 #: Most sets one liveness search visits (about 10 ms on 300 parts) before it takes the set as live.
 LIVE_WORK = 2_000
 
@@ -260,8 +264,9 @@ class WaysEngine(OrderEngine):
 
     def count_result(self, mask: int, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,
                      exact_share: float = 0.65, deadline=None, estimate: bool = True) -> CountResult:
-        """The completions of ``mask``: exact within ``exact_share`` of the time, else estimated by
-        :func:`~opportune.engine.ways.estimate_completions` within the rest (``seed``, ``rel_error``);
+        """The completions of ``mask``: exact within ``exact_share`` of the time (at most
+        :data:`EXACT_SHARE`), else estimated by :func:`~opportune.engine.ways.estimate_completions` within
+        the rest (``seed``, ``rel_error``);
         ``estimate=False``: the exact count alone, within ``deadline`` (or the engine's), else
         :class:`BudgetExceeded`.
 
@@ -276,12 +281,12 @@ class WaysEngine(OrderEngine):
             return CountResult(self.counter.count(mask, self._until if deadline is None else deadline))
         dl = as_deadline(deadline).within(time_limit)
         start = time.perf_counter()
+        share = min(exact_share, EXACT_SHARE)
         try:
-            return CountResult(self.counter.count(mask, dl.within(exact_share * max(0.0, dl.at - start))))
+            return CountResult(self.counter.count(mask, dl.within(share * max(0.0, dl.at - start))))
         except BudgetExceeded:
             pass
-        return estimate_completions(self.table, mask, seed=seed, rel_error=rel_error, deadline=dl,
-                                    memo=self.counter.memo)
+        return estimate_completions(self.table, mask, seed=seed, rel_error=rel_error, deadline=dl)
 
 
 def _bits(mask: int):
