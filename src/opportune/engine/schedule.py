@@ -24,6 +24,7 @@ How a plan becomes posets:
 
 from __future__ import annotations
 
+from abc import ABCMeta
 
 from opportune.engine.count import Counter, entries_within
 from opportune.engine.deadline import Deadline, as_deadline, no_collection
@@ -36,6 +37,7 @@ from opportune.engine.questions import StateQuestions
 # names callers import from here (their home: result.py, tuning.py)
 from opportune.engine.result import EXACT_DIGITS, CountResult, count_text, decimal, interval_unbuilt, log10_int  # noqa: F401
 from opportune.engine.tuning import COUNT_MARGIN, FIRST_TURN, MAX_STRATEGIES_EXACT  # noqa: F401
+from opportune.engine.waysengine import WaysEngine
 from opportune.planning.plan import Plan
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
@@ -58,7 +60,7 @@ class NotAdmissible(ValueError):
         super().__init__(message)
 
 
-class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
+class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep, metaclass=ABCMeta):
     """The order engine of one plan: its unit posets and their counters.
 
     Create one per plan and share it between all schedules, sequencers and
@@ -73,8 +75,6 @@ class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
 
     def __new__(cls, plan: Plan, **options):
         if cls is OrderEngine and getattr(plan, "ways", None) is not None:   # a plan written as ways
-            from opportune.engine.waysengine import WaysEngine
-
             return WaysEngine(plan, **options)
         return super().__new__(cls)
 
@@ -128,6 +128,10 @@ class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         self._hub_search: dict[Counter, HubPath] = {}   # a hub search cut short by a deadline, to resume
         self._probe_left: dict[Counter, int] = {}       # new memo entries the plain probe may still add
         self._until: float | None = None                # the deadline of :meth:`deadline`, if any
+
+
+# the engine of a plan written as ways is an order engine to every caller (isinstance), by its own class
+OrderEngine.register(WaysEngine)
 
 
 #: Passes over every unit of a plan made to answer ``remaining`` or ``in_bin``, by name: a test
@@ -315,6 +319,10 @@ class Schedule:
         >>> abs(est.first[0][0] - 2 / 3) < 0.05
         True
         """
+        if self.plan.ways is not None:      # a plan written as ways: completions drawn by sequential Monte Carlo
+            from opportune.engine.ways import WaysChains
+
+            return WaysChains(self.engine.table, self.mask, chains=chains, seed=seed)
         from opportune.engine.sampling import CompletionChains    # here: a count never draws
 
         return CompletionChains(self.engine.posets[strategy], self.engine.full & ~self.mask, chains=chains, seed=seed)

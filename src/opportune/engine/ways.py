@@ -44,7 +44,7 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.planning.plan import Plan
 
-__all__ = ["WaysCounter", "WaysEngine", "estimate_completions"]
+__all__ = ["WaysChains", "WaysCounter", "estimate_completions"]
 
 #: New memo entries between two readings of the clock (each entry is O(parts × ways) mask work).
 CHECK_EVERY = 64
@@ -53,10 +53,16 @@ CHECK_EVERY = 64
 MAX_TOTAL = 2_000_000
 #: Runs an estimate makes at least before it may stop on its stated error (fewer say little of the spread).
 MIN_RUNS = 4
+#: Steps a draw of :class:`WaysChains` counts for, per part left: its draws are independent runs, not
+#: a chain that needs mixing, so the policies' test of mixing (steps per part left) passes at once.
+MIXED = 1_000
 #: Walks of the first sequential Monte Carlo run (more walks, a run of smaller variance and longer time):
 #: few, so that a run finishes on 300 parts within a second of CPU; later runs take as many as the time
 #: allows (:func:`_run_size`).
 PARTICLES = 8
+#: Runs the size of the later runs is chosen to fit in the time left: four times :data:`MIN_RUNS`, so that
+#: a machine slower than the first run said still finishes several.
+RUNS_IN_TIME = 16
 #: Walks of a run at most, where the time allows more than :data:`PARTICLES` (see :func:`_run_size`).
 MAX_PARTICLES = 4096
 #: Steps between two checks of a walk for parts that lock each other (:meth:`_Walk.locked`, O(ways) mask
@@ -229,7 +235,7 @@ class _Walk:
     open ways each part has, and the parts ready to go in.  Flat arrays, so a copy (a resampled walk) is
     a few C-level copies."""
 
-    __slots__ = ("ways", "mask", "open", "met", "usable", "left", "ready")
+    __slots__ = ("ways", "mask", "open", "met", "usable", "left", "ready", "order")
 
     def __init__(self, ways: _Ways, mask: int):
         self.ways = ways
@@ -241,11 +247,12 @@ class _Walk:
         self.ready = {i for i, u in enumerate(self.usable) if u}
         for i in _bits(mask):
             self.add(i)
+        self.order: list[int] = []          # the parts this walk added, in order
 
     def copy(self) -> "_Walk":
         w = object.__new__(_Walk)
         w.ways, w.mask, w.open, w.met = self.ways, self.mask, bytearray(self.open), self.met[:]
-        w.usable, w.left, w.ready = self.usable[:], self.left[:], set(self.ready)
+        w.usable, w.left, w.ready, w.order = self.usable[:], self.left[:], set(self.ready), self.order[:]
         return w
 
     def add(self, i: int) -> None:
@@ -318,7 +325,8 @@ def _bits(mask: int):
         mask ^= b
 
 
-def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: Deadline) -> float:
+def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: Deadline,
+             finished: list | None = None) -> float:
     """``log`` of one sequential Monte Carlo estimate of the completions of ``start`` (``-inf``: all dead).
 
     ``particles`` walks go forward together a part at a time; at each step the estimate is multiplied by
@@ -326,7 +334,9 @@ def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: De
     choices, each then taking one of its choices at random (a walk with none, or found locked every
     :data:`LOCK_EVERY` steps, weighs 0 and is replaced).  The product
     is an unbiased estimate of the number of completions (the normalising constant of sequential
-    importance sampling with multinomial resampling).  O(parts × particles × ways naming a part)."""
+    importance sampling with multinomial resampling).  The walks at the end (appended to ``finished``, if
+    given, as their orders) are completions drawn about uniformly.  O(parts × particles × ways naming a
+    part)."""
     walks = [_Walk(ways, start)]
     walks += [walks[0].copy() for _ in range(particles - 1)]
     log_z = 0.0
@@ -343,10 +353,14 @@ def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: De
         nxt = []
         for j in picks:
             w = walks[j].copy()
-            w.add(options[j][rng.randrange(weights[j])])
+            part = options[j][rng.randrange(weights[j])]
+            w.add(part)
+            w.order.append(part)
             nxt.append(w)
         walks = nxt
         dl.check("estimating the completions of a plan of ways")
+    if finished is not None:
+        finished.extend(w.order for w in walks)
     return log_z
 
 
@@ -357,8 +371,8 @@ def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_
 
     Independent runs of ``particles`` walks each, until the 95% interval of their mean is within
     ``rel_error`` (after :data:`MIN_RUNS` runs), ``max_runs`` runs or ``deadline``: a run cut by the
-    deadline is dropped.  With a deadline, the first run's time sets the runs' size: as many walks
-    (doubling, up to :data:`MAX_PARTICLES`) as let :data:`MIN_RUNS` runs fit in the time left.  Each run is unbiased, so their mean is; the interval is Student's t over the
+    deadline is dropped.  With a deadline, the first run's time sets the later runs' size: as many walks
+    (doubling, up to :data:`MAX_PARTICLES`) as let :data:`RUNS_IN_TIME` runs fit in the time left.  Each run is unbiased, so their mean is; the interval is Student's t over the
     runs (approximate where the runs' estimates are heavy-tailed).
 
     Parameters
@@ -404,22 +418,19 @@ def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_
         except BudgetExceeded:
             break
         if len(logs) == 1 and dl.finite:
-            # more walks a run where the time allows MIN_RUNS runs of them: the spread of a run's logarithm
-            # falls as its walks grow; the first run (of the default size) is kept only if the size stays
-            grown = _run_size(particles, time.perf_counter() - start, dl.remaining())
-            if grown > size:
-                size, logs = grown, []
-                continue
+            # more walks a run where the time allows RUNS_IN_TIME runs of them: the spread of a run's
+            # logarithm falls as its walks grow (every run, the first too, is an unbiased estimate)
+            size = _run_size(particles, time.perf_counter() - start, dl.remaining())
         if len(logs) >= MIN_RUNS and _interval(logs)[1] <= rel_error:
             break
     return _result(logs)
 
 
 def _run_size(particles: int, seconds: float, left: float) -> int:
-    """Walks a run may take so that :data:`MIN_RUNS` runs fit in ``left`` seconds, a first run of
+    """Walks a run may take so that :data:`RUNS_IN_TIME` runs fit in ``left`` seconds, a first run of
     ``particles`` walks having taken ``seconds`` (at most :data:`MAX_PARTICLES`, a power of two)."""
     size = particles
-    while size < MAX_PARTICLES and 2 * size / particles * seconds * MIN_RUNS <= left:
+    while size < MAX_PARTICLES and 2 * size / particles * seconds * RUNS_IN_TIME <= left:
         size *= 2
     return size
 
@@ -451,3 +462,94 @@ def _result(logs: list[float]) -> CountResult:
     high = l10 + math.log10(1 + rel) if math.isfinite(rel) else math.inf
     return CountResult(10.0 ** l10 if l10 < 308 else math.inf, exact=False, rel_error=rel, confidence=0.95,
                        method="ways-smc", log10_value=l10, log10_low=max(0.0, low), log10_high=high)
+
+
+class WaysChains:
+    """Completions of a state of a plan of ways drawn for the policies' estimates, in the shape of
+    :class:`~opportune.engine.sampling.CompletionChains` (what :meth:`Schedule.chains` gives for such
+    a plan): ``chains`` groups, each reading one completion a round, the completions the walks of one
+    sequential Monte Carlo run of ``chains`` walks end with (about uniform: exactly so as the walks grow;
+    the readings of a round are not independent across groups, so the stated errors are too small by the
+    walks' shared ancestry).  ``below[u]`` is the other parts left for a part that cannot go in now and
+    0 for one that can; ``above[u]`` the part alone: no two parts look interchangeable.
+
+    Examples
+    --------
+    >>> t = WaysTable(3, [[(0b010, ())], [(0, ())], [(0, ())]])     # a before b
+    >>> c = WaysChains(t, 0, chains=4, seed=1)
+    >>> e = c.estimate(first=[0, 2], positions=[1], samples=8, steps=8)
+    >>> round(e.first[0][0] + e.first[2][0], 6), e.positions[1][0] > 1
+    (1.0, True)
+    """
+
+    def __init__(self, table: WaysTable, mask: int, *, chains: int = 8, seed: int = 0):
+        self.table = table
+        self.ways = _Ways(table)
+        self.rng = random.Random(seed)
+        self.chains = max(2, chains)
+        self.remaining = table.full & ~mask
+        self._kept: tuple[dict, dict] = ({}, {})
+        self.steps = 0
+        self._tables()
+
+    def _tables(self) -> None:
+        """``below`` and ``above`` for the state (see the class)."""
+        mask = self.table.full & ~self.remaining
+        now = _Walk(self.ways, mask)
+        can = set(now.choices())
+        self.below = [0 if u in can else self.remaining & ~(1 << u) for u in range(self.table.n)]
+        self.above = [1 << u for u in range(self.table.n)]
+
+    def advance(self, remaining: int) -> None:
+        """The state moved on: ``remaining`` parts are left (readings of the earlier state dropped)."""
+        if remaining != self.remaining:
+            self.remaining = remaining
+            self._kept = ({}, {})
+            self._tables()
+
+    def estimate(self, first=(), positions=(), *, steps: int = 0, samples: int = 32, deadline=None, clock=None,
+                 settled=None, min_rounds: int = 8, keep: bool = False):
+        """As :meth:`CompletionChains.estimate <opportune.engine.sampling.CompletionChains.estimate>`: for each
+        unit of ``first`` the share of completions it begins, for each of ``positions`` its mean position
+        (1 = next), a round (one run) at a time until ``samples`` rounds (with ``steps``) or ``deadline`` (at
+        least two rounds), or ``settled``."""
+        from opportune.engine.sampling import ChainEstimate, _mean_se
+
+        if isinstance(deadline, Deadline):
+            deadline, clock = (deadline.at if deadline.finite else None), time.perf_counter
+        k, start = self.chains, self.table.full & ~self.remaining
+        kept = self._kept if keep else ({}, {})
+        acc_first = {u: kept[0].get(u) or [[0.0] * k, 0] for u in first}
+        acc_pos = {u: kept[1].get(u) or [[0.0] * k, 0] for u in positions}
+        if keep:
+            kept[0].update(acc_first)
+            kept[1].update(acc_pos)
+        rounds = 0
+        while True:
+            ends: list = []
+            _smc_run(self.ways, start, k, self.rng, Deadline.NEVER, ends)
+            self.steps += max(1, self.remaining.bit_count()) * MIXED
+            for c, order in enumerate(ends):
+                where = {u: i + 1 for i, u in enumerate(order)}
+                for u, acc in acc_first.items():
+                    acc[0][c] += 1.0 if order and order[0] == u else 0.0
+                for u, acc in acc_pos.items():
+                    acc[0][c] += where.get(u, 0)
+            for acc in (*acc_first.values(), *acc_pos.values()):
+                acc[1] += 1
+            rounds += 1
+            summary = ChainEstimate(
+                first={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_first.items()},
+                positions={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_pos.items()},
+                per_chain={"first": {u: [x / n for x in xs] for u, (xs, n) in acc_first.items()},
+                           "positions": {u: [x / n for x in xs] for u, (xs, n) in acc_pos.items()}},
+                samples=rounds * k, steps=self.steps)
+            if steps and rounds >= samples:
+                break
+            if rounds >= 2 and deadline is not None and clock is not None and clock() >= deadline:
+                break
+            if rounds >= 2 and deadline is None and not steps:
+                break
+            if settled is not None and rounds >= min_rounds and settled(summary):
+                break
+        return summary

@@ -1,7 +1,9 @@
 """The order engine of a plan written as ways: the same questions about a state, answered by counting
 the completions over installed sets (:mod:`opportune.engine.ways`) instead of linear extensions.
 
-``OrderEngine(plan)`` of a plan written as ways makes a :class:`WaysEngine` (a subclass), so a
+``OrderEngine(plan)`` of a plan written as ways makes a :class:`WaysEngine` (an ``OrderEngine`` by
+``isinstance``: registered as its virtual subclass; it shares the order engine's bases, the deadline,
+the questions and the memory upkeep, not its orders), so a
 :class:`~opportune.engine.schedule.Schedule`, the :class:`~opportune.sequencer.Sequencer` and
 ``opportune count`` take either plan alike.  A state is an installed set (bit ``i``: the ``i``-th
 declared part; every part is one unit) and one "strategy" (``consistent`` is 1 while the state is live,
@@ -18,24 +20,27 @@ are the order engine's alone.
 from __future__ import annotations
 
 import time
-from fractions import Fraction
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
-from opportune.engine.memory import nbytes
+from opportune.engine.exact import ExactCounting
+from opportune.engine.memory import MemoryUpkeep, memory_total, nbytes
+from opportune.engine.questions import StateQuestions
 from opportune.engine.result import CountResult
-from opportune.engine.schedule import DEFAULT_MEMORY, OrderEngine
 from opportune.engine.ways import WaysCounter, estimate_completions
 from opportune.planning.ways import Undecided, WaysTable
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from fractions import Fraction
     from typing import Collection, Iterable
 
     from opportune.planning.plan import Plan
 
 __all__ = ["LIVE_WORK", "WaysEngine"]
 
+#: The engine's default ``memory_limit``, as the order engine's: a quarter of the machine's memory.
+DEFAULT_MEMORY = memory_total() // 4
 #: Share of a count's time the exact count may take at most before the estimate gets the rest: the
 #: reachable sets of a plan whose parts have several ways each grow so fast that an exact count either
 #: fits quickly or not at all (a plan of 30 random blocks: never in minutes), so the estimate gets most.
@@ -44,7 +49,7 @@ EXACT_SHARE = 0.3
 LIVE_WORK = 2_000
 
 
-class WaysEngine(OrderEngine):
+class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
     """The engine of a plan written as ways (made by ``OrderEngine(plan)`` for such a plan).
 
     Parameters
@@ -57,12 +62,15 @@ class WaysEngine(OrderEngine):
 
     Examples
     --------
+    >>> from opportune.engine.schedule import OrderEngine
     >>> from opportune.formats.ways import ways_plan
     >>> from opportune.planning.plan import Part, Way
     >>> plan = ways_plan("p", [Part("a"), Part("b")], {"a": [Way(frozenset({"b"}))]})
     >>> engine = OrderEngine(plan)
     >>> type(engine).__name__, engine.count(0, 1), engine.installable(0, 1), engine.options(0, 1)
     ('WaysEngine', 1, ('a',), {'a': 1})
+    >>> isinstance(engine, OrderEngine)
+    True
     """
 
     def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
@@ -114,7 +122,7 @@ class WaysEngine(OrderEngine):
         --------
         >>> from opportune.formats.ways import ways_plan
         >>> from opportune.planning.plan import Part, Way
-        >>> e = OrderEngine(ways_plan("p", [Part("a"), Part("b")], {"a": [Way(frozenset({"b"}))]}))
+        >>> e = WaysEngine(ways_plan("p", [Part("a"), Part("b")], {"a": [Way(frozenset({"b"}))]}))
         >>> e.live(0b01), e.live(0b10)
         (True, False)
         """
@@ -223,7 +231,7 @@ class WaysEngine(OrderEngine):
         --------
         >>> from opportune.formats.ways import ways_plan
         >>> from opportune.planning.plan import Part, Way
-        >>> e = OrderEngine(ways_plan("p", [Part("a"), Part("b")], {"a": [Way(frozenset({"b"}))]}))
+        >>> e = WaysEngine(ways_plan("p", [Part("a"), Part("b")], {"a": [Way(frozenset({"b"}))]}))
         >>> e.position_sums_for(0, 1, ["a", "b"])
         (1, {'a': 1, 'b': 2})
         """
@@ -258,6 +266,8 @@ class WaysEngine(OrderEngine):
 
     def expected_positions(self, mask: int, consistent: int) -> dict[str, Fraction]:
         """Expected position (1 = next) of each remaining part in a uniformly random completion."""
+        from fractions import Fraction      # here: it loads decimal (5 ms at start-up)
+
         total, sums = self.position_sums_for(mask, consistent, [p for p in self._unit_ids
                                                                  if not mask & self._part_units[p]])
         return {p: Fraction(v, total) for p, v in sums.items()} if total else {}
@@ -274,7 +284,7 @@ class WaysEngine(OrderEngine):
         --------
         >>> from opportune.formats.ways import ways_plan
         >>> from opportune.planning.plan import Part
-        >>> OrderEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")], {})).count_result(0).value
+        >>> WaysEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")], {})).count_result(0).value
         6
         """
         if not estimate:
