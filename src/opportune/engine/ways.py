@@ -511,8 +511,9 @@ class WaysChains:
                  settled=None, min_rounds: int = 8, keep: bool = False):
         """As :meth:`CompletionChains.estimate <opportune.engine.sampling.CompletionChains.estimate>`: for each
         unit of ``first`` the share of completions it begins, for each of ``positions`` its mean position
-        (1 = next), a round (one run) at a time until ``samples`` rounds (with ``steps``) or ``deadline`` (at
-        least two rounds), or ``settled``."""
+        (1 = next), a round (one run) at a time until ``samples`` rounds (with ``steps``) or ``deadline``, or
+        ``settled``.  The first round runs whatever the time; a later one past ``deadline`` (of
+        ``time.perf_counter``) is cut and dropped."""
         from opportune.engine.sampling import ChainEstimate, _mean_se
 
         if isinstance(deadline, Deadline):
@@ -525,9 +526,14 @@ class WaysChains:
             kept[0].update(acc_first)
             kept[1].update(acc_pos)
         rounds = 0
+        summary = None
+        stop = Deadline(deadline) if deadline is not None and clock is time.perf_counter else Deadline.NEVER
         while True:
             ends: list = []
-            _smc_run(self.ways, start, k, self.rng, Deadline.NEVER, ends)
+            try:            # the first round whatever the time (an estimate needs one), the others within it
+                _smc_run(self.ways, start, k, self.rng, stop if rounds else Deadline.NEVER, ends)
+            except BudgetExceeded:
+                break
             self.steps += max(1, self.remaining.bit_count()) * MIXED
             for c, order in enumerate(ends):
                 where = {u: i + 1 for i, u in enumerate(order)}

@@ -10,9 +10,10 @@ declared part; every part is one unit) and one "strategy" (``consistent`` is 1 w
 0 for none): a part *can be installed* when it has a way that admits what is in and the set with it
 still has a completion (:meth:`WaysEngine.live`: never a dead end).
 
-Liveness is decided from the memo where it knows the set, at once where some part is shut out, else by
-a search for one completion within :data:`LIVE_WORK` sets; a set that search cannot decide is taken as
-live (the search finds a completion at once in every derived plan measured; a count of 0 says
+Liveness is decided from the memo where it knows the set; else a set is dead where some part is shut
+out or the parts left lock each other (:meth:`~opportune.planning.ways.WaysTable.locked`), which in a
+plan without needs decides it exactly; with needs, a live-looking set is searched for one completion
+within :data:`LIVE_WORK` sets, and one that search cannot decide is taken as live (a count of 0 says
 otherwise).  Questions that need the order's shape (the policies' dominance rules, completion chains)
 are the order engine's alone.
 """
@@ -45,8 +46,8 @@ DEFAULT_MEMORY = memory_total() // 4
 #: reachable sets of a plan whose parts have several ways each grow so fast that an exact count either
 #: fits quickly or not at all (a plan of 30 random blocks: never in minutes), so the estimate gets most.
 EXACT_SHARE = 0.3
-#: Most sets one liveness search visits (about 10 ms on 300 parts) before it takes the set as live.
-LIVE_WORK = 2_000
+#: Most sets one liveness search visits (plans with needs only) before it takes the set as live.
+LIVE_WORK = 200
 
 
 class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
@@ -132,12 +133,15 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         seen = self._live.get(mask)
         if seen is not None:
             return seen
-        if self.table.shut_out(mask):
-            return False
-        try:
-            found = self.table.completion(mask, LIVE_WORK) is not None
-        except Undecided:
+        if self.table.shut_out(mask) or self.table.locked(mask):
+            found = False
+        elif not self.table.has_needs:      # not locked: live, exactly (WaysTable.locked)
             found = True
+        else:
+            try:
+                found = self.table.completion(mask, LIVE_WORK) is not None
+            except Undecided:
+                found = True
         if len(self._live) > 100_000:
             self._live.clear()
         self._live[mask] = found
