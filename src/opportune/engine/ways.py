@@ -35,14 +35,10 @@ import time
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.memory import nbytes
+from opportune.engine.poset import bits as _bits
 from opportune.engine.result import CountResult
 from opportune.engine.stats import t_quantile
 from opportune.planning.ways import WaysTable
-
-# not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
-TYPE_CHECKING = False
-if TYPE_CHECKING:
-    from opportune.planning.plan import Plan
 
 __all__ = ["WaysChains", "WaysCounter", "estimate_completions"]
 
@@ -139,7 +135,7 @@ class WaysCounter:
 
     def _count(self, mask: int, dl: Deadline) -> int:
         """The memoised recursion, with an explicit stack (a 10,000-part plan is as deep)."""
-        table, memo, full = self.table, self.memo, self.table.full
+        table, memo = self.table, self.memo
         get, goes, shut_out = memo.get, table.goes, table.shut_out
         limit = self.max_memo if self.max_memo is not None else math.inf
         new = 0
@@ -316,13 +312,6 @@ class _Walk:
         """The parts that can go in now without shutting another out (in increasing order: seeded draws
         do not depend on a set's order)."""
         return [i for i in sorted(self.ready) if not self.shuts_out(i)]
-
-
-def _bits(mask: int):
-    while mask:
-        b = mask & -mask
-        yield b.bit_length() - 1
-        mask ^= b
 
 
 def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: Deadline,

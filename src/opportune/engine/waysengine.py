@@ -25,6 +25,7 @@ import time
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.exact import ExactCounting
 from opportune.engine.memory import MemoryUpkeep, memory_total, nbytes
+from opportune.engine.poset import bits as _bits
 from opportune.engine.questions import StateQuestions
 from opportune.engine.result import CountResult
 from opportune.engine.ways import WaysCounter, estimate_completions
@@ -301,10 +302,3 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         except BudgetExceeded:
             pass
         return estimate_completions(self.table, mask, seed=seed, rel_error=rel_error, deadline=dl)
-
-
-def _bits(mask: int):
-    while mask:
-        b = mask & -mask
-        yield b.bit_length() - 1
-        mask ^= b
