@@ -234,3 +234,20 @@ def test_check_count_and_replay_take_a_ways_file(tmp_path):
     looks.write_text("peg cap\nbase\ncap\n-\n")
     replayed = runner.invoke(app, ["replay", str(path), str(looks)])
     assert replayed.exit_code == 0 and "complete: base,cap,peg" in replayed.output
+
+
+@pytest.mark.parametrize("args", [["graph"], ["simulate", "--trials", "1"], ["evaluate"], ["convert"],
+                                  ["replay", "--policy", "slack"]])
+def test_commands_that_do_not_take_ways_plans_yet_say_so_without_a_traceback(tmp_path, args):
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+
+    path = tmp_path / "peg.yaml"
+    path.write_text(WAYS_YAML)
+    looks = tmp_path / "looks.txt"
+    looks.write_text("base\n")
+    extra = {"convert": [str(tmp_path / "out.dot")], "replay": [str(looks)]}.get(args[0], [])
+    result = CliRunner().invoke(app, [args[0], str(path), *extra, *args[1:]])
+    assert result.exit_code in (1, 2) and "Traceback" not in result.output
+    assert "does not take a plan written as ways yet" in result.output, result.output

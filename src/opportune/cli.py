@@ -201,11 +201,15 @@ def _current_names(names) -> list[str]:
     return list(now)
 
 
-def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
-    """Load a plan, or print every error and exit 1."""
+def load_or_exit(path: Path, *, json_errors: bool = False, ways: bool = False) -> Plan:
+    """Load a plan, or print every error and exit 1 (``ways``: the command takes plans written as ways)."""
     from opportune.formats.loader import CheckResult, read_plan
 
     result = read_plan(path)
+    if result.ok and result.plan.is_ways and not ways:
+        from opportune.formats.ways import not_for_ways
+
+        fail(not_for_ways(_command_name()), as_json=json_errors or None)
     if not result.ok:
         if json_errors or _json_errors:
             _print_error({"message": f"{path}: not a valid plan ({len(result.errors)} error(s))", "file": str(path),
@@ -255,6 +259,16 @@ def check(plan_files: list[Path] = typer.Argument(..., help="Plan files (any for
     elif len(plan_files) > 1:
         _out().print(f"\n{len(plan_files)} files: " + ("all valid" if ok else "some invalid (above)"))
     raise typer.Exit(0 if ok else 1)
+
+
+def _command_name() -> str:
+    """The command under way (``opportune graph``: "graph"), for a message."""
+    try:        # typer carries its own copy of click (newer typers), whose context is the one under way
+        from typer._click.globals import get_current_context
+    except ImportError:
+        from click import get_current_context
+    ctx = get_current_context(silent=True)
+    return ctx.info_name if ctx is not None else "this command"
 
 
 def _print_check(plan_file: Path, result) -> None:
@@ -315,7 +329,7 @@ def count(
             _out().print(line, markup=False, emoji=False)
 
     cli_count.run(plan_file, after, as_json, time_limit, max_memo, threads,
-                  load=lambda path: load_or_exit(path, json_errors=as_json), fail=fail, write=write)
+                  load=lambda path: load_or_exit(path, json_errors=as_json, ways=True), fail=fail, write=write)
 
 
 # ---------------------------------------------------------------- graph
@@ -398,7 +412,7 @@ def replay(
     from opportune.formats.looks import LooksError, read_looks
     from opportune.sequencer import Sequencer, SequencerError
 
-    plan = load_or_exit(plan_file, json_errors=as_json)
+    plan = load_or_exit(plan_file, json_errors=as_json, ways=True)
     try:
         looks = read_looks(looks_file)
     except LooksError as exc:
@@ -406,6 +420,10 @@ def replay(
     from opportune.policies.named import UnknownPolicy, make_policy
 
     policy = _current_names([policy])[0]
+    from opportune.formats.ways import WAYS_POLICIES, not_for_ways
+
+    if plan.is_ways and policy not in WAYS_POLICIES:
+        fail(not_for_ways(f"replay --policy {policy}"), 2)
     try:
         chosen = make_policy(policy, budget=decision_budget, visible=plan.simulation.get("visible", 2),
                              capacity=buffer_capacity)

@@ -399,6 +399,7 @@ def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_
     rng = random.Random(seed)
     ways = _Ways(table)
     logs: list[float] = []
+    first: list[float] = []         # the first run, when the later ones are larger
     size = particles
     while len(logs) < max_runs and not dl.expired():
         start = time.perf_counter()
@@ -406,13 +407,17 @@ def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_
             logs.append(_smc_run(ways, mask, size, rng, dl))
         except BudgetExceeded:
             break
-        if len(logs) == 1 and dl.finite:
+        if len(logs) == 1 and not first and dl.finite:
             # more walks a run where the time allows RUNS_IN_TIME runs of them: the spread of a run's
-            # logarithm falls as its walks grow (every run, the first too, is an unbiased estimate)
+            # logarithm falls as its walks grow.  The first run is set aside, and counts only if fewer
+            # than two larger runs finish (a choice by the number of runs, not their values: unbiased)
             size = _run_size(particles, time.perf_counter() - start, dl.remaining())
+            if size > particles:
+                first, logs = logs, []
+                continue
         if len(logs) >= MIN_RUNS and _interval(logs)[1] <= rel_error:
             break
-    return _result(logs)
+    return _result(logs if len(logs) >= 2 else first + logs)
 
 
 def _run_size(particles: int, seconds: float, left: float) -> int:

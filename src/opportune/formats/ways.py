@@ -32,7 +32,10 @@ from opportune.limits import MAX_CONSTRAINTS, MAX_WAYS
 from opportune.planning.plan import Part, Plan, Strategy, Way
 from opportune.planning.ways import Undecided, WaysTable
 
-__all__ = ["SEARCH_WORK", "check_ways", "ways_of_strategy", "ways_plan"]
+__all__ = ["SEARCH_WORK", "WAYS_POLICIES", "check_ways", "not_for_ways", "ways_of_strategy", "ways_plan"]
+
+#: The policies that decide on a plan written as ways (the others read the orders of strategies).
+WAYS_POLICIES = ("paper", "bin-first")
 
 #: Most sets the check of a plan of ways visits looking for an admissible sequence (about 2 s of
 #: pure Python on 300 parts at worst; a plan with one is found in a few hundred sets as a rule).
@@ -243,3 +246,25 @@ def ways_plan(name: str, parts, ways, *, description: str | None = None, simulat
     """
     return Plan(name=name, parts=tuple(parts), strategies=(), source=source, description=description,
                 simulation=simulation or {}, ways={k: tuple(v) for k, v in ways.items()})
+
+
+def not_for_ways(what: str) -> str:
+    """The refusal of a command (or policy) that does not take plans written as ways yet.
+
+    Parameters
+    ----------
+    what : str
+        The command or policy, as the user named it.
+
+    Returns
+    -------
+    str
+        The message: what does take such a plan.
+
+    Examples
+    --------
+    >>> not_for_ways("graph").split(":")[0]
+    'graph does not take a plan written as ways yet'
+    """
+    return (f"{what} does not take a plan written as ways yet: check, count, replay (--policy "
+            f"{' or '.join(WAYS_POLICIES)}) and the Sequencer do")
