@@ -251,3 +251,18 @@ def test_commands_that_do_not_take_ways_plans_yet_say_so_without_a_traceback(tmp
     result = CliRunner().invoke(app, [args[0], str(path), *extra, *args[1:]])
     assert result.exit_code in (1, 2) and "Traceback" not in result.output
     assert "does not take a plan written as ways yet" in result.output, result.output
+
+
+def test_the_checks_search_for_a_sequence_is_bounded_and_warns_when_cut(monkeypatch):
+    from opportune.formats import ways as ways_format
+
+    # 12 free parts but one that must go in first while another is in: undecidable within 3 sets
+    text = "parts: [" + ", ".join(f"p{i}" for i in range(12)) + "]\nways: {p0: [{after: [p1], blockers: [p2]}]}\n"
+    assert check_text(text, file="w.yaml").ok
+    monkeypatch.setattr(ways_format, "SEARCH_WORK", 3)
+    result = check_text(text, file="w.yaml")
+    assert result.ok and [p.code for p in result.warnings] == ["ways-undecided"]
+    monkeypatch.setattr(ways_format, "SEARCH_WORK", 10**9)
+    monkeypatch.setattr(ways_format, "SEARCH_SECONDS", -1.0)      # no time at all: cut at once
+    result = check_text(text, file="w.yaml")
+    assert result.ok and [p.code for p in result.warnings] == ["ways-undecided"]

@@ -21,10 +21,13 @@ more partial orders than a plan holds, and one way list per part (:mod:`opportun
 Limits (:mod:`opportune.limits`): at most :data:`~opportune.limits.MAX_WAYS` ways per part and
 :data:`~opportune.limits.MAX_CONSTRAINTS` part ids in all the ways of a plan, checked before anything
 else is built; every part of quantity 1; and the plan must have an admissible sequence, searched for
-within :data:`SEARCH_WORK` sets (a plan not decided within it is accepted with a warning).
+within :data:`SEARCH_WORK` sets and :data:`SEARCH_SECONDS` (a plan not decided within them is accepted
+with a warning).
 """
 
 from __future__ import annotations
+
+import time
 
 from opportune.formats.documents import Document
 from opportune.formats.problems import Problem, closest
@@ -37,9 +40,12 @@ __all__ = ["SEARCH_WORK", "WAYS_POLICIES", "check_ways", "not_for_ways", "ways_o
 #: The policies that decide on a plan written as ways (the others read the orders of strategies).
 WAYS_POLICIES = ("paper", "bin-first")
 
-#: Most sets the check of a plan of ways visits looking for an admissible sequence (about 2 s of
-#: pure Python on 300 parts at worst; a plan with one is found in a few hundred sets as a rule).
+#: Most sets the check of a plan of ways visits looking for an admissible sequence (a plan with one is
+#: found in as many sets as it has parts as a rule: each set not taken is proved dead first).
 SEARCH_WORK = 20_000
+#: Seconds the check's search may take at most, whatever the plan's size (10,000 parts of 256 ways each
+#: make a set cost seconds): past them the plan is accepted with a warning.
+SEARCH_SECONDS = 2.0
 
 
 def _ids(value) -> list[str]:
@@ -65,7 +71,9 @@ def check_ways(data: dict, doc: Document, parts: list[Part]) -> tuple[dict[str, 
 
     Examples
     --------
-    >>> from opportune.formats.documents import Document
+    >>> import time
+
+from opportune.formats.documents import Document
     >>> data = {"parts": ["a", "b"], "ways": {"b": [{"blockers": ["a", "c"]}]}}
     >>> ways, problems = check_ways(data, Document(data, {}, "f.yaml"), [Part("a"), Part("b")])
     >>> [p.message for p in problems]
@@ -156,17 +164,19 @@ def feasibility_problems(plan: Plan, doc: Document) -> list[Problem]:
 
     Examples
     --------
-    >>> from opportune.formats.documents import Document
+    >>> import time
+
+from opportune.formats.documents import Document
     >>> plan = Plan("p", (Part("a"), Part("b")), (), ways={"a": (Way(frozenset("b")),), "b": (Way(frozenset("a")),)})
     >>> [p.code for p in feasibility_problems(plan, Document({}, {}, None))]
     ['ways-infeasible']
     """
     table = WaysTable.of(plan)
     try:
-        found = table.completion(0, SEARCH_WORK)
+        found = table.completion(0, SEARCH_WORK, time.perf_counter() + SEARCH_SECONDS)
     except Undecided:
-        return [Problem(f"no admissible sequence found within {SEARCH_WORK:,} sets searched (nor proof that "
-                        "there is none)", "count the plan: a count of 0 means no sequence is admissible",
+        return [Problem(f"no admissible sequence found within {SEARCH_WORK:,} sets or {SEARCH_SECONDS:g} s of "
+                        "search (nor proof that there is none)", "count the plan: a count of 0 means no sequence is admissible",
                         file=doc.file, line=doc.line(("ways",)), severity="warning", code="ways-undecided")]
     if found is not None:
         return []

@@ -14,6 +14,8 @@ Complexity: :meth:`WaysTable.can_go` is O(ways of the part × needs) mask operat
 
 from __future__ import annotations
 
+import time
+
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -153,7 +155,7 @@ class WaysTable:
             left = [(i, b) for i, b in left if rest >> i & 1]
         return False
 
-    def completion(self, mask: int = 0, work: int = 1_000_000) -> list[int] | None:
+    def completion(self, mask: int = 0, work: int = 1_000_000, until: float | None = None) -> list[int] | None:
         """One admissible completion of ``mask`` (the parts' positions in the order they go in), or None
         if it has none: a depth-first search that remembers the sets found to have no completion.
 
@@ -163,6 +165,8 @@ class WaysTable:
             The installed parts.
         work : int
             Most sets the search may visit.
+        until : float, optional
+            A moment of ``time.perf_counter()`` past which the search stops, undecided.
 
         Returns
         -------
@@ -172,7 +176,7 @@ class WaysTable:
         Raises
         ------
         Undecided
-            The search visited ``work`` sets without deciding.
+            The search visited ``work`` sets, or passed ``until``, without deciding.
 
         Examples
         --------
@@ -199,8 +203,8 @@ class WaysTable:
             if t in dead or self.shut_out(t) or self.locked(t):
                 continue
             visited += 1
-            if visited > work:
-                raise Undecided(f"no completion found after {work:,} sets")
+            if visited > work or (until is not None and time.perf_counter() > until):
+                raise Undecided(f"no completion found after {visited - 1:,} sets")
             path.append(b.bit_length() - 1)
             stack.append((t, self.goes(t)))
         return None
