@@ -30,14 +30,12 @@ the ways naming a part), kept incremental by :class:`_Walk`.
 from __future__ import annotations
 
 import math
-import random
 import time
 
 from opportune.engine.deadline import BudgetExceeded, Deadline, as_deadline
 from opportune.engine.memory import nbytes
 from opportune.engine.poset import bits as _bits
 from opportune.engine.result import CountResult
-from opportune.engine.stats import t_quantile
 from opportune.planning.ways import WaysTable
 
 __all__ = ["WaysChains", "WaysCounter", "estimate_completions"]
@@ -314,7 +312,7 @@ class _Walk:
         return [i for i in sorted(self.ready) if not self.shuts_out(i)]
 
 
-def _smc_run(ways: _Ways, start: int, particles: int, rng: random.Random, dl: Deadline,
+def _smc_run(ways: _Ways, start: int, particles: int, rng, dl: Deadline,
              finished: list | None = None) -> float:
     """``log`` of one sequential Monte Carlo estimate of the completions of ``start`` (``-inf``: all dead).
 
@@ -395,6 +393,8 @@ def estimate_completions(table: WaysTable, mask: int = 0, *, seed: int = 0, rel_
     >>> round(r.value), r.rel_error, r.exact
     (24, 0.0, False)
     """
+    import random       # here: a count's start-up does not load it (an exact count never draws)
+
     dl = as_deadline(deadline)
     rng = random.Random(seed)
     ways = _Ways(table)
@@ -431,6 +431,8 @@ def _run_size(particles: int, seconds: float, left: float) -> int:
 
 def _interval(logs: list[float]) -> tuple[float, float]:
     """``(log of the mean weight, relative half-width of its 95% interval)``."""
+    from opportune.engine.stats import t_quantile   # here: it loads statistics and random (a count's start-up)
+
     top = max(logs)
     if top == -math.inf:
         return -math.inf, math.inf
@@ -477,6 +479,8 @@ class WaysChains:
     """
 
     def __init__(self, table: WaysTable, mask: int, *, chains: int = 8, seed: int = 0):
+        import random
+
         self.table = table
         self.ways = _Ways(table)
         self.rng = random.Random(seed)
