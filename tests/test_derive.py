@@ -654,3 +654,25 @@ def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monk
     r = run_cli("derive", folder)
     assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
     assert not called
+
+
+def test_a_direction_blocked_by_the_only_support_is_no_way_in_the_ways_form():
+    """b rests on a alone, and a is in b's way along -z: b goes in along +x only (a way whose need its
+    blockers hold never admits the part, and a plan file refuses it; derive leaves it out)."""
+    from opportune.derive.blocking import Blocking
+    from opportune.derive.plan import Conditions
+    from opportune.derive.ways import exact_ways
+    from opportune.formats.loader import plan_from_dict
+
+    free = {"-z": frozenset(), "+x": frozenset()}
+    block = Blocking(("a", "b", "c"), {"-z": (0, 0, -1), "+x": (1, 0, 0)},
+                     {"a": free, "b": {"-z": frozenset("a"), "+x": frozenset("c")}, "c": free}, 0, 0)
+    ways = exact_ways(block, Conditions({"b": (("gravity", frozenset("a")),)}))
+    assert [(w.name, w.blockers, w.needs) for w in ways["b"]] == [("+x", frozenset("c"), (frozenset("a"),))]
+    from opportune.derive import plan_of
+
+    plan = plan_of(block, [], "three", "listed", ways=ways)
+    assert plan_from_dict(plan.to_dict()) == plan and Schedule(plan).count() == 1      # a, b, c
+    with pytest.raises(DeriveError, match="every direction of b is blocked"):
+        exact_ways(Blocking(("a", "b"), {"-z": (0, 0, -1)}, {"a": {"-z": frozenset()}, "b": {"-z": frozenset("a")}},
+                            0, 0), Conditions({"b": (("gravity", frozenset("a")),)}))

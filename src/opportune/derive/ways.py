@@ -70,14 +70,16 @@ def exact_ways(block: Blocking, conditions: Conditions | None = None,
     for p in block.parts:
         needs = () if p == conditions.base else tuple(n for _, n in conditions.needs.get(p, ()))
         fixed = tuple(after.get(p, ()))
-        must = frozenset(q for n in fixed for q in n)
-        # a direction blocked by a part that must be in before (the base, a process constraint) is no way
-        ways = [Way(blockers, needs + fixed, name=d) for d, blockers in opts[p] if not blockers & must]
+        # a direction whose blockers hold every part of a need (a support below that is in the way, the base,
+        # a process constraint) admits the part never: no way
+        ways = [Way(blockers, needs + fixed, name=d) for d, blockers in opts[p]
+                if not any(n <= blockers for n in needs + fixed)]
         if needs and conditions.may_go_first(p) and not fixed:
             ways.append(Way(frozenset(), fixed, name="first", first=True))
         if not ways:
-            raise DeriveError(f"no feasible sequence: every direction of {p} is blocked by a part that must go in "
-                              f"before it ({', '.join(sorted(must))}: the base, or a process constraint)")
+            raise DeriveError(f"no feasible sequence: every direction of {p} is blocked by all the parts of one of "
+                              "its needs (the parts it could rest on or touch, the base, a process constraint), "
+                              "which must go in before it")
         out[p] = tuple(ways)
     _check_feasible(block, out, conditions)
     return out
