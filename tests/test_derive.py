@@ -433,21 +433,66 @@ def test_units_and_a_missing_folder(tmp_path):
     assert r.exit_code == 1 and "units 'inch'" in r.output
 
 
-def test_an_exact_plan_larger_than_a_plan_holds_is_refused_not_approximated(tmp_path, monkeypatch):
+def test_an_exact_plan_larger_than_a_plan_holds_is_written_as_ways_and_refused_as_strategies(tmp_path, monkeypatch):
     from opportune.derive import plan as derive_plan
 
     folder = write_assembly(tmp_path / "eight", partition((3, 3, 3), 8, seed=0))     # 4 strategies exactly
+    exact = Schedule(derive(folder).plan).count()
     monkeypatch.setattr(derive_plan, "MAX_STRATEGIES", 3)
     r = run_cli("derive", folder)
-    assert r.exit_code == 1 and "needs 4 strategies" in r.output and "at most 3" in r.output
-    assert "no approximation" in r.output
+    assert r.exit_code == 0 and "needs 4 strategies" in r.output and "at most 3" in r.output
+    assert "\nways:" in r.output
+    with pytest.raises(DeriveError, match="needs 4 strategies.*no approximation"):
+        derive(folder, form="strategies")
+    ways = derive(folder)
+    assert "a plan holds at most 3: the plan is written as each part's ways in instead" in ways.notes[0]
+    assert ways.plan.is_ways and not ways.strategies and Schedule(ways.plan).count() == exact
     monkeypatch.setattr(derive_plan, "MAX_STRATEGIES", 4)
-    assert run_cli("derive", folder).exit_code == 0
+    assert not derive(folder).plan.is_ways
     monkeypatch.setattr(derive_plan, "MAX_WORKING", 3)
     r = run_cli("derive", folder, "--json")
-    message = json.loads(r.output)["error"]["message"]
-    assert r.exit_code == 1 and "union of more than 3 incomparable partial orders" in message
-    assert "no approximation" in message and "p02 (4)" in message, message     # the part with 4 ways named
+    doc = json.loads(r.output)
+    assert r.exit_code == 0 and "ways" in doc["plan"] and "strategies" not in doc["plan"]
+    assert any("union of more than 3 incomparable partial orders" in n and "p02 (4)" in n for n in doc["notes"])
+    with pytest.raises(DeriveError, match="form 'orders'"):
+        derive(folder, form="orders")
+    r = run_cli("derive", folder, "--explain")
+    assert r.exit_code == 1 and "--explain and --figure read the plan's strategies" in r.output
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(block=st.sampled_from(BLOCKS), k=st.integers(2, 12), seed=st.integers(0, 2**32 - 1))
+def test_random_voxel_assemblies_written_as_ways_admit_exactly_the_feasible_sequences(tmp_path_factory, mode, block,
+                                                                                       k, seed):
+    """The same comparison with the plan forced to the ways form (what derive writes where the union of
+    partial orders is too large): its count, samples, random orders and the brute force's walks."""
+    k = min(k, block[0] * block[1] * block[2])
+    parts = partition(block, k, seed)
+    folder = write_assembly(tmp_path_factory.mktemp("voxels"), parts)
+    options = dict(MODES[mode])
+    if "base" in options:
+        options["base"] = next(p for p, cells in parts.items() if (0, 0, 0) in cells)
+    brute = BruteForce(parts, block, gravity="gravity" in options, connected="connected" in options,
+                       base=options.get("base"))
+    try:
+        derived = derive(folder, directions="axes", form="ways", **options)
+    except DeriveError as exc:
+        assert brute.count() == 0, str(exc)
+        return
+    assert derived.plan.is_ways
+    assert load_plan_text(derived.plan) == derived.plan       # what derive writes reads back the same
+    assert Schedule(derived.plan).count() == brute.count() > 0
+    for k in range(10):
+        assert brute.feasible(Schedule(derived.plan).sample(seed=k))
+    assert_admits_exactly(derived, brute, seed)
+
+
+def load_plan_text(plan):
+    from opportune.formats.loader import plan_from_dict
+
+    return plan_from_dict(json.loads(json.dumps(plan.to_dict())), file=plan.source)
 
 
 @pytest.mark.parametrize("suffix", [".stl", ".ply"])
@@ -685,3 +730,25 @@ def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monk
     r = run_cli("derive", folder)
     assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
     assert not called
+
+
+def test_a_direction_blocked_by_the_only_support_is_no_way_in_the_ways_form():
+    """b rests on a alone, and a is in b's way along -z: b goes in along +x only (a way whose need its
+    blockers hold never admits the part, and a plan file refuses it; derive leaves it out)."""
+    from opportune.derive.blocking import Blocking
+    from opportune.derive.plan import Conditions
+    from opportune.derive.ways import exact_ways
+    from opportune.formats.loader import plan_from_dict
+
+    free = {"-z": frozenset(), "+x": frozenset()}
+    block = Blocking(("a", "b", "c"), {"-z": (0, 0, -1), "+x": (1, 0, 0)},
+                     {"a": free, "b": {"-z": frozenset("a"), "+x": frozenset("c")}, "c": free}, 0, 0)
+    ways = exact_ways(block, Conditions({"b": (("gravity", frozenset("a")),)}))
+    assert [(w.name, w.blockers, w.needs) for w in ways["b"]] == [("+x", frozenset("c"), (frozenset("a"),))]
+    from opportune.derive import plan_of
+
+    plan = plan_of(block, [], "three", "listed", ways=ways)
+    assert plan_from_dict(plan.to_dict()) == plan and Schedule(plan).count() == 1      # a, b, c
+    with pytest.raises(DeriveError, match="every direction of b is blocked"):
+        exact_ways(Blocking(("a", "b"), {"-z": (0, 0, -1)}, {"a": {"-z": frozenset()}, "b": {"-z": frozenset("a")}},
+                            0, 0), Conditions({"b": (("gravity", frozenset("a")),)}))

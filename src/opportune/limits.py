@@ -28,6 +28,7 @@ MAX_UNITS = 10_000           # install operations in all (the sum of the quantit
 MAX_STRATEGIES = 64          # alternative strategies (checking compares every pair of them)
 MAX_CONSTRAINTS = 1_000_000  # declared constraints, over all strategies
 MAX_WEIGHT = 1_000_000       # a constraint's weight (the price of dropping it; > 0, default 1)
+MAX_WAYS = 256               # ways in of one part, in a plan written as ways (derive's minimal ways: directions × supports)
 MAX_PRODUCTS = 16            # products built at once on as many fixtures (one bin)
 
 # ---------------------------------------------------------------- plan files (YAML, JSON)
@@ -113,6 +114,7 @@ LIMITS = {limit.key: limit for limit in (
     Limit("units", MAX_UNITS, "units", "units of a plan in all (the sum of the quantities)", BOTH),
     Limit("strategies", MAX_STRATEGIES, "strategies", "alternative strategies of a plan", BOTH),
     Limit("constraints", MAX_CONSTRAINTS, "constraints", "declared constraints, over all strategies", BOTH),
+    Limit("ways", MAX_WAYS, "ways", "ways in of one part, in a plan written as ways (`ways`)", BOTH),
     Limit("weight", MAX_WEIGHT, "", "a constraint's weight", BOTH),
     Limit("values", MAX_VALUES, "values", "values of a YAML or JSON document (keys included, aliases expanded)",
           BOTH),

@@ -174,11 +174,25 @@ def json_invalid_plan(path: Path, result, json_errors: bool) -> bool:
     return False
 
 
-def load_or_exit(path: Path, *, json_errors: bool = False) -> Plan:
-    """Load a plan, or print every error and exit 1."""
+def command_name() -> str:
+    """The command under way (``opportune graph``: "graph"), for a message."""
+    try:        # typer carries its own copy of click (newer typers), whose context is the one under way
+        from typer._click.globals import get_current_context
+    except ImportError:
+        from click import get_current_context
+    ctx = get_current_context(silent=True)
+    return ctx.info_name if ctx is not None else "this command"
+
+
+def load_or_exit(path: Path, *, json_errors: bool = False, ways: bool = False) -> Plan:
+    """Load a plan, or print every error and exit 1 (``ways``: the command takes plans written as ways)."""
     from opportune.formats.loader import CheckResult, read_plan
 
     result = read_plan(path)
+    if result.ok and result.plan.is_ways and not ways:
+        from opportune.formats.ways import not_for_ways
+
+        fail(not_for_ways(command_name()), as_json=json_errors or None)
     if not result.ok:
         if not json_invalid_plan(path, result, json_errors):
             print_problems(CheckResult(None, result.errors), err())

@@ -57,7 +57,7 @@ def check(plan_files: list[Path] = typer.Argument(..., help="Plan files (any for
 
 def _print_check(plan_file: Path, result) -> None:
     """``check``'s report of one file: its problems, or its summary (and warnings)."""
-    from opportune.formats.summary import summarize
+    from opportune.formats.summary import summarize, ways_line
 
     if not result.ok:
         print_problems(result, out())
@@ -68,7 +68,10 @@ def _print_check(plan_file: Path, result) -> None:
     s = summarize(result.plan)
     out().print(f"[bold]{escape(s['plan'])}[/] ({escape(str(plan_file))}): [green]valid[/]")
     units = f" ({s['units']} units)" if s["units"] != s["parts"] else ""
-    out().print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
+    if "ways" in s:      # a plan written as ways (opportune.formats.ways)
+        out().print(f"  parts: {s['parts']}; written as ways: {escape(ways_line(s['ways']))}")
+    else:
+        out().print(f"  parts: {s['parts']}{units}; strategies: {len(s['strategies'])}")
     for st in s["strategies"]:
         out().print(f"  strategy '{escape(st['name'])}': {st['declared']} constraints declared, "
                     f"{len(st['minimal'])} minimal, {st['implied']} implied in all (transitive closure)")
@@ -113,7 +116,7 @@ def count(
             out().print(line, markup=False, emoji=False)
 
     cli_count.run(plan_file, after, as_json, time_limit, max_memo, threads,
-                  load=lambda path: load_or_exit(path, json_errors=as_json), fail=fail, write=write)
+                  load=lambda path: load_or_exit(path, json_errors=as_json, ways=True), fail=fail, write=write)
 
 
 # ---------------------------------------------------------------- graph
@@ -189,7 +192,7 @@ def replay(
     from opportune.formats.looks import LooksError, read_looks
     from opportune.sequencer import Sequencer, SequencerError
 
-    plan = load_or_exit(plan_file, json_errors=as_json)
+    plan = load_or_exit(plan_file, json_errors=as_json, ways=True)
     try:
         looks = read_looks(looks_file)
     except LooksError as exc:
@@ -197,6 +200,10 @@ def replay(
     from opportune.policies.named import UnknownPolicy, make_policy
 
     policy = policy_names([policy])[0]
+    from opportune.formats.ways import WAYS_POLICIES, not_for_ways
+
+    if plan.is_ways and policy not in WAYS_POLICIES:
+        fail(not_for_ways(f"replay --policy {policy}"), 2)
     try:
         chosen = make_policy(policy, budget=decision_budget, visible=plan.simulation.get("visible", 2),
                              capacity=buffer_capacity)

@@ -24,10 +24,11 @@ from opportune.derive.geometry import SCENE_SUFFIXES, Assembly, GeometryError, r
 from opportune.derive.manifest import (MANIFEST, Manifest, ManifestError, check_interchangeable, check_parts,
                                        manifest_from, merge_units, part_ids, read_manifest, unit_pairs,
                                        without_fixture)
-from opportune.derive.plan import Conditions, DeriveError, DerivedStrategy, alternatives, exact_strategies, options
+from opportune.derive.plan import (Conditions, DeriveError, DerivedStrategy, TooManyStrategies, alternatives,
+                                   exact_strategies, options)
 from opportune.derive.mjcf import read_mjcf_assembly
 from opportune.derive.scene import read_scene_assembly
-from opportune.planning.plan import Plan, PlanError
+from opportune.planning.plan import Plan, PlanError, Way
 
 __all__ = ["derive", "Derivation", "DeriveError", "GeometryError", "ManifestError", "DIRECTION_SETS", "plan_of"]
 
@@ -104,7 +105,7 @@ class Derivation:
         >>> d = derive("geometry:gearbox")
         >>> row = d.to_dict()
         >>> row["parts"], row["strategies"], row["blockers"]["cover"]["+x"]
-        (14, 7, ['screw_1', 'screw_2', 'screw_3', 'screw_4'])
+        (14, 10, ['screw_1', 'screw_2', 'screw_3', 'screw_4'])
         """
         b = self.blocking
         return {"parts": len(b.parts), "directions": list(b.directions), "tolerance_m": b.tolerance,
@@ -120,7 +121,8 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
            tolerance: float | None = None, units: str = "m", name: str | None = None, gravity: str | None = None,
            connected: bool = False, base: str | None = None, manifest: str | Path | None = None,
            names: Mapping[str, str] | None = None, quantities: Mapping[str, Sequence[str]] | None = None,
-           fixture: str | None = None, requires: Mapping[str, Sequence[str]] | None = None) -> Derivation:
+           fixture: str | None = None, requires: Mapping[str, Sequence[str]] | None = None,
+           form: str = "auto") -> Derivation:
     """Derive the plan of an assembly: exactly the sequences feasible under the motion model.
 
     Parameters
@@ -152,6 +154,9 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
         As the manifest's keys, replacing them: display names; identical parts (a part id: its instances);
         the part installed first (it needs no support); the part in place from the start (not installed); process constraints
         (a part id: the parts before it), added to every strategy.
+    form : str
+        ``"auto"`` (strategies where the exact union of partial orders fits a plan, else each part's ways
+        in: :mod:`opportune.derive.ways`), ``"strategies"`` (refused where they do not fit) or ``"ways"``.
 
     Returns
     -------
@@ -166,7 +171,8 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
     ManifestError
         A manifest (or keyword) that cannot be used: every problem, with its file, line and key.
     DeriveError
-        No feasible sequence (the parts that lock each other named), or an exact plan larger than a plan holds.
+        No feasible sequence (the parts that lock each other named), an exact plan larger than a plan holds
+        (``form="strategies"``), identical parts in a plan written as ways, or an unknown ``form``.
 
     Examples
     --------
@@ -216,14 +222,45 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
         block = without_fixture(block, man.fixture)
         conditions = _held_by_fixture(conditions, man.fixture)
     check_interchangeable(man, _ways(block, conditions))
-    strategies = exact_strategies(block, conditions, unit_pairs(man, block.parts))
-    written = merge_units(man, block.parts, strategies)
+    strategies, ways, why = _exact(block, conditions, man, form)
     from opportune.derive.shapes import shapes
 
     carried, notes = shapes(assembly)
-    plan = plan_of(block, written, name or title or "assembly", label, carried, manifest=man, conditions=conditions)
+    written = merge_units(man, block.parts, strategies) if ways is None else []
+    plan = plan_of(block, written, name or title or "assembly", label, carried, manifest=man, conditions=conditions,
+                   ways=ways)
+    if ways is not None:
+        notes = [why] + list(notes)
     return Derivation(plan, block, tuple(strategies), time.process_time() - start, tuple(contacts), conditions,
                       assembly, tuple(notes))
+
+
+FORMS = ("auto", "strategies", "ways")
+
+
+def _exact(block: Blocking, conditions: Conditions, man: Manifest, form: str) -> tuple[list, dict | None, str]:
+    """The exact plan: strategies (and None), or no strategies and each part's ways with why."""
+    if form not in FORMS:
+        raise DeriveError(f"form {form!r}: give one of {', '.join(FORMS)}")
+    pairs = unit_pairs(man, block.parts)
+    if form != "ways":
+        try:
+            return exact_strategies(block, conditions, pairs), None, ""
+        except TooManyStrategies as exc:
+            if form == "strategies":
+                raise
+            said = str(exc).split(": give fewer")[0].replace(", and the engine counts and runs unions of partial "
+                                                             "orders only", "")
+            why = f"{said}: the plan is written as each part's ways in instead, as exact (docs/derive.md)"
+    else:
+        why = "written as each part's ways in (exact), as asked"
+    if any(len(v) > 1 for v in man.quantities.values()):
+        raise DeriveError("identical parts (the manifest's quantities) are not written as ways yet: the exact plan "
+                          "needs them as strategies" + (f" ({why})" if form != "ways" else "")
+                          + "; derive without quantities (each instance a part of its own)")
+    from opportune.derive.ways import exact_ways
+
+    return [], exact_ways(block, conditions, pairs), why
 
 
 def _resolve(source):
@@ -298,7 +335,8 @@ def _direction_set(directions, man: Manifest) -> tuple[str, dict | None]:
 
 
 def plan_of(block: Blocking, written: list, name: str, directions: str, shapes: dict[str, dict] | None = None, *,
-            manifest: Manifest | None = None, conditions: Conditions | None = None) -> Plan:
+            manifest: Manifest | None = None, conditions: Conditions | None = None,
+            ways: Mapping | None = None) -> Plan:
     """The strategies as a plan, through the plan checker (what ``opportune check`` reads back).
 
     Parameters
@@ -318,6 +356,9 @@ def plan_of(block: Blocking, written: list, name: str, directions: str, shapes: 
         Names, quantities, base, fixture and process constraints, as the plan states them.
     conditions : Conditions, optional
         The supports asked (``gravity``, ``connected``), as the description states them.
+    ways : mapping of str to tuple of Way, optional
+        Each part's ways in (:func:`opportune.derive.ways.exact_ways`): the plan is written as ways, and
+        ``written`` is empty.
 
     Returns
     -------
@@ -349,8 +390,13 @@ def plan_of(block: Blocking, written: list, name: str, directions: str, shapes: 
         f"from far away along one of the directions {directions} ({', '.join(block.directions)}), sliding along "
         f"faces it touches, never through another part (penetration tolerance {block.tolerance:.6g} m). "
         + _supports_text(conditions)
-        + "Each strategy is one choice of a way in per part; the plan admits exactly the feasible sequences."
-        + extra), "parts": [], "strategies": []}
+        + ("Each strategy is one choice of a way in per part; " if ways is None else
+           "Each part lists its ways in (a direction, the parts it must go in before, the supports it needs); ")
+        + "the plan admits exactly the feasible sequences." + extra), "parts": []}
+    if ways is not None:
+        doc["ways"] = {p: [w.to_dict() for w in ws] for p, ws in ways.items() if ws != (Way(),)}
+    else:
+        doc["strategies"] = []
     for pid in part_ids(man, block.parts):
         quantity = len(man.quantities.get(pid, (pid,)))
         entry = {"id": pid, **({"name": man.names[pid]} if pid in man.names else {}),

@@ -117,7 +117,7 @@ class Assembly:
     >>> from opportune.datasets import geometry_path
     >>> a = read_assembly(geometry_path("gearbox"))
     >>> len(a.parts), a.parts[0].id, round(a.size, 3), a.units
-    (14, 'bearing_a1', 0.134, 'm')
+    (14, 'bearing_a1', 0.141, 'm')
     """
 
     parts: tuple[PartShape, ...]

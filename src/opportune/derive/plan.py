@@ -42,6 +42,11 @@ class DeriveError(ValueError):
     """
 
 
+class TooManyStrategies(DeriveError):
+    """The exact union of partial orders needs more than a plan holds: :func:`opportune.derive.derive`
+    writes the plan as ways instead (:mod:`opportune.derive.ways`), unless asked for strategies only."""
+
+
 @dataclass(frozen=True)
 class DerivedStrategy:
     """One strategy: a direction for each part, and the order it forces as ``(before, after)`` pairs
@@ -330,11 +335,11 @@ def exact_strategies(block: Blocking, conditions: Conditions | None = None,
                     grown[more.key] = (more, {**names, p: w.name})
         working = _undominated(list(grown.values()), MAX_WORKING)
         if working is None:
-            raise DeriveError(_wall_message(ways, order[:step + 1], len(ids)))
+            raise TooManyStrategies(_wall_message(ways, order[:step + 1], len(ids)))
         if not working:
             raise DeriveError(_contradiction_message(before, ways, conditions) if before else _no_sequence_message(ways, conditions))
     if len(working) > MAX_STRATEGIES:
-        raise DeriveError(f"the exact plan needs {len(working)} strategies (none of whose sequences contain "
+        raise TooManyStrategies(f"the exact plan needs {len(working)} strategies (none of whose sequences contain "
                           f"another's); a plan holds at most {MAX_STRATEGIES}: give fewer directions, or derive "
                           "subassemblies; no approximation is written")
     return [DerivedStrategy(dict(sorted(names.items(), key=lambda kv: index[kv[0]])), reduction(ids, closure.above))

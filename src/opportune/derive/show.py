@@ -38,8 +38,8 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
     Raises
     ------
     ValueError
-        A figure's suffix or strategy that cannot be drawn (checked before anything is drawn), or a figure
-        file that cannot be written.
+        A figure's suffix or strategy that cannot be drawn (checked before anything is drawn), a figure
+        file that cannot be written, or an explanation or figure asked of a plan written as ways.
 
     Examples
     --------
@@ -49,6 +49,10 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
     'gearbox: 14 parts, 10 strategies'
     """
     out = Shown(notes=list(derivation.notes))
+    if derivation.plan.is_ways and (explain or figure is not None):
+        raise ValueError("--explain and --figure read the plan's strategies, and this plan is written as each part's "
+                         "ways in (its partial orders are too many for a plan): derive without them, or give fewer "
+                         "directions or a base part for a plan of strategies")
     if figure is not None:
         from opportune.derive.figure import exploded
 

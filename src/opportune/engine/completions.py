@@ -58,6 +58,10 @@ class CompletionQuestions:
         >>> abs(est.first[0][0] - 2 / 3) < 0.05
         True
         """
+        if self.plan.ways is not None:      # a plan written as ways: completions drawn by sequential Monte Carlo
+            from opportune.engine.ways import WaysChains
+
+            return WaysChains(self.engine.table, self.mask, chains=chains, seed=seed)
         from opportune.engine.sampling import CompletionChains    # here: a count never draws
 
         return CompletionChains(self.engine.posets[strategy], self.engine.full & ~self.mask, chains=chains, seed=seed)
@@ -145,6 +149,9 @@ class CompletionQuestions:
         3
         """
 
+        if self.plan.ways is not None:      # a plan written as ways: its own exact count and estimate
+            return self.engine.count_result(self.mask, rel_error=rel_error, time_limit=time_limit, seed=seed,
+                                            exact_share=exact_share, deadline=deadline, estimate=estimate)
         if not estimate:
             if deadline is None:
                 return CountResult(self.engine.count(self.mask, self.consistent))

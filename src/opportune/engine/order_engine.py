@@ -7,6 +7,8 @@ and its memory upkeep in :mod:`~opportune.engine.memory`.
 
 from __future__ import annotations
 
+from abc import ABCMeta
+
 from opportune.engine.count import Counter, entries_within
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.exact import ExactCounting
@@ -14,6 +16,7 @@ from opportune.engine.hub import HubPath
 from opportune.engine.memory import MemoryUpkeep, memory_total
 from opportune.engine.poset import Poset
 from opportune.engine.questions import StateQuestions
+from opportune.engine.waysengine import WaysEngine
 
 # not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
 TYPE_CHECKING = False
@@ -24,7 +27,7 @@ if TYPE_CHECKING:
 DEFAULT_MEMORY = memory_total() // 4
 
 
-class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
+class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep, metaclass=ABCMeta):
     """The order engine of one plan: its unit posets and their counters.
 
     Create one per plan and share it between all schedules, sequencers and
@@ -69,6 +72,13 @@ class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
     >>> Schedule(engine).count(), Schedule(engine).install("b").count()     # one memo for both
     (6, 3)
     """
+
+    def __new__(cls, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
+                deadline: Deadline | float | None = None, memory_limit: int | None = DEFAULT_MEMORY):
+        if cls is OrderEngine and getattr(plan, "ways", None) is not None:   # a plan written as ways
+            return WaysEngine(plan, max_memo=max_memo, time_limit=time_limit, deadline=deadline,
+                              memory_limit=memory_limit)
+        return super().__new__(cls)
 
     def __init__(self, plan: Plan, *, max_memo: int | None = 2_000_000, time_limit: float | None = None,
                  deadline: Deadline | float | None = None, memory_limit: int | None = DEFAULT_MEMORY):
@@ -116,3 +126,7 @@ class OrderEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         self._hub_search: dict[Counter, HubPath] = {}   # a hub search cut short by a deadline, to resume
         self._probe_left: dict[Counter, int] = {}       # new memo entries the plain probe may still add
         self._until: float | None = None                # the deadline of :meth:`deadline`, if any
+
+
+# the engine of a plan written as ways is an order engine to every caller (isinstance), by its own class
+OrderEngine.register(WaysEngine)

@@ -287,6 +287,8 @@ class Schedule(CompletionQuestions):
         u = self.engine.next_unit(self.mask, i)
         if u is None:
             return []
+        if self.plan.ways is not None:
+            return self.engine.missing_before(self.mask, part)
         best = None
         for s in range(self.engine.k):
             if self.consistent >> s & 1:

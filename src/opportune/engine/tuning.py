@@ -356,3 +356,33 @@ LABEL_DIGITS = 15
 CORE_MAX_ELEMENTS = 1024
 #: Threads that count and draw in relaxation Monte Carlo, at most (``MAX_THREADS`` in ``src/native/relax.cpp``).
 RELAX_MAX_THREADS = 256
+
+
+# ------------------------------------------------------------------ plans written as ways (engine/ways.py)
+
+#: New memo entries between two readings of the clock (each entry is O(parts × ways) mask work).
+WAYS_CHECK_EVERY = 64
+#: Entries the memo of a :class:`~opportune.engine.ways.WaysCounter` holds at most before its oldest half is
+#: dropped (about 150 bytes an entry on 300 parts: 300 MB).
+WAYS_MAX_TOTAL = 2_000_000
+#: Runs an estimate makes at least before it may stop on its stated error (fewer say little of the spread).
+WAYS_MIN_RUNS = 4
+#: Steps a draw of :class:`~opportune.engine.ways.WaysChains` counts for, per part left: its draws are
+#: independent runs, not a chain that needs mixing, so the policies' test of mixing (steps per part left)
+#: passes at once.
+WAYS_MIXED = 1_000
+#: Walks of the first sequential Monte Carlo run (more walks, a run of smaller variance and longer time):
+#: few, so that a run finishes on 300 parts within a second of CPU; later runs take as many as the time
+#: allows (``engine.ways._run_size``).
+WAYS_PARTICLES = 8
+#: Runs the size of the later runs is chosen to fit in the time left: four times :data:`WAYS_MIN_RUNS`, so that
+#: a machine slower than the first run said still finishes several.
+WAYS_RUNS_IN_TIME = 16
+#: Walks of a run at most, where the time allows more than :data:`WAYS_PARTICLES` (see ``engine.ways._run_size``).
+WAYS_MAX_PARTICLES = 4096
+#: Steps between two checks of a walk for parts that lock each other (``engine.ways._Walk.locked``, O(ways)
+#: mask operations a pass): a walk past such a lock has no completion but can go on for many steps (on random
+#: blocks of 300 parts, from the 25th part to the 290th); caught, it weighs 0 and the resampling
+#: replaces it.  Every 4th step: a quarter of the checks' time, a walk kept at most 3 steps too long.
+WAYS_LOCK_EVERY = 4
+

@@ -98,6 +98,12 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
     known = set(ids)
     andor = None
     unlisted_unknown = [0]
+    ways = None
+    if "ways" in data:      # each part's ways in: no strategies (opportune.formats.ways)
+        from opportune.formats.ways import check_ways
+
+        ways, ways_problems = check_ways(data, doc, parts)
+        return _ways_result(data, doc, parts, ways, problems + ways_problems)
     if "assemblies" in data:  # an AND/OR graph (issue 15): expanded into strategies, checked there
         from opportune.formats.andor import check_assemblies
 
@@ -121,6 +127,21 @@ def check_document(doc: Document, *, allow_cycles: bool = False) -> CheckResult:
             object.__setattr__(plan, "_strategy_summaries", tuple(keep_summary(o) for o in orders))
     unlisted[("unknown-part", "error")] += unlisted_unknown[0]
     return CheckResult(plan, _capped(_sorted(problems), unlisted))
+
+
+def _ways_result(data: dict, doc: Document, parts: list[Part], ways: dict, problems: list[Problem]) -> CheckResult:
+    """The check's result for a plan written as ways: the plan if no error, searched for a sequence."""
+    plan = None
+    if not any(p.severity == "error" for p in problems):
+        from opportune.formats.ways import feasibility_problems, ways_plan
+
+        name = data.get("name") or (file_stem(doc.file) if doc.file else "plan")
+        plan = ways_plan(str(name), parts, ways, description=data.get("description") or data.get("source"),
+                         simulation=data.get("simulation") or {}, source=doc.file)
+        problems = problems + feasibility_problems(plan, doc)
+        if any(p.severity == "error" for p in problems):
+            plan = None
+    return CheckResult(plan, _capped(_sorted(problems)))
 
 
 def _size_problems(data: dict, doc: Document) -> list[Problem]:

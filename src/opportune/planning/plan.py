@@ -192,6 +192,92 @@ class Strategy:
 
 
 @dataclass(frozen=True)
+class Way:
+    """One way a part can go in, in a plan written as ways (``ways:`` in a file, :attr:`Plan.ways`).
+
+    The part may go in by this way when none of its ``blockers`` is installed yet and, for each set of
+    ``needs``, at least one part of that set is already installed.  A plain precedence ``a before b`` is
+    ``b``'s need ``{a}``; a support (``--gravity``: one of the parts ``b`` rests on) is one need of
+    several parts.
+
+    Parameters
+    ----------
+    blockers : frozenset of str
+        Parts that must not be installed yet when the part goes in this way (it goes in before them).
+    needs : tuple of frozenset of str
+        Sets of parts, each of which must already have at least one part installed.
+    name : str, optional
+        What the way is, for people (a direction such as ``"-z"``).
+    first : bool, default False
+        The way admits the part only as the first part of all (every other part a blocker; written
+        ``first: true``, not as a list of every other part).
+
+    Examples
+    --------
+    >>> w = Way(frozenset({"c"}), (frozenset({"a", "b"}),), name="-z")
+    >>> w.admits({"a"}), w.admits({"a", "c"}), w.admits(set())
+    (True, False, False)
+    """
+
+    blockers: frozenset = frozenset()
+    needs: tuple = ()
+    name: str | None = None
+    first: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "blockers", frozenset(self.blockers))
+        object.__setattr__(self, "needs", tuple(frozenset(n) for n in self.needs))
+
+    def admits(self, installed) -> bool:
+        """Whether the part can go in this way with ``installed`` in (a set of part ids).
+
+        Parameters
+        ----------
+        installed : set of str
+            The parts installed so far.
+
+        Returns
+        -------
+        bool
+            No blocker installed, and every need met by an installed part.
+
+        Examples
+        --------
+        >>> Way(frozenset(), (frozenset({"a"}),)).admits({"a"})
+        True
+        """
+        if self.first and installed:
+            return False
+        return not (self.blockers & installed) and all(n & installed for n in self.needs)
+
+    def to_dict(self) -> dict:
+        """The way as a file writes it: ``name``, ``blockers``, ``after`` (needs of one part), ``needs``.
+
+        Returns
+        -------
+        dict
+            Ids sorted; empty fields left out.
+
+        Examples
+        --------
+        >>> Way(frozenset({"c"}), (frozenset({"a"}), frozenset({"b", "d"}))).to_dict()
+        {'blockers': ['c'], 'after': ['a'], 'needs': [['b', 'd']]}
+        """
+        doc: dict = {"name": self.name} if self.name else {}
+        if self.first:
+            doc["first"] = True
+        if self.blockers:
+            doc["blockers"] = sorted(self.blockers)
+        after = sorted(next(iter(n)) for n in self.needs if len(n) == 1)
+        several = [sorted(n) for n in self.needs if len(n) > 1]
+        if after:
+            doc["after"] = after
+        if several:
+            doc["needs"] = several
+        return doc
+
+
+@dataclass(frozen=True)
 class Plan:
     """Parts (in declaration order) and one or more strategies.
 
@@ -215,6 +301,12 @@ class Plan:
         The file's ``simulation`` settings (the cell's geometry and times).
     andor : AndOrGraph, optional
         The AND/OR graph the strategies were expanded from, kept for drawing.
+    ways : mapping of str to tuple of Way, optional
+        A plan written as ways (no strategies): each part's ways in (a part not listed has one way with
+        no blockers and no needs).  A sequence is admissible iff each part, when installed, has a way
+        that admits what is in (:meth:`Way.admits`).  A plan of one strategy is the special case where
+        each part has one way whose needs are its required parts, one each
+        (:func:`opportune.formats.ways.ways_of_strategy`).
 
     Examples
     --------
@@ -235,16 +327,27 @@ class Plan:
     # The AND/OR graph the strategies were expanded from (:mod:`opportune.formats.andor`), if any:
     # kept for drawing; every question about sequences uses the strategies, and to_dict writes them.
     andor: object | None = field(default=None, compare=False)
+    ways: Mapping | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "simulation", MappingProxyType(dict(self.simulation)))
         object.__setattr__(self, "parts", tuple(self.parts))
         object.__setattr__(self, "strategies", tuple(self.strategies))
         object.__setattr__(self, "_index", {p.id: i for i, p in enumerate(self.parts)})
+        if self.ways is not None:
+            object.__setattr__(self, "ways", MappingProxyType({k: tuple(v) for k, v in self.ways.items()}))
 
     def __reduce__(self):
         return (Plan, (self.name, self.parts, self.strategies, self.source, self.description,
-                       _plain(self.simulation), self.andor))
+                       _plain(self.simulation), self.andor, None if self.ways is None else dict(self.ways)))
+
+    def __hash__(self):
+        return hash((self.name, self.parts, self.strategies, self.source, self.description))
+
+    @property
+    def is_ways(self) -> bool:
+        """Whether the plan is written as ways (:attr:`ways`), not as strategies."""
+        return self.ways is not None
 
     @property
     def part_ids(self) -> tuple[str, ...]:
@@ -407,6 +510,9 @@ class Plan:
         doc["parts"] = parts
         if self.simulation:
             doc["simulation"] = _plain(self.simulation)
+        if self.ways is not None:
+            doc["ways"] = {pid: [w.to_dict() for w in ways] for pid, ways in self.ways.items()}
+            return doc
         doc["strategies"] = [
             {"name": s.name, "requires": {k: [b if s.weight(b, k) == 1 else {"part": b, "weight": _number(s.weight(b, k))}
                                               for b in v] for k, v in s.requires.items()}}

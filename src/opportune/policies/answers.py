@@ -318,7 +318,7 @@ def _settled(look: LookState, parts: list[str], rule) -> list[str] | None:
     """The parts the order alone proves best under ``rule`` (see :mod:`opportune.engine.dominance`),
     or None: only with one consistent strategy (a union's counts do not follow one order)."""
     consistent = look.consistent
-    if consistent & (consistent - 1):
+    if consistent & (consistent - 1) or not look.engine.posets:     # (a plan written as ways has no order)
         return None
     unit_of = {look.unit(p): p for p in parts}
     best = rule(look.engine.posets[consistent.bit_length() - 1], look.remaining, list(unit_of))

@@ -1,0 +1,217 @@
+"""A plan written as ways, as bit masks: which parts can go in on top of an installed set.
+
+A plan written as ways (:attr:`opportune.planning.plan.Plan.ways`) admits a sequence iff each part,
+when it goes in, has a way none of whose blockers is in yet and each of whose needs has a part in.
+:class:`WaysTable` holds those ways as bit masks over the parts' declaration positions, and answers the
+questions every layer above asks of a state (what can go in now; whether some part can never go in any
+more; one completion, if there is one) without counting: the order engine counts
+(:mod:`opportune.engine.ways`), the file checker uses :meth:`WaysTable.completion` to refuse a plan
+with no admissible sequence.
+
+Complexity: :meth:`WaysTable.can_go` is O(ways of the part × needs) mask operations; :meth:`goes` and
+:meth:`shut_out` O(all ways).
+"""
+
+from __future__ import annotations
+
+import time
+
+# not typing.TYPE_CHECKING: importing typing costs 5 ms of every command's start-up
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from opportune.planning.plan import Plan
+
+__all__ = ["WaysTable", "Undecided"]
+
+
+class Undecided(Exception):
+    """A search for a completion stopped at its work bound before it found one or proved there is none."""
+
+
+class WaysTable:
+    """The ways of a plan's parts as bit masks (part ``i`` is bit ``i``, declaration order).
+
+    Parameters
+    ----------
+    n : int
+        Number of parts.
+    ways : list of list of (int, tuple of int)
+        Per part, its ways: ``(blockers mask, needs masks)``.
+
+    Examples
+    --------
+    >>> t = WaysTable(3, [[(0b010, ())], [(0, (0b001,))], [(0, ())]])    # a before b (both ways)
+    >>> bin(t.goes(0)), bin(t.goes(0b001))
+    ('0b101', '0b110')
+    >>> t.completion(0)
+    [0, 1, 2]
+    """
+
+    __slots__ = ("n", "full", "ways", "_free", "has_needs")
+
+    def __init__(self, n: int, ways: list):
+        self.n = n
+        self.full = (1 << n) - 1
+        self.ways = [[(int(b), tuple(int(x) for x in needs)) for b, needs in w] for w in ways]
+        # parts with a way that asks nothing: they can go in whenever they are not in yet
+        self._free = 0
+        for i, w in enumerate(self.ways):
+            if any(b == 0 and not needs for b, needs in w):
+                self._free |= 1 << i
+        #: whether any way has needs (without, :meth:`locked` decides liveness exactly)
+        self.has_needs = any(needs for w in self.ways for _, needs in w)
+
+    @classmethod
+    def of(cls, plan: Plan) -> "WaysTable":
+        """The table of a plan written as ways (a part the plan lists no way for: one free way).
+
+        Parameters
+        ----------
+        plan : Plan
+            A plan with :attr:`~opportune.planning.plan.Plan.ways`, every part of quantity 1.
+
+        Returns
+        -------
+        WaysTable
+            Its ways as masks.
+
+        Examples
+        --------
+        >>> from opportune.planning.plan import Part, Plan, Way
+        >>> plan = Plan("p", (Part("a"), Part("b")), (), ways={"b": (Way(frozenset({"a"})),)})
+        >>> WaysTable.of(plan).ways
+        [[(0, ())], [(1, ())]]
+        """
+        index = {p.id: i for i, p in enumerate(plan.parts)}
+
+        def mask(ids) -> int:
+            m = 0
+            for q in ids:
+                m |= 1 << index[q]
+            return m
+
+        given = plan.ways or {}
+        table = []
+        full = (1 << len(plan.parts)) - 1
+        for i, p in enumerate(plan.parts):
+            table.append([(full & ~(1 << i) if w.first else mask(w.blockers), tuple(mask(n) for n in w.needs))
+                          for w in given.get(p.id, ())] or [(0, ())])
+        return cls(len(plan.parts), table)
+
+    def can_go(self, mask: int, i: int) -> bool:
+        """Whether part ``i`` (not in ``mask``) has a way that admits the installed set ``mask``."""
+        if self._free >> i & 1:
+            return True
+        for blockers, needs in self.ways[i]:
+            if not blockers & mask and all(n & mask for n in needs):
+                return True
+        return False
+
+    def goes(self, mask: int) -> int:
+        """The parts not in ``mask`` that can go in on top of it, as a mask."""
+        out = self._free & ~mask
+        rest = self.full & ~mask & ~out
+        while rest:
+            b = rest & -rest
+            rest ^= b
+            if self.can_go(mask, b.bit_length() - 1):
+                out |= b
+        return out
+
+    def shut_out(self, mask: int) -> bool:
+        """Whether some part not in ``mask`` has every way blocked by a part in it: it can never go in,
+        so ``mask`` has no completion.  (A necessary sign of a dead end, not a sufficient one.)"""
+        rest = self.full & ~mask & ~self._free
+        while rest:
+            b = rest & -rest
+            rest ^= b
+            if all(blockers & mask for blockers, _ in self.ways[b.bit_length() - 1]):
+                return True
+        return False
+
+    def locked(self, mask: int) -> bool:
+        """Whether the parts not in ``mask`` lock each other: taken out last first while one can be (a
+        part can go in last if a way of it has no blocker in ``mask`` nor among the others left), some
+        remain.  Needs left aside: a locked set has no completion, and in a plan without needs only a
+        locked set has none (fewer parts in block less, so the order of taking out does not matter).
+        O(passes × ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0b010, ())], [(0b001, ())], [(0, ())]])     # a and b block each other
+        >>> t.locked(0), t.locked(0b100)
+        (True, True)
+        """
+        rest = self.full & ~mask
+        left = [(i, blockers) for i in _bits(rest) for blockers, _ in self.ways[i] if not blockers & mask]
+        while rest:
+            out = 0
+            for i, blockers in left:
+                if not blockers & rest & ~(1 << i):
+                    out |= 1 << i
+            if not out:
+                return True
+            rest &= ~out
+            left = [(i, b) for i, b in left if rest >> i & 1]
+        return False
+
+    def completion(self, mask: int = 0, work: int = 1_000_000, until: float | None = None) -> list[int] | None:
+        """One admissible completion of ``mask`` (the parts' positions in the order they go in), or None
+        if it has none: a depth-first search that remembers the sets found to have no completion.
+
+        Parameters
+        ----------
+        mask : int
+            The installed parts.
+        work : int
+            Most sets the search may visit.
+        until : float, optional
+            A moment of ``time.perf_counter()`` past which the search stops, undecided.
+
+        Returns
+        -------
+        list of int or None
+            The parts left, in an admissible order; None if there is none.
+
+        Raises
+        ------
+        Undecided
+            The search visited ``work`` sets, or passed ``until``, without deciding.
+
+        Examples
+        --------
+        >>> WaysTable(2, [[(0b10, ())], [(0b01, ())]]).completion() is None     # each blocks the other
+        True
+        """
+        dead: set[int] = set()
+        path: list[int] = []
+        stack = [(mask, self.goes(mask))]
+        visited = 0
+        while stack:
+            s, todo = stack[-1]
+            if s == self.full:
+                return path
+            if not todo:
+                dead.add(s)
+                stack.pop()
+                if path:
+                    path.pop()
+                continue
+            b = todo & -todo
+            stack[-1] = (s, todo ^ b)
+            t = s | b
+            if t in dead or self.shut_out(t) or self.locked(t):
+                continue
+            visited += 1
+            if visited > work or (until is not None and time.perf_counter() > until):
+                raise Undecided(f"no completion found after {visited - 1:,} sets")
+            path.append(b.bit_length() - 1)
+            stack.append((t, self.goes(t)))
+        return None
+
+
+def _bits(mask: int):
+    while mask:
+        b = mask & -mask
+        yield b.bit_length() - 1
+        mask ^= b
