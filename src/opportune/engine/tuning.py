@@ -197,3 +197,17 @@ RELAX_COUNT_SHARE = 0.5
 #: populations of at most START_KEEP_UNITS steps are kept.
 START_KEEP = 4
 START_KEEP_UNITS = 20_000
+
+# ------------------------------------------------------------ the pile's frontier window (policies/pile_window.py)
+# Measured with benchmarks/policy_lab.py (--bins pile --policies fallback --without-optimum, 16-20 parts)
+# and benchmarks/bench_fallback.py (CPU per decision on KILBRID).
+
+#: The pile window's sizes (parts, buffered ones and ancestors included) tried at a state in increasing
+#: size, the largest that fits PILE_WINDOW_STATES deciding (as the uniform window's sizes).
+PILE_WINDOW_PARTS = (5, 8, 12)
+#: Values (a state's looks and its value after a shake) the pile window's programme may hold per size
+#: tried: counted, not timed, so the decision is the same everywhere.
+PILE_WINDOW_STATES = 20_000
+#: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
+#: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
+PILE_WINDOW_CACHE = 512

@@ -29,6 +29,7 @@ from opportune.policies.optimal import (
     optimum_engine,
     same_action,
 )
+from opportune.policies.pile_window import PileWindow, pile_window_available
 from opportune.policies.variants import Slack
 from opportune.policies.window import FrontierWindow, window_available
 
@@ -154,9 +155,9 @@ class Lookahead(DecidesOnMasks):
         if self.pile:
             solver_settings.pop("weights", None)
         self.settings = solver_settings
-        if not self.pile:
-            self.window = FrontierWindow(self.fallback, visible=solver_settings.get("visible", 2),
-                                         capacity=solver_settings.get("capacity"), costs=solver_settings.get("costs"))
+        window = PileWindow if self.pile else FrontierWindow
+        self.window = window(self.fallback, visible=solver_settings.get("visible", 2),
+                             capacity=solver_settings.get("capacity"), costs=solver_settings.get("costs"))
         self.optimal = optimal
         self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
         #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
@@ -223,8 +224,11 @@ class Lookahead(DecidesOnMasks):
 
     def _window_serves(self, engine) -> bool:
         """Whether the frontier window decides where the optimum does not fit: a uniform bin and the
-        compiled core (:func:`~opportune.policies.window.window_available`).  O(parts)."""
-        return self.window is not None and window_available(engine, self.settings.get("weights"))
+        compiled core (:func:`~opportune.policies.window.window_available`), or the pile and the compiled
+        core (:func:`~opportune.policies.pile_window.pile_window_available`).  O(parts)."""
+        if self.pile:
+            return pile_window_available(engine)
+        return window_available(engine, self.settings.get("weights"))
 
     def _compiled(self, engine) -> bool:
         """Whether the optimum's programme for this plan and bin is the compiled one.  O(parts)."""
