@@ -18,13 +18,12 @@ from opportune.engine import OrderEngine
 from opportune.planning.costs import TimeModel
 from opportune.policies.lookahead import Lookahead
 from opportune.policies.pile import pile_solver
+from opportune.policies.lumped import OTHERS, window_plan
 from opportune.policies.pile_window import (
-    OTHERS,
     CompiledPileWindowSolver,
     PileWindow,
     PileWindowSolver,
     pile_window_available,
-    window_plan,
 )
 
 pytestmark = pytest.mark.skipif(not pile_window_available(OrderEngine(make_plan(["a"], {}))),

@@ -211,3 +211,12 @@ PILE_WINDOW_STATES = 20_000
 #: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
 #: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
 PILE_WINDOW_CACHE = 512
+
+# ------------------------------------------------------------ the weighted bin's frontier window (policies/weighted_window.py)
+
+#: The weighted window's sizes tried at a state in increasing size, the largest that fits
+#: WEIGHTED_WINDOW_STATES deciding (as the uniform window's sizes; its looks enumerated, not order
+#: statistics, so a state costs more).
+WEIGHTED_WINDOW_PARTS = (5, 8, 12)
+#: States the weighted window's programme may hold per size tried: counted, not timed.
+WEIGHTED_WINDOW_STATES = 20_000

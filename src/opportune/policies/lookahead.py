@@ -31,6 +31,7 @@ from opportune.policies.optimal import (
 )
 from opportune.policies.pile_window import PileWindow, pile_window_available
 from opportune.policies.variants import Slack
+from opportune.policies.weighted_window import WeightedWindow, weighted_window_available
 from opportune.policies.window import FrontierWindow, window_available
 
 __all__ = ["Lookahead", "programme_bytes"]
@@ -224,10 +225,19 @@ class Lookahead(DecidesOnMasks):
 
     def _window_serves(self, engine) -> bool:
         """Whether the frontier window decides where the optimum does not fit: a uniform bin and the
-        compiled core (:func:`~opportune.policies.window.window_available`), or the pile and the compiled
-        core (:func:`~opportune.policies.pile_window.pile_window_available`).  O(parts)."""
+        compiled core (:func:`~opportune.policies.window.window_available`), or the pile or a weighted bin and
+        the compiled core (:func:`~opportune.policies.pile_window.pile_window_available`,
+        :func:`~opportune.policies.weighted_window.weighted_window_available`; :attr:`window` becomes the
+        weighted bin's window on a plan whose weights differ).  O(parts)."""
         if self.pile:
             return pile_window_available(engine)
+        visible = self.settings.get("visible", 2)
+        if self._weighted(engine):
+            # the weighted bin's window (its looks enumerated), in place of the uniform bin's
+            if not isinstance(self.window, WeightedWindow):
+                self.window = WeightedWindow(self.fallback, visible=visible, capacity=self.settings.get("capacity"),
+                                             costs=self.settings.get("costs"), weights=self.settings.get("weights"))
+            return weighted_window_available(engine, visible)
         return window_available(engine, self.settings.get("weights"))
 
     def _compiled(self, engine) -> bool:

@@ -27,27 +27,19 @@ Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
-from dataclasses import replace as _replace
 
-from opportune.engine import OrderEngine, compiled_core, tuning
-from opportune.engine.deadline import Deadline, as_deadline
+from opportune.engine import compiled_core, tuning
+from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
-from opportune.planning.plan import Plan, Strategy
-from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
-from opportune.policies.evaluate import OutOfTime
-from opportune.policies.optimal import OptimalTooLarge
+from opportune.policies.base import SHAKE, Action
+from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup, window_engine
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
-from opportune.policies.window import frontier_window
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
-           "pile_window_solver", "window_plan"]
+           "pile_window_solver"]
 
 _native = compiled_core()   # None: the Python programme only
-
-#: The id the others' group takes in a window's moves (no plan part has it: part ids are printable).
-OTHERS = "\x00others"
 
 
 def pile_window_available(engine) -> bool:
@@ -68,107 +60,34 @@ def pile_window_available(engine) -> bool:
     Examples
     --------
     >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
     >>> pile_window_available(OrderEngine(make_plan(["a"], {}))) in (True, False)
     True
     """
     return _native is not None and hasattr(_native, "PileCore") and engine.k <= 64
 
 
-def window_plan(engine, mask: int, consistent: int, parts: list[int]) -> Plan:
-    """The window's parts as a plan of their own: each with its remaining units (in declaration order), one
-    strategy per open strategy with its order among them (a part before another where the last remaining unit
-    of the one is below the first of the other; ancestors outside the window taken as installed).
-    O(parts² × strategies).
-
-    Parameters
-    ----------
-    engine : OrderEngine
-        The plan's engine.
-    mask, consistent : int
-        The installed units and the open strategies.
-    parts : list of int
-        The window's parts (plan indices, declaration order), each with a unit left.
-
-    Returns
-    -------
-    Plan
-        The window's plan (the parts keep their ids, so a cost model prices them as on the plan).
-
-    Examples
-    --------
-    >>> from opportune import make_plan
-    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["b"]}))
-    >>> plan = window_plan(engine, 1, 1, [1, 2])
-    >>> plan.part_ids, dict(plan.strategies[0].requires)
-    (('b', 'c'), {'c': ('b',)})
+class PileWindowSolver(OthersGroup, PileSolver):
+    """The pile's optimum on a window's plan with ``others`` more units lumped as one more group
+    (:class:`~opportune.policies.lumped.OthersGroup`); with no others it is :class:`PileSolver`.  The optimum
+    only (no policy).  Complexity: as PileSolver's, on the window's plan.
     """
-    plan = engine.plan
-    first, last, kept = {}, {}, []
-    for i in parts:
-        units = [u for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity) if not mask >> u & 1]
-        first[i], last[i] = units[0], units[-1]
-        kept.append(_replace(plan.parts[i], quantity=len(units)))
-    strategies = []
-    for s, poset in enumerate(engine.posets):
-        if consistent >> s & 1:
-            requires = {plan.parts[a].id: tuple(plan.parts[b].id for b in parts
-                                                if b != a and poset.below[first[a]] >> last[b] & 1)
-                        for a in parts}
-            strategies.append(Strategy(f"s{s}", {a: bs for a, bs in requires.items() if bs}))
-    return Plan("window", tuple(kept), tuple(strategies))
-
-
-class PileWindowSolver(PileSolver):
-    """The pile's optimum on a window's plan with ``others`` more units lumped as one more group (see the
-    module): a part after the plan's parts in the states (the last buffer count) and in the looks, buffered
-    at ``other_move`` (infinite: never), never installed.  With no others it is :class:`PileSolver`.
-    The optimum only (no policy).  Complexity: as PileSolver's, on the window's plan.
-    """
-
-    def __init__(self, engine, *, others: int = 0, other_move: float = float("inf"), **settings):
-        super().__init__(engine, **settings)
-        self.others, self.other_move = int(others), float(other_move)
-        if self.others:
-            self.quantity = [*self.quantity, self.others]
-            self.move = [*self.move, self.other_move]
-            self.weights = [*self.weights, 1.0]
-            self.ids = (*self.ids, OTHERS)
-
-    def _part_index(self, part: str) -> int:
-        return len(self.plan.parts) if part == OTHERS else self.plan.index(part)
 
     def _others_args(self) -> tuple:
         return (self.others, self.other_move)
-
-    def _installed_counts(self, mask: int) -> list[int]:
-        return super()._installed_counts(mask) + [0] * (self.others > 0)
-
-    def _buffer_installs(self, mask: int, cons: int, buf: tuple[int, ...]):
-        """The plan's parts' installations from the buffer (the others are never installed).  O(parts)."""
-        n = len(self.plan.parts)
-        for i, (m, c, nb) in super()._buffer_installs(mask, cons, buf[:n]):
-            yield i, (m, c, nb + buf[n:])
 
     def _moves(self, key: tuple, look: tuple[int, ...]):
         """The plan's parts' moves, then buffering an other seen (a free location; ``other_move``)."""
         n = len(self.plan.parts)
         yield from super()._moves(key, tuple(i for i in look if i != n))
-        mask, cons, buf = key
-        if n in look and self.other_move < float("inf") and (self.capacity is None or sum(buf) < self.capacity):
-            nb = list(buf)
-            nb[n] += 1
-            yield self.other_move, (mask, cons, tuple(nb)), Action("buffer", OTHERS)
+        nxt = self._buffer_other(key) if n in look else None
+        if nxt is not None:
+            yield self.other_move, nxt, Action("buffer", OTHERS)
 
 
-class CompiledPileWindowSolver(CompiledPileSolver, PileWindowSolver):
+class CompiledPileWindowSolver(CompiledOthers, CompiledPileSolver, PileWindowSolver):
     """:class:`PileWindowSolver` computed by the pile's compiled core (the others its last group): the same
     doubles.  A ``ValueError`` where the core does not take the window's plan."""
-
-    def _core_args(self) -> tuple:
-        args = list(super()._core_args())
-        n = len(self.plan.parts)
-        args[2], args[4] = args[2][:n], args[4][:n]     # the plan's parts' quantities and moves: the others apart
-        return tuple(args)
 
 
 def pile_window_solver(engine, **settings) -> PileWindowSolver:
@@ -190,6 +109,7 @@ def pile_window_solver(engine, **settings) -> PileWindowSolver:
     Examples
     --------
     >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
     >>> solver = pile_window_solver(OrderEngine(make_plan(["a"], {})), visible=1, others=1, other_move=1.0)
     >>> round(solver.value(), 4)
     2.5
@@ -204,9 +124,9 @@ def pile_window_solver(engine, **settings) -> PileWindowSolver:
 
 @dataclass(frozen=True)
 class PileWindowTable:
-    """A state's window solved: its parts (plan indices), the others' units, the window's best action on
-    each look it can see (by the window's parts' indices, the others last; None: shake), the window's value
-    after a shake, its size and the states its programme held."""
+    """A state's window solved: its parts (plan indices), the parts outside it (in the window's topological
+    order), the window's best action on each look it can see (the window's parts by index, the others last;
+    None: shake), the window's value after a shake, its size and the states its programme held."""
 
     parts: tuple[int, ...]
     outside: tuple[int, ...]
@@ -216,9 +136,9 @@ class PileWindowTable:
     states: int
 
 
-class PileWindow(DecidesOnMasks):
+class PileWindow(LumpedWindow):
     """The exact optimum of the frontier window in the pile bin at each state, the rest of the plan lumped
-    (see the module).
+    (see the module; :class:`~opportune.policies.lumped.LumpedWindow` for the work counted and the deadline).
 
     Parameters
     ----------
@@ -232,15 +152,10 @@ class PileWindow(DecidesOnMasks):
     max_states : int
         Values a window's programme may hold (:data:`~opportune.engine.tuning.PILE_WINDOW_STATES`).
 
-    Notes
-    -----
-    The attribute ``work`` counts what it did: windows solved, the states they held, and decisions left
-    to the base.  The attribute ``deadline``, a :class:`~opportune.engine.deadline.Deadline` or None,
-    stops a window's programme; the base decides then.
-
     Examples
     --------
     >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
     >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
     >>> PileWindow(visible=1, capacity=1).choose_at(engine, 0, 1, (), 1.0, ("c",))
     Action(kind='buffer', part='c', source=None)
@@ -248,92 +163,25 @@ class PileWindow(DecidesOnMasks):
 
     name = "pile window"
     rule = "the action of least expected cost in the frontier window's exact optimum in the pile (the other parts lumped)"
-    deterministic = True
-    decision_key = None
+    cache = tuning.PILE_WINDOW_CACHE
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = tuning.PILE_WINDOW_PARTS, max_states: int = tuning.PILE_WINDOW_STATES):
-        from opportune.policies.variants import Slack
+        super().__init__(base, visible=visible, capacity=capacity, costs=costs, sizes=sizes, max_states=max_states)
 
-        self.base = base if base is not None else Slack()
-        self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
-        self.sizes, self.max_states = tuple(sorted(sizes)), max_states
-        self.deadline: Deadline | None = None
-        self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
-        self._tables: OrderedDict = OrderedDict()
-        self._engine = None
-        self.last_table: PileWindowTable | None = None
-
-    def table(self, engine, mask: int, consistent: int, buffer) -> PileWindowTable | None:
-        """The state's window solved (cached), or None where no window fits (states, or the deadline).
-        At most ``len(sizes) × max_states`` values of work.
-
-        Parameters
-        ----------
-        engine : OrderEngine
-            The plan's engine.
-        mask, consistent : int
-            The installed units and the open strategies.
-        buffer : sequence of str
-            The buffered parts.
-
-        Returns
-        -------
-        PileWindowTable or None
-            The largest window's table that fitted, or None where none did.
-        """
-        if self._engine is not engine:
-            self._engine, self._tables = engine, OrderedDict()
-        key = (mask, consistent, tuple(sorted(buffer)))
-        got = self._tables.get(key)
-        if got is not None:
-            self._tables.move_to_end(key)
-            return got
-        for size in self.sizes:
-            # the smaller windows first: past the deadline or the cap, the largest finished one decides
-            try:
-                got = self._solve(engine, mask, consistent, buffer, size)
-            except (OptimalTooLarge, OutOfTime):
-                break
-            if not got.outside:
-                break           # the window holds every part left: a larger one is the same
-        if got is not None:
-            self._tables[key] = got
-            if len(self._tables) > tuning.PILE_WINDOW_CACHE:
-                self._tables.popitem(last=False)
-        return got
-
-    def _solve(self, engine, mask: int, consistent: int, buffer, size: int) -> PileWindowTable:
+    def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
         """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
-        parts, outside = frontier_window(engine, mask, consistent, buffer, size)
-        solver, key = self._solver(engine, mask, consistent, buffer, parts, outside)
+        key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
+        sub = window_engine(engine, mask, consistent, parts)
+        solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
+                                    max_states=self.max_states, others=others, other_move=other_move)
         solver.deadline = as_deadline(self.deadline)
+        key = (0, sub.all_strategies, key)
         try:
             value, actions = solver._deep(lambda k: self._actions(engine, mask, consistent, parts, solver, k), key)
         finally:
-            self.work["windows"] += 1
-            self.work["states"] += solver.states
-            self.work["most_states"] = max(self.work["most_states"], solver.states)
+            self._count(solver)
         return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states)
-
-    def _solver(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
-        """The window's programme (nothing computed yet) and the state's key in it."""
-        plan = engine.plan
-        index = {i: j for j, i in enumerate(parts)}
-        buf, others_buffered = [0] * len(parts), 0
-        for p in buffer:
-            j = index.get(plan.index(p))
-            if j is None:
-                others_buffered += 1
-            else:
-                buf[j] += 1
-        moves = [self.costs.move(plan.parts[i].id) for i in outside
-                 for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity) if not mask >> u & 1]
-        sub = OrderEngine(window_plan(engine, mask, consistent, parts), memory_limit=None)
-        solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
-                                    max_states=self.max_states, others=len(moves),
-                                    other_move=sum(moves) / len(moves) if moves else float("inf"))
-        return solver, (0, sub.all_strategies, tuple(buf) + ((others_buffered,) if moves else ()))
 
     def _actions(self, engine, mask: int, consistent: int, parts: list[int], solver, key: tuple):
         """The value after a shake, and the window's best action on every look of the state (ties: install,
@@ -357,20 +205,11 @@ class PileWindow(DecidesOnMasks):
             actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
         return after_shake, actions
 
-    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
-                  visible: tuple[str, ...]) -> Action:
-        if mask == engine.full:
-            return DONE
-        table = self.table(engine, mask, consistent, buffer)
-        self.last_table = table
-        if table is None:
-            self.work["by_base"] += 1
-            return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
+    def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
         plan = engine.plan
         index = {i: j for j, i in enumerate(table.parts)}
         n = len(table.parts)
-        seen = [index.get(plan.index(p), n) for p in visible]
-        chosen = table.actions.get(tuple(sorted(seen)))
+        chosen = table.actions.get(tuple(sorted(index.get(plan.index(p), n) for p in visible)))
         if chosen is None:
             return SHAKE
         kind, j, source = chosen
@@ -380,33 +219,5 @@ class PileWindow(DecidesOnMasks):
         ids = set(visible)
         return Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids))
 
-    def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
-        """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
-
-        Parameters
-        ----------
-        state : State
-            The sequencer's state.
-        visible : tuple of str
-            The look (the pile's visible top).
-        because : str
-            Why the window decides, said first in the rule (empty: nothing said).
-
-        Returns
-        -------
-        Decision
-            The window's decision, or the base's (saying that no window fitted).
-        """
-        sched = state.schedule
-        if sched.mask == sched.engine.full:
-            return Decision(DONE, "the assembly is complete")
-        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
-        table = self.last_table
-        if table is None:
-            base = self.base.decide(state, visible)
-            return Decision(base.action, f"as the base rule ({self.base.name}), because {because + ' and ' * bool(because)}"
-                            f"no frontier window fitted its state cap ({self.max_states:,}) or its time: {base.rule}",
-                            note=base.note)
-        rule = f"by its frontier window, because {because}: {self.rule}" if because else self.rule
-        return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
-                        f"expected cost of the window after a shake {table.value:.4f}")
+    def _note(self, table: PileWindowTable) -> str:
+        return f"expected cost of the window after a shake {table.value:.4f}"
