@@ -28,6 +28,9 @@ from opportune.policies.window import frontier_window
 
 __all__ = ["OTHERS", "CompiledOthers", "LumpedWindow", "OthersGroup", "window_plan"]
 
+#: Predictions of a larger window that fits after the smallest (each solves one window, at most the state cap).
+REFINE = 2
+
 #: The id the others' group takes in a window programme's moves (no plan part has it: part ids are printable).
 OTHERS = "\x00others"
 
@@ -143,6 +146,8 @@ class LumpedWindow(DecidesOnMasks):
     decision_key = None
     #: States whose solved window is kept.
     cache = 4096
+    #: Whether the bin is the pile (its states listed with its windows).
+    pile = False
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = (5, 8, 12), max_states: int = 20_000):
@@ -153,11 +158,12 @@ class LumpedWindow(DecidesOnMasks):
         self.sizes, self.max_states = tuple(sorted(sizes)), max_states
         self.deadline: Deadline | None = None
         self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
-        self._tables: OrderedDict = OrderedDict()
+        self._tables: OrderedDict = OrderedDict()      # by state and forced parts: the window that decides
+        self._windows: OrderedDict = OrderedDict()     # by state and window: the window solved
         self._engine = None
         self.last_table = None
 
-    def table(self, engine, mask: int, consistent: int, buffer):
+    def table(self, engine, mask: int, consistent: int, buffer, forced: tuple[str, ...] = ()):
         """The state's window solved (cached), or None where no window fits (states, or the deadline).  At
         most ``len(sizes) × max_states`` states of work.
 
@@ -169,6 +175,8 @@ class LumpedWindow(DecidesOnMasks):
             The installed units and the open strategies.
         buffer : sequence of str
             The buffered parts.
+        forced : tuple of str
+            Parts the window takes first, as it takes the buffered ones (with their ancestors, where they fit).
 
         Returns
         -------
@@ -176,26 +184,78 @@ class LumpedWindow(DecidesOnMasks):
             The largest window's table that fitted, or None where none did.
         """
         if self._engine is not engine:
-            self._engine, self._tables = engine, OrderedDict()
-        key = (mask, consistent, tuple(sorted(buffer)))
+            self._engine, self._tables, self._windows = engine, OrderedDict(), OrderedDict()
+        key = (mask, consistent, tuple(sorted(buffer)), forced)
         got = self._tables.get(key)
         if got is not None:
             self._tables.move_to_end(key)
             return got
-        for size in self.sizes:
-            # the smaller windows first: past the deadline or the cap, the largest finished one decides
-            parts, outside = frontier_window(engine, mask, consistent, buffer, size)
-            try:
-                got = self._solved(engine, mask, consistent, buffer, parts, outside, size)
-            except (OptimalTooLarge, OutOfTime):
-                break
-            if not outside:
-                break           # the window holds every part left: a larger one is the same
+        got = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced)
         if got is not None:
             self._tables[key] = got
             if len(self._tables) > self.cache:
                 self._tables.popitem(last=False)
         return got
+
+    def _largest(self, engine, mask: int, consistent: int, buffer, first: tuple):
+        """The largest window predicted to fit, solved: the smallest size is solved, then in turn the largest
+        size whose states are predicted within ``max_states``, the prediction being the states listed for its
+        plan (:func:`~opportune.policies.states.estimate_states`, without the others: under a millisecond)
+        scaled by the last window solved's states over its own listed states; a window that does not fit after
+        all ends the search (the last one solved decides), as do :data:`REFINE` predictions.  So a state
+        costs a few windows, not every size.  None where the smallest does not fit."""
+        sizes = self.sizes
+        parts, outside = frontier_window(engine, mask, consistent, first, sizes[0])
+        got = self._window(engine, mask, consistent, buffer, parts, outside, sizes[0])
+        if got is None:
+            return None
+        for _ in range(REFINE if outside else 0):
+            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self.max_states))
+            pick = None
+            for size in (s for s in sizes if s > got.size):
+                more, rest = frontier_window(engine, mask, consistent, first, size)
+                if more == (pick[1] if pick else parts):
+                    continue
+                if ratio * self._listed(engine, mask, consistent, more, int(self.max_states / ratio) + 1) > self.max_states:
+                    break
+                pick = (size, more, rest)
+                if not rest:
+                    break
+            bigger = None if pick is None else self._window(engine, mask, consistent, buffer, pick[1], pick[2], pick[0])
+            if bigger is None:
+                break
+            got, (_, parts, outside) = bigger, pick
+            if not outside:
+                break
+        return got
+
+    def _window(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int], size: int):
+        """The window of these parts solved (cached by state and parts: looks that force parts already in it
+        share it), or None where it does not fit (states, or the deadline)."""
+        key = (mask, consistent, tuple(sorted(buffer)), tuple(parts))
+        got = self._windows.get(key)
+        if got is not None:
+            self._windows.move_to_end(key)
+            return got
+        try:
+            got = self._solved(engine, mask, consistent, buffer, parts, outside, size)
+        except (OptimalTooLarge, OutOfTime):
+            return None
+        self._windows[key] = got
+        if len(self._windows) > self.cache:
+            self._windows.popitem(last=False)
+        return got
+
+    def _listed(self, engine, mask: int, consistent: int, parts: list[int], most: int) -> int:
+        """The states of the window's plan without the others, listed (more than ``most``: stopped there)."""
+        from opportune.policies.states import estimate_states
+
+        return estimate_states(window_engine(engine, mask, consistent, parts), visible=self.visible,
+                               capacity=self.capacity, pile=self.pile, stop_above=most, time_limit=None).states
+
+    def _forced(self, engine, visible) -> tuple[str, ...]:
+        """The parts of a look the window takes first (none: the state's window decides every look)."""
+        return ()
 
     def _count(self, solver) -> None:
         """The work of a window's programme, counted."""
@@ -227,7 +287,7 @@ class LumpedWindow(DecidesOnMasks):
                   visible: tuple[str, ...]):
         if mask == engine.full:
             return DONE
-        table = self.table(engine, mask, consistent, buffer)
+        table = self.table(engine, mask, consistent, buffer, self._forced(engine, visible))
         self.last_table = table
         if table is None:
             self.work["by_base"] += 1

@@ -164,6 +164,7 @@ class PileWindow(LumpedWindow):
     name = "pile window"
     rule = "the action of least expected cost in the frontier window's exact optimum in the pile (the other parts lumped)"
     cache = tuning.PILE_WINDOW_CACHE
+    pile = True
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = tuning.PILE_WINDOW_PARTS, max_states: int = tuning.PILE_WINDOW_STATES):
@@ -204,6 +205,11 @@ class PileWindow(LumpedWindow):
                     best = (rank, (action.kind, j, action.source))
             actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
         return after_shake, actions
+
+    def _forced(self, engine, visible) -> tuple[str, ...]:
+        # the pile's top stays until taken: the window takes the parts seen first (with their ancestors), so
+        # that buffering or installing one is valued as the part it is, not as a lumped other
+        return tuple(sorted(set(visible), key=engine.plan.index))
 
     def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
         plan = engine.plan
