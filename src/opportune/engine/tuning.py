@@ -216,9 +216,8 @@ PILE_WINDOW_CACHE = 512
 
 # ------------------------------------------------------------ the weighted bin's frontier window (policies/weighted_window.py)
 
-#: The weighted window's sizes tried at a state in increasing size, the largest that fits
-#: WEIGHTED_WINDOW_STATES deciding (as the uniform window's sizes; its looks enumerated, not order
-#: statistics, so a state costs more).
-WEIGHTED_WINDOW_PARTS = (5, 8, 12)
+#: The weighted window's sizes: as PILE_WINDOW_PARTS (its looks enumerated, not order statistics, so a
+#: state costs more than the uniform window's).
+WEIGHTED_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
 #: States the weighted window's programme may hold per size tried: counted, not timed.
 WEIGHTED_WINDOW_STATES = 20_000

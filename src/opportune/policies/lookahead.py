@@ -1,7 +1,8 @@
 """The look-ahead policy: the optimum's action where its programme fits, else the exact optimum of a
-frontier window (:mod:`~opportune.policies.window`) in a uniform bin, or one step of policy improvement
-over a base rule (default :class:`~opportune.policies.variants.Slack`) in the others, within a decision
-budget if it has one.  See :mod:`~opportune.policies.variants` for the rules it builds on.
+frontier window (:mod:`~opportune.policies.window` in a uniform bin, :mod:`~opportune.policies.pile_window`
+in the pile, :mod:`~opportune.policies.weighted_window` in a weighted bin), or where none serves one step
+of policy improvement over a base rule (default :class:`~opportune.policies.variants.Slack`), within a
+decision budget if it has one.  See :mod:`~opportune.policies.variants` for the rules it builds on.
 """
 
 from __future__ import annotations
@@ -75,10 +76,12 @@ def programme_bytes(engine) -> int:
 
 
 class Lookahead(DecidesOnMasks):
-    """The optimal action where the optimum's programme fits, else, in a uniform bin, the best action of
-    the frontier window's exact optimum (:class:`~opportune.policies.window.FrontierWindow`: the next
-    parts of the plan, the rest lumped; ``base`` where no window fits its states or time), and in the
-    pile and weighted bins one step of policy improvement over ``base`` (default :class:`Slack`); on plans
+    """The optimal action where the optimum's programme fits, else the best action of the frontier window's
+    exact optimum (the next parts of the plan, the rest lumped; ``base`` where no window fits its states or
+    time): :class:`~opportune.policies.window.FrontierWindow` in a uniform bin,
+    :class:`~opportune.policies.pile_window.PileWindow` in the pile,
+    :class:`~opportune.policies.weighted_window.WeightedWindow` in a weighted bin; where no window serves
+    (no compiled core), one step of policy improvement over ``base`` (default :class:`Slack`), and on plans
     too large for that, the base's action.
 
     ``solver_settings`` are the bin and costs of the world it acts in (``visible``, ``capacity``,
@@ -89,9 +92,9 @@ class Lookahead(DecidesOnMasks):
     at most that many states, else the base policy's (the states the base reaches, fewer: its values
     after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
     ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its
-    fallback: the window, or in the pile and weighted bins the improvement step (the base past
-    :attr:`STEP_UNITS` units).  (The window was within 0.24% of the optimum on 16-30-part plans, 1-3
-    visible and 1-2 locations, where the step alone was +1.6% and slack +5% to +24%: docs/decisions.md.)
+    fallback: the window of its bin.  (The uniform window was within 0.24% of the optimum on 16-30-part plans,
+    1-3 visible and 1-2 locations, where the step alone was +1.6% and slack +5% to +24%; the pile's and the
+    weighted bin's: docs/decisions.md.)
     The window's work is counted (``self.window.work``), at most
     :data:`~opportune.policies.window.WINDOW_STATES` states a size tried; with a budget it also stops at
     :attr:`WINDOW_SHARE` of it and the base decides within the rest.  The pile bin likewise, with its own programmes
@@ -120,7 +123,7 @@ class Lookahead(DecidesOnMasks):
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
     #: core) is held to ``max_states``.
     COMPILED_STATES = 5_000_000
-    #: Where the optimum does not fit in a pile or weighted bin (the window serves the uniform bin), plans
+    #: Where the optimum does not fit and no window serves (no compiled core), plans
     #: of more units than this decide as the base does: the step over the base evaluates the base look by
     #: look in Python (every look of every state asks the base rule), hours on a 45-part plan.  The optimum
     #: itself is never refused by units, only by its states and bytes.

@@ -5,7 +5,7 @@ The uniform bin's frontier window (:mod:`~opportune.policies.window`) carried to
 (:func:`~opportune.policies.window.frontier_window`: the buffered parts and the next remaining parts in a
 topological order, closed under their remaining ancestors, up to a size), and the plan's other remaining
 units are lumped into one count, the *others*.  The window is made a plan of its own
-(:func:`window_plan`: its parts with their remaining units, each open strategy's order among them,
+(:func:`~opportune.policies.lumped.window_plan`: its parts with their remaining units, each open strategy's order among them,
 ancestors outside it taken as installed), and the pile's exact optimum is solved on it with the others
 one more group of units (:class:`PileWindowSolver`; compiled, :class:`CompiledPileWindowSolver`, the
 pile's own core ``src/native/pile.cpp`` with the group added, the same doubles): they lie in the pile
@@ -13,13 +13,17 @@ and in its visible top as units of a part do, an other seen may be buffered (a f
 others' mean move), and none is installed before the window is complete, the terminal state (what the
 others cost after it does not depend on the window's policy).
 
-The decision on a look is the window's best action on the look as the window sees it (a visible part
-outside the window is an other; buffered, it is the one first in the topological order); an installation
-no open strategy of the plan allows is never chosen.  Every look of a state is decided when the state's
-window is solved (:class:`PileWindowTable`): the exact evaluation of the policy asks each look of a state
-between the looks of its successors, so a state is solved once.  The window's states are counted
-(:data:`~opportune.engine.tuning.PILE_WINDOW_STATES` a size tried: the same decision on every machine);
-where no window fits, or past the deadline, the base rule decides.
+The window takes the parts of the look first (the pile's top stays until a unit is taken from it: a part
+seen outside the state's window would otherwise be valued as a lumped other, never installed, and the
+window would shake where the optimum buffers or installs it).  The decision on a look is the window's best
+action on it (a visible part outside the window is an other; buffered, it is the one first in the
+topological order); an installation no open strategy of the plan allows is never chosen.  Every look of
+a window is decided when it is solved (:class:`PileWindowTable`), and looks whose parts one window holds
+share it: the exact evaluation of the policy asks each look of a state between the looks of its
+successors.  The window's size is the largest predicted to fit
+:data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
+counted states, the same decision on every machine); where none fits, or past the deadline, the base rule
+decides.
 
 Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
 --policies fallback``) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
@@ -205,11 +209,6 @@ class PileWindow(LumpedWindow):
                     best = (rank, (action.kind, j, action.source))
             actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
         return after_shake, actions
-
-    def _forced(self, engine, visible) -> tuple[str, ...]:
-        # the pile's top stays until taken: the window takes the parts seen first (with their ancestors), so
-        # that buffering or installing one is valued as the part it is, not as a lumped other
-        return tuple(sorted(set(visible), key=engine.plan.index))
 
     def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
         plan = engine.plan
