@@ -21,7 +21,9 @@ not fit there), with its CPU and wall time per decision and the window's counted
 
 ``--bin pile``: the same in the pile bin, whose fallback is the pile's frontier window
 (:class:`~opportune.policies.pile_window.PileWindow`); a run's looks are then drawn from the bin, not kept
-on a pile's top (the CPU per decision, not the gap, is what that mode measures).
+on a pile's top (the CPU per decision, not the gap, is what that mode measures).  ``--bin weighted`` (with
+``--decisions``): a weighted bin, part ``i`` of weight 1 + i mod 3, whose fallback is the weighted window
+(:class:`~opportune.policies.weighted_window.WeightedWindow`).
 """
 
 from __future__ import annotations
@@ -64,7 +66,9 @@ def decisions(name: str, settings, seed: int, budget: float | None, bin: str = "
     plan = load_plan(name)
     for visible, capacity in settings:
         engine, rng = OrderEngine(plan), random.Random(seed)
-        policy = Lookahead(visible=visible, capacity=capacity, budget=budget, bin=bin)
+        weights = {p: 1.0 + i % 3 for i, p in enumerate(plan.part_ids)} if bin == "weighted" else None
+        policy = Lookahead(visible=visible, capacity=capacity, budget=budget, bin="pile" if bin == "pile" else "uniform",
+                           weights=weights)
         mask, consistent, buffer, times, walls = 0, engine.all_strategies, (), [], []
         while mask != engine.full:
             in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
@@ -83,7 +87,7 @@ def decisions(name: str, settings, seed: int, budget: float | None, bin: str = "
                     buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
         later = sorted(times[1:])       # the first decision also lists the optimum's states (a second at most)
         work = policy.window.work
-        print(f"| {plan.name}{' (pile)' * (bin == 'pile')} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | {len(times)} | "
+        print(f"| {plan.name}{f' ({bin})' * (bin != 'uniform')} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | {len(times)} | "
               f"{1000 * times[0]:.0f} | {1000 * statistics.mean(later):.1f} | {1000 * later[int(0.99 * len(later))]:.1f} | "
               f"{1000 * later[-1]:.1f} | {1000 * max(walls[1:]):.1f} | {work['windows']:,} | {work['most_states']:,} | "
               f"{work['by_base']} |", flush=True)
@@ -102,8 +106,11 @@ def main(argv=None) -> int:
     ap.add_argument("--decisions", help="time the default's decisions along a run of these plans instead "
                     "(comma-separated, e.g. salbp:KILBRID,salbp:ARC111)")
     ap.add_argument("--budget", type=float, help="with --decisions: the policy's decision budget (s; default none)")
-    ap.add_argument("--bin", default="uniform", choices=("uniform", "pile"), help="the bin (default uniform)")
+    ap.add_argument("--bin", default="uniform", choices=("uniform", "pile", "weighted"),
+                    help="the bin (default uniform; weighted: with --decisions, part i of weight 1 + i mod 3)")
     args = ap.parse_args(argv)
+    if args.bin == "weighted" and not args.decisions:
+        ap.error("--bin weighted times decisions only (--decisions): the policy lab has no weighted bin")
     names = [p for p in args.policies.split(",") if p]
     settings = [(int(v), None if c == "inf" else int(c)) for v, c in (s.split("x") for s in args.settings.split(","))]
     if args.decisions:

@@ -220,4 +220,7 @@ PILE_WINDOW_CACHE = 512
 #: state costs more than the uniform window's).
 WEIGHTED_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
 #: States the weighted window's programme may hold per size tried: counted, not timed.
-WEIGHTED_WINDOW_STATES = 20_000
+WEIGHTED_WINDOW_STATES = 10_000
+#: And at most this many looks over its states (a state enumerates its bin's looks, about 7 ns each: on
+#: KILBRID at 3 visible the state cap alone let a decision take 121 ms of CPU; bench_fallback --bin weighted).
+WEIGHTED_WINDOW_LOOKS = 500_000

@@ -211,13 +211,14 @@ class LumpedWindow(DecidesOnMasks):
         if got is None:
             return None
         for _ in range(REFINE if outside else 0):
-            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self.max_states))
+            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self._cap(len(parts))))
             pick = None
             for size in (s for s in sizes if s > got.size):
                 more, rest = frontier_window(engine, mask, consistent, first, size)
                 if more == (pick[1] if pick else parts):
                     continue
-                if ratio * self._listed(engine, mask, consistent, more, int(self.max_states / ratio) + 1) > self.max_states:
+                cap = self._cap(len(more))
+                if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
                     break
                 pick = (size, more, rest)
                 if not rest:
@@ -253,6 +254,10 @@ class LumpedWindow(DecidesOnMasks):
 
         return estimate_states(window_engine(engine, mask, consistent, parts), visible=self.visible,
                                capacity=self.capacity, pile=self.pile, stop_above=most, time_limit=None).states
+
+    def _cap(self, parts: int) -> int:
+        """The states a window of ``parts`` parts may hold (``max_states``)."""
+        return self.max_states
 
     def _forced(self, engine, visible) -> tuple[str, ...]:
         """The parts of a look the window takes first, with their ancestors where they fit, as it takes the

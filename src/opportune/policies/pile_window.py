@@ -179,7 +179,7 @@ class PileWindow(LumpedWindow):
         key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
         sub = window_engine(engine, mask, consistent, parts)
         solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
-                                    max_states=self.max_states, others=others, other_move=other_move)
+                                    max_states=self._cap(len(parts)), others=others, other_move=other_move)
         solver.deadline = as_deadline(self.deadline)
         key = (0, sub.all_strategies, key)
         try:

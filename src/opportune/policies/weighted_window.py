@@ -18,6 +18,8 @@ deadline, the base rule decides.
 
 from __future__ import annotations
 
+from math import comb
+
 from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
@@ -171,7 +173,7 @@ class WeightedWindow(LumpedWindow):
         sub = window_engine(engine, mask, consistent, parts)
         solver = weighted_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
                                         weights={p.id: self.weights.get(p.id, 1.0) for p in sub.plan.parts},
-                                        max_states=self.max_states, others=others, other_move=other_move,
+                                        max_states=self._cap(len(parts)), others=others, other_move=other_move,
                                         other_weight=other_weight)
         solver.deadline = as_deadline(self.deadline)
         try:
@@ -179,6 +181,11 @@ class WeightedWindow(LumpedWindow):
         finally:
             self._count(solver)
         return WindowTable(tuple(parts), tuple(values), len(outside), size, solver.states)
+
+    def _cap(self, parts: int) -> int:
+        """``max_states``, and at most :data:`~opportune.engine.tuning.WEIGHTED_WINDOW_LOOKS` looks over the
+        states (each state enumerates its bin's looks: at most those of the window's parts and the others)."""
+        return min(self.max_states, tuning.WEIGHTED_WINDOW_LOOKS // comb(parts + self.visible, self.visible))
 
     def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer, visible) -> Action:
         return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
