@@ -121,8 +121,8 @@ def weighted_window_solver(engine, **settings) -> WeightedWindowSolver:
     >>> from opportune.engine import OrderEngine
     >>> solver = weighted_window_solver(OrderEngine(make_plan(["a"], {})), visible=1, weights={"a": 2.0},
     ...                                 others=1, other_move=1.0, other_weight=1.0)
-    >>> round(solver.value(), 4)
-    2.3333
+    >>> round(solver.value(), 4)     # a seen first with chance 2/3 (1 move), else the other buffered first
+    1.3333
     """
     if compiled_optimal_available(engine, settings.get("weights"), visible=settings.get("visible")):
         try:
