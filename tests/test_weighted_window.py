@@ -13,7 +13,7 @@ from conftest import random_plans
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from opportune import load_plan, make_plan
+from opportune import Sequencer, load_plan, make_plan
 from opportune.engine import OrderEngine
 from opportune.planning.costs import TimeModel
 from opportune.policies.lookahead import Lookahead
@@ -134,3 +134,6 @@ def test_the_default_decides_by_the_weighted_window_with_its_work_counted_and_bo
         assert work["windows"] > 0 and work["by_base"] == 0
         assert work["most_states"] <= policy.window.max_states
     assert runs[0] == runs[1]
+    seq = Sequencer(plan, policy=Lookahead(visible=2, capacity=2, weights=weights, optimal=False))
+    rule = seq.decide(["1", "2"]).rule
+    assert "frontier window" in rule and "weighted" in rule, rule
