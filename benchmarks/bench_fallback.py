@@ -17,6 +17,13 @@ not fit there), with its CPU and wall time per decision and the window's counted
 
     python benchmarks/bench_fallback.py --decisions salbp:KILBRID,salbp:TONGE70,salbp:ARC111 --settings 1x1,2x2,3x2
     python benchmarks/bench_fallback.py --decisions salbp:ARC111 --settings 2x2 --budget 0.05
+    python benchmarks/bench_fallback.py --decisions salbp:KILBRID --settings 1x1,2x2,3x2 --bin pile
+
+``--bin pile``: the same in the pile bin, whose fallback is the pile's frontier window
+(:class:`~opportune.policies.pile_window.PileWindow`); a run's looks are then drawn from the bin, not kept
+on a pile's top (the CPU per decision, not the gap, is what that mode measures).  ``--bin weighted`` (with
+``--decisions``): a weighted bin, part ``i`` of weight 1 + i mod 3, whose fallback is the weighted window
+(:class:`~opportune.policies.weighted_window.WeightedWindow`).
 """
 
 from __future__ import annotations
@@ -53,13 +60,15 @@ def draw_plans(n: int, count: int, seed: int, max_states: int, settings=SETTINGS
     return plans
 
 
-def decisions(name: str, settings, seed: int, budget: float | None) -> None:
+def decisions(name: str, settings, seed: int, budget: float | None, bin: str = "uniform") -> None:
     """CPU time of each decision of the default policy along one seeded run of a plan too large for its
     optimum (a fresh state at most moves), and the window's counted work."""
     plan = load_plan(name)
     for visible, capacity in settings:
         engine, rng = OrderEngine(plan), random.Random(seed)
-        policy = Lookahead(visible=visible, capacity=capacity, budget=budget)
+        weights = {p: 1.0 + i % 3 for i, p in enumerate(plan.part_ids)} if bin == "weighted" else None
+        policy = Lookahead(visible=visible, capacity=capacity, budget=budget, bin="pile" if bin == "pile" else "uniform",
+                           weights=weights)
         mask, consistent, buffer, times, walls = 0, engine.all_strategies, (), [], []
         while mask != engine.full:
             in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
@@ -78,7 +87,7 @@ def decisions(name: str, settings, seed: int, budget: float | None) -> None:
                     buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
         later = sorted(times[1:])       # the first decision also lists the optimum's states (a second at most)
         work = policy.window.work
-        print(f"| {plan.name} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | {len(times)} | "
+        print(f"| {plan.name}{f' ({bin})' * (bin != 'uniform')} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | {len(times)} | "
               f"{1000 * times[0]:.0f} | {1000 * statistics.mean(later):.1f} | {1000 * later[int(0.99 * len(later))]:.1f} | "
               f"{1000 * later[-1]:.1f} | {1000 * max(walls[1:]):.1f} | {work['windows']:,} | {work['most_states']:,} | "
               f"{work['by_base']} |", flush=True)
@@ -97,14 +106,18 @@ def main(argv=None) -> int:
     ap.add_argument("--decisions", help="time the default's decisions along a run of these plans instead "
                     "(comma-separated, e.g. salbp:KILBRID,salbp:ARC111)")
     ap.add_argument("--budget", type=float, help="with --decisions: the policy's decision budget (s; default none)")
+    ap.add_argument("--bin", default="uniform", choices=("uniform", "pile", "weighted"),
+                    help="the bin (default uniform; weighted: with --decisions, part i of weight 1 + i mod 3)")
     args = ap.parse_args(argv)
+    if args.bin == "weighted" and not args.decisions:
+        ap.error("--bin weighted times decisions only (--decisions): the policy lab has no weighted bin")
     names = [p for p in args.policies.split(",") if p]
     settings = [(int(v), None if c == "inf" else int(c)) for v, c in (s.split("x") for s in args.settings.split(","))]
     if args.decisions:
         print("| plan | setting | decisions | first, ms | mean, ms | 99th percentile, ms | largest, ms | largest wall, ms | windows | "
               "most states | by slack |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         for name in args.decisions.split(","):
-            decisions(name, settings, args.seed, args.budget)
+            decisions(name, settings, args.seed, args.budget, args.bin)
         return 0
     rows = []
     for n in map(int, args.sizes.split(",")):
@@ -112,7 +125,7 @@ def main(argv=None) -> int:
             for visible, capacity in settings:
                 start = time.process_time()
                 try:
-                    g, best, states = gaps(plan, visible, capacity, only=names, seconds=args.task_seconds,
+                    g, best, states = gaps(plan, visible, capacity, args.bin, only=names, seconds=args.task_seconds,
                                            max_states=10 * args.max_optimum_states)
                 except Exception as exc:        # said, never hidden: a row with why
                     print(f"{n} parts, {plan.name}, {visible} visible, {capacity} locations: skipped ({exc})")

@@ -26,9 +26,10 @@ what decides where the optimum's programme does not fit; ``paper`` the paper's r
 
 Results.  ``--results`` gets one JSON line per plan-setting as it finishes (an interrupted run goes on
 where it stopped); a later line adds its policies' gaps to an earlier one's, and only the policies a
-plan-setting lacks are run.  Each gap carries its policy's version (:data:`POLICY_VERSIONS`): when a
-policy's decisions change (a new fallback), bump its version and rerun that column alone; its old gaps
-are then stale and dropped from the tables::
+plan-setting lacks are run.  Each gap carries its policy's version (:data:`POLICY_VERSIONS`, and
+:data:`BIN_VERSIONS` where a bin's decisions changed alone): when a policy's decisions change (a new
+fallback), bump its version and rerun that column alone; its old gaps are then stale and dropped from the
+tables::
 
     python benchmarks/policy_lab.py --results benchmarks/policy_lab_results.jsonl --policies fallback \\
         --table docs/policy-lab.md --readme README.md --plot docs/img/policy-lab.png --paired "" --workers 2
@@ -101,8 +102,17 @@ ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
 POLICY_VERSIONS = {"fallback": "frontier window"}
+#: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
+#: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
+#: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale.
+BIN_VERSIONS = {("fallback", "pile"): "pile window"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
+
+
+def policy_version(name: str, bin: str) -> str | None:
+    """The version of ``name``'s decisions in ``bin`` (None: not versioned)."""
+    return BIN_VERSIONS.get((name, bin), POLICY_VERSIONS.get(name))
 
 
 def policies(visible: int, capacity: int | None, bin: str = "uniform"):
@@ -209,8 +219,8 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
         if name == "lookahead" and name in out["policy_skipped"] and policy.refusal:
             out["policy_skipped"][name] += f"; it did not decide by its optimum: {policy.refusal}"
         out["cpu"][name] = round(time.process_time() - cpu, 3)
-        if name in POLICY_VERSIONS:
-            out["versions"][name] = POLICY_VERSIONS[name]
+        if policy_version(name, bin) is not None:
+            out["versions"][name] = policy_version(name, bin)
     return out
 
 
@@ -284,7 +294,7 @@ def _fresh(rec: dict) -> dict:
     if "gaps" not in rec:
         return rec
     versions = {**UNTAGGED, **rec.get("versions", {})}
-    gaps = {n: g for n, g in rec["gaps"].items() if versions.get(n) == POLICY_VERSIONS.get(n)}
+    gaps = {n: g for n, g in rec["gaps"].items() if versions.get(n) == policy_version(n, rec.get("bin", "uniform"))}
     return {**rec, "gaps": gaps}
 
 

@@ -115,6 +115,20 @@ def test_a_gap_of_another_version_of_its_policy_is_stale():
     assert policy_lab._missing(done[KEY + "2000000"], ("fallback", "paper"), False) == ("fallback",)
 
 
+def test_a_bin_whose_fallback_changed_alone_has_its_own_version():
+    """The pile's fallback became the pile's own window while the uniform bin's stayed: a pile row tagged with
+    the uniform bin's version is stale (rerun), a uniform row of that version is not."""
+    now = policy_lab.POLICY_VERSIONS["fallback"]
+    assert policy_lab.policy_version("fallback", "pile") != now == policy_lab.policy_version("fallback", "uniform")
+    line = {"gaps": {"paper": 0.01, "fallback": 0.02}, "optimum": 2.0, "states": 9, "versions": {"fallback": now}}
+    done = _read([(KEY + "2000000", {**line, "bin": "pile"}),
+                  ("0:8-12:r1-12:2:inf:uniform:2000000", {**line, "bin": "uniform"})])
+    assert done[KEY + "2000000"]["gaps"] == {"paper": 0.01}
+    assert done["0:8-12:r1-12:2:inf:uniform:2000000"]["gaps"] == {"paper": 0.01, "fallback": 0.02}
+    pile = {**line, "bin": "pile", "versions": {"fallback": policy_lab.policy_version("fallback", "pile")}}
+    assert _read([(KEY + "2000000", pile)])[KEY + "2000000"]["gaps"] == {"paper": 0.01, "fallback": 0.02}
+
+
 def test_rerunning_one_policy_runs_that_policy_alone_and_keeps_the_others(tmp_path, monkeypatch):
     """``--policies fallback`` after a new version of the fallback: one new line with its gap alone, the
     paper's rule's gap kept from the old line."""

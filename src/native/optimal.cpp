@@ -162,10 +162,11 @@ class OptimalCore : private PlanUnits {
 public:
     OptimalCore(int n_units, std::vector<int> first, std::vector<int> quantity,
                 std::vector<std::vector<uint64_t>> below, std::vector<double> move, double look, double shake,
-                int visible, int capacity, std::vector<double> weights, size_t look_cache_bytes)
+                int visible, int capacity, std::vector<double> weights, size_t look_cache_bytes, int others,
+                double other_move, double other_weight)
         : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
                     visible, capacity),
-          weights_(std::move(weights)), looks_(look_cache_bytes) {
+          weights_(std::move(weights)), looks_(look_cache_bytes), others_(others), other_move_(other_move) {
         if (!weights_.empty()) {
             if ((int)weights_.size() != parts_) throw std::invalid_argument("weights need one entry per part");
             for (double w : weights_)
@@ -173,8 +174,20 @@ public:
             // a look is coded in 6 bits a part (at most 64 parts): at most 10 parts in 64 bits
             if (visible_ > 10) throw std::invalid_argument("a weighted bin takes at most 10 visible parts");
         }
-        if (buffers_ > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
-        max_pairs_ = (~uint64_t(0) - 1) / (uint64_t)buffers_;
+        // the others (a weighted bin's frontier window, opportune.policies.weighted_window): one more group
+        // after the parts, its weight `other_weight`, buffered at `other_move`, never installed
+        if (others_ < 0 || others_ > (1 << 20)) throw std::invalid_argument("the others' units are out of range");
+        if (others_ > 0 && (weights_.empty() || parts_ >= 64))
+            throw std::invalid_argument("the others are lumped in a weighted bin of at most 63 parts only");
+        if (others_ > 0 && (!(other_weight > 0.0) || other_weight == INF))
+            throw std::invalid_argument("the others' weight must be a positive finite number");
+        groups_ = parts_ + (others_ > 0);
+        if (others_ > 0) weights_.push_back(other_weight);
+        most_others_ = capacity_ < 0 ? others_ : std::min(others_, capacity_);
+        long double contents = buffers_ * (long double)(others_ + 1);  // a bin's others too: up to all of them
+        if (contents > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
+        contents_ = (uint64_t)contents;
+        max_pairs_ = (~uint64_t(0) - 1) / contents_;
         // C(n, k) for n <= 64: at most C(64, 32) < 2^61, exact in 64 bits
         for (int n = 0; n <= 64; ++n) {
             binom_[n][0] = 1;
@@ -183,11 +196,13 @@ public:
     }
 
     double value(uint64_t mask, uint64_t cons, std::vector<int> buf, double seconds, long long max_states) {
-        if ((int)buf.size() != parts_) throw std::invalid_argument("the buffer needs one count per part");
+        if ((int)buf.size() != groups_) throw std::invalid_argument("the buffer needs one count per part (and the others)");
         for (int i = 0; i < parts_; ++i) {
             if (buf[i] < 0 || buf[i] + __builtin_popcountll(mask & part_units_[i]) > quantity_[i])
                 throw std::invalid_argument("a buffer count is out of range");
         }
+        if (groups_ > parts_ && (buf[parts_] < 0 || buf[parts_] > most_others_))
+            throw std::invalid_argument("the others buffered are out of range");
         if (mask & ~full_) throw std::invalid_argument("an installed unit is out of range");
         timed_ = seconds >= 0;
         if (timed_)
@@ -206,7 +221,14 @@ private:
     uint64_t code(uint64_t mask, uint64_t cons, const std::vector<int>& buf) {
         uint64_t id = pairs_.id(mask, cons, max_pairs_);
         if (id == ~uint64_t(0)) throw OptimalTooLarge("too many states for 64-bit codes");
-        return id * (uint64_t)buffers_ + buffer_code(buf);
+        return id * contents_ + group_code(buf);
+    }
+
+    // a buffer's (or a bin's) counts, the others' count last where there are others
+    uint64_t group_code(const std::vector<int>& counts) const {
+        uint64_t c = buffer_code(counts);
+        if (groups_ > parts_) c += (uint64_t)counts[parts_] * (uint64_t)buffers_;
+        return c;
     }
 
     // OptimalSolver._value: V(s), the look's cost included
@@ -226,7 +248,7 @@ private:
         bool free = capacity_ < 0 || used < capacity_;
         // each part in the bin: its best move (install from the bin, or buffer), in declaration order
         std::vector<std::tuple<double, int, int>> ranked;  // (best move, part, units in the bin)
-        std::vector<int> bin(weights_.empty() ? 0 : parts_, 0);
+        std::vector<int> bin(weights_.empty() ? 0 : groups_, 0);
         int n = 0;
         for (int i = 0; i < parts_; ++i) {
             int units = in_bin(mask, buf, i);
@@ -244,6 +266,18 @@ private:
             }
             ranked.emplace_back(best, i, units);
             if (!weights_.empty()) bin[i] = units;
+        }
+        if (groups_ > parts_ && others_ > buf[parts_]) {  // the others in the bin: buffered if a location is free
+            int units = others_ - buf[parts_];
+            n += units;
+            double best = INF;
+            if (free && other_move_ < INF) {
+                buf[parts_] += 1;
+                best = other_move_ + V(mask, cons, buf);
+                buf[parts_] -= 1;
+            }
+            ranked.emplace_back(best, parts_, units);
+            bin[parts_] = units;
         }
         // the buffer's best installation (the same on every look)
         double from_buffer = INF;
@@ -291,9 +325,9 @@ private:
                                const std::vector<int>& bin) {
         if (n == 0) return shake_loop(ranked, n, from_buffer);
         std::sort(ranked.begin(), ranked.end());
-        std::vector<int> rank_of(parts_, 0);
+        std::vector<int> rank_of(groups_, 0);
         for (size_t r = 0; r < ranked.size(); ++r) rank_of[std::get<1>(ranked[r])] = (int)r;
-        const Looks& looks = looks_.of(buffer_code(bin), bin, weights_, std::min(visible_, n));
+        const Looks& looks = looks_.of(group_code(bin), bin, weights_, std::min(visible_, n));
         std::vector<double> chance(ranked.size(), 0.0);
         const int k = looks.k;
         for (size_t j = 0; j < looks.p.size(); ++j) {
@@ -308,9 +342,11 @@ private:
         return run.s;
     }
 
-    std::vector<double> weights_;  // empty: a uniform bin
+    std::vector<double> weights_;  // empty: a uniform bin; the others' last where there are others
     LookCache looks_;
-    uint64_t max_pairs_ = 0;
+    int others_, groups_ = 0, most_others_ = 0;
+    double other_move_;
+    uint64_t contents_ = 1, max_pairs_ = 0;
     uint64_t binom_[65][65] = {};
     PairIds pairs_;
     Table table_;
@@ -327,10 +363,11 @@ void bind_optimal(py::module_& m) {
     py::register_exception<OptimalStuck>(m, "OptimalCoreStuck", PyExc_RuntimeError);
     py::class_<OptimalCore>(m, "OptimalCore")
         .def(py::init<int, std::vector<int>, std::vector<int>, std::vector<std::vector<uint64_t>>, std::vector<double>,
-                      double, double, int, int, std::vector<double>, size_t>(),
+                      double, double, int, int, std::vector<double>, size_t, int, double, double>(),
              py::arg("n_units"), py::arg("first"), py::arg("quantity"), py::arg("below"), py::arg("move"),
              py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"),
-             py::arg("weights") = std::vector<double>{}, py::arg("look_cache_bytes") = size_t(0))
+             py::arg("weights") = std::vector<double>{}, py::arg("look_cache_bytes") = size_t(0),
+             py::arg("others") = 0, py::arg("other_move") = INF, py::arg("other_weight") = 1.0)
         .def("value", &OptimalCore::value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("seconds"),
              py::arg("max_states"))
         .def("reserve", &OptimalCore::reserve, py::arg("states"))

@@ -13,6 +13,12 @@
 // (installed, strategies) pairs interned once (fewer by the buffers and windows of each).  A state's
 // values go into the table only once all of them are known, so a stop (the deadline, the state cap)
 // leaves a table a later call goes on from.
+//
+// The pile's frontier window (opportune.policies.pile_window) is this programme on the window's plan with
+// `others` more units lumped as one more group (index: the parts' count) after the parts, as window.cpp
+// lumps them in the uniform bin: in the pile, in windows and in the buffer like a part's units, buffered
+// at `other_move` (infinite: never), never installed; the window's plan complete is the terminal state.
+// With no others the group is absent and the programme is the plain pile's.
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -62,17 +68,22 @@ public:
     // The plan as PlanUnits takes it; `compensated`: the interpreter's sum() of floats is Neumaier's
     // (Python 3.12 on), else plain.
     PileCore(int n_units, std::vector<int> first, std::vector<int> quantity, std::vector<std::vector<uint64_t>> below,
-             std::vector<double> move, double look, double shake, int visible, int capacity, bool compensated)
+             std::vector<double> move, double look, double shake, int visible, int capacity, bool compensated,
+             int others, double other_move)
         : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
                     visible, capacity),
-          compensated_(compensated) {
+          compensated_(compensated), others_(others), other_move_(other_move) {
+        if (others_ < 0 || others_ > (1 << 20)) throw std::invalid_argument("the others' units are out of range");
+        groups_ = parts_ + (others_ > 0);
+        most_others_ = capacity_ < 0 ? others_ : std::min(others_, capacity_);
         // codes: ((pair id × buffers) + buffer) × windows + window, the last window code for S
         long double windows = 1;
-        for (int j = 0; j < visible_; ++j) windows *= parts_ + 1;
+        for (int j = 0; j < visible_; ++j) windows *= groups_ + 1;
         windows += 1;
-        if (buffers_ * windows > (long double)(uint64_t(1) << 62))
+        long double contents = buffers_ * (long double)(most_others_ + 1);
+        if (contents * windows > (long double)(uint64_t(1) << 62))
             throw std::invalid_argument("too many buffer contents and windows for 64-bit codes");
-        nbuffers_ = (uint64_t)buffers_;
+        nbuffers_ = (uint64_t)contents;
         windows_ = (uint64_t)windows;
         max_pairs_ = (~uint64_t(0) - 1) / (nbuffers_ * windows_);
         slot_.assign(windows_, -1);
@@ -90,7 +101,7 @@ public:
         check_buffer(buf);
         std::sort(window.begin(), window.end());
         for (int w : window)
-            if (w < 0 || w >= parts_) throw std::invalid_argument("a window's part is out of range");
+            if (w < 0 || w >= groups_) throw std::invalid_argument("a window's part is out of range");
         if ((int)window.size() > visible_) throw std::invalid_argument("a window larger than the visible units");
         start(seconds, max_states);
         if (mask == full_) return 0.0;
@@ -108,7 +119,7 @@ public:
         if (at == window.end()) throw std::invalid_argument("the part taken is not in the window");
         std::vector<int> hidden = bin_counts(mask, buf);
         for (int w : window) {
-            if (w < 0 || w >= parts_) throw std::invalid_argument("a window's part is out of range");
+            if (w < 0 || w >= groups_) throw std::invalid_argument("a window's part is out of range");
             hidden[w] -= 1;
         }
         for (int c : hidden)
@@ -127,9 +138,11 @@ private:
     // ------------------------------------------------------------ plumbing
 
     void check_buffer(const std::vector<int>& buf) const {
-        if ((int)buf.size() != parts_) throw std::invalid_argument("the buffer needs one count per part");
+        if ((int)buf.size() != groups_) throw std::invalid_argument("the buffer needs one count per part (and the others)");
         for (int i = 0; i < parts_; ++i)
             if (buf[i] < 0 || buf[i] > quantity_[i]) throw std::invalid_argument("a buffer count is out of range");
+        if (groups_ > parts_ && (buf[parts_] < 0 || buf[parts_] > most_others_))
+            throw std::invalid_argument("the others buffered are out of range");
     }
 
     void start(double seconds, long long max_states) {
@@ -142,14 +155,16 @@ private:
     uint64_t base_code(uint64_t mask, uint64_t cons, const std::vector<int>& buf) {
         uint64_t id = pairs_.id(mask, cons, max_pairs_);
         if (id == ~uint64_t(0)) throw PileTooLarge("too many states for 64-bit codes");
-        return (id * nbuffers_ + buffer_code(buf)) * windows_;
+        uint64_t b = buffer_code(buf);
+        if (groups_ > parts_) b += (uint64_t)buf[parts_] * (uint64_t)buffers_;
+        return (id * nbuffers_ + b) * windows_;
     }
 
     uint64_t window_code(const std::vector<int>& w) const {
         uint64_t c = 0, r = 1;
         for (int x : w) {
             c += (uint64_t)(x + 1) * r;
-            r *= parts_ + 1;
+            r *= groups_ + 1;
         }
         return c;
     }
@@ -193,7 +208,7 @@ private:
         }
         double mass = 0.0;  // sum(c * 1.0): whole numbers, exact
         for (int c : counts) mass += (double)c;
-        for (int i = 0; i < parts_; ++i) {
+        for (int i = 0; i < groups_; ++i) {
             int c = counts[i];
             if (!c) continue;
             counts[i] -= 1;
@@ -217,8 +232,9 @@ private:
     }
 
     std::vector<int> bin_counts(uint64_t mask, const std::vector<int>& buf) const {
-        std::vector<int> bin(parts_);
+        std::vector<int> bin(groups_);
         for (int i = 0; i < parts_; ++i) bin[i] = in_bin(mask, buf, i);
+        if (groups_ > parts_) bin[parts_] = others_ - buf[parts_];
         return bin;
     }
 
@@ -282,6 +298,15 @@ private:
         for (size_t a = 0; a < window.size(); ++a) {
             int i = window[a];
             if (a && window[a - 1] == i) continue;
+            if (i == parts_) {  // an other: buffered (a free location), never installed
+                if (free && other_move_ < INF) {
+                    buf[i] += 1;
+                    double v = other_move_ + taken(mask, cons, buf, window, a, hidden);
+                    buf[i] -= 1;
+                    best = std::min(best, v);
+                }
+                continue;
+            }
             int u = next_unit(mask, i);
             uint64_t after = consistent_after(mask, cons, u);
             if (after) best = std::min(best, move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden));
@@ -315,7 +340,7 @@ private:
         if (total == 0) return V(mask, cons, buf, rest);
         Sum sum{compensated_};
         std::vector<int> next(rest.size() + 1);
-        for (int j = 0; j < parts_; ++j) {
+        for (int j = 0; j < groups_; ++j) {
             int c = hidden[j];
             if (!c) continue;
             // sorted(rest + [j])
@@ -329,6 +354,8 @@ private:
     }
 
     bool compensated_;
+    int others_, groups_ = 0, most_others_ = 0;
+    double other_move_;
     uint64_t nbuffers_ = 1, windows_ = 1, max_pairs_ = 0;
     std::vector<int> slot_;  // window code -> index in a look list being built (-1: none)
     PairIds pairs_;
@@ -346,9 +373,10 @@ void bind_pile(py::module_& m) {
     py::register_exception<PileStuck>(m, "PileStuck", PyExc_RuntimeError);
     py::class_<PileCore>(m, "PileCore")
         .def(py::init<int, std::vector<int>, std::vector<int>, std::vector<std::vector<uint64_t>>, std::vector<double>,
-                      double, double, int, int, bool>(),
+                      double, double, int, int, bool, int, double>(),
              py::arg("n_units"), py::arg("first"), py::arg("quantity"), py::arg("below"), py::arg("move"),
-             py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"), py::arg("compensated"))
+             py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"), py::arg("compensated"),
+             py::arg("others") = 0, py::arg("other_move") = INF)
         .def("shake_value", &PileCore::shake_value, py::arg("mask"), py::arg("cons"), py::arg("buf"),
              py::arg("seconds"), py::arg("max_states"))
         .def("window_value", &PileCore::window_value, py::arg("mask"), py::arg("cons"), py::arg("buf"),

@@ -49,9 +49,8 @@ def evaluate(
                                                     "got (default: none; --max-states bounds the work)"),
     without_optimum: bool = typer.Option(False, "--without-optimum",
                                          help="The default policy (lookahead) with its exact optimum switched off: "
-                                              "it decides by its fallback (the frontier window's optimum in a uniform "
-                                              "bin; in a pile or weighted bin one step over slack, or slack on plans "
-                                              "of more than 16 units), measured against the optimum"),
+                                              "it decides by its fallback (the exact optimum of a frontier window of "
+                                              "the plan, the rest lumped, in its bin), measured against the optimum"),
     as_json: bool = json_option(),
 ):
     """Exact expected cost of a policy and of the optimum (a dynamic programme, no Monte Carlo error).

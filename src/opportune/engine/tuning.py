@@ -386,3 +386,33 @@ WAYS_MAX_PARTICLES = 4096
 #: replaces it.  Every 4th step: a quarter of the checks' time, a walk kept at most 3 steps too long.
 WAYS_LOCK_EVERY = 4
 
+# ------------------------------------------------------------ the pile's frontier window (policies/pile_window.py)
+# Measured with benchmarks/policy_lab.py (--bins pile --policies fallback --without-optimum, 16-20 parts)
+# and benchmarks/bench_fallback.py (CPU per decision on KILBRID).
+
+#: The pile window's sizes (parts, buffered ones and ancestors included): the smallest is solved at a state,
+#: and the largest whose states, predicted from it, fit PILE_WINDOW_STATES (policies/lumped.py).  Every size
+#: between: a size smaller than the largest that fits costs the gap (on a 16-part plan at 1 visible and 2
+#: locations, sizes 5, 8, 12 were +2.8%, 5-12 by one +0.8%, a cap three times larger +0.25%).
+PILE_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
+#: Values (a state's looks and its value after a shake) the pile window's programme may hold per size
+#: tried: counted, not timed, so the decision is the same everywhere.
+PILE_WINDOW_STATES = 20_000
+#: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
+#: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
+PILE_WINDOW_CACHE = 512
+#: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
+#: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
+#: instead gave +2.8% on a 16-part two-strategy plan.
+WINDOW_REFINE = 2
+
+# ------------------------------------------------------------ the weighted bin's frontier window (policies/weighted_window.py)
+
+#: The weighted window's sizes: as PILE_WINDOW_PARTS (its looks enumerated, not order statistics, so a
+#: state costs more than the uniform window's).
+WEIGHTED_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
+#: States the weighted window's programme may hold per size tried: counted, not timed.
+WEIGHTED_WINDOW_STATES = 10_000
+#: And at most this many looks over its states (a state enumerates its bin's looks, about 7 ns each: on
+#: KILBRID at 3 visible the state cap alone let a decision take 121 ms of CPU; bench_fallback --bin weighted).
+WEIGHTED_WINDOW_LOOKS = 500_000

@@ -1,7 +1,8 @@
 """The look-ahead policy: the optimum's action where its programme fits, else the exact optimum of a
-frontier window (:mod:`~opportune.policies.window`) in a uniform bin, or one step of policy improvement
-over a base rule (default :class:`~opportune.policies.variants.Slack`) in the others, within a decision
-budget if it has one.  See :mod:`~opportune.policies.variants` for the rules it builds on.
+frontier window (:mod:`~opportune.policies.window` in a uniform bin, :mod:`~opportune.policies.pile_window`
+in the pile, :mod:`~opportune.policies.weighted_window` in a weighted bin), or where none serves one step
+of policy improvement over a base rule (default :class:`~opportune.policies.variants.Slack`), within a
+decision budget if it has one.  See :mod:`~opportune.policies.variants` for the rules it builds on.
 """
 
 from __future__ import annotations
@@ -32,7 +33,9 @@ from opportune.policies.optimal import (
     optimum_engine,
     same_action,
 )
+from opportune.policies.pile_window import PileWindow, pile_window_available
 from opportune.policies.variants import Slack
+from opportune.policies.weighted_window import WeightedWindow, weighted_window_available
 from opportune.policies.window import FrontierWindow, window_available
 
 __all__ = ["Lookahead", "programme_bytes"]
@@ -76,10 +79,12 @@ def programme_bytes(engine) -> int:
 
 
 class Lookahead(DecidesOnMasks):
-    """The optimal action where the optimum's programme fits, else, in a uniform bin, the best action of
-    the frontier window's exact optimum (:class:`~opportune.policies.window.FrontierWindow`: the next
-    parts of the plan, the rest lumped; ``base`` where no window fits its states or time), and in the
-    pile and weighted bins one step of policy improvement over ``base`` (default :class:`Slack`); on plans
+    """The optimal action where the optimum's programme fits, else the best action of the frontier window's
+    exact optimum (the next parts of the plan, the rest lumped; ``base`` where no window fits its states or
+    time): :class:`~opportune.policies.window.FrontierWindow` in a uniform bin,
+    :class:`~opportune.policies.pile_window.PileWindow` in the pile,
+    :class:`~opportune.policies.weighted_window.WeightedWindow` in a weighted bin; where no window serves
+    (no compiled core), one step of policy improvement over ``base`` (default :class:`Slack`), and on plans
     too large for that, the base's action.
 
     The scores are expected costs in the world of ``solver_settings``.  ``max_states`` bounds either
@@ -88,8 +93,7 @@ class Lookahead(DecidesOnMasks):
     it holds at most that many states, else the base policy's (the states the base reaches, fewer: its
     values after each action make the improvement step).  ``optimal=False`` (or setting :attr:`optimal`;
     ``opportune evaluate --without-optimum``) switches its exact optimum off, so that it decides by its
-    fallback: the window, or in the pile and weighted bins the improvement step (the base past
-    :attr:`STEP_UNITS` units).  How near the optimum the window and the step come, against the rules
+    fallback: the window of its bin.  How near the optimum the windows and the step come, against the rules
     alone, is measured in docs/decisions.md (``benchmarks/bench_fallback.py``).
     The window's work is counted (``self.window.work``), at most
     :data:`~opportune.policies.window.WINDOW_STATES` states a size tried; with a budget it also stops at
@@ -150,7 +154,7 @@ class Lookahead(DecidesOnMasks):
     #: share of the budget (the clock is read at every new state).  The Python programme (no compiled
     #: core) is held to ``max_states``.
     COMPILED_STATES = LOOKAHEAD_COMPILED_STATES
-    #: Where the optimum does not fit in a pile or weighted bin (the window serves the uniform bin), plans
+    #: Where the optimum does not fit and no window serves (no compiled core), plans
     #: of more units than this decide as the base does: the step over the base evaluates the base look by
     #: look in Python (every look of every state asks the base rule), hours on a 45-part plan.  The optimum
     #: itself is never refused by units, only by its states and bytes.
@@ -186,9 +190,9 @@ class Lookahead(DecidesOnMasks):
         if self.pile:
             solver_settings.pop("weights", None)
         self.settings = solver_settings
-        if not self.pile:
-            self.window = FrontierWindow(self.fallback, visible=solver_settings.get("visible", 2),
-                                         capacity=solver_settings.get("capacity"), costs=solver_settings.get("costs"))
+        window = PileWindow if self.pile else FrontierWindow
+        self.window = window(self.fallback, visible=solver_settings.get("visible", 2),
+                             capacity=solver_settings.get("capacity"), costs=solver_settings.get("costs"))
         self.optimal = optimal
         self._optimum_states = 0        # the optimum's states, counted before it starts (where it fits)
         #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
@@ -277,8 +281,20 @@ class Lookahead(DecidesOnMasks):
 
     def _window_serves(self, engine) -> bool:
         """Whether the frontier window decides where the optimum does not fit: a uniform bin and the
-        compiled core (:func:`~opportune.policies.window.window_available`).  O(parts)."""
-        return self.window is not None and window_available(engine, self.settings.get("weights"))
+        compiled core (:func:`~opportune.policies.window.window_available`), or the pile or a weighted bin and
+        the compiled core (:func:`~opportune.policies.pile_window.pile_window_available`,
+        :func:`~opportune.policies.weighted_window.weighted_window_available`; :attr:`window` becomes the
+        weighted bin's window on a plan whose weights differ).  O(parts)."""
+        if self.pile:
+            return pile_window_available(engine)
+        visible = self.settings.get("visible", 2)
+        if self._weighted(engine):
+            # the weighted bin's window (its looks enumerated), in place of the uniform bin's
+            if not isinstance(self.window, WeightedWindow):
+                self.window = WeightedWindow(self.fallback, visible=visible, capacity=self.settings.get("capacity"),
+                                             costs=self.settings.get("costs"), weights=self.settings.get("weights"))
+            return weighted_window_available(engine, visible)
+        return window_available(engine, self.settings.get("weights"))
 
     def _compiled(self, engine) -> bool:
         """Whether the optimum's programme for this plan and bin is the compiled one.  O(parts)."""

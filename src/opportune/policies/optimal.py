@@ -496,7 +496,7 @@ class OptimalSolver:
         weighted bin :meth:`_weighted_chances`).  The compiled programme (``src/native/optimal.cpp``)
         does the same operations in the same order.  O(parts) values."""
         mask, cons, buf = key
-        engine, move, value = self.engine, self.move, self._value
+        move, value = self.move, self._value
         free = self.capacity is None or sum(buf) < self.capacity
         inf = float("inf")
         ranked = []         # (best move, part, units in the bin)
@@ -505,16 +505,7 @@ class OptimalSolver:
             if c <= 0:
                 continue
             n += c
-            best = inf
-            u = engine.next_unit(mask, i)
-            after = engine.consistent_after(mask, cons, u)
-            if after:
-                best = move[i] + value((mask | 1 << u, after, buf))
-            if free:
-                nb = list(buf)
-                nb[i] += 1
-                best = min(best, move[i] + value((mask, cons, tuple(nb))))
-            ranked.append((best, i, c))
+            ranked.append((self._best_move(key, i, free), i, c))
         from_buffer = inf
         for i, nxt in self._buffer_installs(mask, cons, buf):
             from_buffer = min(from_buffer, move[i] + value(nxt))
@@ -523,6 +514,21 @@ class OptimalSolver:
         ranked.sort()
         chances = self._uniform_chances(ranked, n) if self.uniform else self._weighted_chances(ranked, key)
         return [(min(best, from_buffer), p) for (best, _, _), p in zip(ranked, chances)]
+
+    def _best_move(self, key: tuple, i: int, free: bool) -> float:
+        """A part's best move on a look that shows it: installing its next unit from the bin or, with a free
+        location, buffering one (inf: neither).  O(strategies)."""
+        mask, cons, buf = key
+        best = float("inf")
+        u = self.engine.next_unit(mask, i)
+        after = self.engine.consistent_after(mask, cons, u)
+        if after:
+            best = self.move[i] + self._value((mask | 1 << u, after, buf))
+        if free:
+            nb = list(buf)
+            nb[i] += 1
+            best = min(best, self.move[i] + self._value((mask, cons, tuple(nb))))
+        return best
 
     def _uniform_chances(self, ranked: list[tuple[float, int, int]], n: int) -> list[float]:
         """Each ranked part's chance of being the best visible one in a uniform bin of ``n`` units:
@@ -900,8 +906,11 @@ class CompiledOptimalSolver(CompiledCore, OptimalSolver):
         if not compiled_optimal_available(engine, weights):
             raise ValueError("the compiled optimum needs the compiled core, positive weights and a plan of 1 to "
                              "64 units and at most 64 strategies")
-        self._core = _native.OptimalCore(*self._core_args(), weights=[] if self.uniform else list(self.weights),
-                                         look_cache_bytes=COMPILED_LOOK_CACHE_BYTES)
+        self._core = _native.OptimalCore(*self._core_args(), **self._core_options())
+
+    def _core_options(self) -> dict:
+        """The core's settings after the plan's: the weights (none: a uniform bin) and the look cache's bytes."""
+        return {"weights": [] if self.uniform else list(self.weights), "look_cache_bytes": COMPILED_LOOK_CACHE_BYTES}
 
     def _value(self, key: tuple) -> float:
         try:

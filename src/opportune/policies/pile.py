@@ -201,11 +201,19 @@ class PileSolver(BufferOrder, OptimalSolver):
                 best = v
         return best
 
+    def _part_index(self, part: str) -> int:
+        """A move's part as the programme indexes it (the plan's declaration order).  O(1)."""
+        return self.plan.index(part)
+
+    def _others_args(self) -> tuple:
+        """The compiled core's last arguments: no units lumped (see :mod:`.pile_window`)."""
+        return (0, float("inf"))
+
     def _after(self, key: tuple, window: tuple[int, ...], move, nxt: tuple) -> float:
         """Expected value after a move: a unit taken from the window is replaced by a hidden one."""
         if move.kind == "install" and move.source == "buffer":
             return self._window_value(nxt, window)
-        i = self.plan.index(move.part)
+        i = self._part_index(move.part)
         rest = list(window)
         rest.remove(i)
         # the units of the bin before the move that are not in the window
@@ -275,7 +283,8 @@ class CompiledPileSolver(CompiledCore, PileSolver):
                              "and 64 strategies")
         super().__init__(engine, **settings)
         self._core = _native.PileCore(*self._core_args(),
-                                      sys.version_info >= (3, 12))   # sum() of floats is compensated from Python 3.12 on
+                                      sys.version_info >= (3, 12),   # sum() of floats is compensated from Python 3.12 on
+                                      *self._others_args())
 
     def _shake_value(self, key: tuple) -> float:
         return self._run(self._core.shake_value, key[0], key[1], list(key[2]))
@@ -287,7 +296,7 @@ class CompiledPileSolver(CompiledCore, PileSolver):
         """As :meth:`PileSolver._after`, the expectation over the hidden unit in one call to the core."""
         if move.kind == "install" and move.source == "buffer":
             return self._window_value(nxt, window)
-        return self._run(self._core.taken_value, key[0], key[1], list(key[2]), list(window), self.plan.index(move.part),
+        return self._run(self._core.taken_value, key[0], key[1], list(key[2]), list(window), self._part_index(move.part),
                          nxt[0], nxt[1], list(nxt[2]))
 
     def _run(self, solve, *args) -> float:

@@ -1,0 +1,339 @@
+"""What the frontier windows of the pile and of the weighted bin share: the window made a plan of its own,
+the plan's other units lumped as one more group of an exact programme, and the policy that solves a state's
+window and decides by it.
+
+The uniform bin's window (:mod:`~opportune.policies.window`) has its own compiled programme, whose looks
+are order statistics.  The pile's (:mod:`~opportune.policies.pile_window`) and the weighted bin's
+(:mod:`~opportune.policies.weighted_window`) are those bins' exact programmes (:mod:`~opportune.policies.pile`,
+:mod:`~opportune.policies.optimal`, Python and compiled) run on :func:`window_plan` with the *others*, the
+plan's remaining units outside the window, as one more group after its parts (:class:`OthersGroup`): in
+the bin they dilute the looks, an other seen may be buffered (a free location, the others' mean move), and
+none is installed before the window is complete, the terminal state (what the others cost after it does
+not depend on what was done in the window).  The window takes the parts of the look first (with their
+ancestors, where they fit), so that a part seen is valued as the part it is, not as a lumped other.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import replace as _replace
+
+from opportune.engine import OrderEngine
+from opportune.engine.deadline import Deadline
+from opportune.engine.tuning import WINDOW_REFINE as REFINE
+from opportune.planning.costs import TimeModel
+from opportune.planning.plan import Plan, Strategy
+from opportune.policies.base import DONE, DecidesOnMasks, Decision
+from opportune.policies.evaluate import OutOfTime
+from opportune.policies.optimal import OptimalTooLarge
+from opportune.policies.window import frontier_window
+
+__all__ = ["OTHERS", "CompiledOthers", "LumpedWindow", "OthersGroup", "window_plan"]
+
+#: The id the others' group takes in a window programme's moves (no plan part has it: part ids are printable).
+OTHERS = "\x00others"
+
+
+def window_plan(engine, mask: int, consistent: int, parts: list[int]) -> Plan:
+    """The window's parts as a plan of their own: each with its remaining units (in declaration order), one
+    strategy per open strategy with its order among them (a part before another where the last remaining unit
+    of the one is below the first of the other; ancestors outside the window taken as installed).
+    O(parts² × strategies).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    parts : list of int
+        The window's parts (plan indices, declaration order), each with a unit left.
+
+    Returns
+    -------
+    Plan
+        The window's plan (the parts keep their ids, so a cost model prices them as on the plan).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["b"]}))
+    >>> plan = window_plan(engine, 1, 1, [1, 2])
+    >>> plan.part_ids, dict(plan.strategies[0].requires)
+    (('b', 'c'), {'c': ('b',)})
+    """
+    plan = engine.plan
+    first, last, kept = {}, {}, []
+    for i in parts:
+        units = [u for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity) if not mask >> u & 1]
+        first[i], last[i] = units[0], units[-1]
+        kept.append(_replace(plan.parts[i], quantity=len(units)))
+    strategies = []
+    for s, poset in enumerate(engine.posets):
+        if consistent >> s & 1:
+            requires = {plan.parts[a].id: tuple(plan.parts[b].id for b in parts
+                                                if b != a and poset.below[first[a]] >> last[b] & 1)
+                        for a in parts}
+            strategies.append(Strategy(f"s{s}", {a: bs for a, bs in requires.items() if bs}))
+    return Plan("window", tuple(kept), tuple(strategies))
+
+
+class OthersGroup:
+    """A mixin before an exact programme (:class:`~opportune.policies.optimal.OptimalSolver` or
+    :class:`~opportune.policies.pile.PileSolver`): ``others`` more units lumped as one more group after the
+    plan's parts, in the states (the last buffer count) and in the looks (of weight ``other_weight``),
+    buffered at ``other_move`` (infinite: never), never installed.  With no others, the programme itself."""
+
+    def __init__(self, engine, *, others: int = 0, other_move: float = float("inf"), other_weight: float = 1.0,
+                 **settings):
+        super().__init__(engine, **settings)
+        self.others, self.other_move = int(others), float(other_move)
+        if self.others:
+            self.quantity = [*self.quantity, self.others]
+            self.move = [*self.move, self.other_move]
+            self.weights = [*self.weights, float(other_weight)]
+            self.ids = (*self.ids, OTHERS)
+
+    def _part_index(self, part: str) -> int:
+        return len(self.plan.parts) if part == OTHERS else self.plan.index(part)
+
+    def _installed_counts(self, mask: int) -> list[int]:
+        return super()._installed_counts(mask) + [0] * (self.others > 0)
+
+    def _buffer_installs(self, mask: int, cons: int, buf: tuple[int, ...]):
+        """The plan's parts' installations from the buffer (the others are never installed).  O(parts)."""
+        n = len(self.plan.parts)
+        for i, (m, c, nb) in super()._buffer_installs(mask, cons, buf[:n]):
+            yield i, (m, c, nb + buf[n:])
+
+    def _buffer_other(self, key: tuple) -> tuple | None:
+        """The key after buffering an other, or None where that is not a move (no free location, or the
+        others are never buffered).  O(parts)."""
+        n = len(self.plan.parts)
+        mask, cons, buf = key
+        if self.other_move == float("inf") or (self.capacity is not None and sum(buf) >= self.capacity):
+            return None
+        nb = list(buf)
+        nb[n] += 1
+        return (mask, cons, tuple(nb))
+
+
+class CompiledOthers:
+    """A mixin before a compiled programme of an :class:`OthersGroup`: the core gets the plan's parts'
+    quantities and moves (the others apart, in its last arguments)."""
+
+    def _core_args(self) -> tuple:
+        args = list(super()._core_args())
+        n = len(self.plan.parts)
+        args[2], args[4] = args[2][:n], args[4][:n]
+        return tuple(args)
+
+
+class LumpedWindow(DecidesOnMasks):
+    """A policy deciding by the exact programme of the frontier window at each state, the rest of the plan
+    lumped (see the module): the windows tried in increasing size, the largest that fits ``max_states`` (or
+    the deadline) deciding, the state's solved window cached; the base rule where none fits.  A subclass
+    gives :meth:`_solved` (a state's window solved: a table with ``parts`` and ``states``), :meth:`_decide`
+    (the action on a look by a table) and :meth:`_note`.
+
+    The attribute ``work`` counts windows solved, the states they held, and decisions left to the base.
+    The attribute ``deadline``, a :class:`~opportune.engine.deadline.Deadline` or None, stops a window's
+    programme; the base decides then.
+    """
+
+    deterministic = True
+    decision_key = None
+    #: States whose solved window is kept.
+    cache = 4096
+    #: Whether the bin is the pile (its states listed with its windows).
+    pile = False
+
+    def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
+                 sizes: tuple[int, ...] = (5, 8, 12), max_states: int = 20_000):
+        from opportune.policies.variants import Slack
+
+        self.base = base if base is not None else Slack()
+        self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
+        self.sizes, self.max_states = tuple(sorted(sizes)), max_states
+        self.deadline: Deadline | None = None
+        self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
+        self._tables: OrderedDict = OrderedDict()      # by state and forced parts: the window that decides
+        self._windows: OrderedDict = OrderedDict()     # by state and window: the window solved
+        self._engine = None
+        self.last_table = None
+
+    def table(self, engine, mask: int, consistent: int, buffer, forced: tuple[str, ...] = ()):
+        """The state's window solved (cached), or None where no window fits (states, or the deadline).  At
+        most ``len(sizes) × max_states`` states of work.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+        forced : tuple of str
+            Parts the window takes first, as it takes the buffered ones (with their ancestors, where they fit).
+
+        Returns
+        -------
+        table or None
+            The largest window's table that fitted, or None where none did.
+        """
+        if self._engine is not engine:
+            self._engine, self._tables, self._windows = engine, OrderedDict(), OrderedDict()
+        key = (mask, consistent, tuple(sorted(buffer)), forced)
+        got = self._tables.get(key)
+        if got is not None:
+            self._tables.move_to_end(key)
+            return got
+        got = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced)
+        if got is not None:
+            self._tables[key] = got
+            if len(self._tables) > self.cache:
+                self._tables.popitem(last=False)
+        return got
+
+    def _largest(self, engine, mask: int, consistent: int, buffer, first: tuple):
+        """The largest window predicted to fit, solved: the smallest size is solved, then in turn the largest
+        size whose states are predicted within ``max_states``, the prediction being the states listed for its
+        plan (:func:`~opportune.policies.states.estimate_states`, without the others: under a millisecond)
+        scaled by the last window solved's states over its own listed states; a window that does not fit after
+        all ends the search (the last one solved decides), as do :data:`~opportune.engine.tuning.WINDOW_REFINE` predictions.  So a state
+        costs a few windows, not every size.  None where the smallest does not fit."""
+        sizes = self.sizes
+        parts, outside = frontier_window(engine, mask, consistent, first, sizes[0])
+        got = self._window(engine, mask, consistent, buffer, parts, outside, sizes[0])
+        if got is None:
+            return None
+        for _ in range(REFINE if outside else 0):
+            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self._cap(len(parts))))
+            pick = None
+            for size in (s for s in sizes if s > got.size):
+                more, rest = frontier_window(engine, mask, consistent, first, size)
+                if more == (pick[1] if pick else parts):
+                    continue
+                cap = self._cap(len(more))
+                if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
+                    break
+                pick = (size, more, rest)
+                if not rest:
+                    break
+            bigger = None if pick is None else self._window(engine, mask, consistent, buffer, pick[1], pick[2], pick[0])
+            if bigger is None:
+                break
+            got, (_, parts, outside) = bigger, pick
+            if not outside:
+                break
+        return got
+
+    def _window(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int], size: int):
+        """The window of these parts solved (cached by state and parts: looks that force parts already in it
+        share it), or None where it does not fit (states, or the deadline)."""
+        key = (mask, consistent, tuple(sorted(buffer)), tuple(parts))
+        got = self._windows.get(key)
+        if got is not None:
+            self._windows.move_to_end(key)
+            return got
+        try:
+            got = self._solved(engine, mask, consistent, buffer, parts, outside, size)
+        except (OptimalTooLarge, OutOfTime):
+            return None
+        self._windows[key] = got
+        if len(self._windows) > self.cache:
+            self._windows.popitem(last=False)
+        return got
+
+    def _listed(self, engine, mask: int, consistent: int, parts: list[int], most: int) -> int:
+        """The states of the window's plan without the others, listed (more than ``most``: stopped there)."""
+        from opportune.policies.states import estimate_states
+
+        return estimate_states(window_engine(engine, mask, consistent, parts), visible=self.visible,
+                               capacity=self.capacity, pile=self.pile, stop_above=most, time_limit=None).states
+
+    def _cap(self, parts: int) -> int:
+        """The states a window of ``parts`` parts may hold (``max_states``)."""
+        return self.max_states
+
+    def _forced(self, engine, visible) -> tuple[str, ...]:
+        """The parts of a look the window takes first, with their ancestors where they fit, as it takes the
+        buffered ones: a part seen outside the state's window is then valued as the part it is, not as a
+        lumped other that is never installed (on a 16-part plan at 1 visible and 1 location, +1.03% over
+        the optimum without, +0.28% with, in a weighted bin).  Looks whose parts the state's window holds
+        share its table (:meth:`_window` caches by the parts).  O(visible)."""
+        return tuple(sorted(set(visible), key=engine.plan.index))
+
+    def _count(self, solver) -> None:
+        """The work of a window's programme, counted."""
+        self.work["windows"] += 1
+        self.work["states"] += solver.states
+        self.work["most_states"] = max(self.work["most_states"], solver.states)
+
+    def _window_key(self, engine, buffer, parts: list[int], outside: list[int], mask: int):
+        """The window's buffer counts (the others buffered last, where there are others), the others' count,
+        their mean move and their mean weight (``self.weights``, where the subclass has them).  O(units)."""
+        plan = engine.plan
+        index = {i: j for j, i in enumerate(parts)}
+        buf, others_buffered = [0] * len(parts), 0
+        for p in buffer:
+            j = index.get(plan.index(p))
+            if j is None:
+                others_buffered += 1
+            else:
+                buf[j] += 1
+        units = [plan.parts[i].id for i in outside
+                 for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity) if not mask >> u & 1]
+        weights = getattr(self, "weights", None) or {}
+        n = len(units) or 1
+        return (tuple(buf) + ((others_buffered,) if units else ()), len(units),
+                sum(self.costs.move(p) for p in units) / n if units else float("inf"),
+                sum(float(weights.get(p, 1.0)) for p in units) / n)
+
+    def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                  visible: tuple[str, ...]):
+        if mask == engine.full:
+            return DONE
+        table = self.table(engine, mask, consistent, buffer, self._forced(engine, visible))
+        self.last_table = table
+        if table is None:
+            self.work["by_base"] += 1
+            return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
+        return self._decide(engine, mask, consistent, table, buffer, visible)
+
+    def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
+        """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
+
+        Parameters
+        ----------
+        state : State
+            The sequencer's state.
+        visible : tuple of str
+            The look.
+        because : str
+            Why the window decides, said first in the rule (empty: nothing said).
+
+        Returns
+        -------
+        Decision
+            The window's decision, or the base's (saying that no window fitted).
+        """
+        sched = state.schedule
+        if sched.mask == sched.engine.full:
+            return Decision(DONE, "the assembly is complete")
+        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+        table = self.last_table
+        if table is None:
+            base = self.base.decide(state, visible)
+            return Decision(base.action, f"as the base rule ({self.base.name}), because {because + ' and ' * bool(because)}"
+                            f"no frontier window fitted its state cap ({self.max_states:,}) or its time: {base.rule}",
+                            note=base.note)
+        rule = f"by its frontier window, because {because}: {self.rule}" if because else self.rule
+        return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
+                        + self._note(table))
+
+
+def window_engine(engine, mask: int, consistent: int, parts: list[int]) -> OrderEngine:
+    """The engine of :func:`window_plan` (no memory upkeep: it lives for one state).  O(units × covers)."""
+    return OrderEngine(window_plan(engine, mask, consistent, parts), memory_limit=None)

@@ -1,0 +1,228 @@
+"""The pile's frontier window: near the optimum in the pile bin where the optimum's programme does not fit.
+
+The uniform bin's frontier window (:mod:`~opportune.policies.window`) carried to the pile bin
+(:mod:`~opportune.policies.pile`): at each state the window is the same parts
+(:func:`~opportune.policies.window.frontier_window`: the buffered parts and the next remaining parts in a
+topological order, closed under their remaining ancestors, up to a size), and the plan's other remaining
+units are lumped into one count, the *others*.  The window is made a plan of its own
+(:func:`~opportune.policies.lumped.window_plan`: its parts with their remaining units, each open strategy's order among them,
+ancestors outside it taken as installed), and the pile's exact optimum is solved on it with the others
+one more group of units (:class:`PileWindowSolver`; compiled, :class:`CompiledPileWindowSolver`, the
+pile's own core ``src/native/pile.cpp`` with the group added, the same doubles): they lie in the pile
+and in its visible top as units of a part do, an other seen may be buffered (a free location, the
+others' mean move), and none is installed before the window is complete, the terminal state (what the
+others cost after it does not depend on the window's policy).
+
+The window takes the parts of the look first (the pile's top stays until a unit is taken from it: a part
+seen outside the state's window would otherwise be valued as a lumped other, never installed, and the
+window would shake where the optimum buffers or installs it).  The decision on a look is the window's best
+action on it (a visible part outside the window is an other; buffered, it is the one first in the
+topological order); an installation no open strategy of the plan allows is never chosen.  Every look of
+a window is decided when it is solved (:class:`PileWindowTable`), and looks whose parts one window holds
+share it: the exact evaluation of the policy asks each look of a state between the looks of its
+successors.  The window's size is the largest predicted to fit
+:data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
+counted states, the same decision on every machine); where none fits, or past the deadline, the base rule
+decides.
+
+Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
+--policies fallback``) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from opportune.engine import compiled_core, tuning
+from opportune.engine.deadline import as_deadline
+from opportune.planning.costs import TimeModel
+from opportune.policies.base import SHAKE, Action
+from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup, window_engine
+from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
+
+__all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
+           "pile_window_solver"]
+
+_native = compiled_core()   # None: the Python programme only
+
+
+def pile_window_available(engine) -> bool:
+    """Whether the pile window serves this plan: the compiled core is built (not switched off with
+    ``OPPORTUNE_PURE_PYTHON=1``; the Python programme is the compiled one's reference, too slow to decide
+    within a budget) and the plan has at most 64 strategies.  O(1).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+
+    Returns
+    -------
+    bool
+        True where :class:`PileWindow` decides by the compiled programme.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> pile_window_available(OrderEngine(make_plan(["a"], {}))) in (True, False)
+    True
+    """
+    return _native is not None and hasattr(_native, "PileCore") and engine.k <= 64
+
+
+class PileWindowSolver(OthersGroup, PileSolver):
+    """The pile's optimum on a window's plan with ``others`` more units lumped as one more group
+    (:class:`~opportune.policies.lumped.OthersGroup`); with no others it is :class:`PileSolver`.  The optimum
+    only (no policy).  Complexity: as PileSolver's, on the window's plan.
+    """
+
+    def _others_args(self) -> tuple:
+        return (self.others, self.other_move)
+
+    def _moves(self, key: tuple, look: tuple[int, ...]):
+        """The plan's parts' moves, then buffering an other seen (a free location; ``other_move``)."""
+        n = len(self.plan.parts)
+        yield from super()._moves(key, tuple(i for i in look if i != n))
+        nxt = self._buffer_other(key) if n in look else None
+        if nxt is not None:
+            yield self.other_move, nxt, Action("buffer", OTHERS)
+
+
+class CompiledPileWindowSolver(CompiledOthers, CompiledPileSolver, PileWindowSolver):
+    """:class:`PileWindowSolver` computed by the pile's compiled core (the others its last group): the same
+    doubles.  A ``ValueError`` where the core does not take the window's plan."""
+
+
+def pile_window_solver(engine, **settings) -> PileWindowSolver:
+    """:class:`CompiledPileWindowSolver` where the compiled core takes the window's plan, else
+    :class:`PileWindowSolver`; the same values either way.  O(1) before the work.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The window plan's engine.
+    **settings
+        ``others``, ``other_move`` and :class:`~opportune.policies.pile.PileSolver`'s settings.
+
+    Returns
+    -------
+    PileWindowSolver
+        The programme (nothing computed yet).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> solver = pile_window_solver(OrderEngine(make_plan(["a"], {})), visible=1, others=1, other_move=1.0)
+    >>> solver.value()       # the top is a (1 move) or the other (buffered, then a: 2 moves), evenly
+    1.5
+    """
+    if compiled_pile_available(engine):
+        try:
+            return CompiledPileWindowSolver(engine, **settings)
+        except ValueError:          # codes over 64 bits: the Python programme
+            pass
+    return PileWindowSolver(engine, **settings)
+
+
+@dataclass(frozen=True)
+class PileWindowTable:
+    """A state's window solved: its parts (plan indices), the parts outside it (in the window's topological
+    order), the window's best action on each look it can see (the window's parts by index, the others last;
+    None: shake), the window's value after a shake, its size and the states its programme held."""
+
+    parts: tuple[int, ...]
+    outside: tuple[int, ...]
+    actions: dict
+    value: float
+    size: int
+    states: int
+
+
+class PileWindow(LumpedWindow):
+    """The exact optimum of the frontier window in the pile bin at each state, the rest of the plan lumped
+    (see the module; :class:`~opportune.policies.lumped.LumpedWindow` for the work counted and the deadline).
+
+    Parameters
+    ----------
+    base : policy, optional
+        What decides where no window fits in ``max_states`` or in time (default
+        :class:`~opportune.policies.variants.Slack`).
+    visible, capacity, costs :
+        The pile's world (as :class:`~opportune.policies.pile.PileSolver`).
+    sizes : tuple of int
+        The window sizes tried in turn (:data:`~opportune.engine.tuning.PILE_WINDOW_PARTS`).
+    max_states : int
+        Values a window's programme may hold (:data:`~opportune.engine.tuning.PILE_WINDOW_STATES`).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> PileWindow(visible=1, capacity=1).choose_at(engine, 0, 1, (), 1.0, ("c",))
+    Action(kind='buffer', part='c', source=None)
+    """
+
+    name = "pile window"
+    rule = "the action of least expected cost in the frontier window's exact optimum in the pile (the other parts lumped)"
+    cache = tuning.PILE_WINDOW_CACHE
+    pile = True
+
+    def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
+                 sizes: tuple[int, ...] = tuning.PILE_WINDOW_PARTS, max_states: int = tuning.PILE_WINDOW_STATES):
+        super().__init__(base, visible=visible, capacity=capacity, costs=costs, sizes=sizes, max_states=max_states)
+
+    def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
+        """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
+        key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
+        sub = window_engine(engine, mask, consistent, parts)
+        solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
+                                    max_states=self._cap(len(parts)), others=others, other_move=other_move)
+        solver.deadline = as_deadline(self.deadline)
+        key = (0, sub.all_strategies, key)
+        try:
+            value, actions = solver._deep(lambda k: self._actions(engine, mask, consistent, parts, solver, k), key)
+        finally:
+            self._count(solver)
+        return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states)
+
+    def _actions(self, engine, mask: int, consistent: int, parts: list[int], solver, key: tuple):
+        """The value after a shake, and the window's best action on every look of the state (ties: install,
+        then buffer, then declaration order, the others last, the bin before the buffer, as the optimum's);
+        an installation no open strategy of the plan allows is not a move.  O(looks × moves)."""
+        after_shake = solver._after_shake(key)
+        shake = solver.costs.shake + after_shake
+        legal = {j for j, i in enumerate(parts)
+                 if engine.consistent_after(mask, consistent, engine.next_unit(mask, i)) != 0}
+        n, kinds, actions = len(parts), {"install": 0, "buffer": 1}, {}
+        for look, _ in solver._looks(solver._bin_counts(key)):
+            best = None
+            for cost, nxt, action in solver._moves(key, look):
+                j = solver._part_index(action.part)
+                if action.kind == "install" and j not in legal:
+                    continue
+                rank = (cost + solver._after(key, look, action, nxt), kinds[action.kind],
+                        parts[j] if j < n else len(engine.plan.parts), action.source == "buffer")
+                if best is None or rank < best[0]:
+                    best = (rank, (action.kind, j, action.source))
+            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
+        return after_shake, actions
+
+    def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
+        plan = engine.plan
+        index = {i: j for j, i in enumerate(table.parts)}
+        n = len(table.parts)
+        chosen = table.actions.get(tuple(sorted(index.get(plan.index(p), n) for p in visible)))
+        if chosen is None:
+            return SHAKE
+        kind, j, source = chosen
+        if j < n:
+            return Action(kind, plan.parts[table.parts[j]].id, source)
+        # an other: the one seen first in the window's topological order
+        ids = set(visible)
+        return Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids))
+
+    def _note(self, table: PileWindowTable) -> str:
+        return f"expected cost of the window after a shake {table.value:.4f}"

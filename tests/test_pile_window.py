@@ -1,0 +1,161 @@
+"""The pile's frontier window (policies/pile_window.py, the others' group in src/native/pile.cpp), the default
+policy's fallback in the pile bin where its optimum does not fit: the compiled programme against the Python
+one (the same doubles, others or not), the window over the whole plan against the pile's optimum (the same
+doubles and decisions), the lumped others against a plan with an explicit part in their place, and the
+default's decisions by it with its work counted and bounded."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+from conftest import random_plans
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from opportune import Sequencer, load_plan, make_plan
+from opportune.engine import OrderEngine
+from opportune.planning.costs import TimeModel
+from opportune.policies.lookahead import Lookahead
+from opportune.policies.pile import pile_solver
+from opportune.policies.lumped import OTHERS, window_plan
+from opportune.policies.pile_window import (
+    CompiledPileWindowSolver,
+    PileWindow,
+    PileWindowSolver,
+    pile_window_available,
+)
+
+pytestmark = pytest.mark.skipif(not pile_window_available(OrderEngine(make_plan(["a"], {}))),
+                                reason="the compiled core is not built")
+SETTINGS = ((1, 1), (2, 2), (3, 1), (2, None))      # (visible, buffer locations)
+
+
+def _costs(plan, rng: random.Random) -> TimeModel:
+    return TimeModel(shake=rng.choice([0.5, 1.0, 2.7]), look=rng.choice([0.0, 0.3]),
+                     parts={p.id: rng.choice([1.0, 1.7, 0.35]) for p in plan.parts})
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(plan=random_plans(max_parts=4, max_units=6, max_strategies=2), seed=st.integers(0, 1000),
+       others=st.integers(0, 4))
+def test_the_compiled_window_gives_the_same_doubles_as_python(plan, seed, others):
+    """Every setting, with and without others (bufferable or not): the value after a shake at the start, at
+    every window of the start and after each move there, bit for bit, and the same number of stored values."""
+    rng = random.Random(seed)
+    engine, costs = OrderEngine(plan), _costs(plan, rng)
+    other_move = rng.choice([0.8, 1.0, float("inf")])
+    for visible, capacity in SETTINGS:
+        kw = dict(visible=visible, capacity=capacity, costs=costs, others=others, other_move=other_move)
+        py, cc = PileWindowSolver(engine, **kw), CompiledPileWindowSolver(engine, **kw)
+        start = py.start_key()
+        assert cc.value(start) == py.value(start), (visible, capacity)
+        assert cc.states == py.states
+        for window, _ in py._looks(py._bin_counts(start)):
+            assert cc._window_value(start, window) == py._window_value(start, window)
+            for _, nxt, action in py._moves(start, window):
+                assert cc._after(start, window, action, nxt) == py._after(start, window, action, nxt)
+
+
+def _walk(engine, rng: random.Random, moves: int):
+    """A state a few random legal moves in (installs, and at most one part buffered)."""
+    plan, mask, cons, buffer = engine.plan, 0, engine.all_strategies, ()
+    for _ in range(moves):
+        left = [i for i in range(len(plan.parts)) if engine.next_unit(mask, i) is not None
+                and plan.parts[i].id not in buffer]
+        if not left:
+            break
+        i = rng.choice(left)
+        u = engine.next_unit(mask, i)
+        after = engine.consistent_after(mask, cons, u)
+        if after and rng.random() < 0.7:
+            mask, cons = mask | 1 << u, after
+        elif not buffer:
+            buffer = (plan.parts[i].id,)
+    return mask, cons, buffer
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(plan=random_plans(max_parts=5, max_units=7, max_strategies=3), seed=st.integers(0, 1000))
+def test_a_window_over_the_whole_plan_is_the_pile_optimum_to_the_last_bit(plan, seed):
+    """Several strategies and quantities, costs per part, at the start and a few moves in: the window's value
+    after a shake is the pile optimum's, the same doubles, and its action on every look is the optimum's."""
+    rng = random.Random(seed)
+    engine, costs = OrderEngine(plan), _costs(plan, rng)
+    visible, capacity = rng.choice(SETTINGS)
+    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 3))
+    if mask == engine.full:
+        return
+    optimum = pile_solver(engine, visible=visible, capacity=capacity, costs=costs)
+    window = PileWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), max_states=10**6)
+    table = window.table(engine, mask, cons, buffer)
+    assert not table.outside and len(table.parts) == sum(engine.next_unit(mask, i) is not None
+                                                         for i in range(len(plan.parts)))
+    key = optimum.policy_key(mask, cons, buffer)
+    assert table.value == optimum.value(key)
+    for look, _ in optimum._looks(optimum._bin_counts(key)):
+        ours = window.choose_at(engine, mask, cons, buffer, 0, tuple(plan.parts[i].id for i in look))
+        assert ours == optimum.best_action(key, look)[0], look
+
+
+def _with_rest(plan, others: int):
+    """The plan with one explicit part of ``others`` units after every part: what the window lumps."""
+    requires = {b: [a for a, bb in plan.strategies[0].pairs() if bb == b] for b in plan.part_ids}
+    requires["_rest"] = list(plan.part_ids)
+    return make_plan(list(plan.part_ids) + [{"id": "_rest", "quantity": others}], {k: v for k, v in requires.items() if v})
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_lumped_others_are_a_part_after_the_window(seed):
+    """The window's pile programme with ``others`` lumped units is the pile optimum of the plan with a part of
+    that many units required after every other part, less what those units cost after the window (each a
+    look and a move: the terminal value 0 differs from it by that constant only)."""
+    rng = random.Random(seed)
+    ids = [f"p{i}" for i in range(rng.randint(2, 5))]
+    plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.35] for j, b in enumerate(ids)})
+    others, (visible, capacity) = rng.randint(1, 4), rng.choice(SETTINGS)
+    costs = TimeModel(look=rng.choice([0.0, 0.25]), shake=rng.choice([1.0, 1.6]))
+    explicit = pile_solver(OrderEngine(_with_rest(plan, others)), visible=visible, capacity=capacity, costs=costs)
+    lumped = CompiledPileWindowSolver(OrderEngine(plan), visible=visible, capacity=capacity, costs=costs,
+                                      others=others, other_move=costs.move("_rest"))
+    assert lumped.value() + others * (costs.look + costs.move("_rest")) == pytest.approx(explicit.value(), rel=1e-12)
+    assert lumped.states < explicit.states      # the lumped units are not in the masks
+
+
+def test_the_window_plan_keeps_the_remaining_units_and_the_open_strategies_orders():
+    plan = make_plan(["a", {"id": "b", "quantity": 3}, "c", "d"], {"b": ["a"], "c": ["b"], "d": ["c"]})
+    engine = OrderEngine(plan)
+    mask = 1 | 1 << engine.first[1]                 # a and one unit of b installed
+    sub = window_plan(engine, mask, 1, [1, 2])      # d is outside: not in c's requirements
+    assert [(p.id, p.quantity) for p in sub.parts] == [("b", 2), ("c", 1)]
+    assert dict(sub.strategies[0].requires) == {"c": ("b",)}
+
+
+def test_an_other_seen_is_buffered_as_the_one_nearest_the_frontier():
+    """Two parts in a window of one... the others lumped: with a free location and nothing to install, the
+    window buffers an other, the visible outside part first in the topological order."""
+    engine = OrderEngine(make_plan(["a", "b", "c", "d"], {"b": ["a"], "c": ["b"], "d": ["c"]}))
+    window = PileWindow(visible=2, capacity=2, sizes=(1,))
+    action = window.choose_at(engine, 0, 1, (), 2, ("d", "b"))
+    assert action.kind in ("buffer", "shake") and action.part != OTHERS
+    assert window.last_table.parts == (0,) and window.last_table.outside == (1, 2, 3)
+    if action.kind == "buffer":
+        assert action.part == "b"                   # b is nearer the frontier than d
+
+
+def test_the_default_decides_by_the_pile_window_with_its_work_counted_and_bounded():
+    """KILBRID (45 parts) in the pile with the optimum switched off: the window decides, deterministically,
+    its states within its cap, and the decision says so."""
+    plan = load_plan("salbp:KILBRID")
+    decisions = []
+    for _ in range(2):
+        policy = Lookahead(visible=2, capacity=2, bin="pile", optimal=False)
+        engine = OrderEngine(plan)
+        decisions.append([policy.choose_at(engine, 0, engine.all_strategies, (), 2, look)
+                          for look in (("1", "2"), ("3", "1"), ("2", "7"), ("9", "12"))])
+        work = policy.window.work
+        assert work["windows"] > 0 and work["by_base"] == 0
+        assert work["most_states"] <= policy.window.max_states
+    assert decisions[0] == decisions[1]
+    rule = Sequencer(plan, policy=Lookahead(visible=2, capacity=2, bin="pile", optimal=False)).decide(["1", "2"]).rule
+    assert "frontier window" in rule and "pile" in rule, rule
