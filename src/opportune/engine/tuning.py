@@ -197,3 +197,13 @@ RELAX_COUNT_SHARE = 0.5
 #: populations of at most START_KEEP_UNITS steps are kept.
 START_KEEP = 4
 START_KEEP_UNITS = 20_000
+
+# ------------------------------------------------------------ the frontier window (policies/window.py)
+
+#: Open strategies whose frontier windows a decision of the look-ahead's fallback solves (the first ones
+#: in the plan's order; windows with the same parts solved once): the window is closed in the strategy
+#: it is the frontier of (a window closed in none credits itself with orders its installations break),
+#: and the one of least expected cost, its others a look and a move each, decides.  On the policy lab's
+#: two-strategy plans both are solved (twice a one-strategy decision's work at most); on plans of many
+#: strategies the work grows with this (each window at most ``len(WINDOW_PARTS) × WINDOW_STATES`` states).
+WINDOW_STRATEGIES = 4

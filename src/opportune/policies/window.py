@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
+from opportune.engine.tuning import WINDOW_STRATEGIES
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
@@ -89,6 +90,9 @@ class WindowTable:
     outside: int
     size: int
     states: int
+    #: What the parts outside cost after the window, a look and a move a unit: windows of different
+    #: strategies' frontiers compare by ``values[-1] + rest``.
+    rest: float = 0.0
 
 
 def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int, int], dict[int, int]]:
@@ -111,27 +115,13 @@ def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int
     return nearest, every
 
 
-def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int) -> set[int] | None:
-    """Part ``i`` and its remaining ancestors in every open strategy not in ``window`` (an ancestor in one
-    strategy brings its own in the others), or None past ``most`` parts.  O(parts added × strategies)."""
-    new, todo = set(), [i]
-    while todo:
-        j = todo.pop()
-        if j in new or j in window:
-            continue
-        new.add(j)
-        if len(new) > most:
-            return None
-        todo.extend(part_of[u] for u in bits(every[j]))
-    return new
-
-
-def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
-    """The window of ``size`` parts at a state: the buffered parts and the remaining parts first in a
-    topological order (fewest remaining ancestor units in an open strategy, then declaration order), each
-    with its remaining ancestors (in every open strategy where they fit the window, else in that one), at
-    most 64 units; and the remaining parts outside it, in that order.  A buffered part whose ancestors do
-    not fit is left out (lumped with the others).  O(parts × strategies).
+def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
+                    strategy: int | None = None) -> tuple[list[int], list[int]]:
+    """The window of ``size`` parts at a state, the frontier of one open strategy: the buffered parts and the
+    remaining parts first in its topological order (fewest remaining ancestor units there, then declaration
+    order), each with its remaining ancestors there (so the window is closed in it), at most 64 units; and
+    the remaining parts outside it, in that order.  A part whose ancestors would take the window past its
+    size is skipped (a buffered one is left out: lumped with the others).  O(parts × strategies).
 
     Parameters
     ----------
@@ -142,7 +132,11 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     buffer : sequence of str
         The buffered parts.
     size : int
-        Parts in the window (buffered ones and ancestors counted; more where a closure adds them).
+        Parts in the window (buffered ones and ancestors counted; more where a buffered part's closure adds
+        them).
+    strategy : int, optional
+        The open strategy whose frontier it is (default: the first open one).  The window is closed in it,
+        and in the other strategies :func:`window_strategies` finds.
 
     Returns
     -------
@@ -157,19 +151,30 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     >>> frontier_window(engine, 0, 1, ("c",), 2)
     ([1, 2], [0, 3])
     """
-    anc, every = _ancestors(engine, mask, consistent)
+    if strategy is None:
+        strategy = core_strategies(engine, consistent)[0]
+    # one strategy's ancestors: a closure in several (their union, transitive) takes in most of a plan whose
+    # strategies order the parts differently, and a window closed in none solves a plan that is not there
+    anc, _ = _ancestors(engine, mask, 1 << strategy)
     order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
-    part_of = engine.unit_part
-    plan = engine.plan
+    buffered = sorted({engine.plan.index(p) for p in buffer}, key=order.index)
+    window = _closed_window(engine, mask, buffered + order, buffered, anc, size)
+    return sorted(window), [i for i in order if i not in window]
+
+
+def _closed_window(engine, mask: int, order: list[int], buffered: list[int], anc: dict[int, int],
+                   size: int) -> set[int]:
+    """The parts of ``order`` taken in turn, each with its remaining ancestors in ``anc`` (so the window is
+    closed there), until ``size`` parts (the last may bring more) or 64 units; a buffered part whose
+    ancestors would take it past ``size`` is left out (lumped with the others, an occupied location).
+    O(parts)."""
+    plan, part_of = engine.plan, engine.unit_part
     window: set[int] = set()
     units = 0
-    buffered = sorted({plan.index(p) for p in buffer}, key=order.index)
-    for i in buffered + order:
+    for i in order:
         if i in window or (len(window) >= size and i not in buffered):
             continue
-        # closed in every open strategy where that fits the window (exact there), else in its nearest one
-        new = (_closure(i, every, part_of, window, max(0, size - len(window)))
-               or ({i} | {part_of[u] for u in bits(anc[i])}) - window)
+        new = ({i} | {part_of[u] for u in bits(anc[i])}) - window
         more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
         if units + more > 64 or (i in buffered and len(window) + len(new) > size):
             if i in buffered:
@@ -177,7 +182,47 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
             break
         window |= new
         units += more
-    return sorted(window), [i for i in order if i not in window]
+    return window
+
+
+def window_strategies(engine, mask: int, consistent: int, parts) -> int:
+    """The open strategies in which the window is closed: every remaining unit below a window part there is
+    a window part's.  Only these are the window programme's (in another, a window part waits for a part
+    outside, installed only after the window in its model, so the window could not be completed there:
+    taking it as installed would credit the window with a strategy its installations close).  O(units ×
+    strategies).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    parts : iterable of int
+        The window's parts (plan indices).
+
+    Returns
+    -------
+    int
+        The strategies' bits (a subset of ``consistent``).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b"], strategies={"s": {"b": ["a"]}, "t": {}}))
+    >>> window_strategies(engine, 0, 0b11, [1]), window_strategies(engine, 0, 0b11, [0, 1])
+    (2, 3)
+    """
+    units = 0
+    for i in parts:
+        units |= ((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i]
+    out = 0
+    for s in range(engine.k):
+        below = engine.posets[s].below
+        if consistent >> s & 1 and all(below[u] & ~mask & ~units == 0 for u in bits(units & ~mask)):
+            out |= 1 << s
+    return out
 
 
 class FrontierWindow(DecidesOnMasks):
@@ -261,9 +306,11 @@ class FrontierWindow(DecidesOnMasks):
         for size in sorted(self.sizes):
             # the smaller windows first: past the deadline or the cap, the largest finished one decides
             try:
-                got = self._solve(engine, mask, consistent, buffer, size)
+                tables = [self._solve(engine, mask, consistent, buffer, parts, outside, size)
+                          for parts, outside in self._windows(engine, mask, consistent, buffer, size)]
             except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
                 break
+            got = min(tables, key=lambda t: t.values[-1] + t.rest)
             if not got.outside:
                 break           # the window holds every part left: a larger one is the same
         if got is not None:
@@ -272,19 +319,35 @@ class FrontierWindow(DecidesOnMasks):
                 self._tables.popitem(last=False)
         return got
 
-    def _solve(self, engine, mask: int, consistent: int, buffer, size: int) -> WindowTable:
-        """The window of ``size`` parts solved by the compiled core: its table.  The work is counted."""
-        parts, outside = frontier_window(engine, mask, consistent, buffer, size)
-        core, buf, others_buffered = self._core(engine, mask, consistent, buffer, parts, outside)
+    @staticmethod
+    def _windows(engine, mask: int, consistent: int, buffer, size: int) -> list[tuple[list[int], list[int]]]:
+        """The frontier windows of ``size`` parts of the first :data:`WINDOW_STRATEGIES` open strategies,
+        each once.  O(parts × strategies²)."""
+        out = []
+        for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]:
+            window = frontier_window(engine, mask, consistent, buffer, size, strategy=s)
+            if window not in out:
+                out.append(window)
+        return out
+
+    def _solve(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
+               size: int) -> WindowTable:
+        """The window of ``parts`` solved by the compiled core, in the open strategies it is closed in (the
+        others' moves are not its own: inf, never chosen): its table.  The work is counted."""
+        kept = window_strategies(engine, mask, consistent, parts)
+        core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside)
         seconds = as_deadline(self.deadline).seconds()
         try:
-            values = core.moves(0, (1 << len(core_strategies(engine, consistent))) - 1, buf, others_buffered,
+            values = core.moves(0, (1 << kept.bit_count()) - 1, buf, others_buffered,
                                 seconds=seconds, max_states=self.max_states)
         finally:
             self.work["windows"] += 1
             self.work["states"] += core.states
             self.work["most_states"] = max(self.work["most_states"], core.states)
-        return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states)
+        rest = sum((float(self.costs.look) + self.costs.move(engine.plan.parts[i].id))
+                   * (((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i] & ~mask).bit_count()
+                   for i in outside)
+        return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states, rest)
 
     def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
         """The compiled window programme for ``parts`` (the remaining units of each, the open strategies'
@@ -300,9 +363,8 @@ class FrontierWindow(DecidesOnMasks):
             move.append(float(self.costs.move(plan.parts[i].id)))
         below = []
         for s in core_strategies(engine, consistent):
-            # a unit's ancestors outside the window are the strategies' other than the one its window took
-            # whole (_ancestors): taken as installed there (blocking them would leave the window stuck once
-            # installs closed the other strategies); a move they forbid on the real plan is never chosen
+            # the window is closed in these strategies (window_strategies): its units' remaining ancestors
+            # are all its own
             below.append([_window_bits(engine.posets[s].below[u] & ~mask, unit_bit) for u in unit_bit])
         index = {i: j for j, i in enumerate(parts)}
         buf = [0] * len(parts)
