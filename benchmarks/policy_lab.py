@@ -100,7 +100,7 @@ USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
 ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
-POLICY_VERSIONS = {"fallback": "frontier window per strategy"}
+POLICY_VERSIONS = {"fallback": "frontier window of each strategy, chosen by the look"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 

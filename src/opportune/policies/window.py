@@ -1,10 +1,11 @@
 """The frontier window: near the optimum where the optimum's programme does not fit.
 
-At each state the *window* is the buffered parts and the next remaining parts in a topological order
-(fewest remaining ancestors first, then declaration order), closed under their remaining ancestors (in
-every open strategy where they fit the window, else in the strategy where they are fewest; ancestors
-outside it are taken as installed, and an installation no open strategy allows is never chosen), up to
-:data:`WINDOW_PARTS` parts and 64 units.  The plan's other remaining
+At each state the *window* is the frontier of an open strategy: the buffered parts and the next remaining
+parts in its topological order (fewest remaining ancestors there first, then declaration order), each with
+its remaining ancestors there, up to :data:`WINDOW_PARTS` parts and 64 units.  The window is closed in
+that strategy, and its programme keeps the open strategies it is closed in (:func:`window_strategies`):
+in another, a window part waits for a part outside it, which the model installs only after the window.
+The plan's other remaining
 units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
 plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
 buffered (a free location, the others' mean move), and none is installed before the window is complete,
@@ -13,8 +14,11 @@ the terminal value is 0.  The window's exact optimum (the compiled ``WindowCore`
 ``src/native/window.cpp``: the optimum's recursion, looks as order statistics, the others one more
 group) is solved once per state, within :data:`WINDOW_STATES` states (counted, so the decision is the
 same on every machine), and the decision is its best action on the look: a visible part outside the
-window seen as an other (buffered, the one first in the topological order).  Where the window does not
-fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time, the base rule decides.
+window seen as an other (buffered, the one first in the topological order).  On a plan of several
+strategies the frontier windows of the first :data:`~opportune.engine.tuning.WINDOW_STRATEGIES` open ones
+are solved, and the one of least expected cost with its others (a look and a move each after it) decides.
+Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
+the base rule decides.
 
 Measured against the optimum on 16-30-part plans and per decision on the SALBP plans:
 ``benchmarks/bench_fallback.py`` (docs/decisions.md).
@@ -32,7 +36,7 @@ from opportune.engine.tuning import WINDOW_STRATEGIES
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available"]
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -115,6 +119,22 @@ def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int
     return nearest, every
 
 
+def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int) -> set[int] | None:
+    """Part ``i`` and its remaining ancestors in every open strategy not in ``window`` (an ancestor in one
+    strategy brings its own in the others), or None past ``most`` parts.  O(parts added × strategies)."""
+    new, todo = set(), [i]
+    while todo:
+        j = todo.pop()
+        if j in new or j in window:
+            continue
+        new.add(j)
+        if len(new) > most:
+            return None
+        todo.extend(part_of[u] for u in bits(every[j]))
+    return new
+
+
+
 def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
                     strategy: int | None = None) -> tuple[list[int], list[int]]:
     """The window of ``size`` parts at a state, the frontier of one open strategy: the buffered parts and the
@@ -156,14 +176,15 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
     # one strategy's ancestors: a closure in several (their union, transitive) takes in most of a plan whose
     # strategies order the parts differently, and a window closed in none solves a plan that is not there
     anc, _ = _ancestors(engine, mask, 1 << strategy)
+    _, every = _ancestors(engine, mask, consistent)
     order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
     buffered = sorted({engine.plan.index(p) for p in buffer}, key=order.index)
-    window = _closed_window(engine, mask, buffered + order, buffered, anc, size)
+    window = _closed_window(engine, mask, buffered + order, buffered, anc, every, size)
     return sorted(window), [i for i in order if i not in window]
 
 
 def _closed_window(engine, mask: int, order: list[int], buffered: list[int], anc: dict[int, int],
-                   size: int) -> set[int]:
+                   every: dict[int, int], size: int) -> set[int]:
     """The parts of ``order`` taken in turn, each with its remaining ancestors in ``anc`` (so the window is
     closed there), until ``size`` parts (the last may bring more) or 64 units; a buffered part whose
     ancestors would take it past ``size`` is left out (lumped with the others, an occupied location).
@@ -174,7 +195,9 @@ def _closed_window(engine, mask: int, order: list[int], buffered: list[int], anc
     for i in order:
         if i in window or (len(window) >= size and i not in buffered):
             continue
-        new = ({i} | {part_of[u] for u in bits(anc[i])}) - window
+        # closed in every open strategy where that fits (more strategies kept), else in this one
+        new = (_closure(i, every, part_of, window, max(0, size - len(window)))
+               or ({i} | {part_of[u] for u in bits(anc[i])}) - window)
         more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
         if units + more > 64 or (i in buffered and len(window) + len(new) > size):
             if i in buffered:
@@ -279,7 +302,8 @@ class FrontierWindow(DecidesOnMasks):
 
     def table(self, engine, mask: int, consistent: int, buffer) -> WindowTable | None:
         """The window's decision table at a state (cached), or None where no window fits (states, or the
-        deadline).  At most ``len(sizes) × max_states`` states of work.
+        deadline): of the frontier windows of the open strategies (:meth:`tables`), the one of least expected
+        cost with its rest.  At most ``len(sizes) × max_states`` states of work a window.
 
         Parameters
         ----------
@@ -295,6 +319,27 @@ class FrontierWindow(DecidesOnMasks):
         WindowTable or None
             The largest window's table that fitted, or None where none did.
         """
+        tables = self.tables(engine, mask, consistent, buffer)
+        return min(tables, key=lambda t: t.values[-1] + t.rest) if tables else None
+
+    def tables(self, engine, mask: int, consistent: int, buffer) -> tuple[WindowTable, ...]:
+        """The decision tables of the frontier windows of the first :data:`WINDOW_STRATEGIES` open strategies
+        at a state, each of the largest size at which they all fit (cached; none where none fits).
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+
+        Returns
+        -------
+        tuple of WindowTable
+            One a distinct window, or empty.
+        """
         if self._engine is not engine:
             self._engine, self._tables = engine, OrderedDict()
         key = (mask, consistent, tuple(sorted(buffer)))
@@ -302,18 +347,17 @@ class FrontierWindow(DecidesOnMasks):
         if got is not None:
             self._tables.move_to_end(key)
             return got
-        got = None
+        got = ()
         for size in sorted(self.sizes):
-            # the smaller windows first: past the deadline or the cap, the largest finished one decides
+            # the smaller windows first: past the deadline or the cap, the largest finished ones decide
             try:
-                tables = [self._solve(engine, mask, consistent, buffer, parts, outside, size)
-                          for parts, outside in self._windows(engine, mask, consistent, buffer, size)]
+                got = tuple(self._solve(engine, mask, consistent, buffer, parts, outside, size)
+                            for parts, outside in self._windows(engine, mask, consistent, buffer, size))
             except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
                 break
-            got = min(tables, key=lambda t: t.values[-1] + t.rest)
-            if not got.outside:
-                break           # the window holds every part left: a larger one is the same
-        if got is not None:
+            if not all(t.outside for t in got):
+                break           # a window holds every part left: a larger one is the same
+        if got:
             self._tables[key] = got
             if len(self._tables) > WINDOW_CACHE:
                 self._tables.popitem(last=False)
@@ -389,12 +433,17 @@ class FrontierWindow(DecidesOnMasks):
                   visible: tuple[str, ...]) -> Action:
         if mask == engine.full:
             return DONE
-        table = self.table(engine, mask, consistent, buffer)
-        self.last_table = table
-        if table is None:
+        tables = self.tables(engine, mask, consistent, buffer)
+        if not tables:
+            self.last_table = None
             self.work["by_base"] += 1
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
-        return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
+        # each strategy's window's best move on this look, with its rest: the least decides (the look
+        # chooses the strategy, as on the real plan, where its installations close the others)
+        best = min(((value + t.rest, n), action, t) for n, t in enumerate(tables)
+                   for value, action in [best_move(engine, mask, consistent, t, buffer, visible, self.costs.shake)])
+        self.last_table = best[2]
+        return best[1]
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
         """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
@@ -443,6 +492,31 @@ def core_strategies(engine, consistent: int) -> list[int]:
 
 
 def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffer, visible, shake: float) -> Action:
+    """The window's best action on a look: :func:`best_move`'s action.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    table : WindowTable
+        The state's window.
+    buffer, visible : tuple of str
+        The buffered parts and the look.
+    shake : float
+        The shake's cost.
+
+    Returns
+    -------
+    Action
+        The action.
+    """
+    return best_move(engine, mask, consistent, table, buffer, visible, shake)[1]
+
+
+def best_move(engine, mask: int, consistent: int, table: WindowTable, buffer, visible,
+              shake: float) -> tuple[float, Action]:
     """The window's best action on a look (ties: install, then buffer, then declaration order, the bin
     before the buffer, as the optimum's), or a shake where no move is cheaper than shaking by 1e-12.
 
@@ -461,8 +535,8 @@ def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffe
 
     Returns
     -------
-    Action
-        The action.
+    (float, Action)
+        The window's expected cost from the look on, and the action.
     """
     plan = engine.plan
     values = table.values
@@ -491,6 +565,6 @@ def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffe
         ranked.append((values[-2], 1, i, 0, Action("buffer", plan.parts[i].id)))
     ranked = [r for r in ranked if r[0] != float("inf")]
     if not ranked:
-        return SHAKE
+        return shake + values[-1], SHAKE
     best = min(ranked, key=lambda r: r[:4])
-    return SHAKE if best[0] > shake + values[-1] + 1e-12 else best[4]
+    return (shake + values[-1], SHAKE) if best[0] > shake + values[-1] + 1e-12 else (best[0], best[4])
