@@ -2,9 +2,10 @@
 
 At each state the *window* is the frontier of an open strategy: the buffered parts and the next remaining
 parts in its topological order (fewest remaining ancestors there first, then declaration order), each with
-its remaining ancestors there, up to :data:`WINDOW_PARTS` parts and 64 units.  The window is closed in
-that strategy, and its programme keeps the open strategies it is closed in (:func:`window_strategies`):
-in another, a window part waits for a part outside it, which the model installs only after the window.
+its remaining ancestors (in every open strategy where they fit the window, else in that one), up to
+:data:`WINDOW_PARTS` parts and 64 units.  The window is closed in that strategy, and its programme keeps
+the open strategies it is closed in (:func:`window_strategies`): in another, a window part waits for a
+part outside it, which the model installs only after the window.
 The plan's other remaining
 units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
 plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
@@ -16,7 +17,8 @@ group) is solved once per state, within :data:`WINDOW_STATES` states (counted, s
 same on every machine), and the decision is its best action on the look: a visible part outside the
 window seen as an other (buffered, the one first in the topological order).  On a plan of several
 strategies the frontier windows of the first :data:`~opportune.engine.tuning.WINDOW_STRATEGIES` open ones
-are solved, and the one of least expected cost with its others (a look and a move each after it) decides.
+are solved, and on a look the best move of least expected cost, with its window's others a look and a
+move each after it, decides: the look chooses the strategy.
 Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
 the base rule decides.
 
@@ -139,9 +141,10 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
                     strategy: int | None = None) -> tuple[list[int], list[int]]:
     """The window of ``size`` parts at a state, the frontier of one open strategy: the buffered parts and the
     remaining parts first in its topological order (fewest remaining ancestor units there, then declaration
-    order), each with its remaining ancestors there (so the window is closed in it), at most 64 units; and
-    the remaining parts outside it, in that order.  A part whose ancestors would take the window past its
-    size is skipped (a buffered one is left out: lumped with the others).  O(parts × strategies).
+    order), each with its remaining ancestors in every open strategy where they fit the window, else there
+    (so the window is closed in it), at most 64 units; and the remaining parts outside it, in that order.  The last part taken may bring more than ``size`` parts;
+    a buffered part whose ancestors would take the window past it is left out (lumped with the others).
+    O(parts × strategies).
 
     Parameters
     ----------
@@ -173,7 +176,7 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
     """
     if strategy is None:
         strategy = core_strategies(engine, consistent)[0]
-    # one strategy's ancestors: a closure in several (their union, transitive) takes in most of a plan whose
+    # one strategy's order: a closure in all at once (their union, transitive) takes in most of a plan whose
     # strategies order the parts differently, and a window closed in none solves a plan that is not there
     anc, _ = _ancestors(engine, mask, 1 << strategy)
     _, every = _ancestors(engine, mask, consistent)
@@ -185,10 +188,10 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
 
 def _closed_window(engine, mask: int, order: list[int], buffered: list[int], anc: dict[int, int],
                    every: dict[int, int], size: int) -> set[int]:
-    """The parts of ``order`` taken in turn, each with its remaining ancestors in ``anc`` (so the window is
-    closed there), until ``size`` parts (the last may bring more) or 64 units; a buffered part whose
-    ancestors would take it past ``size`` is left out (lumped with the others, an occupied location).
-    O(parts)."""
+    """The parts of ``order`` taken in turn, each with its remaining ancestors in ``every`` (every open
+    strategy) where they fit ``size`` parts, else in ``anc`` (one strategy: the window is closed there),
+    until ``size`` parts (the last may bring more) or 64 units; a buffered part whose ancestors would take
+    it past ``size`` is left out (lumped with the others, an occupied location).  O(parts × strategies)."""
     plan, part_of = engine.plan, engine.unit_part
     window: set[int] = set()
     units = 0
