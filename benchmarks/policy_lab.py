@@ -103,6 +103,9 @@ ESTIMATE_SECONDS = 5.0
 POLICY_VERSIONS = {"fallback": "frontier window of each strategy, chosen by the look"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
+#: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
+#: touches only plans of several strategies): their gaps on one-strategy plans are current.
+SAME_ON_ONE_STRATEGY = {"fallback": ("frontier window",)}
 
 
 def policies(visible: int, capacity: int | None, bin: str = "uniform"):
@@ -284,7 +287,12 @@ def _fresh(rec: dict) -> dict:
     if "gaps" not in rec:
         return rec
     versions = {**UNTAGGED, **rec.get("versions", {})}
-    gaps = {n: g for n, g in rec["gaps"].items() if versions.get(n) == POLICY_VERSIONS.get(n)}
+
+    def current(n: str) -> bool:
+        v = versions.get(n)
+        return v == POLICY_VERSIONS.get(n) or (not rec.get("two_strategies") and v in SAME_ON_ONE_STRATEGY.get(n, ()))
+
+    gaps = {n: g for n, g in rec["gaps"].items() if current(n)}
     return {**rec, "gaps": gaps}
 
 
