@@ -101,13 +101,16 @@ USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
 ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
-POLICY_VERSIONS = {"fallback": "frontier window"}
+POLICY_VERSIONS = {"fallback": "frontier window of each strategy, chosen by the look"}
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale.
 BIN_VERSIONS = {("fallback", "pile"): "pile window"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
+#: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
+#: touches only plans of several strategies): their gaps on one-strategy plans are current.
+SAME_ON_ONE_STRATEGY = {"fallback": ("frontier window",)}
 
 
 def policy_version(name: str, bin: str) -> str | None:
@@ -294,7 +297,16 @@ def _fresh(rec: dict) -> dict:
     if "gaps" not in rec:
         return rec
     versions = {**UNTAGGED, **rec.get("versions", {})}
-    gaps = {n: g for n, g in rec["gaps"].items() if versions.get(n) == policy_version(n, rec.get("bin", "uniform"))}
+
+    def current(n: str) -> bool:
+        v, bin = versions.get(n), rec.get("bin", "uniform")
+        if v == policy_version(n, bin):
+            return True
+        # a change that touched only plans of several strategies (in a bin without a version of its own)
+        return ((n, bin) not in BIN_VERSIONS and not rec.get("two_strategies")
+                and v in SAME_ON_ONE_STRATEGY.get(n, ()))
+
+    gaps = {n: g for n, g in rec["gaps"].items() if current(n)}
     return {**rec, "gaps": gaps}
 
 

@@ -159,3 +159,16 @@ def test_a_plan_over_the_state_cap_is_skipped_with_its_count_before_any_work():
     r = policy_lab.measure(plan, 2, None, max_states=1000)
     assert r["skipped"].startswith("optimum over 1,000 states: ") and r["estimate"] > 1000
     assert "cpu" not in r
+
+
+def test_a_policys_gap_on_a_one_strategy_plan_stays_current_at_a_version_that_decides_the_same_there(monkeypatch):
+    """A new fallback that changes decisions on plans of several strategies only: its older gaps on
+    one-strategy plans count, those on two-strategy plans do not."""
+    monkeypatch.setitem(policy_lab.POLICY_VERSIONS, "fallback", "new")
+    monkeypatch.setitem(policy_lab.SAME_ON_ONE_STRATEGY, "fallback", ("old",))
+    one = {"gaps": {"fallback": 0.01, "paper": 0.1}, "versions": {"fallback": "old"}, "two_strategies": False}
+    two = {**one, "two_strategies": True}
+    older = {**one, "versions": {"fallback": "older"}}
+    assert policy_lab._fresh(one)["gaps"] == {"fallback": 0.01, "paper": 0.1}
+    assert policy_lab._fresh(two)["gaps"] == {"paper": 0.1}
+    assert policy_lab._fresh(older)["gaps"] == {"paper": 0.1}

@@ -416,3 +416,13 @@ WEIGHTED_WINDOW_STATES = 10_000
 #: And at most this many looks over its states (a state enumerates its bin's looks, about 7 ns each: on
 #: KILBRID at 3 visible the state cap alone let a decision take 121 ms of CPU; bench_fallback --bin weighted).
 WEIGHTED_WINDOW_LOOKS = 500_000
+
+# ------------------------------------------------------------ the frontier window (policies/window.py)
+
+#: Open strategies whose frontier windows a decision of the look-ahead's fallback solves (the first ones
+#: in the plan's order; windows with the same parts solved once): the window is closed in the strategy
+#: it is the frontier of (a window closed in none credits itself with orders its installations break),
+#: and the one of least expected cost, its others a look and a move each, decides.  On the policy lab's
+#: two-strategy plans both are solved (twice a one-strategy decision's work at most); on plans of many
+#: strategies the work grows with this (each window at most ``len(WINDOW_PARTS) × WINDOW_STATES`` states).
+WINDOW_STRATEGIES = 4

@@ -1,10 +1,12 @@
 """The frontier window: near the optimum where the optimum's programme does not fit.
 
-At each state the *window* is the buffered parts and the next remaining parts in a topological order
-(fewest remaining ancestors first, then declaration order), closed under their remaining ancestors (in
-every open strategy where they fit the window, else in the strategy where they are fewest; ancestors
-outside it are taken as installed, and an installation no open strategy allows is never chosen), up to
-:data:`WINDOW_PARTS` parts and 64 units.  The plan's other remaining
+At each state the *window* is the frontier of an open strategy: the buffered parts and the next remaining
+parts in its topological order (fewest remaining ancestors there first, then declaration order), each with
+its remaining ancestors (in every open strategy where they fit the window, else in that one), up to
+:data:`WINDOW_PARTS` parts and 64 units.  The window is closed in that strategy, and its programme keeps
+the open strategies it is closed in (:func:`window_strategies`): in another, a window part waits for a
+part outside it, which the model installs only after the window.
+The plan's other remaining
 units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
 plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
 buffered (a free location, the others' mean move), and none is installed before the window is complete,
@@ -13,8 +15,12 @@ the terminal value is 0.  The window's exact optimum (the compiled ``WindowCore`
 ``src/native/window.cpp``: the optimum's recursion, looks as order statistics, the others one more
 group) is solved once per state, within :data:`WINDOW_STATES` states (counted, so the decision is the
 same on every machine), and the decision is its best action on the look: a visible part outside the
-window seen as an other (buffered, the one first in the topological order).  Where the window does not
-fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time, the base rule decides.
+window seen as an other (buffered, the one first in the topological order).  On a plan of several
+strategies the frontier windows of the first :data:`~opportune.engine.tuning.WINDOW_STRATEGIES` open ones
+are solved, and on a look the best move of least expected cost, with its window's others a look and a
+move each after it, decides: the look chooses the strategy.
+Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
+the base rule decides.
 
 Measured against the optimum on 16-30-part plans and per decision on the SALBP plans:
 ``benchmarks/bench_fallback.py`` (docs/decisions.md).
@@ -28,11 +34,11 @@ from dataclasses import dataclass
 from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
-from opportune.engine.tuning import WINDOW_CACHE, WINDOW_PARTS, WINDOW_STATES  # engine/tuning.py says why
+from opportune.engine.tuning import WINDOW_CACHE, WINDOW_PARTS, WINDOW_STATES, WINDOW_STRATEGIES  # tuning.py says why
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available"]
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -100,6 +106,9 @@ class WindowTable:
     outside: int
     size: int
     states: int
+    #: What the parts outside cost after the window, a look and a move a unit: windows of different
+    #: strategies' frontiers compare by ``values[-1] + rest``.
+    rest: float = 0.0
 
 
 def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int, int], dict[int, int]]:
@@ -137,12 +146,15 @@ def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int
     return new
 
 
-def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tuple[list[int], list[int]]:
-    """The window of ``size`` parts at a state: the buffered parts and the remaining parts first in a
-    topological order (fewest remaining ancestor units in an open strategy, then declaration order), each
-    with its remaining ancestors (in every open strategy where they fit the window, else in that one), at
-    most 64 units; and the remaining parts outside it, in that order.  A buffered part whose ancestors do
-    not fit is left out (lumped with the others).  O(parts × strategies).
+
+def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
+                    strategy: int | None = None) -> tuple[list[int], list[int]]:
+    """The window of ``size`` parts at a state, the frontier of one open strategy: the buffered parts and the
+    remaining parts first in its topological order (fewest remaining ancestor units there, then declaration
+    order), each with its remaining ancestors in every open strategy where they fit the window, else there
+    (so the window is closed in it), at most 64 units; and the remaining parts outside it, in that order.  The last part taken may bring more than ``size`` parts;
+    a buffered part whose ancestors would take the window past it is left out (lumped with the others).
+    O(parts × strategies).
 
     Parameters
     ----------
@@ -153,7 +165,11 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     buffer : sequence of str
         The buffered parts.
     size : int
-        Parts in the window (buffered ones and ancestors counted; more where a closure adds them).
+        Parts in the window (buffered ones and ancestors counted; more where a buffered part's closure adds
+        them).
+    strategy : int, optional
+        The open strategy whose frontier it is (default: the first open one).  The window is closed in it,
+        and in the other strategies :func:`window_strategies` finds.
 
     Returns
     -------
@@ -168,17 +184,31 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
     >>> frontier_window(engine, 0, 1, ("c",), 2)
     ([1, 2], [0, 3])
     """
-    anc, every = _ancestors(engine, mask, consistent)
+    if strategy is None:
+        strategy = core_strategies(engine, consistent)[0]
+    # one strategy's order: a closure in all at once (their union, transitive) takes in most of a plan whose
+    # strategies order the parts differently, and a window closed in none solves a plan that is not there
+    anc, _ = _ancestors(engine, mask, 1 << strategy)
+    _, every = _ancestors(engine, mask, consistent)
     order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
-    part_of = engine.unit_part
-    plan = engine.plan
+    buffered = sorted({engine.plan.index(p) for p in buffer}, key=order.index)
+    window = _closed_window(engine, mask, buffered + order, buffered, anc, every, size)
+    return sorted(window), [i for i in order if i not in window]
+
+
+def _closed_window(engine, mask: int, order: list[int], buffered: list[int], anc: dict[int, int],
+                   every: dict[int, int], size: int) -> set[int]:
+    """The parts of ``order`` taken in turn, each with its remaining ancestors in ``every`` (every open
+    strategy) where they fit ``size`` parts, else in ``anc`` (one strategy: the window is closed there),
+    until ``size`` parts (the last may bring more) or 64 units; a buffered part whose ancestors would take
+    it past ``size`` is left out (lumped with the others, an occupied location).  O(parts × strategies)."""
+    plan, part_of = engine.plan, engine.unit_part
     window: set[int] = set()
     units = 0
-    buffered = sorted({plan.index(p) for p in buffer}, key=order.index)
-    for i in buffered + order:
+    for i in order:
         if i in window or (len(window) >= size and i not in buffered):
             continue
-        # closed in every open strategy where that fits the window (exact there), else in its nearest one
+        # closed in every open strategy where that fits (more strategies kept), else in this one
         new = (_closure(i, every, part_of, window, max(0, size - len(window)))
                or ({i} | {part_of[u] for u in bits(anc[i])}) - window)
         more = sum((((1 << plan.parts[j].quantity) - 1) << engine.first[j] & ~mask).bit_count() for j in new)
@@ -188,7 +218,47 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int) -> tu
             break
         window |= new
         units += more
-    return sorted(window), [i for i in order if i not in window]
+    return window
+
+
+def window_strategies(engine, mask: int, consistent: int, parts) -> int:
+    """The open strategies in which the window is closed: every remaining unit below a window part there is
+    a window part's.  Only these are the window programme's (in another, a window part waits for a part
+    outside, installed only after the window in its model, so the window could not be completed there:
+    taking it as installed would credit the window with a strategy its installations close).  O(units ×
+    strategies).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    parts : iterable of int
+        The window's parts (plan indices).
+
+    Returns
+    -------
+    int
+        The strategies' bits (a subset of ``consistent``).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b"], strategies={"s": {"b": ["a"]}, "t": {}}))
+    >>> window_strategies(engine, 0, 0b11, [1]), window_strategies(engine, 0, 0b11, [0, 1])
+    (2, 3)
+    """
+    units = 0
+    for i in parts:
+        units |= ((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i]
+    out = 0
+    for s in range(engine.k):
+        below = engine.posets[s].below
+        if consistent >> s & 1 and all(below[u] & ~mask & ~units == 0 for u in bits(units & ~mask)):
+            out |= 1 << s
+    return out
 
 
 class FrontierWindow(DecidesOnMasks):
@@ -245,7 +315,8 @@ class FrontierWindow(DecidesOnMasks):
 
     def table(self, engine, mask: int, consistent: int, buffer) -> WindowTable | None:
         """The window's decision table at a state (cached), or None where no window fits (states, or the
-        deadline).  At most ``len(sizes) × max_states`` states of work.
+        deadline): of the frontier windows of the open strategies (:meth:`tables`), the one of least expected
+        cost with its rest.  At most ``len(sizes) × max_states`` states of work a window.
 
         Parameters
         ----------
@@ -273,6 +344,27 @@ class FrontierWindow(DecidesOnMasks):
         >>> FrontierWindow(visible=1, capacity=1, max_states=1).table(engine, 0, 1, ()) is None
         True
         """
+        tables = self.tables(engine, mask, consistent, buffer)
+        return min(tables, key=lambda t: t.values[-1] + t.rest) if tables else None
+
+    def tables(self, engine, mask: int, consistent: int, buffer) -> tuple[WindowTable, ...]:
+        """The decision tables of the frontier windows of the first :data:`WINDOW_STRATEGIES` open strategies
+        at a state, each of the largest size at which they all fit (cached; none where none fits).
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+
+        Returns
+        -------
+        tuple of WindowTable
+            One a distinct window, or empty.
+        """
         if self._engine is not engine:
             self._engine, self._tables = engine, OrderedDict()
         key = (mask, consistent, tuple(sorted(buffer)))
@@ -280,34 +372,51 @@ class FrontierWindow(DecidesOnMasks):
         if got is not None:
             self._tables.move_to_end(key)
             return got
-        got = None
+        got = ()
         for size in sorted(self.sizes):
-            # the smaller windows first: past the deadline or the cap, the largest finished one decides
+            # the smaller windows first: past the deadline or the cap, the largest finished ones decide
             try:
-                got = self._solve(engine, mask, consistent, buffer, size)
+                got = tuple(self._solve(engine, mask, consistent, buffer, parts, outside, size)
+                            for parts, outside in self._windows(engine, mask, consistent, buffer, size))
             except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
                 break
-            if not got.outside:
-                break           # the window holds every part left: a larger one is the same
-        if got is not None:
+            if not all(t.outside for t in got):
+                break           # a window holds every part left: a larger one is the same
+        if got:
             self._tables[key] = got
             if len(self._tables) > WINDOW_CACHE:
                 self._tables.popitem(last=False)
         return got
 
-    def _solve(self, engine, mask: int, consistent: int, buffer, size: int) -> WindowTable:
-        """The window of ``size`` parts solved by the compiled core: its table.  The work is counted."""
-        parts, outside = frontier_window(engine, mask, consistent, buffer, size)
-        core, buf, others_buffered = self._core(engine, mask, consistent, buffer, parts, outside)
+    @staticmethod
+    def _windows(engine, mask: int, consistent: int, buffer, size: int) -> list[tuple[list[int], list[int]]]:
+        """The frontier windows of ``size`` parts of the first :data:`WINDOW_STRATEGIES` open strategies,
+        each once.  O(parts × strategies²)."""
+        out = []
+        for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]:
+            window = frontier_window(engine, mask, consistent, buffer, size, strategy=s)
+            if window not in out:
+                out.append(window)
+        return out
+
+    def _solve(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
+               size: int) -> WindowTable:
+        """The window of ``parts`` solved by the compiled core, in the open strategies it is closed in (the
+        others' moves are not its own: inf, never chosen): its table.  The work is counted."""
+        kept = window_strategies(engine, mask, consistent, parts)
+        core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside)
         seconds = as_deadline(self.deadline).seconds()
         try:
-            values = core.moves(0, (1 << len(core_strategies(engine, consistent))) - 1, buf, others_buffered,
+            values = core.moves(0, (1 << kept.bit_count()) - 1, buf, others_buffered,
                                 seconds=seconds, max_states=self.max_states)
         finally:
             self.work["windows"] += 1
             self.work["states"] += core.states
             self.work["most_states"] = max(self.work["most_states"], core.states)
-        return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states)
+        rest = sum((float(self.costs.look) + self.costs.move(engine.plan.parts[i].id))
+                   * (((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i] & ~mask).bit_count()
+                   for i in outside)
+        return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states, rest)
 
     def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
         """The compiled window programme for ``parts`` (the remaining units of each, the open strategies'
@@ -323,9 +432,8 @@ class FrontierWindow(DecidesOnMasks):
             move.append(float(self.costs.move(plan.parts[i].id)))
         below = []
         for s in core_strategies(engine, consistent):
-            # a unit's ancestors outside the window are the strategies' other than the one its window took
-            # whole (_ancestors): taken as installed there (blocking them would leave the window stuck once
-            # installs closed the other strategies); a move they forbid on the real plan is never chosen
+            # the window is closed in these strategies (window_strategies): its units' remaining ancestors
+            # are all its own
             below.append([_window_bits(engine.posets[s].below[u] & ~mask, unit_bit) for u in unit_bit])
         index = {i: j for j, i in enumerate(parts)}
         buf = [0] * len(parts)
@@ -379,12 +487,17 @@ class FrontierWindow(DecidesOnMasks):
         """
         if mask == engine.full:
             return DONE
-        table = self.table(engine, mask, consistent, buffer)
-        self.last_table = table
-        if table is None:
+        tables = self.tables(engine, mask, consistent, buffer)
+        if not tables:
+            self.last_table = None
             self.work["by_base"] += 1
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
-        return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
+        # each strategy's window's best move on this look, with its rest: the least decides (the look
+        # chooses the strategy, as on the real plan, where its installations close the others)
+        best = min(((value + t.rest, n), action, t) for n, t in enumerate(tables)
+                   for value, action in [best_move(engine, mask, consistent, t, buffer, visible, self.costs.shake)])
+        self.last_table = best[2]
+        return best[1]
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
         """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
@@ -445,17 +558,16 @@ def core_strategies(engine, consistent: int) -> list[int]:
 
 
 def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffer, visible, shake: float) -> Action:
-    """The window's best action on a look (ties: install, then buffer, then declaration order, the bin
-    before the buffer, as the optimum's), or a shake where no move is cheaper than shaking by 1e-12.
+    """The window's best action on a look: :func:`best_move`'s action.
 
     Parameters
     ----------
     engine : OrderEngine
         The plan's engine.
     mask, consistent : int
-        The installed units and the open strategies (an installation no open strategy allows is not a move).
+        The installed units and the open strategies.
     table : WindowTable
-        The state's window (:meth:`FrontierWindow.table`).
+        The state's window.
     buffer, visible : tuple of str
         The buffered parts and the look.
     shake : float
@@ -474,6 +586,41 @@ def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffe
     >>> table = FrontierWindow(visible=1, capacity=1).table(engine, 0, 1, ())
     >>> best_in_window(engine, 0, 1, table, (), ("c",), 1.0), best_in_window(engine, 0, 1, table, (), ("a",), 1.0)
     (Action(kind='buffer', part='c', source=None), Action(kind='install', part='a', source='bin'))
+    """
+    return best_move(engine, mask, consistent, table, buffer, visible, shake)[1]
+
+
+def best_move(engine, mask: int, consistent: int, table: WindowTable, buffer, visible,
+              shake: float) -> tuple[float, Action]:
+    """The window's best action on a look (ties: install, then buffer, then declaration order, the bin
+    before the buffer, as the optimum's), or a shake where no move is cheaper than shaking by 1e-12.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies (an installation no open strategy allows is not a move).
+    table : WindowTable
+        The state's window (:meth:`FrontierWindow.table`).
+    buffer, visible : tuple of str
+        The buffered parts and the look.
+    shake : float
+        The shake's cost.
+
+    Returns
+    -------
+    (float, Action)
+        The window's expected cost from the look on, and the action.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> table = FrontierWindow(visible=1, capacity=1).table(engine, 0, 1, ())
+    >>> best_move(engine, 0, 1, table, (), ("a",), 1.0)[1]
+    Action(kind='install', part='a', source='bin')
     """
     plan = engine.plan
     values = table.values
@@ -502,6 +649,6 @@ def best_in_window(engine, mask: int, consistent: int, table: WindowTable, buffe
         ranked.append((values[-2], 1, i, 0, Action("buffer", plan.parts[i].id)))
     ranked = [r for r in ranked if r[0] != float("inf")]
     if not ranked:
-        return SHAKE
+        return shake + values[-1], SHAKE
     best = min(ranked, key=lambda r: r[:4])
-    return SHAKE if best[0] > shake + values[-1] + 1e-12 else best[4]
+    return (shake + values[-1], SHAKE) if best[0] > shake + values[-1] + 1e-12 else (best[0], best[4])
