@@ -9,6 +9,7 @@ are everywhere in these assemblies: sliding along them must be allowed.
 
 from __future__ import annotations
 
+import io
 import itertools
 import json
 import random
@@ -373,6 +374,11 @@ HOSTILE = {
     "not a mesh": ("\x00\x01garbage \xff\xfe" * 50, "part 'bad'"),
     "degenerate": (cube_text() + "v 5 5 5\nv 6 6 6\nv 7 7 7\nf 9 10 11\n", "degenerate"),
     "open": ("\n".join(cube_text().splitlines()[:-2]) + "\n", "not a closed surface"),
+    # closed and oriented, but a corner pushed through the opposite face: the surface passes through itself
+    "crossing": (cube_text().replace("v 1 1 1", "v 0.2 0.3 -0.8"), "bad.obj: part 'bad': body 1 crosses itself"),
+    "crossing a side": (cube_text().replace("v 1 1 1", "v -0.5 1.2 1.3"), "crosses itself (its triangles 1 and 3"),
+    "half turned": ("".join(line if not line.startswith("f") or i % 3 else "f " + " ".join(line.split()[:0:-1]) + "\n"
+                            for i, line in enumerate(cube_text().splitlines(True))), "triangles facing opposite ways"),
 }
 
 
@@ -388,6 +394,38 @@ def test_a_hostile_mesh_is_refused_naming_the_part(tmp_path, case):
     assert "error:" in out and "'bad'" in out and expected in out, out
     with pytest.raises(GeometryError):
         derive(folder)
+
+
+def test_a_surface_through_itself_is_refused_as_stl_too_and_a_dent_or_an_inward_file_is_not(tmp_path):
+    """The crossing check is on every body however read (an STL's vertices joined by position); a cube with a
+    corner pushed in (not convex, a valid solid) and a cube written inside out (turned as read) derive."""
+    import trimesh
+
+    folder = write_assembly(tmp_path / "stl", {"good": [(3, 0, 0)]})
+    crossing = trimesh.load(io.StringIO(HOSTILE["crossing"][0]), file_type="obj", process=False)
+    crossing.export(folder / "bad.stl")
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "bad.stl: part 'bad': body 1 crosses itself" in " ".join(r.output.split()), r.output
+    (folder / "bad.stl").unlink()
+    (folder / "dent.obj").write_text(cube_text().replace("v 1 1 1", "v 0.5 0.5 0.5"))
+    inward = [line if not line.startswith("f") else "f " + " ".join(line.split()[:0:-1]) for line in cube_lines([(0, 2, 0)])]
+    (folder / "inward.obj").write_text("\n".join(inward) + "\n")
+    assert run_cli("derive", folder).exit_code == 0
+    bodies = {p.id: p.bodies for p in read_assembly(folder).parts}
+    assert not bodies["dent"][0].convex and bodies["inward"][0].convex
+
+
+def test_a_convex_surface_covering_its_hull_twice_is_refused():
+    """The convex bodies' check (their triangles' volume against their hull's): a tetrahedron's surface
+    written twice over is closed, faces out and passes the convexity test, but covers its hull twice."""
+    from opportune.derive.geometry import Body, _check_not_crossing
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    once = Body(corners, np.eye(3), np.eye(3), faces, True)
+    _check_not_crossing("t", 1, once, np.arange(4))
+    with pytest.raises(GeometryError, match="part 't': body 1 crosses itself .*cover its hull 2 times"):
+        _check_not_crossing("t", 1, Body(corners, np.eye(3), np.eye(3), np.vstack([faces, faces]), True), np.arange(8))
 
 
 def test_a_binary_stl_that_is_noise_is_refused(tmp_path):
@@ -611,3 +649,4 @@ def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monk
     r = run_cli("derive", folder)
     assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
     assert not called
+
