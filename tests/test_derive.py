@@ -25,6 +25,7 @@ pytest.importorskip("trimesh", reason="the geometry extra, which make test insta
 
 from conftest import run_cli  # noqa: E402
 from opportune.derive import DeriveError, GeometryError, derive  # noqa: E402
+from opportune.derive.explain import explain  # noqa: E402
 from opportune.derive.geometry import read_assembly  # noqa: E402
 from opportune.engine import Schedule  # noqa: E402
 from opportune.formats import load_plan  # noqa: E402
@@ -650,3 +651,45 @@ def test_too_many_contact_normals_are_refused_before_the_blocking(tmp_path, monk
     assert r.exit_code == 1 and "make 6 directions" in r.output and "give --directions" in r.output
     assert not called
 
+
+# ---------------------------------------------------------------- derive --explain under the derivation's conditions
+
+
+class HeldBruteForce(BruteForce):
+    """The brute force with process constraints (``after``: part -> the parts before it) and some parts out of
+    everyone's way (``gone``: no sweep meets them; they still hold and touch what rests on them)."""
+
+    def __init__(self, parts, block, after=None, gone=(), **options):
+        super().__init__(parts, block, **options)
+        self.after = {self.ids.index(p): [self.ids.index(q) for q in qs] for p, qs in (after or {}).items()}
+        mask = sum(1 << self.ids.index(q) for q in gone)
+        self.swept = [[m & ~mask for m in masks] for masks in self.swept]
+
+    def fits(self, i: int, built: int) -> bool:
+        return all(built >> j & 1 for j in self.after.get(i, ())) and super().fits(i, built)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_explain_recounts_under_the_supports_and_the_process_constraints(tmp_path, seed):
+    """`derive --explain`'s "which part frees the most" derives each changed relation again under the
+    derivation's own conditions: gravity, connected and a process constraint.  Each recount equals the
+    brute force under the same conditions, and some differs from the brute force without them (what the
+    recount gave when it dropped them)."""
+    block = (3, 3, 2)
+    parts = partition(block, 6, seed + 7)
+    folder = write_assembly(tmp_path / "held", parts)
+    supports = {"gravity": True, "connected": True}
+    total = BruteForce(parts, block, **supports).count()
+    # a process constraint that some feasible sequences keep and some do not
+    after = next({b: [a]} for a, b in itertools.permutations(sorted(parts), 2)
+                 if 0 < HeldBruteForce(parts, block, {b: [a]}, **supports).count() < total)
+    derived = derive(folder, directions="axes", gravity="-z", connected=True, requires=after)
+    e = explain(derived, time_limit=60)
+    assert e.count["value"] == HeldBruteForce(parts, block, after, **supports).count()
+    assert e.frees and not e.unfinished
+    differs = 0
+    for f in e.frees:
+        held = HeldBruteForce(parts, block, after, gone=[f["name"]], **supports).count()
+        assert f["count"]["exact"] and f["count"]["value"] == held, f
+        differs += held != HeldBruteForce(parts, block, gone=[f["name"]]).count()
+    assert differs
