@@ -693,3 +693,34 @@ def test_explain_recounts_under_the_supports_and_the_process_constraints(tmp_pat
         assert f["count"]["exact"] and f["count"]["value"] == held, f
         differs += held != HeldBruteForce(parts, block, gone=[f["name"]]).count()
     assert differs
+
+
+# ---------------------------------------------------------------- the convex pieces a plan carries for a body not convex
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_convex_pieces_of_a_body_not_convex_are_the_body(tmp_path, seed):
+    """Random voxel parts written as one surface (not convex) are cut into convex pieces that fill them
+    exactly: the pieces' hulls' volumes add up to the cells', each piece's centre is in a cell of the part,
+    and no more pieces than cells."""
+    from scipy.spatial import ConvexHull
+
+    from opportune.derive.solids import convex_pieces
+
+    found = 0
+    for name, cells in partition((4, 4, 3), 6, seed).items():
+        lines = surface_lines(cells)
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "p.obj").write_text("\n".join(lines or cube_lines(cells)) + "\n")
+        body, = read_assembly(folder).parts[0].bodies if lines else (None,)
+        if body is None or body.convex:
+            continue
+        found += 1
+        pieces = convex_pieces(body, 64)
+        assert pieces is not None and 2 <= len(pieces) <= len(cells)
+        assert sum(ConvexHull(p).volume for p in pieces) == pytest.approx(len(cells), rel=1e-9)
+        for p in pieces:
+            centre = ConvexHull(p).points.mean(axis=0)
+            assert tuple(int(c) for c in np.floor(centre)) in set(map(tuple, cells))
+    assert found
