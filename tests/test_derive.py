@@ -9,6 +9,7 @@ are everywhere in these assemblies: sliding along them must be allowed.
 
 from __future__ import annotations
 
+import io
 import itertools
 import json
 import random
@@ -24,6 +25,7 @@ pytest.importorskip("trimesh", reason="the geometry extra, which make test insta
 
 from conftest import run_cli  # noqa: E402
 from opportune.derive import DeriveError, GeometryError, derive  # noqa: E402
+from opportune.derive.explain import explain  # noqa: E402
 from opportune.derive.geometry import read_assembly  # noqa: E402
 from opportune.engine import Schedule  # noqa: E402
 from opportune.formats import load_plan  # noqa: E402
@@ -373,6 +375,11 @@ HOSTILE = {
     "not a mesh": ("\x00\x01garbage \xff\xfe" * 50, "part 'bad'"),
     "degenerate": (cube_text() + "v 5 5 5\nv 6 6 6\nv 7 7 7\nf 9 10 11\n", "degenerate"),
     "open": ("\n".join(cube_text().splitlines()[:-2]) + "\n", "not a closed surface"),
+    # closed and oriented, but a corner pushed through the opposite face: the surface passes through itself
+    "crossing": (cube_text().replace("v 1 1 1", "v 0.2 0.3 -0.8"), "bad.obj: part 'bad': body 1 crosses itself"),
+    "crossing a side": (cube_text().replace("v 1 1 1", "v -0.5 1.2 1.3"), "crosses itself (its triangles 1 and 3"),
+    "half turned": ("".join(line if not line.startswith("f") or i % 3 else "f " + " ".join(line.split()[:0:-1]) + "\n"
+                            for i, line in enumerate(cube_text().splitlines(True))), "triangles facing opposite ways"),
 }
 
 
@@ -388,6 +395,38 @@ def test_a_hostile_mesh_is_refused_naming_the_part(tmp_path, case):
     assert "error:" in out and "'bad'" in out and expected in out, out
     with pytest.raises(GeometryError):
         derive(folder)
+
+
+def test_a_surface_through_itself_is_refused_as_stl_too_and_a_dent_or_an_inward_file_is_not(tmp_path):
+    """The crossing check is on every body however read (an STL's vertices joined by position); a cube with a
+    corner pushed in (not convex, a valid solid) and a cube written inside out (turned as read) derive."""
+    import trimesh
+
+    folder = write_assembly(tmp_path / "stl", {"good": [(3, 0, 0)]})
+    crossing = trimesh.load(io.StringIO(HOSTILE["crossing"][0]), file_type="obj", process=False)
+    crossing.export(folder / "bad.stl")
+    r = run_cli("derive", folder)
+    assert r.exit_code == 1 and "bad.stl: part 'bad': body 1 crosses itself" in " ".join(r.output.split()), r.output
+    (folder / "bad.stl").unlink()
+    (folder / "dent.obj").write_text(cube_text().replace("v 1 1 1", "v 0.5 0.5 0.5"))
+    inward = [line if not line.startswith("f") else "f " + " ".join(line.split()[:0:-1]) for line in cube_lines([(0, 2, 0)])]
+    (folder / "inward.obj").write_text("\n".join(inward) + "\n")
+    assert run_cli("derive", folder).exit_code == 0
+    bodies = {p.id: p.bodies for p in read_assembly(folder).parts}
+    assert not bodies["dent"][0].convex and bodies["inward"][0].convex
+
+
+def test_a_convex_surface_covering_its_hull_twice_is_refused():
+    """The convex bodies' check (their triangles' volume against their hull's): a tetrahedron's surface
+    written twice over is closed, faces out and passes the convexity test, but covers its hull twice."""
+    from opportune.derive.geometry import Body, _check_not_crossing
+
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    once = Body(corners, np.eye(3), np.eye(3), faces, True)
+    _check_not_crossing("t", 1, once, np.arange(4))
+    with pytest.raises(GeometryError, match="part 't': body 1 crosses itself .*cover its hull 2 times"):
+        _check_not_crossing("t", 1, Body(corners, np.eye(3), np.eye(3), np.vstack([faces, faces]), True), np.arange(8))
 
 
 def test_a_binary_stl_that_is_noise_is_refused(tmp_path):
@@ -752,3 +791,77 @@ def test_a_direction_blocked_by_the_only_support_is_no_way_in_the_ways_form():
     with pytest.raises(DeriveError, match="every direction of b is blocked"):
         exact_ways(Blocking(("a", "b"), {"-z": (0, 0, -1)}, {"a": {"-z": frozenset()}, "b": {"-z": frozenset("a")}},
                             0, 0), Conditions({"b": (("gravity", frozenset("a")),)}))
+
+
+# ---------------------------------------------------------------- derive --explain under the derivation's conditions
+
+
+class HeldBruteForce(BruteForce):
+    """The brute force with process constraints (``after``: part -> the parts before it) and some parts out of
+    everyone's way (``gone``: no sweep meets them; they still hold and touch what rests on them)."""
+
+    def __init__(self, parts, block, after=None, gone=(), **options):
+        super().__init__(parts, block, **options)
+        self.after = {self.ids.index(p): [self.ids.index(q) for q in qs] for p, qs in (after or {}).items()}
+        mask = sum(1 << self.ids.index(q) for q in gone)
+        self.swept = [[m & ~mask for m in masks] for masks in self.swept]
+
+    def fits(self, i: int, built: int) -> bool:
+        return all(built >> j & 1 for j in self.after.get(i, ())) and super().fits(i, built)
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_explain_recounts_under_the_supports_and_the_process_constraints(tmp_path, seed):
+    """`derive --explain`'s "which part frees the most" derives each changed relation again under the
+    derivation's own conditions: gravity, connected and a process constraint.  Each recount equals the
+    brute force under the same conditions, and some differs from the brute force without them (what the
+    recount gave when it dropped them)."""
+    block = (3, 3, 2)
+    parts = partition(block, 6, seed + 7)
+    folder = write_assembly(tmp_path / "held", parts)
+    supports = {"gravity": True, "connected": True}
+    total = BruteForce(parts, block, **supports).count()
+    # a process constraint that some feasible sequences keep and some do not
+    after = next({b: [a]} for a, b in itertools.permutations(sorted(parts), 2)
+                 if 0 < HeldBruteForce(parts, block, {b: [a]}, **supports).count() < total)
+    derived = derive(folder, directions="axes", gravity="-z", connected=True, requires=after)
+    e = explain(derived, time_limit=60)
+    assert e.count["value"] == HeldBruteForce(parts, block, after, **supports).count()
+    assert e.frees and not e.unfinished
+    differs = 0
+    for f in e.frees:
+        held = HeldBruteForce(parts, block, after, gone=[f["name"]], **supports).count()
+        assert f["count"]["exact"] and f["count"]["value"] == held, f
+        differs += held != HeldBruteForce(parts, block, gone=[f["name"]]).count()
+    assert differs
+
+
+# ---------------------------------------------------------------- the convex pieces a plan carries for a body not convex
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_convex_pieces_of_a_body_not_convex_are_the_body(tmp_path, seed):
+    """Random voxel parts written as one surface (not convex) are cut into convex pieces that fill them
+    exactly: the pieces' hulls' volumes add up to the cells', each piece's centre is in a cell of the part,
+    and no more pieces than cells."""
+    from scipy.spatial import ConvexHull
+
+    from opportune.derive.solids import convex_pieces
+
+    found = 0
+    for name, cells in partition((4, 4, 3), 6, seed).items():
+        lines = surface_lines(cells)
+        folder = tmp_path / name
+        folder.mkdir()
+        (folder / "p.obj").write_text("\n".join(lines or cube_lines(cells)) + "\n")
+        body, = read_assembly(folder).parts[0].bodies if lines else (None,)
+        if body is None or body.convex:
+            continue
+        found += 1
+        pieces = convex_pieces(body, 64)
+        assert pieces is not None and 2 <= len(pieces) <= len(cells)
+        assert sum(ConvexHull(p).volume for p in pieces) == pytest.approx(len(cells), rel=1e-9)
+        for p in pieces:
+            centre = ConvexHull(p).points.mean(axis=0)
+            assert tuple(int(c) for c in np.floor(centre)) in set(map(tuple, cells))
+    assert found

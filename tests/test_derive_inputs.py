@@ -24,7 +24,7 @@ pytest.importorskip("trimesh", reason="the geometry extra, which make test insta
 from conftest import run_cli  # noqa: E402
 from opportune.derive import DeriveError, GeometryError, ManifestError, derive  # noqa: E402
 from opportune.engine import Schedule  # noqa: E402
-from test_derive import BruteForce, admits, closure, cube_lines, partition, write_assembly  # noqa: E402
+from test_derive import AXES, BruteForce, admits, closure, cube_lines, partition, write_assembly  # noqa: E402
 
 # one unit cube centred on the origin: vertices and outward triangles (0-based), from the OBJ writer's
 _LINES = cube_lines([(0, 0, 0)])
@@ -710,3 +710,23 @@ def test_three_identical_parts_count_a_sixth_of_their_instances_orders(tmp_path)
     assert Schedule(merged.plan).count() * 6 == brute.count() == 48
     everything = set(itertools.permutations(["plate", "bolt", "bolt", "bolt", "cover"]))
     assert {s for s in everything if admits(merged.plan, s)} == projected(brute, {"bolt": ["b1", "b2", "b3"]})
+
+
+def test_explain_adds_a_direction_with_the_fixture_in_place(tmp_path):
+    """`derive --explain` measures a direction added with the fixture in place, as the derivation has it: the
+    plate is no part, and a direction it blocks is none.  Derived on four axes, +x and -x added: each
+    recount is the brute force's on five axes, with the plate first (the fixture) and out of the count."""
+    from opportune.derive.explain import explain
+
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    fixed = derive(folder, fixture="plate", directions="+y,-y,+z,-z")
+    e = explain(fixed, fixed.assembly, directions={"+x": (1, 0, 0), "-x": (-1, 0, 0)}, time_limit=30)
+    added = {f["name"]: f for f in e.frees if f["kind"] == "direction"}
+    assert sorted(added) == ["+x", "-x"] and not e.unfinished
+    brute = BruteForce(BOLTS, (3, 1, 3))
+    names, swept = list(AXES), brute.swept
+    for name, f in added.items():
+        keep = [names.index(d) for d in ("+y", "-y", "+z", "-z", name)]
+        brute.swept = [[m if k in keep else -1 for k, m in enumerate(masks)] for masks in swept]
+        count = sum(1 for s in itertools.permutations(brute.ids) if brute.feasible(s) and s[0] == "plate")
+        assert f["count"]["value"] == count, (name, f)

@@ -330,3 +330,60 @@ def test_a_part_id_with_dollars_is_drawn_as_written_not_as_mathtext(tmp_path):
     result = runner.invoke(app, ["derive", str(tmp_path), "--figure", str(out), "--explain"])
     assert result.exit_code == 0, result.output
     assert "a$b$c" in out.read_text(encoding="utf-8") and "1 in 10^0.00" in result.stdout
+
+
+def test_a_part_that_is_not_convex_is_heaped_as_its_convex_pieces_and_holds_a_peg_in_its_slot(tmp_path):
+    """A U written as one closed surface (not convex) is carried as convex pieces whose union is the U, none
+    over its slot; in the physical bin, the U and a peg placed in its slot as assembled touch without
+    MuJoCo finding them overlapping (its convex hull, the old shape, swallows the peg)."""
+    pytest.importorskip("mujoco")
+    import mujoco
+    import numpy as np
+    from scipy.spatial import Delaunay
+
+    from opportune.worlds.physics import PhysicsBin
+    from test_derive import cube_lines, surface_lines
+
+    cell = 0.02
+    u_cells = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 0, 1), (2, 0, 1)]
+
+    def scaled(lines):
+        return "\n".join("v " + " ".join(str(cell * float(c)) for c in line.split()[1:]) if line.startswith("v ")
+                         else line for line in lines) + "\n"
+
+    (tmp_path / "u.obj").write_text(scaled(surface_lines(u_cells)))
+    (tmp_path / "peg.obj").write_text(scaled(cube_lines([(1, 0, 1)])))
+    d = derive(tmp_path, directions="axes")
+    u = next(p for p in d.assembly.parts if p.id == "u")
+    assert len(u.bodies) == 1 and not u.bodies[0].convex and not d.notes
+    geometry = {p.id: p.geometry for p in d.plan.parts}
+    shape, pieces = geometry["u"]
+    assert shape == "convex" and 2 <= len(pieces) <= 5
+    slot = np.array([1.5, 0.5, 1.5]) * cell
+    volume = 0.0
+    for piece in pieces:
+        hull = Delaunay(np.array(piece))
+        assert hull.find_simplex(slot) < 0                    # no piece reaches into the slot
+        volume += sum(abs(np.linalg.det(hull.points[s[1:]] - hull.points[s[0]])) / 6 for s in hull.simplices)
+    assert volume == pytest.approx(len(u_cells) * cell ** 3, rel=1e-6)
+    bounds = {p.id: p.bounds for p in d.assembly.parts}
+
+    def deepest(geometry, sink=0.0):
+        """The deepest overlap MuJoCo finds between the U and the peg placed as assembled (the peg lowered by
+        ``sink``), 0 if none; and the U's geoms."""
+        world = PhysicsBin(visible=2, geometry=geometry)
+        world._build(["u", "peg"])
+        for i, part in enumerate(("u", "peg")):          # both as assembled, lifted into the bin's air
+            lo, hi = bounds[part]
+            adr = world._qadr[i]
+            world.data.qpos[adr:adr + 7] = [*((lo + hi) / 2 + [0, 0, 0.1 - (sink if i else 0)]), 1, 0, 0, 0]
+        mujoco.mj_forward(world.model, world.data)
+        peg = set(world._geoms[1])
+        pairs = [(c.dist, {int(c.geom1), int(c.geom2)}) for c in world.data.contact[:world.data.ncon]]
+        return min([dist for dist, g in pairs if g & peg and g - peg] + [0.0]), world._geoms[0]
+
+    depth, geoms = deepest(geometry)
+    assert len(geoms) == len(pieces) and depth > -1e-3 * cell          # in the slot, touching, not overlapping
+    assert deepest(geometry, sink=0.2 * cell)[0] < -0.1 * cell         # pushed into the U's floor: found
+    hull = {**geometry, "u": ("convex", [[c for body in pieces for c in body]])}
+    assert deepest(hull)[0] < -0.3 * cell                               # the U as one hull swallows the peg

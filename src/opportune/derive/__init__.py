@@ -64,6 +64,9 @@ class Derivation:
         The parts' geometry (the figure and the explanation's added directions read it).
     notes : tuple of str
         What the plan does not carry of the shapes (said on standard error by the command).
+    manifest : Manifest, optional
+        The manifest the plan was derived under (names, quantities, base, fixture, process constraints):
+        :meth:`replanned` derives again under it.
 
     Examples
     --------
@@ -89,6 +92,71 @@ class Derivation:
     conditions: Conditions = Conditions({})
     assembly: Assembly | None = None
     notes: tuple[str, ...] = ()
+    manifest: Manifest | None = None
+
+    def replanned(self, block: Blocking) -> Plan:
+        """The plan of another blocking relation over the same parts, derived under this derivation's
+        conditions: the manifest's quantities, base, fixture and process constraints, and the supports
+        (``gravity``, ``connected``) each part needed.  What ``derive --explain`` recounts.
+
+        Parameters
+        ----------
+        block : Blocking
+            The changed relation (a part out of everyone's way, a direction added).
+
+        Returns
+        -------
+        Plan
+            Its exact plan, named as this one.
+
+        Raises
+        ------
+        DeriveError
+            No feasible sequence, or a plan larger than a plan holds.
+        ManifestError
+            Instances of one part the changed relation tells apart.
+
+        Examples
+        --------
+        >>> d = derive("geometry:gearbox")
+        >>> d.replanned(d.blocking).strategies == d.plan.strategies
+        True
+        """
+        man = self.manifest if self.manifest is not None else manifest_from({})
+        return _plan_under(block, man, self.conditions, self.plan.name, "changed")[0]
+
+    def blocking_along(self, directions: dict) -> Blocking:
+        """The blocking relation of this derivation's parts along other directions, found in its assembly,
+        the fixture (if any) in place: a direction along which the fixture is in a part's way is none for it.
+
+        Parameters
+        ----------
+        directions : dict
+            Name → vector.
+
+        Returns
+        -------
+        Blocking
+            Over the derivation's parts and those directions only.
+
+        Raises
+        ------
+        ValueError
+            A derivation without its assembly.
+
+        Examples
+        --------
+        >>> d = derive("geometry:gearbox")
+        >>> d.blocking_along({"up": (0, 0, 1)}).blockers["cover"]["up"] == d.blocking.blockers["cover"]["+z"]
+        True
+        """
+        if self.assembly is None:
+            raise ValueError("this derivation carries no assembly: derive from the geometry")
+        more = find_blocking(self.assembly, directions)
+        fixture = self.manifest.fixture if self.manifest is not None else None
+        blockers = {p: {d: q for d, q in more.blockers[p].items() if fixture is None or fixture not in q}
+                    for p in self.blocking.parts}
+        return Blocking(self.blocking.parts, dict(more.directions), blockers, more.tolerance, more.checks)
 
     def to_dict(self) -> dict:
         """The numbers of the derivation, as ``derive --json`` prints them (the plan aside).
@@ -221,18 +289,27 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
     if man.fixture is not None:
         block = without_fixture(block, man.fixture)
         conditions = _held_by_fixture(conditions, man.fixture)
-    check_interchangeable(man, _ways(block, conditions))
-    strategies, ways, why = _exact(block, conditions, man, form)
     from opportune.derive.shapes import shapes
 
     carried, notes = shapes(assembly)
-    written = merge_units(man, block.parts, strategies) if ways is None else []
-    plan = plan_of(block, written, name or title or "assembly", label, carried, manifest=man, conditions=conditions,
-                   ways=ways)
-    if ways is not None:
+    plan, strategies, why = _plan_under(block, man, conditions, name or title or "assembly", label, carried, form)
+    if why:
         notes = [why] + list(notes)
     return Derivation(plan, block, tuple(strategies), time.process_time() - start, tuple(contacts), conditions,
-                      assembly, tuple(notes))
+                      assembly, tuple(notes), man)
+
+
+def _plan_under(block: Blocking, man: Manifest, conditions: Conditions, name: str, label: str,
+                carried: dict | None = None, form: str = "auto") -> tuple[Plan, list[DerivedStrategy], str]:
+    """The exact plan of a blocking relation under the manifest and the supports, its strategies over
+    instances (none where it is written as ways) and why it is written as ways (or ""): the one place a
+    derivation's conditions meet its relation (:func:`derive`, and :meth:`Derivation.replanned` for the
+    explanation's recounts)."""
+    check_interchangeable(man, _ways(block, conditions))
+    strategies, ways, why = _exact(block, conditions, man, form)
+    written = merge_units(man, block.parts, strategies) if ways is None else []
+    plan = plan_of(block, written, name, label, carried, manifest=man, conditions=conditions, ways=ways)
+    return plan, strategies, why
 
 
 FORMS = ("auto", "strategies", "ways")

@@ -12,9 +12,11 @@
 * for design for assembly: the number of feasible sequences (the engine's count of the plan, exact or
   a marked estimate), their share of all orders, the orders forced in every strategy, and which single
   change frees the most: a **part out of everyone's way** (the blocking relation with that part in no
-  blocker set, its own constraints kept) or a **direction added** (the blocking along one more
-  direction, found in the geometry), each measured by deriving the plan again (with the same supports
-  and base) and counting it.
+  blocker set, its own constraints kept; a part of several identical instances: all of them) or a
+  **direction added** (the blocking along one more direction, found in the geometry), each measured by
+  deriving the plan again under the derivation's own conditions (the manifest's base, fixture,
+  quantities and process constraints, the ``gravity`` and ``connected`` supports:
+  :meth:`~opportune.derive.Derivation.replanned`) and counting it.
 
 Every text is plain (part ids with control characters escaped, as :func:`printable` writes them).
 """
@@ -28,8 +30,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from opportune.derive.blocking import Blocking, find_blocking
-from opportune.derive.plan import DeriveError, exact_strategies, way_direction, way_supports
+from opportune.derive.blocking import Blocking
+from opportune.derive.manifest import ManifestError
+from opportune.derive.plan import DeriveError, way_direction, way_supports
 from opportune.formats.problems import CONTROL_CHARS
 
 #: Directions tried as "one more direction" when the assembly's geometry is given: the twelve
@@ -103,6 +106,7 @@ class Explanation:
     Part ``a`` is blocked by ``b`` along both directions, so it goes in first:
 
     >>> from opportune.derive import Derivation, plan_of
+    >>> from opportune.derive.plan import exact_strategies
     >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0), "-x": (-1, 0, 0)},
     ...              {"a": {"+x": frozenset("b"), "-x": frozenset("b")}, "b": {"+x": frozenset(), "-x": frozenset()}}, 0, 0)
     >>> strategies = tuple(exact_strategies(b))
@@ -132,6 +136,7 @@ class Explanation:
         Examples
         --------
         >>> from opportune.derive import Derivation, plan_of
+        >>> from opportune.derive.plan import exact_strategies
         >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
         >>> strategies = tuple(exact_strategies(b))
         >>> doc = explain(Derivation(plan_of(b, strategies, "pin", "axes"), b, strategies, 0.0)).to_dict()
@@ -157,6 +162,7 @@ class Explanation:
         Examples
         --------
         >>> from opportune.derive import Derivation, plan_of
+        >>> from opportune.derive.plan import exact_strategies
         >>> b = Blocking(("a", "b"), {"+x": (1, 0, 0)}, {"a": {"+x": frozenset("b")}, "b": {"+x": frozenset()}}, 0, 0)
         >>> strategies = tuple(exact_strategies(b))
         >>> print(explain(Derivation(plan_of(b, strategies, "pin", "axes"), b, strategies, 0.0)).text())
@@ -208,6 +214,8 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     (54054000, ['+x', '-x'], ['-x'])
     """
     end = time.perf_counter() + time_limit
+    if assembly is not None:
+        derivation = replace(derivation, assembly=assembly)
     block, strategies = derivation.blocking, derivation.strategies
     orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
     closures = [_closure(s.pairs) for s in strategies]
@@ -221,13 +229,14 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
             unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
             break
         usable[p] = _insertion_directions(block, p, earlier)
-    held = _held(derivation)
     frees: list[dict] = []
     later = len(_new_directions(block, directions)) if assembly is not None else 0   # their share kept for them
     # the added directions' blocking is geometry, not interruptible: found only if it fits the time left, as
     # the derivation's own blocking took per direction
     cost = derivation.seconds * later / max(1, len(block.directions))
-    for trials in (_part_trials(block), lambda: _direction_trials(block, assembly, directions)):
+    quantities = derivation.manifest.quantities if derivation.manifest is not None else {}
+    for trials in (_part_trials(block, quantities),
+                   lambda: _direction_trials(derivation, directions) if assembly is not None else []):
         if not isinstance(trials, list) and time.perf_counter() + cost > end:
             unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
             break
@@ -238,7 +247,7 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
                 unfinished.append(f"{len(trials) - k} changes to try")
                 break
             pending = len(trials) - k + (later if kind == "part" else 0)
-            count = _recount(changed, derivation.plan.name, left / pending, seed, held)
+            count = _recount(derivation, changed, left / pending, seed)
             frees.append({"kind": kind, "name": name, **count})
     frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
     return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
@@ -280,13 +289,6 @@ def _earlier(pairs) -> dict[str, set[str]]:
     for a, b in _closure(pairs):
         out.setdefault(b, set()).add(a)
     return out
-
-
-def _held(derivation) -> tuple:
-    """The supports and the base a recount keeps: the derivation's conditions and the base's orders."""
-    conditions = getattr(derivation, "conditions", None)
-    base = conditions.base if conditions is not None else None
-    return conditions, tuple((base, p) for p in derivation.blocking.parts if base is not None and p != base)
 
 
 def _usable(block: Blocking, part: str, direction: str) -> bool:
@@ -345,8 +347,9 @@ def _count(plan, seconds: float, seed: int) -> dict:
             "log10_low": low, "log10_high": high, "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
 
 
-def _part_trials(block: Blocking) -> list[tuple[str, str, Blocking]]:
-    """The changed blocking relations to recount: each part out of everyone's way, those that block the most
+def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[str, str, Blocking]]:
+    """The changed blocking relations to recount: each part out of everyone's way (a part of several
+    identical instances, ``quantities``: all of them, named by the part), those that block the most
     part-directions first."""
     out = []
     blocks = {q: 0 for q in block.parts}
@@ -354,11 +357,16 @@ def _part_trials(block: Blocking) -> list[tuple[str, str, Blocking]]:
         for s in dirs.values():
             for q in s:
                 blocks[q] += 1
-    for q in sorted(block.parts, key=lambda q: -blocks[q]):
-        if not blocks[q]:
+    group = {i: part for part, instances in (quantities or {}).items() for i in instances}
+    members: dict[str, set[str]] = {}
+    for q in block.parts:
+        members.setdefault(group.get(q, q), set()).add(q)
+    for name in sorted(members, key=lambda n: -sum(blocks[q] for q in members[n])):
+        gone = members[name]
+        if not sum(blocks[q] for q in gone):
             continue
-        blockers = {p: {d: s - {q} for d, s in dirs.items()} for p, dirs in block.blockers.items()}
-        out.append(("part", q, replace(block, blockers=blockers)))
+        blockers = {p: {d: s - gone for d, s in dirs.items()} for p, dirs in block.blockers.items()}
+        out.append(("part", name, replace(block, blockers=blockers)))
     return out
 
 
@@ -370,27 +378,27 @@ def _new_directions(block: Blocking, directions: dict | None) -> dict:
             and tuple(np.round(np.asarray(vec, float) / np.linalg.norm(vec), 9)) not in used}
 
 
-def _direction_trials(block: Blocking, assembly, directions: dict | None) -> list[tuple[str, str, Blocking]]:
-    """The changed blocking relations to recount: each direction added, its blocking found in the geometry."""
-    out = []
-    if assembly is not None:
+def _direction_trials(derivation, directions: dict | None) -> list[tuple[str, str, Blocking]]:
+    """The changed blocking relations to recount: each direction added, its blocking found in the geometry
+    (the fixture in place, as the derivation had it)."""
+    block, out = derivation.blocking, []
+    if derivation.assembly is not None:
         tried = _new_directions(block, directions)
-        more = find_blocking(assembly, tried) if tried else None   # one pass for all of them
+        more = derivation.blocking_along(tried) if tried else None   # one pass for all of them
         for name, vec in tried.items():
-            blockers = {p: {**dirs, name: more.blockers[p][name]} for p, dirs in block.blockers.items()}
+            blockers = {p: {**dirs, **({name: more.blockers[p][name]} if name in more.blockers[p] else {})}
+                        for p, dirs in block.blockers.items()}
             out.append(("direction", name, replace(block, blockers=blockers,
                                                      directions={**block.directions, name: vec})))
     return out
 
 
-def _recount(block: Blocking, name: str, seconds: float, seed: int, held: tuple = (None, ())) -> dict:
-    """Derive the plan of a changed blocking relation again, with the supports and base ``held``, and count
+def _recount(derivation, block: Blocking, seconds: float, seed: int) -> dict:
+    """Derive the plan of a changed blocking relation again, under the derivation's conditions, and count
     it (or say why not)."""
-    from opportune.derive import plan_of
-
     try:
-        plan = plan_of(block, exact_strategies(block, *held), name, "changed")
-    except DeriveError as exc:
+        plan = derivation.replanned(block)
+    except (DeriveError, ManifestError) as exc:
         return {"count": None, "why": str(exc)}
     return {"count": _count(plan, seconds, seed)}
 

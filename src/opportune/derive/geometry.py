@@ -4,7 +4,8 @@
 Each ``.obj``, ``.stl`` or ``.ply`` file of the folder is one part, its id the file's stem; other
 files are left alone.  Coordinates are metres, or millimetres with ``units="mm"`` (scaled to metres
 as read).  Meshes are read by trimesh, then checked before any blocking test: every coordinate
-finite, at least one triangle, no degenerate triangle, every body (connected piece) closed.  A body
+finite, at least one triangle, no degenerate triangle, every body (connected piece) closed, oriented
+and not crossing itself (:func:`_check_not_crossing`).  A body
 that is convex is tested by opportune's separating axes (:mod:`opportune.derive.blocking`, exact on
 convex polyhedra); one that is not, by manifold3d's exact booleans (it must then be a valid manifold:
 closed, oriented, not crossing itself).  Every refusal is a :class:`GeometryError` naming the part and
@@ -155,7 +156,7 @@ def read_assembly(path: str | Path, *, units: str = "m", tolerance: float | None
         A folder that is missing or holds no mesh, over :data:`~opportune.limits.MAX_MESH_PARTS` parts,
         two files of one stem, a file over :data:`~opportune.limits.MAX_MESH_BYTES` bytes or
         :data:`~opportune.limits.MAX_TRIANGLES` triangles, or a mesh that is unreadable, empty, not
-        finite, degenerate, open, or not convex and crossing itself: the message names the part.
+        finite, degenerate, open, or crossing itself: the message names the file and the part.
 
     Examples
     --------
@@ -272,7 +273,10 @@ def _read_part(part: str, file: Path, scale: float) -> PartShape:
     except Exception as exc:   # the readers raise many kinds on a bad file: each is the same refusal
         raise GeometryError(f"part {part!r}: {file.name} is not a readable mesh ({type(exc).__name__}: "
                             f"{str(exc)[:200]!r}); export it again as OBJ, STL or PLY") from None
-    bodies = mesh_bodies(part, vertices, faces, scale=scale, join=file.suffix.lower() == ".stl")
+    try:
+        bodies = mesh_bodies(part, vertices, faces, scale=scale, join=file.suffix.lower() == ".stl")
+    except GeometryError as exc:    # the file named too: a part's id is its stem, the suffix tells files apart
+        raise GeometryError(f"{file.name}: {exc}") from None
     return PartShape(part, file, bodies, len(faces))
 
 
@@ -301,7 +305,7 @@ def mesh_bodies(part: str, vertices: np.ndarray, faces: np.ndarray, *, scale: fl
     ------
     GeometryError
         No triangle, over :data:`~opportune.limits.MAX_TRIANGLES`, an index out of range, a coordinate not
-        finite or farther than :data:`~opportune.limits.MAX_COORDINATE` from the origin, a degenerate triangle, or a body open or not convex: the message names the part.
+        finite or farther than :data:`~opportune.limits.MAX_COORDINATE` from the origin, a degenerate triangle, or a body open, inside out in places or crossing itself: the message names the part.
 
     Examples
     --------
@@ -350,7 +354,9 @@ def _bodies(part: str, vertices: np.ndarray, faces: np.ndarray, stl: bool) -> tu
     for label in np.unique(labels[faces[:, 0]]):
         mine = labels[faces[:, 0]] == label
         points, tri = _merged(vertices, faces[mine])
-        bodies.append(_body(part, len(bodies) + 1, points, tri, normals[mine]))
+        body = _body(part, len(bodies) + 1, points, tri, normals[mine])
+        _check_not_crossing(part, len(bodies) + 1, body, np.nonzero(mine)[0])
+        bodies.append(body)
     return tuple(bodies)
 
 
@@ -414,6 +420,42 @@ def _body(part: str, k: int, points: np.ndarray, tri: np.ndarray, normals: np.nd
             raise GeometryError(f"part {part!r}: body {k} is not convex and not a valid solid ({exc}); repair the "
                                 "mesh (closed, oriented, not crossing itself) or write it as convex bodies") from None
     return body
+
+
+def _check_not_crossing(part: str, k: int, body: Body, numbers: np.ndarray) -> None:
+    """Refuse a body whose triangles cross or overlap each other (a surface through itself: its inside is
+    not defined, for the separating axes or for the booleans).  ``numbers`` are the body's triangles'
+    indices in the file (for the message).
+
+    A convex body's triangles all lie on its hull, facing out, so their signed volume is the hull's volume
+    times how often they cover it: once unless they overlap (compared with manifold3d's hull, O(n log n)).
+    A body that is not convex is searched by libigl's exact predicates over a tree of bounding boxes, to
+    the first crossing pair (triangles sharing an edge or a corner and only touching there do not cross);
+    its worst case, triangles whose boxes all overlap, is quadratic in the triangles, bounded by
+    :data:`~opportune.limits.MAX_TRIANGLES` and well below the booleans' own cost on such a body."""
+    triangles = np.ascontiguousarray(body.triangles, dtype=np.int64)
+    if body.convex:
+        import manifold3d
+
+        corners = body.vertices[triangles]
+        volume = float(np.einsum("ij,ij->i", corners[:, 0], cross(corners[:, 1], corners[:, 2])).sum()) / 6
+        hull = manifold3d.Manifold.hull_points(np.ascontiguousarray(body.vertices - body.vertices[0])).volume()
+        if volume > 1.5 * hull:     # an integer multiple of the hull: 2 or more is a surface over itself
+            raise GeometryError(f"part {part!r}: body {k} crosses itself (its triangles cover its hull "
+                                f"{volume / hull:.0f} times over); {_REPAIR}")
+        return
+    from igl.predicates import find_self_intersections
+
+    found, pairs, _ = find_self_intersections(body.vertices, triangles, True)
+    if found:
+        a, b = sorted(int(numbers[i]) + 1 for i in pairs[0])
+        raise GeometryError(f"part {part!r}: body {k} crosses itself (its triangles {a} and {b} intersect, as "
+                            f"read from the file); {_REPAIR}")
+
+
+#: What a message on a body that crosses itself asks for.
+_REPAIR = ("repair the mesh (a closed surface that does not pass through itself) or write the part as separate "
+           "closed bodies")
 
 
 def _unique_directions(vectors: np.ndarray) -> np.ndarray:

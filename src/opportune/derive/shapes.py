@@ -2,8 +2,11 @@
 
 The physical bin (``simulate --bin physics``) heaps these shapes instead of boxes.  Each body is
 written as its corners in the assembled pose, in metres rounded to :data:`ROUND` (a micrometre);
-the bin takes each body's convex hull, which is the body itself (every body of a derived part is
-convex).  The plan's bounds on shapes (:mod:`opportune.formats.shapes`) hold for what is written: a
+the bin takes each body's convex hull, which is the body itself for a convex body.  A body that is
+not convex (a U, a cup written as one surface) is written as its convex pieces
+(:func:`~opportune.derive.solids.convex_pieces`: cut along its own faces' planes, their union the body
+exactly), so that a peg can lie in its slot; one that needs more pieces than the part's shape has
+bodies left (a curved surface) is written as its hull, said in a note.  The plan's bounds on shapes (:mod:`opportune.formats.shapes`) hold for what is written: a
 body with more corners than a body may have keeps its extreme corners along :data:`MAX_BODY_POINTS`
 directions spread over the sphere (a slightly smaller hull); a part over the other bounds (too large
 or too small for the bin, too many bodies, a flat body, far from the origin) gets no shape, and
@@ -51,6 +54,7 @@ def shapes(assembly: Assembly) -> tuple[dict[str, dict], list[str]]:
             notes.append(f"part {part.id!r} is heaped as the default box: {why}")
         else:
             out[part.id] = shape
+            notes += [f"part {part.id!r}: {why}"] if why else []
     total = sum(len(b) for s in out.values() for b in s["convex"])
     if total > MAX_SHAPE_POINTS:
         return {}, [f"no part's shape written: {total:,} corners in all, over the {MAX_SHAPE_POINTS:,} a plan "
@@ -59,7 +63,7 @@ def shapes(assembly: Assembly) -> tuple[dict[str, dict], list[str]]:
 
 
 def _shape(part: PartShape) -> tuple[dict | None, str]:
-    """One part's shape, or None and why not."""
+    """One part's shape, or None and why not (with a shape: what it leaves out, if anything)."""
     if len(part.bodies) > MAX_SHAPE_BODIES:
         return None, f"{len(part.bodies)} convex bodies, over the {MAX_SHAPE_BODIES} a shape holds"
     lo, hi = part.bounds
@@ -69,12 +73,34 @@ def _shape(part: PartShape) -> tuple[dict | None, str]:
     if max(float(np.abs(lo).max()), float(np.abs(hi).max())) > COORDINATE:
         return None, f"further than {COORDINATE:g} m from the origin"
     bodies = []
-    for body in part.bodies:
-        corners = np.round(_fewer(body.vertices), ROUND)
+    pieces, hulled = _pieces(part)
+    for points in pieces:
+        corners = np.round(_fewer(points), ROUND)
         if thickness(corners) < THICKNESS:
             return None, f"a body thinner than {THICKNESS:g} m"
         bodies.append([[_short(c) for c in p] for p in corners.tolist()])
-    return {"convex": bodies}, ""
+    if len(bodies) > MAX_SHAPE_BODIES:
+        return None, f"{len(bodies)} convex bodies, over the {MAX_SHAPE_BODIES} a shape holds"
+    why = (f"bod{'ies' if len(hulled) > 1 else 'y'} {', '.join(map(str, hulled))} (not convex) heaped as "
+           f"{'their hulls' if len(hulled) > 1 else 'its hull'}: more convex pieces than the {MAX_SHAPE_BODIES} "
+           "bodies a shape holds" if hulled else "")
+    return {"convex": bodies}, why
+
+
+def _pieces(part: PartShape) -> tuple[list[np.ndarray], list[int]]:
+    """The corners of the part's convex bodies (each convex body's, and each piece of one that is not), and
+    the bodies (from 1) written as their hulls: the pieces would take more bodies than the shape has left."""
+    from opportune.derive.solids import convex_pieces
+
+    out: list[np.ndarray] = []
+    hulled = []
+    for k, body in enumerate(part.bodies):
+        left = MAX_SHAPE_BODIES - len(out) - (len(part.bodies) - k - 1)
+        pieces = None if body.convex else convex_pieces(body, left)
+        if pieces is None and not body.convex:
+            hulled.append(k + 1)
+        out += [body.vertices] if pieces is None else pieces
+    return out, hulled
 
 
 def _fewer(points: np.ndarray) -> np.ndarray:

@@ -136,3 +136,101 @@ def thickness(a: "Body", b: "Body", sweep: np.ndarray | None = None, reach: floa
     if volume <= 0:
         return 0.0
     return 2 * volume / both.surface_area()
+
+
+#: How far (a share of the body's size) a corner must lie outside a face's plane for the face to be
+#: reflex (a cut along it needed): well above the rounding of a cut's new corners, well below any feature.
+REFLEX_SHARE = 1e-7
+
+
+#: Steps (cuts, or a piece taken apart) allowed per piece wanted before a body is given up as needing too
+#: many: a body of ``k`` convex blocks takes about ``2k`` steps.
+CUTS_PER_PIECE = 4
+
+
+def convex_pieces(body: "Body", most: int) -> list[np.ndarray] | None:
+    """A body that is not convex cut into convex pieces along its own faces' planes (manifold3d's exact
+    ``split_by_plane``): while a piece has a reflex edge (a corner of one of its two faces outside the other
+    face's plane), it is cut along that face's plane, the largest such face first; a piece of several
+    components is taken apart first.  A connected closed surface without a reflex edge is convex, and the
+    test is local (each edge once): a cut costs O(n log n) in the piece's triangles.  The pieces' union is the body,
+    exactly; a body that is a union of a few convex blocks (a U, an L, a cup) comes out as those blocks.
+
+    Parameters
+    ----------
+    body : Body
+        A closed body (a valid solid).
+    most : int
+        The most pieces wanted: a body that needs more (a curved surface that is not convex) gives None.
+
+    Returns
+    -------
+    list of numpy.ndarray or None
+        Each piece's corners, in metres, or None.
+
+    Examples
+    --------
+    A U (a block with a slot cut across its top) is three blocks, its floor and its two posts:
+
+    >>> import manifold3d
+    >>> from opportune.derive.geometry import Body
+    >>> u = manifold3d.Manifold.cube((3, 1, 2)) - manifold3d.Manifold.cube((1, 2, 1)).translate((1, -0.5, 1))
+    >>> mesh = u.to_mesh64()
+    >>> body = Body(np.asarray(mesh.vert_properties), np.eye(3), np.eye(3), np.asarray(mesh.tri_verts), False)
+    >>> sorted(np.round(np.ptp(p, axis=0), 9).tolist() for p in convex_pieces(body, 64))    # their sides
+    [[1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [3.0, 1.0, 1.0]]
+    >>> convex_pieces(body, 2) is None
+    True
+    """
+    origin = body.vertices.min(axis=0)
+    size = max(float(np.ptp(body.vertices, axis=0).max()), 1e-300)
+    eps = REFLEX_SHARE * size
+    todo, done = [solid(body, origin)], []
+    for _ in range(CUTS_PER_PIECE * most):      # bounded, whatever the cuts do
+        if not todo:
+            return done
+        if len(done) + len(todo) > most:
+            return None
+        piece = todo.pop()
+        parts = piece.decompose()
+        if len(parts) > 1:
+            todo += [part for part in parts if part.volume() > eps * size * size]
+            continue
+        mesh = piece.to_mesh64()
+        points = np.asarray(mesh.vert_properties, dtype=float)[:, :3]
+        plane = _reflex_plane(points, np.asarray(mesh.tri_verts, dtype=np.int64), eps)
+        if plane is None:
+            done.append(points + origin)
+            continue
+        # a cut along a face the piece only touches leaves a flat sliver on one side: nothing of the body
+        todo += [half for half in piece.split_by_plane(*plane) if half.volume() > eps * size * size]
+    return None
+
+
+def _reflex_plane(points: np.ndarray, tri: np.ndarray, eps: float) -> tuple[tuple, float] | None:
+    """The plane ``(normal, offset)`` of the largest face with a reflex edge (the neighbour across the edge has
+    its third corner more than ``eps`` outside the face's plane) that has corners more than ``eps`` on both
+    sides, or None: the piece has no reflex edge (or only flaps a cut left, within ``eps`` of flat)."""
+    corners = points[tri]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area = np.linalg.norm(normals, axis=1)
+    units = normals / np.maximum(area, 1e-300)[:, None]
+    n = len(points)
+    # each triangle's edges a -> b with the corner opposite; the neighbour across is the edge b -> a
+    a, b = tri.reshape(-1), tri[:, [1, 2, 0]].reshape(-1)
+    opposite = tri[:, [2, 0, 1]].reshape(-1)
+    face = np.repeat(np.arange(len(tri)), 3)
+    key, twin_key = a * n + b, b * n + a
+    order = np.argsort(key)
+    at = np.clip(np.searchsorted(key[order], twin_key), 0, len(key) - 1)
+    twin = order[at]
+    paired = key[twin] == twin_key
+    out = np.einsum("ij,ij->i", points[opposite[twin]] - points[a], units[face])
+    reflex = paired & (out > eps) & (area[face] > 0)
+    if not reflex.any():
+        return None
+    for k in sorted(set(face[reflex].tolist()), key=lambda k: -area[k]):
+        side = points @ units[k] - units[k] @ points[tri[k, 0]]
+        if side.max() > eps and side.min() < -eps:     # a cut that splits (not a flap left by an earlier cut)
+            return tuple(float(c) for c in units[k]), float(units[k] @ points[tri[k, 0]])
+    return None

@@ -90,6 +90,9 @@ class WindowTable:
         The window's size, as tried (:data:`WINDOW_PARTS`).
     states : int
         The states its programme held.
+    rest : float, default 0.0
+        What the parts outside cost after the window (a look and a move a unit): windows of different
+        strategies' frontiers compare by ``values[-1] + rest``.
 
     Examples
     --------
@@ -364,6 +367,15 @@ class FrontierWindow(DecidesOnMasks):
         -------
         tuple of WindowTable
             One a distinct window, or empty.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(list("abcdef"), {"f": ["a", "b"]}))
+        >>> (t,) = FrontierWindow(visible=2, capacity=1, sizes=(3,)).tables(engine, 0, 1, ())
+        >>> t.parts, t.outside, t.rest      # three parts left outside: a look and a move each
+        ((0, 1, 2), 3, 3.0)
         """
         if self._engine is not engine:
             self._engine, self._tables = engine, OrderedDict()
