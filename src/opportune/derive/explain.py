@@ -280,7 +280,8 @@ def _insertion_directions(block: Blocking, part: str, earlier: list[dict[str, se
     sequences); without: :func:`_usable`'s peeling of the blocking relation."""
     if not earlier:
         return [d for d in block.directions if _usable(block, part, d)]
-    return [d for d in block.directions if any(not (block.blockers[part][d] & e.get(part, set())) for e in earlier)]
+    own = block.blockers[part]      # (a direction the fixture is in the part's way along is none for it)
+    return [d for d in block.directions if d in own and any(not (own[d] & e.get(part, set())) for e in earlier)]
 
 
 def _earlier(pairs) -> dict[str, set[str]]:
