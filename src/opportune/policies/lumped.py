@@ -26,7 +26,7 @@ from opportune.planning.plan import Plan, Strategy
 from opportune.policies.base import DONE, DecidesOnMasks, Decision
 from opportune.policies.evaluate import OutOfTime
 from opportune.policies.optimal import OptimalTooLarge
-from opportune.policies.window import frontier_window
+from opportune.policies.window import frontier_window, window_decision
 
 __all__ = ["OTHERS", "CompiledOthers", "LumpedWindow", "OthersGroup", "window_plan"]
 
@@ -319,19 +319,7 @@ class LumpedWindow(DecidesOnMasks):
         Decision
             The window's decision, or the base's (saying that no window fitted).
         """
-        sched = state.schedule
-        if sched.mask == sched.engine.full:
-            return Decision(DONE, "the assembly is complete")
-        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
-        table = self.last_table
-        if table is None:
-            base = self.base.decide(state, visible)
-            return Decision(base.action, f"as the base rule ({self.base.name}), because {because + ' and ' * bool(because)}"
-                            f"no frontier window fitted its state cap ({self.max_states:,}) or its time: {base.rule}",
-                            note=base.note)
-        rule = f"by its frontier window, because {because}: {self.rule}" if because else self.rule
-        return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
-                        + self._note(table))
+        return window_decision(self, state, visible, because, self._note)
 
 
 def window_engine(engine, mask: int, consistent: int, parts: list[int]) -> OrderEngine:

@@ -540,19 +540,27 @@ class FrontierWindow(DecidesOnMasks):
         >>> tiny.decide(Sequencer(plan, buffer_capacity=1).state, ("c",)).rule
         'as the base rule (slack), because no frontier window fitted its state cap (1) or its time: ...'
         """
-        sched = state.schedule
-        if sched.mask == sched.engine.full:
-            return Decision(DONE, "the assembly is complete")
-        action = self.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
-        table = self.last_table
-        if table is None:
-            base = self.base.decide(state, visible)
-            return Decision(base.action, f"as the base rule ({self.base.name}), because {because + ' and ' * bool(because)}"
-                            f"no frontier window fitted its state cap ({self.max_states:,}) or its time: {base.rule}",
-                            note=base.note)
-        rule = f"by its frontier window, because {because}: {self.rule}" if because else self.rule
-        return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
-                        f"expected cost of the window {table.values[-1]:.4f}")
+        return window_decision(self, state, visible, because,
+                               lambda table: f"expected cost of the window {table.values[-1]:.4f}")
+
+
+def window_decision(window, state, visible: tuple[str, ...], because: str, describe) -> Decision:
+    """A window policy's decision with its reasons (the uniform, pile and weighted windows share it): its
+    action at the state, said as the window's, or the base's where no window fitted; ``describe`` says what
+    the window's table tells (after its parts and states, in the note)."""
+    sched = state.schedule
+    if sched.mask == sched.engine.full:
+        return Decision(DONE, "the assembly is complete")
+    action = window.choose_at(sched.engine, sched.mask, sched.consistent, state.buffer, state.buffer_free, visible)
+    table = window.last_table
+    if table is None:
+        base = window.base.decide(state, visible)
+        return Decision(base.action, f"as the base rule ({window.base.name}), because {because + ' and ' * bool(because)}"
+                        f"no frontier window fitted its state cap ({window.max_states:,}) or its time: {base.rule}",
+                        note=base.note)
+    rule = f"by its frontier window, because {because}: {window.rule}" if because else window.rule
+    return Decision(action, rule, note=f"a window of {len(table.parts)} parts, {table.states:,} states; "
+                    + describe(table))
 
 
 def _window_bits(units: int, unit_bit: dict[int, int]) -> int:
