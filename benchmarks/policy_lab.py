@@ -379,6 +379,8 @@ def _run_jobs(jobs: list[Job], args, done: dict, sink) -> None:
     """Run what the jobs lack of the asked policies, each reported as it finishes (a full run takes hours)
     and appended to ``--results`` at once, so that an interrupted run goes on from where it stopped."""
     todo = [(job, need) for job in jobs if (need := _missing(done.get(job.key), args.policies, args.redo_skipped))]
+    if args.cheapest_first:     # by the optimum's states --results has for them (those without last), stably
+        todo.sort(key=lambda t: done.get(t[0].key, {}).get("states", float("inf")))
 
     def report(job: Job, r: dict) -> None:
         rec = _record(job, r)
@@ -781,6 +783,9 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--policy-states", type=int,
                     help="states of one policy's evaluation, at most (counted work: the same cut whatever the load; "
                          "default: --max-states); past it the policy is left out of that plan-setting's column")
+    ap.add_argument("--cheapest-first", action="store_true",
+                    help="run the plan-settings in order of the optimum's states --results has for them (those it "
+                         "lacks last): the most columns filled in a short run")
     ap.add_argument("--task-seconds", type=float, default=300.0,
                     help="seconds for the optimum of one plan in one setting, and for each policy's evaluation, at most")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (plans x settings, and the paired studies)")

@@ -22,30 +22,13 @@ from opportune.policies.optimal import same_action
 from opportune.policies.variants import Slack
 
 
-class LookByLook(PolicyEvaluator):
+def look_by_look(engine, policy, **settings):
     """The evaluation as it was: the policy asked at each look in turn, its action matched among the legal
-    moves (:meth:`policy_moves`), each look's successor solved before the next look is asked."""
-
-    def policy_moves_at(self, key, looks):
-        raise AssertionError("not used: _policy_value below asks look by look")
-
-    def _policy_value(self, key):
-        cached = self._policy_values.get(key)
-        if cached is not None:
-            return cached
-        if key[0] == self.engine.full:
-            self._policy_values[key] = 0.0
-            return 0.0
-        moved = p_shake = 0.0
-        for look, p in self._looks(self._bin_counts(self._counts_key(key))):
-            move = self._policy_move(self.policy, key, look)
-            if move is None:
-                p_shake += p
-            else:
-                moved += p * (move[0] + self._policy_value(move[1]))
-        v = (self.costs.look + moved + p_shake * self.costs.shake) / (1.0 - p_shake)
-        self._policy_values[key] = v
-        return v
+    moves, each look's successor solved before the next look is asked."""
+    ev = PolicyEvaluator(engine, policy, **settings)
+    ev.LOOKS_AT_ONCE = False
+    ev.policy_moves_at = None           # never asked
+    return ev
 
 
 def _chains(n: int, seed: int):
@@ -71,7 +54,7 @@ def test_all_looks_at_once_give_the_value_look_by_look_gives_to_the_bit(plan, vi
         settings_ = dict(visible=visible, capacity=capacity)
         batch = PolicyEvaluator(engine, policy, **settings_)
         batch.OPTIMUM_SHORTCUT = False          # the look-ahead evaluated look by look, not by its optimum's value
-        one = LookByLook(engine, again, **settings_)
+        one = look_by_look(engine, again, **settings_)
         one.OPTIMUM_SHORTCUT = False
         assert batch.value() == one.value()
         assert batch.policy_states == one.policy_states
@@ -82,7 +65,7 @@ def test_the_fallback_beyond_its_window_is_worth_the_same_either_way(n, visible,
     engine = OrderEngine(_chains(n, seed))
     settings_ = dict(visible=visible, capacity=capacity)
     batch = PolicyEvaluator(engine, Lookahead(optimal=False, **settings_), **settings_)
-    one = LookByLook(engine, Lookahead(optimal=False, **settings_), **settings_)
+    one = look_by_look(engine, Lookahead(optimal=False, **settings_), **settings_)
     assert batch.value() == one.value() and not batch.by_optimum
     assert batch.policy.window.work["windows"] > 0      # the window decided (the plan is beyond one window)
 

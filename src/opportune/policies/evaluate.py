@@ -252,6 +252,12 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
     #: than the look-by-look evaluation (every look of every state asks the policy).
     OPTIMUM_SHORTCUT = True
 
+    #: Whether :meth:`value` asks the policy for all the looks of a state at once (:meth:`policy_moves_at`),
+    #: or look by look, each move matched among the legal ones and its successor solved before the next look
+    #: (as it did before: kept to measure the difference, ``benchmarks/bench_evaluate_looks.py``).  The same
+    #: values to the bit either way (tests/test_evaluate_batch.py).
+    LOOKS_AT_ONCE = True
+
     def value(self, key: tuple | None = None) -> float:
         """Expected remaining cost of the policy from a state.
 
@@ -392,8 +398,8 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         >>> from opportune.engine import OrderEngine
         >>> from opportune.policies.opportunistic import Opportunistic
         >>> ev = PolicyEvaluator(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), Opportunistic(), visible=1)
-        >>> ev.policy_moves_at(ev.policy_start(), [(0,), (1,)])
-        [(1.0, (1, 1, (0, 0))), (1.0, (0, 1, (0, 1)))]
+        >>> ev.policy_moves_at(ev.policy_start(), [(0,), (1,)])     # a seen: installed; b seen: buffered
+        [(1.0, (1, 1, ())), (1.0, (0, 1, (1,)))]
         """
         mask, cons, _ = key
         ids = self.ids
@@ -456,9 +462,13 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
         p_shake = 0.0
         looks = self._looks(self._bin_counts(self._counts_key(key)))
-        # every look's decision first, then the states they lead to: the policy's work at this state (a
-        # window's table) is done while it is at hand, not again after a descent that displaced it
-        for (_, p), move in zip(looks, self.policy_moves_at(key, [look for look, _ in looks])):
+        if self.LOOKS_AT_ONCE:
+            # every look's decision first, then the states they lead to: the policy's work at this state (a
+            # window's table) is done while it is at hand, not again after a descent that displaced it
+            moves = self.policy_moves_at(key, [look for look, _ in looks])
+        else:       # lazily: each look's successor solved before the next look is asked
+            moves = (self._policy_move(self.policy, key, look) for look, _ in looks)
+        for (_, p), move in zip(looks, moves):
             if move is None:
                 p_shake += p
             else:
