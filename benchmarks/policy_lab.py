@@ -44,6 +44,8 @@ The whole lab (hours; resumable), and the order it was run in (the cheap columns
     python benchmarks/policy_lab.py --results R --policies paper --capacities 1,2 --salbp "" --paired "" \
         --task-seconds 120 --only r0-16,r1-16,r2-16x2,...      # the first plans of each size first
     python benchmarks/policy_lab.py --results R --policies fallback --paired "" --only ...
+    python benchmarks/policy_lab.py --results R --policies fallback --sizes 16,20,25,30 --plans 6 --salbp "" \
+        --paired "" --only r0-16,r1-16,r3-16,... --policy-states 12000 --cheapest-first   # a counted cut
     python benchmarks/policy_lab.py --results R --no-run --table docs/policy-lab.md --readme README.md \\
         --plot docs/img/policy-lab.png --paired ""                                   # the tables alone
 
