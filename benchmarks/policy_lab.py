@@ -15,7 +15,8 @@ the uniform bin, :class:`~opportune.policies.pile.PileSolver` in the pile) is di
 The optimum's states are counted before the work (:func:`~opportune.policies.states.estimate_states`):
 a plan-setting whose optimum needs more than ``--max-states`` is skipped with that count, one whose
 optimum takes over ``--task-seconds`` likewise, and a policy whose evaluation takes over
-``--task-seconds`` is left out of that column (said, never hidden).  Where the look-ahead decides by the
+``--task-seconds`` or stores over ``--policy-states`` states (counted work: the same cut on a loaded
+machine as on an idle one) is left out of that column (said, never hidden).  Where the look-ahead decides by the
 optimum (its decisions say so), its value is the optimum's, as in ``opportune evaluate``.  No Monte
 Carlo: every number is exact.
 
@@ -43,6 +44,8 @@ The whole lab (hours; resumable), and the order it was run in (the cheap columns
     python benchmarks/policy_lab.py --results R --policies paper --capacities 1,2 --salbp "" --paired "" \
         --task-seconds 120 --only r0-16,r1-16,r2-16x2,...      # the first plans of each size first
     python benchmarks/policy_lab.py --results R --policies fallback --paired "" --only ...
+    python benchmarks/policy_lab.py --results R --policies fallback --sizes 16,20,25,30 --plans 6 --salbp "" \
+        --paired "" --only r0-16,r1-16,r3-16,... --policy-states 12000 --cheapest-first   # a counted cut
     python benchmarks/policy_lab.py --results R --no-run --table docs/policy-lab.md --readme README.md \\
         --plot docs/img/policy-lab.png --paired ""                                   # the tables alone
 
@@ -183,10 +186,12 @@ def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | Non
 
 
 def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
-            seconds: float | None = None, only=None, python: bool = False) -> dict:
+            seconds: float | None = None, only=None, python: bool = False, policy_states: int | None = None) -> dict:
     """One plan in one setting: the optimum, its states and each policy's gap over it (with the CPU seconds
     each took, the versions, the policies out of time or states and those worth the optimum); or
-    ``{"skipped": why, "estimate": states}`` where the optimum does not fit (counted first) or runs out of time."""
+    ``{"skipped": why, "estimate": states}`` where the optimum does not fit (counted first) or runs out of time.
+    ``policy_states``: the states a policy's evaluation may store (counted work, the same cut on a loaded
+    machine as on an idle one; None: ``max_states``)."""
     engine = OrderEngine(plan)
     est = estimate_states(engine, visible=visible, capacity=capacity, pile=bin == "pile", stop_above=max_states,
                           time_limit=ESTIMATE_SECONDS)
@@ -202,6 +207,7 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
         return {"skipped": f"optimum over {max_states:,} states", "estimate": est.states}
     except OutOfTime:
         return {"skipped": f"optimum over {seconds:g} s", "estimate": est.states}
+    settings["max_states"] = policy_states or max_states
     out = {"optimum": best, "states": optimum.states, "gaps": {}, "policy_skipped": {}, "by_optimum": [],
            "cpu": {"optimum": round(time.process_time() - cpu, 3)}, "versions": {}}
     for name, policy in policies(visible, capacity, bin).items():
@@ -216,7 +222,7 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
             elif name == "lookahead" and policy.refusal:     # the default did not decide by its optimum: why
                 out["refusals"] = {name: policy.refusal}
         except OptimalTooLarge:
-            out["policy_skipped"][name] = f"over {max_states:,} states"
+            out["policy_skipped"][name] = f"over {settings['max_states']:,} states"
         except OutOfTime:
             out["policy_skipped"][name] = f"over {seconds:g} s"
         if name == "lookahead" and name in out["policy_skipped"] and policy.refusal:
@@ -242,8 +248,9 @@ def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_
 
 def _task(job):
     """One plan in one setting (a worker's job): :func:`measure`'s record."""
-    plan, visible, capacity, bin, max_states, seconds, only, python = job
-    return measure(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, python=python)
+    plan, visible, capacity, bin, max_states, seconds, only, python, policy_states = job
+    return measure(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, python=python,
+                   policy_states=policy_states)
 
 
 # ------------------------------------------------------------------ the jobs and the results file
@@ -374,6 +381,8 @@ def _run_jobs(jobs: list[Job], args, done: dict, sink) -> None:
     """Run what the jobs lack of the asked policies, each reported as it finishes (a full run takes hours)
     and appended to ``--results`` at once, so that an interrupted run goes on from where it stopped."""
     todo = [(job, need) for job in jobs if (need := _missing(done.get(job.key), args.policies, args.redo_skipped))]
+    if args.cheapest_first:     # by the optimum's states --results has for them (those without last), stably
+        todo.sort(key=lambda t: done.get(t[0].key, {}).get("states", float("inf")))
 
     def report(job: Job, r: dict) -> None:
         rec = _record(job, r)
@@ -383,7 +392,7 @@ def _run_jobs(jobs: list[Job], args, done: dict, sink) -> None:
             sink.write(json.dumps({"key": job.key, **rec}) + "\n")
             sink.flush()
 
-    tasks = [(job.plan, *job.setting, args.max_states, args.task_seconds, need, args.python_optimum)
+    tasks = [(job.plan, *job.setting, args.max_states, args.task_seconds, need, args.python_optimum, args.policy_states)
              for job, need in todo]
     if args.workers > 1 and len(todo) > 1:
         from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -773,6 +782,12 @@ def parser() -> argparse.ArgumentParser:
                     help="the optimum by the Python programme (the same values as the compiled core, 20-46x later)")
     ap.add_argument("--compiled-optimum", action="store_true", help="the optimum by the compiled core (the default)")
     ap.add_argument("--max-states", type=int, default=2_000_000, help="states of one exact programme, at most")
+    ap.add_argument("--policy-states", type=int,
+                    help="states of one policy's evaluation, at most (counted work: the same cut whatever the load; "
+                         "default: --max-states); past it the policy is left out of that plan-setting's column")
+    ap.add_argument("--cheapest-first", action="store_true",
+                    help="run the plan-settings in order of the optimum's states --results has for them (those it "
+                         "lacks last): the most columns filled in a short run")
     ap.add_argument("--task-seconds", type=float, default=300.0,
                     help="seconds for the optimum of one plan in one setting, and for each policy's evaluation, at most")
     ap.add_argument("--workers", type=int, default=1, help="worker processes (plans x settings, and the paired studies)")

@@ -444,6 +444,13 @@ class DecidesOnMasks:
         rules that fall back on another policy call; a policy that takes the value itself overrides it."""
         return self.choose_at(*look)
 
+    def choose_looks(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                     looks) -> list[Action]:
+        """``choose_at`` at one state on each of ``looks``, in order: what the exact evaluation asks
+        (:meth:`PolicyEvaluator.policy_moves_at <opportune.policies.evaluate.PolicyEvaluator.policy_moves_at>`);
+        a policy whose work at a state serves all its looks overrides it."""
+        return [self.choose_at(engine, mask, consistent, buffer, free, visible) for visible in looks]
+
 
 @runtime_checkable
 class Policy(Protocol):

@@ -252,6 +252,12 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
     #: than the look-by-look evaluation (every look of every state asks the policy).
     OPTIMUM_SHORTCUT = True
 
+    #: Whether :meth:`value` asks the policy for all the looks of a state at once (:meth:`policy_moves_at`),
+    #: or look by look, each move matched among the legal ones and its successor solved before the next look
+    #: (as it did before: kept to measure the difference, ``benchmarks/bench_evaluate_looks.py``).  The same
+    #: values to the bit either way (tests/test_evaluate_batch.py).
+    LOOKS_AT_ONCE = True
+
     def value(self, key: tuple | None = None) -> float:
         """Expected remaining cost of the policy from a state.
 
@@ -362,6 +368,83 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         """States the policy reaches from the start (after :meth:`value`)."""
         return len(self._policy_values)
 
+    def policy_moves_at(self, key: tuple, looks) -> list:
+        """The policy's move at a state on each of ``looks``, in order: ``(cost, next key)`` as
+        :meth:`policy_moves` gives it for the action the policy chooses, or None where it shakes.  The
+        policy is asked once for all the looks (``choose_looks``, where it has one: the look-ahead decides
+        by its fallback there without going through its programme at every look), and each move is made
+        from its action directly.  O(looks × (a decision + parts)).
+
+        Parameters
+        ----------
+        key : tuple
+            A state, as :meth:`policy_key` makes it.
+        looks : sequence of tuple of int
+            Looks, as sorted part indices.
+
+        Returns
+        -------
+        list of (float, tuple) or None
+            One per look.
+
+        Raises
+        ------
+        ValueError
+            If the policy chooses a move that is not legal at the state.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> from opportune.policies.opportunistic import Opportunistic
+        >>> ev = PolicyEvaluator(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), Opportunistic(), visible=1)
+        >>> ev.policy_moves_at(ev.policy_start(), [(0,), (1,)])     # a seen: installed; b seen: buffered
+        [(1.0, (1, 1, ())), (1.0, (0, 1, (1,)))]
+        """
+        mask, cons, _ = key
+        ids = self.ids
+        buffer = self._buffered(key)
+        free = float("inf") if self.capacity is None else self.capacity - len(buffer)
+        visible = [tuple(ids[i] for i in look) for look in looks]
+        choose_looks = getattr(self.policy, "choose_looks", None)
+        if choose_looks is not None:
+            actions = choose_looks(self.engine, mask, cons, buffer, free, visible)
+        else:
+            actions = [self.policy.choose_at(self.engine, mask, cons, buffer, free, v) for v in visible]
+        return [None if action.kind == "shake" else self._move_of(key, look, action)
+                for look, action in zip(looks, actions)]
+
+    def _move_of(self, key: tuple, look: tuple[int, ...], action) -> tuple[float, tuple]:
+        """``(cost, next key)`` of ``action`` at ``key`` on ``look``: the move of :meth:`policy_moves` whose
+        action it is (tests/test_evaluate_memo.py checks they agree), made without listing the others.
+        A move that is not legal there is a ``ValueError``.  O(parts)."""
+        mask, cons, buf = key
+        i = self.plan.index(action.part)
+        from_buffer = action.kind == "install" and (action.source or "bin") == "buffer"
+        held = buf.count(i) if self.ordered else buf[i]
+        legal = held > 0 if from_buffer else i in look
+        if legal and action.kind == "buffer":
+            legal = self.capacity is None or (len(buf) if self.ordered else sum(buf)) < self.capacity
+            nxt = None if not legal else (mask, cons, self._canonical(buf + (i,)) if self.ordered
+                                          else buf[:i] + (buf[i] + 1,) + buf[i + 1:])
+        elif legal and action.kind == "install":
+            u = self.engine.next_unit(mask, i)
+            after = 0 if u is None else self.engine.consistent_after(mask, cons, u)
+            legal = after != 0
+            if not from_buffer:
+                rest = buf
+            elif self.ordered:
+                j = buf.index(i)
+                rest = self._canonical(buf[:j] + buf[j + 1:])
+            else:
+                rest = buf[:i] + (buf[i] - 1,) + buf[i + 1:]
+            nxt = (mask | 1 << u, after, rest) if legal else None
+        else:
+            legal = False
+        if not legal:
+            raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
+        return self.move[i], nxt
+
     # ------------------------------------------------------------ internals
 
     def _policy_value(self, key: tuple) -> float:
@@ -378,8 +461,14 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
                                   "plan; raise the state limit, or estimate with `opportune simulate`")
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
         p_shake = 0.0
-        for look, p in self._looks(self._bin_counts(self._counts_key(key))):
-            move = self._policy_move(self.policy, key, look)
+        looks = self._looks(self._bin_counts(self._counts_key(key)))
+        if self.LOOKS_AT_ONCE:
+            # every look's decision first, then the states they lead to: the policy's work at this state (a
+            # window's table) is done while it is at hand, not again after a descent that displaced it
+            moves = self.policy_moves_at(key, [look for look, _ in looks])
+        else:       # lazily: each look's successor solved before the next look is asked
+            moves = (self._policy_move(self.policy, key, look) for look, _ in looks)
+        for (_, p), move in zip(looks, moves):
             if move is None:
                 p_shake += p
             else:

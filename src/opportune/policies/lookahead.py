@@ -500,6 +500,49 @@ class Lookahead(DecidesOnMasks):
         finally:
             resume_collector()
 
+    def choose_looks(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
+                     looks) -> list[Action]:
+        """:meth:`choose_at` at one state on each of ``looks``, in order: the same actions.  Without a
+        budget, once the first look has found that the programme does not decide (the plan is too large
+        for it), the other looks go to the fallback at once, not through the programme look by look.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : tuple of str
+            The buffered parts.
+        free : float
+            Free buffer locations (``inf``: unlimited).
+        looks : sequence of tuple of str
+            The looks.
+
+        Returns
+        -------
+        list of Action
+            One per look.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> Lookahead(visible=1, capacity=1, optimal=False).choose_looks(engine, 0, 1, (), 1.0, [("c",), ("a",)])
+        [Action(kind='buffer', part='c', source=None), Action(kind='install', part='a', source='bin')]
+        """
+        if not looks:
+            return []
+        first = self.choose_at(engine, mask, consistent, buffer, free, looks[0])
+        if self.lookahead_budget is not None or mask == engine.full or not self._too_large:
+            return [first] + [self.choose_at(engine, mask, consistent, buffer, free, v) for v in looks[1:]]
+        fallback = self._fallback(engine, time.perf_counter())
+        batch = getattr(fallback, "choose_looks", None)
+        if batch is None:       # a base of the caller's that decides look by look
+            return [first] + [fallback.choose_at(engine, mask, consistent, buffer, free, v) for v in looks[1:]]
+        return [first, *batch(engine, mask, consistent, buffer, free, looks[1:])]
+
     def _choose(self, look: LookState) -> Action:
         start = time.perf_counter()
         action = self._programme(look)
