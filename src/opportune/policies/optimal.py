@@ -374,7 +374,7 @@ class OptimalSolver:
                 continue
             seen.add(i)
             u = engine.next_unit(mask, i)
-            after = engine.consistent_after(mask, cons, u)
+            after = engine.exact_after(mask, cons, u)
             if after:
                 yield self.move[i], (mask | 1 << u, after, buf), Action("install", self.ids[i], "bin")
             if free:
@@ -390,7 +390,7 @@ class OptimalSolver:
         for i, c in enumerate(buf):
             if c:
                 u = engine.next_unit(mask, i)
-                after = engine.consistent_after(mask, cons, u)
+                after = engine.exact_after(mask, cons, u)
                 if after:
                     nb = list(buf)
                     nb[i] -= 1
@@ -405,10 +405,13 @@ class OptimalSolver:
         ids = self.ids
         buffer = self._buffered(key)
         free = float("inf") if self.capacity is None else self.capacity - len(buffer)
+        # the moves first: on a plan written as ways they decide exactly which sets after are live, and the
+        # engine's look-by-look answers the policy reads take those decisions (never a guess of "live")
+        moves = list(self.policy_moves(key, look))
         action = policy.choose_at(self.engine, mask, cons, buffer, free, tuple(ids[i] for i in look))
         if action.kind == "shake":
             return None
-        for move in self.policy_moves(key, look):
+        for move in moves:
             if same_action(move[2], action):
                 return move
         raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
@@ -521,7 +524,7 @@ class OptimalSolver:
         mask, cons, buf = key
         best = float("inf")
         u = self.engine.next_unit(mask, i)
-        after = self.engine.consistent_after(mask, cons, u)
+        after = self.engine.exact_after(mask, cons, u)
         if after:
             best = self.move[i] + self._value((mask | 1 << u, after, buf))
         if free:
@@ -858,9 +861,18 @@ class CompiledCore:
         """The arguments every core takes first: units, parts' first units and quantities, the units below
         each unit per strategy, move costs, the look's and the shake's costs, visible, capacity (-1: none)."""
         engine = self.engine
-        below = [[int(b) for b in poset.below] for poset in engine.posets]
+        # a plan written as ways has no orders: one strategy with nothing below any unit, its ways given
+        # after (:meth:`_give_ways`)
+        below = [[int(b) for b in poset.below] for poset in engine.posets] or [[0] * engine.n_units]
         return (engine.n_units, list(engine.first), list(self.quantity), below, list(self.move),
                 float(self.costs.look), float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity)
+
+    def _give_ways(self) -> None:
+        """On a plan written as ways, its table to the core: each part's ways as a blockers mask and need
+        masks (the core decides which sets have a completion, exactly, as
+        :meth:`~opportune.engine.waysengine.WaysEngine.alive`).  O(ways)."""
+        if self.plan.is_ways:
+            self._core.set_ways(self.engine.table.ways)
 
     def reserve(self, states: int) -> None:
         """Make room for ``states`` values at once (the count from
@@ -907,6 +919,7 @@ class CompiledOptimalSolver(CompiledCore, OptimalSolver):
             raise ValueError("the compiled optimum needs the compiled core, positive weights and a plan of 1 to "
                              "64 units and at most 64 strategies")
         self._core = _native.OptimalCore(*self._core_args(), **self._core_options())
+        self._give_ways()
 
     def _core_options(self) -> dict:
         """The core's settings after the plan's: the weights (none: a uniform bin) and the look cache's bytes."""
