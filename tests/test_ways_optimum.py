@@ -174,13 +174,15 @@ def test_a_strategy_written_as_ways_has_the_strategy_plans_optimum(plan):
 
 def test_a_dead_end_is_never_entered_though_the_look_by_look_answer_guesses_live(monkeypatch):
     """A set the engine's bounded search cannot decide is taken as live by the sequencer's answers; the
-    optimum decides it exactly: c needs a, and a goes in only before b, so b first is a dead end."""
+    optimum decides it exactly: c needs a, and a goes in before b or after c, so b first is a dead end (no
+    part shut out, none locked by blockers: only a search finds it)."""
     from opportune.engine import waysengine
     from opportune.formats.ways import ways_plan
     from opportune.planning.plan import Part, Way
 
-    plan = ways_plan("p", [Part("a"), Part("b"), Part("c")],
-                     {"a": [Way(frozenset({"b"}))], "c": [Way(frozenset(), (frozenset({"a"}),))]})
+    plan = ways_plan("p", [Part("a"), Part("b"), Part("c"), Part("d")],
+                     {"a": [Way(frozenset({"b"})), Way(frozenset(), (frozenset({"c"}),))],
+                      "c": [Way(frozenset(), (frozenset({"a"}),))]})
     monkeypatch.setattr(waysengine, "LIVE_WORK", 0)      # every search undecided: "live"
     engine = OrderEngine(plan)
     assert engine.consistent_after(0, 1, 1) == 1 and engine.exact_after(0, 1, 1) == 0
