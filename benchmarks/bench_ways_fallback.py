@@ -3,13 +3,14 @@
 On a plan written as ways the frontier windows (which read the strategies' orders) do not serve: where its
 optimum does not fit, the look-ahead decides by one step of policy improvement over the paper's rule on plans
 of at most ``LOOKAHEAD_STEP_UNITS`` parts, else by the paper's rule itself.  Here, on voxel blocks of 14-20
-parts derived from geometry and written as ways (``derive(..., form="ways")``, the generator of
+parts derived from geometry under gravity and written as ways (``derive(..., form="ways", gravity="-z")``:
+the supports are needs; the generator of
 ``benchmarks/bench_derive.py``), each policy's exact expected time (:class:`~opportune.policies.evaluate.
 PolicyEvaluator`, the uniform bin) is divided by the optimum's: ``step`` (the look-ahead with its optimum
 switched off, the step allowed on every size here), ``paper`` and ``bin-first``.
 
     python benchmarks/bench_ways_fallback.py                         # 2 blocks each of 14, 17, 20 parts
-    python benchmarks/bench_ways_fallback.py --sizes 16 --plans 3 --settings 1x1,2x2
+    python benchmarks/bench_ways_fallback.py --sizes 16 --plans 3 --settings 1x1,2x2 --gravity none
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_derive import block_for, partition, write  # noqa: E402
 
 
-def ways_blocks(n: int, count: int, seed: int, max_states: int, settings) -> list:
+def ways_blocks(n: int, count: int, seed: int, max_states: int, settings, gravity: str | None) -> list:
     """``count`` voxel blocks of ``n`` parts derived as ways whose optimum holds at most ``max_states`` states in
     every setting (blocks with no admissible sequence, or too many states, are drawn again)."""
     plans, k = [], 0
@@ -42,7 +43,7 @@ def ways_blocks(n: int, count: int, seed: int, max_states: int, settings) -> lis
         with tempfile.TemporaryDirectory() as tmp:
             write(Path(tmp), partition(block_for(n), n, seed * 1000 + n * 10 + k))
             try:
-                plan = derive(Path(tmp), form="ways").plan
+                plan = derive(Path(tmp), form="ways", gravity=gravity).plan
             except DeriveError:
                 continue
         engine = OrderEngine(plan)
@@ -64,15 +65,17 @@ def main() -> None:
     ap.add_argument("--sizes", default="14,17,20")
     ap.add_argument("--plans", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--settings", default="1x1,2x2", help="visible x buffer locations, comma-separated")
-    ap.add_argument("--max-optimum-states", type=int, default=40_000)
+    ap.add_argument("--settings", default="1x1,2x0", help="visible x buffer locations, comma-separated")
+    ap.add_argument("--max-optimum-states", type=int, default=20_000)
+    ap.add_argument("--gravity", default="-z", help="derive's --gravity (supports become needs); 'none': none")
     args = ap.parse_args()
     settings = [tuple(int(x) for x in s.split("x")) for s in args.settings.split(",")]
     print("| parts | setting | plan states | optimum | step / optimum | paper / optimum | bin-first / optimum | CPU s |")
     print("|---|---|---|---|---|---|---|---|")
     ratios: dict[str, list[float]] = {"step": [], "paper": [], "bin-first": []}
     for n in (int(x) for x in args.sizes.split(",")):
-        for plan in ways_blocks(n, args.plans, args.seed, args.max_optimum_states, settings):
+        gravity = None if args.gravity == "none" else args.gravity
+        for plan in ways_blocks(n, args.plans, args.seed, args.max_optimum_states, settings, gravity):
             for visible, capacity in settings:
                 start = time.process_time()
                 world = dict(visible=visible, capacity=capacity)

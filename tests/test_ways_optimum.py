@@ -19,7 +19,8 @@ from opportune.engine import OrderEngine
 from opportune.formats.ways import WAYS_POLICIES, ways_of_strategy
 from opportune.planning.costs import TimeModel
 from opportune.policies.lookahead import Lookahead
-from opportune.policies.optimal import CompiledOptimalSolver, OptimalSolver, compiled_optimal_available, optimal_solver
+from opportune.policies.optimal import (CompiledOptimalSolver, OptimalSolver, compiled_optimal_available, optimal_solver,
+                                        optimum_bytes)
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
 from opportune.policies.states import estimate_states
 
@@ -66,8 +67,13 @@ def test_the_compiled_optimum_of_a_ways_plan_is_the_python_one_bit_for_bit(n, se
                 cc = CompiledOptimalSolver(OrderEngine(plan), **world)
                 assert cc.value() == py.value(), world
                 assert cc.states == py.states
-                if w is None:
-                    assert py.states == estimate_states(OrderEngine(plan), visible=visible, capacity=capacity).states
+                if w is None:       # the states counted, and the bytes known, before the work
+                    est = estimate_states(OrderEngine(plan), visible=visible, capacity=capacity)
+                    assert py.states == est.states
+                    sized = CompiledOptimalSolver(OrderEngine(plan), **world)
+                    sized.reserve(est.states)
+                    assert sized.value() == cc.value()
+                    assert sized.bytes <= optimum_bytes(est.states, est.keys, compiled=True, ways=True)
                 start = py.start_key()
                 for look, _ in py._looks(py._bin_counts(start)):
                     assert cc.best_action(start, look) == py.best_action(start, look)

@@ -64,6 +64,10 @@ public:
         if (cap > cap_) rehash(cap);
     }
     size_t size() const { return size_; }
+    void clear() {
+        std::fill(slots_, slots_ + cap_, Slot{0, 0.0});
+        size_ = 0;
+    }
     // the bytes of a table reserved for n values (what reserve(n) allocates on a new table)
     static size_t bytes_for(size_t n) {
         size_t cap = 1024;
@@ -100,7 +104,8 @@ struct PairHash {
 // ways, (blockers, needs) masks: none of the blockers in yet, a part of each need in.  A set is live when
 // it has a completion, decided exactly as WaysEngine.alive decides it: a part shut out (every way
 // blocked) or the parts left locking each other: dead; else, with no needs anywhere, live; else live when
-// a set one part larger is, every set decided kept (a value of 1 or 0 in a Table).
+// a set one part larger is, every set decided kept (a value of 1 or 0 in a Table) up to `limit` sets, then
+// forgotten whole (a cache: what is forgotten is decided again), so its bytes are known before the work.
 class WaysLiveness {
 public:
     using Way = std::pair<uint64_t, std::vector<uint64_t>>;
@@ -151,10 +156,17 @@ public:
             for (uint64_t todo = goes(mask); todo && !found; todo &= todo - 1)
                 found = live(mask | (todo & -todo));
         }
+        if (memo_.size() >= limit_) memo_.clear();
         memo_.put(mask, found ? 1.0 : 0.0);
         return found;
     }
 
+    // at most n sets kept (at least 512: a table's least, 1,024 slots, holds them), their table reserved at
+    // once: Table::bytes_for(n) bytes
+    void reserve(size_t n) {
+        limit_ = std::max<size_t>(n, 512);
+        memo_.reserve(limit_);
+    }
     size_t bytes() const { return memo_.bytes(); }
 
 private:
@@ -192,6 +204,7 @@ private:
     std::vector<std::vector<Way>> ways_;
     uint64_t full_ = 0, free_ = 0;
     bool has_needs_ = false;
+    size_t limit_ = std::numeric_limits<size_t>::max();
     Table memo_;
 };
 
@@ -238,6 +251,9 @@ struct PlanUnits {
         ways_ = std::make_unique<WaysLiveness>(n_units_, std::move(ways));
     }
     size_t ways_bytes() const { return ways_ ? ways_->bytes() : 0; }
+    void reserve_ways(size_t n) {
+        if (ways_) ways_->reserve(n);
+    }
 
     uint64_t consistent_after(uint64_t mask, uint64_t cons, int unit) const {
         if (ways_)  // the set after must have a completion: a dead one is never entered

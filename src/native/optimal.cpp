@@ -211,7 +211,10 @@ public:
         return V(mask, cons, buf);
     }
 
-    void reserve(size_t n) { table_.reserve(n); }
+    void reserve(size_t n) {  // the values' table and, on a plan written as ways, the sets decided live or dead
+        table_.reserve(n);
+        reserve_ways(n);
+    }
     // a plan written as ways: per part, its ways as (blockers, needs) masks (PlanUnits::set_ways)
     void set_ways(std::vector<std::vector<opportune_memo::WaysLiveness::Way>> ways) { PlanUnits::set_ways(std::move(ways)); }
     size_t states() const { return table_.size(); }

@@ -33,6 +33,7 @@ from opportune.policies.optimal import (
     optimum_bytes,
     optimum_engine,
     same_action,
+    ways_table_bytes,
 )
 from opportune.policies.pile_window import PileWindow, pile_window_available
 from opportune.policies.variants import Slack
@@ -105,6 +106,13 @@ class Lookahead(DecidesOnMasks):
     :class:`~opportune.policies.pile.CompiledPileSolver`), used up to :attr:`COMPILED_STATES` states
     and within the bytes the engine grants, whatever the plan's units; the step over the base is tried
     on plans of up to :attr:`STEP_UNITS` units.
+
+    On a plan written as ways (:attr:`~opportune.planning.plan.Plan.ways`) the optimum's programmes, compiled
+    too, take the ways table and decide exactly which sets have a completion; where the optimum does not
+    fit, no frontier window serves (the windows read the strategies' orders): its default base is then the
+    paper's rule (:class:`~opportune.policies.opportunistic.Opportunistic`, through the answering layer),
+    the step over it deciding on plans of up to :attr:`STEP_UNITS` units and the rule itself beyond, as
+    :attr:`deciding_rule` and the decisions say (measured against the optimum: docs/decisions.md).
 
     Parameters
     ----------
@@ -372,14 +380,18 @@ class Lookahead(DecidesOnMasks):
         """The bytes the optimum's programme holds, from its state count: the compiled uniform table and
         its pairs (:func:`~opportune.policies.optimal.optimum_bytes`), the compiled pile's
         :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` a value, or the Python programme's
-        :data:`~opportune.policies.states.BYTES_PER_STATE`.  O(log states)."""
+        :data:`~opportune.policies.states.BYTES_PER_STATE`; on a plan written as ways, the compiled programme's
+        table of sets decided live or dead too (:func:`~opportune.policies.optimal.ways_table_bytes`).
+        O(log states)."""
         compiled = self._compiled(engine)
+        ways = compiled and engine.plan.is_ways     # the compiled programme's table of sets decided live or dead
         if self.pile and compiled:
             from opportune.policies.pile import COMPILED_BYTES_PER_STATE
 
-            return COMPILED_BYTES_PER_STATE * estimate.states
+            return COMPILED_BYTES_PER_STATE * estimate.states + (ways_table_bytes(estimate.states) if ways else 0)
         looks = (estimate.looks, min(self.settings.get("visible", 2), engine.n_units)) if self._weighted(engine) else None
-        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks)
+        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks,
+                             ways=ways)
 
     def _optimum_fits(self, engine) -> bool:
         """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,

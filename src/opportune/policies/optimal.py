@@ -713,17 +713,22 @@ def compiled_optimal_available(engine, weights: dict[str, float] | None = None, 
             and engine.k <= 64 and contents <= 1 << 62)
 
 
-def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tuple[int, int] | None = None) -> int:
+def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tuple[int, int] | None = None,
+                  ways: bool = False) -> int:
     """The bytes the optimum's programme holds for ``states`` states over ``keys`` (installed,
     strategies) pairs, known before it starts: the compiled table reserved for the count (16-byte
     slots, a power of two at least twice the states, at least 1,024) and the pairs it interns, or
     :data:`~opportune.policies.states.BYTES_PER_STATE` a state in Python (plus the bounded look cache).
     ``weighted_looks``: in a weighted bin, ``(looks at the start, parts a look)``: the compiled
     programme's look cache adds at most :data:`COMPILED_LOOK_CACHE_BYTES` and the start's looks
-    (:data:`COMPILED_LOOK_BYTES` each, the most any bin has).  O(log states).
+    (:data:`COMPILED_LOOK_BYTES` each, the most any bin has).  ``ways``: on a plan written as ways the
+    compiled programme keeps the sets it decided live or dead in a second table of as many slots
+    (:func:`ways_table_bytes`).  O(log states).
 
     >>> optimum_bytes(3_000, 100, compiled=True)
     137472
+    >>> optimum_bytes(3_000, 100, compiled=True, ways=True) - 137472
+    131072
     >>> optimum_bytes(3_000, 100, compiled=True, weighted_looks=(10, 2)) - 137472
     4195780
     """
@@ -731,14 +736,26 @@ def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tup
         from opportune.policies.states import BYTES_PER_STATE
 
         return states * BYTES_PER_STATE
-    slots = 1024
-    while slots < 2 * states:
-        slots *= 2
     looks = 0
     if weighted_looks is not None:
         start, k = weighted_looks
         looks = COMPILED_LOOK_CACHE_BYTES + start * (COMPILED_LOOK_BYTES + k) + COMPILED_LOOK_ENTRY_BYTES
-    return 16 * slots + COMPILED_PAIR_BYTES * keys + looks
+    return (2 if ways else 1) * ways_table_bytes(states) + COMPILED_PAIR_BYTES * keys + looks
+
+
+def ways_table_bytes(states: int) -> int:
+    """The bytes of a compiled table reserved for ``states`` values: 16-byte slots, a power of two at
+    least twice the states, at least 1,024 (``src/native/memo_table.hpp``).  On a plan written as ways a
+    compiled programme reserved for ``states`` keeps as many sets decided live or dead, in a table of as
+    many bytes (forgotten whole when full: decided again).  O(log states).
+
+    >>> ways_table_bytes(3_000)
+    131072
+    """
+    slots = 1024
+    while slots < 2 * states:
+        slots *= 2
+    return 16 * slots
 
 
 def optimal_solver(engine: OrderEngine, *, merge: bool = True, **settings) -> OptimalSolver:
