@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <limits>
+#include <memory>
 #include <new>
 #include <stdexcept>
 #include <tuple>
@@ -63,6 +64,10 @@ public:
         if (cap > cap_) rehash(cap);
     }
     size_t size() const { return size_; }
+    void clear() {
+        std::fill(slots_, slots_ + cap_, Slot{0, 0.0});
+        size_ = 0;
+    }
     // the bytes of a table reserved for n values (what reserve(n) allocates on a new table)
     static size_t bytes_for(size_t n) {
         size_t cap = 1024;
@@ -93,6 +98,114 @@ private:
 
 struct PairHash {
     size_t operator()(const std::pair<uint64_t, uint64_t>& k) const { return mix(k.first ^ mix(k.second)); }
+};
+
+// A plan written as ways (opportune.planning.ways.WaysTable): each part (one unit) goes in by one of its
+// ways, (blockers, needs) masks: none of the blockers in yet, a part of each need in.  A set is live when
+// it has a completion, decided exactly as WaysEngine.alive decides it: a part shut out (every way
+// blocked) or the parts left locking each other: dead; else, with no needs anywhere, live; else live when
+// a set one part larger is, every set decided kept (a value of 1 or 0 in a Table) up to `limit` sets, then
+// forgotten whole (a cache: what is forgotten is decided again), so its bytes are known before the work.
+class WaysLiveness {
+public:
+    using Way = std::pair<uint64_t, std::vector<uint64_t>>;
+    WaysLiveness(int n, std::vector<std::vector<Way>> ways) : n_(n), ways_(std::move(ways)) {
+        if ((int)ways_.size() != n_) throw std::invalid_argument("the ways need one list per part");
+        full_ = n_ == 64 ? ~uint64_t(0) : (uint64_t(1) << n_) - 1;
+        for (int i = 0; i < n_; ++i) {
+            if (ways_[i].empty()) ways_[i].emplace_back(0, std::vector<uint64_t>{});  // none listed: one free way
+            for (auto& [blockers, needs] : ways_[i]) {
+                if ((blockers | (uint64_t(1) << i)) & ~full_) throw std::invalid_argument("a blocker is out of range");
+                for (uint64_t x : needs) {
+                    if (x & ~full_) throw std::invalid_argument("a need is out of range");
+                    has_needs_ = true;
+                }
+                if (!blockers && needs.empty()) free_ |= uint64_t(1) << i;
+            }
+        }
+    }
+
+    bool can_go(uint64_t mask, int i) const {
+        if (free_ >> i & 1) return true;
+        for (auto& [blockers, needs] : ways_[i]) {
+            if (blockers & mask) continue;
+            bool ok = true;
+            for (uint64_t x : needs) ok = ok && (x & mask);
+            if (ok) return true;
+        }
+        return false;
+    }
+
+    uint64_t goes(uint64_t mask) const {
+        uint64_t out = 0;
+        for (uint64_t rest = full_ & ~mask; rest; rest &= rest - 1) {
+            int i = __builtin_ctzll(rest);
+            if (can_go(mask, i)) out |= uint64_t(1) << i;
+        }
+        return out;
+    }
+
+    bool live(uint64_t mask) {
+        if (mask == full_) return true;
+        if (const double* known = memo_.find(mask)) return *known != 0.0;
+        bool found;
+        if (shut_out(mask) || locked(mask)) found = false;
+        else if (!has_needs_) found = true;
+        else {
+            found = false;
+            for (uint64_t todo = goes(mask); todo && !found; todo &= todo - 1)
+                found = live(mask | (todo & -todo));
+        }
+        if (memo_.size() >= limit_) memo_.clear();
+        memo_.put(mask, found ? 1.0 : 0.0);
+        return found;
+    }
+
+    // at most n sets kept (at least 512: a table's least, 1,024 slots, holds them), their table reserved at
+    // once: Table::bytes_for(n) bytes
+    void reserve(size_t n) {
+        limit_ = std::max<size_t>(n, 512);
+        memo_.reserve(limit_);
+    }
+    size_t bytes() const { return memo_.bytes(); }
+
+private:
+    // WaysTable.shut_out: a part not in whose every way has a blocker in
+    bool shut_out(uint64_t mask) const {
+        for (uint64_t rest = full_ & ~mask & ~free_; rest; rest &= rest - 1) {
+            bool blocked = true;
+            for (auto& w : ways_[__builtin_ctzll(rest)]) blocked = blocked && (w.first & mask);
+            if (blocked) return true;
+        }
+        return false;
+    }
+
+    // WaysTable.locked: the parts left taken out last first while one can be (a way with no blocker in
+    // the set nor among the others left); some remain
+    bool locked(uint64_t mask) const {
+        uint64_t rest = full_ & ~mask;
+        while (rest) {
+            uint64_t out = 0;
+            for (uint64_t r = rest; r; r &= r - 1) {
+                int i = __builtin_ctzll(r);
+                for (auto& w : ways_[i])
+                    if (!(w.first & mask) && !(w.first & rest & ~(uint64_t(1) << i))) {
+                        out |= uint64_t(1) << i;
+                        break;
+                    }
+            }
+            if (!out) return true;
+            rest &= ~out;
+        }
+        return false;
+    }
+
+    int n_;
+    std::vector<std::vector<Way>> ways_;
+    uint64_t full_ = 0, free_ = 0;
+    bool has_needs_ = false;
+    size_t limit_ = std::numeric_limits<size_t>::max();
+    Table memo_;
 };
 
 // The plan as the programmes see it.  `first[i]`, `quantity[i]`: part i's units first ..
@@ -131,7 +244,20 @@ struct PlanUnits {
         return -1;
     }
 
+    // A plan written as ways: its table in place of the strategies' orders (every part one unit, one
+    // "strategy" that stays open while the set is live).
+    void set_ways(std::vector<std::vector<WaysLiveness::Way>> ways) {
+        if (n_units_ != parts_) throw std::invalid_argument("a plan written as ways has parts of one unit");
+        ways_ = std::make_unique<WaysLiveness>(n_units_, std::move(ways));
+    }
+    size_t ways_bytes() const { return ways_ ? ways_->bytes() : 0; }
+    void reserve_ways(size_t n) {
+        if (ways_) ways_->reserve(n);
+    }
+
     uint64_t consistent_after(uint64_t mask, uint64_t cons, int unit) const {
+        if (ways_)  // the set after must have a completion: a dead one is never entered
+            return (cons & 1) && ways_->can_go(mask, unit) && ways_->live(mask | uint64_t(1) << unit) ? 1 : 0;
         uint64_t out = 0;
         for (size_t s = 0; s < below_.size(); ++s)
             if ((cons >> s & 1) && (below_[s][unit] & ~mask) == 0) out |= uint64_t(1) << s;
@@ -158,6 +284,7 @@ struct PlanUnits {
     uint64_t full_ = 0;
     long double buffers_ = 1;
     std::vector<uint64_t> part_units_, radix_;
+    std::unique_ptr<WaysLiveness> ways_;  // a plan written as ways; null: the strategies' orders (below_)
 };
 
 // The (installed, strategies) pairs, numbered in the order first seen.

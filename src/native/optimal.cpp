@@ -211,9 +211,14 @@ public:
         return V(mask, cons, buf);
     }
 
-    void reserve(size_t n) { table_.reserve(n); }
+    void reserve(size_t n) {  // the values' table and, on a plan written as ways, the sets decided live or dead
+        table_.reserve(n);
+        reserve_ways(n);
+    }
+    // a plan written as ways: per part, its ways as (blockers, needs) masks (PlanUnits::set_ways)
+    void set_ways(std::vector<std::vector<opportune_memo::WaysLiveness::Way>> ways) { PlanUnits::set_ways(std::move(ways)); }
     size_t states() const { return table_.size(); }
-    size_t bytes() const { return table_.bytes() + pairs_.bytes() + looks_.bytes(); }
+    size_t bytes() const { return table_.bytes() + pairs_.bytes() + looks_.bytes() + ways_bytes(); }
     // the bytes a programme of `states` states over `pairs` (installed, strategies) pairs holds once reserved
     static size_t bytes_for(size_t states, size_t pairs) { return Table::bytes_for(states) + pairs * PairIds::PAIR_BYTES; }
 
@@ -371,6 +376,7 @@ void bind_optimal(py::module_& m) {
         .def("value", &OptimalCore::value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("seconds"),
              py::arg("max_states"))
         .def("reserve", &OptimalCore::reserve, py::arg("states"))
+        .def("set_ways", &OptimalCore::set_ways, py::arg("ways"))
         .def_static("bytes_for", &OptimalCore::bytes_for, py::arg("states"), py::arg("pairs"))
         .def_property_readonly("states", &OptimalCore::states)
         .def_property_readonly("bytes", &OptimalCore::bytes);

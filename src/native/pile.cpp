@@ -128,10 +128,15 @@ public:
         return taken(nmask, ncons, nbuf, window, (size_t)(at - window.begin()), hidden);
     }
 
-    void reserve(size_t n) { table_.reserve(n); }
+    void reserve(size_t n) {  // the values' table and, on a plan written as ways, the sets decided live or dead
+        table_.reserve(n);
+        reserve_ways(n);
+    }
+    // a plan written as ways: per part, its ways as (blockers, needs) masks (PlanUnits::set_ways)
+    void set_ways(std::vector<std::vector<opportune_memo::WaysLiveness::Way>> ways) { PlanUnits::set_ways(std::move(ways)); }
     size_t states() const { return table_.size(); }
     size_t bytes() const {
-        return table_.bytes() + pairs_.bytes() + slot_.size() * sizeof(int);
+        return table_.bytes() + pairs_.bytes() + slot_.size() * sizeof(int) + ways_bytes();
     }
 
 private:
@@ -385,6 +390,7 @@ void bind_pile(py::module_& m) {
              py::arg("part"), py::arg("nmask"), py::arg("ncons"), py::arg("nbuf"), py::arg("seconds"),
              py::arg("max_states"))
         .def("reserve", &PileCore::reserve, py::arg("states"))
+        .def("set_ways", &PileCore::set_ways, py::arg("ways"))
         .def_property_readonly("states", &PileCore::states)
         .def_property_readonly("bytes", &PileCore::bytes);
 }

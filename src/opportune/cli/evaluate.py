@@ -59,7 +59,7 @@ def evaluate(
     refused before any work, with the figure.  On a terminal a progress bar shows states done / expected."""
     from opportune.engine import OrderEngine
 
-    plan = load_or_exit(plan_file, json_errors=as_json)
+    plan = load_or_exit(plan_file, json_errors=as_json, ways=True)    # a policy that does not take it: refused below
     chosen_bin = bin_model or plan.simulation.get("bin", "uniform")
     policy = _evaluated_policy(policy, chosen_bin, without_optimum, as_json)
     config = _evaluation_config(plan, policy, chosen_bin, visible, buffer_capacity, max_states)

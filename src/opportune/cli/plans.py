@@ -203,7 +203,7 @@ def replay(
     from opportune.formats.ways import WAYS_POLICIES, not_for_ways
 
     if plan.is_ways and policy not in WAYS_POLICIES:
-        fail(not_for_ways(f"replay --policy {policy}"), 2)
+        fail(not_for_ways(f"the policy '{policy}'"), 2)
     try:
         chosen = make_policy(policy, budget=decision_budget, visible=plan.simulation.get("visible", 2),
                              capacity=buffer_capacity)

@@ -167,7 +167,7 @@ def _study_plan(ctx: typer.Context, plan_file: Optional[Path], from_results: Opt
     """The study's plan, the settings a ``results.json`` records (None for a plan file) and the options the
     command line gives (those override the recorded settings)."""
     if from_results is None:
-        return load_or_exit(plan_file, json_errors=as_json), None, set()
+        return load_or_exit(plan_file, json_errors=as_json, ways=True), None, set()
     recorded, plan = _recorded_study(from_results, as_json)
     # by name: typer carries its own copy of click, whose enum is not the click package's
     given = {name for name in ctx.params if getattr(ctx.get_parameter_source(name), "name", "") == "COMMANDLINE"}

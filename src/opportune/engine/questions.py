@@ -60,6 +60,34 @@ class StateQuestions:
                 out |= 1 << s
         return out
 
+    def exact_after(self, mask: int, consistent: int, unit: int) -> int:
+        """:meth:`consistent_after`, decided exactly: the exact programmes (the optimum, a policy's value)
+        step by it.  An order engine's is exact already; a plan written as ways decides here whether the
+        set after has a completion without the bound its look-by-look answers keep
+        (:meth:`~opportune.engine.waysengine.WaysEngine.exact_after`).  O(strategies) here.
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open.
+        unit : int
+            The unit to install next.
+
+        Returns
+        -------
+        int
+            As :meth:`consistent_after`.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> OrderEngine(make_plan(["a", "b"], {"b": ["a"]})).exact_after(0, 1, 1)
+        0
+        """
+        return self.consistent_after(mask, consistent, unit)
+
     def next_unit(self, mask: int, part: int) -> int | None:
         """The next uninstalled unit of a part, or None if all are installed.  O(quantity).
 

@@ -104,6 +104,7 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         self._part_units = {p.id: 1 << i for i, p in enumerate(plan.parts)}
         self._until: float | None = None
         self._live: dict[int, bool] = {}
+        self._alive: dict[int, bool] = {}   # liveness decided exactly (exact_after), never a guess
 
     # ---------------------------------------------------------------- states
 
@@ -131,7 +132,9 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         known = self.counter.memo.get(mask)
         if known is not None:
             return known > 0
-        seen = self._live.get(mask)
+        seen = self._alive.get(mask)
+        if seen is None:
+            seen = self._live.get(mask)
         if seen is not None:
             return seen
         if self.table.shut_out(mask) or self.table.locked(mask):
@@ -153,6 +156,68 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         if not consistent or mask >> unit & 1 or not self.table.can_go(mask, unit):
             return 0
         return 1 if self.live(mask | 1 << unit) else 0
+
+    def exact_after(self, mask: int, consistent: int, unit: int) -> int:
+        """:meth:`consistent_after` with the set after decided exactly (:meth:`alive`): what the exact
+        programmes step by, whose states bound the search's work.
+
+        Examples
+        --------
+        >>> from opportune.formats.ways import ways_plan
+        >>> from opportune.planning.plan import Part, Way
+        >>> e = WaysEngine(ways_plan("p", [Part("a"), Part("b")], {"a": [Way(frozenset({"b"}))]}))
+        >>> e.exact_after(0, 1, 0), e.exact_after(0, 1, 1)
+        (1, 0)
+        """
+        if not consistent or mask >> unit & 1 or not self.table.can_go(mask, unit):
+            return 0
+        return 1 if self.alive(mask | 1 << unit) else 0
+
+    def alive(self, mask: int) -> bool:
+        """Whether the installed set ``mask`` has a completion, decided exactly: a set with a part shut out,
+        or whose parts left lock each other, has none; else in a plan without needs it has one; else some
+        set one part larger must have one (a depth-first search, every set decided kept).  The compiled
+        programmes decide it alike (``src/native/memo_table.hpp``).  O(sets reachable from ``mask`` ×
+        ways) the first time.
+
+        Examples
+        --------
+        >>> from opportune.formats.ways import ways_plan
+        >>> from opportune.planning.plan import Part, Way
+        >>> e = WaysEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")],
+        ...                          {"c": [Way(frozenset(), (frozenset({"a"}),))], "a": [Way(frozenset({"b"}))]}))
+        >>> e.alive(0), e.alive(0b010)      # b in first: a never goes in, so c neither
+        (True, False)
+        """
+        memo, table = self._alive, self.table
+        stack = [[mask, None]]      # per set entered: its children not tried yet (None: none listed)
+        while stack:
+            top = stack[-1]
+            s, todo = top
+            if todo is None:
+                found = memo.get(s)
+                if found is None:
+                    if s == table.full:
+                        found = True
+                    elif table.shut_out(s) or table.locked(s):
+                        found = False
+                    elif not table.has_needs:
+                        found = True
+                if found is None:
+                    top[1] = table.goes(s)
+                    continue
+                memo[s] = found
+            elif memo.get(s) is None and todo:
+                b = todo & -todo
+                top[1] = todo ^ b
+                stack.append([s | b, None])
+                continue
+            elif memo.get(s) is None:
+                memo[s] = False         # no child live
+            stack.pop()
+            if stack and memo[s]:
+                memo[stack[-1][0]] = True       # a child is live: so is its parent
+        return memo[mask]
 
     def installable(self, mask: int, consistent: int) -> tuple[str, ...]:
         """The parts that can go in now without a dead end, in declaration order (nothing counted)."""
@@ -220,13 +285,14 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
 
     def nbytes(self) -> int:
         """Estimated bytes held: the memo, the liveness and per-state caches, the programmes' grants."""
-        return (self.counter.nbytes() + nbytes(self._live) + nbytes(self._installable_cache)
+        return (self.counter.nbytes() + nbytes(self._live) + nbytes(self._alive) + nbytes(self._installable_cache)
                 + nbytes(self._options_cache) + nbytes(self._positions_cache) + sum(self.programmes.values()))
 
     def clear_state_caches(self) -> None:
         """Forget the per-state caches and the liveness found (not the memo)."""
         super().clear_state_caches()
         self._live.clear()
+        self._alive.clear()
 
     def position_sums_for(self, mask: int, consistent: int, parts: Iterable[str]) -> tuple[int, dict[str, int]]:
         """``(completions, position sums)`` of these parts: the sum over all completions of each part's

@@ -37,8 +37,10 @@ from opportune.planning.ways import Undecided, WaysTable
 
 __all__ = ["SEARCH_WORK", "WAYS_POLICIES", "check_ways", "not_for_ways", "ways_of_strategy", "ways_plan"]
 
-#: The policies that decide on a plan written as ways (the others read the orders of strategies).
-WAYS_POLICIES = ("paper", "bin-first")
+#: The policies and study strategies that take a plan written as ways (the others read the orders of
+#: strategies): the one list every door checks (``replay``, ``simulate``, ``evaluate``, a study's settings).
+WAYS_POLICIES = ("lookahead", "paper", "bin-first", "optimal", "pallet", "shake", "kitting", "buffer", "quantify",
+                 "random")
 
 #: Most sets the check of a plan of ways visits looking for an admissible sequence (a plan with one is
 #: found in as many sets as it has parts as a rule: each set not taken is proved dead first).
@@ -276,5 +278,5 @@ def not_for_ways(what: str) -> str:
     >>> not_for_ways("graph").split(":")[0]
     'graph does not take a plan written as ways yet'
     """
-    return (f"{what} does not take a plan written as ways yet: check, count, replay (--policy "
-            f"{' or '.join(WAYS_POLICIES)}) and the Sequencer do")
+    return (f"{what} does not take a plan written as ways yet: check, count, replay, simulate, evaluate and the "
+            f"Sequencer do, with the policies and strategies {', '.join(WAYS_POLICIES)}")

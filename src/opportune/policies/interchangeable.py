@@ -49,9 +49,14 @@ def interchangeable_groups(engine: OrderEngine, costs: TimeModel | None = None,
     >>> from opportune import make_plan
     >>> interchangeable_groups(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})))
     [[0, 1], [2]]
+    >>> from opportune.formats.ways import ways_of_strategy
+    >>> interchangeable_groups(OrderEngine(ways_of_strategy(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))))
+    [[0], [1], [2]]
     """
     costs = costs or TimeModel()
     plan = engine.plan
+    if plan.is_ways:    # no orders to compare: each part its own group (a part of a plan of ways is one unit)
+        return [[i] for i in range(len(plan.parts))]
     groups: dict[tuple, list[int]] = {}
     for i, part in enumerate(plan.parts):
         # the units before the part's first unit and after its last are whole parts' units (a part's

@@ -24,6 +24,7 @@ from opportune.policies.base import (
 )
 from opportune.policies.evaluate import OutOfTime, PolicyEvaluator
 from opportune.policies.look import LookState
+from opportune.policies.opportunistic import Opportunistic
 from opportune.policies.optimal import (
     COMPILED_WEIGHTED_LOOKS,
     OptimalTooLarge,
@@ -32,6 +33,7 @@ from opportune.policies.optimal import (
     optimum_bytes,
     optimum_engine,
     same_action,
+    ways_table_bytes,
 )
 from opportune.policies.pile_window import PileWindow, pile_window_available
 from opportune.policies.variants import Slack
@@ -105,6 +107,13 @@ class Lookahead(DecidesOnMasks):
     and within the bytes the engine grants, whatever the plan's units; the step over the base is tried
     on plans of up to :attr:`STEP_UNITS` units.
 
+    On a plan written as ways (:attr:`~opportune.planning.plan.Plan.ways`) the optimum's programmes, compiled
+    too, take the ways table and decide exactly which sets have a completion; where the optimum does not
+    fit, no frontier window serves (the windows read the strategies' orders): its default base is then the
+    paper's rule (:class:`~opportune.policies.opportunistic.Opportunistic`, through the answering layer),
+    the step over it deciding on plans of up to :attr:`STEP_UNITS` units and the rule itself beyond, as
+    :attr:`deciding_rule` and the decisions say (measured against the optimum: docs/decisions.md).
+
     Parameters
     ----------
     base : Policy, optional
@@ -167,6 +176,9 @@ class Lookahead(DecidesOnMasks):
     #: programme stops and raises :class:`~opportune.policies.optimal.OutOfTime` (what it finished stays):
     #: a caller's own deadline, e.g. ``evaluate --time-limit``.  None: none.
     deadline = None
+    #: What the decisions say where the step over the paper's rule decides on a plan written as ways.
+    WAYS_RULE = ("the action with the least expected cost of finishing by the paper's rule (a plan written as "
+                 "ways: the frontier window reads partial orders)")
     #: Why the optimum did not decide when :attr:`optimal` is False (the decisions quote it).
     SWITCHED_OFF = "its exact optimum is switched off"
 
@@ -181,6 +193,11 @@ class Lookahead(DecidesOnMasks):
         # within the whole budget (nothing else runs then)
         self.fallback = self.base if budget is None else Slack(budget=budget * LOOKAHEAD_BASE_SHARE)
         self.fallback_alone = self.base if budget is None else Slack(budget=budget)
+        # the bases by the plan's kind (written as ways or not): see _suit
+        self._bases = {False: (self.base, self.fallback, self.fallback_alone)}
+        if base is not None:
+            self._bases[True] = self._bases[False]      # a base given is the base on every plan
+        self._on_ways = False
         #: The frontier window that decides where the optimum does not fit, in a uniform bin (its ``work``
         #: counts its windows and states); its base is the fallback within what it leaves of the budget.
         self.window = None
@@ -198,6 +215,23 @@ class Lookahead(DecidesOnMasks):
         #: Why the optimum's programme did not decide (states or bytes, before it started), or None.
         self.refusal: str | None = None
         self.last_cost: float | None = None
+
+    def _suit(self, engine) -> None:
+        """The base for the plan's kind: on a plan written as ways, unless a base was given, the paper's rule
+        (:class:`~opportune.policies.opportunistic.Opportunistic`, through the answering layer; the frontier
+        windows read the strategies' orders, which such a plan does not have).  Switching kind drops the
+        programme chosen so far.  O(1)."""
+        ways = bool(engine.plan.is_ways)
+        if ways == self._on_ways:
+            return
+        if ways not in self._bases:
+            budget = self.lookahead_budget
+            paper = Opportunistic()
+            self._bases[True] = (paper, paper if budget is None else Opportunistic(budget=budget * LOOKAHEAD_BASE_SHARE),
+                                 paper if budget is None else Opportunistic(budget=budget))
+        self.base, self.fallback, self.fallback_alone = self._bases[ways]
+        self._on_ways = ways
+        self._evaluator, self._too_large, self._by_window = None, False, False
 
     @property
     def optimal(self) -> bool:
@@ -240,6 +274,7 @@ class Lookahead(DecidesOnMasks):
         >>> Lookahead().buffer_ties_at(engine, 0, 1)
         [(0, 1)]
         """
+        self._suit(engine)
         ties = getattr(self.base, "buffer_ties_at", None)
         return None if ties is None else ties(engine, mask, consistent)
 
@@ -285,6 +320,8 @@ class Lookahead(DecidesOnMasks):
         the compiled core (:func:`~opportune.policies.pile_window.pile_window_available`,
         :func:`~opportune.policies.weighted_window.weighted_window_available`; :attr:`window` becomes the
         weighted bin's window on a plan whose weights differ).  O(parts)."""
+        if engine.plan.is_ways:
+            return False        # the windows read the strategies' orders: the base decides (see _suit)
         if self.pile:
             return pile_window_available(engine)
         visible = self.settings.get("visible", 2)
@@ -343,14 +380,18 @@ class Lookahead(DecidesOnMasks):
         """The bytes the optimum's programme holds, from its state count: the compiled uniform table and
         its pairs (:func:`~opportune.policies.optimal.optimum_bytes`), the compiled pile's
         :data:`~opportune.policies.pile.COMPILED_BYTES_PER_STATE` a value, or the Python programme's
-        :data:`~opportune.policies.states.BYTES_PER_STATE`.  O(log states)."""
+        :data:`~opportune.policies.states.BYTES_PER_STATE`; on a plan written as ways, the compiled programme's
+        table of sets decided live or dead too (:func:`~opportune.policies.optimal.ways_table_bytes`).
+        O(log states)."""
         compiled = self._compiled(engine)
+        ways = compiled and engine.plan.is_ways     # the compiled programme's table of sets decided live or dead
         if self.pile and compiled:
             from opportune.policies.pile import COMPILED_BYTES_PER_STATE
 
-            return COMPILED_BYTES_PER_STATE * estimate.states
+            return COMPILED_BYTES_PER_STATE * estimate.states + (ways_table_bytes(estimate.states) if ways else 0)
         looks = (estimate.looks, min(self.settings.get("visible", 2), engine.n_units)) if self._weighted(engine) else None
-        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks)
+        return optimum_bytes(estimate.states, estimate.keys, compiled=compiled and not self.pile, weighted_looks=looks,
+                             ways=ways)
 
     def _optimum_fits(self, engine) -> bool:
         """Whether the optimum's programme fits, by states and bytes, whatever the plan's units: its states,
@@ -430,13 +471,17 @@ class Lookahead(DecidesOnMasks):
             return False
         if weights and len({weights.get(p.id, 1.0) for p in engine.plan.parts}) > 1:
             return False
+        self._suit(engine)
         self._values(engine)
         return self._optimum
 
     @property
     def deciding_rule(self) -> str:
-        """The rule of the programme that decides (after the first decision on a plan)."""
-        return self.OPTIMAL_RULE if self._optimum else self.rule
+        """The rule of the programme that decides (after the first decision on a plan): on a plan written as
+        ways where the optimum does not fit, the paper's rule's (see :meth:`_suit`)."""
+        if self._optimum:
+            return self.OPTIMAL_RULE
+        return self.WAYS_RULE if self._on_ways and self.base.name == "paper" else self.rule
 
     @property
     def _optimum(self) -> bool:
@@ -444,11 +489,12 @@ class Lookahead(DecidesOnMasks):
         return self._evaluator is not None and getattr(self._evaluator, "policy", None) is None
 
     def _share_key(self):
-        """What the programme's values depend on, when that is known (the default base rule); else None."""
-        if type(self.base) is not Slack or self.base.budget is not None:
+        """What the programme's values depend on, when that is known (the default base rules: ``slack``, or
+        the paper's on a plan written as ways); else None."""
+        if type(self.base) not in (Slack, Opportunistic) or self.base.budget is not None:
             return None
         settings = tuple(sorted((k, repr(v)) for k, v in self.settings.items()))
-        return (self.base.weight, self.max_states, self.pile, self.optimal, settings)
+        return (self.base.name, getattr(self.base, "weight", None), self.max_states, self.pile, self.optimal, settings)
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
@@ -489,6 +535,7 @@ class Lookahead(DecidesOnMasks):
         """
         if mask == engine.full:
             return DONE
+        self._suit(engine)
         look = LookState(engine, mask, consistent, buffer, free, visible)
         if self.lookahead_budget is None:
             return self._choose(look)
@@ -602,6 +649,8 @@ class Lookahead(DecidesOnMasks):
             return self.refusal or "its optimum needs more states than it holds"
         base = (f"the step over the base rule is evaluated on plans of at most {self.STEP_UNITS} units"
                 if self._evaluator is None else f"the base rule's needs more than {self.max_states:,} states")
+        if self._on_ways:
+            base += "; its frontier window reads partial orders, which a plan written as ways does not have"
         return f"{self.refusal}; {base}" if self.refusal else base
 
     def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):
@@ -654,6 +703,7 @@ class Lookahead(DecidesOnMasks):
         sched = state.schedule
         if sched.mask == sched.engine.full:
             return Decision(DONE, "the assembly is complete")
+        self._suit(sched.engine)
         start = time.perf_counter()
         action = self._programme(LookState.of(state, visible))
         if action is None and self._by_window and self._too_large:

@@ -374,7 +374,7 @@ class OptimalSolver:
                 continue
             seen.add(i)
             u = engine.next_unit(mask, i)
-            after = engine.consistent_after(mask, cons, u)
+            after = engine.exact_after(mask, cons, u)
             if after:
                 yield self.move[i], (mask | 1 << u, after, buf), Action("install", self.ids[i], "bin")
             if free:
@@ -390,7 +390,7 @@ class OptimalSolver:
         for i, c in enumerate(buf):
             if c:
                 u = engine.next_unit(mask, i)
-                after = engine.consistent_after(mask, cons, u)
+                after = engine.exact_after(mask, cons, u)
                 if after:
                     nb = list(buf)
                     nb[i] -= 1
@@ -405,10 +405,13 @@ class OptimalSolver:
         ids = self.ids
         buffer = self._buffered(key)
         free = float("inf") if self.capacity is None else self.capacity - len(buffer)
+        # the moves first: on a plan written as ways they decide exactly which sets after are live, and the
+        # engine's look-by-look answers the policy reads take those decisions (never a guess of "live")
+        moves = list(self.policy_moves(key, look))
         action = policy.choose_at(self.engine, mask, cons, buffer, free, tuple(ids[i] for i in look))
         if action.kind == "shake":
             return None
-        for move in self.policy_moves(key, look):
+        for move in moves:
             if same_action(move[2], action):
                 return move
         raise ValueError(f"the policy chose {action} at a state where it is not a legal move")
@@ -521,7 +524,7 @@ class OptimalSolver:
         mask, cons, buf = key
         best = float("inf")
         u = self.engine.next_unit(mask, i)
-        after = self.engine.consistent_after(mask, cons, u)
+        after = self.engine.exact_after(mask, cons, u)
         if after:
             best = self.move[i] + self._value((mask | 1 << u, after, buf))
         if free:
@@ -710,17 +713,22 @@ def compiled_optimal_available(engine, weights: dict[str, float] | None = None, 
             and engine.k <= 64 and contents <= 1 << 62)
 
 
-def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tuple[int, int] | None = None) -> int:
+def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tuple[int, int] | None = None,
+                  ways: bool = False) -> int:
     """The bytes the optimum's programme holds for ``states`` states over ``keys`` (installed,
     strategies) pairs, known before it starts: the compiled table reserved for the count (16-byte
     slots, a power of two at least twice the states, at least 1,024) and the pairs it interns, or
     :data:`~opportune.policies.states.BYTES_PER_STATE` a state in Python (plus the bounded look cache).
     ``weighted_looks``: in a weighted bin, ``(looks at the start, parts a look)``: the compiled
     programme's look cache adds at most :data:`COMPILED_LOOK_CACHE_BYTES` and the start's looks
-    (:data:`COMPILED_LOOK_BYTES` each, the most any bin has).  O(log states).
+    (:data:`COMPILED_LOOK_BYTES` each, the most any bin has).  ``ways``: on a plan written as ways the
+    compiled programme keeps the sets it decided live or dead in a second table of as many slots
+    (:func:`ways_table_bytes`).  O(log states).
 
     >>> optimum_bytes(3_000, 100, compiled=True)
     137472
+    >>> optimum_bytes(3_000, 100, compiled=True, ways=True) - 137472
+    131072
     >>> optimum_bytes(3_000, 100, compiled=True, weighted_looks=(10, 2)) - 137472
     4195780
     """
@@ -728,14 +736,26 @@ def optimum_bytes(states: int, keys: int, *, compiled: bool, weighted_looks: tup
         from opportune.policies.states import BYTES_PER_STATE
 
         return states * BYTES_PER_STATE
-    slots = 1024
-    while slots < 2 * states:
-        slots *= 2
     looks = 0
     if weighted_looks is not None:
         start, k = weighted_looks
         looks = COMPILED_LOOK_CACHE_BYTES + start * (COMPILED_LOOK_BYTES + k) + COMPILED_LOOK_ENTRY_BYTES
-    return 16 * slots + COMPILED_PAIR_BYTES * keys + looks
+    return (2 if ways else 1) * ways_table_bytes(states) + COMPILED_PAIR_BYTES * keys + looks
+
+
+def ways_table_bytes(states: int) -> int:
+    """The bytes of a compiled table reserved for ``states`` values: 16-byte slots, a power of two at
+    least twice the states, at least 1,024 (``src/native/memo_table.hpp``).  On a plan written as ways a
+    compiled programme reserved for ``states`` keeps as many sets decided live or dead, in a table of as
+    many bytes (forgotten whole when full: decided again).  O(log states).
+
+    >>> ways_table_bytes(3_000)
+    131072
+    """
+    slots = 1024
+    while slots < 2 * states:
+        slots *= 2
+    return 16 * slots
 
 
 def optimal_solver(engine: OrderEngine, *, merge: bool = True, **settings) -> OptimalSolver:
@@ -858,9 +878,18 @@ class CompiledCore:
         """The arguments every core takes first: units, parts' first units and quantities, the units below
         each unit per strategy, move costs, the look's and the shake's costs, visible, capacity (-1: none)."""
         engine = self.engine
-        below = [[int(b) for b in poset.below] for poset in engine.posets]
+        # a plan written as ways has no orders: one strategy with nothing below any unit, its ways given
+        # after (:meth:`_give_ways`)
+        below = [[int(b) for b in poset.below] for poset in engine.posets] or [[0] * engine.n_units]
         return (engine.n_units, list(engine.first), list(self.quantity), below, list(self.move),
                 float(self.costs.look), float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity)
+
+    def _give_ways(self) -> None:
+        """On a plan written as ways, its table to the core: each part's ways as a blockers mask and need
+        masks (the core decides which sets have a completion, exactly, as
+        :meth:`~opportune.engine.waysengine.WaysEngine.alive`).  O(ways)."""
+        if self.plan.is_ways:
+            self._core.set_ways(self.engine.table.ways)
 
     def reserve(self, states: int) -> None:
         """Make room for ``states`` values at once (the count from
@@ -907,6 +936,7 @@ class CompiledOptimalSolver(CompiledCore, OptimalSolver):
             raise ValueError("the compiled optimum needs the compiled core, positive weights and a plan of 1 to "
                              "64 units and at most 64 strategies")
         self._core = _native.OptimalCore(*self._core_args(), **self._core_options())
+        self._give_ways()
 
     def _core_options(self) -> dict:
         """The core's settings after the plan's: the weights (none: a uniform bin) and the look cache's bytes."""

@@ -285,6 +285,7 @@ class CompiledPileSolver(CompiledCore, PileSolver):
         self._core = _native.PileCore(*self._core_args(),
                                       sys.version_info >= (3, 12),   # sum() of floats is compensated from Python 3.12 on
                                       *self._others_args())
+        self._give_ways()
 
     def _shake_value(self, key: tuple) -> float:
         return self._run(self._core.shake_value, key[0], key[1], list(key[2]))

@@ -117,7 +117,7 @@ def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pi
     if listed.complete:
         return StateEstimate(listed.total, listed.total, True, "listed", listed.keys, looks)
     # every set of minimal units is a down-set, so a key: a bound where the listing saw little
-    minimal = max(sum(1 for b in poset.below if not b) for poset in engine.posets)
+    minimal = max((sum(1 for b in poset.below if not b) for poset in engine.posets), default=0)
     low = max(listed.total, (1 << minimal) - 1)
     profile = estimate_from_downsets(engine, deadline=until, weigh=weigh)
     if profile is None or profile <= low:
@@ -290,11 +290,11 @@ def reachable_keys(engine, until: Deadline = Deadline.NEVER):
                 if check and not steps & 1023 and until.expired():
                     return
                 u = b.bit_length() - 1
-                if k == 1:
+                if k == 1 and posets:
                     if not posets[0].below[u] & ~mask:
                         nxt[(mask | b, cons)] = None
-                else:
-                    after = engine.consistent_after(mask, cons, u)
+                else:       # several strategies, or a plan written as ways (its sets after decided exactly)
+                    after = engine.exact_after(mask, cons, u)
                     if after:
                         nxt[(mask | b, after)] = None
             if check and until.expired():
@@ -342,7 +342,7 @@ def estimate_from_downsets(engine, *, visible: int = 2, capacity: int | None = N
                            deadline: Deadline | float | None = None, weigh: _Weigher | None = None) -> int | None:
     """The state count estimated from the order alone: Σ over strategies and down-sets of the states
     of a key whose remaining units were single parts (None: past ``deadline``, or a plan of more than
-    2,000 units).  Exact for one strategy of single-unit parts; see the module's docstring for the
+    2,000 units, or one written as ways).  Exact for one strategy of single-unit parts; see the module's docstring for the
     factor otherwise.  Complexity: that of :func:`downset_profile` per strategy.
 
     >>> from opportune import make_plan
@@ -353,7 +353,7 @@ def estimate_from_downsets(engine, *, visible: int = 2, capacity: int | None = N
     weigh = weigh or _Weigher(engine, visible, capacity, pile)
     until = as_deadline(deadline)
     n = engine.n_units
-    if n > PROFILE_MAX_UNITS:
+    if n > PROFILE_MAX_UNITS or not engine.posets:     # a plan written as ways has no order to decompose
         return None
     weights = [weigh.of_remaining(r) for r in range(n + 1)]
     total = 0

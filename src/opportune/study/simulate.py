@@ -144,7 +144,8 @@ class StudyConfig:
         Raises
         ------
         StudyError
-            Naming the setting to change: an unknown strategy or bin, ``optimal`` in a bin without an
+            Naming the setting to change: an unknown strategy or bin, a strategy that does not take the
+            plan written as ways (:data:`~opportune.formats.ways.WAYS_POLICIES`), ``optimal`` in a bin without an
             exact optimum, a physical bin the plan does not fit, or a count, limit or budget out of range.
 
         Examples
@@ -158,6 +159,12 @@ class StudyConfig:
         unknown = [s for s in self.strategies if s not in ALL_STRATEGIES]
         if unknown:
             raise StudyError(f"unknown strategy '{unknown[0]}': choose from {', '.join(ALL_STRATEGIES)}")
+        if self.plan.is_ways:
+            from opportune.formats.ways import WAYS_POLICIES, not_for_ways
+
+            refused = [s for s in self.strategies if s not in WAYS_POLICIES]
+            if refused:
+                raise StudyError(not_for_ways(f"the strategy '{refused[0]}'"))
         if self.bin not in BIN_NAMES:
             raise StudyError(f"unknown bin model '{self.bin}': use {', '.join(BIN_NAMES[:-1])} or {BIN_NAMES[-1]}")
         if self.bin == "physics":
