@@ -255,11 +255,13 @@ LONGEST_FIRST = (
     "tests/test_engine_count_scans.py::test_narrow_and_wide_scans_agree",
     "tests/test_reproducible.py::test_a_recorded_study_runs_again",
     "tests/test_openapi.py::test_schemathesis_finds_answers_as_documented",
+    "tests/test_openapi.py::test_schemathesis_with_an_operator_token_finds_answers_as_documented",
     "tests/test_engine_count.py::test_salbp_decomposition_agrees_with_downsets",
     "tests/test_service_restart.py::test_kill_9_under_load",
     "tests/test_opcua.py::test_kill_9_under_a_driving_opcua_client",
     "tests/test_opcua.py::test_table_1_over_opcua",
     "tests/test_physics_bin.py::test_every_policy_completes_on_the_physical_bin",
+    "tests/test_plain_yaml.py::test_mutated_documents_are_read_as_pyyaml_reads_them_or_declined",
 )
 
 

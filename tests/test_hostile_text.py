@@ -10,14 +10,13 @@ from __future__ import annotations
 import json
 import socket
 import subprocess
-import sys
 import threading
 import time
 import uuid
 
 import pytest
 
-from conftest import GEARBOX
+from conftest import GEARBOX, run_cli as run_in_process
 from opportune import make_plan
 from opportune.planning.plan import PlanError
 
@@ -29,9 +28,12 @@ ESC_ID = "a\x1b]0;pwned\x07\x1b[2J"
 CONTROLS = ["\x00", "\x1b", "\x07", "\x7f", "\x9b", "\x85"]
 
 
-def run_cli(*args, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "opportune.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=120, errors="surrogateescape")
+def run_cli(*args) -> subprocess.CompletedProcess:
+    """``opportune ARGS`` in this process (typer's runner: what ``python -m opportune.cli`` runs for a command
+    line without ``--json``, without a new interpreter each time), as a finished process: the exit code, and
+    standard output and error apart.  The runner's own check holds too: no traceback, no exception but the exit."""
+    result = run_in_process(*args)
+    return subprocess.CompletedProcess(args, result.exit_code, result.stdout, result.stderr)
 
 
 def raw_controls(text: str) -> list[str]:

@@ -71,14 +71,16 @@ def test_a_shape_is_accepted_exactly_within_its_bounds(thick, side):
 def test_the_service_takes_a_derived_plan_and_refuses_a_bad_shape(tmp_path):
     pytest.importorskip("fastapi")
     pytest.importorskip("trimesh")
+    from contextlib import closing
+
     import yaml
 
     from opportune.derive import derive
     from opportune.service.testing import Client, ServiceProcess
 
     text = yaml.safe_dump(derive("geometry:pump").plan.to_dict())
-    with ServiceProcess(tmp_path / "api.db", log=tmp_path / "api.log") as svc:
-        client = Client(svc.url, svc.token(cell="cell-a"))
+    with ServiceProcess(tmp_path / "api.db", log=tmp_path / "api.log") as svc, \
+            closing(Client(svc.url, svc.token(cell="cell-a"))) as client:     # closed: no socket left to the GC
         r = client.post("/plans", content=text, headers={"Content-Type": "application/yaml"}, key=False)
         assert r.status_code == 201, r.text
         flat = plan_text({"convex": [[[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]]]})
