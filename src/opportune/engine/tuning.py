@@ -325,6 +325,12 @@ ROLLOUT_SHARE = 0.8
 #: within 0.24% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
 #: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
 WINDOW_PARTS = (5, 8, 12)
+#: The sizes tried at a state where several strategies are open (each open strategy's frontier window),
+#: a larger one skipped where its states, predicted from the two before (their growth), pass
+#: :data:`WINDOW_STATES`: a window closed in several strategies keeps the option of choosing among them,
+#: which the windows of one strategy each do not value (on the lab's two-strategy plans of 16 and 20 parts
+#: at 1 visible, 12 parts were up to +1.7% over the optimum with the look's option value, 20 within 0.4%).
+WINDOW_PARTS_SEVERAL = (5, 8, 12, 16, 20)
 #: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
