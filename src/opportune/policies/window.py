@@ -17,8 +17,11 @@ group) is solved once per state, within :data:`WINDOW_STATES` states (counted, s
 same on every machine), and the decision is its best action on the look: a visible part outside the
 window seen as an other (buffered, the one first in the topological order).  On a plan of several
 strategies the frontier windows of the first :data:`~opportune.engine.tuning.WINDOW_STRATEGIES` open ones
-are solved, and on a look the best move of least expected cost, with its window's others a look and a
-move each after it, decides: the look chooses the strategy.
+are solved (larger ones there, :data:`~opportune.engine.tuning.WINDOW_PARTS_SEVERAL`), and on a look the
+move of least expected cost over the windows, with its window's others a look and a move each after it,
+decides: the look chooses the strategy.  A window of one strategy's frontier values a state as if the
+others were closed, so the moves that keep several open (a buffering, an installation several allow, the
+shake) are worth the option of choosing later: :func:`option_value`, one look deep, is taken off them.
 Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
 the base rule decides.
 
