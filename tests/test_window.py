@@ -59,7 +59,7 @@ def test_a_window_over_the_whole_plan_is_the_optimum_to_the_last_bit(plan, seed)
     if mask == engine.full:
         return
     optimum = optimal_solver(engine, merge=False, visible=visible, capacity=capacity, costs=costs)
-    window = FrontierWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), max_states=10**6)
+    window = FrontierWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), several=(64,), max_states=10**6)
     table = window.table(engine, mask, cons, buffer)
     assert table.outside == 0 and len(table.parts) == sum(engine.next_unit(mask, i) is not None
                                                             for i in range(len(plan.parts)))
@@ -145,7 +145,7 @@ def test_on_two_strategy_plans_the_window_is_the_optimum_of_its_parts_then_the_r
     engine = OrderEngine(plan)
     (visible, capacity), size = rng.choice(SETTINGS[:3]), rng.choice([5, 8])
     costs = TimeModel(look=rng.choice([0.0, 0.25]), shake=rng.choice([1.0, 1.6]))
-    window = FrontierWindow(visible=visible, capacity=capacity, costs=costs, sizes=(size,), max_states=10**6)
+    window = FrontierWindow(visible=visible, capacity=capacity, costs=costs, sizes=(size,), several=(size,), max_states=10**6)
     table = window.table(engine, 0, engine.all_strategies, ())
     parts, outside = list(table.parts), len(plan.parts) - len(table.parts)
     assert outside == table.outside > 0
@@ -167,7 +167,7 @@ def test_a_window_over_a_whole_two_strategy_plan_is_the_python_optimum_to_the_la
     engine = OrderEngine(plan)
     visible, capacity = rng.choice(SETTINGS[:3])
     optimum = OptimalSolver(engine, visible=visible, capacity=capacity)
-    window = FrontierWindow(visible=visible, capacity=capacity, sizes=(64,), max_states=10**6)
+    window = FrontierWindow(visible=visible, capacity=capacity, sizes=(64,), several=(64,), max_states=10**6)
     for moves in (0, 2, 4):
         mask, cons, buffer = _walk(engine, rng, moves)
         table = window.table(engine, mask, cons, buffer)
@@ -193,7 +193,7 @@ def test_on_two_strategies_each_window_is_one_strategys_frontier_closed_in_it():
     assert frontier_window(engine, 0, both, (), 4) == ([0, 1, 2, 3], [])
     assert window_strategies(engine, 0, both, [0, 1, 2, 3]) == both
     assert frontier_window(engine, 1, 0b01, (), 2) == ([1, 3], [2])
-    table = FrontierWindow(visible=1, capacity=1, sizes=(2,)).table(engine, 0, both, ())
+    table = FrontierWindow(visible=1, capacity=1, sizes=(2,), several=(2,)).table(engine, 0, both, ())
     assert table.parts in ((0, 3), (2, 3)) and table.outside == 2 and table.rest == 2 * (TimeModel().look + 1.0)
 
 

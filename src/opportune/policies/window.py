@@ -17,8 +17,11 @@ group) is solved once per state, within :data:`WINDOW_STATES` states (counted, s
 same on every machine), and the decision is its best action on the look: a visible part outside the
 window seen as an other (buffered, the one first in the topological order).  On a plan of several
 strategies the frontier windows of the first :data:`~opportune.engine.tuning.WINDOW_STRATEGIES` open ones
-are solved, and on a look the best move of least expected cost, with its window's others a look and a
-move each after it, decides: the look chooses the strategy.
+are solved (larger ones there, :data:`~opportune.engine.tuning.WINDOW_PARTS_SEVERAL`), and on a look the
+move of least expected cost over the windows, with its window's others a look and a move each after it,
+decides: the look chooses the strategy.  A window of one strategy's frontier values a state as if the
+others were closed, so the moves that keep several open (a buffering, an installation several allow, the
+shake) are worth the option of choosing later: :func:`option_value`, one look deep, is taken off them.
 Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
 the base rule decides.
 
@@ -29,16 +32,18 @@ Measured against the optimum on 16-30-part plans and per decision on the SALBP p
 from __future__ import annotations
 
 from collections import OrderedDict
+from math import comb
 from dataclasses import dataclass
 
 from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
-from opportune.engine.tuning import WINDOW_CACHE, WINDOW_PARTS, WINDOW_STATES, WINDOW_STRATEGIES  # tuning.py says why
+from opportune.engine.tuning import (  # tuning.py says why
+    WINDOW_CACHE, WINDOW_PARTS, WINDOW_PARTS_SEVERAL, WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "window_available", "window_strategies"]
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "option_value", "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -276,6 +281,12 @@ class FrontierWindow(DecidesOnMasks):
         The uniform bin's world (as :class:`~opportune.policies.optimal.OptimalSolver`).
     sizes : tuple of int
         The window sizes tried in turn (:data:`WINDOW_PARTS`).
+    several : tuple of int
+        The sizes tried where several strategies are open, a size predicted past ``max_states`` skipped
+        (:data:`WINDOW_PARTS_SEVERAL`).
+    option : bool
+        Whether the look values keeping several strategies open (:func:`option_value`; the default) where
+        several windows decide, or takes the least window's best move alone.
     max_states : int
         States a window's programme may hold (:data:`WINDOW_STATES`).
     others : {"buffer", "ignore"}
@@ -303,12 +314,14 @@ class FrontierWindow(DecidesOnMasks):
     decision_key = None
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
-                 sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer"):
+                 sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer",
+                 several: tuple[int, ...] = WINDOW_PARTS_SEVERAL, option: bool = True):
         from opportune.policies.variants import Slack
 
         self.base = base if base is not None else Slack()
         self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
         self.sizes, self.max_states = tuple(sizes), max_states
+        self.several, self.option = tuple(several), option
         self.others = others
         self.deadline: Deadline | None = None
         self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
@@ -384,14 +397,18 @@ class FrontierWindow(DecidesOnMasks):
         if got is not None:
             self._tables.move_to_end(key)
             return got
-        got = ()
-        for size in sorted(self.sizes):
+        got, grown = (), []
+        several = consistent.bit_count() > 1
+        for size in sorted(self.several if several else self.sizes):
             # the smaller windows first: past the deadline or the cap, the largest finished ones decide
+            if several and len(grown) > 1 and grown[-1] * grown[-1] > self.max_states * max(1, grown[-2]):
+                break           # predicted past the cap by the growth of the last two: not tried
             try:
                 got = tuple(self._solve(engine, mask, consistent, buffer, parts, outside, size)
                             for parts, outside in self._windows(engine, mask, consistent, buffer, size))
             except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
                 break
+            grown.append(max(t.states for t in got))
             if not all(t.outside for t in got):
                 break           # a window holds every part left: a larger one is the same
         if got:
@@ -509,7 +526,29 @@ class FrontierWindow(DecidesOnMasks):
         best = min(((value + t.rest, n), action, t) for n, t in enumerate(tables)
                    for value, action in [best_move(engine, mask, consistent, t, buffer, visible, self.costs.shake)])
         self.last_table = best[2]
+        if len(tables) > 1 and self.option:
+            return self._with_option(engine, mask, consistent, buffer, visible, tables)
         return best[1]
+
+    def _with_option(self, engine, mask: int, consistent: int, buffer, visible, tables) -> Action:
+        """Where several strategies' windows decide: each move's least value over the windows, with the
+        value of keeping several strategies open (:func:`option_value`) taken off the moves that keep them
+        (a buffering, an installation several allow, the shake): a window of one strategy's frontier values
+        a state as if the others were closed.  Ties as :func:`best_move`'s, then the windows' order."""
+        option = option_value(engine, mask, consistent, buffer, tables, self.visible, self.costs)
+        plan, shake = engine.plan, float(self.costs.shake)
+        least = min(t.values[-1] + t.rest for t in tables)
+        ranked = []
+        for n, t in enumerate(tables):
+            for value, order, action in moves_on_look(engine, mask, consistent, t, buffer, visible):
+                keeps = consistent
+                if action.kind == "install":
+                    keeps = engine.consistent_after(mask, consistent, engine.next_unit(mask, plan.index(action.part)))
+                ranked.append((value + t.rest - option * (keeps.bit_count() > 1), order, n, action))
+        if not ranked:
+            return SHAKE
+        best = min(ranked, key=lambda r: r[:3])
+        return SHAKE if best[0] > shake + least - option + 1e-12 else best[3]
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
         """The decision with its reasons; ``because``: why the window decides (a caller's words, first).
@@ -642,6 +681,46 @@ def best_move(engine, mask: int, consistent: int, table: WindowTable, buffer, vi
     >>> best_move(engine, 0, 1, table, (), ("a",), 1.0)[1]
     Action(kind='install', part='a', source='bin')
     """
+    ranked = moves_on_look(engine, mask, consistent, table, buffer, visible)
+    values = table.values
+    if not ranked:
+        return shake + values[-1], SHAKE
+    best = min(ranked, key=lambda r: r[:2])
+    return (shake + values[-1], SHAKE) if best[0] > shake + values[-1] + 1e-12 else (best[0], best[2])
+
+
+def moves_on_look(engine, mask: int, consistent: int, table: WindowTable, buffer,
+                  visible) -> list[tuple[float, tuple, Action]]:
+    """The window's moves on a look (the shake aside), each with its expected cost and its rank among equals
+    (install, then buffer, then declaration order, the bin before the buffer, as the optimum's): a visible
+    part outside the window is buffered as the window's other, the one first in the topological order.
+    O(visible + buffer) and the outside parts' ancestors.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies (an installation no open strategy allows is not a move).
+    table : WindowTable
+        The state's window.
+    buffer, visible : tuple of str
+        The buffered parts and the look.
+
+    Returns
+    -------
+    list of (float, tuple, Action)
+        The moves of finite cost, unordered.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> table = FrontierWindow(visible=1, capacity=1).table(engine, 0, 1, ())
+    >>> [str(action) for _, _, action in sorted(moves_on_look(engine, 0, 1, table, (), ("a",)))]
+    ['install a', 'buffer a']
+    """
     plan = engine.plan
     values = table.values
     index = {i: j for j, i in enumerate(table.parts)}
@@ -655,20 +734,89 @@ def best_move(engine, mask: int, consistent: int, table: WindowTable, buffer, vi
         j = index.get(i)
         if j is not None:
             if fits(i):
-                ranked.append((values[3 * j], 0, i, 0, Action("install", plan.parts[i].id, "bin")))
-            ranked.append((values[3 * j + 1], 1, i, 0, Action("buffer", plan.parts[i].id)))
+                ranked.append((values[3 * j], (0, i, 0), Action("install", plan.parts[i].id, "bin")))
+            ranked.append((values[3 * j + 1], (1, i, 0), Action("buffer", plan.parts[i].id)))
     for i in {plan.index(p) for p in buffer}:
         j = index.get(i)
         if j is not None and fits(i):
-            ranked.append((values[3 * j + 2], 0, i, 1, Action("install", plan.parts[i].id, "buffer")))
+            ranked.append((values[3 * j + 2], (0, i, 1), Action("install", plan.parts[i].id, "buffer")))
     outside = [i for i in seen if i not in index]
     if outside:
         # the one nearest the frontier, as the window's order ranks them
         anc, _ = _ancestors(engine, mask, consistent, outside)
         i = min(outside, key=lambda i: (anc[i].bit_count(), i))
-        ranked.append((values[-2], 1, i, 0, Action("buffer", plan.parts[i].id)))
-    ranked = [r for r in ranked if r[0] != float("inf")]
-    if not ranked:
-        return shake + values[-1], SHAKE
-    best = min(ranked, key=lambda r: r[:4])
-    return (shake + values[-1], SHAKE) if best[0] > shake + values[-1] + 1e-12 else (best[0], best[4])
+        ranked.append((values[-2], (1, i, 0), Action("buffer", plan.parts[i].id)))
+    return [r for r in ranked if r[0] != float("inf")]
+
+
+def option_value(engine, mask: int, consistent: int, buffer, tables, visible: int, costs: TimeModel) -> float:
+    """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
+    values (each window one strategy's frontier, valued as if the others were closed) less the state's
+    value where each look takes its best move over all the windows (the look chooses the strategy; looks as
+    order statistics, the shake loop over them, as the optimum's).  0 with one window.  O(parts × windows).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    buffer : tuple of str
+        The buffered parts.
+    tables : sequence of WindowTable
+        The state's windows (:meth:`FrontierWindow.tables`).
+    visible : int
+        Parts per look.
+    costs : TimeModel
+        The costs of a look and a shake.
+
+    Returns
+    -------
+    float
+        The value, at least 0.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> from opportune.planning.costs import TimeModel
+    >>> engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]},
+    ...                                                           "t": {"b": ["c"], "a": ["b"]}}))
+    >>> tables = FrontierWindow(visible=1, capacity=1, several=(2,)).tables(engine, 0, 0b11, ())
+    >>> len(tables), option_value(engine, 0, 0b11, (), tables[:1], 1, TimeModel())
+    (2, 0.0)
+    >>> option_value(engine, 0, 0b11, (), tables, 1, TimeModel()) > 0
+    True
+    """
+    plan, inf = engine.plan, float("inf")
+    counts = {i: (((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)}
+    for p in buffer:
+        counts[plan.index(p)] -= 1
+    best = {i: inf for i, c in counts.items() if c > 0}       # a part's best move on a look showing it
+    from_buffer = inf
+    for t in tables:
+        index = {i: j for j, i in enumerate(t.parts)}
+        v = t.values
+        for i in best:
+            j = index.get(i)
+            best[i] = min(best[i], t.rest + (v[-2] if j is None else min(v[3 * j], v[3 * j + 1])))
+        for p in set(buffer):
+            j = index.get(plan.index(p))
+            if j is not None:
+                from_buffer = min(from_buffer, t.rest + v[3 * j + 2])
+    least = min(t.values[-1] + t.rest for t in tables)
+    n = sum(counts[i] for i in best)
+    if n == 0:          # every unit left is buffered: no part is seen
+        return max(0.0, least - from_buffer) if from_buffer < inf else 0.0
+    k, rank, total = min(visible, n), 0, float(comb(n, min(visible, n)))
+    acc_pm = acc_p = 0.0
+    value = inf
+    for b, i in sorted((b, i) for i, b in best.items()):
+        m = min(b, from_buffer)
+        if m == inf:
+            break
+        p = float(comb(n - rank, k) - comb(n - rank - counts[i], k)) / total
+        rank += counts[i]
+        acc_pm, acc_p = acc_pm + p * m, acc_p + p
+        value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
+    return max(0.0, least - value) if value < inf else 0.0
