@@ -100,6 +100,9 @@ class Explanation:
         or a direction added (``"direction"``), each with its count.
     unfinished : list of str
         What the time limit did not reach, in words.
+    form : str
+        ``"strategies"``, or ``"ways"`` for a plan written as ways: then ``orders`` is one, the forced
+        orders' transitive reduction with their reasons (:mod:`opportune.derive.waysfacts`).
 
     Examples
     --------
@@ -123,6 +126,7 @@ class Explanation:
     forced: list[tuple[str, str]]
     frees: list[dict] = field(default_factory=list)
     unfinished: list[str] = field(default_factory=list)
+    form: str = "strategies"
 
     def to_dict(self) -> dict:
         """The explanation as plain data (``derive --explain --json``).
@@ -143,7 +147,7 @@ class Explanation:
         >>> doc["single_direction"], doc["forced_in_every_strategy"], doc["reasons"][0]["before"]
         ({'a': '+x', 'b': '+x'}, [['a', 'b']], ['b'])
         """
-        return {"name": self.name, "parts": list(self.parts), "orders": self.orders,
+        return {"name": self.name, "form": self.form, "parts": list(self.parts), "orders": self.orders,
                 "insertion_directions": self.usable,
                 "single_direction": {p: d[0] for p, d in self.usable.items() if len(d) == 1},
                 "reasons": reasons(self),
@@ -217,18 +221,25 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     if assembly is not None:
         derivation = replace(derivation, assembly=assembly)
     block, strategies = derivation.blocking, derivation.strategies
-    orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
-    closures = [_closure(s.pairs) for s in strategies]
-    forced = sorted(set.intersection(*closures)) if closures else []
     base = _count(derivation.plan, max(0.001, time_limit / 4), seed)
-    unfinished = []
-    usable: dict[str, list[str]] = {}
-    earlier = [_earlier(s.pairs) for s in strategies]
-    for p in block.parts:
-        if time.perf_counter() > end:
-            unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
-            break
-        usable[p] = _insertion_directions(block, p, earlier)
+    unfinished: list[str] = []
+    if derivation.plan.is_ways:
+        from opportune.derive.waysfacts import ways_facts
+
+        facts = ways_facts(derivation, until=time.perf_counter() + (end - time.perf_counter()) / 2, seed=seed)
+        orders, usable, forced = [facts.order], facts.usable, facts.forced
+        unfinished += facts.unfinished
+    else:
+        orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
+        closures = [_closure(s.pairs) for s in strategies]
+        forced = sorted(set.intersection(*closures)) if closures else []
+        usable = {}
+        earlier = [_earlier(s.pairs) for s in strategies]
+        for p in block.parts:
+            if time.perf_counter() > end:
+                unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
+                break
+            usable[p] = _insertion_directions(block, p, earlier)
     frees: list[dict] = []
     later = len(_new_directions(block, directions)) if assembly is not None else 0   # their share kept for them
     # the added directions' blocking is geometry, not interruptible: found only if it fits the time left, as
@@ -250,7 +261,8 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
             count = _recount(derivation, changed, left / pending, seed)
             frees.append({"kind": kind, "name": name, **count})
     frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
-    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
+    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished,
+                       "ways" if derivation.plan.is_ways else "strategies")
 
 
 def _order(block: Blocking, strategy, conditions=None) -> dict:
@@ -464,7 +476,8 @@ def reasons(e: Explanation) -> list[dict]:
     for k, order in enumerate(e.orders, 1):
         for c in order["constraints"]:
             support = {"support": c["support"]} if c.get("support") else {}
-            r = grouped.setdefault((c["before"], c["direction"], c.get("support")), {
+            support.update({"why": c["why"]} if c.get("why") else {})
+            r = grouped.setdefault((c["before"], c["direction"], c.get("support"), c.get("why")), {
                 "part": c["before"], "direction": c["direction"], **support, "before": [],
                 "other_directions": c["other_directions"], "strategies": []})
             if c["after"] not in r["before"]:
@@ -477,10 +490,14 @@ def reasons(e: Explanation) -> list[dict]:
 def _report(e: Explanation) -> list[str]:
     """The lines of :meth:`Explanation.text`."""
     n = len(e.orders)
-    lines = [f"{e.name}: {len(e.parts)} parts, {n} strateg{'y' if n == 1 else 'ies'}", "forced orders:"]
+    form = f"{n} strateg{'y' if n == 1 else 'ies'}" if e.form == "strategies" else "written as each part's ways in"
+    lines = [f"{e.name}: {len(e.parts)} parts, {form}", "forced orders:"]
     for r in reasons(e):
         where = "" if len(r["strategies"]) == n else " (strateg" + ("y s" if len(r["strategies"]) == 1 else "ies s") \
             + ", s".join(map(str, r["strategies"])) + ")"
+        if r.get("why"):                # forced by the ways together, not by one blocking or support
+            lines.append(f"  {_names(r['before'])} after {r['part']}: {r['why']}")
+            continue
         if r["direction"] is None:      # a support: the later parts rest on (or touch) the earlier one
             lines.append(f"  {_names(r['before'])} after {r['part']}{where}: "
                          f"{r.get('support', 'resting on or touching')} {r['part']}")
@@ -495,7 +512,8 @@ def _report(e: Explanation) -> list[str]:
                  + (", ".join(f"{p} {d}" for p, d in single.items()) or "none"))
     c = e.count
     lines.append(f"feasible sequences: {_number(c)} of 10^{c['log10_all_orders']:.2f} orders of the parts "
-                 f"(1 in 10^{max(0.0, -c['share_log10']):.2f}); {len(e.forced)} orders forced in every strategy")
+                 f"(1 in 10^{max(0.0, -c['share_log10']):.2f}); {len(e.forced)} orders forced in every "
+                 + ("strategy" if e.form == "strategies" else "feasible sequence"))
     if e.unfinished:
         lines.append("not reached within the time limit: " + "; ".join(e.unfinished))
     best = next((f for f in e.frees if f["count"]), None)
