@@ -249,7 +249,8 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     for trials in (_part_trials(block, quantities),
                    lambda: _direction_trials(derivation, directions) if assembly is not None else []):
         if not isinstance(trials, list) and time.perf_counter() + cost > end:
-            unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
+            if later:       # (none to add: nothing left unsaid)
+                unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
             break
         trials = trials if isinstance(trials, list) else trials()
         for k, (kind, name, changed) in enumerate(trials):

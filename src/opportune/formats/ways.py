@@ -200,7 +200,8 @@ from opportune.formats.documents import Document
                         file=doc.file, line=doc.line(("ways",)), severity="warning", code="ways-undecided")]
     if found is not None:
         return []
-    first = [plan.parts[i].id for i in range(table.n) if table.can_go(0, i)]
+    units = [p.id for p in plan.parts for _ in range(p.quantity)]
+    first = list(dict.fromkeys(units[i] for i in range(table.n) if table.can_go(0, i)))
     why = (f"parts that can go in first: {', '.join(first[:12])}{', …' if len(first) > 12 else ''}" if first
            else "no part can go in first")
     return [Problem(f"the ways admit no sequence: whatever goes in first, some part can never go in ({why})",
