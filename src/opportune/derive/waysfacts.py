@@ -50,7 +50,7 @@ class WaysFacts:
         The forced orders' transitive reduction as one order's ``constraints`` (as
         :class:`~opportune.derive.explain.Explanation` holds a strategy's), each with its reason.
     usable : dict
-        Part id → its insertion directions.
+        Part id → its insertion directions (the parts whose every direction was decided).
     forced : list of (str, str)
         Every forced order (closed).
     unfinished : list of str
@@ -102,7 +102,7 @@ def ways_facts(derivation, *, until: float | None = None, seed: int = 0) -> Ways
     proved = _closed(_direct(table))
     usable, left_dirs = _usable_directions(table, ids, own, samples, proved, until)
     forced, left_pairs = _forced(table, ids, samples, proved, until)
-    unfinished = ([f"{left_dirs} directions of parts"] if left_dirs else []) + (
+    unfinished = ([f"insertion directions of {left_dirs} parts"] if left_dirs else []) + (
         [f"{left_pairs} orders (not said to be forced)"] if left_pairs else [])
     return WaysFacts(_reasons(derivation, ids, forced), usable, forced, unfinished)
 
@@ -144,8 +144,8 @@ def _needs(table: WaysTable, i: int) -> tuple | None:
 
 def _usable_directions(table: WaysTable, ids: list[str], own: dict, samples, proved: list[int],
                        until) -> tuple[dict, int]:
-    """Each part's insertion directions, and how many the time left undecided (``proved``: the parts surely
-    before each part, :func:`_direct`'s closure: a direction one of them blocks is none)."""
+    """Each part's insertion directions, and how many parts the time left undecided (``proved``: the parts
+    surely before each part, :func:`_direct`'s closure: a direction one of them blocks is none)."""
     found: dict[str, set[str]] = {p: set() for p in ids}
     for seq in samples:
         s = 0
@@ -153,7 +153,7 @@ def _usable_directions(table: WaysTable, ids: list[str], own: dict, samples, pro
             p = ids[i]
             found[p] |= {d for d, m in own[p].items() if not m & s}
             s |= 1 << i
-    left = 0
+    undecided: set[str] = set()
     for i, p in enumerate(ids):
         for d, m in own[p].items():
             needs = _needs(table, i)
@@ -165,10 +165,11 @@ def _usable_directions(table: WaysTable, ids: list[str], own: dict, samples, pro
             ways += [(b, n) for b, n in table.ways[i] if b == table.full & ~(1 << i) and not n]   # first
             answer = _admits(table, i, ways, until)
             if answer is None:
-                left += 1
+                undecided.add(p)
             elif answer:
                 found[p].add(d)
-    return {p: [d for d in own[p] if d in found[p]] for p in ids}, left
+    # a part with a direction undecided is left out (its directions not said, nor that it has one only)
+    return {p: [d for d in own[p] if d in found[p]] for p in ids if p not in undecided}, len(undecided)
 
 
 def _admits(table: WaysTable, i: int, ways: list, until) -> bool | None:
