@@ -18,6 +18,11 @@
   quantities and process constraints, the ``gravity`` and ``connected`` supports:
   :meth:`~opportune.derive.Derivation.replanned`) and counting it.
 
+A plan written as ways has no strategies: its forced orders (each with the directions along which the
+later part blocks the earlier one) and its insertion directions are read from the ways themselves
+(:mod:`opportune.derive.waysfacts`), within half the time left after the plan's own count; the rest is
+as above.
+
 Every text is plain (part ids with control characters escaped, as :func:`printable` writes them).
 """
 

@@ -8,6 +8,10 @@ for word: a way per minimal direction (:func:`~opportune.derive.plan.options`) w
 as its needs, and a way ``first`` (``first: true``: only as the first part of all) where the part may go in first.  The base
 and the process constraints are needs of every way (``a`` before ``b``: each way of ``b`` needs ``a``).
 
+Identical instances (the manifest's ``quantities``) are kept in the manifest's order (each after the one
+before) and written as their part's units, ``bolt#1``, ``bolt#2`` (:func:`as_units`), each with its own
+ways: the count is of distinct sequences of part ids, and a look names the part.
+
 ``opportune derive`` writes this form where the union of partial orders
 (:func:`~opportune.derive.plan.exact_strategies`) needs more than a plan holds; it is as exact, and its
 size is the blocking relation's (parts × directions), not the number of direction choices.

@@ -238,6 +238,9 @@ def _forced(table: WaysTable, ids: list[str], samples, proved: list[int],
     proved = list(proved)
     left = 0
     for b in range(n):
+        if until is not None and time.perf_counter() > until:     # the rest undecided, counted at once
+            left += sum((before[c] & ~proved[c]).bit_count() for c in range(b, n))
+            break
         for a in _bits(before[b] & ~proved[b]):
             # b before a possible? without needs: b's ways each blocked by a (a after b); else a's ways each
             # need b in (a way first is then no way of a)
@@ -250,9 +253,19 @@ def _forced(table: WaysTable, ids: list[str], samples, proved: list[int],
             if answer is None:
                 left += 1
             elif not answer:
-                proved[b] |= 1 << a
-        proved = _closed(proved) if before[b] & ~proved[b] else proved
+                _add(proved, a, b)
     return sorted((ids[a], ids[b]) for b in range(n) for a in _bits(proved[b])), left
+
+
+def _add(before: list[int], a: int, b: int) -> None:
+    """Add ``a`` before ``b`` to a closed order (part → the parts before it), closed again: whatever is before
+    ``a`` (and ``a``) goes before ``b`` and before whatever is after ``b``.  O(parts) mask operations."""
+    add = before[a] | 1 << a
+    if before[b] & add == add:
+        return
+    for c in range(len(before)):
+        if c == b or before[c] >> b & 1:
+            before[c] |= add
 
 
 def _direct(table: WaysTable) -> list[int]:
@@ -315,7 +328,7 @@ def _reasons(derivation, ids: list[str], forced: list[tuple[str, str]]) -> dict:
     return {"directions": {}, "constraints": out}
 
 
-def sequence_strategy(derivation, *, seed: int = 0) -> DerivedStrategy:
+def sequence_strategy(derivation) -> DerivedStrategy:
     """One feasible sequence of a plan written as ways as a strategy the figure can draw: each part's direction
     (the first free one on the parts before it, ``-z`` where free) and the orders that keep it feasible (the
     part before the parts in its way along that direction; a support before the parts it holds).
@@ -323,9 +336,7 @@ def sequence_strategy(derivation, *, seed: int = 0) -> DerivedStrategy:
     Parameters
     ----------
     derivation : Derivation
-        A derivation whose plan is written as ways.
-    seed : int
-        Unused by the search (kept for a sampled sequence later; the search is deterministic).
+        A derivation whose plan is written as ways (the sequence: the first a depth-first search finds).
 
     Returns
     -------
