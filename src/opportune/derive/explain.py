@@ -264,7 +264,7 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
                 unfinished.append(f"{len(trials) - k} changes to try")
                 break
             pending = len(trials) - k + (later if kind == "part" else 0)
-            count = _recount(derivation, changed, left / pending, seed)
+            count = _recount(derivation, changed() if callable(changed) else changed, left / pending, seed)
             frees.append({"kind": kind, "name": name, **count})
     frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
     return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished,
@@ -366,10 +366,10 @@ def _count(plan, seconds: float, seed: int) -> dict:
             "log10_low": low, "log10_high": high, "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
 
 
-def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[str, str, Blocking]]:
-    """The changed blocking relations to recount: each part out of everyone's way (a part of several
-    identical instances, ``quantities``: all of them, named by the part), those that block the most
-    part-directions first."""
+def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[str, str, object]]:
+    """The changed blocking relations to recount, each made when asked for (a function of none): each part out
+    of everyone's way (a part of several identical instances, ``quantities``: all of them, named by the part),
+    those that block the most part-directions first."""
     out = []
     blocks = {q: 0 for q in block.parts}
     for dirs in block.blockers.values():
@@ -384,9 +384,14 @@ def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[
         gone = members[name]
         if not sum(blocks[q] for q in gone):
             continue
-        blockers = {p: {d: s - gone for d, s in dirs.items()} for p, dirs in block.blockers.items()}
-        out.append(("part", name, replace(block, blockers=blockers)))
+        out.append(("part", name, lambda gone=gone: _without(block, gone)))
     return out
+
+
+def _without(block: Blocking, gone: set[str]) -> Blocking:
+    """The blocking relation with the parts ``gone`` in no blocker set (made when its recount's turn comes:
+    O(parts × directions) each, seconds for all the parts of a 300-part block)."""
+    return replace(block, blockers={p: {d: s - gone for d, s in dirs.items()} for p, dirs in block.blockers.items()})
 
 
 def _new_directions(block: Blocking, directions: dict | None) -> dict:

@@ -83,9 +83,9 @@ def ways_facts(derivation, *, until: float | None = None, seed: int = 0) -> Ways
     Examples
     --------
     >>> from opportune.derive import derive
-    >>> f = ways_facts(derive("geometry:gearbox", form="ways"))
-    >>> f.usable["gear_a"], ("bearing_a2", "gear_a") in f.forced
-    (['-x'], True)
+    >>> f = ways_facts(derive("geometry:gearbox", gravity="-z", form="ways"))
+    >>> f.usable["gear_a"], [a for a, b in f.forced if b == "gear_a"]
+    (['-x'], ['bearing_a2', 'housing', 'shaft_a'])
     """
     from opportune.engine.ways import sample_completions
 
@@ -351,9 +351,9 @@ def sequence_strategy(derivation) -> DerivedStrategy:
     Examples
     --------
     >>> from opportune.derive import derive
-    >>> s = sequence_strategy(derive("geometry:gearbox", form="ways"))
-    >>> s.directions["gear_a"], len(s.directions)
-    ('-x', 14)
+    >>> s = sequence_strategy(derive("geometry:gearbox", gravity="-z", form="ways"))
+    >>> s.directions["gear_a"], s.directions["cover"], len(s.directions)
+    ('-x', '-z', 14)
     """
     block = derivation.blocking
     table, ids = instance_table(derivation)

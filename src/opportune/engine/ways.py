@@ -137,6 +137,9 @@ class WaysCounter:
                     if shut_out(t):
                         v = 0
                     else:
+                        # the clock at each step down too: on hundreds of parts the first entry is made only at
+                        # the full set, hundreds of steps (each O(parts × ways)) down (a reading costs far less)
+                        dl.check("counting the completions of a plan of ways")
                         frame[1] = todo
                         frames.append([t, goes(t), 0])
                         down = True
