@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from opportune.derive.plan import DerivedStrategy
 from opportune.planning.ways import Undecided, WaysTable
 
-__all__ = ["WaysFacts", "ways_facts", "sequence_strategy", "SAMPLES"]
+__all__ = ["WaysFacts", "ways_facts", "sequence_strategy", "SAMPLES", "SEARCH_WORK"]
 
 #: Runs × walks of the sampled feasible sequences: 24 runs of 4 walks (96 sequences, about uniform; more runs
 #: than walks, as the walks of a run share ancestors) refute most orders that are not forced in the random
@@ -90,7 +90,7 @@ def ways_facts(derivation, *, until: float | None = None, seed: int = 0) -> Ways
     from opportune.engine.ways import sample_completions
 
     block = derivation.blocking
-    table, ids = instance_table(derivation)
+    table, ids = _instance_table(derivation)
     index = {p: i for i, p in enumerate(ids)}
     own = {p: {d: _mask(q, index) for d, q in block.blockers[p].items()} for p in ids}
     runs, walks = SAMPLES
@@ -107,14 +107,14 @@ def ways_facts(derivation, *, until: float | None = None, seed: int = 0) -> Ways
     return WaysFacts(_reasons(derivation, ids, forced), usable, forced, unfinished)
 
 
-def instance_table(derivation) -> tuple[WaysTable, list[str]]:
+def _instance_table(derivation) -> tuple[WaysTable, list[str]]:
     """The derivation's ways as masks over its instances (the blocking relation's parts), with their ids:
     the plan's table, each unit of a part of several identical instances named by its instance."""
     table = WaysTable.of(derivation.plan)
-    return table, list(table_ids(derivation, table))
+    return table, list(_table_ids(derivation, table))
 
 
-def table_ids(derivation, table: WaysTable) -> list[str]:
+def _table_ids(derivation, table: WaysTable) -> list[str]:
     """The instance each bit of the plan's table stands for (a part's ``k``-th unit: its ``k``-th instance)."""
     man = derivation.manifest
     groups = man.quantities if man is not None else {}
@@ -356,7 +356,7 @@ def sequence_strategy(derivation) -> DerivedStrategy:
     ('-x', '-z', 14)
     """
     block = derivation.blocking
-    table, ids = instance_table(derivation)
+    table, ids = _instance_table(derivation)
     try:
         seq = table.completion(0, 50 * table.n + SEARCH_WORK)
     except Undecided:
