@@ -55,6 +55,14 @@ class WaysFacts:
         Every forced order (closed).
     unfinished : list of str
         What the time did not decide.
+
+    Examples
+    --------
+    >>> from opportune.derive import derive
+    >>> f = ways_facts(derive("geometry:pump", gravity="-z", form="ways"))
+    >>> c = f.order["constraints"][0]
+    >>> f.usable["shaft"], c["before"], c["after"], c["other_directions"], f.unfinished
+    (['-z'], 'bearing', 'shaft', {'+z': ['housing', 'seal']}, [])
     """
 
     order: dict
