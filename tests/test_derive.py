@@ -495,8 +495,9 @@ def test_an_exact_plan_larger_than_a_plan_holds_is_written_as_ways_and_refused_a
     assert any("union of more than 3 incomparable partial orders" in n and "p02 (4)" in n for n in doc["notes"])
     with pytest.raises(DeriveError, match="form 'orders'"):
         derive(folder, form="orders")
-    r = run_cli("derive", folder, "--explain")
-    assert r.exit_code == 1 and "--explain and --figure read the plan's strategies" in r.output
+    r = run_cli("derive", folder, "--explain", "--figure", tmp_path / "ways.svg")   # read from the ways
+    assert r.exit_code == 0 and "8 parts, written as each part's ways in" in r.output
+    assert "wrote the exploded view (one feasible sequence)" in r.output and (tmp_path / "ways.svg").stat().st_size
 
 
 @pytest.mark.parametrize("mode", sorted(MODES))
@@ -865,3 +866,62 @@ def test_the_convex_pieces_of_a_body_not_convex_are_the_body(tmp_path, seed):
             centre = ConvexHull(p).points.mean(axis=0)
             assert tuple(int(c) for c in np.floor(centre)) in set(map(tuple, cells))
     assert found
+
+
+def brute_facts(brute: BruteForce) -> tuple[dict, set]:
+    """Each part's insertion directions and the forced orders, from the sets on some feasible sequence (reached
+    from nothing, with a completion): a direction is one where a part goes in on such a set with its sweep
+    clear, and ``a`` before ``b`` is forced where every such set holding ``b`` holds ``a``."""
+    n = len(brute.ids)
+    full = (1 << n) - 1
+
+    @lru_cache(maxsize=None)
+    def completes(built: int) -> bool:
+        return built == full or any(completes(built | 1 << i) for i in range(n)
+                                    if not built >> i & 1 and brute.fits(i, built))
+    live, todo = {0}, [0]
+    while todo:
+        built = todo.pop()
+        for i in range(n):
+            nxt = built | 1 << i
+            if not built >> i & 1 and brute.fits(i, built) and completes(nxt) and nxt not in live:
+                live.add(nxt)
+                todo.append(nxt)
+    names = list(AXES)
+    usable = {p: set() for p in brute.ids}
+    for built in live:
+        for i in range(n):
+            if not built >> i & 1 and brute.fits(i, built) and built | 1 << i in live:
+                usable[brute.ids[i]] |= {names[k] for k, m in enumerate(brute.swept[i]) if not m & built}
+    forced = {(brute.ids[a], brute.ids[b]) for a in range(n) for b in range(n) if a != b
+              and all(s >> a & 1 for s in live if s >> b & 1)}
+    return usable, forced
+
+
+@pytest.mark.parametrize("mode", sorted(MODES))
+@settings(max_examples=8, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(block=st.sampled_from(BLOCKS), k=st.integers(2, 10), seed=st.integers(0, 2**32 - 1))
+def test_what_explain_reads_from_the_ways_is_the_brute_forces(tmp_path_factory, mode, block, k, seed):
+    """`derive --explain` on a plan written as ways: each part's insertion directions and the orders forced in
+    every feasible sequence, read from the ways (sampled sequences, then peeling or a search), are the brute
+    force's on the grid, under every support mode."""
+    from opportune.derive.waysfacts import ways_facts
+
+    k = min(k, block[0] * block[1] * block[2])
+    parts = partition(block, k, seed)
+    folder = write_assembly(tmp_path_factory.mktemp("voxels"), parts)
+    options = dict(MODES[mode])
+    if "base" in options:
+        options["base"] = next(p for p, cells in parts.items() if (0, 0, 0) in cells)
+    brute = BruteForce(parts, block, gravity="gravity" in options, connected="connected" in options,
+                       base=options.get("base"))
+    try:
+        derived = derive(folder, directions="axes", form="ways", **options)
+    except DeriveError:
+        return
+    facts = ways_facts(derived, seed=seed % 1000)
+    usable, forced = brute_facts(brute)
+    assert not facts.unfinished
+    assert {p: set(d) for p, d in facts.usable.items()} == usable
+    assert set(facts.forced) == forced

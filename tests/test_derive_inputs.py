@@ -357,6 +357,55 @@ def test_identical_parts_are_one_part_of_quantity_n_and_the_count_is_the_brute_f
     assert r.exit_code == 0 and "quantity: 2" in (tmp_path / "plan.yaml").read_text()
 
 
+@pytest.mark.parametrize("directions", [None, ["+z", "-z"]])
+def test_identical_parts_in_a_plan_written_as_ways_count_and_run_as_in_its_strategies(tmp_path, directions):
+    """The two bolts of a quantity written as ways: the bolt is one part of quantity 2 whose units keep each
+    instance's ways; the count is the strategies' (each sequence of part ids once), the plan admits exactly
+    the projections of the brute force's feasible sequences, and the sequencer and `replay` take a look
+    that names the bolt, either unit."""
+    folder = write_assembly(tmp_path / "bolts", BOLTS)
+    brute = BruteForce(BOLTS, (3, 1, 3))
+    if directions:
+        brute.swept = [m[4:] for m in brute.swept]
+    strategies = derive(folder, directions=directions, quantities={"bolt": ["b1", "b2"]})
+    ways = derive(folder, directions=directions, quantities={"bolt": ["b1", "b2"]}, form="ways")
+    assert ways.plan.is_ways and {p.id: p.quantity for p in ways.plan.parts}["bolt"] == 2
+    assert {"bolt#1", "bolt#2"} <= set(ways.plan.ways) and "b1" not in ways.plan.ways
+    assert Schedule(ways.plan).count() == Schedule(strategies.plan).count() == brute.count() // 2 > 0
+    feasible = projected(brute, {"bolt": ["b1", "b2"]})
+    everything = set(itertools.permutations(["plate", "bolt", "spacer", "bolt", "cover"]))
+    assert {s for s in everything if admits(ways.plan, s)} == feasible
+    plan = tmp_path / "plan.yaml"
+    import yaml
+
+    plan.write_text(yaml.safe_dump(ways.plan.to_dict()), encoding="utf-8")     # read back through the checker
+    assert str(Schedule(ways.plan).count()) in run_cli("count", plan).output
+    for k, sequence in enumerate(sorted(feasible)[:3]):    # the camera shows one part at a time
+        looks = tmp_path / f"seq{k}.looks"
+        looks.write_text("\n".join(sequence) + "\n", encoding="utf-8")
+        r = run_cli("replay", plan, looks, "--json")
+        steps = json.loads(r.output)
+        assert r.exit_code == 0 and steps[-1]["action"]["kind"] == "done" and steps[-1]["installed"] == list(sequence)
+
+
+def test_a_part_between_two_instances_is_written_as_ways(tmp_path):
+    """b1, x, b2 in a row along ±x: some sequences put x between the bolts, which a quantity of a plan of
+    strategies cannot say; the plan written as ways can, and counts the brute force's sequences of part ids."""
+    parts = {"b1": [(0, 0, 0)], "x": [(1, 0, 0)], "b2": [(2, 0, 0)]}
+    folder = write_assembly(tmp_path / "row", parts)
+    (folder / "assembly.yaml").write_text("directions: [+x, -x]\nquantities: {bolt: [b1, b2]}\n")
+    brute = BruteForce(parts, (3, 1, 1))
+    brute.swept = [m[:2] for m in brute.swept]
+    with pytest.raises(ManifestError, match="'x' goes in between two instances of 'bolt'"):
+        derive(folder, form="strategies")
+    derived = derive(folder)
+    assert derived.plan.is_ways and "written as each part's ways in instead" in derived.notes[0]
+    feasible = projected(brute, {"bolt": ["b1", "b2"]})
+    assert ("bolt", "x", "bolt") in feasible
+    assert Schedule(derived.plan).count() == len(feasible) == brute.count() // 2
+    assert {s for s in set(itertools.permutations(["bolt", "bolt", "x"])) if admits(derived.plan, s)} == feasible
+
+
 def test_instances_the_geometry_tells_apart_are_refused(tmp_path):
     """Along ±z, a clip above b2 only: b2 has the clip in its way from above, b1 does not."""
     parts = dict(BOLTS, clip=[(2, 0, 3)])
@@ -364,19 +413,6 @@ def test_instances_the_geometry_tells_apart_are_refused(tmp_path):
     (folder / "assembly.yaml").write_text("directions: [+z, -z]\nquantities:\n  bolt: [b1, b2]\n")
     text = fail_text(folder)
     assert "assembly.yaml:3" in text and "'b1' and 'b2' are not interchangeable" in text and "separate parts" in text
-
-
-def test_a_part_between_two_instances_is_refused(tmp_path):
-    """b1, x, b2 in a row, inserted along ±x only: x must come before one of the bolts, so some sequences
-    put it between them, which a quantity cannot say."""
-    parts = {"b1": [(0, 0, 0)], "x": [(1, 0, 0)], "b2": [(2, 0, 0)]}
-    folder = write_assembly(tmp_path / "row", parts)
-    (folder / "assembly.yaml").write_text("directions: [+x, -x]\n")
-    brute = BruteForce(parts, (3, 1, 1))
-    brute.swept = [m[:2] for m in brute.swept]
-    assert Schedule(derive(folder).plan).count() == brute.count() == 4
-    (folder / "assembly.yaml").write_text("directions: [+x, -x]\nquantities: {bolt: [b1, b2]}\n")
-    assert "'x' goes in between two instances of 'bolt'" in fail_text(folder)
 
 
 @pytest.mark.parametrize("seed", [2, 5])

@@ -387,3 +387,74 @@ def test_a_part_that_is_not_convex_is_heaped_as_its_convex_pieces_and_holds_a_pe
     assert deepest(geometry, sink=0.2 * cell)[0] < -0.1 * cell         # pushed into the U's floor: found
     hull = {**geometry, "u": ("convex", [[c for body in pieces for c in body]])}
     assert deepest(hull)[0] < -0.3 * cell                               # the U as one hull swallows the peg
+
+
+def test_the_pump_derives_under_gravity_every_part_resting_on_one_below():
+    """The pump under --gravity -z: the housing on the fixture, the seal on the lip of its stepped bore, the
+    bearing on the seal (its flange on the floor), the shaft's collar on the bearing, the impeller and the key
+    on the collar, the cover on the housing, the bolts in their holes; the count is the brute force's with
+    the supports."""
+    d = derive("geometry:pump", gravity="-z")
+    b, needs = d.blocking, d.conditions.needs
+    assert set(needs) == set(b.parts) - {"housing"}
+    on = {p: set().union(*(n for _, n in needs[p])) for p in needs}
+    assert on["seal"] == {"housing"} and on["bearing"] == {"seal", "housing"} and on["shaft"] == {"bearing"}
+    assert on["impeller"] >= {"shaft"} and on["key"] >= {"shaft"} and "housing" in on["cover"]
+    assert Schedule(d.plan).count() == held_count(b.parts, b.blockers, needs) == 48
+
+
+def facts(e) -> tuple:
+    """What an explanation says of the plan, whatever its form."""
+    doc = e.to_dict()
+    return e.usable, doc["single_direction"], e.forced, e.count["value"], e.count["exact"]
+
+
+@pytest.mark.parametrize("name, gravity", [("pump", "-z"), ("gearbox", "-z"), ("pump", None)])
+def test_explain_reads_the_same_facts_from_the_plan_written_as_ways(name, gravity):
+    """Derived as strategies and as ways, the explanation's facts agree: each part's insertion directions,
+    the parts with one, the orders forced in every feasible sequence and the count.  Each forced order of the
+    ways form says the directions along which the later part blocks the earlier one (it does, in the
+    blocking relation) and the other directions' blockers, or the support."""
+    strategies = derive(f"geometry:{name}", gravity=gravity)
+    ways = derive(f"geometry:{name}", gravity=gravity, form="ways")
+    assert ways.plan.is_ways and not strategies.plan.is_ways
+    es, ew = explain(strategies, time_limit=60), explain(ways, time_limit=60)     # (time for a loaded machine)
+    assert facts(ew) == facts(es)
+    assert not [u for u in es.unfinished + ew.unfinished if "directions of" in u or "orders" in u]
+    b = ways.blocking.blockers
+    closed = set(ew.forced)
+    for c in ew.orders[0]["constraints"]:
+        assert (c["before"], c["after"]) in closed
+        if c["direction"]:
+            assert all(c["after"] in b[c["before"]][d] for d in c["direction"].split(", "))
+            assert all(c["after"] not in b[c["before"]][d] for d in c["other_directions"])
+        else:
+            assert c["support"] and any(c["before"] in n for _, n in ways.conditions.needs[c["after"]])
+    text = ew.text()
+    assert text.startswith(f"{name}: {len(b)} parts, written as each part's ways in")
+    assert "forced in every feasible sequence" in text and "frees the most:" in text
+    assert ew.to_dict()["form"] == "ways"
+
+
+def test_the_exploded_view_of_a_plan_written_as_ways_draws_one_feasible_sequence(tmp_path):
+    """The figure of a plan written as ways: one feasible sequence read as a strategy, whose every linear
+    extension the plan admits (each part before the parts in its way along its direction, after a support)."""
+    from opportune.derive.figure import levels
+    from opportune.derive.waysfacts import sequence_strategy
+
+    d = derive("geometry:gearbox", gravity="-z", form="ways")
+    s = sequence_strategy(d)
+    level, _ = levels(d.blocking.parts, s.pairs)
+    for order in (sorted(d.blocking.parts, key=lambda p: level[p]),
+                  sorted(d.blocking.parts, key=lambda p: (level[p], p[::-1]))):
+        schedule = Schedule(d.plan)
+        for p in order:
+            assert p in schedule.installable(), (order, p)
+            schedule = schedule.install(p)
+    from opportune.derive.figure import exploded
+
+    out = exploded(d, tmp_path / "ways.svg")
+    text = out.read_text(encoding="utf-8")
+    assert "one feasible sequence" in text and all(p in text for p in d.blocking.parts)
+    with pytest.raises(ValueError, match="draws one feasible sequence"):
+        exploded(d, out, strategy=2)

@@ -16,7 +16,7 @@ from opportune.formats.loader import check_text, make_plan, plan_from_dict
 from opportune.formats.ways import ways_of_strategy, ways_plan
 from opportune.limits import MAX_WAYS
 from opportune.planning.plan import Part, Way
-from opportune.planning.ways import WaysTable
+from opportune.planning.ways import WaysTable, unit_id
 
 
 def random_ways_plan(rng: random.Random, n: int, max_ways: int = 3, needs: bool = True):
@@ -160,7 +160,11 @@ def test_a_ways_file_reads_writes_back_and_counts():
     ("parts: [a, b]\nrequires: {b: [a]}\nways: {a: [{blockers: [b]}]}\n", "conflict"),
     ("parts: [a, b]\nways: {a: [{blockers: [c]}]}\n", "unknown-part"),
     ("parts: [a, b]\nways: {a: [{blockers: [a]}]}\n", "self-requirement"),
-    ("parts: [a, {id: b, quantity: 2}]\nways: {a: [{blockers: [b]}]}\n", "ways-quantity"),
+    ("parts: [a, {id: b, quantity: 2}]\nways: {a: [{blockers: [b#3]}]}\n", "unknown-part"),
+    ("parts: [a, b]\nways: {a: [{blockers: [b#1]}]}\n", "unknown-part"),
+    ("parts: [a, {id: b, quantity: 2}]\nways: {b#3: [{blockers: [a]}]}\n", "unknown-part"),
+    ("parts: [a, {id: b, quantity: 2}]\nways: {b#2: [{after: [b]}]}\n", "self-requirement"),
+    ("parts: [a, {id: b, quantity: 2}]\nways: {b: [{needs: [[b#1, a]]}]}\n", "self-requirement"),
     ("parts: [a, b]\nways: {a: [{blockers: [b], after: [b]}]}\n", "ways-contradiction"),
     ("parts: [a, b]\nways: {a: [{blockers: [b]}], b: [{blockers: [a]}]}\n", "ways-infeasible"),
     ("parts: [a, b]\nways: {a: [{name: \"x\\e[31m\"}]}\n", "text"),
@@ -266,3 +270,81 @@ def test_the_checks_search_for_a_sequence_is_bounded_and_warns_when_cut(monkeypa
     monkeypatch.setattr(ways_format, "SEARCH_SECONDS", -1.0)      # no time at all: cut at once
     result = check_text(text, file="w.yaml")
     assert result.ok and [p.code for p in result.warnings] == ["ways-undecided"]
+
+
+def random_units_plan(rng: random.Random, n: int) -> tuple:
+    """A random plan written as ways whose parts have 1 or 2 units, each unit its own ways naming units."""
+    quantity = {f"p{i}": rng.choice((1, 1, 2)) for i in range(n)}
+    units = [unit_id(p, k) if q > 1 else p for p, q in quantity.items() for k in range(1, q + 1)]
+    ways = {}
+    for u in units:
+        others = [x for x in units if x.split("#")[0] != u.split("#")[0]]
+        listed = []
+        for _ in range(rng.randint(1, 2)):
+            need = (frozenset(rng.sample(others, min(2, len(others)))),) if others and rng.random() < 0.3 else ()
+            held = set().union(*need)     # a part needed is no blocker (the file refuses that contradiction)
+            listed.append(Way(frozenset(x for x in others if x not in held and rng.random() < 0.3), need))
+        if rng.random() < 0.85:
+            ways[u] = listed
+    return ways_plan("units", [Part(p, quantity=q) for p, q in quantity.items()], ways), quantity
+
+
+def admitted_units(plan, quantity: dict, sequence) -> bool:
+    """The definition with units: the k-th time a part goes in, its k-th unit has a way that admits the
+    units in (a unit not listed goes in whenever its turn comes)."""
+    installed: set[str] = set()
+    seen: dict[str, int] = {}
+    for p in sequence:
+        seen[p] = seen.get(p, 0) + 1
+        unit = unit_id(p, seen[p]) if quantity[p] > 1 else p
+        ways = plan.ways.get(unit)
+        if ways and not any(w.admits(installed) for w in ways):
+            return False
+        installed.add(unit)
+    return True
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(1, 4), st.integers(0, 10**9))
+def test_parts_of_several_units_count_and_install_as_the_definition_says(n, seed):
+    """A part of quantity 2 in a plan written as ways: its units go in in turn, each by its own ways; the
+    count is the number of distinct sequences of part ids the definition admits, the schedule installs
+    exactly those (naming the part, not a unit), and the file form reads back the same plan."""
+    plan, quantity = random_units_plan(random.Random(seed), n)
+    multiset = [p for p, q in quantity.items() for _ in range(q)]
+    good = {s for s in itertools.permutations(multiset) if admitted_units(plan, quantity, s)}
+    assert Schedule(plan).count() == len(good)
+    for seq in set(itertools.permutations(multiset)):
+        s = Schedule(plan)
+        try:
+            for p in seq:
+                s = s.install(p)
+            ok = True
+        except NotAdmissible:
+            ok = False
+        assert ok == (seq in good), seq
+    if good:
+        back = check_text(__import__("yaml").safe_dump(plan.to_dict()), file="u.yaml")
+        assert back.ok and Schedule(back.plan).count() == len(good)
+
+
+def test_a_bare_id_of_a_part_of_several_is_its_first_unit_in_blockers_and_its_last_in_after():
+    text = ("parts: [{id: s, quantity: 2}, a, b]\n"
+            "ways: {a: [{blockers: [s]}], b: [{after: [s]}]}\n")
+    plan = check_text(text, file="s.yaml").plan
+    assert {tuple(sorted(w.blockers)) for w in plan.ways["a"]} == {("s#1",)}
+    assert [sorted(n) for w in plan.ways["b"] for n in w.needs] == [["s#2"]]
+    orders = {s for s in set(itertools.permutations(["s", "s", "a", "b"]))
+              if Schedule(plan, s[:0]).count() and _installs(plan, s)}
+    assert orders == {s for s in set(itertools.permutations(["s", "s", "a", "b"]))
+                      if s.index("a") < s.index("s") and s.index("b") > len(s) - 1 - s[::-1].index("s")}
+
+
+def _installs(plan, sequence) -> bool:
+    s = Schedule(plan)
+    try:
+        for p in sequence:
+            s = s.install(p)
+    except NotAdmissible:
+        return False
+    return True

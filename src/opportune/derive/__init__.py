@@ -240,7 +240,7 @@ def derive(source: str | Path | Assembly, *, directions: str | Sequence | dict |
         A manifest (or keyword) that cannot be used: every problem, with its file, line and key.
     DeriveError
         No feasible sequence (the parts that lock each other named), an exact plan larger than a plan holds
-        (``form="strategies"``), identical parts in a plan written as ways, or an unknown ``form``.
+        (``form="strategies"``), or an unknown ``form``.
 
     Examples
     --------
@@ -307,7 +307,16 @@ def _plan_under(block: Blocking, man: Manifest, conditions: Conditions, name: st
     explanation's recounts)."""
     check_interchangeable(man, _ways(block, conditions))
     strategies, ways, why = _exact(block, conditions, man, form)
-    written = merge_units(man, block.parts, strategies) if ways is None else []
+    written = []
+    if ways is None:
+        try:
+            written = merge_units(man, block.parts, strategies)
+        except ManifestError as exc:    # a part between two identical instances: the ways form says it
+            if form != "auto":
+                raise
+            strategies, ways = [], _units_ways(block, conditions, man)
+            why = (f"{exc.problems[0].message} in a plan of strategies: the plan is written as each part's ways in "
+                   "instead, as exact (docs/derive.md)")
     plan = plan_of(block, written, name, label, carried, manifest=man, conditions=conditions, ways=ways)
     return plan, strategies, why
 
@@ -331,13 +340,14 @@ def _exact(block: Blocking, conditions: Conditions, man: Manifest, form: str) ->
             why = f"{said}: the plan is written as each part's ways in instead, as exact (docs/derive.md)"
     else:
         why = "written as each part's ways in (exact), as asked"
-    if any(len(v) > 1 for v in man.quantities.values()):
-        raise DeriveError("identical parts (the manifest's quantities) are not written as ways yet: the exact plan "
-                          "needs them as strategies" + (f" ({why})" if form != "ways" else "")
-                          + "; derive without quantities (each instance a part of its own)")
-    from opportune.derive.ways import exact_ways
+    return [], _units_ways(block, conditions, man), why
 
-    return [], exact_ways(block, conditions, pairs), why
+
+def _units_ways(block: Blocking, conditions: Conditions, man: Manifest) -> dict:
+    """Each part's ways in, identical instances as the units of their part (:mod:`opportune.derive.ways`)."""
+    from opportune.derive.ways import as_units, exact_ways
+
+    return as_units(exact_ways(block, conditions, unit_pairs(man, block.parts)), man.quantities)
 
 
 def _resolve(source):

@@ -9,9 +9,10 @@ Three products, each written as a folder of OBJ files (one a part, metres) in it
   through the cover into the end walls.  Under ``--gravity -z`` every part rests on one placed before
   it: the housing on the fixture, the bearings in their bores, the shafts in their bearings, the
   gears on their shafts, the cover on the walls, the screws in their holes.
-* :func:`pump` — the centrifugal pump of ``example:pump``: a housing with a bore in its floor, a
-  bearing and a seal in the bore, a shaft through them, a key beside the shaft, an impeller keyed on
-  it, a cover and four bolts.
+* :func:`pump` — the centrifugal pump of ``example:pump``: a housing with a stepped bore in its floor,
+  a seal on the bore's lip, a bearing on the seal (its flange on the floor), a shaft through them (its
+  collar on the flange), a key beside the shaft, an impeller keyed on it (both on the collar), a cover
+  and four bolts.  Under ``--gravity -z`` every part rests on one placed before it.
 * :func:`puzzle` — two links of a chain threaded through each other on a stand: no sequence builds
   it (``derive`` refuses it, naming the two links).
 
@@ -190,8 +191,10 @@ def gearbox(g: Gearbox = Gearbox()) -> dict[str, list[Body]]:
 
 
 def pump() -> dict[str, list[Body]]:
-    """The pump's parts by id (see the module): its axis is z, the impeller at the top under the cover, the
-    bearing's flange under the housing's floor.
+    """The pump's parts by id (see the module): its axis is z, the impeller at the top under the cover.
+    The bore in the housing's floor is stepped: the seal sits on its lip, the bearing on the seal with
+    its flange on the floor, the shaft's collar on the bearing's flange, and the impeller and the key on
+    the collar, so under ``--gravity -z`` every part rests on one below it.
 
     Returns
     -------
@@ -205,14 +208,16 @@ def pump() -> dict[str, list[Body]]:
     """
     L, t, floor, H, lid = 0.07, 0.005, 0.012, 0.04, 0.005
     c, shaft, bore, s, deep = L / 2, 0.004, 0.008, 0.0015, 0.008
+    lip, flange, collar = 0.002, floor + 0.003, 0.018      # the lip's top, the flange's top, the collar's top
     bolts = [(x, y) for y in (t / 2, L - t / 2) for x in (0.01, L - 0.01)]
-    housing = cut((0, 0, 0), (L, L, floor), [((c - bore, c - bore, 0), (c + bore, c + bore, floor))])
+    housing = cut((0, 0, 0), (L, L, floor), [((c - 0.006, c - 0.006, 0), (c + 0.006, c + 0.006, lip)),
+                                             ((c - bore, c - bore, lip), (c + bore, c + bore, floor))])
     housing += [box((0, t, floor), (t, L - t, H)), box((L - t, t, floor), (L, L - t, H))]
     for y0 in (0.0, L - t):   # the side walls, with the bolts' blind holes in their tops
         housing += cut((0, y0, floor), (L, y0 + t, H),
                        [((x - s, y - s, H - deep), (x + s, y + s, H)) for x, y in bolts if y0 < y < y0 + t])
-    key = ((c + shaft, c - 0.0015, 0.018), (c + shaft + 0.003, c + 0.0015, 0.03))
-    hub = ((c - 0.012, c - 0.012, 0.018), (c + 0.012, c + 0.012, 0.024))
+    key = ((c + shaft, c - 0.0015, collar), (c + shaft + 0.003, c + 0.0015, 0.03))
+    hub = ((c - 0.012, c - 0.012, collar), (c + 0.012, c + 0.012, collar + 0.006))
     # the hub's hole: the square round the shaft's octagon (touching its four flats) and the key's slot
     impeller = cut(*hub, [((c - shaft, c - shaft, hub[0][2]), (c + shaft, c + shaft, hub[1][2])),
                           ((key[0][0], key[0][1], hub[0][2]), (key[1][0], key[1][1], hub[1][2]))])
@@ -222,9 +227,10 @@ def pump() -> dict[str, list[Body]]:
                  box((c - 0.001, c + 0.006, z0), (c + 0.001, c + 0.012, z1)),
                  box((c - 0.001, c - 0.012, z0), (c + 0.001, c - 0.006, z1))]
     parts = {"housing": housing,
-             "bearing": ring((c, c), shaft, bore, 2, 0, floor / 2) + ring((c, c), shaft, 0.012, 2, -0.003, 0),
-             "seal": ring((c, c), shaft, bore, 2, floor / 2, floor),
-             "shaft": [rod((c, c), shaft, 2, -0.01, 0.03)],
+             "bearing": ring((c, c), shaft, bore, 2, floor / 2, floor) + ring((c, c), shaft, 0.012, 2, floor, flange),
+             "seal": ring((c, c), shaft, bore, 2, lip, floor / 2),
+             # the collar under the key reaches past it (apothem 0.0075), narrower than the bore
+             "shaft": [rod((c, c), shaft, 2, 0.001, 0.03), *ring((c, c), shaft, 0.0075, 2, flange, collar)],
              "key": [box(*key)], "impeller": impeller,
              "cover": cut((0, 0, H), (L, L, H + lid), [((x - s, y - s, H), (x + s, y + s, H + lid)) for x, y in bolts])}
     for k, (x, y) in enumerate(bolts, 1):

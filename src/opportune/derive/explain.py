@@ -18,6 +18,11 @@
   quantities and process constraints, the ``gravity`` and ``connected`` supports:
   :meth:`~opportune.derive.Derivation.replanned`) and counting it.
 
+A plan written as ways has no strategies: its forced orders (each with the directions along which the
+later part blocks the earlier one) and its insertion directions are read from the ways themselves
+(:mod:`opportune.derive.waysfacts`), within half the time left after the plan's own count; the rest is
+as above.
+
 Every text is plain (part ids with control characters escaped, as :func:`printable` writes them).
 """
 
@@ -100,6 +105,9 @@ class Explanation:
         or a direction added (``"direction"``), each with its count.
     unfinished : list of str
         What the time limit did not reach, in words.
+    form : str
+        ``"strategies"``, or ``"ways"`` for a plan written as ways: then ``orders`` is one, the forced
+        orders' transitive reduction with their reasons (:mod:`opportune.derive.waysfacts`).
 
     Examples
     --------
@@ -123,6 +131,7 @@ class Explanation:
     forced: list[tuple[str, str]]
     frees: list[dict] = field(default_factory=list)
     unfinished: list[str] = field(default_factory=list)
+    form: str = "strategies"
 
     def to_dict(self) -> dict:
         """The explanation as plain data (``derive --explain --json``).
@@ -143,7 +152,7 @@ class Explanation:
         >>> doc["single_direction"], doc["forced_in_every_strategy"], doc["reasons"][0]["before"]
         ({'a': '+x', 'b': '+x'}, [['a', 'b']], ['b'])
         """
-        return {"name": self.name, "parts": list(self.parts), "orders": self.orders,
+        return {"name": self.name, "form": self.form, "parts": list(self.parts), "orders": self.orders,
                 "insertion_directions": self.usable,
                 "single_direction": {p: d[0] for p, d in self.usable.items() if len(d) == 1},
                 "reasons": reasons(self),
@@ -217,18 +226,25 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     if assembly is not None:
         derivation = replace(derivation, assembly=assembly)
     block, strategies = derivation.blocking, derivation.strategies
-    orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
-    closures = [_closure(s.pairs) for s in strategies]
-    forced = sorted(set.intersection(*closures)) if closures else []
     base = _count(derivation.plan, max(0.001, time_limit / 4), seed)
-    unfinished = []
-    usable: dict[str, list[str]] = {}
-    earlier = [_earlier(s.pairs) for s in strategies]
-    for p in block.parts:
-        if time.perf_counter() > end:
-            unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
-            break
-        usable[p] = _insertion_directions(block, p, earlier)
+    unfinished: list[str] = []
+    if derivation.plan.is_ways:
+        from opportune.derive.waysfacts import ways_facts
+
+        facts = ways_facts(derivation, until=time.perf_counter() + (end - time.perf_counter()) / 2, seed=seed)
+        orders, usable, forced = [facts.order], facts.usable, facts.forced
+        unfinished += facts.unfinished
+    else:
+        orders = [_order(block, s, getattr(derivation, "conditions", None)) for s in strategies]
+        closures = [_closure(s.pairs) for s in strategies]
+        forced = sorted(set.intersection(*closures)) if closures else []
+        usable = {}
+        earlier = [_earlier(s.pairs) for s in strategies]
+        for p in block.parts:
+            if time.perf_counter() > end:
+                unfinished.append(f"insertion directions of {len(block.parts) - len(usable)} parts")
+                break
+            usable[p] = _insertion_directions(block, p, earlier)
     frees: list[dict] = []
     later = len(_new_directions(block, directions)) if assembly is not None else 0   # their share kept for them
     # the added directions' blocking is geometry, not interruptible: found only if it fits the time left, as
@@ -238,7 +254,8 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
     for trials in (_part_trials(block, quantities),
                    lambda: _direction_trials(derivation, directions) if assembly is not None else []):
         if not isinstance(trials, list) and time.perf_counter() + cost > end:
-            unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
+            if later:       # (none to add: nothing left unsaid)
+                unfinished.append(f"the {later} directions to add (finding their blocking takes about {cost:.2g} s)")
             break
         trials = trials if isinstance(trials, list) else trials()
         for k, (kind, name, changed) in enumerate(trials):
@@ -247,10 +264,11 @@ def explain(derivation, assembly=None, *, directions: dict | None = None, time_l
                 unfinished.append(f"{len(trials) - k} changes to try")
                 break
             pending = len(trials) - k + (later if kind == "part" else 0)
-            count = _recount(derivation, changed, left / pending, seed)
+            count = _recount(derivation, changed() if callable(changed) else changed, left / pending, seed)
             frees.append({"kind": kind, "name": name, **count})
     frees.sort(key=lambda f: (-(f["count"]["log10"] if f["count"] else -math.inf), f["kind"], f["name"]))
-    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished)
+    return Explanation(derivation.plan.name, block.parts, orders, usable, base, forced, frees, unfinished,
+                       "ways" if derivation.plan.is_ways else "strategies")
 
 
 def _order(block: Blocking, strategy, conditions=None) -> dict:
@@ -348,10 +366,10 @@ def _count(plan, seconds: float, seed: int) -> dict:
             "log10_low": low, "log10_high": high, "log10_all_orders": log_all, "share_log10": r.log10 - log_all}
 
 
-def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[str, str, Blocking]]:
-    """The changed blocking relations to recount: each part out of everyone's way (a part of several
-    identical instances, ``quantities``: all of them, named by the part), those that block the most
-    part-directions first."""
+def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[str, str, object]]:
+    """The changed blocking relations to recount, each made when asked for (a function of none): each part out
+    of everyone's way (a part of several identical instances, ``quantities``: all of them, named by the part),
+    those that block the most part-directions first."""
     out = []
     blocks = {q: 0 for q in block.parts}
     for dirs in block.blockers.values():
@@ -366,9 +384,14 @@ def _part_trials(block: Blocking, quantities: dict | None = None) -> list[tuple[
         gone = members[name]
         if not sum(blocks[q] for q in gone):
             continue
-        blockers = {p: {d: s - gone for d, s in dirs.items()} for p, dirs in block.blockers.items()}
-        out.append(("part", name, replace(block, blockers=blockers)))
+        out.append(("part", name, lambda gone=gone: _without(block, gone)))
     return out
+
+
+def _without(block: Blocking, gone: set[str]) -> Blocking:
+    """The blocking relation with the parts ``gone`` in no blocker set (made when its recount's turn comes:
+    O(parts × directions) each, seconds for all the parts of a 300-part block)."""
+    return replace(block, blockers={p: {d: s - gone for d, s in dirs.items()} for p, dirs in block.blockers.items()})
 
 
 def _new_directions(block: Blocking, directions: dict | None) -> dict:
@@ -464,7 +487,8 @@ def reasons(e: Explanation) -> list[dict]:
     for k, order in enumerate(e.orders, 1):
         for c in order["constraints"]:
             support = {"support": c["support"]} if c.get("support") else {}
-            r = grouped.setdefault((c["before"], c["direction"], c.get("support")), {
+            support.update({"why": c["why"]} if c.get("why") else {})
+            r = grouped.setdefault((c["before"], c["direction"], c.get("support"), c.get("why")), {
                 "part": c["before"], "direction": c["direction"], **support, "before": [],
                 "other_directions": c["other_directions"], "strategies": []})
             if c["after"] not in r["before"]:
@@ -477,10 +501,14 @@ def reasons(e: Explanation) -> list[dict]:
 def _report(e: Explanation) -> list[str]:
     """The lines of :meth:`Explanation.text`."""
     n = len(e.orders)
-    lines = [f"{e.name}: {len(e.parts)} parts, {n} strateg{'y' if n == 1 else 'ies'}", "forced orders:"]
+    form = f"{n} strateg{'y' if n == 1 else 'ies'}" if e.form == "strategies" else "written as each part's ways in"
+    lines = [f"{e.name}: {len(e.parts)} parts, {form}", "forced orders:"]
     for r in reasons(e):
         where = "" if len(r["strategies"]) == n else " (strateg" + ("y s" if len(r["strategies"]) == 1 else "ies s") \
             + ", s".join(map(str, r["strategies"])) + ")"
+        if r.get("why"):                # forced by the ways together, not by one blocking or support
+            lines.append(f"  {_names(r['before'])} after {r['part']}: {r['why']}")
+            continue
         if r["direction"] is None:      # a support: the later parts rest on (or touch) the earlier one
             lines.append(f"  {_names(r['before'])} after {r['part']}{where}: "
                          f"{r.get('support', 'resting on or touching')} {r['part']}")
@@ -495,7 +523,8 @@ def _report(e: Explanation) -> list[str]:
                  + (", ".join(f"{p} {d}" for p, d in single.items()) or "none"))
     c = e.count
     lines.append(f"feasible sequences: {_number(c)} of 10^{c['log10_all_orders']:.2f} orders of the parts "
-                 f"(1 in 10^{max(0.0, -c['share_log10']):.2f}); {len(e.forced)} orders forced in every strategy")
+                 f"(1 in 10^{max(0.0, -c['share_log10']):.2f}); {len(e.forced)} orders forced in every "
+                 + ("strategy" if e.form == "strategies" else "feasible sequence"))
     if e.unfinished:
         lines.append("not reached within the time limit: " + "; ".join(e.unfinished))
     best = next((f for f in e.frees if f["count"]), None)

@@ -1,7 +1,8 @@
 """An exploded view of a derived plan: each part moved out along its insertion direction, coloured by stage.
 
-One strategy of the plan (the first by default) gives each part its insertion direction ``d`` and an
-order.  A part's **stage** is its earliest position in a sequence the strategy admits (one more than
+One strategy of the plan (the first by default; of a plan written as ways, one feasible sequence read as
+a strategy: :func:`~opportune.derive.waysfacts.sequence_strategy`) gives each part its insertion
+direction ``d`` and an order.  A part's **stage** is its earliest position in a sequence the strategy admits (one more than
 the parts that must go in before it); its **level** is the length of the longest chain of
 constraints that ends at it.  The part is drawn moved back along ``-d`` (where it comes from) by
 ``(level + 1) × gap`` plus its own length along ``d`` (a long shaft clears the short parts on its
@@ -140,7 +141,8 @@ def exploded(derivation, path: str | Path, *, strategy: int = 1, gap: float | No
     Raises
     ------
     ValueError
-        A suffix not in :data:`FORMATS`, a strategy the plan does not have, or a derivation without geometry.
+        A suffix not in :data:`FORMATS`, a strategy the plan does not have (a plan written as ways has one
+        to draw), or a derivation without geometry.
 
     Examples
     --------
@@ -155,10 +157,18 @@ def exploded(derivation, path: str | Path, *, strategy: int = 1, gap: float | No
         raise ValueError(f"{path.name}: write the figure as {', '.join(FORMATS)} (the suffix chooses)")
     if derivation.assembly is None:
         raise ValueError("the derivation carries no geometry: derive it from the meshes")
-    if not 1 <= strategy <= len(derivation.strategies):
+    if derivation.plan.is_ways:
+        if strategy != 1:
+            raise ValueError(f"strategy {strategy}: the plan is written as each part's ways in, and the figure "
+                             "draws one feasible sequence of it (give 1)")
+        from opportune.derive.waysfacts import sequence_strategy
+
+        chosen, what = sequence_strategy(derivation), "one feasible sequence"
+    elif not 1 <= strategy <= len(derivation.strategies):
         raise ValueError(f"strategy {strategy}: the plan has {len(derivation.strategies)} (give 1 to "
                          f"{len(derivation.strategies)})")
-    chosen = derivation.strategies[strategy - 1]
+    else:
+        chosen, what = derivation.strategies[strategy - 1], f"strategy s{strategy}"
     assembly = derivation.assembly
     level, stage = levels(derivation.blocking.parts, chosen.pairs)
     step = GAP_SHARE * assembly.size if gap is None else float(gap)
@@ -171,7 +181,7 @@ def exploded(derivation, path: str | Path, *, strategy: int = 1, gap: float | No
              -unit[directions[p.id]] * (step * (level[p.id] + 1) + _length(p, unit[directions[p.id]]))
              for p in assembly.parts}
     fig = _draw(assembly, moves, stage, title or f"{derivation.plan.name}: each part moved out along its insertion "
-                                                  f"direction (strategy s{strategy})")
+                                                  f"direction ({what})")
     fig.savefig(path, dpi=200, bbox_inches="tight")
     return path
 

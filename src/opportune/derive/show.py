@@ -38,8 +38,8 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
     Raises
     ------
     ValueError
-        A figure's suffix or strategy that cannot be drawn (checked before anything is drawn), a figure
-        file that cannot be written, or an explanation or figure asked of a plan written as ways.
+        A figure's suffix or strategy that cannot be drawn (checked before anything is drawn), or a figure
+        file that cannot be written.
 
     Examples
     --------
@@ -49,10 +49,6 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
     'gearbox: 14 parts, 10 strategies'
     """
     out = Shown(notes=list(derivation.notes))
-    if derivation.plan.is_ways and (explain or figure is not None):
-        raise ValueError("--explain and --figure read the plan's strategies, and this plan is written as each part's "
-                         "ways in (its partial orders are too many for a plan): derive without them, or give fewer "
-                         "directions or a base part for a plan of strategies")
     if figure is not None:
         from opportune.derive.figure import exploded
 
@@ -62,7 +58,8 @@ def show(derivation, *, explain: bool = False, figure: str | Path | None = None,
             raise ValueError(f"{figure}: cannot write the figure ({exc.strerror or exc}); give a path in a folder "
                              "you can write to") from None
         out.data["figure"] = str(written)
-        out.notes.append(f"wrote the exploded view (strategy s{strategy}) to {written}")
+        what = "one feasible sequence" if derivation.plan.is_ways else f"strategy s{strategy}"
+        out.notes.append(f"wrote the exploded view ({what}) to {written}")
     if explain:
         from opportune.derive.explain import explain as explain_plan
 

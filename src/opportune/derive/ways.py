@@ -8,6 +8,10 @@ for word: a way per minimal direction (:func:`~opportune.derive.plan.options`) w
 as its needs, and a way ``first`` (``first: true``: only as the first part of all) where the part may go in first.  The base
 and the process constraints are needs of every way (``a`` before ``b``: each way of ``b`` needs ``a``).
 
+Identical instances (the manifest's ``quantities``) are kept in the manifest's order (each after the one
+before) and written as their part's units, ``bolt#1``, ``bolt#2`` (:func:`as_units`), each with its own
+ways: the count is of distinct sequences of part ids, and a look names the part.
+
 ``opportune derive`` writes this form where the union of partial orders
 (:func:`~opportune.derive.plan.exact_strategies`) needs more than a plan holds; it is as exact, and its
 size is the blocking relation's (parts × directions), not the number of direction choices.
@@ -22,9 +26,9 @@ from opportune.derive.plan import Conditions, DeriveError, _lock_message, _no_se
 from opportune.derive.plan import options as minimal_directions
 from opportune.formats.ways import SEARCH_WORK
 from opportune.planning.plan import Part, Way
-from opportune.planning.ways import Undecided, WaysTable
+from opportune.planning.ways import Undecided, WaysTable, unit_id
 
-__all__ = ["exact_ways"]
+__all__ = ["exact_ways", "as_units"]
 
 
 def exact_ways(block: Blocking, conditions: Conditions | None = None,
@@ -99,3 +103,46 @@ def _check_feasible(block: Blocking, ways: dict[str, tuple[Way, ...]], condition
                           "no feasible sequence keeps the process constraints (the base and identical parts' "
                           "included): every choice of insertion directions contradicts them; drop or change a "
                           "constraint")
+
+
+def as_units(ways: dict[str, tuple[Way, ...]], quantities: dict) -> dict[str, tuple[Way, ...]]:
+    """Ways over instances as the plan writes them: the ``k``-th instance of a part of several (the
+    manifest's ``quantities``, in its order: the order :func:`exact_ways` keeps them in) is the part's
+    ``k``-th unit, ``part#k`` (:mod:`opportune.formats.ways`), with the instance's own ways.
+
+    Parameters
+    ----------
+    ways : dict
+        Each instance's ways (:func:`exact_ways`, the instances of a part in sequence).
+    quantities : dict
+        Part id → its instances.
+
+    Returns
+    -------
+    dict
+        The same ways keyed and naming units (``bolt#2``); the order of a unit after the one before it is
+        left out (a plan's units go in in order).
+
+    Examples
+    --------
+    >>> w = {"b1": (Way(frozenset({"c"})),), "b2": (Way(frozenset({"c"}), (frozenset({"b1"}),)),),
+    ...      "c": (Way(frozenset(), (frozenset({"b1", "b2"}),)),)}
+    >>> {k: [(sorted(x.blockers), [sorted(n) for n in x.needs]) for x in v] for k, v in as_units(w, {"b": ["b1", "b2"]}).items()}
+    {'b#1': [(['c'], [])], 'b#2': [(['c'], [])], 'c': [([], [['b#1', 'b#2']])]}
+    """
+    unit = {inst: unit_id(part, k) for part, group in quantities.items() if len(group) > 1
+            for k, inst in enumerate(group, 1)}
+    if not unit:
+        return ways
+    before = {unit[b]: unit[a] for group in quantities.values() if len(group) > 1 for a, b in zip(group, group[1:])}
+
+    def named(ids) -> frozenset[str]:
+        return frozenset(unit.get(q, q) for q in ids)
+
+    out = {}
+    for p, ws in ways.items():
+        key = unit.get(p, p)
+        chain = frozenset([before[key]]) if key in before else None
+        out[key] = tuple(Way(named(w.blockers), tuple(named(n) for n in w.needs if named(n) != chain), name=w.name,
+                             first=w.first) for w in ws)
+    return out

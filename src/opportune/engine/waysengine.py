@@ -5,8 +5,8 @@ the completions over installed sets (:mod:`opportune.engine.ways`) instead of li
 ``isinstance``: registered as its virtual subclass; it shares the order engine's bases, the deadline,
 the questions and the memory upkeep, not its orders), so a
 :class:`~opportune.engine.schedule.Schedule`, the :class:`~opportune.sequencer.Sequencer` and
-``opportune count`` take either plan alike.  A state is an installed set (bit ``i``: the ``i``-th
-declared part; every part is one unit) and one "strategy" (``consistent`` is 1 while the state is live,
+``opportune count`` take either plan alike.  A state is an installed set (a bit a unit, as the order
+engine's: a part of quantity ``q`` has ``q`` units, in a row, going in lowest first) and one "strategy" (``consistent`` is 1 while the state is live,
 0 for none): a part *can be installed* when it has a way that admits what is in and the set with it
 still has a completion (:meth:`WaysEngine.live`: never a dead end).
 
@@ -82,9 +82,12 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         self._start_upkeep(memory_limit)
         self.table = WaysTable.of(plan)
         n = self.table.n
-        self.first = list(range(n))
-        self.unit_part = list(range(n))
-        self._quantity = [1] * n
+        # units as the order engine has them: a part's units in a row, going in lowest first
+        self.first, self.unit_part = [], []
+        for i, p in enumerate(plan.parts):
+            self.first.append(len(self.unit_part))
+            self.unit_part += [i] * p.quantity
+        self._quantity = [p.quantity for p in plan.parts]
         self.n_units, self.full = n, self.table.full
         if max_memo == 0:       # as many entries as the memory holds (as the order engine's 0)
             from opportune.engine.count import entries_within
@@ -100,8 +103,8 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         self._count_cache, self._options_cache, self._positions_cache = {}, {}, {}
         self._option_cache, self._installable_cache, self._terms_cache = {}, {}, {}
         self._above = None
-        self._unit_ids = [p.id for p in plan.parts]
-        self._part_units = {p.id: 1 << i for i, p in enumerate(plan.parts)}
+        self._unit_ids = [plan.parts[i].id for i in self.unit_part]
+        self._part_units = {p.id: ((1 << p.quantity) - 1) << self.first[i] for i, p in enumerate(plan.parts)}
         self._until: float | None = None
         self._live: dict[int, bool] = {}
         self._alive: dict[int, bool] = {}   # liveness decided exactly (exact_after), never a guess
@@ -240,16 +243,23 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         return [p for p in self.installable(mask, consistent) if p in asked]
 
     def installable_units(self, mask: int, consistent: int) -> int:
-        """The installable parts as a mask."""
+        """The installable parts' next units as a mask."""
         out = 0
-        for p in self.installable(mask, consistent):
-            out |= self._part_units[p]
+        for i in _bits(self.table.goes(mask)):
+            if consistent and self.live(mask | 1 << i):
+                out |= 1 << i
         return out
+
+    def _next(self, mask: int, part: str) -> int | None:
+        """The part's next unit on ``mask`` (None: all its units in)."""
+        return self.next_unit(mask, self.plan.index(part))
 
     def missing_before(self, mask: int, part: str) -> list[str]:
         """Parts to install before ``part`` by its way that misses the fewest (one of each need), or []
         if every way of it is blocked by a part already in."""
-        i = self.plan.index(part)
+        i = self._next(mask, part)
+        if i is None:
+            return []
         best = None
         for blockers, needs in self.table.ways[i]:
             if blockers & mask:
@@ -278,7 +288,7 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
 
     def options_for(self, mask: int, consistent: int, parts: Collection[str]) -> dict[str, int]:
         """:meth:`options` for those of ``parts`` installable now."""
-        return {p: self.count(mask | self._part_units[p], 1) for p in self.installable_among(mask, consistent, parts)}
+        return {p: self.count(mask | 1 << self._next(mask, p), 1) for p in self.installable_among(mask, consistent, parts)}
 
     def prepare(self, deadline: Deadline | float | None = None) -> None:
         """Nothing to build: the ways are the tables."""
@@ -308,7 +318,8 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         """
         total = self.count(mask, consistent)
         sums = self._position_sums(mask) if total else {}
-        return total, {p: sums.get(self.plan.index(p), 0) for p in parts if not mask & self._part_units[p]}
+        nxt = {p: self._next(mask, p) for p in parts}
+        return total, {p: sums.get(u, 0) for p, u in nxt.items() if u is not None}
 
     def _position_sums(self, mask: int) -> dict[int, int]:
         key = mask
@@ -339,8 +350,7 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         """Expected position (1 = next) of each remaining part in a uniformly random completion."""
         from fractions import Fraction      # here: it loads decimal (5 ms at start-up)
 
-        total, sums = self.position_sums_for(mask, consistent, [p for p in self._unit_ids
-                                                                 if not mask & self._part_units[p]])
+        total, sums = self.position_sums_for(mask, consistent, [p.id for p in self.plan.parts])
         return {p: Fraction(v, total) for p, v in sums.items()} if total else {}
 
     def count_result(self, mask: int, *, rel_error: float = 0.01, time_limit: float = 10.0, seed: int = 0,

@@ -18,9 +18,15 @@ strategy binds all parts at once, a way binds one), nor is a plan of ways in gen
 partial orders: a plan derived from geometry whose parts have several incomparable ways each needs
 more partial orders than a plan holds, and one way list per part (:mod:`opportune.derive.plan`).
 
+Identical parts: a part of quantity ``q`` has ``q`` units that go in one after another (as in a plan of
+strategies); ``id#k`` names its ``k``-th unit, as a key (that unit's ways; the key ``id``: every unit's)
+and in a way; a bare ``id`` of such a part is its first unit among ``blockers`` and ``needs`` (any unit
+in) and its last among ``after`` (every unit in).  So the units of a derived plan's identical instances
+keep each instance's own ways, and a look names the part, any of its units.
+
 Limits (:mod:`opportune.limits`): at most :data:`~opportune.limits.MAX_WAYS` ways per part and
 :data:`~opportune.limits.MAX_CONSTRAINTS` part ids in all the ways of a plan, checked before anything
-else is built; every part of quantity 1; and the plan must have an admissible sequence, searched for
+else is built; and the plan must have an admissible sequence, searched for
 within :data:`SEARCH_WORK` sets and :data:`SEARCH_SECONDS` (a plan not decided within them is accepted
 with a warning).
 """
@@ -33,7 +39,7 @@ from opportune.formats.documents import Document
 from opportune.formats.problems import Problem, closest
 from opportune.limits import MAX_CONSTRAINTS, MAX_WAYS
 from opportune.planning.plan import Part, Plan, Strategy, Way
-from opportune.planning.ways import Undecided, WaysTable
+from opportune.planning.ways import UNIT, Undecided, WaysTable, unit_id
 
 __all__ = ["SEARCH_WORK", "WAYS_POLICIES", "check_ways", "not_for_ways", "ways_of_strategy", "ways_plan"]
 
@@ -88,11 +94,7 @@ from opportune.formats.documents import Document
             return {}, [Problem(f"the plan has both `{key}` and `ways`", "give the order one way: as partial "
                                 "orders (`requires`, `strategies`), an AND/OR graph (`assemblies`) or each part's "
                                 "ways in (`ways`)", file=file, line=doc.line((key,)), code="conflict")]
-    known = {p.id for p in parts}
-    problems += [Problem(f"part '{p.id}' has quantity {p.quantity}: a plan written as ways takes parts of quantity 1",
-                         "list identical units as parts of their own (a way per unit)", file=file,
-                         line=doc.line(("parts",)), parts=(p.id,), code="ways-quantity")
-                 for p in parts if p.quantity != 1]
+    known = {p.id: p.quantity for p in parts}
     raw = data["ways"] or {}
     total = sum(len(_ids(w.get("blockers"))) + len(_ids(w.get("after"))) + sum(len(n) for n in w.get("needs") or ())
                 for ws in raw.values() for w in ws)
@@ -102,7 +104,7 @@ from opportune.formats.documents import Document
     out: dict[str, tuple[Way, ...]] = {}
     for key, ways in raw.items():
         pid = str(key)
-        if pid not in known:
+        if _unit(pid, known) is None:
             problems.append(_unknown(pid, "listed with ways", known, file, doc.line(("ways", key))))
             continue
         if len(ways) > MAX_WAYS:
@@ -115,17 +117,33 @@ from opportune.formats.documents import Document
     return out, problems
 
 
-def _way(pid: str, i: int, entry: dict, known: set[str], doc: Document, problems: list[Problem]) -> Way | None:
-    """One way of part ``pid`` (its ``i``-th), or None with its problems appended."""
+def _unit(ref: str, known: dict[str, int]) -> tuple[str, int] | None:
+    """``(part, unit number or 0 for the part itself)`` of a reference ``id`` or ``id#k``; None if the plan has
+    no such part or unit."""
+    if ref in known:
+        return ref, 0
+    pid, sep, k = ref.rpartition(UNIT)
+    if sep and pid in known and k.isdigit() and 1 <= int(k) <= known[pid] and known[pid] > 1 and k[0] != "0":
+        return pid, int(k)
+    return None
+
+
+def _units(refs: list[str], known: dict[str, int], last: bool) -> list[str]:
+    """References as units: a bare id of a part of several is its first unit (its last, ``last``)."""
+    return [unit_id(q, known[q] if last else 1) if known.get(q, 1) > 1 else q for q in refs]
+
+
+def _way(pid: str, i: int, entry: dict, known: dict[str, int], doc: Document, problems: list[Problem]) -> Way | None:
+    """One way of part (or unit) ``pid`` (its ``i``-th), or None with its problems appended."""
     line = doc.line(("ways", pid, i))
     blockers, after = _ids(entry.get("blockers")), _ids(entry.get("after"))
     needs = [_ids(n) for n in entry.get("needs") or ()]
     bad = False
     for q in dict.fromkeys(blockers + after + [q for n in needs for q in n]):
-        if q not in known:
+        if _unit(q, known) is None:
             problems.append(_unknown(q, f"in way {i + 1} of '{pid}'", known, doc.file, line))
             bad = True
-        elif q == pid:
+        elif q == pid or (q in known and _unit(pid, known)[0] == q) or (pid in known and _unit(q, known)[0] == pid):
             problems.append(Problem(f"way {i + 1} of '{pid}' names '{pid}' itself", f"remove '{pid}' from its own way",
                                     file=doc.file, line=line, parts=(pid,), code="self-requirement"))
             bad = True
@@ -137,6 +155,8 @@ def _way(pid: str, i: int, entry: dict, known: set[str], doc: Document, problems
         bad = True
     if bad:
         return None
+    blockers, after = _units(blockers, known, False), _units(after, known, True)
+    needs = [_units(n, known, False) for n in needs]
     return Way(frozenset(blockers), tuple(frozenset([q]) for q in after) + tuple(frozenset(n) for n in needs),
                name=entry.get("name"), first=bool(entry.get("first", False)))
 
@@ -182,7 +202,8 @@ from opportune.formats.documents import Document
                         file=doc.file, line=doc.line(("ways",)), severity="warning", code="ways-undecided")]
     if found is not None:
         return []
-    first = [plan.parts[i].id for i in range(table.n) if table.can_go(0, i)]
+    units = [p.id for p in plan.parts for _ in range(p.quantity)]
+    first = list(dict.fromkeys(units[i] for i in range(table.n) if table.can_go(0, i)))
     why = (f"parts that can go in first: {', '.join(first[:12])}{', …' if len(first) > 12 else ''}" if first
            else "no part can go in first")
     return [Problem(f"the ways admit no sequence: whatever goes in first, some part can never go in ({why})",
@@ -193,13 +214,13 @@ from opportune.formats.documents import Document
 def ways_of_strategy(plan: Plan, strategy: int = 0) -> Plan:
     """A plan of strategies written as ways: exact for one strategy (the special case of ways).
 
-    Each part gets one way whose ``after`` is the part's required parts in the strategy (the plan's
-    other strategies are ignored: a union of strategies is not per-part).
+    Each part gets one way whose ``after`` is the part's required parts in the strategy (each one's last
+    unit; the plan's other strategies are ignored: a union of strategies is not per-part).
 
     Parameters
     ----------
     plan : Plan
-        A plan with strategies, every part of quantity 1.
+        A plan with strategies.
     strategy : int, default 0
         The strategy written.
 
@@ -208,21 +229,17 @@ def ways_of_strategy(plan: Plan, strategy: int = 0) -> Plan:
     Plan
         The same parts, the strategy as ways: it admits exactly the strategy's sequences.
 
-    Raises
-    ------
-    ValueError
-        A part of quantity above 1.
-
     Examples
     --------
     >>> from opportune.formats.loader import make_plan
     >>> ways_of_strategy(make_plan(["a", "b"], {"b": ["a"]})).to_dict()["ways"]
     {'b': [{'after': ['a']}]}
+    >>> ways_of_strategy(make_plan([{"id": "a", "quantity": 2}, "b"], {"b": ["a"]})).to_dict()["ways"]
+    {'b': [{'after': ['a#2']}]}
     """
-    if any(p.quantity != 1 for p in plan.parts):
-        raise ValueError("a plan written as ways takes parts of quantity 1")
     s: Strategy = plan.strategies[strategy]
-    ways = {pid: (Way(frozenset(), tuple(frozenset([b]) for b in before)),)
+    q = {p.id: p.quantity for p in plan.parts}
+    ways = {pid: (Way(frozenset(), tuple(frozenset([unit_id(b, q[b]) if q[b] > 1 else b]) for b in before)),)
             for pid, before in s.requires.items() if before}
     return ways_plan(plan.name, plan.parts, ways, description=plan.description)
 
@@ -236,9 +253,10 @@ def ways_plan(name: str, parts, ways, *, description: str | None = None, simulat
     name : str
         The plan's name.
     parts : iterable of Part
-        The parts, every one of quantity 1.
+        The parts.
     ways : mapping of str to iterable of Way
-        Each part's ways (a part not listed: one free way).
+        Each part's (or unit's, ``id#k``) ways (a part not listed: one free way), naming units
+        ``id#k`` of the parts of several (:meth:`~opportune.planning.ways.WaysTable.of`).
     description : str, optional
         Text for people.
     simulation : mapping, optional

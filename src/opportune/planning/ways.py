@@ -21,7 +21,34 @@ TYPE_CHECKING = False
 if TYPE_CHECKING:
     from opportune.planning.plan import Plan
 
-__all__ = ["WaysTable", "Undecided"]
+__all__ = ["WaysTable", "Undecided", "UNIT", "unit_id"]
+
+#: What joins a part's id and a unit's number in a plan written as ways (``screw#2``: the second screw to
+#: go in); part ids cannot hold it.
+UNIT = "#"
+
+
+def unit_id(part: str, k: int) -> str:
+    """The ``k``-th unit (from 1) of a part of several, as a plan written as ways names it.
+
+    Parameters
+    ----------
+    part : str
+        The part's id.
+    k : int
+        The unit's number, from 1.
+
+    Returns
+    -------
+    str
+        ``part#k``.
+
+    Examples
+    --------
+    >>> unit_id("screw", 2)
+    'screw#2'
+    """
+    return f"{part}{UNIT}{k}"
 
 
 class Undecided(Exception):
@@ -63,12 +90,15 @@ class WaysTable:
 
     @classmethod
     def of(cls, plan: Plan) -> "WaysTable":
-        """The table of a plan written as ways (a part the plan lists no way for: one free way).
+        """The table of a plan written as ways, a bit per unit: a part of quantity ``q`` has ``q`` units,
+        in declaration order, each after the one before (its units go in in order, as the order engine's
+        do), with the ways its key ``id#k`` lists (else those of ``id``); a part the plan lists no way for
+        has one free way.  A reference ``id#k`` in a way is the part's ``k``-th unit, ``id`` its only unit.
 
         Parameters
         ----------
         plan : Plan
-            A plan with :attr:`~opportune.planning.plan.Plan.ways`, every part of quantity 1.
+            A plan with :attr:`~opportune.planning.plan.Plan.ways`.
 
         Returns
         -------
@@ -81,22 +111,34 @@ class WaysTable:
         >>> plan = Plan("p", (Part("a"), Part("b")), (), ways={"b": (Way(frozenset({"a"})),)})
         >>> WaysTable.of(plan).ways
         [[(0, ())], [(1, ())]]
+        >>> plan = Plan("p", (Part("s", quantity=2), Part("c")), (), ways={"c": (Way(frozenset({"s#2"})),)})
+        >>> WaysTable.of(plan).ways          # the second screw after the first; c before the second
+        [[(0, ())], [(0, (1,))], [(2, ())]]
         """
-        index = {p.id: i for i, p in enumerate(plan.parts)}
+        first, n = {}, 0
+        for p in plan.parts:
+            first[p.id] = n
+            n += p.quantity
 
         def mask(ids) -> int:
             m = 0
             for q in ids:
-                m |= 1 << index[q]
+                pid, _, k = (q, "", "1") if q in first else q.rpartition(UNIT)
+                m |= 1 << (first[pid] + int(k) - 1)
             return m
 
         given = plan.ways or {}
         table = []
-        full = (1 << len(plan.parts)) - 1
-        for i, p in enumerate(plan.parts):
-            table.append([(full & ~(1 << i) if w.first else mask(w.blockers), tuple(mask(n) for n in w.needs))
-                          for w in given.get(p.id, ())] or [(0, ())])
-        return cls(len(plan.parts), table)
+        full = (1 << n) - 1
+        for p in plan.parts:
+            for k in range(p.quantity):
+                unit = first[p.id] + k
+                ways = given.get(unit_id(p.id, k + 1) if p.quantity > 1 else p.id) or given.get(p.id, ())
+                rows = [(full & ~(1 << unit) if w.first else mask(w.blockers), tuple(mask(x) for x in w.needs))
+                        for w in ways] or [(0, ())]
+                # a later unit after the one before it: interchangeable units, counted once in one order
+                table.append([(b, needs + (1 << unit - 1,)) for b, needs in rows] if k else rows)
+        return cls(n, table)
 
     def can_go(self, mask: int, i: int) -> bool:
         """Whether part ``i`` (not in ``mask``) has a way that admits the installed set ``mask``."""
