@@ -30,6 +30,7 @@
 #include <new>
 #include <limits>
 #include <stdexcept>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -126,6 +127,37 @@ public:
             if (c < 0) throw std::invalid_argument("a window that the bin cannot show");
         start(seconds, max_states);
         return taken(nmask, ncons, nbuf, window, (size_t)(at - window.begin()), hidden);
+    }
+
+    // PileWindow._actions: S(s), then on every look of s the best move (ties: install, then buffer, then
+    // `order`, the bin before the buffer), None where none is cheaper than a shake by 1e-12 or where the
+    // only moves install a part `legal` refuses; the same doubles as the Python loop over the looks, in
+    // one call (every value it reads is stored by S(s)).  Look -> (kind, group, source) or None.
+    py::tuple actions(uint64_t mask, uint64_t cons, std::vector<int> buf, std::vector<int> order,
+                      std::vector<bool> legal, double seconds, long long max_states) {
+        check_buffer(buf);
+        if ((int)order.size() != groups_ || (int)legal.size() != groups_)
+            throw std::invalid_argument("one order and one legality per part (and the others)");
+        start(seconds, max_states);
+        if (mask == full_) throw std::invalid_argument("a complete state has no looks");
+        double after_shake = S(mask, cons, buf);
+        double shake = shake_ + after_shake;
+        std::vector<int> bin = bin_counts(mask, buf);
+        py::dict out;
+        py::str install("install"), buffer("buffer"), from_bin("bin"), from_buffer("buffer");
+        for (const Look& l : looks(bin)) {
+            Best best = best_move(mask, cons, buf, bin, l.window, order, legal);
+            py::tuple key(l.window.size());
+            for (size_t k = 0; k < l.window.size(); ++k) key[k] = py::int_(l.window[k]);
+            if (best.kind < 0 || best.value > shake + 1e-12) {
+                out[key] = py::none();
+                continue;
+            }
+            out[key] = py::make_tuple(best.kind == 0 ? install : buffer, best.group,
+                                      best.kind == 1 ? py::object(py::none())
+                                                     : py::object(best.from_buffer ? from_buffer : from_bin));
+        }
+        return py::make_tuple(after_shake, out);
     }
 
     void reserve(size_t n) { table_.reserve(n); }
@@ -330,6 +362,61 @@ private:
         return best;
     }
 
+    // A move ranked as PileWindow._actions ranks it: (value, kind: 0 install 1 buffer, order, from the buffer)
+    struct Best {
+        double value = INF;
+        int kind = -1, order = 0, group = -1;
+        bool from_buffer = false;
+        void offer(double v, int k, int o, bool b, int g) {
+            if (kind >= 0 && !(std::make_tuple(v, k, o, b) < std::make_tuple(value, kind, order, from_buffer))) return;
+            value = v, kind = k, order = o, from_buffer = b, group = g;
+        }
+    };
+
+    // The best move on `window` at s by that rank (installations of parts `legal` refuses left out); the
+    // values as move_value computes them
+    Best best_move(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
+                   const std::vector<int>& window, const std::vector<int>& order, const std::vector<bool>& legal) {
+        int used = 0;
+        for (int c : buf) used += c;
+        bool free = capacity_ < 0 || used < capacity_;
+        std::vector<int> hidden(bin);
+        for (int w : window) hidden[w] -= 1;
+        Best best;
+        for (size_t a = 0; a < window.size(); ++a) {
+            int i = window[a];
+            if (a && window[a - 1] == i) continue;
+            if (i == parts_) {
+                if (free && other_move_ < INF) {
+                    buf[i] += 1;
+                    best.offer(other_move_ + taken(mask, cons, buf, window, a, hidden), 1, order[i], false, i);
+                    buf[i] -= 1;
+                }
+                continue;
+            }
+            int u = next_unit(mask, i);
+            uint64_t after = consistent_after(mask, cons, u);
+            if (after && legal[i])
+                best.offer(move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden), 0, order[i], false, i);
+            if (free) {
+                buf[i] += 1;
+                best.offer(move_[i] + taken(mask, cons, buf, window, a, hidden), 1, order[i], false, i);
+                buf[i] -= 1;
+            }
+        }
+        for (int i = 0; i < parts_; ++i) {
+            if (!buf[i] || !legal[i]) continue;
+            int u = next_unit(mask, i);
+            uint64_t after = consistent_after(mask, cons, u);
+            if (!after) continue;
+            buf[i] -= 1;
+            double v = move_[i] + V(mask | uint64_t(1) << u, after, buf, window);
+            buf[i] += 1;
+            best.offer(v, 0, order[i], true, i);
+        }
+        return best;
+    }
+
     // PileSolver._after for a unit taken from the window (window[a]): a hidden unit replaces it
     double taken(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window, size_t a,
                  const std::vector<int>& hidden) {
@@ -384,6 +471,8 @@ void bind_pile(py::module_& m) {
         .def("taken_value", &PileCore::taken_value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("window"),
              py::arg("part"), py::arg("nmask"), py::arg("ncons"), py::arg("nbuf"), py::arg("seconds"),
              py::arg("max_states"))
+        .def("actions", &PileCore::actions, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("order"),
+             py::arg("legal"), py::arg("seconds"), py::arg("max_states"))
         .def("reserve", &PileCore::reserve, py::arg("states"))
         .def_property_readonly("states", &PileCore::states)
         .def_property_readonly("bytes", &PileCore::bytes);
