@@ -427,6 +427,9 @@ private:
         if (total == 0) return V(mask, cons, buf, rest);
         Sum sum{compensated_};
         std::vector<int> next(rest.size() + 1);
+        // the state's code once for all its windows (V finds each from it; the values are V's)
+        bool done = mask == full_;
+        uint64_t base = done ? 0 : base_code(mask, cons, buf);
         for (int j = 0; j < groups_; ++j) {
             int c = hidden[j];
             if (!c) continue;
@@ -435,7 +438,12 @@ private:
             while (r < rest.size() && rest[r] <= j) next[k++] = rest[r++];
             next[k++] = j;
             while (r < rest.size()) next[k++] = rest[r++];
-            sum.add((double)c / (double)total * V(mask, cons, buf, next));
+            double v = 0.0;
+            if (!done) {
+                const double* got = table_.find(base + window_code(next));
+                v = got ? *got : V(mask, cons, buf, next);
+            }
+            sum.add((double)c / (double)total * v);
         }
         return sum.result();
     }

@@ -405,6 +405,9 @@ PILE_WINDOW_CACHE = 512
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.
 WINDOW_REFINE = 2
+#: Window plans' engines the pile's and the weighted bin's windows keep (by state and parts, policies/lumped.py):
+#: a window's plan is listed to predict its states, then solved, and a state's looks ask for it again.
+WINDOW_ENGINES = 64
 
 # ------------------------------------------------------------ the weighted bin's frontier window (policies/weighted_window.py)
 

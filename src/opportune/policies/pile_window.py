@@ -37,7 +37,7 @@ from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
 from opportune.policies.base import SHAKE, Action
-from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup, window_engine
+from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
@@ -227,7 +227,7 @@ class PileWindow(LumpedWindow):
     def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
         """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
         key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
-        sub = window_engine(engine, mask, consistent, parts)
+        sub = self._window_engine(engine, mask, consistent, parts)
         solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
                                     max_states=self._cap(len(parts)), others=others, other_move=other_move)
         solver.deadline = as_deadline(self.deadline)
