@@ -408,6 +408,10 @@ WINDOW_REFINE = 2
 #: Window plans' engines the pile's and the weighted bin's windows keep (by state and parts, policies/lumped.py):
 #: a window's plan is listed to predict its states, then solved, and a state's looks ask for it again.
 WINDOW_ENGINES = 64
+#: States whose parts' remaining ancestors the frontier windows keep per plan (policies/window.py): a state's
+#: windows of every size and strategy ask them, O(parts × strategies) each (on KILBRID at 3 visible about a
+#: quarter of a pile window's decision before); a few hundred states are a run's recent ones.
+WINDOW_ANCESTORS = 256
 
 # ------------------------------------------------------------ the weighted bin's frontier window (policies/weighted_window.py)
 
