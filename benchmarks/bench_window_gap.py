@@ -98,8 +98,10 @@ def run_losses(opt, policy, engine, rng: random.Random, pile: bool, weights: lis
     return loss, looks
 
 
-def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed: int) -> dict:
-    """The fallback's gap over the optimum on ``runs`` seeded runs: mean, 95% half-width, the optimum."""
+def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed: int,
+             window_states: int | None = None) -> dict:
+    """The fallback's gap over the optimum on ``runs`` seeded runs: mean, 95% half-width, the optimum;
+    ``window_states``: the window's state cap instead of its default (to measure the cap's trade-off)."""
     engine = OrderEngine(plan)
     weights = {p.id: WEIGHTS[i % len(WEIGHTS)] for i, p in enumerate(plan.parts)} if bin == "weighted" else None
     settings = dict(visible=visible, capacity=capacity, max_states=20_000_000)
@@ -108,6 +110,9 @@ def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed
     best = opt.value()
     policy = Lookahead(visible=visible, capacity=capacity, bin="pile" if bin == "pile" else "uniform",
                        weights=weights, optimal=False)
+    if window_states is not None:
+        policy._window_serves(engine)       # the weighted bin's window is made there
+        policy.window.max_states = window_states
     w = [weights[p.id] for p in plan.parts] if weights else [1.0] * len(plan.parts)
     losses, cpu = [], time.process_time()
     for i in range(runs):
@@ -115,7 +120,7 @@ def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed
         losses.append(loss / best)
     mean = statistics.mean(losses)
     half = (t975(runs - 1) * statistics.stdev(losses) / runs ** 0.5) if runs > 1 else float("inf")
-    return {"mean": mean, "half": half, "optimum": best, "cpu": time.process_time() - cpu,
+    return {"mean": mean, "half": half, "optimum": best, "cpu": time.process_time() - cpu, "cap": policy.window.max_states,
             "window": policy.window.work if policy.window is not None else {}}
 
 
@@ -135,15 +140,17 @@ def main(argv=None) -> int:
     ap.add_argument("--settings", default="1x2,2x1,2x2,3x2", help="VISIBLExLOCATIONS, comma-separated (inf: unlimited)")
     ap.add_argument("--runs", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--window-states", type=int, help="the window's state cap (default: the tuned one)")
     args = ap.parse_args(argv)
     plans = lab_plans(args.plans.split(","), [int(s) for s in args.sizes.split(",")], args.lab_plans, 0)
     settings = [(int(v), None if c == "inf" else int(c)) for v, c in (s.split("x") for s in args.settings.split(","))]
-    print(f"| plan | bin | setting | runs | gap, mean | 95% interval | CPU, s |\n| --- | --- | --- | ---: | ---: | ---: | ---: |")
+    print("| plan | bin | setting | window states | runs | gap, mean | 95% interval | CPU, s |\n"
+          "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |")
     for plan in plans:
         for visible, capacity in settings:
-            r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed)
+            r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed, args.window_states)
             print(f"| {plan.name} | {args.bin} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | "
-                  f"{args.runs} | {100 * r['mean']:+.2f}% | ±{100 * r['half']:.2f} | {r['cpu']:.0f} |", flush=True)
+                  f"{r['cap']:,} | {args.runs} | {100 * r['mean']:+.2f}% | ±{100 * r['half']:.2f} | {r['cpu']:.0f} |", flush=True)
     return 0
 
 

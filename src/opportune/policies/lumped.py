@@ -164,7 +164,7 @@ class LumpedWindow(DecidesOnMasks):
         # looks), each a function of its key alone: a decision never depends on what was asked before
         self._frontiers: OrderedDict = OrderedDict()   # by (installed, strategies, parts first, size)
         self._engines: OrderedDict = OrderedDict()     # by (installed, strategies, parts): the window plan's engine
-        self._listings: OrderedDict = OrderedDict()    # by (installed, strategies, parts): its states listed
+        self._listings: OrderedDict = OrderedDict()    # by (installed, strategies, parts, most): its states listed
         self._engine = None
         self.last_table = None
 
@@ -213,13 +213,14 @@ class LumpedWindow(DecidesOnMasks):
         if got is None:
             return None
         for _ in range(REFINE if outside else 0):
-            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts))
+            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self._cap(len(parts))))
             pick = None
             for size in (s for s in sizes if s > got.size):
                 more, rest = self._frontier(engine, mask, consistent, first, size)
                 if more == (pick[1] if pick else parts):
                     continue
-                if ratio * self._listed(engine, mask, consistent, more) > self._cap(len(more)):
+                cap = self._cap(len(more))
+                if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
                     break
                 pick = (size, more, rest)
                 if not rest:
@@ -245,19 +246,17 @@ class LumpedWindow(DecidesOnMasks):
                 return None
         return got
 
-    def _listed(self, engine, mask: int, consistent: int, parts: list[int]) -> float:
-        """The states of the window's plan without the others, listed up to its state cap (``inf`` past it:
-        never predicted to fit), cached by state and parts (a function of them alone).  O(states listed)."""
+    def _listed(self, engine, mask: int, consistent: int, parts: list[int], most: int) -> int:
+        """The states of the window's plan without the others, listed (more than ``most``: stopped there),
+        cached by state, parts and ``most`` (a function of them alone).  O(states listed)."""
         from opportune.policies.states import estimate_states
 
-        key = (mask, consistent, tuple(parts))
+        key = (mask, consistent, tuple(parts), most)
         got = _cached(self._listings, key)
         if got is None:
-            most = self._cap(len(parts))
-            listed = estimate_states(self._window_engine(engine, mask, consistent, parts), visible=self.visible,
-                                     capacity=self.capacity, pile=self.pile, stop_above=most, time_limit=None)
-            got = _keep(self._listings, key, listed.states if listed.exact and listed.states <= most
-                        else float("inf"), self.cache)
+            got = _keep(self._listings, key, estimate_states(
+                self._window_engine(engine, mask, consistent, parts), visible=self.visible, capacity=self.capacity,
+                pile=self.pile, stop_above=most, time_limit=None).states, self.cache)
         return got
 
     def _frontier(self, engine, mask: int, consistent: int, first: tuple, size: int):
