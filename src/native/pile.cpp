@@ -27,6 +27,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <deque>
 #include <new>
 #include <limits>
 #include <stdexcept>
@@ -226,13 +227,13 @@ private:
     // PileSolver._look_distribution: units drawn one by one without replacement (weights all 1)
     void draw(int depth, int k, double prob, std::vector<int>& counts, std::vector<int>& taken, std::vector<Look>& out) {
         if (depth == k) {
-            std::vector<int> w(taken);
-            std::sort(w.begin(), w.end());
-            uint64_t code = window_code(w);
+            leaf_.assign(taken.begin(), taken.end());  // scratch: a leaf allocates only for a new look
+            std::sort(leaf_.begin(), leaf_.end());
+            uint64_t code = window_code(leaf_);
             int& s = slot_[code];
             if (s < 0) {
                 s = (int)out.size();
-                out.push_back({std::move(w), 0.0 + prob});
+                out.push_back({leaf_, 0.0 + prob});
             } else {
                 out[s].p = out[s].p + prob;
             }
@@ -324,7 +325,9 @@ private:
         for (int c : buf) used += c;
         bool free = capacity_ < 0 || used < capacity_;
         // the units of the bin that are not in the window
-        std::vector<int> hidden(bin);
+        Frame frame(*this);
+        std::vector<int>& hidden = frame->hidden;
+        hidden.assign(bin.begin(), bin.end());
         for (int w : window) hidden[w] -= 1;
         double best = INF;
         for (size_t a = 0; a < window.size(); ++a) {
@@ -380,7 +383,9 @@ private:
         int used = 0;
         for (int c : buf) used += c;
         bool free = capacity_ < 0 || used < capacity_;
-        std::vector<int> hidden(bin);
+        Frame frame(*this);
+        std::vector<int>& hidden = frame->hidden;
+        hidden.assign(bin.begin(), bin.end());
         for (int w : window) hidden[w] -= 1;
         Best best;
         for (size_t a = 0; a < window.size(); ++a) {
@@ -420,13 +425,16 @@ private:
     // PileSolver._after for a unit taken from the window (window[a]): a hidden unit replaces it
     double taken(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window, size_t a,
                  const std::vector<int>& hidden) {
-        std::vector<int> rest(window);
+        Frame frame(*this);
+        std::vector<int>& rest = frame->rest;
+        rest.assign(window.begin(), window.end());
         rest.erase(rest.begin() + a);
         int total = 0;
         for (int c : hidden) total += c;
         if (total == 0) return V(mask, cons, buf, rest);
         Sum sum{compensated_};
-        std::vector<int> next(rest.size() + 1);
+        std::vector<int>& next = frame->next;
+        next.resize(rest.size() + 1);
         // the state's code once for all its windows (V finds each from it; the values are V's)
         bool done = mask == full_;
         uint64_t base = done ? 0 : base_code(mask, cons, buf);
@@ -447,6 +455,30 @@ private:
         }
         return sum.result();
     }
+
+    // Scratch vectors per depth of the recursion (move_value -> taken -> V -> S -> move_value ...): a look's
+    // moves allocate nothing once the deepest frame is made.  A deque: a new frame moves none of the others.
+    struct Scratch {
+        std::vector<int> hidden, rest, next;
+    };
+    std::deque<Scratch> frames_;
+    size_t depth_ = 0;
+    std::vector<int> leaf_;  // draw's leaf (no recursion inside draw)
+    class Frame {
+    public:
+        explicit Frame(PileCore& core) : core_(core) {
+            if (core_.depth_ == core_.frames_.size()) core_.frames_.emplace_back();
+            scratch_ = &core_.frames_[core_.depth_++];
+        }
+        ~Frame() { --core_.depth_; }
+        Frame(const Frame&) = delete;
+        Frame& operator=(const Frame&) = delete;
+        Scratch* operator->() const { return scratch_; }
+
+    private:
+        PileCore& core_;
+        Scratch* scratch_;
+    };
 
     bool compensated_;
     int others_, groups_ = 0, most_others_ = 0;
