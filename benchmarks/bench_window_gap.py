@@ -62,7 +62,6 @@ def _draw(rng: random.Random, counts: list[int], k: int, weights: list[float]) -
 def run_losses(opt, policy, engine, rng: random.Random, pile: bool, weights: list[float]) -> tuple[float, int]:
     """One seeded run of ``policy``: the optimum's losses summed over its looks, and the looks."""
     key, costs = opt.start_key(), opt.costs
-    units = [i for i, p in enumerate(engine.plan.parts) for _ in range(p.quantity)]
     stack: list[int] = []
     window: list[int] = []
     loss, looks = 0.0, 0

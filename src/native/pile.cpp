@@ -89,6 +89,8 @@ public:
         windows_ = (uint64_t)windows;
         max_pairs_ = (~uint64_t(0) - 1) / (nbuffers_ * windows_);
         slot_.assign(windows_, -1);
+        no_order_.assign(groups_, 0);
+        every_move_.assign(groups_, true);
     }
 
     double shake_value(uint64_t mask, uint64_t cons, std::vector<int> buf, double seconds, long long max_states) {
@@ -321,48 +323,8 @@ private:
     // m(s, W): the best move's cost to go (INF: no move)
     double move_value(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
                       const std::vector<int>& window) {
-        int used = 0;
-        for (int c : buf) used += c;
-        bool free = capacity_ < 0 || used < capacity_;
-        // the units of the bin that are not in the window
-        Frame frame(*this);
-        std::vector<int>& hidden = frame->hidden;
-        hidden.assign(bin.begin(), bin.end());
-        for (int w : window) hidden[w] -= 1;
-        double best = INF;
-        for (size_t a = 0; a < window.size(); ++a) {
-            int i = window[a];
-            if (a && window[a - 1] == i) continue;
-            if (i == parts_) {  // an other: buffered (a free location), never installed
-                if (free && other_move_ < INF) {
-                    buf[i] += 1;
-                    double v = other_move_ + taken(mask, cons, buf, window, a, hidden);
-                    buf[i] -= 1;
-                    best = std::min(best, v);
-                }
-                continue;
-            }
-            int u = next_unit(mask, i);
-            uint64_t after = consistent_after(mask, cons, u);
-            if (after) best = std::min(best, move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden));
-            if (free) {
-                buf[i] += 1;
-                double v = move_[i] + taken(mask, cons, buf, window, a, hidden);
-                buf[i] -= 1;
-                best = std::min(best, v);
-            }
-        }
-        for (int i = 0; i < parts_; ++i) {
-            if (!buf[i]) continue;
-            int u = next_unit(mask, i);
-            uint64_t after = consistent_after(mask, cons, u);
-            if (!after) continue;
-            buf[i] -= 1;
-            double v = move_[i] + V(mask | uint64_t(1) << u, after, buf, window);
-            buf[i] += 1;
-            best = std::min(best, v);
-        }
-        return best;
+        // every move a move (none refused), the ties' order of no matter: the least value, in the same calls
+        return best_move(mask, cons, buf, bin, window, no_order_, every_move_).value;
     }
 
     // A move ranked as PileWindow._actions ranks it: (value, kind: 0 install 1 buffer, order, from the buffer)
@@ -464,6 +426,8 @@ private:
     std::deque<Scratch> frames_;
     size_t depth_ = 0;
     std::vector<int> leaf_;  // draw's leaf (no recursion inside draw)
+    std::vector<int> no_order_;     // move_value's ranks: all equal
+    std::vector<bool> every_move_;  // and nothing refused
     class Frame {
     public:
         explicit Frame(PileCore& core) : core_(core) {

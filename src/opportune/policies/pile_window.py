@@ -18,7 +18,8 @@ seen outside the state's window would otherwise be valued as a lumped other, nev
 window would shake where the optimum buffers or installs it).  The decision on a look is the window's best
 action on it (a visible part outside the window is an other; buffered, it is the one first in the
 topological order); an installation no open strategy of the plan allows is never chosen.  Every look of
-a window is decided when it is solved (:class:`PileWindowTable`), and looks whose parts one window holds
+a window is decided when it is solved (:class:`PileWindowTable`; :meth:`PileWindowSolver.actions`, in one
+call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
 successors.  The window's size is the largest predicted to fit
 :data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
