@@ -18,7 +18,7 @@ from opportune.engine import OrderEngine
 from opportune.planning.costs import TimeModel
 from opportune.policies.lookahead import Lookahead
 from opportune.policies.pile import pile_solver
-from opportune.policies.lumped import OTHERS, window_plan
+from opportune.policies.lumped import OTHERS, window_engine, window_plan
 from opportune.policies.pile_window import (
     CompiledPileWindowSolver,
     PileWindow,
@@ -159,3 +159,81 @@ def test_the_default_decides_by_the_pile_window_with_its_work_counted_and_bounde
     assert decisions[0] == decisions[1]
     rule = Sequencer(plan, policy=Lookahead(visible=2, capacity=2, bin="pile", optimal=False)).decide(["1", "2"]).rule
     assert "frontier window" in rule and "pile" in rule, rule
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(plan=random_plans(max_parts=4, max_units=6, max_strategies=2), seed=st.integers(0, 1000),
+       others=st.integers(0, 4))
+def test_every_look_s_best_move_in_one_compiled_call_is_the_python_loop_s(plan, seed, others):
+    """``actions`` (the best move on every look of a state, in one call to the compiled core) against its
+    Python reference, at the start and a few moves in, with random tie ranks and installations refused:
+    the same value after a shake (the same double) and the same move, or shake, on every look."""
+    rng = random.Random(seed)
+    engine, costs = OrderEngine(plan), _costs(plan, rng)
+    other_move = rng.choice([0.8, 1.0, float("inf")])
+    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 2))
+    if mask == engine.full:
+        return
+    for visible, capacity in SETTINGS:
+        if capacity is not None and len(buffer) > capacity:
+            continue
+        kw = dict(visible=visible, capacity=capacity, costs=costs, others=others, other_move=other_move)
+        py, cc = PileWindowSolver(engine, **kw), CompiledPileWindowSolver(engine, **kw)
+        groups = len(py.quantity)
+        order = rng.sample(range(groups), groups)
+        legal = [rng.random() < 0.8 for _ in range(groups)]
+        key = py.policy_key(mask, cons, buffer)
+        got, want = cc.actions(key, order, legal), py.actions(key, order, legal)
+        assert got == want, (visible, capacity)
+        assert cc.states == py.states
+
+
+def _decisions(window, engine, asks):
+    return [window.choose_at(engine, mask, cons, buffer, 2, look) for mask, cons, buffer, look in asks]
+
+
+@pytest.mark.parametrize("window_class", ["pile", "weighted"])
+def test_a_decision_does_not_depend_on_what_the_window_was_asked_before(window_class):
+    """The caches of the search for a state's window (frontier windows, window plans' engines, their listed
+    states) hold functions of their keys alone: on KILBRID, decisions asked in one order of states and looks
+    are those of a fresh policy per decision, and a listing kept is a fresh listing's."""
+    from opportune.policies.states import estimate_states
+    from opportune.policies.weighted_window import WeightedWindow
+
+    plan = load_plan("salbp:KILBRID")
+    engine, rng = OrderEngine(plan), random.Random(5)
+
+    def fresh():
+        if window_class == "pile":
+            return PileWindow(visible=2, capacity=2, max_states=3_000)
+        return WeightedWindow(visible=2, capacity=2, max_states=3_000,
+                              weights={p: 1.0 + i % 3 for i, p in enumerate(plan.part_ids)})
+
+    asks = []
+    for _ in range(3):
+        mask, cons, buffer = _walk(engine, rng, rng.randint(0, 6))
+        left = [p.id for i, p in enumerate(plan.parts) if engine.next_unit(mask, i) is not None and p.id not in buffer]
+        asks += [(mask, cons, buffer, tuple(rng.sample(left, 2))) for _ in range(3)]
+    shared = fresh()
+    together = _decisions(shared, engine, asks + asks[::-1])
+    alone = [_decisions(fresh(), engine, [ask])[0] for ask in asks + asks[::-1]]
+    assert together == alone
+    assert shared._listings and shared._frontiers and shared._engines
+    for (mask, cons, parts, most), states in list(shared._listings.items())[:6]:
+        sub = window_engine(engine, mask, cons, list(parts))
+        assert states == estimate_states(sub, visible=2, capacity=2, pile=shared.pile, stop_above=most,
+                                         time_limit=None).states
+
+
+def test_past_its_deadline_the_window_stops_and_the_base_decides():
+    """A deadline already passed (injected, not timed) stops the window's compiled programme at its first
+    state, every look's moves included: no window decides, the base does, and that is counted."""
+    from opportune.engine.deadline import Deadline
+
+    plan = load_plan("salbp:KILBRID")
+    engine = OrderEngine(plan)
+    window = PileWindow(visible=3, capacity=2)
+    window.deadline = Deadline(0.0)
+    action = window.choose_at(engine, 0, engine.all_strategies, (), 2, ("1", "2", "3"))
+    assert window.last_table is None and window.work["by_base"] == 1 and window.work["windows"] == 1
+    assert action == window.base.choose_at(engine, 0, engine.all_strategies, (), 2, ("1", "2", "3"))

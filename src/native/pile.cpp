@@ -27,9 +27,11 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <deque>
 #include <new>
 #include <limits>
 #include <stdexcept>
+#include <tuple>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -87,6 +89,8 @@ public:
         windows_ = (uint64_t)windows;
         max_pairs_ = (~uint64_t(0) - 1) / (nbuffers_ * windows_);
         slot_.assign(windows_, -1);
+        no_order_.assign(groups_, 0);
+        every_move_.assign(groups_, true);
     }
 
     double shake_value(uint64_t mask, uint64_t cons, std::vector<int> buf, double seconds, long long max_states) {
@@ -126,6 +130,37 @@ public:
             if (c < 0) throw std::invalid_argument("a window that the bin cannot show");
         start(seconds, max_states);
         return taken(nmask, ncons, nbuf, window, (size_t)(at - window.begin()), hidden);
+    }
+
+    // PileWindow._actions: S(s), then on every look of s the best move (ties: install, then buffer, then
+    // `order`, the bin before the buffer), None where none is cheaper than a shake by 1e-12 or where the
+    // only moves install a part `legal` refuses; the same doubles as the Python loop over the looks, in
+    // one call (every value it reads is stored by S(s)).  Look -> (kind, group, source) or None.
+    py::tuple actions(uint64_t mask, uint64_t cons, std::vector<int> buf, std::vector<int> order,
+                      std::vector<bool> legal, double seconds, long long max_states) {
+        check_buffer(buf);
+        if ((int)order.size() != groups_ || (int)legal.size() != groups_)
+            throw std::invalid_argument("one order and one legality per part (and the others)");
+        start(seconds, max_states);
+        if (mask == full_) throw std::invalid_argument("a complete state has no looks");
+        double after_shake = S(mask, cons, buf);
+        double shake = shake_ + after_shake;
+        std::vector<int> bin = bin_counts(mask, buf);
+        py::dict out;
+        py::str install("install"), buffer("buffer"), from_bin("bin"), from_buffer("buffer");
+        for (const Look& l : looks(bin)) {
+            Best best = best_move(mask, cons, buf, bin, l.window, order, legal);
+            py::tuple key(l.window.size());
+            for (size_t k = 0; k < l.window.size(); ++k) key[k] = py::int_(l.window[k]);
+            if (best.kind < 0 || best.value > shake + 1e-12) {
+                out[key] = py::none();
+                continue;
+            }
+            out[key] = py::make_tuple(best.kind == 0 ? install : buffer, best.group,
+                                      best.kind == 1 ? py::object(py::none())
+                                                     : py::object(best.from_buffer ? from_buffer : from_bin));
+        }
+        return py::make_tuple(after_shake, out);
     }
 
     void reserve(size_t n) {  // the values' table and, on a plan written as ways, the sets decided live or dead
@@ -199,13 +234,13 @@ private:
     // PileSolver._look_distribution: units drawn one by one without replacement (weights all 1)
     void draw(int depth, int k, double prob, std::vector<int>& counts, std::vector<int>& taken, std::vector<Look>& out) {
         if (depth == k) {
-            std::vector<int> w(taken);
-            std::sort(w.begin(), w.end());
-            uint64_t code = window_code(w);
+            leaf_.assign(taken.begin(), taken.end());  // scratch: a leaf allocates only for a new look
+            std::sort(leaf_.begin(), leaf_.end());
+            uint64_t code = window_code(leaf_);
             int& s = slot_[code];
             if (s < 0) {
                 s = (int)out.size();
-                out.push_back({std::move(w), 0.0 + prob});
+                out.push_back({leaf_, 0.0 + prob});
             } else {
                 out[s].p = out[s].p + prob;
             }
@@ -293,44 +328,63 @@ private:
     // m(s, W): the best move's cost to go (INF: no move)
     double move_value(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
                       const std::vector<int>& window) {
+        // every move a move (none refused), the ties' order of no matter: the least value, in the same calls
+        return best_move(mask, cons, buf, bin, window, no_order_, every_move_).value;
+    }
+
+    // A move ranked as PileWindow._actions ranks it: (value, kind: 0 install 1 buffer, order, from the buffer)
+    struct Best {
+        double value = INF;
+        int kind = -1, order = 0, group = -1;
+        bool from_buffer = false;
+        void offer(double v, int k, int o, bool b, int g) {
+            if (kind >= 0 && !(std::make_tuple(v, k, o, b) < std::make_tuple(value, kind, order, from_buffer))) return;
+            value = v, kind = k, order = o, from_buffer = b, group = g;
+        }
+    };
+
+    // The best move on `window` at s by that rank (installations of parts `legal` refuses left out); the
+    // values as move_value computes them
+    Best best_move(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
+                   const std::vector<int>& window, const std::vector<int>& order, const std::vector<bool>& legal) {
         int used = 0;
         for (int c : buf) used += c;
         bool free = capacity_ < 0 || used < capacity_;
-        // the units of the bin that are not in the window
-        std::vector<int> hidden(bin);
+        Frame frame(*this);
+        std::vector<int>& hidden = frame->hidden;
+        hidden.assign(bin.begin(), bin.end());
         for (int w : window) hidden[w] -= 1;
-        double best = INF;
+        Best best;
         for (size_t a = 0; a < window.size(); ++a) {
             int i = window[a];
             if (a && window[a - 1] == i) continue;
-            if (i == parts_) {  // an other: buffered (a free location), never installed
+            if (i == parts_) {
                 if (free && other_move_ < INF) {
                     buf[i] += 1;
-                    double v = other_move_ + taken(mask, cons, buf, window, a, hidden);
+                    best.offer(other_move_ + taken(mask, cons, buf, window, a, hidden), 1, order[i], false, i);
                     buf[i] -= 1;
-                    best = std::min(best, v);
                 }
                 continue;
             }
             int u = next_unit(mask, i);
             uint64_t after = consistent_after(mask, cons, u);
-            if (after) best = std::min(best, move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden));
+            if (after && legal[i])
+                best.offer(move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden), 0, order[i], false, i);
             if (free) {
                 buf[i] += 1;
-                double v = move_[i] + taken(mask, cons, buf, window, a, hidden);
+                best.offer(move_[i] + taken(mask, cons, buf, window, a, hidden), 1, order[i], false, i);
                 buf[i] -= 1;
-                best = std::min(best, v);
             }
         }
         for (int i = 0; i < parts_; ++i) {
-            if (!buf[i]) continue;
+            if (!buf[i] || !legal[i]) continue;
             int u = next_unit(mask, i);
             uint64_t after = consistent_after(mask, cons, u);
             if (!after) continue;
             buf[i] -= 1;
             double v = move_[i] + V(mask | uint64_t(1) << u, after, buf, window);
             buf[i] += 1;
-            best = std::min(best, v);
+            best.offer(v, 0, order[i], true, i);
         }
         return best;
     }
@@ -338,13 +392,19 @@ private:
     // PileSolver._after for a unit taken from the window (window[a]): a hidden unit replaces it
     double taken(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window, size_t a,
                  const std::vector<int>& hidden) {
-        std::vector<int> rest(window);
+        Frame frame(*this);
+        std::vector<int>& rest = frame->rest;
+        rest.assign(window.begin(), window.end());
         rest.erase(rest.begin() + a);
         int total = 0;
         for (int c : hidden) total += c;
         if (total == 0) return V(mask, cons, buf, rest);
         Sum sum{compensated_};
-        std::vector<int> next(rest.size() + 1);
+        std::vector<int>& next = frame->next;
+        next.resize(rest.size() + 1);
+        // the state's code once for all its windows (V finds each from it; the values are V's)
+        bool done = mask == full_;
+        uint64_t base = done ? 0 : base_code(mask, cons, buf);
         for (int j = 0; j < groups_; ++j) {
             int c = hidden[j];
             if (!c) continue;
@@ -353,10 +413,41 @@ private:
             while (r < rest.size() && rest[r] <= j) next[k++] = rest[r++];
             next[k++] = j;
             while (r < rest.size()) next[k++] = rest[r++];
-            sum.add((double)c / (double)total * V(mask, cons, buf, next));
+            double v = 0.0;
+            if (!done) {
+                const double* got = table_.find(base + window_code(next));
+                v = got ? *got : V(mask, cons, buf, next);
+            }
+            sum.add((double)c / (double)total * v);
         }
         return sum.result();
     }
+
+    // Scratch vectors per depth of the recursion (move_value -> taken -> V -> S -> move_value ...): a look's
+    // moves allocate nothing once the deepest frame is made.  A deque: a new frame moves none of the others.
+    struct Scratch {
+        std::vector<int> hidden, rest, next;
+    };
+    std::deque<Scratch> frames_;
+    size_t depth_ = 0;
+    std::vector<int> leaf_;  // draw's leaf (no recursion inside draw)
+    std::vector<int> no_order_;     // move_value's ranks: all equal
+    std::vector<bool> every_move_;  // and nothing refused
+    class Frame {
+    public:
+        explicit Frame(PileCore& core) : core_(core) {
+            if (core_.depth_ == core_.frames_.size()) core_.frames_.emplace_back();
+            scratch_ = &core_.frames_[core_.depth_++];
+        }
+        ~Frame() { --core_.depth_; }
+        Frame(const Frame&) = delete;
+        Frame& operator=(const Frame&) = delete;
+        Scratch* operator->() const { return scratch_; }
+
+    private:
+        PileCore& core_;
+        Scratch* scratch_;
+    };
 
     bool compensated_;
     int others_, groups_ = 0, most_others_ = 0;
@@ -389,6 +480,8 @@ void bind_pile(py::module_& m) {
         .def("taken_value", &PileCore::taken_value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("window"),
              py::arg("part"), py::arg("nmask"), py::arg("ncons"), py::arg("nbuf"), py::arg("seconds"),
              py::arg("max_states"))
+        .def("actions", &PileCore::actions, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("order"),
+             py::arg("legal"), py::arg("seconds"), py::arg("max_states"))
         .def("reserve", &PileCore::reserve, py::arg("states"))
         .def("set_ways", &PileCore::set_ways, py::arg("ways"))
         .def_property_readonly("states", &PileCore::states)

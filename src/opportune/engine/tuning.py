@@ -396,8 +396,9 @@ WAYS_MAX_PARTICLES = 4096
 WAYS_LOCK_EVERY = 4
 
 # ------------------------------------------------------------ the pile's frontier window (policies/pile_window.py)
-# Measured with benchmarks/policy_lab.py (--bins pile --policies fallback --without-optimum, 16-20 parts)
-# and benchmarks/bench_fallback.py (CPU per decision on KILBRID).
+# Measured with benchmarks/policy_lab.py (--bins pile --policies fallback --without-optimum, 16-20 parts),
+# benchmarks/bench_window_gap.py (the gap along seeded runs, where the exact evaluation is too slow) and
+# benchmarks/bench_fallback.py (CPU per decision on KILBRID).
 
 #: The pile window's sizes (parts, buffered ones and ancestors included): the smallest is solved at a state,
 #: and the largest whose states, predicted from it, fit PILE_WINDOW_STATES (policies/lumped.py).  Every size
@@ -405,7 +406,8 @@ WAYS_LOCK_EVERY = 4
 #: locations, sizes 5, 8, 12 were +2.8%, 5-12 by one +0.8%, a cap three times larger +0.25%).
 PILE_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
 #: Values (a state's looks and its value after a shake) the pile window's programme may hold per size
-#: tried: counted, not timed, so the decision is the same everywhere.
+#: tried: counted, not timed, so the decision is the same everywhere.  40,000 roughly halve the gap at 2-3
+#: visible (docs/decisions.md) at 1.6 times the CPU, over the window's share of a 50 ms budget on KILBRID.
 PILE_WINDOW_STATES = 20_000
 #: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
 #: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
@@ -414,6 +416,13 @@ PILE_WINDOW_CACHE = 512
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.
 WINDOW_REFINE = 2
+#: Window plans' engines the pile's and the weighted bin's windows keep (by state and parts, policies/lumped.py):
+#: a window's plan is listed to predict its states, then solved, and a state's looks ask for it again.
+WINDOW_ENGINES = 64
+#: States whose parts' remaining ancestors the frontier windows keep per plan (policies/window.py): a state's
+#: windows of every size and strategy ask them, O(parts × strategies) each (on KILBRID at 3 visible about a
+#: quarter of a pile window's decision before); a few hundred states are a run's recent ones.
+WINDOW_ANCESTORS = 256
 
 # ------------------------------------------------------------ the weighted bin's frontier window (policies/weighted_window.py)
 

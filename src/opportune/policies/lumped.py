@@ -20,6 +20,7 @@ from dataclasses import replace as _replace
 
 from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline
+from opportune.engine.tuning import WINDOW_ENGINES
 from opportune.engine.tuning import WINDOW_REFINE as REFINE
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
@@ -159,6 +160,11 @@ class LumpedWindow(DecidesOnMasks):
         self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
         self._tables: OrderedDict = OrderedDict()      # by state and forced parts: the window that decides
         self._windows: OrderedDict = OrderedDict()     # by state and window: the window solved
+        # what the search for a state's largest window asks again (across its sizes, its rounds and a state's
+        # looks), each a function of its key alone: a decision never depends on what was asked before
+        self._frontiers: OrderedDict = OrderedDict()   # by (installed, strategies, parts first, size)
+        self._engines: OrderedDict = OrderedDict()     # by (installed, strategies, parts): the window plan's engine
+        self._listings: OrderedDict = OrderedDict()    # by (installed, strategies, parts, most): its states listed
         self._engine = None
         self.last_table = None
 
@@ -183,17 +189,15 @@ class LumpedWindow(DecidesOnMasks):
             The largest window's table that fitted, or None where none did.
         """
         if self._engine is not engine:
-            self._engine, self._tables, self._windows = engine, OrderedDict(), OrderedDict()
+            self._engine = engine
+            for cache in (self._tables, self._windows, self._frontiers, self._engines, self._listings):
+                cache.clear()
         key = (mask, consistent, tuple(sorted(buffer)), forced)
-        got = self._tables.get(key)
-        if got is not None:
-            self._tables.move_to_end(key)
-            return got
-        got = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced)
-        if got is not None:
-            self._tables[key] = got
-            if len(self._tables) > self.cache:
-                self._tables.popitem(last=False)
+        got = _cached(self._tables, key)
+        if got is None:
+            got = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced)
+            if got is not None:
+                _keep(self._tables, key, got, self.cache)
         return got
 
     def _largest(self, engine, mask: int, consistent: int, buffer, first: tuple):
@@ -204,7 +208,7 @@ class LumpedWindow(DecidesOnMasks):
         all ends the search (the last one solved decides), as do :data:`~opportune.engine.tuning.WINDOW_REFINE` predictions.  So a state
         costs a few windows, not every size.  None where the smallest does not fit."""
         sizes = self.sizes
-        parts, outside = frontier_window(engine, mask, consistent, first, sizes[0])
+        parts, outside = self._frontier(engine, mask, consistent, first, sizes[0])
         got = self._window(engine, mask, consistent, buffer, parts, outside, sizes[0])
         if got is None:
             return None
@@ -212,7 +216,7 @@ class LumpedWindow(DecidesOnMasks):
             ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self._cap(len(parts))))
             pick = None
             for size in (s for s in sizes if s > got.size):
-                more, rest = frontier_window(engine, mask, consistent, first, size)
+                more, rest = self._frontier(engine, mask, consistent, first, size)
                 if more == (pick[1] if pick else parts):
                     continue
                 cap = self._cap(len(more))
@@ -233,25 +237,42 @@ class LumpedWindow(DecidesOnMasks):
         """The window of these parts solved (cached by state and parts: looks that force parts already in it
         share it), or None where it does not fit (states, or the deadline)."""
         key = (mask, consistent, tuple(sorted(buffer)), tuple(parts))
-        got = self._windows.get(key)
-        if got is not None:
-            self._windows.move_to_end(key)
-            return got
-        try:
-            got = self._solved(engine, mask, consistent, buffer, parts, outside, size)
-        except (OptimalTooLarge, OutOfTime):
-            return None
-        self._windows[key] = got
-        if len(self._windows) > self.cache:
-            self._windows.popitem(last=False)
+        got = _cached(self._windows, key)
+        if got is None:
+            try:
+                got = _keep(self._windows, key, self._solved(engine, mask, consistent, buffer, parts, outside, size),
+                            self.cache)
+            except (OptimalTooLarge, OutOfTime):
+                return None
         return got
 
     def _listed(self, engine, mask: int, consistent: int, parts: list[int], most: int) -> int:
-        """The states of the window's plan without the others, listed (more than ``most``: stopped there)."""
+        """The states of the window's plan without the others, listed (more than ``most``: stopped there),
+        cached by state, parts and ``most`` (a function of them alone).  O(states listed)."""
         from opportune.policies.states import estimate_states
 
-        return estimate_states(window_engine(engine, mask, consistent, parts), visible=self.visible,
-                               capacity=self.capacity, pile=self.pile, stop_above=most, time_limit=None).states
+        key = (mask, consistent, tuple(parts), most)
+        got = _cached(self._listings, key)
+        if got is None:
+            got = _keep(self._listings, key, estimate_states(
+                self._window_engine(engine, mask, consistent, parts), visible=self.visible, capacity=self.capacity,
+                pile=self.pile, stop_above=most, time_limit=None).states, self.cache)
+        return got
+
+    def _frontier(self, engine, mask: int, consistent: int, first: tuple, size: int):
+        """:func:`~opportune.policies.window.frontier_window` of ``size`` parts with the parts ``first`` taken
+        first, cached (the search asks each size in each of its rounds, and a state's looks ask again)."""
+        key = (mask, consistent, first, size)
+        got = _cached(self._frontiers, key)
+        return got if got is not None else _keep(self._frontiers, key,
+                                                 frontier_window(engine, mask, consistent, first, size), self.cache)
+
+    def _window_engine(self, engine, mask: int, consistent: int, parts: list[int]) -> OrderEngine:
+        """:func:`window_engine`, cached (a window listed is then solved, and a state's looks share it)."""
+        key = (mask, consistent, tuple(parts))
+        got = _cached(self._engines, key)
+        return got if got is not None else _keep(self._engines, key, window_engine(engine, mask, consistent, parts),
+                                                 WINDOW_ENGINES)
 
     def _cap(self, parts: int) -> int:
         """The states a window of ``parts`` parts may hold (``max_states``)."""
@@ -320,6 +341,22 @@ class LumpedWindow(DecidesOnMasks):
             The window's decision, or the base's (saying that no window fitted).
         """
         return window_decision(self, state, visible, because, self._note)
+
+
+def _cached(cache: OrderedDict, key):
+    """``cache[key]`` made the newest, or None."""
+    got = cache.get(key)
+    if got is not None:
+        cache.move_to_end(key)
+    return got
+
+
+def _keep(cache: OrderedDict, key, value, most: int):
+    """``value`` kept under ``key``, the oldest dropped past ``most`` entries; the value."""
+    cache[key] = value
+    if len(cache) > most:
+        cache.popitem(last=False)
+    return value
 
 
 def window_engine(engine, mask: int, consistent: int, parts: list[int]) -> OrderEngine:

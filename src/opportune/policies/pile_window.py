@@ -18,7 +18,8 @@ seen outside the state's window would otherwise be valued as a lumped other, nev
 window would shake where the optimum buffers or installs it).  The decision on a look is the window's best
 action on it (a visible part outside the window is an other; buffered, it is the one first in the
 topological order); an installation no open strategy of the plan allows is never chosen.  Every look of
-a window is decided when it is solved (:class:`PileWindowTable`), and looks whose parts one window holds
+a window is decided when it is solved (:class:`PileWindowTable`; :meth:`PileWindowSolver.actions`, in one
+call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
 successors.  The window's size is the largest predicted to fit
 :data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
@@ -37,7 +38,7 @@ from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
 from opportune.policies.base import SHAKE, Action
-from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup, window_engine
+from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
@@ -89,9 +90,59 @@ class PileWindowSolver(OthersGroup, PileSolver):
             yield self.other_move, nxt, Action("buffer", OTHERS)
 
 
+    def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
+        """The value after a shake at ``key``, and the best move on every look of it: ``(kind, group,
+        source)`` (a group is a window part's index, the others last), or None where no move is cheaper
+        than a shake by 1e-12.  Ties: install, then buffer, then ``order`` (a rank per group), the bin
+        before the buffer, as the optimum's; an installation of a group ``legal`` refuses is not a move.
+        O(looks × moves); the compiled programme's in one call.
+
+        Parameters
+        ----------
+        key : tuple
+            The state (:meth:`~opportune.policies.optimal.OptimalSolver.policy_key`).
+        order : list of int
+            A rank per group (the window's parts, then the others), breaking ties of value and kind.
+        legal : list of bool
+            Per group, whether installing it is a move (the plan's open strategies allow it).
+
+        Returns
+        -------
+        (float, dict)
+            The value after a shake, and look (sorted groups) -> the best move or None.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> solver = PileWindowSolver(OrderEngine(make_plan(["a"], {})), visible=1, others=1, other_move=1.0)
+        >>> solver.actions(solver.start_key(), [0, 1], [True, False])
+        (1.5, {(0,): ('install', 0, 'bin'), (1,): ('buffer', 1, None)})
+        """
+        after_shake = self._after_shake(key)
+        shake = self.costs.shake + after_shake
+        kinds, actions = {"install": 0, "buffer": 1}, {}
+        for look, _ in self._looks(self._bin_counts(key)):
+            best = None
+            for cost, nxt, action in self._moves(key, look):
+                j = self._part_index(action.part)
+                if action.kind == "install" and not legal[j]:
+                    continue
+                rank = (cost + self._after(key, look, action, nxt), kinds[action.kind], order[j],
+                        action.source == "buffer")
+                if best is None or rank < best[0]:
+                    best = (rank, (action.kind, j, action.source))
+            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
+        return after_shake, actions
+
+
 class CompiledPileWindowSolver(CompiledOthers, CompiledPileSolver, PileWindowSolver):
     """:class:`PileWindowSolver` computed by the pile's compiled core (the others its last group): the same
-    doubles.  A ``ValueError`` where the core does not take the window's plan."""
+    doubles, and :meth:`actions` in one call to the core.  A ``ValueError`` where the core does not take the
+    window's plan."""
+
+    def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
+        return self._run(self._core.actions, key[0], key[1], list(key[2]), list(order), list(legal))
 
 
 def pile_window_solver(engine, **settings) -> PileWindowSolver:
@@ -177,7 +228,7 @@ class PileWindow(LumpedWindow):
     def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
         """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
         key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
-        sub = window_engine(engine, mask, consistent, parts)
+        sub = self._window_engine(engine, mask, consistent, parts)
         solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
                                     max_states=self._cap(len(parts)), others=others, other_move=other_move)
         solver.deadline = as_deadline(self.deadline)
@@ -189,26 +240,15 @@ class PileWindow(LumpedWindow):
         return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states)
 
     def _actions(self, engine, mask: int, consistent: int, parts: list[int], solver, key: tuple):
-        """The value after a shake, and the window's best action on every look of the state (ties: install,
-        then buffer, then declaration order, the others last, the bin before the buffer, as the optimum's);
-        an installation no open strategy of the plan allows is not a move.  O(looks × moves)."""
-        after_shake = solver._after_shake(key)
-        shake = solver.costs.shake + after_shake
-        legal = {j for j, i in enumerate(parts)
-                 if engine.consistent_after(mask, consistent, engine.next_unit(mask, i)) != 0}
-        n, kinds, actions = len(parts), {"install": 0, "buffer": 1}, {}
-        for look, _ in solver._looks(solver._bin_counts(key)):
-            best = None
-            for cost, nxt, action in solver._moves(key, look):
-                j = solver._part_index(action.part)
-                if action.kind == "install" and j not in legal:
-                    continue
-                rank = (cost + solver._after(key, look, action, nxt), kinds[action.kind],
-                        parts[j] if j < n else len(engine.plan.parts), action.source == "buffer")
-                if best is None or rank < best[0]:
-                    best = (rank, (action.kind, j, action.source))
-            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
-        return after_shake, actions
+        """The value after a shake, and the window's best action on every look of the state
+        (:meth:`PileWindowSolver.actions`: ties by the plan's declaration order, the others last); an
+        installation no open strategy of the plan allows is not a move.  O(looks × moves)."""
+        legal = [engine.consistent_after(mask, consistent, engine.next_unit(mask, i)) != 0 for i in parts]
+        order = list(parts)
+        if len(solver.quantity) > len(parts):       # the others' group: never installed, ranked last
+            legal.append(False)
+            order.append(len(engine.plan.parts))
+        return solver.actions(key, order, legal)
 
     def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
         plan = engine.plan

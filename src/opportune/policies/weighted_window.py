@@ -24,7 +24,7 @@ from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
 from opportune.policies.base import Action
-from opportune.policies.lumped import CompiledOthers, LumpedWindow, OthersGroup, window_engine
+from opportune.policies.lumped import CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.optimal import (
     COMPILED_LOOK_CACHE_BYTES,
     COMPILED_WEIGHTED_VISIBLE,
@@ -170,7 +170,7 @@ class WeightedWindow(LumpedWindow):
     def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> WindowTable:
         """The window of ``size`` parts solved: the expected costs after each move.  The work is counted."""
         buf, others, other_move, other_weight = self._window_key(engine, buffer, parts, outside, mask)
-        sub = window_engine(engine, mask, consistent, parts)
+        sub = self._window_engine(engine, mask, consistent, parts)
         solver = weighted_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
                                         weights={p.id: self.weights.get(p.id, 1.0) for p in sub.plan.parts},
                                         max_states=self._cap(len(parts)), others=others, other_move=other_move,

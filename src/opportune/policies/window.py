@@ -31,6 +31,7 @@ Measured against the optimum on 16-30-part plans and per decision on the SALBP p
 
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 from math import comb
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 from opportune.engine.tuning import (  # tuning.py says why
-    WINDOW_CACHE, WINDOW_PARTS, WINDOW_PARTS_SEVERAL, WINDOW_STATES, WINDOW_STRATEGIES)
+    WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_PARTS, WINDOW_PARTS_SEVERAL, WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
@@ -139,6 +140,25 @@ def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int
     return nearest, every
 
 
+#: Per engine (held weakly), :func:`_ancestors` of every part by (installed, strategies): a state's windows of
+#: each size and strategy ask the same, and each is O(parts × strategies).  Cleared whole past :data:`~opportune.engine.tuning.WINDOW_ANCESTORS`
+#: entries.
+_ANCESTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _ancestors_of(engine, mask: int, consistent: int) -> tuple[dict[int, int], dict[int, int]]:
+    """:func:`_ancestors` of every part, kept per engine (a pure function of the state).  O(1) when kept."""
+    memo = _ANCESTORS.get(engine)
+    if memo is None:
+        memo = _ANCESTORS.setdefault(engine, {})
+    got = memo.get((mask, consistent))
+    if got is None:
+        if len(memo) > WINDOW_ANCESTORS:
+            memo.clear()
+        got = memo[(mask, consistent)] = _ancestors(engine, mask, consistent)
+    return got
+
+
 def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int) -> set[int] | None:
     """Part ``i`` and its remaining ancestors in every open strategy not in ``window`` (an ancestor in one
     strategy brings its own in the others), or None past ``most`` parts.  O(parts added × strategies)."""
@@ -196,8 +216,8 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int,
         strategy = core_strategies(engine, consistent)[0]
     # one strategy's order: a closure in all at once (their union, transitive) takes in most of a plan whose
     # strategies order the parts differently, and a window closed in none solves a plan that is not there
-    anc, _ = _ancestors(engine, mask, 1 << strategy)
-    _, every = _ancestors(engine, mask, consistent)
+    anc, _ = _ancestors_of(engine, mask, 1 << strategy)
+    _, every = _ancestors_of(engine, mask, consistent)
     order = sorted(anc, key=lambda i: (anc[i].bit_count(), i))
     buffered = sorted({engine.plan.index(p) for p in buffer}, key=order.index)
     window = _closed_window(engine, mask, buffered + order, buffered, anc, every, size)
