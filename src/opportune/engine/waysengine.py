@@ -182,17 +182,41 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         return out
 
     def missing_before(self, mask: int, part: str) -> list[str]:
-        """Parts to install before ``part`` by its way that misses the fewest (one of each need), or []
-        if every way of it is blocked by a part already in."""
-        i = self.plan.index(part)
-        best = None
-        for blockers, needs in self.table.ways[i]:
-            if blockers & mask:
-                continue
-            lacking = sorted({self._unit_ids[(n & -n).bit_length() - 1] for n in needs if not n & mask})
-            if best is None or len(lacking) < len(best):
-                best = lacking
-        return best or []
+        """Parts to install before ``part`` (declaration order): for its way that asks the fewest, each
+        unmet need met by the part that itself asks the fewest, with what that part asks
+        (:meth:`~opportune.planning.ways.WaysTable.before`); [] if it can go in now or every way of it is
+        blocked by a part already in.
+
+        Examples
+        --------
+        >>> from opportune.formats.ways import ways_plan
+        >>> from opportune.planning.plan import Part, Way
+        >>> ways = {"b": [Way(frozenset(), (frozenset({"a"}),))], "c": [Way(frozenset(), (frozenset({"b"}),))]}
+        >>> WaysEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")], ways)).missing_before(0, "c")
+        ['a', 'b']
+        """
+        return [self._unit_ids[i] for i in _bits(self.table.before(mask, self.plan.index(part)))]
+
+    def waits(self, mask: int, consistent: int, unit: int) -> tuple[int, int]:
+        """The installs still needed before part ``unit`` can go in (:meth:`missing_before`'s), and the
+        parts that must follow it as far as the ways show
+        (:meth:`~opportune.planning.ways.WaysTable.waiting_on`): on a plan of one strategy written as ways,
+        the order engine's answers.
+
+        Examples
+        --------
+        >>> from opportune.formats.ways import ways_plan
+        >>> from opportune.planning.plan import Part, Way
+        >>> ways = {"b": [Way(frozenset(), (frozenset({"a"}),))], "c": [Way(frozenset(), (frozenset({"b"}),))]}
+        >>> WaysEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")], ways)).waits(0, 1, 1)
+        (1, 1)
+        """
+        return self.table.before(mask, unit).bit_count(), self.table.waiting_on(mask, unit).bit_count()
+
+    def steps_waiting(self, unit: int) -> int:
+        """The parts that must follow part ``unit`` at the start (:meth:`waits`'s second, on nothing
+        installed): the rollout's static priority."""
+        return self.table.waiting_on(0, unit).bit_count()
 
     # ---------------------------------------------------------------- counts
 

@@ -38,7 +38,7 @@ from opportune.planning.ways import Undecided, WaysTable
 __all__ = ["SEARCH_WORK", "WAYS_POLICIES", "check_ways", "not_for_ways", "ways_of_strategy", "ways_plan"]
 
 #: The policies that decide on a plan written as ways (the others read the orders of strategies).
-WAYS_POLICIES = ("paper", "bin-first")
+WAYS_POLICIES = ("paper", "bin-first", "slack", "rollout")
 
 #: Most sets the check of a plan of ways visits looking for an admissible sequence (a plan with one is
 #: found in as many sets as it has parts as a rule: each set not taken is proved dead first).

@@ -155,6 +155,89 @@ class WaysTable:
             left = [(i, b) for i, b in left if rest >> i & 1]
         return False
 
+    def before(self, mask: int, i: int) -> int:
+        """The parts to install before part ``i`` can go in on ``mask``: for its way that asks the
+        fewest, each unmet need met by the member that itself asks the fewest (with what that member
+        asks, recursively), none of them a blocker of the way.  Exact for a plan of one way per part
+        whose needs are single parts (a strategy, where it is every predecessor left); in general one
+        set of installs that lets ``i`` in, not always the smallest (that is a set cover).  0 if ``i``
+        can go in now, or no way of it is open.  O(parts × ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0, ())], [(0, (0b001,))], [(0, (0b010,))]])    # a, then b, then c
+        >>> bin(t.before(0, 2)), bin(t.before(0b001, 2)), t.before(0b011, 2)
+        ('0b11', '0b10', 0)
+        """
+        memo: dict[int, int | None] = {}
+        found = self._before(mask, i, memo)
+        return found or 0
+
+    def _before(self, mask: int, i: int, memo: dict) -> int | None:
+        """:meth:`before` of ``i`` (None: no open way; a part in the middle of its own search counts as
+        unable, so a cycle of needs is not followed)."""
+        if i in memo:
+            return memo[i]
+        memo[i] = None
+        best = None
+        for blockers, needs in self.ways[i]:
+            if blockers & mask:
+                continue
+            got = 0
+            for need in needs:
+                if need & mask:
+                    continue
+                pick = None
+                for g in _bits(need):
+                    sub = self._before(mask, g, memo)
+                    if sub is None or (sub | 1 << g) & blockers:
+                        continue
+                    sub |= 1 << g
+                    if pick is None or sub.bit_count() < pick.bit_count():
+                        pick = sub
+                if pick is None:
+                    break
+                got |= pick
+            else:
+                if best is None or got.bit_count() < best.bit_count():
+                    best = got
+        memo[i] = best
+        return best
+
+    def waiting_on(self, mask: int, i: int) -> int:
+        """The parts left that must go in after part ``i`` in every completion of ``mask``, as far as the
+        ways show it: a part every open way of which has an unmet need all of whose members are ``i``
+        or wait on it, or a part that blocks every open way of ``i`` or of one waiting on it (taken to a
+        fixpoint).  Exact for a plan of one way per part whose needs are single parts (every successor
+        left); else a lower bound.  O(passes × ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0, ())], [(0, (0b001,))], [(0, (0b010,))]])    # a, then b, then c
+        >>> bin(t.waiting_on(0, 0)), bin(t.waiting_on(0, 1)), t.waiting_on(0, 2)
+        ('0b110', '0b100', 0)
+        """
+        rest = self.full & ~mask & ~(1 << i)
+        open_ways = {q: [(b, tuple(n for n in needs if not n & mask)) for b, needs in self.ways[q] if not b & mask]
+                     for q in _bits(rest | 1 << i)}
+        after, grew = 1 << i, True
+        while grew:
+            grew = False
+            for q in _bits(rest & ~after):
+                ways = open_ways[q]
+                if ways and all(any(not n & ~after for n in needs) for _, needs in ways):
+                    after |= 1 << q
+                    grew = True
+            for x in _bits(after):
+                ways = open_ways[x]
+                blocks = rest & ~after
+                for blockers, _ in ways:
+                    blocks &= blockers
+                if ways and blocks:
+                    after |= blocks
+                    grew = True
+        return after & ~(1 << i)
+
     def completion(self, mask: int = 0, work: int = 1_000_000, until: float | None = None) -> list[int] | None:
         """One admissible completion of ``mask`` (the parts' positions in the order they go in), or None
         if it has none: a depth-first search that remembers the sets found to have no completion.

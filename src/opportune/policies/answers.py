@@ -326,13 +326,10 @@ def _settled(look: LookState, parts: list[str], rule) -> list[str] | None:
 
 
 def _needed_after(look: LookState, part: str) -> tuple[int, int]:
-    """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
-    consistent strategy that frees it soonest)."""
-    engine, remaining = look.engine, look.remaining
-    posets = [engine.posets[i] for i in range(engine.k) if look.consistent >> i & 1]
-    u = look.unit(part)
-    return (min((p.below[u] & remaining).bit_count() for p in posets),
-            min((p.above[u] & remaining).bit_count() for p in posets))
+    """The installs still needed before ``part`` can go in, and the steps that wait on it (the engine's
+    :meth:`~opportune.engine.questions.StateQuestions.waits`: under the consistent strategy that frees it
+    soonest, or by the ways of a plan written as ways)."""
+    return look.engine.waits(look.mask, look.consistent, look.unit(part))
 
 
 def _exact_slack(look: LookState, parts: list[str], weight: float) -> dict:

@@ -61,7 +61,7 @@ class Rollout(DecidesOnMasks):
         """Where the order of the buffer can decide (see :meth:`Opportunistic.buffer_ties_at
         <opportune.policies.opportunistic.Opportunistic.buffer_ties_at>`): the look-ahead's on a small plan;
         None (any pair) on a larger one, whose futures are drawn from the whole buffer's order."""
-        if engine.n_units <= self.exact_below:
+        if self._exact_for(engine):
             return self._exact_policy().buffer_ties_at(engine, mask, consistent)
         return None
 
@@ -96,7 +96,7 @@ class Rollout(DecidesOnMasks):
                 for u in range(first[p], first[p] + part.quantity):
                     unit_part[u] = p
             # steps waiting on a unit, in the strategy that has the most (a static priority)
-            waiting = [max(po.above[u].bit_count() for po in engine.posets) for u in range(engine.n_units)]
+            waiting = [engine.steps_waiting(u) for u in range(engine.n_units)]
             move = [self.costs.move(part.id) for part in plan.parts]
             self._quantity = [part.quantity for part in plan.parts]
             self._tables = (engine, first, unit_part, waiting, move, {part.id: p for p, part in enumerate(plan.parts)})
@@ -110,7 +110,7 @@ class Rollout(DecidesOnMasks):
             return DONE
         self.last = None
         look = LookState(engine, mask, consistent, buffer, free, visible)
-        if engine.n_units <= self.exact_below:
+        if self._exact_for(engine):
             return self._exact_policy().choose_look(look)
         actions = self._actions(look)
         base = actions[0]
@@ -145,6 +145,16 @@ class Rollout(DecidesOnMasks):
         self.last = {"rounds": rounds, "means": {_label(a): m for a, m in zip(actions, means)}, "fallback": False}
         return actions[best]
 
+    def _exact_for(self, engine) -> bool:
+        """Whether the exact look-ahead decides on this engine's plan: one of at most :attr:`exact_below`
+        units, and not written as ways unless the look-ahead takes such plans
+        (:data:`~opportune.formats.ways.WAYS_POLICIES`); else the futures are sampled."""
+        if engine.n_units > self.exact_below:
+            return False
+        from opportune.formats.ways import WAYS_POLICIES
+
+        return engine.plan.ways is None or "lookahead" in WAYS_POLICIES
+
     def _exact_policy(self):
         if self.exact is None:
             from opportune.policies.lookahead import Lookahead
@@ -173,11 +183,8 @@ class Rollout(DecidesOnMasks):
             return out + [shared_action("install", p, "buffer") for p in sorted(in_buffer, key=rank)]
         if free <= 0 or not visible:
             return [SHAKE]
-        remaining = engine.full & ~mask
-
         def missing(part):
-            u = engine.next_unit(mask, index[part])
-            return min((po.below[u] & remaining).bit_count() for po in engine.posets)
+            return engine.waits(mask, engine.all_strategies, engine.next_unit(mask, index[part]))[0]
 
         parts = sorted(set(visible), key=lambda p: (missing(p), -waiting_of(p), index[p]))
         # no shake while the buffer has room: a motion into the buffer keeps the part, a shake keeps nothing
@@ -221,7 +228,8 @@ class Rollout(DecidesOnMasks):
         _, first, unit_part, waiting, move, _ = tables
         posets = engine.posets
         single = len(posets) == 1
-        below = posets[0].below
+        # the first strategy's order (a plan written as ways has none: the engine says what is missing)
+        below = posets[0].below if posets else None
         full = engine.full
         k = self.visible
         cap = self.capacity
@@ -290,7 +298,8 @@ class Rollout(DecidesOnMasks):
             pick = None
             for i in seen:
                 u = next_unit(bin_parts[i])
-                key = ((below[u] & remaining).bit_count(), -waiting[u])
+                missing = (below[u] & remaining).bit_count() if below is not None else engine.waits(mask, 1, u)[0]
+                key = (missing, -waiting[u])
                 if pick is None or key < pick[0]:
                     pick = (key, i)
             i = pick[1]
@@ -302,7 +311,7 @@ class Rollout(DecidesOnMasks):
         return t
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        if state.schedule.engine.n_units <= self.exact_below:
+        if self._exact_for(state.schedule.engine):
             return self._exact_policy().decide(state, visible)
         action = self.choose(state, visible)
         if action.kind == "done":
