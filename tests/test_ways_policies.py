@@ -123,8 +123,19 @@ def test_every_trial_on_a_random_plan_of_ways_completes_with_an_admitted_sequenc
     assert sorted(installed) == sorted(plan.part_ids) and admitted(plan, installed)
 
 
-def test_slack_and_rollout_take_plans_written_as_ways():
-    assert {"paper", "bin-first", "slack", "rollout"} <= set(WAYS_POLICIES)
+@pytest.mark.parametrize("policy", ["slack", "rollout"])
+def test_replay_takes_slack_and_rollout_on_a_ways_file(tmp_path, policy):
+    from typer.testing import CliRunner
+
+    from opportune.cli import app
+    from test_ways import WAYS_YAML
+
+    assert policy in WAYS_POLICIES
+    path, looks = tmp_path / "peg.yaml", tmp_path / "looks.txt"
+    path.write_text(WAYS_YAML)
+    looks.write_text("peg cap\nbase\ncap\n-\n")
+    replayed = CliRunner().invoke(app, ["replay", "--policy", policy, str(path), str(looks)])
+    assert replayed.exit_code == 0 and "complete: base,cap,peg" in replayed.output, replayed.output
 
 
 def test_the_ways_bound_what_waits_where_the_order_cannot():

@@ -120,10 +120,12 @@ class WaysCounter:
     def _count(self, mask: int, dl: Deadline) -> int:
         """The memoised recursion, with an explicit stack (a 10,000-part plan is as deep)."""
         table, memo = self.table, self.memo
-        get, goes, shut_out = memo.get, table.goes, table.shut_out
+        get, goes, shutting = memo.get, table.goes, table.shutting
         limit = self.max_memo if self.max_memo is not None else math.inf
         new = 0
-        frames = [[mask, goes(mask), 0]]
+        # a frame: the set, the parts still to try on it, the sum so far, and the parts that would shut
+        # another out (WaysTable.shutting: one pass a set instead of one a part tried)
+        frames = [[mask, goes(mask), 0, shutting(mask)]]
         while frames:
             frame = frames[-1]
             s, todo = frame[0], frame[1]
@@ -134,11 +136,11 @@ class WaysCounter:
                 t = s | b
                 v = get(t)
                 if v is None:
-                    if shut_out(t):
+                    if frame[3] & b:
                         v = 0
                     else:
                         frame[1] = todo
-                        frames.append([t, goes(t), 0])
+                        frames.append([t, goes(t), 0, shutting(t)])
                         down = True
                         break
                 frame[2] += v
@@ -496,10 +498,9 @@ class WaysChains:
         """As :meth:`CompletionChains.estimate <opportune.engine.sampling.CompletionChains.estimate>`: for each
         unit of ``first`` the share of completions it begins, for each of ``positions`` its mean position
         (1 = next), a round (one run) at a time until ``samples`` rounds (with ``steps``) or ``deadline``, or
-        ``settled``.  The first round runs whatever the time; a later one past ``deadline`` (of
-        ``time.perf_counter``) is cut and dropped."""
-        from opportune.engine.sampling import ChainEstimate, _mean_se
-
+        ``settled``.  Every round, the first too, stops at ``deadline`` (of ``time.perf_counter``): a round
+        cut is dropped, and with no round, none kept from before (``keep``) and none finished in time,
+        the answer is None (a run over a 300-part plan takes longer than a decision's budget)."""
         if isinstance(deadline, Deadline):
             deadline, clock = (deadline.at if deadline.finite else None), time.perf_counter
         k, start = self.chains, self.table.full & ~self.remaining
@@ -514,8 +515,8 @@ class WaysChains:
         stop = Deadline(deadline) if deadline is not None and clock is time.perf_counter else Deadline.NEVER
         while True:
             ends: list = []
-            try:            # the first round whatever the time (an estimate needs one), the others within it
-                _smc_run(self.ways, start, k, self.rng, stop if rounds else Deadline.NEVER, ends)
+            try:            # every round within the deadline: the budget is the caller's promise
+                _smc_run(self.ways, start, k, self.rng, stop, ends)
             except BudgetExceeded:
                 break
             self.steps += max(1, self.remaining.bit_count()) * MIXED
@@ -528,12 +529,7 @@ class WaysChains:
             for acc in (*acc_first.values(), *acc_pos.values()):
                 acc[1] += 1
             rounds += 1
-            summary = ChainEstimate(
-                first={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_first.items()},
-                positions={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_pos.items()},
-                per_chain={"first": {u: [x / n for x in xs] for u, (xs, n) in acc_first.items()},
-                           "positions": {u: [x / n for x in xs] for u, (xs, n) in acc_pos.items()}},
-                samples=rounds * k, steps=self.steps)
+            summary = self._summary(acc_first, acc_pos)
             if steps and rounds >= samples:
                 break
             if rounds >= 2 and deadline is not None and clock is not None and clock() >= deadline:
@@ -542,4 +538,20 @@ class WaysChains:
                 break
             if settled is not None and rounds >= min_rounds and settled(summary):
                 break
+        if summary is None:
+            summary = self._summary(acc_first, acc_pos)     # the readings kept from before, if any
         return summary
+
+    def _summary(self, acc_first: dict, acc_pos: dict):
+        """The estimate from the readings so far (``unit → [per-group sums, rounds]``), or None without one."""
+        from opportune.engine.sampling import ChainEstimate, _mean_se
+
+        accs = (*acc_first.values(), *acc_pos.values())
+        if not accs or not all(n for _, n in accs):
+            return None
+        return ChainEstimate(
+            first={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_first.items()},
+            positions={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_pos.items()},
+            per_chain={"first": {u: [x / n for x in xs] for u, (xs, n) in acc_first.items()},
+                       "positions": {u: [x / n for x in xs] for u, (xs, n) in acc_pos.items()}},
+            samples=max(n for _, n in accs) * self.chains, steps=self.steps)

@@ -170,9 +170,16 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         return frozenset(self.installable(mask, consistent))
 
     def installable_among(self, mask: int, consistent: int, parts: Collection[str]) -> list[str]:
-        """Those of ``parts`` installable now (declaration order)."""
-        asked = set(parts)
-        return [p for p in self.installable(mask, consistent) if p in asked]
+        """Those of ``parts`` installable now (declaration order): the liveness of those alone is decided
+        (a look asks of two or three parts, and each liveness costs O(passes × ways))."""
+        key = mask | consistent << self.n_units
+        known = self._installable_cache.get(key)
+        index = self.plan.index
+        asked = sorted({index(p) for p in parts}) if consistent else []
+        if known is not None:
+            return [self._unit_ids[i] for i in asked if self._unit_ids[i] in known]
+        return [self._unit_ids[i] for i in asked
+                if not mask >> i & 1 and self.table.can_go(mask, i) and self.live(mask | 1 << i)]
 
     def installable_units(self, mask: int, consistent: int) -> int:
         """The installable parts as a mask."""
@@ -280,11 +287,12 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         while level:
             nxt: dict[int, int] = {}
             for s, paths in level.items():
+                shutting = table.shutting(s)        # s is live: t is shut out iff i is among these
                 for i in _bits(table.goes(s)):
                     t = s | 1 << i
                     f = memo.get(t)
                     if f is None:
-                        f = 0 if table.shut_out(t) else self.counter.count(t, dl)
+                        f = 0 if shutting >> i & 1 else self.counter.count(t, dl)
                     if f:
                         sums[i] = sums.get(i, 0) + paths * f * depth
                         nxt[t] = nxt.get(t, 0) + paths

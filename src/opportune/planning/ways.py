@@ -129,6 +129,33 @@ class WaysTable:
                 return True
         return False
 
+    def shutting(self, mask: int) -> int:
+        """The parts whose going in on ``mask`` would shut another part out: for each part left, the
+        blockers every way of it still open shares.  On a set not shut out itself, ``t = mask | 1 << b``
+        is shut out exactly when ``b`` is among them, so one pass answers :meth:`shut_out` for every part
+        that can go next.  O(ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0b010, ())], [(0, ())], [(0b011, ()), (0b010, ())]])  # b shuts a and c out
+        >>> bin(t.shutting(0)), t.shut_out(0b010)
+        ('0b10', True)
+        """
+        out = 0
+        rest = self.full & ~mask & ~self._free
+        while rest:
+            b = rest & -rest
+            rest ^= b
+            common = -1
+            for blockers, _ in self.ways[b.bit_length() - 1]:
+                if not blockers & mask:
+                    common &= blockers
+                    if not common:
+                        break
+            if common > 0:
+                out |= common
+        return out
+
     def locked(self, mask: int) -> bool:
         """Whether the parts not in ``mask`` lock each other: taken out last first while one can be (a
         part can go in last if a way of it has no blocker in ``mask`` nor among the others left), some
