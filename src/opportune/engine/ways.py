@@ -122,7 +122,7 @@ class WaysCounter:
         table, memo = self.table, self.memo
         get, goes, shutting = memo.get, table.goes, table.shutting
         limit = self.max_memo if self.max_memo is not None else math.inf
-        new = 0
+        new = pushed = 0
         # a frame: the set, the parts still to try on it, the sum so far, and the parts that would shut
         # another out (WaysTable.shutting: one pass a set instead of one a part tried)
         frames = [[mask, goes(mask), 0, shutting(mask)]]
@@ -140,6 +140,9 @@ class WaysCounter:
                         v = 0
                     else:
                         frame[1] = todo
+                        pushed += 1     # the clock read by sets entered (a first descent is as deep as the plan)
+                        if not pushed % CHECK_EVERY:
+                            dl.check("counting the completions of a plan of ways")
                         frames.append([t, goes(t), 0, shutting(t)])
                         down = True
                         break
@@ -151,8 +154,6 @@ class WaysCounter:
             if new > limit:
                 raise BudgetExceeded(f"exact count needs more than max_memo={self.max_memo} new memo entries",
                                      reason="memo", memo_size=len(memo))
-            if not new % CHECK_EVERY:
-                dl.check("counting the completions of a plan of ways")
             frames.pop()
             if frames:
                 frames[-1][2] += frame[2]
