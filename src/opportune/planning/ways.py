@@ -47,7 +47,7 @@ class WaysTable:
     [0, 1, 2]
     """
 
-    __slots__ = ("n", "full", "ways", "_free", "has_needs")
+    __slots__ = ("n", "full", "ways", "_free", "has_needs", "_open")
 
     def __init__(self, n: int, ways: list):
         self.n = n
@@ -60,6 +60,7 @@ class WaysTable:
                 self._free |= 1 << i
         #: whether any way has needs (without, :meth:`locked` decides liveness exactly)
         self.has_needs = any(needs for w in self.ways for _, needs in w)
+        self._open = None       # (mask, what _open_ways found on it): the last set asked
 
     @classmethod
     def of(cls, plan: Plan) -> "WaysTable":
@@ -245,25 +246,38 @@ class WaysTable:
         ('0b110', '0b100', 0)
         """
         rest = self.full & ~mask & ~(1 << i)
-        open_ways = {q: [(b, tuple(n for n in needs if not n & mask)) for b, needs in self.ways[q] if not b & mask]
-                     for q in _bits(rest | 1 << i)}
+        open_ways, common, needy = self._open_ways(mask)
         after, grew = 1 << i, True
         while grew:
             grew = False
-            for q in _bits(rest & ~after):
-                ways = open_ways[q]
-                if ways and all(any(not n & ~after for n in needs) for _, needs in ways):
+            for q in needy:
+                if rest >> q & 1 and not after >> q & 1 and all(
+                        any(not n & ~after for n in needs) for _, needs in open_ways[q]):
                     after |= 1 << q
                     grew = True
             for x in _bits(after):
-                ways = open_ways[x]
-                blocks = rest & ~after
-                for blockers, _ in ways:
-                    blocks &= blockers
-                if ways and blocks:
+                blocks = rest & ~after & common.get(x, 0)
+                if blocks:
                     after |= blocks
                     grew = True
         return after & ~(1 << i)
+
+    def _open_ways(self, mask: int) -> tuple[dict, dict, list]:
+        """On ``mask`` (the last one asked kept): each part left's open ways with their unmet needs, the
+        blockers they share (0 if none is open), and the parts every open way of which has a need."""
+        if self._open is not None and self._open[0] == mask:
+            return self._open[1]
+        open_ways = {q: [(b, tuple(n for n in needs if not n & mask)) for b, needs in self.ways[q] if not b & mask]
+                     for q in _bits(self.full & ~mask)}
+        common = {}
+        for q, ways in open_ways.items():
+            c = -1
+            for b, _ in ways:
+                c &= b
+            common[q] = c if ways else 0
+        needy = [q for q, ways in open_ways.items() if ways and all(needs for _, needs in ways)]
+        self._open = (mask, (open_ways, common, needy))
+        return open_ways, common, needy
 
     def completion(self, mask: int = 0, work: int = 1_000_000, until: float | None = None) -> list[int] | None:
         """One admissible completion of ``mask`` (the parts' positions in the order they go in), or None

@@ -18,8 +18,9 @@ millisecond:
 
 Budget.  Without one, every decision samples ``samples`` futures per action (the same decision
 for the same state and seed, on any machine).  With ``budget`` seconds, rounds of futures run until
-80% of it is spent (at least ``min_samples`` rounds, else the decision is the base rule's, said so
-in its reasons); the number of rounds, and so the decision, then depends on the machine's speed.
+80% of it is spent, a round cut there dropped (a future reads the clock every 16 steps); with fewer
+than ``min_samples`` rounds the decision is the base rule's, said so in its reasons.  The number of
+rounds, and so the decision, then depends on the machine's speed.
 
 Plans of at most :attr:`Rollout.EXACT_UNITS` units are decided by the exact look-ahead instead:
 there the expectation is computed, not sampled.
@@ -27,9 +28,12 @@ there the expectation is computed, not sampled.
 
 from __future__ import annotations
 
+import math
 import random
 import time
 import zlib
+
+from opportune.engine.deadline import BudgetExceeded
 
 from opportune.engine.tuning import ROLLOUT_EXACT_UNITS, ROLLOUT_SHARE
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
@@ -82,6 +86,7 @@ class Rollout(DecidesOnMasks):
         self.exact_below = self.EXACT_UNITS if exact_below is None else exact_below
         self.exact = exact
         self._tables = None
+        self._stop = math.inf       # the moment the futures of a decision stop (the budget's share)
         self.last: dict | None = None
 
     # ------------------------------------------------------------------ tables of the plan
@@ -124,19 +129,16 @@ class Rollout(DecidesOnMasks):
         # the futures' seed: the same state and look give the same futures, in any process
         stream = zlib.crc32(repr((self.seed, mask, consistent, buffer, tuple(sorted(visible)))).encode())
         rounds = 0
-        while True:
-            if deadline is None:
-                if rounds >= self.samples:
-                    break
-            elif rounds >= self.min_samples and time.perf_counter() >= deadline:
-                break
+        self._stop = math.inf if deadline is None else deadline
+        while rounds < self.samples if deadline is None else time.perf_counter() < deadline:
             seed = (stream << 20) | rounds
-            for i, action in enumerate(actions):
-                totals[i] += self._cost_after(engine, tables, mask, consistent, buffer, bin_parts, action, index,
-                                              random.Random(seed))
+            try:    # a round cut at the deadline is dropped (every action's future, or none)
+                costs = [self._cost_after(engine, tables, mask, consistent, buffer, bin_parts, action, index,
+                                          random.Random(seed)) for action in actions]
+            except BudgetExceeded:
+                break
+            totals = [t + c for t, c in zip(totals, costs)]
             rounds += 1
-            if deadline is not None and rounds < self.min_samples and time.perf_counter() >= deadline + self.budget:
-                break       # far over the budget: a plan too large to sample; the base rule's action
         if rounds < self.min_samples:
             self.last = {"rounds": rounds, "fallback": True}
             return base
@@ -252,8 +254,11 @@ class Rollout(DecidesOnMasks):
                 return below[u] & ~mask == 0
             return engine.consistent_after(mask, consistent, u) != 0
 
+        stop = self._stop
         while mask != full and steps < limit:
             steps += 1
+            if not steps & 15 and stop < math.inf and time.perf_counter() >= stop:
+                raise BudgetExceeded("a sampled future past the decision's deadline")
             t += look_cost
             n = len(bin_parts)
             if n <= k:
