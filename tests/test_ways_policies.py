@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import itertools
 import random
+import time
+from pathlib import Path
 
 import pytest
 from hypothesis import assume, given, settings, strategies as st
@@ -151,3 +153,58 @@ def test_the_ways_bound_what_waits_where_the_order_cannot():
     assert engine.waits(0, 1, 0) == (0, 0)      # the peg may go in after the cap instead
     brute = [s for s in itertools.permutations(plan.part_ids) if admitted(plan, s)]
     assert all(s.index("peg") > min(s.index("base"), s.index("cap")) for s in brute)
+
+
+BLOCK30 = Path(__file__).parent / "data" / "ways-block30.yaml"     # `opportune derive` of a random voxel block
+
+
+class SlowClock:
+    """A clock that moves only with the work of the engine of ways: each call of a unit of it (a set's
+    parts that can go in, a liveness test, a walk's step) costs ``cost`` seconds, as on a machine that
+    slow; ``time.perf_counter`` reads it."""
+
+    def __init__(self, monkeypatch, cost: float):
+        from opportune.engine import deadline, ways as engine_ways
+        from opportune.planning.ways import WaysTable as Table
+
+        self.now, self.cost = 1000.0, cost
+        monkeypatch.setattr(time, "perf_counter", lambda: self.now)
+        monkeypatch.setattr(deadline, "_perf", lambda: self.now)
+        # the units of O(ways) or more (a part going in, O(the ways naming it), is not one)
+        for owner, name in ((Table, "goes"), (Table, "shutting"), (Table, "locked"), (Table, "before"),
+                            (Table, "_open_ways_of"), (engine_ways._Walk, "choices"), (engine_ways._Walk, "locked")):
+            monkeypatch.setattr(owner, name, self.charged(getattr(owner, name)))
+
+    def charged(self, work):
+        def slow(*args, **kwargs):
+            self.now += self.cost
+            return work(*args, **kwargs)
+        return slow
+
+
+@pytest.mark.parametrize("policy", ["paper", "bin-first", "slack", "rollout"])
+def test_a_decision_on_a_plan_of_ways_keeps_its_budget_however_slow_the_work(monkeypatch, policy):
+    """On a derived block of 30 parts, with every unit of the ways' work costing a millisecond of an
+    injected clock, each decision ends within its budget and one unit of work between two readings of
+    the clock: the exact count's (4 sets), a walk's step, a liveness test (at most 10 units)."""
+    from opportune import load_plan
+    from opportune.sequencer import Sequencer
+
+    plan = load_plan(BLOCK30)
+    budget, cost = 0.05, 0.001
+    chosen = make_policy(policy, budget=budget) if policy != "rollout" else Rollout(budget=budget, exact_below=0)
+    seq = Sequencer(plan, chosen, buffer_capacity=2, budget=budget, warm_up=0.01)
+    clock = SlowClock(monkeypatch, cost)
+    rng = random.Random(3)
+    slowest, estimated = 0.0, 0
+    for _ in range(25):
+        if seq.state.is_complete:
+            break
+        in_bin = [p for p, n in seq.state.in_bin.items() for _ in range(n)]
+        start = clock.now
+        decision = seq.decide(tuple(rng.sample(in_bin, min(2, len(in_bin)))))
+        slowest = max(slowest, clock.now - start)
+        estimated += not decision.exact
+        seq.report("success")
+    assert slowest <= budget + 10 * cost, slowest
+    assert estimated, "every decision was exact: the clock was not slow enough to test the budget"

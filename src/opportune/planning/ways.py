@@ -265,8 +265,12 @@ class WaysTable:
     def _open_ways(self, mask: int) -> tuple[dict, dict, list]:
         """On ``mask`` (the last one asked kept): each part left's open ways with their unmet needs, the
         blockers they share (0 if none is open), and the parts every open way of which has a need."""
-        if self._open is not None and self._open[0] == mask:
-            return self._open[1]
+        if self._open is None or self._open[0] != mask:
+            self._open = (mask, self._open_ways_of(mask))
+        return self._open[1]
+
+    def _open_ways_of(self, mask: int) -> tuple[dict, dict, list]:
+        """:meth:`_open_ways`, found.  O(ways) mask operations."""
         open_ways = {q: [(b, tuple(n for n in needs if not n & mask)) for b, needs in self.ways[q] if not b & mask]
                      for q in _bits(self.full & ~mask)}
         common = {}
@@ -276,7 +280,6 @@ class WaysTable:
                 c &= b
             common[q] = c if ways else 0
         needy = [q for q, ways in open_ways.items() if ways and all(needs for _, needs in ways)]
-        self._open = (mask, (open_ways, common, needy))
         return open_ways, common, needy
 
     def completion(self, mask: int = 0, work: int = 1_000_000, until: float | None = None) -> list[int] | None:

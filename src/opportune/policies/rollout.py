@@ -18,7 +18,8 @@ millisecond:
 
 Budget.  Without one, every decision samples ``samples`` futures per action (the same decision
 for the same state and seed, on any machine).  With ``budget`` seconds, rounds of futures run until
-80% of it is spent, a round cut there dropped (a future reads the clock every 16 steps); with fewer
+80% of it is spent, a round cut there dropped (a future reads the clock every 16 steps, every step on a
+plan written as ways); with fewer
 than ``min_samples`` rounds the decision is the base rule's, said so in its reasons.  The number of
 rounds, and so the decision, then depends on the machine's speed.
 
@@ -255,9 +256,12 @@ class Rollout(DecidesOnMasks):
             return engine.consistent_after(mask, consistent, u) != 0
 
         stop = self._stop
+        # the clock read every 16 steps, every step on a plan written as ways (a step's liveness test
+        # there is O(ways), not O(1))
+        every = 15 if posets else 0
         while mask != full and steps < limit:
             steps += 1
-            if not steps & 15 and stop < math.inf and time.perf_counter() >= stop:
+            if not steps & every and stop < math.inf and time.perf_counter() >= stop:
                 raise BudgetExceeded("a sampled future past the decision's deadline")
             t += look_cost
             n = len(bin_parts)
