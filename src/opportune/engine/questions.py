@@ -88,6 +88,59 @@ class StateQuestions:
         """
         return self.consistent_after(mask, consistent, unit)
 
+    def waits(self, mask: int, consistent: int, unit: int) -> tuple[int, int]:
+        """The installs still needed before ``unit`` can go in, and the steps that wait on it (each under
+        the consistent strategy that has the fewest).  O(strategies).
+
+        Parameters
+        ----------
+        mask : int
+            The installed units.
+        consistent : int
+            The strategies still open (not 0).
+        unit : int
+            A unit not installed.
+
+        Returns
+        -------
+        tuple of (int, int)
+            The units left below ``unit``, and the units left above it.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["b"]}))
+        >>> engine.waits(0, 1, engine.first[1]), engine.waits(0b001, 1, engine.first[2])
+        ((1, 1), (1, 0))
+        """
+        remaining = self.full & ~mask
+        posets = [self.posets[s] for s in range(self.k) if consistent >> s & 1]
+        return (min((p.below[unit] & remaining).bit_count() for p in posets),
+                min((p.above[unit] & remaining).bit_count() for p in posets))
+
+    def steps_waiting(self, unit: int) -> int:
+        """The steps that wait on ``unit`` at the start, in the strategy that has the most (a static
+        priority).  O(strategies).
+
+        Parameters
+        ----------
+        unit : int
+            A unit.
+
+        Returns
+        -------
+        int
+            The units above it.
+
+        Examples
+        --------
+        >>> from opportune import OrderEngine, make_plan
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], strategies={"x": {"c": ["a"]}, "y": {"c": ["b"], "b": ["a"]}}))
+        >>> engine.steps_waiting(engine.first[0])
+        2
+        """
+        return max(p.above[unit].bit_count() for p in self.posets)
+
     def next_unit(self, mask: int, part: int) -> int | None:
         """The next uninstalled unit of a part, or None if all are installed.  O(quantity).
 

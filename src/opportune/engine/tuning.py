@@ -369,8 +369,10 @@ RELAX_MAX_THREADS = 256
 
 # ------------------------------------------------------------------ plans written as ways (engine/ways.py)
 
-#: New memo entries between two readings of the clock (each entry is O(parts × ways) mask work).
-WAYS_CHECK_EVERY = 64
+#: Sets an exact count enters between two readings of the clock (each is O(ways) mask work: on a random
+#: block of 300 parts about half a millisecond, so a count passes its deadline by a few milliseconds at most;
+#: read as sets are entered, not finished: the first descent is as deep as the plan).
+WAYS_CHECK_EVERY = 4
 #: Entries the memo of a :class:`~opportune.engine.ways.WaysCounter` holds at most before its oldest half is
 #: dropped (about 150 bytes an entry on 300 parts: 300 MB).
 WAYS_MAX_TOTAL = 2_000_000

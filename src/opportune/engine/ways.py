@@ -120,10 +120,12 @@ class WaysCounter:
     def _count(self, mask: int, dl: Deadline) -> int:
         """The memoised recursion, with an explicit stack (a 10,000-part plan is as deep)."""
         table, memo = self.table, self.memo
-        get, goes, shut_out = memo.get, table.goes, table.shut_out
+        get, goes, shutting = memo.get, table.goes, table.shutting
         limit = self.max_memo if self.max_memo is not None else math.inf
-        new = 0
-        frames = [[mask, goes(mask), 0]]
+        new = pushed = 0
+        # a frame: the set, the parts still to try on it, the sum so far, and the parts that would shut
+        # another out (WaysTable.shutting: one pass a set instead of one a part tried)
+        frames = [[mask, goes(mask), 0, shutting(mask)]]
         while frames:
             frame = frames[-1]
             s, todo = frame[0], frame[1]
@@ -134,14 +136,17 @@ class WaysCounter:
                 t = s | b
                 v = get(t)
                 if v is None:
-                    if shut_out(t):
+                    if frame[3] & b:
                         v = 0
                     else:
                         # the clock at each step down too: on hundreds of parts the first entry is made only at
                         # the full set, hundreds of steps (each O(parts × ways)) down (a reading costs far less)
                         dl.check("counting the completions of a plan of ways")
                         frame[1] = todo
-                        frames.append([t, goes(t), 0])
+                        pushed += 1     # the clock read by sets entered (a first descent is as deep as the plan)
+                        if not pushed % CHECK_EVERY:
+                            dl.check("counting the completions of a plan of ways")
+                        frames.append([t, goes(t), 0, shutting(t)])
                         down = True
                         break
                 frame[2] += v
@@ -152,8 +157,6 @@ class WaysCounter:
             if new > limit:
                 raise BudgetExceeded(f"exact count needs more than max_memo={self.max_memo} new memo entries",
                                      reason="memo", memo_size=len(memo))
-            if not new % CHECK_EVERY:
-                dl.check("counting the completions of a plan of ways")
             frames.pop()
             if frames:
                 frames[-1][2] += frame[2]
@@ -218,7 +221,7 @@ class _Walk:
     open ways each part has, and the parts ready to go in.  Flat arrays, so a copy (a resampled walk) is
     a few C-level copies."""
 
-    __slots__ = ("ways", "mask", "open", "met", "usable", "left", "ready", "order")
+    __slots__ = ("ways", "mask", "open", "met", "usable", "left", "ready", "order", "common")
 
     def __init__(self, ways: _Ways, mask: int):
         self.ways = ways
@@ -228,6 +231,8 @@ class _Walk:
         self.left = [len(k) for k in ways.of_part]          # open ways per part
         self.usable = [sum(1 for k in ks if not ways.needs[k]) for ks in ways.of_part]
         self.ready = {i for i, u in enumerate(self.usable) if u}
+        # per part, the blockers its open ways share (-1: none open): a part among them shuts it out
+        self.common = [self._common(q) for q in range(len(ways.of_part))]
         for i in _bits(mask):
             self.add(i)
         self.order: list[int] = []          # the parts this walk added, in order
@@ -236,7 +241,16 @@ class _Walk:
         w = object.__new__(_Walk)
         w.ways, w.mask, w.open, w.met = self.ways, self.mask, bytearray(self.open), self.met[:]
         w.usable, w.left, w.ready, w.order = self.usable[:], self.left[:], set(self.ready), self.order[:]
+        w.common = self.common[:]
         return w
+
+    def _common(self, q: int) -> int:
+        """The blockers every open way of part ``q`` shares (-1 if none is open)."""
+        out = -1
+        for k in self.ways.of_part[q]:
+            if self.open[k]:
+                out &= self.ways.blockers[k]
+        return out
 
     def add(self, i: int) -> None:
         """Part ``i`` goes in."""
@@ -244,10 +258,12 @@ class _Walk:
         self.mask |= 1 << i
         ready.discard(i)
         full_needs = ways.needs
+        closed = set()
         for k in ways.blocks[i]:
             if is_open[k]:
                 is_open[k] = 0
                 q = ways.owner[k]
+                closed.add(q)
                 self.left[q] -= 1
                 if met[k].bit_count() == full_needs[k]:
                     usable[q] -= 1
@@ -261,6 +277,8 @@ class _Walk:
                     usable[q] += 1
                     if usable[q] == 1 and not self.mask >> q & 1:
                         ready.add(q)
+        for q in closed:
+            self.common[q] = self._common(q)
 
     def shuts_out(self, i: int) -> bool:
         """Whether installing ``i`` would leave another remaining part with every way blocked."""
@@ -297,8 +315,13 @@ class _Walk:
 
     def choices(self) -> list[int]:
         """The parts that can go in now without shutting another out (in increasing order: seeded draws
-        do not depend on a set's order)."""
-        return [i for i in sorted(self.ready) if not self.shuts_out(i)]
+        do not depend on a set's order): those among no remaining part's shared blockers
+        (:meth:`shuts_out`'s answer for all at once, O(parts))."""
+        mask, shutting = self.mask, 0
+        for q, c in enumerate(self.common):
+            if c > 0 and not mask >> q & 1:
+                shutting |= c
+        return [i for i in sorted(self.ready) if not shutting >> i & 1]
 
 
 def _smc_run(ways: _Ways, start: int, particles: int, rng, dl: Deadline,
@@ -317,9 +340,13 @@ def _smc_run(ways: _Ways, start: int, particles: int, rng, dl: Deadline,
     walks += [walks[0].copy() for _ in range(particles - 1)]
     log_z = 0.0
     for step in range(ways.table.n - start.bit_count()):
-        options = [w.choices() for w in walks]
-        if not step % LOCK_EVERY:       # a walk whose parts left lock each other has no completion: 0
-            options = [[] if o and w.locked() else o for w, o in zip(walks, options)]
+        options = []
+        for w in walks:         # the clock read a walk at a time: a step of 8 walks on 300 parts is milliseconds
+            o = w.choices()
+            if o and not step % LOCK_EVERY and w.locked():   # parts left that lock each other: no completion
+                o = []
+            options.append(o)
+            dl.check("estimating the completions of a plan of ways")
         weights = [len(o) for o in options]
         total = sum(weights)
         if not total:
@@ -546,10 +573,9 @@ class WaysChains:
         """As :meth:`CompletionChains.estimate <opportune.engine.sampling.CompletionChains.estimate>`: for each
         unit of ``first`` the share of completions it begins, for each of ``positions`` its mean position
         (1 = next), a round (one run) at a time until ``samples`` rounds (with ``steps``) or ``deadline``, or
-        ``settled``.  The first round runs whatever the time; a later one past ``deadline`` (of
-        ``time.perf_counter``) is cut and dropped."""
-        from opportune.engine.sampling import ChainEstimate, _mean_se
-
+        ``settled``.  Every round, the first too, stops at ``deadline`` (of ``time.perf_counter``): a round
+        cut is dropped, and with no round, none kept from before (``keep``) and none finished in time,
+        the answer is None (a run over a 300-part plan takes longer than a decision's budget)."""
         if isinstance(deadline, Deadline):
             deadline, clock = (deadline.at if deadline.finite else None), time.perf_counter
         k, start = self.chains, self.table.full & ~self.remaining
@@ -564,8 +590,8 @@ class WaysChains:
         stop = Deadline(deadline) if deadline is not None and clock is time.perf_counter else Deadline.NEVER
         while True:
             ends: list = []
-            try:            # the first round whatever the time (an estimate needs one), the others within it
-                _smc_run(self.ways, start, k, self.rng, stop if rounds else Deadline.NEVER, ends)
+            try:            # every round within the deadline: the budget is the caller's promise
+                _smc_run(self.ways, start, k, self.rng, stop, ends)
             except BudgetExceeded:
                 break
             self.steps += max(1, self.remaining.bit_count()) * MIXED
@@ -578,12 +604,7 @@ class WaysChains:
             for acc in (*acc_first.values(), *acc_pos.values()):
                 acc[1] += 1
             rounds += 1
-            summary = ChainEstimate(
-                first={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_first.items()},
-                positions={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_pos.items()},
-                per_chain={"first": {u: [x / n for x in xs] for u, (xs, n) in acc_first.items()},
-                           "positions": {u: [x / n for x in xs] for u, (xs, n) in acc_pos.items()}},
-                samples=rounds * k, steps=self.steps)
+            summary = self._summary(acc_first, acc_pos)
             if steps and rounds >= samples:
                 break
             if rounds >= 2 and deadline is not None and clock is not None and clock() >= deadline:
@@ -592,4 +613,20 @@ class WaysChains:
                 break
             if settled is not None and rounds >= min_rounds and settled(summary):
                 break
+        if summary is None:
+            summary = self._summary(acc_first, acc_pos)     # the readings kept from before, if any
         return summary
+
+    def _summary(self, acc_first: dict, acc_pos: dict):
+        """The estimate from the readings so far (``unit → [per-group sums, rounds]``), or None without one."""
+        from opportune.engine.sampling import ChainEstimate, _mean_se
+
+        accs = (*acc_first.values(), *acc_pos.values())
+        if not accs or not all(n for _, n in accs):
+            return None
+        return ChainEstimate(
+            first={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_first.items()},
+            positions={u: _mean_se([x / n for x in xs]) for u, (xs, n) in acc_pos.items()},
+            per_chain={"first": {u: [x / n for x in xs] for u, (xs, n) in acc_first.items()},
+                       "positions": {u: [x / n for x in xs] for u, (xs, n) in acc_pos.items()}},
+            samples=max(n for _, n in accs) * self.chains, steps=self.steps)

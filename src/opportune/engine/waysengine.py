@@ -238,9 +238,16 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         return frozenset(self.installable(mask, consistent))
 
     def installable_among(self, mask: int, consistent: int, parts: Collection[str]) -> list[str]:
-        """Those of ``parts`` installable now (declaration order)."""
-        asked = set(parts)
-        return [p for p in self.installable(mask, consistent) if p in asked]
+        """Those of ``parts`` installable now (declaration order): the liveness of those alone is decided
+        (a look asks of two or three parts, and each liveness costs O(passes × ways))."""
+        key = mask | consistent << self.n_units
+        known = self._installable_cache.get(key)
+        index = self.plan.index
+        asked = sorted({u for p in parts if (u := self.next_unit(mask, index(p))) is not None}) if consistent else []
+        if known is not None:
+            return [self._unit_ids[i] for i in asked if self._unit_ids[i] in known]
+        return [self._unit_ids[i] for i in asked
+                if not mask >> i & 1 and self.table.can_go(mask, i) and self.live(mask | 1 << i)]
 
     def installable_units(self, mask: int, consistent: int) -> int:
         """The installable parts' next units as a mask."""
@@ -255,19 +262,42 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         return self.next_unit(mask, self.plan.index(part))
 
     def missing_before(self, mask: int, part: str) -> list[str]:
-        """Parts to install before ``part`` by its way that misses the fewest (one of each need), or []
-        if every way of it is blocked by a part already in."""
+        """Parts to install before ``part``'s next unit (declaration order): for its way that asks the fewest, each
+        unmet need met by the part that itself asks the fewest, with what that part asks
+        (:meth:`~opportune.planning.ways.WaysTable.before`); [] if it can go in now or every way of it is
+        blocked by a part already in.
+
+        Examples
+        --------
+        >>> from opportune.formats.ways import ways_plan
+        >>> from opportune.planning.plan import Part, Way
+        >>> ways = {"b": [Way(frozenset(), (frozenset({"a"}),))], "c": [Way(frozenset(), (frozenset({"b"}),))]}
+        >>> WaysEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")], ways)).missing_before(0, "c")
+        ['a', 'b']
+        """
         i = self._next(mask, part)
-        if i is None:
-            return []
-        best = None
-        for blockers, needs in self.table.ways[i]:
-            if blockers & mask:
-                continue
-            lacking = sorted({self._unit_ids[(n & -n).bit_length() - 1] for n in needs if not n & mask})
-            if best is None or len(lacking) < len(best):
-                best = lacking
-        return best or []
+        return [] if i is None else [self._unit_ids[u] for u in _bits(self.table.before(mask, i))]
+
+    def waits(self, mask: int, consistent: int, unit: int) -> tuple[int, int]:
+        """The installs still needed before part ``unit`` can go in (:meth:`missing_before`'s), and the
+        parts that must follow it as far as the ways show
+        (:meth:`~opportune.planning.ways.WaysTable.waiting_on`): on a plan of one strategy written as ways,
+        the order engine's answers.
+
+        Examples
+        --------
+        >>> from opportune.formats.ways import ways_plan
+        >>> from opportune.planning.plan import Part, Way
+        >>> ways = {"b": [Way(frozenset(), (frozenset({"a"}),))], "c": [Way(frozenset(), (frozenset({"b"}),))]}
+        >>> WaysEngine(ways_plan("p", [Part("a"), Part("b"), Part("c")], ways)).waits(0, 1, 1)
+        (1, 1)
+        """
+        return self.table.before(mask, unit).bit_count(), self.table.waiting_on(mask, unit).bit_count()
+
+    def steps_waiting(self, unit: int) -> int:
+        """The parts that must follow part ``unit`` at the start (:meth:`waits`'s second, on nothing
+        installed): the rollout's static priority."""
+        return self.table.waiting_on(0, unit).bit_count()
 
     # ---------------------------------------------------------------- counts
 
@@ -333,11 +363,12 @@ class WaysEngine(ExactCounting, StateQuestions, MemoryUpkeep):
         while level:
             nxt: dict[int, int] = {}
             for s, paths in level.items():
+                shutting = table.shutting(s)        # s is live: t is shut out iff i is among these
                 for i in _bits(table.goes(s)):
                     t = s | 1 << i
                     f = memo.get(t)
                     if f is None:
-                        f = 0 if table.shut_out(t) else self.counter.count(t, dl)
+                        f = 0 if shutting >> i & 1 else self.counter.count(t, dl)
                     if f:
                         sums[i] = sums.get(i, 0) + paths * f * depth
                         nxt[t] = nxt.get(t, 0) + paths

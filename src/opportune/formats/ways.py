@@ -44,9 +44,10 @@ from opportune.planning.ways import UNIT, Undecided, WaysTable, unit_id
 __all__ = ["SEARCH_WORK", "WAYS_POLICIES", "check_ways", "not_for_ways", "ways_of_strategy", "ways_plan"]
 
 #: The policies and study strategies that take a plan written as ways (the others read the orders of
-#: strategies): the one list every door checks (``replay``, ``simulate``, ``evaluate``, a study's settings).
-WAYS_POLICIES = ("lookahead", "paper", "bin-first", "optimal", "pallet", "shake", "kitting", "buffer", "quantify",
-                 "random")
+#: strategies): the one list every door checks (``replay``, ``simulate``, ``evaluate``, a study's settings,
+#: the service's runs).
+WAYS_POLICIES = ("lookahead", "paper", "bin-first", "slack", "rollout", "optimal", "pallet", "shake", "kitting",
+                 "buffer", "quantify", "random")
 
 #: Most sets the check of a plan of ways visits looking for an admissible sequence (a plan with one is
 #: found in as many sets as it has parts as a rule: each set not taken is proved dead first).

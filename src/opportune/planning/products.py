@@ -50,6 +50,7 @@ from opportune.planning.plan import (
     Part,
     Plan,
     Strategy,
+    Way,
     _plain,
 )
 from opportune.limits import MAX_PRODUCTS  # noqa: F401 (their home: the one table of limits)
@@ -253,6 +254,7 @@ def combine_products(plans: Sequence[Plan], *, serial: bool = False, name: str |
     if combos * per_combo > MAX_CONSTRAINTS:
         raise ProductsError(f"the joint plan would declare about {combos * per_combo:,} constraints, beyond the "
                             f"limit of {MAX_CONSTRAINTS:,}: use fewer products")
+    ways = _joint_ways(plans, serial)
     visibility: dict[str, float] = {}
     parts: list[Part] = []
     for i, plan in enumerate(plans, 1):
@@ -288,8 +290,33 @@ def combine_products(plans: Sequence[Plan], *, serial: bool = False, name: str |
     if costs.get("parts"):   # per-part motion costs apply to every unit of the kind
         costs["parts"] = {unit_id(k, i): v for i in range(1, len(plans) + 1) for k, v in costs["parts"].items()}
         simulation["costs"] = costs
-    return Plan(name, tuple(parts), tuple(strategies), source=plans[0].source, description=desc,
-                simulation=simulation)
+    return Plan(name, tuple(parts), () if ways is not None else tuple(strategies), source=plans[0].source,
+                description=desc, simulation=simulation, ways=ways)
+
+
+def _joint_ways(plans: list[Plan], serial: bool) -> dict | None:
+    """The joint plan's ways where the products are written as ways (each unit's ways, renamed to its
+    product's units: a product's parts block and need only its own), else None."""
+    written = [p.ways is not None for p in plans]
+    if not any(written):
+        return None
+    if not all(written) or serial:
+        raise ProductsError("products written as ways are combined only with others written as ways, side by "
+                            "side (not one after another)")
+    named = sum(len(w.blockers) + sum(len(n) for n in w.needs) for p in plans for ws in p.ways.values() for w in ws)
+    if named > MAX_CONSTRAINTS:
+        raise ProductsError(f"the joint plan's ways would name {named:,} parts in all, beyond the limit of "
+                            f"{MAX_CONSTRAINTS:,}: use fewer products")
+    ways: dict = {}
+    for i, plan in enumerate(plans, 1):
+        for pid, listed in plan.ways.items():
+            # a way in first: before every other part of its own product (its blockers, written out); one
+            # first with needs admits nothing (its needs are never met first) and is left out
+            ways[unit_id(pid, i)] = tuple(
+                Way(frozenset(unit_id(b, i) for b in (set(plan.part_ids) - {pid} if w.first else w.blockers)),
+                    tuple(frozenset(unit_id(q, i) for q in need) for need in w.needs), name=w.name)
+                for w in listed if not (w.first and w.needs))
+    return ways
 
 
 def _ends(plan: Plan, strategy: Strategy, *, last: bool) -> list[str]:

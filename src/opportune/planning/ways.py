@@ -74,7 +74,7 @@ class WaysTable:
     [0, 1, 2]
     """
 
-    __slots__ = ("n", "full", "ways", "_free", "has_needs")
+    __slots__ = ("n", "full", "ways", "_free", "has_needs", "_open")
 
     def __init__(self, n: int, ways: list):
         self.n = n
@@ -87,6 +87,7 @@ class WaysTable:
                 self._free |= 1 << i
         #: whether any way has needs (without, :meth:`locked` decides liveness exactly)
         self.has_needs = any(needs for w in self.ways for _, needs in w)
+        self._open = None       # (mask, what _open_ways found on it): the last set asked
 
     @classmethod
     def of(cls, plan: Plan) -> "WaysTable":
@@ -171,6 +172,33 @@ class WaysTable:
                 return True
         return False
 
+    def shutting(self, mask: int) -> int:
+        """The parts whose going in on ``mask`` would shut another part out: for each part left, the
+        blockers every way of it still open shares.  On a set not shut out itself, ``t = mask | 1 << b``
+        is shut out exactly when ``b`` is among them, so one pass answers :meth:`shut_out` for every part
+        that can go next.  O(ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0b010, ())], [(0, ())], [(0b011, ()), (0b010, ())]])  # b shuts a and c out
+        >>> bin(t.shutting(0)), t.shut_out(0b010)
+        ('0b10', True)
+        """
+        out = 0
+        rest = self.full & ~mask & ~self._free
+        while rest:
+            b = rest & -rest
+            rest ^= b
+            common = -1
+            for blockers, _ in self.ways[b.bit_length() - 1]:
+                if not blockers & mask:
+                    common &= blockers
+                    if not common:
+                        break
+            if common > 0:
+                out |= common
+        return out
+
     def locked(self, mask: int) -> bool:
         """Whether the parts not in ``mask`` lock each other: taken out last first while one can be (a
         part can go in last if a way of it has no blocker in ``mask`` nor among the others left), some
@@ -196,6 +224,105 @@ class WaysTable:
             rest &= ~out
             left = [(i, b) for i, b in left if rest >> i & 1]
         return False
+
+    def before(self, mask: int, i: int) -> int:
+        """The parts to install before part ``i`` can go in on ``mask``: for its way that asks the
+        fewest, each unmet need met by the member that itself asks the fewest (with what that member
+        asks, recursively), none of them a blocker of the way.  Exact for a plan of one way per part
+        whose needs are single parts (a strategy, where it is every predecessor left); in general one
+        set of installs that lets ``i`` in, not always the smallest (that is a set cover).  0 if ``i``
+        can go in now, or no way of it is open.  O(parts × ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0, ())], [(0, (0b001,))], [(0, (0b010,))]])    # a, then b, then c
+        >>> bin(t.before(0, 2)), bin(t.before(0b001, 2)), t.before(0b011, 2)
+        ('0b11', '0b10', 0)
+        """
+        memo: dict[int, int | None] = {}
+        found = self._before(mask, i, memo)
+        return found or 0
+
+    def _before(self, mask: int, i: int, memo: dict) -> int | None:
+        """:meth:`before` of ``i`` (None: no open way; a part in the middle of its own search counts as
+        unable, so a cycle of needs is not followed)."""
+        if i in memo:
+            return memo[i]
+        memo[i] = None
+        best = None
+        for blockers, needs in self.ways[i]:
+            if blockers & mask:
+                continue
+            got = 0
+            for need in needs:
+                if need & mask:
+                    continue
+                pick = None
+                for g in _bits(need):
+                    sub = self._before(mask, g, memo)
+                    if sub is None or (sub | 1 << g) & blockers:
+                        continue
+                    sub |= 1 << g
+                    if pick is None or sub.bit_count() < pick.bit_count():
+                        pick = sub
+                if pick is None:
+                    break
+                got |= pick
+            else:
+                if best is None or got.bit_count() < best.bit_count():
+                    best = got
+        memo[i] = best
+        return best
+
+    def waiting_on(self, mask: int, i: int) -> int:
+        """The parts left that must go in after part ``i`` in every completion of ``mask``, as far as the
+        ways show it: a part every open way of which has an unmet need all of whose members are ``i``
+        or wait on it, or a part that blocks every open way of ``i`` or of one waiting on it (taken to a
+        fixpoint).  Exact for a plan of one way per part whose needs are single parts (every successor
+        left); else a lower bound.  O(passes × ways) mask operations.
+
+        Examples
+        --------
+        >>> t = WaysTable(3, [[(0, ())], [(0, (0b001,))], [(0, (0b010,))]])    # a, then b, then c
+        >>> bin(t.waiting_on(0, 0)), bin(t.waiting_on(0, 1)), t.waiting_on(0, 2)
+        ('0b110', '0b100', 0)
+        """
+        rest = self.full & ~mask & ~(1 << i)
+        open_ways, common, needy = self._open_ways(mask)
+        after, grew = 1 << i, True
+        while grew:
+            grew = False
+            for q in needy:
+                if rest >> q & 1 and not after >> q & 1 and all(
+                        any(not n & ~after for n in needs) for _, needs in open_ways[q]):
+                    after |= 1 << q
+                    grew = True
+            for x in _bits(after):
+                blocks = rest & ~after & common.get(x, 0)
+                if blocks:
+                    after |= blocks
+                    grew = True
+        return after & ~(1 << i)
+
+    def _open_ways(self, mask: int) -> tuple[dict, dict, list]:
+        """On ``mask`` (the last one asked kept): each part left's open ways with their unmet needs, the
+        blockers they share (0 if none is open), and the parts every open way of which has a need."""
+        if self._open is None or self._open[0] != mask:
+            self._open = (mask, self._open_ways_of(mask))
+        return self._open[1]
+
+    def _open_ways_of(self, mask: int) -> tuple[dict, dict, list]:
+        """:meth:`_open_ways`, found.  O(ways) mask operations."""
+        open_ways = {q: [(b, tuple(n for n in needs if not n & mask)) for b, needs in self.ways[q] if not b & mask]
+                     for q in _bits(self.full & ~mask)}
+        common = {}
+        for q, ways in open_ways.items():
+            c = -1
+            for b, _ in ways:
+                c &= b
+            common[q] = c if ways else 0
+        needy = [q for q, ways in open_ways.items() if ways and all(needs for _, needs in ways)]
+        return open_ways, common, needy
 
     def completion(self, mask: int = 0, work: int = 1_000_000, until: float | None = None) -> list[int] | None:
         """One admissible completion of ``mask`` (the parts' positions in the order they go in), or None

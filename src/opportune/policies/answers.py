@@ -326,13 +326,10 @@ def _settled(look: LookState, parts: list[str], rule) -> list[str] | None:
 
 
 def _needed_after(look: LookState, part: str) -> tuple[int, int]:
-    """The installs still needed before ``part`` can go in, and the steps that wait on it (under the
-    consistent strategy that frees it soonest)."""
-    engine, remaining = look.engine, look.remaining
-    posets = [engine.posets[i] for i in range(engine.k) if look.consistent >> i & 1]
-    u = look.unit(part)
-    return (min((p.below[u] & remaining).bit_count() for p in posets),
-            min((p.above[u] & remaining).bit_count() for p in posets))
+    """The installs still needed before ``part`` can go in, and the steps that wait on it (the engine's
+    :meth:`~opportune.engine.questions.StateQuestions.waits`: under the consistent strategy that frees it
+    soonest, or by the ways of a plan written as ways)."""
+    return look.engine.waits(look.mask, look.consistent, look.unit(part))
 
 
 def _exact_slack(look: LookState, parts: list[str], weight: float) -> dict:
@@ -372,6 +369,8 @@ class Estimates:
 
         est = chains.estimate(first=set(first.values()), deadline=self.end, clock=time.perf_counter,
                               settled=sure if self.stop_when_sure else None, keep=True)
+        if est is None:
+            return self.unestimated(dict.fromkeys(can, 0.0), note)
         value = {p: 0.0 for p in can} | _tied_means(chains, remaining, first, est.first)
 
         def how(ranked) -> How:
@@ -402,6 +401,8 @@ class Estimates:
 
         est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter,
                               settled=sure if self.stop_when_sure else None, keep=True)
+        if est is None:
+            return self.unestimated(dict.fromkeys(parts, 0.0), note)
         value = _tied_means(chains, remaining, at, est.positions)
 
         def how(ranked) -> How:
@@ -445,6 +446,8 @@ class Estimates:
         est = chains.estimate(positions=set(at.values()), deadline=self.end, clock=time.perf_counter, keep=True,
                               settled=lambda e: _mixed(chains) and (confidence(e, best_of(e)) >= SURE or
                                                                     confidence(e, best_of(e), margin) >= SURE))
+        if est is None:     # the installs missing and the steps waiting, without the positions
+            return self.unestimated(offset, note)
         value = {p: est.positions[at[p]][0] + offset[p] for p in parts}
 
         def how(ranked) -> How:
@@ -455,6 +458,16 @@ class Estimates:
             return How(False, "mcmc", estimates, conf, note, close)
 
         self.record.update(how=how, ranked=None)
+        return value
+
+
+    def unestimated(self, value: dict, note: str) -> dict:
+        """The answer when not one sample of the estimate fitted before ``end`` (a large plan of ways, whose
+        every sample is a run over all parts left): ``value``, what needs no sample (ties, or the part of
+        the slack known without positions), so the rule's tie-breaks decide, said so with confidence 0."""
+        why = "no estimate fitted the decision budget: decided by the rule's tie-breaks"
+        how = How(False, "tie-breaks", (), 0.0, f"{note}; {why}" if note else why)
+        self.record.update(how=lambda ranked: how, ranked=None)
         return value
 
 

@@ -18,8 +18,10 @@ millisecond:
 
 Budget.  Without one, every decision samples ``samples`` futures per action (the same decision
 for the same state and seed, on any machine).  With ``budget`` seconds, rounds of futures run until
-80% of it is spent (at least ``min_samples`` rounds, else the decision is the base rule's, said so
-in its reasons); the number of rounds, and so the decision, then depends on the machine's speed.
+80% of it is spent, a round cut there dropped (a future reads the clock every 16 steps, every step on a
+plan written as ways); with fewer
+than ``min_samples`` rounds the decision is the base rule's, said so in its reasons.  The number of
+rounds, and so the decision, then depends on the machine's speed.
 
 Plans of at most :attr:`Rollout.EXACT_UNITS` units are decided by the exact look-ahead instead:
 there the expectation is computed, not sampled.
@@ -27,9 +29,12 @@ there the expectation is computed, not sampled.
 
 from __future__ import annotations
 
+import math
 import random
 import time
 import zlib
+
+from opportune.engine.deadline import BudgetExceeded
 
 from opportune.engine.tuning import ROLLOUT_EXACT_UNITS, ROLLOUT_SHARE
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision, shared_action
@@ -61,7 +66,7 @@ class Rollout(DecidesOnMasks):
         """Where the order of the buffer can decide (see :meth:`Opportunistic.buffer_ties_at
         <opportune.policies.opportunistic.Opportunistic.buffer_ties_at>`): the look-ahead's on a small plan;
         None (any pair) on a larger one, whose futures are drawn from the whole buffer's order."""
-        if engine.n_units <= self.exact_below:
+        if self._exact_for(engine):
             return self._exact_policy().buffer_ties_at(engine, mask, consistent)
         return None
 
@@ -82,6 +87,7 @@ class Rollout(DecidesOnMasks):
         self.exact_below = self.EXACT_UNITS if exact_below is None else exact_below
         self.exact = exact
         self._tables = None
+        self._stop = math.inf       # the moment the futures of a decision stop (the budget's share)
         self.last: dict | None = None
 
     # ------------------------------------------------------------------ tables of the plan
@@ -96,7 +102,7 @@ class Rollout(DecidesOnMasks):
                 for u in range(first[p], first[p] + part.quantity):
                     unit_part[u] = p
             # steps waiting on a unit, in the strategy that has the most (a static priority)
-            waiting = [max(po.above[u].bit_count() for po in engine.posets) for u in range(engine.n_units)]
+            waiting = [engine.steps_waiting(u) for u in range(engine.n_units)]
             move = [self.costs.move(part.id) for part in plan.parts]
             self._quantity = [part.quantity for part in plan.parts]
             self._tables = (engine, first, unit_part, waiting, move, {part.id: p for p, part in enumerate(plan.parts)})
@@ -110,7 +116,7 @@ class Rollout(DecidesOnMasks):
             return DONE
         self.last = None
         look = LookState(engine, mask, consistent, buffer, free, visible)
-        if engine.n_units <= self.exact_below:
+        if self._exact_for(engine):
             return self._exact_policy().choose_look(look)
         actions = self._actions(look)
         base = actions[0]
@@ -124,19 +130,16 @@ class Rollout(DecidesOnMasks):
         # the futures' seed: the same state and look give the same futures, in any process
         stream = zlib.crc32(repr((self.seed, mask, consistent, buffer, tuple(sorted(visible)))).encode())
         rounds = 0
-        while True:
-            if deadline is None:
-                if rounds >= self.samples:
-                    break
-            elif rounds >= self.min_samples and time.perf_counter() >= deadline:
-                break
+        self._stop = math.inf if deadline is None else deadline
+        while rounds < self.samples if deadline is None else time.perf_counter() < deadline:
             seed = (stream << 20) | rounds
-            for i, action in enumerate(actions):
-                totals[i] += self._cost_after(engine, tables, mask, consistent, buffer, bin_parts, action, index,
-                                              random.Random(seed))
+            try:    # a round cut at the deadline is dropped (every action's future, or none)
+                costs = [self._cost_after(engine, tables, mask, consistent, buffer, bin_parts, action, index,
+                                          random.Random(seed)) for action in actions]
+            except BudgetExceeded:
+                break
+            totals = [t + c for t, c in zip(totals, costs)]
             rounds += 1
-            if deadline is not None and rounds < self.min_samples and time.perf_counter() >= deadline + self.budget:
-                break       # far over the budget: a plan too large to sample; the base rule's action
         if rounds < self.min_samples:
             self.last = {"rounds": rounds, "fallback": True}
             return base
@@ -144,6 +147,16 @@ class Rollout(DecidesOnMasks):
         best = min(range(len(actions)), key=lambda i: (means[i], i))    # ties: the earlier (the base's first)
         self.last = {"rounds": rounds, "means": {_label(a): m for a, m in zip(actions, means)}, "fallback": False}
         return actions[best]
+
+    def _exact_for(self, engine) -> bool:
+        """Whether the exact look-ahead decides on this engine's plan: one of at most :attr:`exact_below`
+        units, and not written as ways unless the look-ahead takes such plans
+        (:data:`~opportune.formats.ways.WAYS_POLICIES`); else the futures are sampled."""
+        if engine.n_units > self.exact_below:
+            return False
+        from opportune.formats.ways import WAYS_POLICIES
+
+        return engine.plan.ways is None or "lookahead" in WAYS_POLICIES
 
     def _exact_policy(self):
         if self.exact is None:
@@ -173,11 +186,8 @@ class Rollout(DecidesOnMasks):
             return out + [shared_action("install", p, "buffer") for p in sorted(in_buffer, key=rank)]
         if free <= 0 or not visible:
             return [SHAKE]
-        remaining = engine.full & ~mask
-
         def missing(part):
-            u = engine.next_unit(mask, index[part])
-            return min((po.below[u] & remaining).bit_count() for po in engine.posets)
+            return engine.waits(mask, engine.all_strategies, engine.next_unit(mask, index[part]))[0]
 
         parts = sorted(set(visible), key=lambda p: (missing(p), -waiting_of(p), index[p]))
         # no shake while the buffer has room: a motion into the buffer keeps the part, a shake keeps nothing
@@ -221,7 +231,8 @@ class Rollout(DecidesOnMasks):
         _, first, unit_part, waiting, move, _ = tables
         posets = engine.posets
         single = len(posets) == 1
-        below = posets[0].below
+        # the first strategy's order (a plan written as ways has none: the engine says what is missing)
+        below = posets[0].below if posets else None
         full = engine.full
         k = self.visible
         cap = self.capacity
@@ -244,8 +255,14 @@ class Rollout(DecidesOnMasks):
                 return below[u] & ~mask == 0
             return engine.consistent_after(mask, consistent, u) != 0
 
+        stop = self._stop
+        # the clock read every 16 steps, every step on a plan written as ways (a step's liveness test
+        # there is O(ways), not O(1))
+        every = 15 if posets else 0
         while mask != full and steps < limit:
             steps += 1
+            if not steps & every and stop < math.inf and time.perf_counter() >= stop:
+                raise BudgetExceeded("a sampled future past the decision's deadline")
             t += look_cost
             n = len(bin_parts)
             if n <= k:
@@ -290,7 +307,8 @@ class Rollout(DecidesOnMasks):
             pick = None
             for i in seen:
                 u = next_unit(bin_parts[i])
-                key = ((below[u] & remaining).bit_count(), -waiting[u])
+                missing = (below[u] & remaining).bit_count() if below is not None else engine.waits(mask, 1, u)[0]
+                key = (missing, -waiting[u])
                 if pick is None or key < pick[0]:
                     pick = (key, i)
             i = pick[1]
@@ -302,7 +320,7 @@ class Rollout(DecidesOnMasks):
         return t
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
-        if state.schedule.engine.n_units <= self.exact_below:
+        if self._exact_for(state.schedule.engine):
             return self._exact_policy().decide(state, visible)
         action = self.choose(state, visible)
         if action.kind == "done":

@@ -87,6 +87,18 @@ def plan_too_large(why: str, *, retry: bool = False) -> ApiError:
                     "the opportunistic policy needs exact counts: split the plan or reduce its freedom", where="body.plan")
 
 
+def ways_policy(asked: str | None) -> None:
+    """Refuse (422) a run of a plan written as ways under a policy that does not take one yet, the
+    service's default included, naming those that do (:data:`~opportune.formats.ways.WAYS_POLICIES`)."""
+    from opportune.formats.ways import WAYS_POLICIES
+
+    policy = current_name(asked or DEFAULT_POLICY, warn=False)
+    if policy not in WAYS_POLICIES:
+        which = f"policy '{policy}'" if asked else f"the default policy '{policy}'"
+        raise ApiError(422, "policy_not_for_ways", f"{which} does not take a plan written as ways yet",
+                       f"choose a policy that does: {', '.join(WAYS_POLICIES)}", where="body.policy")
+
+
 class ReplayMismatch(Exception):
     pass
 
@@ -361,6 +373,8 @@ class RunManager:
             loaded = self._joint_plan(loaded, products, principal.cell)
         if loaded.too_large:
             raise plan_too_large(loaded.too_large)
+        if loaded.plan.is_ways:
+            ways_policy(body.get("policy"))
         if self.budget is not None:
             # Once per plan: the first run counts its first state for up to START_WARM_UP seconds here (small
             # plans finish), the rest goes on in the background; later runs find it done or under way.
