@@ -31,7 +31,6 @@ Measured against the optimum on 16-30-part plans and per decision on the SALBP p
 
 from __future__ import annotations
 
-import weakref
 from collections import OrderedDict
 from math import comb
 from dataclasses import dataclass
@@ -140,17 +139,16 @@ def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int
     return nearest, every
 
 
-#: Per engine (held weakly), :func:`_ancestors` of every part by (installed, strategies): a state's windows of
-#: each size and strategy ask the same, and each is O(parts × strategies).  Cleared whole past :data:`~opportune.engine.tuning.WINDOW_ANCESTORS`
-#: entries.
-_ANCESTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Key of :func:`_ancestors_of`'s memo in the engine's kept store (``engine.kept``: freed with the engine,
+#: where the look-ahead keeps its programmes too).  Cleared whole past
+#: :data:`~opportune.engine.tuning.WINDOW_ANCESTORS` entries.
+_ANCESTORS = "window.ancestors"
 
 
 def _ancestors_of(engine, mask: int, consistent: int) -> tuple[dict[int, int], dict[int, int]]:
-    """:func:`_ancestors` of every part, kept per engine (a pure function of the state).  O(1) when kept."""
-    memo = _ANCESTORS.get(engine)
-    if memo is None:
-        memo = _ANCESTORS.setdefault(engine, {})
+    """:func:`_ancestors` of every part, kept on the engine (a pure function of the state): a state's windows
+    of each size and strategy ask the same, and each is O(parts × strategies).  O(1) when kept."""
+    memo = engine.kept.setdefault(_ANCESTORS, {})
     got = memo.get((mask, consistent))
     if got is None:
         if len(memo) > WINDOW_ANCESTORS:
