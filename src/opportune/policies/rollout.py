@@ -149,14 +149,9 @@ class Rollout(DecidesOnMasks):
         return actions[best]
 
     def _exact_for(self, engine) -> bool:
-        """Whether the exact look-ahead decides on this engine's plan: one of at most :attr:`exact_below`
-        units, and not written as ways unless the look-ahead takes such plans
-        (:data:`~opportune.formats.ways.WAYS_POLICIES`); else the futures are sampled."""
-        if engine.n_units > self.exact_below:
-            return False
-        from opportune.formats.ways import WAYS_POLICIES
-
-        return engine.plan.ways is None or "lookahead" in WAYS_POLICIES
+        """Whether the exact look-ahead decides on this engine's plan (one of at most :attr:`exact_below`
+        units, written either way); else the futures are sampled."""
+        return engine.n_units <= self.exact_below
 
     def _exact_policy(self):
         if self.exact is None:
