@@ -232,6 +232,23 @@ def test_one_fixture_decides_as_today(plan, capacity, policy, seed):
     assert cell.state.is_complete == one.state.is_complete
 
 
+def test_two_buffered_units_of_one_part_fill_two_locations():
+    # Two units of p2 on the one fixture, both buffered: the policy must see both (a view that merged them
+    # showed the optimum a free location, and it buffered p4 into a full buffer).
+    plan = make_plan(["p0", "p1", {"id": "p2", "quantity": 2}, "p3", "p4"], {"p2": ["p1"], "p4": ["p2"]})
+    for policy in ("lookahead", "paper", "slack"):
+        one = Sequencer(plan, make_policy(policy, capacity=2), buffer_capacity=2, budget=None)
+        cell = MultiSequencer(several_products(plan, 1), make_policy(policy, capacity=2), buffer_capacity=2,
+                              budget=None)
+        for look in (("p3",), ("p2",), ("p2",), ("p0",), ("p4",)):
+            a, b = one.step(look).action, cell.step(look).action
+            assert (a.kind, a.source) == (b.kind, b.source)
+        assert cell.state.buffer.count("p2") == 2 and cell.state.buffer_free == 0
+        view, units = cell.state.view(("p2", "p2", "p4"))
+        assert view.buffer == ("p2@1", "p2@1") and units == ("p2@1", "p2@1", "p4@1")
+        assert b.kind != "buffer"
+
+
 def test_looks_of_kinds_are_checked():
     cell = MultiSequencer(several_products(GEARBOX, 2), budget=None)
     with pytest.raises(LookError, match="part kinds"):

@@ -64,11 +64,17 @@ class Layout:
         return [pid for i, pid in self.units[kind] if engine.next_unit(mask, i) is not None]
 
     def view(self, engine: OrderEngine, mask: int, kinds: Iterable[str]) -> tuple[str, ...]:
-        """Kinds (a look, or the buffer, in order) as the units they can become, without repeats."""
-        out: dict[str, None] = {}
-        for kind in kinds:
-            for pid in self.needed(engine, mask, kind):
-                out[pid] = None
+        """Kinds (a look, or the buffer, in order) as the units they can become: a kind held ``m`` times
+        becomes each part of it still needed, ``m`` times but no more than that part has units left.
+        (Without the repeats, two buffered units of one part on one fixture would read as one, and a
+        programme that sizes the buffer by its contents would see a free location that is not there.)
+        O(kinds × fixtures × quantity)."""
+        out: list[str] = []
+        for kind, m in Tally(kinds).items():
+            for i, pid in self.units[kind]:
+                u = engine.next_unit(mask, i)
+                if u is not None:
+                    out.extend([pid] * min(m, engine.first[i] + self.plan.parts[i].quantity - u))
         return tuple(out)
 
     def in_bin(self, schedule: Schedule, buffer: tuple[str, ...]) -> dict[str, int]:
