@@ -17,15 +17,37 @@ from typing import Optional
 import typer
 
 from opportune.cli.common import PLAN_ARG, err, fail, json_option, load_or_exit, out, policy_names
+from opportune.engine.tuning import EVALUATE_BYTES, EVALUATE_MEMORY, EVALUATE_RATES, EVALUATE_SECONDS
 from opportune.limits import MAX_BUFFER
 
-# The programmes' speed, measured in CPU time on a 2-core machine: the optimum's states (as estimated
-# before the start) per second of the whole evaluation (the policy's programme and the optimum's), about
-# 500-1,000/s in a Markov bin on plans of 11-21 parts (a state costs a look-up per look, ~r²/2 looks with r
-# parts left) and 4,000-10,000/s in the pile (whose windows are stored several at once).  They set the
-# default of --max-states (about a minute) and the time a refusal quotes.
-EVALUATE_STATES_PER_SECOND = {"uniform": 500, "weighted": 500, "pile": 4_000}
-EVALUATE_MAX_STATES = 30_000
+# What each programme is, in the messages (by the first word of its key in EVALUATE_RATES).
+_WORDS = {"compiled": "the compiled optimum", "Python": "the optimum in Python (no compiled core)",
+          "rule": "the policy's own evaluation (look by look, in Python)",
+          "window": "the look-ahead's own evaluation (look by look, in Python)"}
+
+
+def default_cap(programme: str) -> int:
+    """The states ``programme`` (a key of :data:`~opportune.engine.tuning.EVALUATE_RATES`) may store
+    by default: what it does in :data:`~opportune.engine.tuning.EVALUATE_SECONDS` of CPU at its measured
+    rate, within :data:`~opportune.engine.tuning.EVALUATE_MEMORY` of its states.  O(1).
+
+    Parameters
+    ----------
+    programme : str
+        ``"compiled uniform"``, ``"Python pile"``, ``"rule uniform"``, ...
+
+    Returns
+    -------
+    int
+        The state cap.
+
+    Examples
+    --------
+    >>> default_cap("compiled uniform") > 100 * default_cap("rule uniform")
+    True
+    """
+    kind = "compiled" if programme.startswith("compiled") else "Python"
+    return min(EVALUATE_SECONDS * EVALUATE_RATES[programme], EVALUATE_MEMORY // EVALUATE_BYTES[kind])
 
 
 def evaluate(
@@ -37,13 +59,14 @@ def evaluate(
     visible: Optional[int] = typer.Option(None, "--visible", min=1, help="Parts seen per look (default: plan, else 2)"),
     buffer_capacity: Optional[int] = typer.Option(None, "--buffer-capacity", min=0, max=MAX_BUFFER,
                                                   help="Buffer locations (default: plan, else unlimited)"),
-    max_states: int = typer.Option(
-        EVALUATE_MAX_STATES, "--max-states", min=1,
-        help=f"Most states of the dynamic programme (default {EVALUATE_MAX_STATES:,}: about a minute at the "
-             f"~{EVALUATE_STATES_PER_SECOND['uniform']:,} states/s measured on a 2-core machine (seconds on plans of "
-             "10 parts, up to two minutes of CPU on plans of 45; the pile bin is ~8 times faster), and at most "
-             f"about {2 * EVALUATE_MAX_STATES * 1_000 // 10**6 + 30} MB).  The states a plan needs are counted or "
-             "estimated before the programme starts, and a plan over the limit is refused at once"),
+    max_states: Optional[int] = typer.Option(
+        None, "--max-states", min=1,
+        help=f"Most states of each programme (default: what it does in about {EVALUATE_SECONDS} s of CPU, "
+             f"within {EVALUATE_MEMORY >> 30} GB: {default_cap('compiled uniform'):,} for the compiled optimum of "
+             f"a uniform bin, {default_cap('rule uniform'):,} for a policy's own evaluation in Python, which the "
+             "look-ahead needs none of where it decides by the optimum).  The states are counted or estimated "
+             "before any work, a plan whose optimum is over the limit is refused at once with the time and "
+             "memory it would take, and a policy's evaluation stops at it saying how far it got"),
     time_limit: Optional[float] = typer.Option(None, "--time-limit", min=0.0,
                                                help="Stop the programme after this many seconds and say how far it "
                                                     "got (default: none; --max-states bounds the work)"),
@@ -62,9 +85,12 @@ def evaluate(
     plan = load_or_exit(plan_file, json_errors=as_json, ways=True)    # a policy that does not take it: refused below
     chosen_bin = bin_model or plan.simulation.get("bin", "uniform")
     policy = _evaluated_policy(policy, chosen_bin, without_optimum, as_json)
-    config = _evaluation_config(plan, policy, chosen_bin, visible, buffer_capacity, max_states)
     engine = OrderEngine(plan)
-    run = _Run(plan, policy, chosen_bin, max_states, time_limit, _estimate(engine, config, chosen_bin, max_states))
+    config = _evaluation_config(plan, policy, chosen_bin, visible, buffer_capacity, max_states)
+    sized = _optimum_engine(engine, config)
+    work = _Work(sized, config, policy, without_optimum, max_states)
+    run = _Run(plan, policy, chosen_bin, work, time_limit, _estimate(sized, config, work))
+    run.sized = sized
     run.solve(engine, config, without_optimum, as_json)
     doc = {"plan": plan.name, "policy": policy, "bin": chosen_bin, "visible": config.visible,
            "buffer_capacity": config.buffer_capacity, "expected_time": run.value, "optimal": run.best,
@@ -118,7 +144,7 @@ def _evaluation_config(plan, policy: str, chosen_bin: str, visible: Optional[int
     try:
         return StudyConfig(plan=plan, strategies=(policy,), trials=1, bin=chosen_bin,
                            visible=visible or sim.get("visible", 2), buffer_capacity=buffer_capacity,
-                           costs=TimeModel.from_plan(plan), optimal_states=max_states).validate()
+                           costs=TimeModel.from_plan(plan), optimal_states=max_states or default_cap("compiled uniform")).validate()
     except (StudyError, ValueError) as exc:
         fail(str(exc))
 
@@ -128,27 +154,112 @@ def _simulate_hint(chosen_bin: str) -> str:
     return f"`opportune simulate{' --bin pile' if chosen_bin == 'pile' else ''}`"
 
 
-def _estimate(engine, config, chosen_bin: str, max_states: int):
-    """The states the evaluation needs, counted or estimated before any (a few seconds at most, and far cheaper
-    per state than the programme); exit with the figure when they are out of reach or over --max-states."""
-    from opportune.policies.optimal import LOOK_CACHE_LOOKS
-    from opportune.policies.states import BYTES_PER_STATE, big, estimate_states
+def _optimum_engine(engine, config):
+    """The engine whose states the optimum's programme stores: the plan's with its interchangeable parts
+    merged (fewer states, the same values; the compiled programme's 64-bit state codes need it on plans of
+    many distinct parts), except in the pile, whose programme takes the plan as it is."""
+    if config.bin == "pile":
+        return engine
+    from opportune.policies.optimal import optimum_engine
 
-    plan = config.plan
+    return optimum_engine(engine, config.costs, config.weights if config.bin == "weighted" else None)
+
+
+class _Work:
+    """What the evaluation will run, sized before it starts: the optimum's programme (compiled or in Python)
+    and the policy's own evaluation (none where the look-ahead decides by the optimum), each with its
+    measured speed and bytes (:data:`~opportune.engine.tuning.EVALUATE_RATES`) and its state cap
+    (``--max-states`` for both where given, else each its own :func:`default_cap`)."""
+
+    def __init__(self, engine, config, policy: str, without_optimum: bool, max_states: Optional[int]):
+        pile, weights = config.bin == "pile", config.weights if config.bin == "weighted" else None
+        weighted = bool(weights) and len(set(weights.values())) > 1
+        self.bin = "pile" if pile else "weighted" if weighted else "uniform"
+        self.optimum = f"{'compiled' if self._compiled(engine, config, weights) else 'Python'} {self.bin}"
+        self.policy = f"{'window' if policy == 'lookahead' else 'rule'} {'pile' if pile else 'uniform'}"
+        self.given = max_states is not None
+        self.optimum_cap = max_states or default_cap(self.optimum)
+        self.policy_cap = max_states or default_cap(self.policy)
+        # the look-ahead decides by its own optimum where it fits its cap, in a uniform bin (not the pile's
+        # evaluation: there it is evaluated look by look): then it has no states of its own to evaluate
+        self.lookahead_cap = None
+        if policy == "lookahead" and not without_optimum and self.bin == "uniform":
+            from opportune.policies.lookahead import Lookahead
+
+            self.lookahead_cap = Lookahead.COMPILED_STATES if self.optimum.startswith("compiled") else Lookahead().max_states
+
+    @staticmethod
+    def _compiled(engine, config, weights) -> bool:
+        if config.bin == "pile":
+            from opportune.policies.pile import compiled_pile_available
+
+            return compiled_pile_available(engine)
+        from opportune.policies.optimal import compiled_optimal_available
+
+        return compiled_optimal_available(engine, weights, visible=config.visible)
+
+    def seconds(self, programme: str, states: int) -> float:
+        """The CPU seconds ``programme`` takes for ``states`` states, at its measured rate."""
+        return states / EVALUATE_RATES[programme]
+
+    def optimum_words(self, states: int) -> str:
+        """``'the compiled optimum: ~2 s of CPU (~500,000 states/s) and about 180 MB'``."""
+        from opportune.policies.states import big
+
+        kind = self.optimum.split()[0]
+        return (f"{_WORDS[kind]}: {_duration(self.seconds(self.optimum, states))} of CPU "
+                f"(~{EVALUATE_RATES[self.optimum]:,} states/s) and about "
+                f"{big(max(1, states * EVALUATE_BYTES[kind] // 10**6))} MB")
+
+    def limit(self, cap: int, programme: str) -> str:
+        """``'--max-states 1,000'``, or the default cap and what it is."""
+        if self.given:
+            return f"--max-states {cap:,}"
+        return f"--max-states {cap:,} (the default for {_WORDS[programme.split()[0]]}: ~{EVALUATE_SECONDS} s of CPU)"
+
+    def by_optimum(self, estimate) -> Optional[bool]:
+        """Whether the policy will decide by the optimum (so evaluating it is the optimum's work alone): True,
+        False, or None when the count cannot tell (the estimate straddles the look-ahead's cap)."""
+        if self.lookahead_cap is None:
+            return False
+        if estimate.low > self.lookahead_cap:
+            return False
+        return True if estimate.exact or estimate.states <= self.lookahead_cap else None
+
+    def policy_words(self, estimate) -> str:
+        """The policy's own evaluation, as a refusal quotes it."""
+        by = self.by_optimum(estimate)
+        if by:
+            return "the policy decides by the optimum (its value is the optimum's: nothing more to evaluate)"
+        rate, cap = EVALUATE_RATES[self.policy], self.policy_cap
+        words = (f"{_WORDS[self.policy.split()[0]]} stops at {cap:,} states "
+                 f"({_duration(self.seconds(self.policy, cap))} of CPU at ~{rate:,} states/s)")
+        if by is None:
+            return (f"the policy decides by the optimum where it has at most {self.lookahead_cap:,} states; "
+                    f"else {words}")
+        return f"then {words}"
+
+
+def _estimate(engine, config, work: _Work):
+    """The states the evaluation needs, counted or estimated before any (a few seconds at most, and far cheaper
+    per state than the programme); exit with the figure when they are out of reach or over the optimum's cap."""
+    from opportune.policies.optimal import LOOK_CACHE_LOOKS
+    from opportune.policies.states import estimate_states
+
+    plan, chosen_bin = config.plan, config.bin
     estimate = estimate_states(engine, visible=config.visible, capacity=config.buffer_capacity,
-                               pile=chosen_bin == "pile", stop_above=max_states, time_limit=3.0)
+                               pile=chosen_bin == "pile", stop_above=work.optimum_cap, time_limit=3.0)
     if estimate.looks > LOOK_CACHE_LOOKS:
         fail(f"the exact evaluation of {plan.name} would weigh {estimate.looks:,} distinct looks at every state "
              f"({plan.n_units:,} parts, {config.visible} visible), more than the {LOOK_CACHE_LOOKS:,} the programme "
              f"keeps: it is out of reach whatever --max-states; estimate it by Monte Carlo with "
              f"{_simulate_hint(chosen_bin)}")
-    if estimate.over(max_states):
+    if estimate.over(work.optimum_cap):
         figure = max(estimate.states, estimate.low)
-        rate = EVALUATE_STATES_PER_SECOND[chosen_bin]
-        fail(f"the exact evaluation of {plan.name} needs {estimate.describe()} states, more than --max-states "
-             f"{max_states:,} (at ~{rate:,} states/s that is {_duration(figure / rate)}, and about "
-             f"{big(2 * figure * BYTES_PER_STATE // 10**6)} MB): raise --max-states, reduce --buffer-capacity or "
-             f"--visible, or estimate it by Monte Carlo with {_simulate_hint(chosen_bin)}")
+        fail(f"the exact evaluation of {plan.name} needs {estimate.describe()} states for the optimum, more than "
+             f"{work.limit(work.optimum_cap, work.optimum)}; {work.optimum_words(figure)}; "
+             f"{work.policy_words(estimate)}.  Raise --max-states, reduce --buffer-capacity or --visible, or "
+             f"estimate it by Monte Carlo with {_simulate_hint(chosen_bin)}")
     return estimate
 
 
@@ -157,10 +268,12 @@ class _Run:
     that a stop can say how far they got) and what they found.  (A plain class: ``dataclasses`` is not
     loaded at the command line's start-up for this one.)"""
 
-    def __init__(self, plan, policy: str, chosen_bin: str, max_states: int, time_limit: Optional[float], estimate):
+    def __init__(self, plan, policy: str, chosen_bin: str, work: _Work, time_limit: Optional[float], estimate):
         self.plan, self.policy, self.chosen_bin, self.estimate = plan, policy, chosen_bin, estimate
-        self.max_states, self.time_limit = max_states, time_limit
+        self.work, self.time_limit = work, time_limit
+        self.running = "optimum"      # which programme runs (the policy's own evaluation, or the optimum's)
         self.ev = self.optimum = None
+        self.sized = None       # the engine the optimum's states were counted on (the plan's, merged)
         self.policy_bound, self.ordered = 0, False
         self.value = self.best = 0.0
         self.states = self.policy_states = 0
@@ -182,8 +295,11 @@ class _Run:
                 chosen.optimal = False      # the look-ahead's own setting: its fallback decides
             self._programmes(engine, chosen, config, until, as_json)
         except (OptimalTooLarge, OutOfTime) as exc:
+            work = self.work
+            cap = work.policy_cap if self.running == "policy" else work.optimum_cap
             why = (f"passed --time-limit {self.time_limit:g} s" if isinstance(exc, OutOfTime)
-                   else f"needed more than --max-states {self.max_states:,} states")
+                   else f"needed more than {work.limit(cap, getattr(work, self.running))} states for the "
+                        f"{self.running}")
             bound = (f", at most {big(self.policy_bound)} for the policy"
                      if self.policy_bound not in (0, estimate.states) else "")
             fail(f"the exact evaluation of {plan.name} {why}: it stopped after "
@@ -198,46 +314,65 @@ class _Run:
         except (PolicyStuck, StudyError, ValueError) as exc:
             fail(str(exc))
 
+    def _declared(self, engine, config):
+        """The optimum's states on the plan as declared (its interchangeable parts not merged): they bound a
+        policy's; counted as the merged plan's were (the same estimate where nothing merges)."""
+        from opportune.policies.states import estimate_states
+
+        if self.sized is engine:
+            return self.estimate
+        return estimate_states(engine, visible=config.visible, capacity=config.buffer_capacity,
+                               stop_above=self.work.optimum_cap, time_limit=3.0)
+
     def _programmes(self, engine, chosen, config, until, as_json: bool) -> None:
         """Make the policy's programme and the optimum's, say how many states they may reach, and run them."""
         from opportune.policies.evaluate import PolicyEvaluator
         from opportune.policies.states import big
 
-        estimate, pile = self.estimate, self.chosen_bin == "pile"
-        settings = dict(visible=config.visible, capacity=config.buffer_capacity, costs=config.costs,
-                        max_states=self.max_states)
+        estimate, pile, work = self.estimate, self.chosen_bin == "pile", self.work
+        settings = dict(visible=config.visible, capacity=config.buffer_capacity, costs=config.costs)
         if pile:
             from opportune.policies.pile import PileSolver, pile_solver
 
             # the optimum compiled where the core is built (the same values): the policy's programme in Python
-            self.ev, self.optimum = PileSolver(engine, chosen, **settings), pile_solver(engine, **settings)
+            self.ev = PileSolver(engine, chosen, max_states=work.policy_cap, **settings)
+            self.optimum = pile_solver(engine, max_states=work.optimum_cap, **settings)
             if estimate.exact:
                 self.optimum.reserve(estimate.states)    # a compiled table sized at once: it never doubles
         else:
             weights = config.weights if self.chosen_bin == "weighted" else None
-            self.ev = PolicyEvaluator(engine, chosen, weights=weights, **settings)
+            self.ev = PolicyEvaluator(engine, chosen, weights=weights, max_states=work.optimum_cap, **settings)
+            self.ev.max_policy_states, self.ev.merge_optimum = work.policy_cap, True
         ev = self.ev
         ev.deadline = until         # finding where the buffer's order decides counts options: within it too
         # a policy deciding by the optimum is worth the optimum: none of its own states are evaluated
         by_optimum = not pile and ev.takes_optimum()
-        self.policy_bound, self.ordered = (0, False) if by_optimum else (ev.states_bound(estimate.states), ev.ordered)
+        if by_optimum:
+            self.policy_bound, self.ordered = 0, False
+        else:       # the policy's states are the plan's as declared: they are bounded by its count
+            self.policy_bound, self.ordered = ev.states_bound(self._declared(engine, config).states), ev.ordered
         kept = " (its buffer kept in the order of buffering)" if self.ordered else ""
+        optimum = f"states: {estimate.describe()} for the optimum ({work.optimum_words(estimate.states)})"
         if not as_json and by_optimum:
-            out().print(f"states: {estimate.describe()} for the optimum; none for the policy (it decides by the "
-                        "optimum's values: its value is the optimum's)")
+            out().print(f"{optimum}; none for the policy (it decides by the optimum's values: its value is the "
+                        "optimum's)")
         elif not as_json:
-            # a bound, not a count: the policy reaches a part of these states (it stops at --max-states if not)
-            out().print(f"states: {estimate.describe()} for the optimum, at most {big(self.policy_bound)} for the "
-                        f"policy{kept}" + (f"; it stops if it passes --max-states {self.max_states:,}"
-                                           if self.policy_bound > self.max_states else ""))
+            # a bound, not a count: the policy reaches a part of these states (it stops at its cap if not)
+            reach = min(self.policy_bound, work.policy_cap)
+            out().print(f"{optimum}; at most {big(self.policy_bound)} for the policy{kept} "
+                        f"({_WORDS[work.policy.split()[0]]}: at most {_duration(work.seconds(work.policy, reach))} "
+                        "of CPU)" + (f"; it stops if it passes {work.limit(work.policy_cap, work.policy)}"
+                                     if self.policy_bound > work.policy_cap else ""))
         with _evaluation_progress(estimate, enabled=not as_json) as report:
             for solver in {id(ev): ev, id(self.optimum): self.optimum}.values():
                 if solver is not None:
                     solver.deadline, solver.progress = until, report
             if hasattr(chosen, "deadline"):    # a policy with a programme of its own (the look-ahead) stops too
                 chosen.deadline = until
+            self.running = "optimum" if by_optimum else "policy"
             self.value = ev.value()
             report(ev, done=True)
+            self.running = "optimum"
             if pile:
                 self.best = self.optimum.value()
                 self.states, self.policy_states = self.optimum.states, ev.states
@@ -247,7 +382,9 @@ class _Run:
 
 
 def _duration(seconds: float) -> str:
-    """``'40 s'``, ``'12 min'``, ``'3.5 h'``, ``'2.1e+05 years'``."""
+    """``'under a second'``, ``'40 s'``, ``'12 min'``, ``'3.5 h'``, ``'2.1e+05 years'``."""
+    if seconds < 1:
+        return "under a second"
     if seconds < 120:
         return f"{seconds:.0f} s"
     if seconds < 7200:

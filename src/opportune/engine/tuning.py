@@ -290,6 +290,36 @@ BYTES_PER_STATE = 1_000
 #: a lower bound is given (:func:`~opportune.policies.states.downset_profile`).
 PROFILE_MAX_UNITS = 2_000
 
+# ------------------------------------------------------------ the exact evaluation (cli/evaluate.py)
+# Measured with benchmarks/bench_evaluate_rates.py: states stored per CPU second (the machine's load beside
+# them), each programme run alone in a child process, and its peak resident memory over a child's that
+# only built the plan (bytes per state).  ``opportune evaluate`` sizes its work with them before it starts.
+
+#: Seconds of CPU the default state caps of ``opportune evaluate`` are sized for: each programme that runs
+#: (the optimum's, and the policy's own evaluation where it does not decide by the optimum) may store the
+#: states it does in this time at its rate in :data:`EVALUATE_RATES`, within :data:`EVALUATE_MEMORY`.
+EVALUATE_SECONDS = 60
+#: Bytes the states of one programme may hold under the default caps (its rate's states times its bytes
+#: per state, :data:`EVALUATE_BYTES`): a share a laptop of 8 GB spares; ``--max-states`` asks for more.
+EVALUATE_MEMORY = 2 << 30
+#: States per CPU second, by programme: the compiled optimum (``OptimalCore``, ``PileCore``) by bin, the
+#: Python optimum (no compiled core) by bin, and a policy's own evaluation (Python: every look of every
+#: state asks the policy) of a rule (paper, slack, bin-first) or of the look-ahead deciding by its frontier
+#: window, by bin.  Measured (load 9-10 on 2 cores): the compiled uniform optimum 308,000 on KILBRID at 2
+#: visible and 1 location, 402,000 at 1 and 1, 480,000 on a 14-part plan at 2 visible and an unlimited
+#: buffer; the Python optimum ~26,700 (uniform and pile); the paper's rule 2,800-5,300 (uniform) and 19,000
+#: (pile); the look-ahead's frontier window ~900; each rounded down.  A weighted bin's compiled rate
+#: falls with its looks (about 7 ns a look).
+EVALUATE_RATES = {
+    "compiled uniform": 300_000, "compiled weighted": 100_000, "compiled pile": 300_000,
+    "Python uniform": 25_000, "Python weighted": 5_000, "Python pile": 25_000,
+    "rule uniform": 2_500, "rule pile": 10_000, "window uniform": 800, "window pile": 800,
+}
+#: Bytes per stored state, by programme: the compiled tables (16-byte slots at most half full, the
+#: (installed, strategies) pairs beside them: 47-61 bytes a state by their own count, 69-90 of peak resident
+#: memory while a table doubles), the Python programmes' :data:`BYTES_PER_STATE` (266-1,053 measured).
+EVALUATE_BYTES = {"compiled": 96, "Python": BYTES_PER_STATE}
+
 # ------------------------------------------------------------ the look-ahead and the rollout (policies/lookahead.py, rollout.py)
 # Measured with benchmarks/bench_optimum.py, benchmarks/policy_lab.py and tests/test_pile_compiled.py.
 

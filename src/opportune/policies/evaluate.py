@@ -245,6 +245,16 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         self._optimum: OptimalSolver | None = None     # the compiled optimum, once asked for (None: this memo)
         #: The policy's value was the optimum's (:meth:`value`): it decides by the optimum in this bin.
         self.by_optimum = False
+        #: States the policy's own memo may hold (:class:`OptimalTooLarge` above it); None: ``max_states``,
+        #: which bounds the optimum's programme either way (``opportune evaluate`` sizes each by its speed).
+        self.max_policy_states: int | None = None
+        #: Whether :meth:`optimal` solves the plan with its interchangeable parts merged
+        #: (:func:`~opportune.policies.optimal.optimal_solver`: fewer states, the same values to rounding; the
+        #: compiled programme codes a state in 64 bits, which a plan of 45 distinct parts' buffers fills past
+        #: 2^19 (installed, strategies) pairs): ``opportune evaluate`` sizes it on
+        #: :func:`~opportune.policies.optimal.optimum_engine`.  False: on the plan as declared, whose states
+        #: bound the policy's.
+        self.merge_optimum = False
 
     #: Whether :meth:`value` takes the optimum's value for a policy that decides by the optimum in this bin
     #: (the look-ahead where its programme is the optimum's) instead of evaluating it look by look: the
@@ -342,11 +352,12 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
         2.5
         """
         weights = None if self.uniform else dict(zip(self.ids, self.weights))
-        if self._optimum is None and compiled_optimal_available(self.engine, weights):
-            # on the plan as declared (not merged): its states are those counted before the work, which
-            # bound the policy's too
-            self._optimum = optimal_solver(self.engine, visible=self.visible, capacity=self.capacity, merge=False,
-                                           costs=self.costs, weights=weights, max_states=self.max_states)
+        if self._optimum is None and (self.merge_optimum or compiled_optimal_available(self.engine, weights)):
+            # by default on the plan as declared (not merged): its states are those counted before the work,
+            # which bound the policy's too
+            self._optimum = optimal_solver(self.engine, visible=self.visible, capacity=self.capacity,
+                                           merge=self.merge_optimum, costs=self.costs, weights=weights,
+                                           max_states=self.max_states)
         if self._optimum is None:
             return OptimalSolver.value(self)
         self._optimum.deadline, self._optimum.progress = self.deadline, self.progress
@@ -456,8 +467,9 @@ class PolicyEvaluator(BufferOrder, OptimalSolver):
             return 0.0
         stored = len(self._policy_values)
         self._tick("the policy's evaluation", stored)
-        if stored >= self.max_states:
-            raise OptimalTooLarge(f"evaluating the policy needs more than {self.max_states:,} states for this "
+        most = self.max_states if self.max_policy_states is None else self.max_policy_states
+        if stored >= most:
+            raise OptimalTooLarge(f"evaluating the policy needs more than {most:,} states for this "
                                   "plan; raise the state limit, or estimate with `opportune simulate`")
         moved = 0.0           # Σ p (c + V(next)) over the looks on which the policy moves
         p_shake = 0.0
