@@ -63,7 +63,7 @@ def test_the_refusal_quotes_the_programmes_that_would_run(monkeypatch):
         # the optimum's states (of the merged plan: at least 2,001, the figure its estimate gives), at its rate
         states = int(re.search(r"needs (?:about |at least )?([\d,]+)", text).group(1).replace(",", ""))
         assert states > 2000 and f"more than --max-states 2,000; {'the compiled optimum' if compiled else ''}" in text
-        assert f"{states / rate:.0f} s of CPU (~{rate:,} states/s) and about {max(1, states * per_state // 10**6)} MB" \
+        assert f"{states / rate:.0f} s of CPU at ~{rate:,} states/s and about {max(1, states * per_state // 10**6)} MB" \
             in text, text
     assert "the policy decides by the optimum" in texts["lookahead"] and "~89 states/s" not in texts["lookahead"]
     assert "stops at 2,000 states (22 s of CPU at ~89 states/s)" in texts["paper"], texts["paper"]
@@ -72,7 +72,7 @@ def test_the_refusal_quotes_the_programmes_that_would_run(monkeypatch):
     monkeypatch.setattr(evaluate_cli._Work, "_compiled", staticmethod(lambda *args: False))
     text = _text(runner.invoke(app(), ["evaluate", str(GEARBOX), "--max-states", "2000"]))
     states = int(re.search(r"needs (?:about |at least )?([\d,]+)", text).group(1).replace(",", ""))
-    assert (f"the optimum in Python (no compiled core): {states / 40:.0f} s of CPU (~40 states/s) and about "
+    assert (f"the optimum in Python (no compiled core): {states / 40:.0f} s of CPU at ~40 states/s and about "
             f"{max(1, states * EVALUATE_BYTES['Python'] // 10**6)} MB") in text, text
 
 

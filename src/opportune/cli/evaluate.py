@@ -22,8 +22,8 @@ from opportune.limits import MAX_BUFFER
 
 # What each programme is, in the messages (by the first word of its key in EVALUATE_RATES).
 _WORDS = {"compiled": "the compiled optimum", "Python": "the optimum in Python (no compiled core)",
-          "rule": "the policy's own evaluation (look by look, in Python)",
-          "window": "the look-ahead's own evaluation (look by look, in Python)"}
+          "rule": "the policy's own evaluation, look by look in Python",
+          "window": "the look-ahead's own evaluation, look by look in Python"}
 
 
 def default_cap(programme: str) -> int:
@@ -63,7 +63,8 @@ def evaluate(
         None, "--max-states", min=1,
         help=f"Most states of each programme (default: what it does in about {EVALUATE_SECONDS} s of CPU, "
              f"within {EVALUATE_MEMORY >> 30} GB: {default_cap('compiled uniform'):,} for the compiled optimum of "
-             f"a uniform bin, {default_cap('rule uniform'):,} for a policy's own evaluation in Python, which the "
+             f"a uniform bin, {default_cap('Python uniform'):,} for the optimum in Python (no compiled core), "
+             f"{default_cap('rule uniform'):,} for a policy's own evaluation in Python, which the "
              "look-ahead needs none of where it decides by the optimum).  The states are counted or estimated "
              "before any work, a plan whose optimum is over the limit is refused at once with the time and "
              "memory it would take, and a policy's evaluation stops at it saying how far it got"),
@@ -203,12 +204,12 @@ class _Work:
         return states / EVALUATE_RATES[programme]
 
     def optimum_words(self, states: int) -> str:
-        """``'the compiled optimum: ~2 s of CPU (~500,000 states/s) and about 180 MB'``."""
+        """``'the compiled optimum: 2 s of CPU at ~300,000 states/s and about 180 MB'``."""
         from opportune.policies.states import big
 
         kind = self.optimum.split()[0]
         return (f"{_WORDS[kind]}: {_duration(self.seconds(self.optimum, states))} of CPU "
-                f"(~{EVALUATE_RATES[self.optimum]:,} states/s) and about "
+                f"at ~{EVALUATE_RATES[self.optimum]:,} states/s and about "
                 f"{big(max(1, states * EVALUATE_BYTES[kind] // 10**6))} MB")
 
     def limit(self, cap: int, programme: str) -> str:
@@ -351,7 +352,7 @@ class _Run:
             self.policy_bound, self.ordered = 0, False
         else:       # the policy's states are the plan's as declared: they are bounded by its count
             self.policy_bound, self.ordered = ev.states_bound(self._declared(engine, config).states), ev.ordered
-        kept = " (its buffer kept in the order of buffering)" if self.ordered else ""
+        kept = "its buffer kept in the order of buffering; " if self.ordered else ""
         optimum = f"states: {estimate.describe()} for the optimum ({work.optimum_words(estimate.states)})"
         if not as_json and by_optimum:
             out().print(f"{optimum}; none for the policy (it decides by the optimum's values: its value is the "
@@ -359,8 +360,8 @@ class _Run:
         elif not as_json:
             # a bound, not a count: the policy reaches a part of these states (it stops at its cap if not)
             reach = min(self.policy_bound, work.policy_cap)
-            out().print(f"{optimum}; at most {big(self.policy_bound)} for the policy{kept} "
-                        f"({_WORDS[work.policy.split()[0]]}: at most {_duration(work.seconds(work.policy, reach))} "
+            out().print(f"{optimum}; at most {big(self.policy_bound)} for the policy ({kept}"
+                        f"{_WORDS[work.policy.split()[0]]}: at most {_duration(work.seconds(work.policy, reach))} "
                         "of CPU)" + (f"; it stops if it passes {work.limit(work.policy_cap, work.policy)}"
                                      if self.policy_bound > work.policy_cap else ""))
         with _evaluation_progress(estimate, enabled=not as_json) as report:
