@@ -7,7 +7,8 @@ second, and its peak resident memory less a child's that built the same engine a
 per state; the compiled programmes also say their own bytes).  Programmes: the compiled optimum (uniform,
 weighted, pile bin; on the plan with its interchangeable parts merged, as the command solves it), the
 Python optimum (no compiled core), and a policy's own evaluation in Python (the
-paper's rule; the look-ahead with its optimum switched off, which decides by its frontier window).
+paper's rule; the look-ahead with its optimum switched off, which decides by its frontier window; the
+rollout, which decides by an exact look-ahead on plans of up to 16 parts).
 
     python benchmarks/bench_evaluate_rates.py                 # every row, 20 s each at most
     python benchmarks/bench_evaluate_rates.py --rows 0 1 --seconds 10
@@ -43,6 +44,7 @@ ROWS = (
     ("s108 (14 parts)", "plan14", "uniform", 2, None, "lookahead without optimum, in Python"),
     ("s108 (14 parts)", "plan14", "pile", 2, 1, "lookahead without optimum, in Python"),
     ("s108 (14 parts)", "plan14", "weighted", 2, 1, "Python optimum"),
+    ("s108 (14 parts)", "plan14", "uniform", 2, None, "rollout, in Python"),
 )
 
 
@@ -74,8 +76,13 @@ def programme(engine, bin: str, visible: int, capacity, what: str):
         if bin == "pile":
             return PileSolver(engine, **settings), "states"
         return OptimalSolver(engine, weights=weights, **settings), "states"
-    policy = (Opportunistic() if what.startswith("paper") else
-              Lookahead(optimal=False, bin=bin, weights=weights, visible=visible, capacity=capacity))
+    if what.startswith("rollout"):
+        from opportune.policies.named import make_policy
+
+        policy = make_policy("rollout", visible=visible, capacity=capacity, bin=bin, weights=weights)
+    else:
+        policy = (Opportunistic() if what.startswith("paper") else
+                  Lookahead(optimal=False, bin=bin, weights=weights, visible=visible, capacity=capacity))
     if bin == "pile":
         return PileSolver(engine, policy, **settings), "states"
     return PolicyEvaluator(engine, policy, weights=weights, **settings), "policy_states"

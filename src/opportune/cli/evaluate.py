@@ -23,7 +23,7 @@ from opportune.limits import MAX_BUFFER
 # What each programme is, in the messages (by the first word of its key in EVALUATE_RATES).
 _WORDS = {"compiled": "the compiled optimum", "Python": "the optimum in Python (no compiled core)",
           "rule": "the policy's own evaluation, look by look in Python",
-          "window": "the look-ahead's own evaluation, look by look in Python"}
+          "window": "the policy's own evaluation with its look-ahead, look by look in Python"}
 
 
 def default_cap(programme: str) -> int:
@@ -177,7 +177,8 @@ class _Work:
         weighted = bool(weights) and len(set(weights.values())) > 1
         self.bin = "pile" if pile else "weighted" if weighted else "uniform"
         self.optimum = f"{'compiled' if self._compiled(engine, config, weights) else 'Python'} {self.bin}"
-        self.policy = f"{'window' if policy == 'lookahead' else 'rule'} {'pile' if pile else 'uniform'}"
+        # the look-ahead and the rollout decide by a programme of their own at every state: slower than a rule
+        self.policy = f"{'window' if policy in ('lookahead', 'rollout') else 'rule'} {'pile' if pile else 'uniform'}"
         self.given = max_states is not None
         self.optimum_cap = max_states or default_cap(self.optimum)
         self.policy_cap = max_states or default_cap(self.policy)

@@ -304,18 +304,18 @@ EVALUATE_SECONDS = 60
 EVALUATE_MEMORY = 2 << 30
 #: States per CPU second, by programme: the compiled optimum (``OptimalCore``, ``PileCore``) by bin, the
 #: Python optimum (no compiled core) by bin, and a policy's own evaluation (Python: every look of every
-#: state asks the policy) of a rule (paper, slack, bin-first) or of the look-ahead deciding by its frontier
-#: window, by bin.  Measured (load 6-10 on 2 cores): the compiled uniform optimum 308,000 on KILBRID at 2
+#: state asks the policy) of a rule (paper, slack, bin-first) or of a policy deciding by a look-ahead of its
+#: own (the look-ahead by its frontier window, the rollout), by bin.  Measured (load 6-10 on 2 cores): the compiled uniform optimum 308,000 on KILBRID at 2
 #: visible and 1 location, 402,000-490,000 at 1 and 1, 480,000 on a 14-part plan at 2 visible and an
 #: unlimited buffer; the compiled weighted optimum 176,000 on KILBRID at 1 and 1, 263,000 on the 14-part
 #: plan at 2 and 1 (it falls with the looks: about 7 ns a look); the compiled pile optimum 1,600,000 on the
 #: 14-part plan at 2 and 1; the Python optimum ~26,700 (uniform, pile), 6,100 (weighted); the paper's rule
 #: 2,800-5,300 (uniform) and 19,000 (pile); the look-ahead's own evaluation (its frontier window deciding)
-#: 900 (uniform) and 1,160 (pile); each rounded down.
+#: 900 (uniform) and 1,160 (pile), the rollout's 600 (uniform, 14 parts); each rounded down.
 EVALUATE_RATES = {
     "compiled uniform": 300_000, "compiled weighted": 100_000, "compiled pile": 1_000_000,
     "Python uniform": 25_000, "Python weighted": 5_000, "Python pile": 25_000,
-    "rule uniform": 2_500, "rule pile": 10_000, "window uniform": 800, "window pile": 800,
+    "rule uniform": 2_500, "rule pile": 10_000, "window uniform": 600, "window pile": 600,
 }
 #: Bytes per stored state, by programme: the compiled tables (16-byte slots at most half full, the
 #: (installed, strategies) pairs beside them: 39-61 bytes a state by their own count, 57-90 of peak resident
