@@ -108,3 +108,23 @@ def test_default_caps_follow_the_measured_rates_and_memory():
         cap = evaluate_cli.default_cap(programme)
         assert cap <= evaluate_cli.EVALUATE_SECONDS * rate and cap * EVALUATE_BYTES[kind] <= evaluate_cli.EVALUATE_MEMORY
     assert evaluate_cli.default_cap("compiled uniform") > 30_000 * 100     # the old flat cap, far below
+
+
+def test_the_look_aheads_listing_stops_at_the_callers_deadline():
+    """Without a budget the look-ahead lists its optimum's states by counted work; a caller's deadline
+    (evaluate --time-limit) stops that listing too, as out of time (not as a different choice)."""
+    import pytest
+
+    from opportune import load_plan
+    from opportune.engine.deadline import Deadline
+    from opportune.policies.lookahead import Lookahead
+    from opportune.policies.optimal import OutOfTime
+
+    policy = Lookahead(visible=1, capacity=1)
+    policy.deadline = Deadline.after(-1.0)
+    with pytest.raises(OutOfTime):      # 2,777,988 states to list: stopped at once
+        policy.decides_by_optimum(OrderEngine(load_plan("salbp:KILBRID")), 1, 1, None)
+    gear = OrderEngine(load_plan(GEARBOX))
+    policy = Lookahead(visible=1, capacity=1)
+    policy.deadline = Deadline.after(3600.0)
+    assert policy.decides_by_optimum(gear, 1, 1, None)

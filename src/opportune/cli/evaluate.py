@@ -347,6 +347,8 @@ class _Run:
             self.ev.max_policy_states, self.ev.merge_optimum = work.policy_cap, True
         ev = self.ev
         ev.deadline = until         # finding where the buffer's order decides counts options: within it too
+        if hasattr(chosen, "deadline"):    # a policy with a programme of its own (the look-ahead) stops too, its
+            chosen.deadline = until        # listing of the optimum's states (asked next) included
         # a policy deciding by the optimum is worth the optimum: none of its own states are evaluated
         by_optimum = not pile and ev.takes_optimum()
         if by_optimum:
@@ -369,8 +371,6 @@ class _Run:
             for solver in {id(ev): ev, id(self.optimum): self.optimum}.values():
                 if solver is not None:
                     solver.deadline, solver.progress = until, report
-            if hasattr(chosen, "deadline"):    # a policy with a programme of its own (the look-ahead) stops too
-                chosen.deadline = until
             self.running = "optimum" if by_optimum else "policy"
             self.value = ev.value()
             report(ev, done=True)

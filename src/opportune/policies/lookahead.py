@@ -409,9 +409,14 @@ class Lookahead(DecidesOnMasks):
         from opportune.policies.states import big, estimate_states
 
         seconds = None if self.lookahead_budget is None else self.lookahead_budget / LOOKAHEAD_LISTING_PARTS
+        # without a budget, a caller's deadline (evaluate --time-limit) stops the listing too: it is then out
+        # of time, not a different choice (the choice stays the same on any machine)
+        until = as_deadline(self.deadline if self.lookahead_budget is None else None)
         cap = self._optimum_cap(engine)
         est = estimate_states(self._sized(engine), visible=self.settings.get("visible", 2), capacity=self.settings.get("capacity"),
-                              pile=self.pile, stop_above=cap, time_limit=seconds)
+                              pile=self.pile, stop_above=cap, deadline=until, time_limit=seconds)
+        if self.lookahead_budget is None and not est.exact and est.low <= cap and until.expired():
+            raise OutOfTime("the look-ahead's listing of its optimum's states passed its deadline")
         self._optimum_states = est.states
         if est.exact and est.states <= cap:
             pass
