@@ -320,7 +320,8 @@ EVALUATE_RATES = {
 #: Bytes per stored state, by programme: the compiled tables (16-byte slots at most half full, the
 #: (installed, strategies) pairs beside them: 39-61 bytes a state by their own count, 57-90 of peak resident
 #: memory while a table doubles), the Python programmes' :data:`BYTES_PER_STATE` (266-1,053 measured on
-#: runs of 10,000-120,000 states; a run of a few thousand shows its look cache's bytes as well).
+#: runs of 10,000-120,000 states; a run of a few thousand shows its look cache's bytes as well, and a
+#: policy deciding by a look-ahead of its own its bounded window caches, :data:`WINDOW_CACHE`: 2.6-3.7 kB).
 EVALUATE_BYTES = {"compiled": 96, "Python": BYTES_PER_STATE}
 
 # ------------------------------------------------------------ the look-ahead and the rollout (policies/lookahead.py, rollout.py)
