@@ -145,7 +145,8 @@ def _evaluation_config(plan, policy: str, chosen_bin: str, visible: Optional[int
     try:
         return StudyConfig(plan=plan, strategies=(policy,), trials=1, bin=chosen_bin,
                            visible=visible or sim.get("visible", 2), buffer_capacity=buffer_capacity,
-                           costs=TimeModel.from_plan(plan), optimal_states=max_states or default_cap("compiled uniform")).validate()
+                           costs=TimeModel.from_plan(plan),
+                           optimal_states=max_states or default_cap("compiled uniform")).validate()
     except (StudyError, ValueError) as exc:
         fail(str(exc))
 
@@ -188,7 +189,8 @@ class _Work:
         if policy == "lookahead" and not without_optimum and self.bin == "uniform":
             from opportune.policies.lookahead import Lookahead
 
-            self.lookahead_cap = Lookahead.COMPILED_STATES if self.optimum.startswith("compiled") else Lookahead().max_states
+            compiled = self.optimum.startswith("compiled")
+            self.lookahead_cap = Lookahead.COMPILED_STATES if compiled else Lookahead().max_states
 
     @staticmethod
     def _compiled(engine, config, weights) -> bool:

@@ -304,14 +304,15 @@ EVALUATE_SECONDS = 60
 EVALUATE_MEMORY = 2 << 30
 #: States per CPU second, by programme: the compiled optimum (``OptimalCore``, ``PileCore``) by bin, the
 #: Python optimum (no compiled core) by bin, and a policy's own evaluation (Python: every look of every
-#: state asks the policy) of a rule (paper, slack, bin-first) or of a policy deciding by a look-ahead of its
-#: own (the look-ahead by its frontier window, the rollout), by bin.  Measured (load 6-10 on 2 cores): the compiled uniform optimum 308,000 on KILBRID at 2
-#: visible and 1 location, 402,000-490,000 at 1 and 1, 480,000 on a 14-part plan at 2 visible and an
-#: unlimited buffer; the compiled weighted optimum 176,000 on KILBRID at 1 and 1, 263,000 on the 14-part
-#: plan at 2 and 1 (it falls with the looks: about 7 ns a look); the compiled pile optimum 1,600,000 on the
-#: 14-part plan at 2 and 1; the Python optimum ~26,700 (uniform, pile), 6,100 (weighted); the paper's rule
-#: 2,800-5,300 (uniform) and 19,000 (pile); the look-ahead's own evaluation (its frontier window deciding)
-#: 900 (uniform) and 1,160 (pile), the rollout's 600 (uniform, 14 parts); each rounded down.
+#: state asks the policy) of a rule (paper, slack, bin-first) or of a policy deciding by a look-ahead of
+#: its own (the look-ahead by its frontier window, the rollout), by bin.  Measured in two runs (load 6-12
+#: on 2 cores; docs/decisions.md has the table): the compiled uniform optimum 308,000-444,000 on KILBRID
+#: (1-2 visible, 1 location), 480,000-742,000 on a 14-part plan (2 visible, unlimited buffer); the compiled
+#: weighted optimum 176,000-199,000 on KILBRID, 241,000-263,000 on the 14-part plan (it falls with the
+#: looks: about 7 ns a look); the compiled pile optimum 1,090,000-1,600,000 on the 14-part plan; the Python
+#: optimum 26,700-32,500 (uniform), 19,800-26,900 (pile), 6,100-10,800 (weighted); the paper's rule
+#: 2,550-6,580 (uniform) and 19,000-23,000 (pile); the look-ahead's own evaluation 900-1,210 (uniform) and
+#: 1,160-1,590 (pile), the rollout's 600-850; each rounded down below the lower figure.
 EVALUATE_RATES = {
     "compiled uniform": 300_000, "compiled weighted": 100_000, "compiled pile": 1_000_000,
     "Python uniform": 25_000, "Python weighted": 5_000, "Python pile": 25_000,
