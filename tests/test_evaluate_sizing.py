@@ -128,3 +128,24 @@ def test_the_look_aheads_listing_stops_at_the_callers_deadline():
     policy = Lookahead(visible=1, capacity=1)
     policy.deadline = Deadline.after(3600.0)
     assert policy.decides_by_optimum(gear, 1, 1, None)
+
+
+def test_in_the_pile_the_look_ahead_is_worth_the_pile_optimum_without_a_look_by_look_evaluation():
+    """The look-ahead decides by the pile's optimum where it fits: evaluate takes the optimum's value for it
+    (tests/test_pile_compiled.py checks it against its look-by-look evaluation) instead of evaluating it look
+    by look in Python; the refusal of an over-cap pile plan quotes it so, and the paper's rule at its rate."""
+    from opportune import load_plan
+    from opportune.policies.pile import PileSolver
+
+    out = runner.invoke(app(), ["evaluate", str(GEARBOX), "--bin", "pile", "--visible", "2", "--buffer-capacity",
+                                "2", "--json"])
+    assert out.exit_code == 0, out.output
+    doc = json.loads(out.output)
+    assert doc["policy_by_optimum"] and doc["policy_states"] == 0 and doc["expected_time"] == doc["optimal"]
+    python = PileSolver(OrderEngine(load_plan(GEARBOX)), visible=2, capacity=2, max_states=10**6)   # second method
+    assert abs(python.value() - doc["optimal"]) < 1e-9 and python.states == doc["states"]
+    texts = {policy: _text(runner.invoke(app(), ["evaluate", str(GEARBOX), "--bin", "pile", "--policy", policy,
+                                                 "--max-states", "100"])) for policy in ("lookahead", "paper")}
+    assert "the policy decides by the optimum" in texts["lookahead"], texts["lookahead"]
+    rate = EVALUATE_RATES["rule pile"]
+    assert f"stops at 100 states (under a second of CPU at ~{rate:,} states/s)" in texts["paper"], texts["paper"]

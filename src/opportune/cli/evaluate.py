@@ -98,7 +98,7 @@ def evaluate(
            "ratio": run.value / run.best if run.best else None, "states": run.states,
            "policy_states": run.policy_states, "estimated_states": run.estimate.states,
            "estimate_exact": run.estimate.exact, "estimated_policy_states": run.policy_bound,
-           "buffer_order_kept": run.ordered, "policy_by_optimum": bool(getattr(run.ev, "by_optimum", False)),
+           "buffer_order_kept": run.ordered, "policy_by_optimum": bool(run.by_optimum),
            "without_optimum": without_optimum}
     if as_json:
         print(json.dumps(doc, indent=2))
@@ -183,10 +183,10 @@ class _Work:
         self.given = max_states is not None
         self.optimum_cap = max_states or default_cap(self.optimum)
         self.policy_cap = max_states or default_cap(self.policy)
-        # the look-ahead decides by its own optimum where it fits its cap, in a uniform bin (not the pile's
-        # evaluation: there it is evaluated look by look): then it has no states of its own to evaluate
+        # the look-ahead decides by its own optimum where it fits its cap, in a uniform bin or the pile (not a
+        # weighted bin whose weights differ): then it has no states of its own to evaluate
         self.lookahead_cap = None
-        if policy == "lookahead" and not without_optimum and self.bin == "uniform":
+        if policy == "lookahead" and not without_optimum and self.bin != "weighted":
             from opportune.policies.lookahead import Lookahead
 
             compiled = self.optimum.startswith("compiled")
@@ -278,7 +278,7 @@ class _Run:
         self.running = "optimum"      # which programme runs (the policy's own evaluation, or the optimum's)
         self.ev = self.optimum = None
         self.sized = None       # the engine the optimum's states were counted on (the plan's, merged)
-        self.policy_bound, self.ordered = 0, False
+        self.policy_bound, self.ordered, self.by_optimum = 0, False, False
         self.value = self.best = 0.0
         self.states = self.policy_states = 0
 
@@ -351,8 +351,11 @@ class _Run:
         ev.deadline = until         # finding where the buffer's order decides counts options: within it too
         if hasattr(chosen, "deadline"):    # a policy with a programme of its own (the look-ahead) stops too, its
             chosen.deadline = until        # listing of the optimum's states (asked next) included
-        # a policy deciding by the optimum is worth the optimum: none of its own states are evaluated
-        by_optimum = not pile and ev.takes_optimum()
+        # a policy deciding by the optimum is worth the optimum: none of its own states are evaluated (in the
+        # pile, the look-ahead says so itself: the pile's evaluator does not ask)
+        decides = getattr(chosen, "decides_by_optimum", None)
+        by_optimum = self.by_optimum = (ev.takes_optimum() if not pile else decides is not None and decides(
+            engine, config.visible, config.buffer_capacity, config.costs, pile=True))
         if by_optimum:
             self.policy_bound, self.ordered = 0, False
         else:       # the policy's states are the plan's as declared: they are bounded by its count
@@ -374,7 +377,7 @@ class _Run:
                 if solver is not None:
                     solver.deadline, solver.progress = until, report
             self.running = "optimum" if by_optimum else "policy"
-            self.value = ev.value()
+            self.value = self.optimum.value() if pile and by_optimum else ev.value()
             report(ev, done=True)
             self.running = "optimum"
             if pile:

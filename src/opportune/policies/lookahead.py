@@ -433,11 +433,12 @@ class Lookahead(DecidesOnMasks):
             return False
         return True
 
-    def decides_by_optimum(self, engine, visible: int, capacity: int | None, costs) -> bool:
+    def decides_by_optimum(self, engine, visible: int, capacity: int | None, costs, *, pile: bool = False) -> bool:
         """Whether on ``engine`` every decision of this look-ahead is an action of least expected cost in
-        the uniform bin of ``visible`` parts, ``capacity`` locations and ``costs``: its world is that one,
-        without a budget, and the programme that decides is the optimum's (prepared here, as its first
-        decision would).  Its expected cost there is then the optimum's (ties within 1e-12 a move).
+        the uniform bin (or with ``pile``, the pile) of ``visible`` parts, ``capacity`` locations and
+        ``costs``: its world is that one, without a budget, and the programme that decides is the optimum's
+        (prepared here, as its first decision would).  Its expected cost there is then the optimum's (ties
+        within 1e-12 a move; tests/test_pile_compiled.py checks the pile's against its look-by-look value).
         O(1) once prepared.
 
         Parameters
@@ -450,6 +451,8 @@ class Lookahead(DecidesOnMasks):
             Buffer locations (None: unlimited).
         costs : TimeModel or None
             The time model (None: the default one).
+        pile : bool
+            The world is the pile bin (its look-ahead's own programme), not the uniform bin.
 
         Returns
         -------
@@ -472,9 +475,9 @@ class Lookahead(DecidesOnMasks):
 
         world = (self.settings.get("visible", 2), self.settings.get("capacity"), self.settings.get("costs") or TimeModel())
         weights = self.settings.get("weights")
-        if self.pile or self.lookahead_budget is not None or world != (visible, capacity, costs or TimeModel()):
+        if self.pile != pile or self.lookahead_budget is not None or world != (visible, capacity, costs or TimeModel()):
             return False
-        if weights and len({weights.get(p.id, 1.0) for p in engine.plan.parts}) > 1:
+        if not pile and weights and len({weights.get(p.id, 1.0) for p in engine.plan.parts}) > 1:
             return False
         self._suit(engine)
         self._values(engine)
