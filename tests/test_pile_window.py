@@ -231,7 +231,7 @@ def test_a_decision_does_not_depend_on_what_the_window_was_asked_before(window_c
 def test_a_state_s_window_is_listed_once(monkeypatch):
     """The search for a state's largest window asks the states of each window it considers in every round
     and for every look, with a stop that depends on the round: a window (state and parts) is listed again
-    only where an ask stops later than every ask before, not once per ask (on KILBRID at 3 visible, 8.6
+    only where an ask stops later than every ask before, not once per ask (on KILBRID at 3 visible, 8-9
     listings a decision before)."""
     import opportune.policies.states as states
 

@@ -250,8 +250,9 @@ class LumpedWindow(DecidesOnMasks):
         """The states of the window's plan without the others, listed, or ``most + 1`` where they are more
         than ``most`` (a function of the key and ``most`` alone; the callers compare it with ``most``).  The
         listing is cached by state and parts: a count answers every later ask, a listing stopped answers
-        those stopping no later, so the search's rounds and a state's looks list a window once (on KILBRID
-        at 3 visible in the pile, 8.6 listings a decision before).  O(states listed)."""
+        those stopping no later, so the search's rounds and a state's looks list a window once, again only
+        for a later stop (on KILBRID at 3 visible in the pile, 8-9 listings a decision before).
+        O(states listed)."""
         from opportune.policies.states import estimate_states
 
         key = (mask, consistent, tuple(parts))
