@@ -165,8 +165,10 @@ public:
     }
 
     // Keep every expectation over the unit that replaces one taken (taken()): the same doubles, each
-    // computed once however many moves lead into its state, in a second table of at most as many entries
-    // as the values' (a state's rests are fewer than its windows); for the windows' short-lived programmes
+    // computed once however many moves lead into its state, in a second table (a state's rests, one unit
+    // fewer than a look, are fewer than its looks where its bin holds more units than are visible; its
+    // bytes counted in bytes()): for the windows' programmes, which live one state; the plain optimum's
+    // table keeps its stated bytes per value
     void memo_taken(bool on) { memo_taken_ = on; }
     void reserve(size_t n) {  // the values' table and, on a plan written as ways, the sets decided live or dead
         table_.reserve(n);
