@@ -219,10 +219,42 @@ def test_a_decision_does_not_depend_on_what_the_window_was_asked_before(window_c
     alone = [_decisions(fresh(), engine, [ask])[0] for ask in asks + asks[::-1]]
     assert together == alone
     assert shared._listings and shared._frontiers and shared._engines
-    for (mask, cons, parts, most), states in list(shared._listings.items())[:6]:
+    for (mask, cons, parts), (_, _, most) in list(shared._listings.items())[:6]:
         sub = window_engine(engine, mask, cons, list(parts))
-        assert states == estimate_states(sub, visible=2, capacity=2, pile=shared.pile, stop_above=most,
-                                         time_limit=None).states
+        for asked in (most, most // 3, 10 * most):     # as listed, stopped sooner, and further
+            fresh_listing = estimate_states(sub, visible=2, capacity=2, pile=shared.pile, stop_above=asked,
+                                            time_limit=None)
+            want = fresh_listing.states if fresh_listing.exact else asked + 1
+            assert shared._listed(engine, mask, cons, list(parts), asked) == want
+
+
+def test_a_state_s_window_is_listed_once(monkeypatch):
+    """The search for a state's largest window asks the states of each window it considers in every round
+    and for every look, with a stop that depends on the round: a window (state and parts) is listed again
+    only where an ask stops later than every ask before, not once per ask (on KILBRID at 3 visible, 8-9
+    listings a decision before)."""
+    import opportune.policies.states as states
+
+    plan = load_plan("salbp:KILBRID")
+    engine, rng = OrderEngine(plan), random.Random(3)
+    listed, asked = [], []
+    real = states.estimate_states
+    monkeypatch.setattr(states, "estimate_states", lambda sub, **kw: listed.append(sub) or real(sub, **kw))
+    window = PileWindow(visible=3, capacity=2, max_states=3_000)
+    inner = window._listed
+    window._listed = lambda engine, mask, cons, parts, most: asked.append((mask, cons, tuple(parts), most)) or inner(
+        engine, mask, cons, parts, most)
+    for _ in range(4):
+        mask, cons, buffer = _walk(engine, rng, rng.randint(0, 6))
+        left = [p.id for i, p in enumerate(plan.parts) if engine.next_unit(mask, i) is not None and p.id not in buffer]
+        for _ in range(2):
+            window.choose_at(engine, mask, cons, buffer, 2, tuple(rng.sample(left, 3)))
+    furthest, needed = {}, 0
+    for *key, most in asked:
+        needed += most > furthest.get(tuple(key), -1)
+        furthest[tuple(key)] = max(most, furthest.get(tuple(key), -1))
+    assert len(asked) > len(set(asked)) >= 4        # asked again, and with the same stop
+    assert len(furthest) <= len(listed) <= needed < len(asked)
 
 
 def test_past_its_deadline_the_window_stops_and_the_base_decides():

@@ -88,7 +88,6 @@ public:
         nbuffers_ = (uint64_t)contents;
         windows_ = (uint64_t)windows;
         max_pairs_ = (~uint64_t(0) - 1) / (nbuffers_ * windows_);
-        slot_.assign(windows_, -1);
         no_order_.assign(groups_, 0);
         every_move_.assign(groups_, true);
     }
@@ -129,7 +128,8 @@ public:
         for (int c : hidden)
             if (c < 0) throw std::invalid_argument("a window that the bin cannot show");
         start(seconds, max_states);
-        return taken(nmask, ncons, nbuf, window, (size_t)(at - window.begin()), hidden);
+        uint64_t base = nmask == full_ ? 0 : base_code(nmask, ncons, nbuf);
+        return taken(nmask, ncons, nbuf, base, window, (size_t)(at - window.begin()), hidden);
     }
 
     // PileWindow._actions: S(s), then on every look of s the best move (ties: install, then buffer, then
@@ -146,10 +146,11 @@ public:
         double after_shake = S(mask, cons, buf);
         double shake = shake_ + after_shake;
         std::vector<int> bin = bin_counts(mask, buf);
+        std::vector<Next> next = successors(mask, cons, buf, bin);
         py::dict out;
         py::str install("install"), buffer("buffer"), from_bin("bin"), from_buffer("buffer");
         for (const Look& l : looks(bin)) {
-            Best best = best_move(mask, cons, buf, bin, l.window, order, legal);
+            Best best = best_move(mask, cons, buf, bin, next, l.window, order, legal);
             py::tuple key(l.window.size());
             for (size_t k = 0; k < l.window.size(); ++k) key[k] = py::int_(l.window[k]);
             if (best.kind < 0 || best.value > shake + 1e-12) {
@@ -163,6 +164,12 @@ public:
         return py::make_tuple(after_shake, out);
     }
 
+    // Keep every expectation over the unit that replaces one taken (taken()): the same doubles, each
+    // computed once however many moves lead into its state, in a second table (a state's rests, one unit
+    // fewer than a look, are fewer than its looks where its bin holds more units than are visible; its
+    // bytes counted in bytes()): for the windows' programmes, which live one state; the plain optimum's
+    // table keeps its stated bytes per value
+    void memo_taken(bool on) { memo_taken_ = on; }
     void reserve(size_t n) {  // the values' table and, on a plan written as ways, the sets decided live or dead
         table_.reserve(n);
         reserve_ways(n);
@@ -171,7 +178,7 @@ public:
     void set_ways(std::vector<std::vector<opportune_memo::WaysLiveness::Way>> ways) { PlanUnits::set_ways(std::move(ways)); }
     size_t states() const { return table_.size(); }
     size_t bytes() const {
-        return table_.bytes() + pairs_.bytes() + slot_.size() * sizeof(int) + ways_bytes();
+        return table_.bytes() + taken_.bytes() + pairs_.bytes() + ways_bytes();
     }
 
 private:
@@ -231,43 +238,51 @@ private:
         double result() const { return (compensated && c != 0.0 && std::isfinite(c)) ? f + c : f; }
     };
 
-    // PileSolver._look_distribution: units drawn one by one without replacement (weights all 1)
-    void draw(int depth, int k, double prob, std::vector<int>& counts, std::vector<int>& taken, std::vector<Look>& out) {
-        if (depth == k) {
-            leaf_.assign(taken.begin(), taken.end());  // scratch: a leaf allocates only for a new look
-            std::sort(leaf_.begin(), leaf_.end());
-            uint64_t code = window_code(leaf_);
-            int& s = slot_[code];
-            if (s < 0) {
-                s = (int)out.size();
-                out.push_back({leaf_, 0.0 + prob});
-            } else {
-                out[s].p = out[s].p + prob;
+    // PileSolver._look_distribution: units drawn one by one without replacement (weights all 1).  Each
+    // look (a sorted multiset, made in increasing order) sums the chances of its orders of drawing, in the
+    // order the draw visits them (lexicographic: std::next_permutation from the sorted look), each order's
+    // chance the product along its draws as the draw forms it, so the doubles are the draw's.
+    double look_chance(const std::vector<int>& bin, int total) {
+        order_.assign(drawn_.begin(), drawn_.end());
+        double p = 0.0;
+        do {
+            double prob = 1.0;
+            for (size_t d = 0; d < order_.size(); ++d) {
+                int a = order_[d], before = 0;
+                for (size_t e = 0; e < d; ++e) before += order_[e] == a;
+                // sum(c * 1.0) of the counts left: whole numbers, exact
+                prob = prob * (double)(bin[a] - before) * 1.0 / (double)(total - (int)d);
             }
+            p = p + prob;
+        } while (std::next_permutation(order_.begin(), order_.end()));
+        return p;
+    }
+
+    void multisets(int k, int from, std::vector<int>& counts, const std::vector<int>& bin, int total,
+                   std::vector<Look>& out) {
+        if ((int)drawn_.size() == k) {
+            out.push_back({drawn_, look_chance(bin, total)});
             return;
         }
-        double mass = 0.0;  // sum(c * 1.0): whole numbers, exact
-        for (int c : counts) mass += (double)c;
-        for (int i = 0; i < groups_; ++i) {
-            int c = counts[i];
-            if (!c) continue;
+        for (int i = from; i < groups_; ++i) {
+            if (!counts[i]) continue;
             counts[i] -= 1;
-            taken.push_back(i);
-            draw(depth + 1, k, prob * (double)c * 1.0 / mass, counts, taken, out);
-            taken.pop_back();
+            drawn_.push_back(i);
+            multisets(k, i, counts, bin, total, out);
+            drawn_.pop_back();
             counts[i] += 1;
         }
     }
 
+    // the looks of a bin in increasing order (as sorted vectors), each with its chance
     std::vector<Look> looks(const std::vector<int>& bin) {
         int total = 0;
         for (int c : bin) total += c;
         int k = std::min(visible_, total);
         std::vector<Look> out;
-        std::vector<int> counts(bin), taken;
-        draw(0, k, 1.0, counts, taken, out);
-        for (auto& l : out) slot_[window_code(l.window)] = -1;
-        std::sort(out.begin(), out.end(), [](const Look& a, const Look& b) { return a.window < b.window; });
+        std::vector<int> counts(bin);
+        drawn_.clear();
+        multisets(k, 0, counts, bin, total, out);
         return out;
     }
 
@@ -283,7 +298,11 @@ private:
     // V(s, W): the look at window W, the look's cost included
     double V(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window) {
         if (mask == full_) return 0.0;
-        uint64_t base = base_code(mask, cons, buf);
+        return V_at(base_code(mask, cons, buf), mask, cons, buf, window);
+    }
+
+    // V(s, W) with the code of s (base_code) known
+    double V_at(uint64_t base, uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window) {
         const double* v = table_.find(base + window_code(window));
         if (v) return *v;
         S(mask, cons, buf);  // stores every window's value of s
@@ -302,8 +321,9 @@ private:
         std::vector<int> bin = bin_counts(mask, buf);
         std::vector<Look> ls = looks(bin);
         if (table_.size() + ls.size() + 1 > max_states_) throw PileTooLarge("over the state limit");
+        std::vector<Next> next = successors(mask, cons, buf, bin);
         std::vector<double> m(ls.size());
-        for (size_t j = 0; j < ls.size(); ++j) m[j] = move_value(mask, cons, buf, bin, ls[j].window);
+        for (size_t j = 0; j < ls.size(); ++j) m[j] = move_value(mask, cons, buf, bin, next, ls[j].window);
         // OptimalSolver._solve_shake_loop over (m, p) sorted
         std::vector<std::pair<double, double>> mp(ls.size());
         for (size_t j = 0; j < ls.size(); ++j) mp[j] = {m[j], ls[j].p};
@@ -325,11 +345,47 @@ private:
         return s;
     }
 
+    // The states a move of each group at s leads to, their codes found once for all the looks of s (not
+    // once per look): installing the next unit (where an open strategy allows it: `after`), from the bin
+    // or the buffer, and buffering a unit seen (where a location is free)
+    struct Next {
+        int unit = -1;
+        uint64_t after = 0, install = 0, from_buffer = 0, buffered = 0;
+        bool can_buffer = false;
+    };
     // m(s, W): the best move's cost to go (INF: no move)
     double move_value(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
-                      const std::vector<int>& window) {
+                      const std::vector<Next>& next, const std::vector<int>& window) {
         // every move a move (none refused), the ties' order of no matter: the least value, in the same calls
-        return best_move(mask, cons, buf, bin, window, no_order_, every_move_).value;
+        return best_move(mask, cons, buf, bin, next, window, no_order_, every_move_).value;
+    }
+
+    std::vector<Next> successors(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin) {
+        int used = 0;
+        for (int c : buf) used += c;
+        bool free = capacity_ < 0 || used < capacity_;
+        std::vector<Next> out(groups_);
+        for (int i = 0; i < groups_; ++i) {
+            Next& n = out[i];
+            n.can_buffer = free && bin[i] > 0 && (i < parts_ || other_move_ < INF);
+            if (n.can_buffer) {
+                buf[i] += 1;
+                n.buffered = base_code(mask, cons, buf);
+                buf[i] -= 1;
+            }
+            if (i == parts_ || (!bin[i] && !buf[i])) continue;
+            n.unit = next_unit(mask, i);
+            n.after = consistent_after(mask, cons, n.unit);
+            uint64_t nmask = mask | uint64_t(1) << n.unit;
+            if (!n.after || nmask == full_) continue;
+            if (bin[i]) n.install = base_code(nmask, n.after, buf);
+            if (buf[i]) {
+                buf[i] -= 1;
+                n.from_buffer = base_code(nmask, n.after, buf);
+                buf[i] += 1;
+            }
+        }
+        return out;
     }
 
     // A move ranked as PileWindow._actions ranks it: (value, kind: 0 install 1 buffer, order, from the buffer)
@@ -346,10 +402,8 @@ private:
     // The best move on `window` at s by that rank (installations of parts `legal` refuses left out); the
     // values as move_value computes them
     Best best_move(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& bin,
-                   const std::vector<int>& window, const std::vector<int>& order, const std::vector<bool>& legal) {
-        int used = 0;
-        for (int c : buf) used += c;
-        bool free = capacity_ < 0 || used < capacity_;
+                   const std::vector<Next>& next, const std::vector<int>& window, const std::vector<int>& order,
+                   const std::vector<bool>& legal) {
         Frame frame(*this);
         std::vector<int>& hidden = frame->hidden;
         hidden.assign(bin.begin(), bin.end());
@@ -358,53 +412,59 @@ private:
         for (size_t a = 0; a < window.size(); ++a) {
             int i = window[a];
             if (a && window[a - 1] == i) continue;
+            const Next& n = next[i];
             if (i == parts_) {
-                if (free && other_move_ < INF) {
+                if (n.can_buffer) {
                     buf[i] += 1;
-                    best.offer(other_move_ + taken(mask, cons, buf, window, a, hidden), 1, order[i], false, i);
+                    best.offer(other_move_ + taken(mask, cons, buf, n.buffered, window, a, hidden), 1, order[i], false, i);
                     buf[i] -= 1;
                 }
                 continue;
             }
-            int u = next_unit(mask, i);
-            uint64_t after = consistent_after(mask, cons, u);
-            if (after && legal[i])
-                best.offer(move_[i] + taken(mask | uint64_t(1) << u, after, buf, window, a, hidden), 0, order[i], false, i);
-            if (free) {
+            if (n.after && legal[i])
+                best.offer(move_[i] + taken(mask | uint64_t(1) << n.unit, n.after, buf, n.install, window, a, hidden), 0,
+                           order[i], false, i);
+            if (n.can_buffer) {
                 buf[i] += 1;
-                best.offer(move_[i] + taken(mask, cons, buf, window, a, hidden), 1, order[i], false, i);
+                best.offer(move_[i] + taken(mask, cons, buf, n.buffered, window, a, hidden), 1, order[i], false, i);
                 buf[i] -= 1;
             }
         }
         for (int i = 0; i < parts_; ++i) {
-            if (!buf[i] || !legal[i]) continue;
-            int u = next_unit(mask, i);
-            uint64_t after = consistent_after(mask, cons, u);
-            if (!after) continue;
-            buf[i] -= 1;
-            double v = move_[i] + V(mask | uint64_t(1) << u, after, buf, window);
-            buf[i] += 1;
-            best.offer(v, 0, order[i], true, i);
+            const Next& n = next[i];
+            if (!buf[i] || !legal[i] || !n.after) continue;
+            uint64_t nmask = mask | uint64_t(1) << n.unit;
+            double v = 0.0;
+            if (nmask != full_) {
+                buf[i] -= 1;
+                v = V_at(n.from_buffer, nmask, n.after, buf, window);
+                buf[i] += 1;
+            }
+            best.offer(move_[i] + v, 0, order[i], true, i);
         }
         return best;
     }
 
     // PileSolver._after for a unit taken from the window (window[a]): a hidden unit replaces it
-    double taken(uint64_t mask, uint64_t cons, std::vector<int>& buf, const std::vector<int>& window, size_t a,
-                 const std::vector<int>& hidden) {
+    // (`base`: the code of the state after the move, base_code, unless it is complete)
+    double taken(uint64_t mask, uint64_t cons, std::vector<int>& buf, uint64_t base, const std::vector<int>& window,
+                 size_t a, const std::vector<int>& hidden) {
         Frame frame(*this);
         std::vector<int>& rest = frame->rest;
         rest.assign(window.begin(), window.end());
         rest.erase(rest.begin() + a);
         int total = 0;
         for (int c : hidden) total += c;
-        if (total == 0) return V(mask, cons, buf, rest);
+        bool done = mask == full_;
+        if (total == 0) return done ? 0.0 : V_at(base, mask, cons, buf, rest);
         Sum sum{compensated_};
         std::vector<int>& next = frame->next;
         next.resize(rest.size() + 1);
-        // the state's code once for all its windows (V finds each from it; the values are V's)
-        bool done = mask == full_;
-        uint64_t base = done ? 0 : base_code(mask, cons, buf);
+        // the expectation is a function of the state after the move and the rest of the window alone (the
+        // hidden units are that state's bin less the rest): kept, every other move into that state reads it
+        uint64_t rest_code = done ? 0 : base + window_code(rest);
+        if (!done && memo_taken_)
+            if (const double* got = taken_.find(rest_code)) return *got;
         for (int j = 0; j < groups_; ++j) {
             int c = hidden[j];
             if (!c) continue;
@@ -416,11 +476,13 @@ private:
             double v = 0.0;
             if (!done) {
                 const double* got = table_.find(base + window_code(next));
-                v = got ? *got : V(mask, cons, buf, next);
+                v = got ? *got : V_at(base, mask, cons, buf, next);
             }
             sum.add((double)c / (double)total * v);
         }
-        return sum.result();
+        double out = sum.result();
+        if (!done && memo_taken_) taken_.put(rest_code, out);
+        return out;
     }
 
     // Scratch vectors per depth of the recursion (move_value -> taken -> V -> S -> move_value ...): a look's
@@ -430,7 +492,7 @@ private:
     };
     std::deque<Scratch> frames_;
     size_t depth_ = 0;
-    std::vector<int> leaf_;  // draw's leaf (no recursion inside draw)
+    std::vector<int> drawn_, order_;  // looks()'s look being made, and an order of drawing it
     std::vector<int> no_order_;     // move_value's ranks: all equal
     std::vector<bool> every_move_;  // and nothing refused
     class Frame {
@@ -453,9 +515,10 @@ private:
     int others_, groups_ = 0, most_others_ = 0;
     double other_move_;
     uint64_t nbuffers_ = 1, windows_ = 1, max_pairs_ = 0;
-    std::vector<int> slot_;  // window code -> index in a look list being built (-1: none)
     PairIds pairs_;
     Table table_;
+    Table taken_;  // taken()'s expectations by the state after the move and the rest (memo_taken)
+    bool memo_taken_ = false;
     bool timed_ = false;
     Clock::time_point deadline_;
     size_t max_states_ = 0;
@@ -483,6 +546,7 @@ void bind_pile(py::module_& m) {
         .def("actions", &PileCore::actions, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("order"),
              py::arg("legal"), py::arg("seconds"), py::arg("max_states"))
         .def("reserve", &PileCore::reserve, py::arg("states"))
+        .def("memo_taken", &PileCore::memo_taken, py::arg("on"))
         .def("set_ways", &PileCore::set_ways, py::arg("ways"))
         .def_property_readonly("states", &PileCore::states)
         .def_property_readonly("bytes", &PileCore::bytes);

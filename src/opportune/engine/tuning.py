@@ -443,9 +443,12 @@ WAYS_LOCK_EVERY = 4
 #: locations, sizes 5, 8, 12 were +2.8%, 5-12 by one +0.8%, a cap three times larger +0.25%).
 PILE_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
 #: Values (a state's looks and its value after a shake) the pile window's programme may hold per size
-#: tried: counted, not timed, so the decision is the same everywhere.  40,000 roughly halve the gap at 2-3
-#: visible (docs/decisions.md) at 1.6 times the CPU, over the window's share of a 50 ms budget on KILBRID.
-PILE_WINDOW_STATES = 20_000
+#: tried: counted, not timed, so the decision is the same everywhere.  30,000 take about the CPU 20,000
+#: took before the compiled core kept its expectations per successor state (KILBRID at 3 visible, counted
+#: in instructions: the mean decision 8% less, the largest 16% more; at 1 visible the largest 40% more;
+#: a mean of 6-19 ms a decision, within the window's 35 ms share of a 50 ms budget) and bring the gap on
+#: r1-16 under 1% at 1-3 visible; 40,000 cost a quarter more again (docs/decisions.md).
+PILE_WINDOW_STATES = 30_000
 #: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
 #: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
 PILE_WINDOW_CACHE = 512

@@ -139,7 +139,12 @@ class PileWindowSolver(OthersGroup, PileSolver):
 class CompiledPileWindowSolver(CompiledOthers, CompiledPileSolver, PileWindowSolver):
     """:class:`PileWindowSolver` computed by the pile's compiled core (the others its last group): the same
     doubles, and :meth:`actions` in one call to the core.  A ``ValueError`` where the core does not take the
-    window's plan."""
+    window's plan.  The core keeps the expectation over the unit replacing one taken, by the state after the
+    move and the rest of the look: the same doubles, each computed once however many moves lead there."""
+
+    def __init__(self, engine, **settings):
+        super().__init__(engine, **settings)
+        self._core.memo_taken(True)
 
     def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
         return self._run(self._core.actions, key[0], key[1], list(key[2]), list(order), list(legal))
