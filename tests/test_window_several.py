@@ -14,6 +14,7 @@ from opportune.planning.costs import TimeModel
 from opportune.policies.evaluate import PolicyEvaluator
 from opportune.policies.lookahead import Lookahead
 from opportune.policies.optimal import OptimalSolver
+from opportune.engine.tuning import WINDOW_GROWTH_SEVERAL
 from opportune.policies.window import FrontierWindow, option_value, window_available
 
 pytestmark = pytest.mark.skipif(not window_available(OrderEngine(make_plan(["a"], {}))),
@@ -40,8 +41,8 @@ def test_the_looks_option_value_beats_the_per_strategy_choice_by_a_computed_marg
     rule) is 1.56% over the optimum; with the option of keeping both strategies open taken off the moves
     that keep them, 0.77%."""
     engine = OrderEngine(TWO)
-    old = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), option=False), engine, 1, 1)
-    new = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,)), engine, 1, 1)
+    old = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), option=False, joint=False), engine, 1, 1)
+    new = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), joint=False), engine, 1, 1)
     assert old == pytest.approx(0.015565, abs=1e-5)
     assert new == pytest.approx(0.007735, abs=1e-5)
     assert new < old - 0.005
@@ -63,7 +64,7 @@ def test_the_option_value_is_what_the_looks_choice_of_window_saves():
     looks; 0 with either window alone."""
     engine = OrderEngine(TWO)
     costs = TimeModel()
-    window = FrontierWindow(visible=1, capacity=1, sizes=(5,), several=(5,))
+    window = FrontierWindow(visible=1, capacity=1, sizes=(5,), several=(5,), joint=False)
     tables = window.tables(engine, 0, engine.all_strategies, ())
     assert len(tables) == 2
     assert all(option_value(engine, 0, engine.all_strategies, (), (t,), 1, costs) == pytest.approx(0.0, abs=1e-9)
@@ -81,6 +82,58 @@ def test_the_option_value_is_what_the_looks_choice_of_window_saves():
     least = min(t.values[-1] + t.rest for t in tables)
     got = option_value(engine, 0, engine.all_strategies, (), tables, 1, costs)
     assert got == pytest.approx(least - value, rel=1e-12) and got > 0
+
+
+def test_a_size_predicted_past_the_cap_by_less_than_its_margin_is_tried_and_nears_the_optimum():
+    """At 1 visible and 2 locations, windows of 3-11 parts within 1,200 states: the growth of the two sizes
+    before predicts the next past the cap where it would fit.  Tried up to twice the cap (the default
+    margin), the window is larger where both strategies are open and the fallback nearer the optimum than
+    where a size predicted past the cap is not tried (exact evaluation: 2.565% and 1.416%)."""
+    engine = OrderEngine(TWO)
+    gaps, work = [], []
+    for growth in (1.0, WINDOW_GROWTH_SEVERAL):
+        window = FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11), growth=growth)
+        gaps.append(_gap(window, engine, 1, 2))
+        work.append(window.work)
+    assert gaps[0] == pytest.approx(0.02565, abs=1e-5) and gaps[1] == pytest.approx(0.01416, abs=1e-5)
+    assert all(w["most_states"] <= 1200 and w["by_base"] == 0 for w in work)
+    sizes = [FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11), growth=g)
+             .tables(engine, 0, engine.all_strategies, ())[0].size for g in (1.0, WINDOW_GROWTH_SEVERAL)]
+    assert sizes[0] < sizes[1]
+
+
+def _joint_core(ends=(), costs=()):
+    """A joint window's programme of four one-unit parts a, b, c, d (units 0-3): b after a in the first
+    strategy, a after c in the second; 1 visible, 2 locations, 3 others outside at a move each."""
+    from opportune.engine import compiled_core
+
+    below = [[0, 0b0001, 0, 0], [0b0100, 0, 0, 0]]
+    return compiled_core().WindowCore(4, [0, 1, 2, 3], [1, 1, 1, 1], below, [1.0] * 4, 0.0, 1.0, 1, 2, 3, 1.0,
+                                      list(ends), list(costs))
+
+
+def _value(core, mask: int, cons: int) -> float:
+    return core.value(mask, cons, [0, 0, 0, 0], 0, seconds=-1.0, max_states=-1)
+
+
+def test_a_joint_windows_ends_are_terminal_at_their_cost_and_each_strategy_is_worth_its_end():
+    """The compiled programme of a joint window: ends at the full mask and no cost are the plain window's
+    values to the bit; a state past a strategy's end is worth its cost and the units left (a move each,
+    brute force); a strategy decided alone moves with its end's cost exactly and not with the other's; and
+    both open are worth at most the better one alone (the option of choosing later is worth at least 0)."""
+    args = (0, 0b11, [0, 0, 0, 0], 0)
+    plain = _joint_core().moves(*args, seconds=-1.0, max_states=-1)
+    assert _joint_core([0b1111, 0b1111], [0.0, 0.0]).moves(*args, seconds=-1.0, max_states=-1) == plain
+    ends = [0b0011, 0b0101]                    # each strategy's own window: a, b and a, c
+    core = _joint_core(ends, [0.5, -0.25])
+    assert _value(core, 0b0011, 0b01) == 0.5 + 2 * 1.0                      # c and d left, a move each
+    assert _value(core, 0b0101, 0b11) == -0.25 + 2 * 1.0                    # the second's end: b and d left
+    assert _value(core, 0b1111, 0b11) == -0.25                             # both ended: the least cost
+    alone = [_value(core, 0, 1 << s) for s in range(2)]
+    shifted = _joint_core(ends, [0.5 + 3.0, -0.25])
+    assert _value(shifted, 0, 0b01) == pytest.approx(alone[0] + 3.0, rel=1e-12)
+    assert _value(shifted, 0, 0b10) == pytest.approx(alone[1], rel=1e-12)
+    assert _value(core, 0, 0b11) <= min(alone) + 1e-12
 
 
 def test_on_a_two_strategy_plan_its_decisions_are_deterministic_and_its_work_bounded():

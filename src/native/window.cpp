@@ -12,6 +12,11 @@
 // is the same whatever the window's policy did, so it does not change a decision).  A state is
 // (installed window units, strategies, the window's buffer counts, others buffered).
 //
+// A joint window (several strategies' frontier windows at once) has `ends`: one mask a strategy, the
+// units of that strategy's own window; a state of an open strategy whose end is installed is terminal,
+// its value the window's units left (a move each, and a look each one not buffered) and that strategy's
+// `end_costs` (the least where several end).  Without ends the full mask alone is terminal, at 0.
+//
 // The same operations as OptimalCore in the same order where there are no others, so the same
 // doubles; the binomials are 128-bit where the bin holds more than 64 units.
 #include <pybind11/pybind11.h>
@@ -51,11 +56,18 @@ class WindowCore : private PlanUnits {
 public:
     WindowCore(int n_units, std::vector<int> first, std::vector<int> quantity,
                std::vector<std::vector<uint64_t>> below, std::vector<double> move, double look, double shake,
-               int visible, int capacity, int others, double other_move)
+               int visible, int capacity, int others, double other_move, std::vector<uint64_t> ends,
+               std::vector<double> end_costs)
         : PlanUnits(n_units, std::move(first), std::move(quantity), std::move(below), std::move(move), look, shake,
                     visible, capacity),
-          others_(others), other_move_(other_move) {
+          others_(others), other_move_(other_move), ends_(std::move(ends)), end_costs_(std::move(end_costs)) {
         if (others_ < 0 || others_ > (1 << 20)) throw std::invalid_argument("the others' units are out of range");
+        if (!ends_.empty() && ends_.size() != below_.size())
+            throw std::invalid_argument("ends needs one mask per strategy (or none)");
+        if (!end_costs_.empty() && end_costs_.size() != ends_.size())
+            throw std::invalid_argument("end_costs needs one cost per end (or none)");
+        for (uint64_t e : ends_)
+            if (e & ~full_) throw std::invalid_argument("an end is out of range");
         most_buffered_ = capacity_ < 0 ? others_ : std::min(others_, capacity_);
         long double codes = buffers_ * (long double)(most_buffered_ + 1);
         if (codes > (long double)(uint64_t(1) << 62)) throw std::invalid_argument("too many buffer contents for 64-bit codes");
@@ -146,6 +158,13 @@ private:
         uint64_t c = code(mask, cons, buf, ob);
         const double* cached = table_.find(c);
         if (cached) return *cached;
+        if (!ends_.empty()) {  // a joint window: its full mask is past every open strategy's end
+            double e = end_value(mask, cons, buf);
+            if (e < INF) {
+                table_.put(c, e);
+                return e;
+            }
+        }
         if (mask == full_) {
             table_.put(c, 0.0);
             return 0.0;
@@ -189,8 +208,27 @@ private:
         return loop.value;
     }
 
+    // A joint window's end in one of its open strategies: every unit of that strategy's end installed.
+    // What it costs after: the window's units left, a look and a move each (a move for a buffered one), as
+    // the others outside it, and that strategy's end cost (the least where several end).  INF: no end
+    // (the window ends at its full mask alone, at 0).
+    double end_value(uint64_t mask, uint64_t cons, const std::vector<int>& buf) const {
+        double least = INF;
+        for (size_t s = 0; s < ends_.size(); ++s)
+            if ((cons >> s & 1) && (ends_[s] & ~mask) == 0)
+                least = std::min(least, end_costs_.empty() ? 0.0 : end_costs_[s]);
+        if (least == INF) return INF;
+        for (int i = 0; i < parts_; ++i) {
+            int left = quantity_[i] - __builtin_popcountll(mask & part_units_[i]);
+            least += left * move_[i] + (left - buf[i]) * look_;
+        }
+        return least;
+    }
+
     int others_;
     double other_move_;
+    std::vector<uint64_t> ends_;
+    std::vector<double> end_costs_;
     int most_buffered_ = 0, ks_ = 0;
     uint64_t contents_ = 1, max_pairs_ = 0;
     std::vector<u128> binom_;
@@ -208,10 +246,10 @@ void bind_window(py::module_& m) {
     py::register_exception<WindowTimeout>(m, "WindowCoreTimeout", PyExc_RuntimeError);
     py::class_<WindowCore>(m, "WindowCore")
         .def(py::init<int, std::vector<int>, std::vector<int>, std::vector<std::vector<uint64_t>>, std::vector<double>,
-                      double, double, int, int, int, double>(),
+                      double, double, int, int, int, double, std::vector<uint64_t>, std::vector<double>>(),
              py::arg("n_units"), py::arg("first"), py::arg("quantity"), py::arg("below"), py::arg("move"),
              py::arg("look"), py::arg("shake"), py::arg("visible"), py::arg("capacity"), py::arg("others"),
-             py::arg("other_move"))
+             py::arg("other_move"), py::arg("ends") = std::vector<uint64_t>{}, py::arg("end_costs") = std::vector<double>{})
         .def("value", &WindowCore::value, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("others_buffered"),
              py::arg("seconds"), py::arg("max_states"))
         .def("moves", &WindowCore::moves, py::arg("mask"), py::arg("cons"), py::arg("buf"), py::arg("others_buffered"),

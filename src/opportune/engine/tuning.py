@@ -369,6 +369,13 @@ WINDOW_PARTS = (5, 8, 12)
 #: The CPU of a decision along runs of two-strategy plans of 20 and 30 parts (1-3 visible, a loaded
 #: machine): at most 54 ms (37.5 ms before); with a budget the deadline stops the largest window first.
 WINDOW_PARTS_SEVERAL = (5, 8, 12, 16, 20)
+#: Where several strategies are open, a size of :data:`WINDOW_PARTS_SEVERAL` is tried unless its states,
+#: predicted from the growth of the two before, pass this many times :data:`WINDOW_STATES` (a window
+#: that does not fit after all stops at the cap: at most that much work lost).  The prediction runs high
+#: (on r14-20x2 of the policy lab at 1 visible and 2 locations, 12 parts predicted at 26,400 states held
+#: 17,777, and the windows of 8 parts saw the second strategy 1.7 worse than the first where it is 7.7
+#: worse, those of 12 parts 7.1): that plan's fallback +1.518% with 1, +0.429% with 2 (no limit: +0.427%).
+WINDOW_GROWTH_SEVERAL = 2
 #: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.

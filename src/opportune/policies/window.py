@@ -22,6 +22,12 @@ move of least expected cost over the windows, with its window's others a look an
 decides: the look chooses the strategy.  A window of one strategy's frontier values a state as if the
 others were closed, so the moves that keep several open (a buffering, an installation several allow, the
 shake) are worth the option of choosing later: :func:`option_value`, one look deep, is taken off them.
+The sizes tried there grow while the states of the next, predicted from the growth of the two before, stay
+within :data:`~opportune.engine.tuning.WINDOW_GROWTH_SEVERAL` times the cap.  A *joint window*
+(``joint=True``, for measurement: nearer the optimum on some two-strategy plans, farther on others) is the
+union of the strategies' frontier windows (:func:`joint_window`) solved in all of them at once (a unit
+waiting there for a part outside is never installed in that strategy), ending in a strategy once that
+strategy's own window is installed, at the cost its largest window adds to its own window of that size.
 Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
 the base rule decides.
 
@@ -39,11 +45,13 @@ from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 from opportune.engine.tuning import (  # tuning.py says why
-    WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_PARTS, WINDOW_PARTS_SEVERAL, WINDOW_STATES, WINDOW_STRATEGIES)
+    WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_GROWTH_SEVERAL, WINDOW_PARTS, WINDOW_PARTS_SEVERAL, WINDOW_STATES,
+    WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "option_value", "window_available", "window_strategies"]
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "joint_window", "option_value", "window_available",
+           "window_strategies"]
 
 _native = compiled_core()
 
@@ -305,6 +313,12 @@ class FrontierWindow(DecidesOnMasks):
     option : bool
         Whether the look values keeping several strategies open (:func:`option_value`; the default) where
         several windows decide, or takes the least window's best move alone.
+    joint : bool
+        Whether the joint window of the open strategies decides where several are open and it fits (see
+        the module; False, the default: the strategies' own windows with the option value decide).
+    growth : float
+        Where several strategies are open, a size is tried while its states, predicted from the growth of
+        the two before, are within this many times ``max_states`` (:data:`WINDOW_GROWTH_SEVERAL`).
     max_states : int
         States a window's programme may hold (:data:`WINDOW_STATES`).
     others : {"buffer", "ignore"}
@@ -333,13 +347,14 @@ class FrontierWindow(DecidesOnMasks):
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer",
-                 several: tuple[int, ...] = WINDOW_PARTS_SEVERAL, option: bool = True):
+                 several: tuple[int, ...] = WINDOW_PARTS_SEVERAL, option: bool = True, joint: bool = False,
+                 growth: float = WINDOW_GROWTH_SEVERAL):
         from opportune.policies.variants import Slack
 
         self.base = base if base is not None else Slack()
         self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
         self.sizes, self.max_states = tuple(sizes), max_states
-        self.several, self.option = tuple(several), option
+        self.several, self.option, self.joint, self.growth = tuple(several), option, joint, growth
         self.others = others
         self.deadline: Deadline | None = None
         self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
@@ -415,43 +430,82 @@ class FrontierWindow(DecidesOnMasks):
         if got is not None:
             self._tables.move_to_end(key)
             return got
-        got, grown = (), []
         several = consistent.bit_count() > 1
-        for size in sorted(self.several if several else self.sizes):
-            # the smaller windows first: past the deadline or the cap, the largest finished ones decide
-            if several and len(grown) > 1 and grown[-1] * grown[-1] > self.max_states * max(1, grown[-2]):
-                break           # predicted past the cap by the growth of the last two: not tried
-            try:
-                got = tuple(self._solve(engine, mask, consistent, buffer, parts, outside, size)
-                            for parts, outside in self._windows(engine, mask, consistent, buffer, size))
-            except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
-                break
-            grown.append(max(t.states for t in got))
-            if not all(t.outside for t in got):
-                break           # a window holds every part left: a larger one is the same
+        grown = self._grown(engine, mask, consistent, buffer)
+        got = ()
+        if grown:
+            got = tuple({t.parts: t for t in grown[-1][1]}.values())
+            joint = self._joint(engine, mask, consistent, buffer, grown) if several and self.joint else None
+            got = got if joint is None else (joint,)
         if got:
             self._tables[key] = got
             if len(self._tables) > WINDOW_CACHE:
                 self._tables.popitem(last=False)
         return got
 
+    def _grown(self, engine, mask: int, consistent: int, buffer) -> list[tuple[int, tuple[WindowTable, ...]]]:
+        """Each size that fits (the smaller first: past the deadline or the cap, the largest finished ones
+        decide) with the tables of the frontier windows of the first :data:`WINDOW_STRATEGIES` open
+        strategies, one a strategy in order (a window two share solved once); empty where none fits."""
+        out, grown = [], []
+        several = consistent.bit_count() > 1
+        for size in sorted(self.several if several else self.sizes):
+            if several and _past_cap(grown, self.growth * self.max_states):
+                break           # predicted past the cap by the growth of the last two: not tried
+            windows = self._windows(engine, mask, consistent, buffer, size)
+            solved: dict[tuple, WindowTable] = {}
+            try:
+                for parts, outside in windows:
+                    if tuple(parts) not in solved:
+                        solved[tuple(parts)] = self._solve(engine, mask, consistent, buffer, parts, outside, size)
+            except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
+                break
+            out.append((size, tuple(solved[tuple(parts)] for parts, _ in windows)))
+            grown.append(max(t.states for t in solved.values()))
+            if not all(t.outside for t in solved.values()):
+                break           # a window holds every part left: a larger one is the same
+        return out
+
+    def _joint(self, engine, mask: int, consistent: int, buffer, grown) -> WindowTable | None:
+        """The joint window of the open strategies' frontier windows of the largest size that fits after
+        them (:func:`joint_window`: smaller ones first, a size predicted past the cap not tried), its end in
+        each strategy costing what that strategy's largest window adds to its own window of the joint
+        window's size (so a strategy, decided alone, is worth what its largest window says); None where
+        none fits."""
+        largest = grown[-1][1]
+        got, states = None, []
+        for size, own in grown:
+            if _past_cap(states, self.max_states):
+                break
+            parts, outside = joint_window(engine, mask, consistent, own)
+            if sum(_left(engine, mask, i) for i in parts) > 64:
+                break           # the union past the core's 64 units
+            costs = [(big.values[-1] + big.rest) - (t.values[-1] + t.rest) for big, t in zip(largest, own)]
+            try:
+                got = self._solve(engine, mask, consistent, buffer, parts, outside, size,
+                                  ([t.parts for t in own], costs))
+            except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
+                break
+            states.append(got.states)
+            if not got.outside:
+                break
+        return got
+
     @staticmethod
     def _windows(engine, mask: int, consistent: int, buffer, size: int) -> list[tuple[list[int], list[int]]]:
         """The frontier windows of ``size`` parts of the first :data:`WINDOW_STRATEGIES` open strategies,
-        each once.  O(parts × strategies²)."""
-        out = []
-        for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]:
-            window = frontier_window(engine, mask, consistent, buffer, size, strategy=s)
-            if window not in out:
-                out.append(window)
-        return out
+        one a strategy in order.  O(parts × strategies²)."""
+        return [frontier_window(engine, mask, consistent, buffer, size, strategy=s)
+                for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]]
 
     def _solve(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
-               size: int) -> WindowTable:
+               size: int, joint=None) -> WindowTable:
         """The window of ``parts`` solved by the compiled core, in the open strategies it is closed in (the
-        others' moves are not its own: inf, never chosen): its table.  The work is counted."""
-        kept = window_strategies(engine, mask, consistent, parts)
-        core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside)
+        others' moves are not its own: inf, never chosen), or with ``joint`` (its ends and their costs,
+        :meth:`_joint`) in the first :data:`WINDOW_STRATEGIES` open ones: its table.  The work is counted."""
+        kept = (_first_bits(consistent, WINDOW_STRATEGIES) if joint
+                else window_strategies(engine, mask, consistent, parts))
+        core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside, joint)
         seconds = as_deadline(self.deadline).seconds()
         try:
             values = core.moves(0, (1 << kept.bit_count()) - 1, buf, others_buffered,
@@ -465,9 +519,12 @@ class FrontierWindow(DecidesOnMasks):
                    for i in outside)
         return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states, rest)
 
-    def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int]):
+    def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
+              joint=None):
         """The compiled window programme for ``parts`` (the remaining units of each, the open strategies'
-        orders among them), the window's buffer counts, and the others buffered."""
+        orders among them), the window's buffer counts, and the others buffered.  ``joint``: None, or a
+        joint window's ends (each strategy's parts) and their costs (:meth:`_joint`).  O(units² ×
+        strategies)."""
         plan = engine.plan
         unit_bit, first, quantity, move = {}, [], [], []
         for i in parts:
@@ -477,11 +534,15 @@ class FrontierWindow(DecidesOnMasks):
                     unit_bit[u] = len(unit_bit)
             quantity.append(len(unit_bit) - first[-1])
             move.append(float(self.costs.move(plan.parts[i].id)))
-        below = []
+        below, units = [], sum(1 << u for u in unit_bit)
         for s in core_strategies(engine, consistent):
             # the window is closed in these strategies (window_strategies): its units' remaining ancestors
-            # are all its own
-            below.append([_window_bits(engine.posets[s].below[u] & ~mask, unit_bit) for u in unit_bit])
+            # are all its own; in a joint window, a unit waiting for one outside it there is below itself
+            # (never installed in the window in that strategy)
+            below.append([_window_bits(engine.posets[s].below[u] & ~mask, unit_bit)
+                          | (engine.posets[s].below[u] & ~mask & ~units != 0) << n for n, u in enumerate(unit_bit)])
+        ends = [] if joint is None else [_window_bits(sum(((1 << plan.parts[i].quantity) - 1) << engine.first[i]
+                                                          for i in own), unit_bit) for own in joint[0]]
         index = {i: j for j, i in enumerate(parts)}
         buf = [0] * len(parts)
         others_buffered = 0
@@ -498,7 +559,7 @@ class FrontierWindow(DecidesOnMasks):
                       if other_units else float(self.costs.motion))
         core = _native.WindowCore(len(unit_bit), first, quantity, below, move, float(self.costs.look),
                                   float(self.costs.shake), self.visible, -1 if self.capacity is None else self.capacity,
-                                  len(other_units), float(other_move))
+                                  len(other_units), float(other_move), ends, [] if joint is None else list(joint[1]))
         return core, buf, others_buffered
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
@@ -627,6 +688,62 @@ def _window_bits(units: int, unit_bit: dict[int, int]) -> int:
         if u in unit_bit:
             out |= 1 << unit_bit[u]
     return out
+
+
+def _left(engine, mask: int, i: int) -> int:
+    """Part ``i``'s units not installed.  O(1)."""
+    return (((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i] & ~mask).bit_count()
+
+
+def _first_bits(bits_: int, most: int) -> int:
+    """The lowest ``most`` bits of ``bits_``.  O(most)."""
+    out = 0
+    for _ in range(most):
+        if not bits_:
+            break
+        low = bits_ & -bits_
+        out, bits_ = out | low, bits_ & ~low
+    return out
+
+
+def joint_window(engine, mask: int, consistent: int, own) -> tuple[list[int], list[int]]:
+    """The joint window of the open strategies' frontier windows at a state: their parts (in declaration
+    order), each strategy's window its end there, and the remaining parts outside them.  O(parts ×
+    strategies).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies.
+    own : sequence of WindowTable
+        The first :data:`WINDOW_STRATEGIES` open strategies' frontier windows, one a strategy.
+
+    Returns
+    -------
+    (list of int, list of int)
+        The joint window's parts, and the remaining parts outside it (declaration order).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"]}, "t": {"a": ["c"]}}))
+    >>> own = FrontierWindow(visible=1, capacity=1, several=(2,), joint=False).tables(engine, 0, 0b11, ())
+    >>> [t.parts for t in own], joint_window(engine, 0, 0b11, own)
+    ([(0, 2), (1, 2)], ([0, 1, 2], [3]))
+    """
+    parts = sorted({i for t in own for i in t.parts})
+    _, every = _ancestors_of(engine, mask, consistent)
+    taken = set(parts)
+    return parts, [i for i in sorted(every) if i not in taken]
+
+
+def _past_cap(states: list[int], cap: float) -> bool:
+    """Whether the next size's states, predicted from the growth of the last two sizes' ``states``, pass
+    ``cap``.  O(1)."""
+    return len(states) > 1 and states[-1] * states[-1] > cap * max(1, states[-2])
 
 
 def core_strategies(engine, consistent: int) -> list[int]:
