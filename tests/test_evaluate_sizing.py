@@ -15,6 +15,7 @@ from conftest import GEARBOX
 from opportune import make_plan
 from opportune.cli import evaluate as evaluate_cli
 from opportune.engine import OrderEngine
+from opportune.engine import tuning
 from opportune.engine.tuning import EVALUATE_BYTES, EVALUATE_RATES
 from opportune.policies.optimal import compiled_optimal_available, optimal_solver, optimum_engine
 
@@ -50,7 +51,7 @@ def test_the_refusal_quotes_the_programmes_that_would_run(monkeypatch):
     """On the same over-cap plan, the look-ahead (which decides by the optimum) and the paper's rule (whose
     evaluation runs look by look in Python) quote differently, each from its programme's constants."""
     rates = dict(EVALUATE_RATES, **{"compiled uniform": 50, "Python uniform": 40, "rule uniform": 89})
-    monkeypatch.setattr(evaluate_cli, "EVALUATE_RATES", rates)
+    monkeypatch.setattr(tuning, "EVALUATE_RATES", rates)
     engine = OrderEngine(__import__("opportune").load_plan(GEARBOX))
     compiled = compiled_optimal_available(optimum_engine(engine))
     rate, per_state = (50, EVALUATE_BYTES["compiled"]) if compiled else (40, EVALUATE_BYTES["Python"])
@@ -92,9 +93,9 @@ def test_a_plan_past_the_old_cap_is_evaluated_by_default_at_the_optimum(tmp_path
 def test_the_policys_own_evaluation_stops_at_its_default_cap(tmp_path, monkeypatch):
     """The paper's rule is evaluated look by look in Python: its default cap is its rate's share of the
     time (made small here), not the optimum's; it stops there and says how far it got."""
-    monkeypatch.setattr(evaluate_cli, "EVALUATE_RATES", dict(EVALUATE_RATES, **{"rule uniform": 5}))
+    monkeypatch.setattr(tuning, "EVALUATE_RATES", dict(EVALUATE_RATES, **{"rule uniform": 5}))
     cap = evaluate_cli.default_cap("rule uniform")
-    assert cap == 5 * evaluate_cli.EVALUATE_SECONDS < evaluate_cli.default_cap("compiled uniform")
+    assert cap == 5 * tuning.EVALUATE_SECONDS < evaluate_cli.default_cap("compiled uniform")
     out = runner.invoke(app(), ["evaluate", _file(tmp_path, _plan12()), "--policy", "paper"])
     text = _text(out)
     assert out.exit_code == 1 and "Traceback" not in out.output, text
@@ -106,7 +107,7 @@ def test_default_caps_follow_the_measured_rates_and_memory():
     for programme, rate in EVALUATE_RATES.items():
         kind = "compiled" if programme.startswith("compiled") else "Python"
         cap = evaluate_cli.default_cap(programme)
-        assert cap <= evaluate_cli.EVALUATE_SECONDS * rate and cap * EVALUATE_BYTES[kind] <= evaluate_cli.EVALUATE_MEMORY
+        assert cap <= tuning.EVALUATE_SECONDS * rate and cap * EVALUATE_BYTES[kind] <= tuning.EVALUATE_MEMORY
     assert evaluate_cli.default_cap("compiled uniform") > 30_000 * 100     # the old flat cap, far below
 
 

@@ -17,7 +17,6 @@ from typing import Optional
 import typer
 
 from opportune.cli.common import PLAN_ARG, err, fail, json_option, load_or_exit, out, policy_names
-from opportune.engine.tuning import EVALUATE_BYTES, EVALUATE_MEMORY, EVALUATE_RATES, EVALUATE_SECONDS
 from opportune.limits import MAX_BUFFER
 
 # What each programme is, in the messages (by the first word of its key in EVALUATE_RATES).
@@ -46,6 +45,8 @@ def default_cap(programme: str) -> int:
     >>> default_cap("compiled uniform") > 100 * default_cap("rule uniform")
     True
     """
+    from opportune.engine.tuning import EVALUATE_BYTES, EVALUATE_MEMORY, EVALUATE_RATES, EVALUATE_SECONDS
+
     kind = "compiled" if programme.startswith("compiled") else "Python"
     return min(EVALUATE_SECONDS * EVALUATE_RATES[programme], EVALUATE_MEMORY // EVALUATE_BYTES[kind])
 
@@ -61,13 +62,12 @@ def evaluate(
                                                   help="Buffer locations (default: plan, else unlimited)"),
     max_states: Optional[int] = typer.Option(
         None, "--max-states", min=1,
-        help=f"Most states of each programme (default: what it does in about {EVALUATE_SECONDS} s of CPU, "
-             f"within {EVALUATE_MEMORY >> 30} GB: {default_cap('compiled uniform'):,} for the compiled optimum of "
-             f"a uniform bin, {default_cap('Python uniform'):,} for the optimum in Python (no compiled core), "
-             f"{default_cap('rule uniform'):,} for a policy's own evaluation in Python, which the "
-             "look-ahead needs none of where it decides by the optimum).  The states are counted or estimated "
-             "before any work, a plan whose optimum is over the limit is refused at once with the time and "
-             "memory it would take, and a policy's evaluation stops at it saying how far it got"),
+        help="Most states of each programme (default: what it does in about a minute of CPU at its measured "
+             "rate, within 2 GB: millions of states for the compiled optimum, about a hundred thousand for a "
+             "policy's own evaluation in Python, which the look-ahead needs none of where it decides by the "
+             "optimum; docs/comparison.md lists them).  The states are counted or estimated before any work, a "
+             "plan whose optimum is over the limit is refused at once with the time and memory it would take, "
+             "and a policy's evaluation stops at it saying how far it got"),
     time_limit: Optional[float] = typer.Option(None, "--time-limit", min=0.0,
                                                help="Stop the programme after this many seconds and say how far it "
                                                     "got (default: none; --max-states bounds the work)"),
@@ -204,10 +204,13 @@ class _Work:
 
     def seconds(self, programme: str, states: int) -> float:
         """The CPU seconds ``programme`` takes for ``states`` states, at its measured rate."""
+        from opportune.engine.tuning import EVALUATE_RATES
+
         return states / EVALUATE_RATES[programme]
 
     def optimum_words(self, states: int) -> str:
         """``'the compiled optimum: 2 s of CPU at ~300,000 states/s and about 180 MB'``."""
+        from opportune.engine.tuning import EVALUATE_BYTES, EVALUATE_RATES
         from opportune.policies.states import big
 
         kind = self.optimum.split()[0]
@@ -217,6 +220,8 @@ class _Work:
 
     def limit(self, cap: int, programme: str) -> str:
         """``'--max-states 1,000'``, or the default cap and what it is."""
+        from opportune.engine.tuning import EVALUATE_SECONDS
+
         if self.given:
             return f"--max-states {cap:,}"
         return f"--max-states {cap:,} (the default for {_WORDS[programme.split()[0]]}: ~{EVALUATE_SECONDS} s of CPU)"
@@ -232,6 +237,8 @@ class _Work:
 
     def policy_words(self, estimate) -> str:
         """The policy's own evaluation, as a refusal quotes it."""
+        from opportune.engine.tuning import EVALUATE_RATES
+
         by = self.by_optimum(estimate)
         if by:
             return "the policy decides by the optimum (its value is the optimum's: nothing more to evaluate)"
