@@ -218,6 +218,28 @@ def random_plans(draw, max_parts=6, max_units=8, max_strategies=3, quantities=Tr
     return plan_from_dict(doc)
 
 
+
+def policy_run(policy, engine, visible: int, capacity: int, rng, steps: int) -> list:
+    """A policy's actions (``choose_at``) along a run whose looks are drawn from the bin by ``rng``: at most
+    ``steps`` decisions, each action carried out on the state (a buffered part leaves the buffer once)."""
+    plan, mask, cons, buffer, out = engine.plan, 0, engine.all_strategies, (), []
+    for _ in range(steps):
+        if mask == engine.full:
+            break
+        in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
+        action = policy.choose_at(engine, mask, cons, buffer, capacity - len(buffer),
+                                  tuple(rng.sample(in_bin, min(visible, len(in_bin)))))
+        out.append(action)
+        if action.kind == "buffer":
+            buffer += (action.part,)
+        elif action.kind == "install":
+            unit = engine.next_unit(mask, plan.index(action.part))
+            mask, cons = mask | 1 << unit, engine.consistent_after(mask, cons, unit)
+            if action.source == "buffer":
+                buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
+    return out
+
+
 def run_cli(*args):
     """Run ``opportune ARGS`` in process (typer's runner) and return the result, after checking what every
     command line test needs: no traceback, and no exception other than the exit."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 import random
 
 import pytest
-from conftest import random_plans
+from conftest import policy_run, random_plans
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -206,23 +206,7 @@ def test_the_window_takes_the_next_parts_and_lumps_a_buffered_part_far_from_the_
 
 def _run(policy, plan, visible: int, capacity: int, seed: int, steps: int):
     """The policy's decisions along a seeded run (the looks drawn from the bin)."""
-    engine, rng = OrderEngine(plan), random.Random(seed)
-    mask, cons, buffer, out = 0, engine.all_strategies, (), []
-    for _ in range(steps):
-        if mask == engine.full:
-            break
-        in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
-        action = policy.choose_at(engine, mask, cons, buffer, capacity - len(buffer),
-                                  tuple(rng.sample(in_bin, min(visible, len(in_bin)))))
-        out.append(action)
-        if action.kind == "buffer":
-            buffer += (action.part,)
-        elif action.kind == "install":
-            unit = engine.next_unit(mask, plan.index(action.part))
-            mask, cons = mask | 1 << unit, engine.consistent_after(mask, cons, unit)
-            if action.source == "buffer":
-                buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
-    return out
+    return policy_run(policy, OrderEngine(plan), visible, capacity, random.Random(seed), steps)
 
 
 def test_on_a_large_plan_its_decisions_are_deterministic_and_its_work_is_counted_and_bounded():

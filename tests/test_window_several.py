@@ -7,6 +7,7 @@ from __future__ import annotations
 import random
 
 import pytest
+from conftest import policy_run
 
 from opportune import make_plan
 from opportune.engine import OrderEngine
@@ -151,27 +152,7 @@ def test_on_a_two_strategy_plan_its_decisions_are_deterministic_and_its_work_bou
     runs = []
     for _ in range(2):
         policy = FrontierWindow(visible=2, capacity=2)
-        runs.append(_walk(policy, engine, 2, 2, random.Random(3), 12))
+        runs.append(policy_run(policy, engine, 2, 2, random.Random(3), 12))
         work = policy.work
         assert work["windows"] > 0 and work["by_base"] == 0 and work["most_states"] <= policy.max_states
     assert runs[0] == runs[1]
-
-
-def _walk(policy, engine, visible: int, capacity: int, rng: random.Random, steps: int) -> list:
-    """The policy's actions along a run whose looks are drawn from the bin by ``rng``."""
-    plan, mask, cons, buffer, out = engine.plan, 0, engine.all_strategies, (), []
-    for _ in range(steps):
-        if mask == engine.full:
-            break
-        in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
-        action = policy.choose_at(engine, mask, cons, buffer, capacity - len(buffer),
-                                  tuple(rng.sample(in_bin, min(visible, len(in_bin)))))
-        out.append(action)
-        if action.kind == "buffer":
-            buffer += (action.part,)
-        elif action.kind == "install":
-            unit = engine.next_unit(mask, plan.index(action.part))
-            mask, cons = mask | 1 << unit, engine.consistent_after(mask, cons, unit)
-            if action.source == "buffer":
-                buffer = tuple(p for p in buffer if p != action.part)
-    return out
