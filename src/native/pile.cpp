@@ -135,7 +135,7 @@ public:
     // PileWindow._actions: S(s), then on every look of s the best move (ties: install, then buffer, then
     // `order`, the bin before the buffer), None where none is cheaper than a shake by 1e-12 or where the
     // only moves install a part `legal` refuses; the same doubles as the Python loop over the looks, in
-    // one call (every value it reads is stored by S(s)).  Look -> (kind, group, source) or None.
+    // one call (every value it reads is stored by S(s)).  Look -> (kind, group, source, expected cost) or None.
     py::tuple actions(uint64_t mask, uint64_t cons, std::vector<int> buf, std::vector<int> order,
                       std::vector<bool> legal, double seconds, long long max_states) {
         check_buffer(buf);
@@ -159,7 +159,8 @@ public:
             }
             out[key] = py::make_tuple(best.kind == 0 ? install : buffer, best.group,
                                       best.kind == 1 ? py::object(py::none())
-                                                     : py::object(best.from_buffer ? from_buffer : from_bin));
+                                                     : py::object(best.from_buffer ? from_buffer : from_bin),
+                                      best.value);
         }
         return py::make_tuple(after_shake, out);
     }

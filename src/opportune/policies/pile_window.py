@@ -40,6 +40,7 @@ from opportune.planning.costs import TimeModel
 from opportune.policies.base import SHAKE, Action
 from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
+from opportune.policies.window import outside_rest
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
            "pile_window_solver"]
@@ -92,7 +93,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
 
     def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
         """The value after a shake at ``key``, and the best move on every look of it: ``(kind, group,
-        source)`` (a group is a window part's index, the others last), or None where no move is cheaper
+        source, expected cost)`` (a group is a window part's index, the others last), or None where no move is cheaper
         than a shake by 1e-12.  Ties: install, then buffer, then ``order`` (a rank per group), the bin
         before the buffer, as the optimum's; an installation of a group ``legal`` refuses is not a move.
         O(looks × moves); the compiled programme's in one call.
@@ -109,7 +110,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
         Returns
         -------
         (float, dict)
-            The value after a shake, and look (sorted groups) -> the best move or None.
+            The value after a shake, and look (sorted groups) -> the best move with its expected cost, or None.
 
         Examples
         --------
@@ -117,7 +118,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
         >>> from opportune.engine import OrderEngine
         >>> solver = PileWindowSolver(OrderEngine(make_plan(["a"], {})), visible=1, others=1, other_move=1.0)
         >>> solver.actions(solver.start_key(), [0, 1], [True, False])
-        (1.5, {(0,): ('install', 0, 'bin'), (1,): ('buffer', 1, None)})
+        (1.5, {(0,): ('install', 0, 'bin', 1.0), (1,): ('buffer', 1, None, 2.0)})
         """
         after_shake = self._after_shake(key)
         shake = self.costs.shake + after_shake
@@ -132,7 +133,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
                         action.source == "buffer")
                 if best is None or rank < best[0]:
                     best = (rank, (action.kind, j, action.source))
-            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
+            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else (*best[1], best[0][0])
         return after_shake, actions
 
 
@@ -186,7 +187,8 @@ def pile_window_solver(engine, **settings) -> PileWindowSolver:
 class PileWindowTable:
     """A state's window solved: its parts (plan indices), the parts outside it (in the window's topological
     order), the window's best action on each look it can see (the window's parts by index, the others last;
-    None: shake), the window's value after a shake, its size and the states its programme held."""
+    None: shake; else its kind, group, source and expected cost), the window's value after a shake, its
+    size, the states its programme held, and what the parts outside cost after it."""
 
     parts: tuple[int, ...]
     outside: tuple[int, ...]
@@ -194,6 +196,8 @@ class PileWindowTable:
     value: float
     size: int
     states: int
+    #: What the parts outside cost after the window (:func:`~opportune.policies.window.outside_rest`).
+    rest: float = 0.0
 
 
 class PileWindow(LumpedWindow):
@@ -242,7 +246,8 @@ class PileWindow(LumpedWindow):
             value, actions = solver._deep(lambda k: self._actions(engine, mask, consistent, parts, solver, k), key)
         finally:
             self._count(solver)
-        return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states)
+        return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states,
+                               outside_rest(engine, mask, outside, self.costs))
 
     def _actions(self, engine, mask: int, consistent: int, parts: list[int], solver, key: tuple):
         """The value after a shake, and the window's best action on every look of the state
@@ -255,19 +260,21 @@ class PileWindow(LumpedWindow):
             order.append(len(engine.plan.parts))
         return solver.actions(key, order, legal)
 
-    def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
+    def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer,
+                visible) -> tuple[float, Action]:
         plan = engine.plan
         index = {i: j for j, i in enumerate(table.parts)}
         n = len(table.parts)
         chosen = table.actions.get(tuple(sorted(index.get(plan.index(p), n) for p in visible)))
         if chosen is None:
-            return SHAKE
-        kind, j, source = chosen
+            return float(self.costs.shake) + table.value + table.rest, SHAKE
+        kind, j, source, value = chosen
         if j < n:
-            return Action(kind, plan.parts[table.parts[j]].id, source)
+            return value + table.rest, Action(kind, plan.parts[table.parts[j]].id, source)
         # an other: the one seen first in the window's topological order
         ids = set(visible)
-        return Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids))
+        return value + table.rest, Action("buffer", next(plan.parts[i].id for i in table.outside
+                                                          if plan.parts[i].id in ids))
 
     def _note(self, table: PileWindowTable) -> str:
         return f"expected cost of the window after a shake {table.value:.4f}"

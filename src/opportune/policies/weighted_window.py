@@ -11,7 +11,7 @@ other remaining units one more group (:class:`~opportune.policies.lumped.OthersG
 (their share of the bin's weight, so of the looks, is the plan's) and their mean move.  From it come the
 expected costs after each move of the state (:class:`~opportune.policies.window.WindowTable`), and the
 decision on a look is the uniform window's rule over them
-(:func:`~opportune.policies.window.best_in_window`).  Its states are counted
+(:func:`~opportune.policies.window.best_move`).  Its states are counted
 (:data:`~opportune.engine.tuning.WEIGHTED_WINDOW_STATES` a size tried); where no window fits, or past the
 deadline, the base rule decides.
 """
@@ -32,7 +32,7 @@ from opportune.policies.optimal import (
     OptimalSolver,
     compiled_optimal_available,
 )
-from opportune.policies.window import WindowTable, best_in_window
+from opportune.policies.window import WindowTable, best_move, outside_rest
 
 __all__ = ["CompiledWeightedWindowSolver", "WeightedWindow", "WeightedWindowSolver", "weighted_window_available",
            "weighted_window_solver"]
@@ -180,15 +180,18 @@ class WeightedWindow(LumpedWindow):
             values = solver._deep(lambda key: _after_moves(solver, key), (0, sub.all_strategies, buf))
         finally:
             self._count(solver)
-        return WindowTable(tuple(parts), tuple(values), len(outside), size, solver.states)
+        return WindowTable(tuple(parts), tuple(values), len(outside), size, solver.states,
+                           outside_rest(engine, mask, outside, self.costs))
 
     def _cap(self, parts: int) -> int:
         """``max_states``, and at most :data:`~opportune.engine.tuning.WEIGHTED_WINDOW_LOOKS` looks over the
         states (each state enumerates its bin's looks: at most those of the window's parts and the others)."""
         return min(self.max_states, tuning.WEIGHTED_WINDOW_LOOKS // comb(parts + self.visible, self.visible))
 
-    def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer, visible) -> Action:
-        return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
+    def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer,
+                visible) -> tuple[float, Action]:
+        value, action = best_move(engine, mask, consistent, table, buffer, visible, self.costs.shake)
+        return value + table.rest, action
 
     def _note(self, table: WindowTable) -> str:
         return f"expected cost of the window {table.values[-1]:.4f}"
