@@ -24,7 +24,7 @@ from opportune.engine.tuning import WINDOW_ENGINES, WINDOW_STRATEGIES
 from opportune.engine.tuning import WINDOW_REFINE as REFINE
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
-from opportune.policies.base import DONE, DecidesOnMasks, Decision
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.evaluate import OutOfTime
 from opportune.policies.optimal import OptimalTooLarge
 from opportune.policies.window import core_strategies, frontier_window, outside_rest, window_decision, window_strategies
@@ -136,9 +136,10 @@ class LumpedWindow(DecidesOnMasks):
     the deadline) deciding, the state's solved window cached; the base rule where none fits.  A subclass
     gives :meth:`_solved` (a state's window solved: a table with ``parts``, ``states``, ``value``, the
     window's expected cost from the state, and ``rest``, what the parts outside it cost after it,
-    :func:`~opportune.policies.window.outside_rest`), :meth:`_decide` (the best move on a look by a table
-    with its expected cost and the rest) and :meth:`_note`.  Where several strategies are open, a window of
-    each one's frontier is solved, and each look takes the least of their moves.
+    :func:`~opportune.policies.window.outside_rest`), :meth:`_decide` (a table's best move on a look, or
+    None, with its expected cost and that of a shake, the rest aside), :meth:`_note`, and :meth:`_option`
+    where it values keeping several strategies open.  Where several strategies are open, a window of each
+    one's frontier is solved, and each look takes the least of their moves (:meth:`_over_windows`).
 
     The attribute ``work`` counts windows solved, the states they held, and decisions left to the base.
     The attribute ``deadline``, a :class:`~opportune.engine.deadline.Deadline` or None, stops a window's
@@ -364,10 +365,41 @@ class LumpedWindow(DecidesOnMasks):
             self.last_table = None
             self.work["by_base"] += 1
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
-        # each window's best move on the look with its rest: the least decides (ties: the first strategy's)
-        ranked = [(self._decide(engine, mask, consistent, t, buffer, visible), n, t) for n, t in enumerate(tables)]
-        (_, action), _, self.last_table = min(ranked, key=lambda r: (r[0][0], r[1]))
-        return action
+        decided = [(self._decide(engine, mask, consistent, t, buffer, visible), t) for t in tables]
+        if len(decided) == 1:
+            (value, action, shake), self.last_table = decided[0]
+            return SHAKE if action is None or value > shake + 1e-12 else action
+        return self._over_windows(engine, mask, consistent, buffer, decided)
+
+    def _over_windows(self, engine, mask: int, consistent: int, buffer, decided) -> Action:
+        """Where several strategies' windows decide (the look chooses the strategy, as on the real plan, where
+        its installations close the others): each window's best move on the look with its rest, the value of
+        keeping several strategies open (:meth:`_option`) taken off the moves that keep them (a buffering, an
+        installation several allow), the least deciding (ties: the first strategy's); a shake where none is
+        cheaper than a shake after the least window less that value, by 1e-12.  A window of one strategy's
+        frontier values a state as if the others were closed.  O(windows) and :meth:`_option`."""
+        plan = engine.plan
+        option = self._option(engine, mask, consistent, buffer, tuple(t for _, t in decided))
+        least = min(decided, key=lambda d: d[1].value + d[1].rest)[1]
+        ranked = []
+        for n, ((value, action, _), t) in enumerate(decided):
+            if action is None:
+                continue
+            keeps = consistent
+            if action.kind == "install":
+                keeps = engine.consistent_after(mask, consistent, engine.next_unit(mask, plan.index(action.part)))
+            ranked.append((value + t.rest - option * (keeps.bit_count() > 1), n, action, t))
+        best = min(ranked, key=lambda r: r[:2]) if ranked else None
+        if best is None or best[0] > float(self.costs.shake) + least.value + least.rest - option + 1e-12:
+            self.last_table = least
+            return SHAKE
+        self.last_table = best[3]
+        return best[2]
+
+    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """What keeping several strategies open is worth at a state, one look deep, by its windows (a
+        subclass's; 0 here: each look takes the least of the windows' moves)."""
+        return 0.0
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
         """The decision with its reasons; ``because``: why the window decides (a caller's words, first).

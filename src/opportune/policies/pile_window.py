@@ -33,6 +33,7 @@ Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import comb
 
 from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
@@ -93,8 +94,8 @@ class PileWindowSolver(OthersGroup, PileSolver):
 
     def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
         """The value after a shake at ``key``, and the best move on every look of it: ``(kind, group,
-        source, expected cost)`` (a group is a window part's index, the others last), or None where no move is cheaper
-        than a shake by 1e-12.  Ties: install, then buffer, then ``order`` (a rank per group), the bin
+        source, expected cost)`` (a group is a window part's index, the others last; the caller weighs it
+        against a shake), or None where there is no move.  Ties: install, then buffer, then ``order`` (a rank per group), the bin
         before the buffer, as the optimum's; an installation of a group ``legal`` refuses is not a move.
         O(looks × moves); the compiled programme's in one call.
 
@@ -121,7 +122,6 @@ class PileWindowSolver(OthersGroup, PileSolver):
         (1.5, {(0,): ('install', 0, 'bin', 1.0), (1,): ('buffer', 1, None, 2.0)})
         """
         after_shake = self._after_shake(key)
-        shake = self.costs.shake + after_shake
         kinds, actions = {"install": 0, "buffer": 1}, {}
         for look, _ in self._looks(self._bin_counts(key)):
             best = None
@@ -133,7 +133,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
                         action.source == "buffer")
                 if best is None or rank < best[0]:
                     best = (rank, (action.kind, j, action.source))
-            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else (*best[1], best[0][0])
+            actions[look] = None if best is None else (*best[1], best[0][0])
         return after_shake, actions
 
 
@@ -233,6 +233,8 @@ class PileWindow(LumpedWindow):
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = tuning.PILE_WINDOW_PARTS, max_states: int = tuning.PILE_WINDOW_STATES):
         super().__init__(base, visible=visible, capacity=capacity, costs=costs, sizes=sizes, max_states=max_states)
+        self._options: dict = {}
+        self._options_engine = None
 
     def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
         """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
@@ -261,20 +263,89 @@ class PileWindow(LumpedWindow):
         return solver.actions(key, order, legal)
 
     def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer,
-                visible) -> tuple[float, Action]:
+                visible) -> tuple[float, Action | None, float]:
         plan = engine.plan
         index = {i: j for j, i in enumerate(table.parts)}
         n = len(table.parts)
+        shake = float(self.costs.shake) + table.value
         chosen = table.actions.get(tuple(sorted(index.get(plan.index(p), n) for p in visible)))
         if chosen is None:
-            return float(self.costs.shake) + table.value + table.rest, SHAKE
+            return float("inf"), None, shake
         kind, j, source, value = chosen
         if j < n:
-            return value + table.rest, Action(kind, plan.parts[table.parts[j]].id, source)
+            return value, Action(kind, plan.parts[table.parts[j]].id, source), shake
         # an other: the one seen first in the window's topological order
         ids = set(visible)
-        return value + table.rest, Action("buffer", next(plan.parts[i].id for i in table.outside
-                                                          if plan.parts[i].id in ids))
+        return value, Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids)), shake
+
+    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
+        values with their rests less the state's value where each fresh look (a shake's: the bin's units
+        drawn evenly) takes its best move over all the windows, the shake loop over them (as the pile's
+        optimum's).  0 where the looks are more than :data:`~opportune.engine.tuning.PILE_OPTION_LOOKS`
+        (cached by the state and the windows).  O(looks × windows)."""
+        key = (mask, consistent, tuple(sorted(buffer)), tuple(t.parts for t in tables))
+        got = self._options.get(key) if self._options_engine is engine else None
+        if got is None:
+            if self._options_engine is not engine:
+                self._options_engine, self._options = engine, {}
+            got = self._options[key] = _pile_option(engine, mask, buffer, tables, self.visible, self.costs)
+            if len(self._options) > self.cache:
+                self._options.pop(next(iter(self._options)))
+        return got
 
     def _note(self, table: PileWindowTable) -> str:
         return f"expected cost of the window after a shake {table.value:.4f}"
+
+
+def _pile_option(engine, mask: int, buffer, tables, visible: int, costs: TimeModel) -> float:
+    """:meth:`PileWindow._option` computed: the fresh looks over the windows' parts (the bin's other units
+    one group), each valued by its best move over the windows with their rests.  O(looks × windows)."""
+    plan = engine.plan
+    counts = [(((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)]
+    for p in buffer:
+        counts[plan.index(p)] -= 1
+    union = sorted({i for t in tables for i in t.parts})
+    groups = [i for i in union if counts[i] > 0]
+    sizes = [counts[i] for i in groups]
+    others = sum(counts) - sum(sizes)
+    if others:
+        groups.append(None)
+        sizes.append(others)
+    total = sum(sizes)
+    least = min(t.value + t.rest for t in tables)
+    k = min(visible, total)
+    if k == 0 or comb(len(groups) + k - 1, k) > tuning.PILE_OPTION_LOOKS:
+        return 0.0
+    maps = [{i: j for j, i in enumerate(t.parts)} for t in tables]
+    pairs = []
+    for look, ways in _looks(sizes, k):
+        best = float("inf")
+        for t, index in zip(tables, maps):
+            n = len(t.parts)
+            chosen = t.actions.get(tuple(sorted(index.get(groups[g], n) if groups[g] is not None else n
+                                                for g in look)))
+            if chosen is not None:
+                best = min(best, chosen[3] + t.rest)
+        pairs.append((best, ways / comb(total, k)))
+    pairs.sort()
+    acc_pm = acc_p = 0.0
+    value = float("inf")
+    for m, p in pairs:
+        if m == float("inf"):
+            break
+        acc_pm, acc_p = acc_pm + p * m, acc_p + p
+        value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
+    return max(0.0, least - value) if value < float("inf") else 0.0
+
+
+def _looks(sizes: list[int], k: int, start: int = 0):
+    """Every multiset of ``k`` units over groups of ``sizes`` units (from group ``start``), as a list of group
+    indices with repeats, with its number of ways to be drawn.  O(looks)."""
+    if k == 0:
+        yield [], 1
+        return
+    for g in range(start, len(sizes)):
+        for c in range(1, min(k, sizes[g]) + 1):
+            for rest, ways in _looks(sizes, k - c, g + 1):
+                yield [g] * c + rest, comb(sizes[g], c) * ways

@@ -11,7 +11,7 @@ other remaining units one more group (:class:`~opportune.policies.lumped.OthersG
 (their share of the bin's weight, so of the looks, is the plan's) and their mean move.  From it come the
 expected costs after each move of the state (:class:`~opportune.policies.window.WindowTable`), and the
 decision on a look is the uniform window's rule over them
-(:func:`~opportune.policies.window.best_move`).  Its states are counted
+(:func:`~opportune.policies.window.best_move`: the best of :func:`~opportune.policies.window.moves_on_look`, or a shake).  Its states are counted
 (:data:`~opportune.engine.tuning.WEIGHTED_WINDOW_STATES` a size tried); where no window fits, or past the
 deadline, the base rule decides.
 """
@@ -32,7 +32,7 @@ from opportune.policies.optimal import (
     OptimalSolver,
     compiled_optimal_available,
 )
-from opportune.policies.window import WindowTable, best_move, outside_rest
+from opportune.policies.window import WindowTable, moves_on_look, option_value, outside_rest
 
 __all__ = ["CompiledWeightedWindowSolver", "WeightedWindow", "WeightedWindowSolver", "weighted_window_available",
            "weighted_window_solver"]
@@ -189,9 +189,18 @@ class WeightedWindow(LumpedWindow):
         return min(self.max_states, tuning.WEIGHTED_WINDOW_LOOKS // comb(parts + self.visible, self.visible))
 
     def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer,
-                visible) -> tuple[float, Action]:
-        value, action = best_move(engine, mask, consistent, table, buffer, visible, self.costs.shake)
-        return value + table.rest, action
+                visible) -> tuple[float, Action | None, float]:
+        ranked = moves_on_look(engine, mask, consistent, table, buffer, visible)
+        shake = self.costs.shake + table.values[-1]
+        if not ranked:
+            return float("inf"), None, shake
+        value, _, action = min(ranked, key=lambda r: r[:2])
+        return value, action, shake
+
+    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """:func:`~opportune.policies.window.option_value` over the windows (its looks the uniform bin's: the
+        weights' share of the looks aside).  O(parts × windows)."""
+        return option_value(engine, mask, consistent, buffer, tables, self.visible, self.costs)
 
     def _note(self, table: WindowTable) -> str:
         return f"expected cost of the window {table.values[-1]:.4f}"
