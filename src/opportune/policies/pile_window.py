@@ -21,7 +21,10 @@ topological order); an installation no open strategy of the plan allows is never
 a window is decided when it is solved (:class:`PileWindowTable`; :meth:`PileWindowSolver.actions`, in one
 call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
-successors.  The window's size is the largest predicted to fit
+successors.  Where several strategies are open, a window of each one's frontier decides the look by the
+least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), the value of keeping several
+open computed over the fresh looks of their parts (:func:`fresh_look_value`).  The window's size is the
+largest predicted to fit
 :data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
 counted states, the same decision on every machine); where none fits, or past the deadline, the base rule
 decides.
@@ -38,13 +41,13 @@ from math import comb
 from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
-from opportune.policies.base import SHAKE, Action
+from opportune.policies.base import Action
 from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
 from opportune.policies.window import outside_rest
 
-__all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
-           "pile_window_solver"]
+__all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "fresh_look_value",
+           "pile_window_available", "pile_window_solver"]
 
 _native = compiled_core()   # None: the Python programme only
 
@@ -95,9 +98,9 @@ class PileWindowSolver(OthersGroup, PileSolver):
     def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
         """The value after a shake at ``key``, and the best move on every look of it: ``(kind, group,
         source, expected cost)`` (a group is a window part's index, the others last; the caller weighs it
-        against a shake), or None where there is no move.  Ties: install, then buffer, then ``order`` (a rank per group), the bin
-        before the buffer, as the optimum's; an installation of a group ``legal`` refuses is not a move.
-        O(looks × moves); the compiled programme's in one call.
+        against a shake), or None where there is no move.  Ties: install, then buffer, then ``order`` (a
+        rank per group), the bin before the buffer, as the optimum's; an installation of a group ``legal``
+        refuses is not a move.  O(looks × moves); the compiled programme's in one call.
 
         Parameters
         ----------
@@ -299,32 +302,72 @@ class PileWindow(LumpedWindow):
 
 
 def _pile_option(engine, mask: int, buffer, tables, visible: int, costs: TimeModel) -> float:
-    """:meth:`PileWindow._option` computed: the fresh looks over the windows' parts (the bin's other units
-    one group), each valued by its best move over the windows with their rests.  O(looks × windows)."""
+    """:meth:`PileWindow._option` computed: the least of the windows' values with their rests less
+    :func:`fresh_look_value`, at least 0; 0 past :data:`~opportune.engine.tuning.PILE_OPTION_LOOKS` looks."""
+    value = fresh_look_value(engine, mask, buffer, tables, visible, costs, tuning.PILE_OPTION_LOOKS)
+    least = min(t.value + t.rest for t in tables)
+    return max(0.0, least - value) if value < float("inf") else 0.0
+
+
+def fresh_look_value(engine, mask: int, buffer, tables, visible: int, costs: TimeModel,
+                     most: int | None = None) -> float:
+    """The value of a state after a shake where each fresh look (the bin's units drawn evenly; the units of
+    parts outside every window one group) takes its best move over the windows, with their rests, the shake
+    loop over the looks (as the pile's optimum's).  With one window, that window's own value after a shake
+    and its rest.  O(looks × windows).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask : int
+        The installed units.
+    buffer : sequence of str
+        The buffered parts.
+    tables : sequence of PileWindowTable
+        The state's windows.
+    visible : int
+        Parts per look.
+    costs : TimeModel
+        The costs of a look and a shake.
+    most : int, optional
+        Looks at most: inf past it (default: no limit).
+
+    Returns
+    -------
+    float
+        The value; inf where no look has a move, or past ``most`` looks.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> window = PileWindow(visible=1, capacity=1)
+    >>> (table,) = window.tables(engine, 0, 1, ())
+    >>> round(fresh_look_value(engine, 0, (), [table], 1, window.costs), 9) == round(table.value, 9)
+    True
+    """
     plan = engine.plan
     counts = [(((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)]
     for p in buffer:
         counts[plan.index(p)] -= 1
-    union = sorted({i for t in tables for i in t.parts})
-    groups = [i for i in union if counts[i] > 0]
+    groups: list = [i for i in sorted({i for t in tables for i in t.parts}) if counts[i] > 0]
     sizes = [counts[i] for i in groups]
-    others = sum(counts) - sum(sizes)
-    if others:
-        groups.append(None)
-        sizes.append(others)
+    if sum(counts) > sum(sizes):
+        groups.append(None)         # the units of the parts outside every window
+        sizes.append(sum(counts) - sum(sizes))
     total = sum(sizes)
-    least = min(t.value + t.rest for t in tables)
     k = min(visible, total)
-    if k == 0 or comb(len(groups) + k - 1, k) > tuning.PILE_OPTION_LOOKS:
-        return 0.0
+    if most is not None and comb(len(groups) + k - 1, k) > most:
+        return float("inf")
     maps = [{i: j for j, i in enumerate(t.parts)} for t in tables]
     pairs = []
     for look, ways in _looks(sizes, k):
         best = float("inf")
         for t, index in zip(tables, maps):
             n = len(t.parts)
-            chosen = t.actions.get(tuple(sorted(index.get(groups[g], n) if groups[g] is not None else n
-                                                for g in look)))
+            chosen = t.actions.get(tuple(sorted(index.get(groups[g], n) for g in look)))
             if chosen is not None:
                 best = min(best, chosen[3] + t.rest)
         pairs.append((best, ways / comb(total, k)))
@@ -336,7 +379,7 @@ def _pile_option(engine, mask: int, buffer, tables, visible: int, costs: TimeMod
             break
         acc_pm, acc_p = acc_pm + p * m, acc_p + p
         value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
-    return max(0.0, least - value) if value < float("inf") else 0.0
+    return value
 
 
 def _looks(sizes: list[int], k: int, start: int = 0):

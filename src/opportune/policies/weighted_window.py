@@ -13,7 +13,10 @@ expected costs after each move of the state (:class:`~opportune.policies.window.
 decision on a look is the uniform window's rule over them
 (:func:`~opportune.policies.window.best_move`: the best of :func:`~opportune.policies.window.moves_on_look`, or a shake).  Its states are counted
 (:data:`~opportune.engine.tuning.WEIGHTED_WINDOW_STATES` a size tried); where no window fits, or past the
-deadline, the base rule decides.
+deadline, the base rule decides.  Where several strategies are open, a window of each one's frontier
+decides the look by the least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), the
+value of keeping several open the uniform bin's (:func:`~opportune.policies.window.option_value`, its
+looks drawn evenly: the weights' share of the looks aside).
 """
 
 from __future__ import annotations
