@@ -14,9 +14,9 @@ decision on a look is the uniform window's rule over them
 (:func:`~opportune.policies.window.best_move`: the best of :func:`~opportune.policies.window.moves_on_look`, or a shake).  Its states are counted
 (:data:`~opportune.engine.tuning.WEIGHTED_WINDOW_STATES` a size tried); where no window fits, or past the
 deadline, the base rule decides.  Where several strategies are open, a window of each one's frontier
-decides the look by the least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), the
-value of keeping several open the uniform bin's (:func:`~opportune.policies.window.option_value`, its
-looks drawn evenly: the weights' share of the looks aside).
+decides the look by the least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), with no
+value of keeping several open: the uniform bin's (:func:`~opportune.policies.window.option_value`, its
+looks drawn evenly) made it worse in a weighted bin (docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from opportune.policies.optimal import (
     OptimalSolver,
     compiled_optimal_available,
 )
-from opportune.policies.window import WindowTable, moves_on_look, option_value, outside_rest
+from opportune.policies.window import WindowTable, moves_on_look, outside_rest
 
 __all__ = ["CompiledWeightedWindowSolver", "WeightedWindow", "WeightedWindowSolver", "weighted_window_available",
            "weighted_window_solver"]
@@ -199,11 +199,6 @@ class WeightedWindow(LumpedWindow):
             return float("inf"), None, shake
         value, _, action = min(ranked, key=lambda r: r[:2])
         return value, action, shake
-
-    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
-        """:func:`~opportune.policies.window.option_value` over the windows (its looks the uniform bin's: the
-        weights' share of the looks aside).  O(parts × windows)."""
-        return option_value(engine, mask, consistent, buffer, tables, self.visible, self.costs)
 
     def _note(self, table: WindowTable) -> str:
         return f"expected cost of the window {table.values[-1]:.4f}"
