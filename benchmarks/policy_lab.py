@@ -108,14 +108,17 @@ POLICY_VERSIONS = {"fallback": "windows of several strategies tried up to twice 
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;
-#: then its state cap went from 20,000 to 30,000 (the compiled core made it affordable).
-BIN_VERSIONS = {("fallback", "pile"): "pile window, 30,000 states"}
+#: then its state cap went from 20,000 to 30,000 (the compiled core made it affordable); then a window per
+#: open strategy, each look taking the least of their moves with the option value of keeping several open.
+BIN_VERSIONS = {("fallback", "pile"): "pile window of each strategy, with the looks' option value"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
 #: touches only plans of several strategies): their gaps on one-strategy plans are current.
 SAME_ON_ONE_STRATEGY = {"fallback": ("frontier window", "frontier window of each strategy, chosen by the look",
                                      "windows of several strategies larger, with the look's option value")}
+#: As :data:`SAME_ON_ONE_STRATEGY`, in a bin with a version of its own.
+BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",)}
 
 
 def policy_version(name: str, bin: str) -> str | None:
@@ -311,9 +314,9 @@ def _fresh(rec: dict) -> dict:
         v, bin = versions.get(n), rec.get("bin", "uniform")
         if v == policy_version(n, bin):
             return True
-        # a change that touched only plans of several strategies (in a bin without a version of its own)
-        return ((n, bin) not in BIN_VERSIONS and not rec.get("two_strategies")
-                and v in SAME_ON_ONE_STRATEGY.get(n, ()))
+        # a change that touched only plans of several strategies
+        same = BIN_SAME_ON_ONE_STRATEGY.get((n, bin), ()) if (n, bin) in BIN_VERSIONS else SAME_ON_ONE_STRATEGY.get(n, ())
+        return not rec.get("two_strategies") and v in same
 
     gaps = {n: g for n, g in rec["gaps"].items() if current(n)}
     return {**rec, "gaps": gaps}

@@ -172,3 +172,16 @@ def test_a_policys_gap_on_a_one_strategy_plan_stays_current_at_a_version_that_de
     assert policy_lab._fresh(one)["gaps"] == {"fallback": 0.01, "paper": 0.1}
     assert policy_lab._fresh(two)["gaps"] == {"paper": 0.1}
     assert policy_lab._fresh(older)["gaps"] == {"paper": 0.1}
+
+
+def test_a_bins_own_version_keeps_its_own_one_strategy_gaps_only(monkeypatch):
+    """In a bin with a version of its own, only that bin's earlier versions that decide the same on
+    one-strategy plans keep their gaps there; the bin-less list does not reach it."""
+    monkeypatch.setitem(policy_lab.BIN_VERSIONS, ("fallback", "pile"), "new")
+    monkeypatch.setitem(policy_lab.BIN_SAME_ON_ONE_STRATEGY, ("fallback", "pile"), ("old pile",))
+    monkeypatch.setitem(policy_lab.SAME_ON_ONE_STRATEGY, "fallback", ("old uniform",))
+    one = {"gaps": {"fallback": 0.01}, "versions": {"fallback": "old pile"}, "two_strategies": False, "bin": "pile"}
+    assert policy_lab._fresh(one)["gaps"] == {"fallback": 0.01}
+    assert policy_lab._fresh({**one, "two_strategies": True})["gaps"] == {}
+    assert policy_lab._fresh({**one, "versions": {"fallback": "old uniform"}})["gaps"] == {}
+    assert policy_lab._fresh({**one, "versions": {"fallback": "new"}, "two_strategies": True})["gaps"] == {"fallback": 0.01}

@@ -133,9 +133,10 @@ public:
     }
 
     // PileWindow._actions: S(s), then on every look of s the best move (ties: install, then buffer, then
-    // `order`, the bin before the buffer), None where none is cheaper than a shake by 1e-12 or where the
-    // only moves install a part `legal` refuses; the same doubles as the Python loop over the looks, in
-    // one call (every value it reads is stored by S(s)).  Look -> (kind, group, source) or None.
+    // `order`, the bin before the buffer) with its expected cost, None where the only moves install a part
+    // `legal` refuses (the caller weighs the move against a shake); the same doubles as the Python loop over
+    // the looks, in one call (every value it reads is stored by S(s)).
+    // Look -> (kind, group, source, expected cost) or None.
     py::tuple actions(uint64_t mask, uint64_t cons, std::vector<int> buf, std::vector<int> order,
                       std::vector<bool> legal, double seconds, long long max_states) {
         check_buffer(buf);
@@ -144,7 +145,6 @@ public:
         start(seconds, max_states);
         if (mask == full_) throw std::invalid_argument("a complete state has no looks");
         double after_shake = S(mask, cons, buf);
-        double shake = shake_ + after_shake;
         std::vector<int> bin = bin_counts(mask, buf);
         std::vector<Next> next = successors(mask, cons, buf, bin);
         py::dict out;
@@ -153,13 +153,14 @@ public:
             Best best = best_move(mask, cons, buf, bin, next, l.window, order, legal);
             py::tuple key(l.window.size());
             for (size_t k = 0; k < l.window.size(); ++k) key[k] = py::int_(l.window[k]);
-            if (best.kind < 0 || best.value > shake + 1e-12) {
+            if (best.kind < 0) {
                 out[key] = py::none();
                 continue;
             }
             out[key] = py::make_tuple(best.kind == 0 ? install : buffer, best.group,
                                       best.kind == 1 ? py::object(py::none())
-                                                     : py::object(best.from_buffer ? from_buffer : from_bin));
+                                                     : py::object(best.from_buffer ? from_buffer : from_bin),
+                                      best.value);
         }
         return py::make_tuple(after_shake, out);
     }

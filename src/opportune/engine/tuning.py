@@ -459,6 +459,11 @@ PILE_WINDOW_STATES = 30_000
 #: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
 #: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
 PILE_WINDOW_CACHE = 512
+#: Where several strategies are open, the pile window values keeping them open by the fresh looks of its
+#: windows' parts (the others one group), each taken by its best move over the windows; past this many looks
+#: (at 3 visible, windows of about 20 parts) the value is 0 and each look takes the least of the windows'
+#: moves alone (policies/pile_window.py).  Each look costs a dictionary look-up a window.
+PILE_OPTION_LOOKS = 2_000
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.

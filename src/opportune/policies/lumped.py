@@ -11,6 +11,15 @@ the bin they dilute the looks, an other seen may be buffered (a free location, t
 none is installed before the window is complete, the terminal state (what the others cost after it does
 not depend on what was done in the window).  The window takes the parts of the look first (with their
 ancestors, where they fit), so that a part seen is valued as the part it is, not as a lumped other.
+
+Where several strategies are open, as in the uniform bin, a window of each open strategy's frontier is
+solved (its plan keeps the strategies it is closed in: in another, a window part waits for a part outside
+it), and the look chooses among their best moves, each with what the parts outside its window cost after
+it (:func:`~opportune.policies.window.outside_rest`), less the value of keeping several strategies open
+on the moves that keep them: a window of one strategy's frontier values a state as if the others were
+closed.  Taking the first open strategy's frontier alone, the others credited with the parts outside it,
+cost up to +6.7% over the optimum in the pile and +34% in a weighted bin on 16-part two-strategy plans
+(docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -20,14 +29,14 @@ from dataclasses import replace as _replace
 
 from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline
-from opportune.engine.tuning import WINDOW_ENGINES
+from opportune.engine.tuning import WINDOW_ENGINES, WINDOW_STRATEGIES
 from opportune.engine.tuning import WINDOW_REFINE as REFINE
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
-from opportune.policies.base import DONE, DecidesOnMasks, Decision
+from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.evaluate import OutOfTime
 from opportune.policies.optimal import OptimalTooLarge
-from opportune.policies.window import frontier_window, window_decision
+from opportune.policies.window import core_strategies, frontier_window, window_decision, window_strategies
 
 __all__ = ["OTHERS", "CompiledOthers", "LumpedWindow", "OthersGroup", "window_plan"]
 
@@ -134,8 +143,12 @@ class LumpedWindow(DecidesOnMasks):
     """A policy deciding by the exact programme of the frontier window at each state, the rest of the plan
     lumped (see the module): the windows tried in increasing size, the largest that fits ``max_states`` (or
     the deadline) deciding, the state's solved window cached; the base rule where none fits.  A subclass
-    gives :meth:`_solved` (a state's window solved: a table with ``parts`` and ``states``), :meth:`_decide`
-    (the action on a look by a table) and :meth:`_note`.
+    gives :meth:`_solved` (a state's window solved: a table with ``parts``, ``states``, ``value``, the
+    window's expected cost from the state, and ``rest``, what the parts outside it cost after it,
+    :func:`~opportune.policies.window.outside_rest`), :meth:`_decide` (a table's best move on a look, or
+    None, with its expected cost and that of a shake, the rest aside), :meth:`_note`, and :meth:`_option`
+    where it values keeping several strategies open.  Where several strategies are open, a window of each
+    one's frontier is solved, and each look takes the least of their moves (:meth:`_over_windows`).
 
     The attribute ``work`` counts windows solved, the states they held, and decisions left to the base.
     The attribute ``deadline``, a :class:`~opportune.engine.deadline.Deadline` or None, stops a window's
@@ -169,8 +182,8 @@ class LumpedWindow(DecidesOnMasks):
         self.last_table = None
 
     def table(self, engine, mask: int, consistent: int, buffer, forced: tuple[str, ...] = ()):
-        """The state's window solved (cached), or None where no window fits (states, or the deadline).  At
-        most ``len(sizes) × max_states`` states of work.
+        """The state's window solved (cached), or None where no window fits (states, or the deadline): of the
+        frontier windows of the open strategies (:meth:`tables`), the one of least value with its rest.
 
         Parameters
         ----------
@@ -188,6 +201,32 @@ class LumpedWindow(DecidesOnMasks):
         table or None
             The largest window's table that fitted, or None where none did.
         """
+        tables = self.tables(engine, mask, consistent, buffer, forced)
+        return min(tables, key=lambda t: t.value + t.rest) if tables else None
+
+    def tables(self, engine, mask: int, consistent: int, buffer, forced: tuple[str, ...] = ()) -> tuple:
+        """The state's windows solved (cached), one a distinct window of the first
+        :data:`~opportune.engine.tuning.WINDOW_STRATEGIES` open strategies' frontiers, each the largest that
+        fits; empty where none fits.  A look then takes its best move over them (:meth:`choose_at`): each
+        window is one strategy's frontier, and on a two-strategy plan the look chooses the strategy, as on the
+        real plan.  At most ``len(sizes) × max_states`` states of work a window.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        mask, consistent : int
+            The installed units and the open strategies.
+        buffer : sequence of str
+            The buffered parts.
+        forced : tuple of str
+            Parts each window takes first, as it takes the buffered ones.
+
+        Returns
+        -------
+        tuple of tables
+            One a distinct window (one strategy open: at most one), or empty.
+        """
         if self._engine is not engine:
             self._engine = engine
             for cache in (self._tables, self._windows, self._frontiers, self._engines, self._listings):
@@ -195,20 +234,26 @@ class LumpedWindow(DecidesOnMasks):
         key = (mask, consistent, tuple(sorted(buffer)), forced)
         got = _cached(self._tables, key)
         if got is None:
-            got = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced)
-            if got is not None:
+            found: dict = {}
+            for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]:
+                table = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced, s)
+                if table is not None:
+                    found.setdefault(table.parts, table)
+            got = tuple(found.values())
+            if got:
                 _keep(self._tables, key, got, self.cache)
         return got
 
-    def _largest(self, engine, mask: int, consistent: int, buffer, first: tuple):
+    def _largest(self, engine, mask: int, consistent: int, buffer, first: tuple, strategy: int):
         """The largest window predicted to fit, solved: the smallest size is solved, then in turn the largest
         size whose states are predicted within ``max_states``, the prediction being the states listed for its
         plan (:func:`~opportune.policies.states.estimate_states`, without the others: under a millisecond)
         scaled by the last window solved's states over its own listed states; a window that does not fit after
         all ends the search (the last one solved decides), as do :data:`~opportune.engine.tuning.WINDOW_REFINE` predictions.  So a state
-        costs a few windows, not every size.  None where the smallest does not fit."""
+        costs a few windows, not every size.  Each window is ``strategy``'s frontier.  None where the smallest
+        does not fit."""
         sizes = self.sizes
-        parts, outside = self._frontier(engine, mask, consistent, first, sizes[0])
+        parts, outside = self._frontier(engine, mask, consistent, first, sizes[0], strategy)
         got = self._window(engine, mask, consistent, buffer, parts, outside, sizes[0])
         if got is None:
             return None
@@ -216,7 +261,7 @@ class LumpedWindow(DecidesOnMasks):
             ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self._cap(len(parts))))
             pick = None
             for size in (s for s in sizes if s > got.size):
-                more, rest = self._frontier(engine, mask, consistent, first, size)
+                more, rest = self._frontier(engine, mask, consistent, first, size, strategy)
                 if more == (pick[1] if pick else parts):
                     continue
                 cap = self._cap(len(more))
@@ -264,20 +309,23 @@ class LumpedWindow(DecidesOnMasks):
         states, exact, _ = got
         return states if exact and states <= most else most + 1
 
-    def _frontier(self, engine, mask: int, consistent: int, first: tuple, size: int):
-        """:func:`~opportune.policies.window.frontier_window` of ``size`` parts with the parts ``first`` taken
-        first, cached (the search asks each size in each of its rounds, and a state's looks ask again)."""
-        key = (mask, consistent, first, size)
+    def _frontier(self, engine, mask: int, consistent: int, first: tuple, size: int, strategy: int):
+        """:func:`~opportune.policies.window.frontier_window` of ``size`` parts of ``strategy``'s frontier with
+        the parts ``first`` taken first, cached (the search asks each size in each of its rounds, and a
+        state's looks ask again)."""
+        key = (mask, consistent, first, size, strategy)
         got = _cached(self._frontiers, key)
-        return got if got is not None else _keep(self._frontiers, key,
-                                                 frontier_window(engine, mask, consistent, first, size), self.cache)
+        return got if got is not None else _keep(
+            self._frontiers, key, frontier_window(engine, mask, consistent, first, size, strategy), self.cache)
 
     def _window_engine(self, engine, mask: int, consistent: int, parts: list[int]) -> OrderEngine:
         """:func:`window_engine`, cached (a window listed is then solved, and a state's looks share it)."""
         key = (mask, consistent, tuple(parts))
         got = _cached(self._engines, key)
-        return got if got is not None else _keep(self._engines, key, window_engine(engine, mask, consistent, parts),
-                                                 WINDOW_ENGINES)
+        if got is None:
+            kept = window_strategies(engine, mask, consistent, parts) or consistent
+            got = _keep(self._engines, key, window_engine(engine, mask, kept, parts), WINDOW_ENGINES)
+        return got
 
     def _cap(self, parts: int) -> int:
         """The states a window of ``parts`` parts may hold (``max_states``)."""
@@ -321,12 +369,46 @@ class LumpedWindow(DecidesOnMasks):
                   visible: tuple[str, ...]):
         if mask == engine.full:
             return DONE
-        table = self.table(engine, mask, consistent, buffer, self._forced(engine, visible))
-        self.last_table = table
-        if table is None:
+        tables = self.tables(engine, mask, consistent, buffer, self._forced(engine, visible))
+        if not tables:
+            self.last_table = None
             self.work["by_base"] += 1
             return self.base.choose_at(engine, mask, consistent, buffer, free, visible)
-        return self._decide(engine, mask, consistent, table, buffer, visible)
+        decided = [(self._decide(engine, mask, consistent, t, buffer, visible), t) for t in tables]
+        if len(decided) == 1:
+            (value, action, shake), self.last_table = decided[0]
+            return SHAKE if action is None or value > shake + 1e-12 else action
+        return self._over_windows(engine, mask, consistent, buffer, decided)
+
+    def _over_windows(self, engine, mask: int, consistent: int, buffer, decided) -> Action:
+        """Where several strategies' windows decide (the look chooses the strategy, as on the real plan, where
+        its installations close the others): each window's best move on the look with its rest, the value of
+        keeping several strategies open (:meth:`_option`) taken off the moves that keep them (a buffering, an
+        installation several allow), the least deciding (ties: the first strategy's); a shake where none is
+        cheaper than a shake after the least window less that value, by 1e-12.  A window of one strategy's
+        frontier values a state as if the others were closed.  O(windows) and :meth:`_option`."""
+        plan = engine.plan
+        option = self._option(engine, mask, consistent, buffer, tuple(t for _, t in decided))
+        least = min(decided, key=lambda d: d[1].value + d[1].rest)[1]
+        ranked = []
+        for n, ((value, action, _), t) in enumerate(decided):
+            if action is None:
+                continue
+            keeps = consistent
+            if action.kind == "install":
+                keeps = engine.consistent_after(mask, consistent, engine.next_unit(mask, plan.index(action.part)))
+            ranked.append((value + t.rest - option * (keeps.bit_count() > 1), n, action, t))
+        best = min(ranked, key=lambda r: r[:2]) if ranked else None
+        if best is None or best[0] > float(self.costs.shake) + least.value + least.rest - option + 1e-12:
+            self.last_table = least
+            return SHAKE
+        self.last_table = best[3]
+        return best[2]
+
+    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """What keeping several strategies open is worth at a state, one look deep, by its windows (a
+        subclass's; 0 here: each look takes the least of the windows' moves)."""
+        return 0.0
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:
         """The decision with its reasons; ``because``: why the window decides (a caller's words, first).

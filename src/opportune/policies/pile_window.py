@@ -21,7 +21,10 @@ topological order); an installation no open strategy of the plan allows is never
 a window is decided when it is solved (:class:`PileWindowTable`; :meth:`PileWindowSolver.actions`, in one
 call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
-successors.  The window's size is the largest predicted to fit
+successors.  Where several strategies are open, a window of each one's frontier decides the look by the
+least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), the value of keeping several
+open computed over the fresh looks of their parts (:func:`fresh_look_value`).  The window's size is the
+largest predicted to fit
 :data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
 counted states, the same decision on every machine); where none fits, or past the deadline, the base rule
 decides.
@@ -33,16 +36,18 @@ Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab
 from __future__ import annotations
 
 from dataclasses import dataclass
+from math import comb
 
 from opportune.engine import compiled_core, tuning
 from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
-from opportune.policies.base import SHAKE, Action
+from opportune.policies.base import Action
 from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
+from opportune.policies.window import outside_rest
 
-__all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "pile_window_available",
-           "pile_window_solver"]
+__all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "fresh_look_value",
+           "pile_window_available", "pile_window_solver"]
 
 _native = compiled_core()   # None: the Python programme only
 
@@ -92,10 +97,10 @@ class PileWindowSolver(OthersGroup, PileSolver):
 
     def actions(self, key: tuple, order: list[int], legal: list[bool]) -> tuple[float, dict]:
         """The value after a shake at ``key``, and the best move on every look of it: ``(kind, group,
-        source)`` (a group is a window part's index, the others last), or None where no move is cheaper
-        than a shake by 1e-12.  Ties: install, then buffer, then ``order`` (a rank per group), the bin
-        before the buffer, as the optimum's; an installation of a group ``legal`` refuses is not a move.
-        O(looks × moves); the compiled programme's in one call.
+        source, expected cost)`` (a group is a window part's index, the others last; the caller weighs it
+        against a shake), or None where there is no move.  Ties: install, then buffer, then ``order`` (a
+        rank per group), the bin before the buffer, as the optimum's; an installation of a group ``legal``
+        refuses is not a move.  O(looks × moves); the compiled programme's in one call.
 
         Parameters
         ----------
@@ -109,7 +114,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
         Returns
         -------
         (float, dict)
-            The value after a shake, and look (sorted groups) -> the best move or None.
+            The value after a shake, and look (sorted groups) -> the best move with its expected cost, or None.
 
         Examples
         --------
@@ -117,10 +122,9 @@ class PileWindowSolver(OthersGroup, PileSolver):
         >>> from opportune.engine import OrderEngine
         >>> solver = PileWindowSolver(OrderEngine(make_plan(["a"], {})), visible=1, others=1, other_move=1.0)
         >>> solver.actions(solver.start_key(), [0, 1], [True, False])
-        (1.5, {(0,): ('install', 0, 'bin'), (1,): ('buffer', 1, None)})
+        (1.5, {(0,): ('install', 0, 'bin', 1.0), (1,): ('buffer', 1, None, 2.0)})
         """
         after_shake = self._after_shake(key)
-        shake = self.costs.shake + after_shake
         kinds, actions = {"install": 0, "buffer": 1}, {}
         for look, _ in self._looks(self._bin_counts(key)):
             best = None
@@ -132,7 +136,7 @@ class PileWindowSolver(OthersGroup, PileSolver):
                         action.source == "buffer")
                 if best is None or rank < best[0]:
                     best = (rank, (action.kind, j, action.source))
-            actions[look] = None if best is None or best[0][0] > shake + 1e-12 else best[1]
+            actions[look] = None if best is None else (*best[1], best[0][0])
         return after_shake, actions
 
 
@@ -186,7 +190,8 @@ def pile_window_solver(engine, **settings) -> PileWindowSolver:
 class PileWindowTable:
     """A state's window solved: its parts (plan indices), the parts outside it (in the window's topological
     order), the window's best action on each look it can see (the window's parts by index, the others last;
-    None: shake), the window's value after a shake, its size and the states its programme held."""
+    None: shake; else its kind, group, source and expected cost), the window's value after a shake, its
+    size, the states its programme held, and what the parts outside cost after it."""
 
     parts: tuple[int, ...]
     outside: tuple[int, ...]
@@ -194,6 +199,8 @@ class PileWindowTable:
     value: float
     size: int
     states: int
+    #: What the parts outside cost after the window (:func:`~opportune.policies.window.outside_rest`).
+    rest: float = 0.0
 
 
 class PileWindow(LumpedWindow):
@@ -229,6 +236,8 @@ class PileWindow(LumpedWindow):
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = tuning.PILE_WINDOW_PARTS, max_states: int = tuning.PILE_WINDOW_STATES):
         super().__init__(base, visible=visible, capacity=capacity, costs=costs, sizes=sizes, max_states=max_states)
+        self._options: dict = {}
+        self._options_engine = None
 
     def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
         """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
@@ -242,7 +251,8 @@ class PileWindow(LumpedWindow):
             value, actions = solver._deep(lambda k: self._actions(engine, mask, consistent, parts, solver, k), key)
         finally:
             self._count(solver)
-        return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states)
+        return PileWindowTable(tuple(parts), tuple(outside), actions, value, size, solver.states,
+                               outside_rest(engine, mask, outside, self.costs))
 
     def _actions(self, engine, mask: int, consistent: int, parts: list[int], solver, key: tuple):
         """The value after a shake, and the window's best action on every look of the state
@@ -255,19 +265,130 @@ class PileWindow(LumpedWindow):
             order.append(len(engine.plan.parts))
         return solver.actions(key, order, legal)
 
-    def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer, visible) -> Action:
+    def _decide(self, engine, mask: int, consistent: int, table: PileWindowTable, buffer,
+                visible) -> tuple[float, Action | None, float]:
         plan = engine.plan
         index = {i: j for j, i in enumerate(table.parts)}
         n = len(table.parts)
+        shake = float(self.costs.shake) + table.value
         chosen = table.actions.get(tuple(sorted(index.get(plan.index(p), n) for p in visible)))
         if chosen is None:
-            return SHAKE
-        kind, j, source = chosen
+            return float("inf"), None, shake
+        kind, j, source, value = chosen
         if j < n:
-            return Action(kind, plan.parts[table.parts[j]].id, source)
+            return value, Action(kind, plan.parts[table.parts[j]].id, source), shake
         # an other: the one seen first in the window's topological order
         ids = set(visible)
-        return Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids))
+        return value, Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids)), shake
+
+    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
+        values with their rests less the state's value where each fresh look (a shake's: the bin's units
+        drawn evenly) takes its best move over all the windows, the shake loop over them (as the pile's
+        optimum's).  0 where the looks are more than :data:`~opportune.engine.tuning.PILE_OPTION_LOOKS`
+        (cached by the state and the windows).  O(looks × windows)."""
+        key = (mask, consistent, tuple(sorted(buffer)), tuple(t.parts for t in tables))
+        got = self._options.get(key) if self._options_engine is engine else None
+        if got is None:
+            if self._options_engine is not engine:
+                self._options_engine, self._options = engine, {}
+            got = self._options[key] = _pile_option(engine, mask, buffer, tables, self.visible, self.costs)
+            if len(self._options) > self.cache:
+                self._options.pop(next(iter(self._options)))
+        return got
 
     def _note(self, table: PileWindowTable) -> str:
         return f"expected cost of the window after a shake {table.value:.4f}"
+
+
+def _pile_option(engine, mask: int, buffer, tables, visible: int, costs: TimeModel) -> float:
+    """:meth:`PileWindow._option` computed: the least of the windows' values with their rests less
+    :func:`fresh_look_value`, at least 0; 0 past :data:`~opportune.engine.tuning.PILE_OPTION_LOOKS` looks."""
+    value = fresh_look_value(engine, mask, buffer, tables, visible, costs, tuning.PILE_OPTION_LOOKS)
+    least = min(t.value + t.rest for t in tables)
+    return max(0.0, least - value) if value < float("inf") else 0.0
+
+
+def fresh_look_value(engine, mask: int, buffer, tables, visible: int, costs: TimeModel,
+                     most: int | None = None) -> float:
+    """The value of a state after a shake where each fresh look (the bin's units drawn evenly; the units of
+    parts outside every window one group) takes its best move over the windows, with their rests, the shake
+    loop over the looks (as the pile's optimum's).  With one window, that window's own value after a shake
+    and its rest.  O(looks × windows).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask : int
+        The installed units.
+    buffer : sequence of str
+        The buffered parts.
+    tables : sequence of PileWindowTable
+        The state's windows.
+    visible : int
+        Parts per look.
+    costs : TimeModel
+        The costs of a look and a shake.
+    most : int, optional
+        Looks at most: inf past it (default: no limit).
+
+    Returns
+    -------
+    float
+        The value; inf where no look has a move, or past ``most`` looks.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> window = PileWindow(visible=1, capacity=1)
+    >>> (table,) = window.tables(engine, 0, 1, ())
+    >>> round(fresh_look_value(engine, 0, (), [table], 1, window.costs), 9) == round(table.value, 9)
+    True
+    """
+    plan = engine.plan
+    counts = [(((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)]
+    for p in buffer:
+        counts[plan.index(p)] -= 1
+    groups: list = [i for i in sorted({i for t in tables for i in t.parts}) if counts[i] > 0]
+    sizes = [counts[i] for i in groups]
+    if sum(counts) > sum(sizes):
+        groups.append(None)         # the units of the parts outside every window
+        sizes.append(sum(counts) - sum(sizes))
+    total = sum(sizes)
+    k = min(visible, total)
+    if most is not None and comb(len(groups) + k - 1, k) > most:
+        return float("inf")
+    maps = [{i: j for j, i in enumerate(t.parts)} for t in tables]
+    pairs = []
+    for look, ways in _looks(sizes, k):
+        best = float("inf")
+        for t, index in zip(tables, maps):
+            n = len(t.parts)
+            chosen = t.actions.get(tuple(sorted(index.get(groups[g], n) for g in look)))
+            if chosen is not None:
+                best = min(best, chosen[3] + t.rest)
+        pairs.append((best, ways / comb(total, k)))
+    pairs.sort()
+    acc_pm = acc_p = 0.0
+    value = float("inf")
+    for m, p in pairs:
+        if m == float("inf"):
+            break
+        acc_pm, acc_p = acc_pm + p * m, acc_p + p
+        value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
+    return value
+
+
+def _looks(sizes: list[int], k: int, start: int = 0):
+    """Every multiset of ``k`` units over groups of ``sizes`` units (from group ``start``), as a list of group
+    indices with repeats, with its number of ways to be drawn.  O(looks)."""
+    if k == 0:
+        yield [], 1
+        return
+    for g in range(start, len(sizes)):
+        for c in range(1, min(k, sizes[g]) + 1):
+            for rest, ways in _looks(sizes, k - c, g + 1):
+                yield [g] * c + rest, comb(sizes[g], c) * ways

@@ -11,9 +11,12 @@ other remaining units one more group (:class:`~opportune.policies.lumped.OthersG
 (their share of the bin's weight, so of the looks, is the plan's) and their mean move.  From it come the
 expected costs after each move of the state (:class:`~opportune.policies.window.WindowTable`), and the
 decision on a look is the uniform window's rule over them
-(:func:`~opportune.policies.window.best_in_window`).  Its states are counted
+(:func:`~opportune.policies.window.best_move`: the best of :func:`~opportune.policies.window.moves_on_look`, or a shake).  Its states are counted
 (:data:`~opportune.engine.tuning.WEIGHTED_WINDOW_STATES` a size tried); where no window fits, or past the
-deadline, the base rule decides.
+deadline, the base rule decides.  Where several strategies are open, a window of each one's frontier
+decides the look by the least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), with no
+value of keeping several open: the uniform bin's (:func:`~opportune.policies.window.option_value`, its
+looks drawn evenly) made it worse in a weighted bin (docs/decisions.md).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from opportune.policies.optimal import (
     OptimalSolver,
     compiled_optimal_available,
 )
-from opportune.policies.window import WindowTable, best_in_window
+from opportune.policies.window import WindowTable, moves_on_look, outside_rest
 
 __all__ = ["CompiledWeightedWindowSolver", "WeightedWindow", "WeightedWindowSolver", "weighted_window_available",
            "weighted_window_solver"]
@@ -180,15 +183,22 @@ class WeightedWindow(LumpedWindow):
             values = solver._deep(lambda key: _after_moves(solver, key), (0, sub.all_strategies, buf))
         finally:
             self._count(solver)
-        return WindowTable(tuple(parts), tuple(values), len(outside), size, solver.states)
+        return WindowTable(tuple(parts), tuple(values), len(outside), size, solver.states,
+                           outside_rest(engine, mask, outside, self.costs))
 
     def _cap(self, parts: int) -> int:
         """``max_states``, and at most :data:`~opportune.engine.tuning.WEIGHTED_WINDOW_LOOKS` looks over the
         states (each state enumerates its bin's looks: at most those of the window's parts and the others)."""
         return min(self.max_states, tuning.WEIGHTED_WINDOW_LOOKS // comb(parts + self.visible, self.visible))
 
-    def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer, visible) -> Action:
-        return best_in_window(engine, mask, consistent, table, buffer, visible, self.costs.shake)
+    def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer,
+                visible) -> tuple[float, Action | None, float]:
+        ranked = moves_on_look(engine, mask, consistent, table, buffer, visible)
+        shake = self.costs.shake + table.values[-1]
+        if not ranked:
+            return float("inf"), None, shake
+        value, _, action = min(ranked, key=lambda r: r[:2])
+        return value, action, shake
 
     def _note(self, table: WindowTable) -> str:
         return f"expected cost of the window {table.values[-1]:.4f}"

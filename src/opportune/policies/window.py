@@ -50,8 +50,8 @@ from opportune.engine.tuning import (  # tuning.py says why
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "joint_window", "option_value", "window_available",
-           "window_strategies"]
+__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "joint_window", "option_value", "outside_rest",
+           "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -125,6 +125,11 @@ class WindowTable:
     #: What the parts outside cost after the window, a look and a move a unit: windows of different
     #: strategies' frontiers compare by ``values[-1] + rest``.
     rest: float = 0.0
+
+    @property
+    def value(self) -> float:
+        """The window's expected cost from the state (``values[-1]``)."""
+        return self.values[-1]
 
 
 def _ancestors(engine, mask: int, consistent: int, parts=None) -> tuple[dict[int, int], dict[int, int]]:
@@ -514,9 +519,7 @@ class FrontierWindow(DecidesOnMasks):
             self.work["windows"] += 1
             self.work["states"] += core.states
             self.work["most_states"] = max(self.work["most_states"], core.states)
-        rest = sum((float(self.costs.look) + self.costs.move(engine.plan.parts[i].id))
-                   * (((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i] & ~mask).bit_count()
-                   for i in outside)
+        rest = outside_rest(engine, mask, outside, self.costs)
         return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states, rest)
 
     def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
@@ -738,6 +741,40 @@ def joint_window(engine, mask: int, consistent: int, own) -> tuple[list[int], li
     _, every = _ancestors_of(engine, mask, consistent)
     taken = set(parts)
     return parts, [i for i in sorted(every) if i not in taken]
+
+
+def outside_rest(engine, mask: int, outside, costs: TimeModel) -> float:
+    """What the remaining units of the parts ``outside`` a window cost after it, a look and a move a unit:
+    windows of different strategies' frontiers compare by their value and this.  O(parts outside).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask : int
+        The installed units.
+    outside : iterable of int
+        The parts outside the window (plan indices).
+    costs : TimeModel
+        The costs of a look and of each part's move.
+
+    Returns
+    -------
+    float
+        The cost, 0 where no unit is outside.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> from opportune.planning.costs import TimeModel
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> outside_rest(engine, 0b001, [0, 2], TimeModel(look=0.5))    # a is installed: c's unit is left
+    1.5
+    """
+    plan = engine.plan
+    return sum((float(costs.look) + costs.move(plan.parts[i].id))
+               * (((1 << plan.parts[i].quantity) - 1) << engine.first[i] & ~mask).bit_count() for i in outside)
 
 
 def _past_cap(states: list[int], cap: float) -> bool:
