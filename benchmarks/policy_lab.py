@@ -165,7 +165,7 @@ def _optimum(engine, bin: str, settings: dict, python: bool) -> OptimalSolver:
 
 def _wall(optimum, cpu: float) -> dict:
     """What the optimum's programme (or a policy's evaluation) reached where it was cut (by its state cap or
-    its time): the states it stored, the CPU seconds it took, the process's peak resident memory in MB (a worker's peak since it
+    its time): the states it stored (those whose value it finished), the CPU seconds it took, the process's peak resident memory in MB (a worker's peak since it
     started: this plan-setting's where it ran alone) and the bytes the compiled programme held (None: the
     Python programme's are not measured)."""
     try:
@@ -400,11 +400,12 @@ def _missing(rec: dict | None, asked, redo_skipped: bool) -> tuple[str, ...]:
 
 
 def wall_words(measured: dict) -> str:
-    """What a cut programme reached (:func:`_wall`), in words: ``'2,000,001 states stored in 41.3 CPU s,
-    peak memory 230 MB (the programme's table 96 MB)'``."""
-    out = f"{measured['states']:,} states stored in {measured['cpu']:,} CPU s"
+    """What a cut programme reached (:func:`_wall`), in words: ``'2,000,001 states finished in 41.3 CPU s,
+    the process's peak memory 230 MB (the programme's table 96 MB)'`` (a state is stored once its value is known: a
+    programme that descends far before the first finishes may be cut with none)."""
+    out = f"{measured['states']:,} states finished in {measured['cpu']:,} CPU s"
     if measured.get("rss_mb") is not None:
-        out += f", peak memory {measured['rss_mb']:,} MB"
+        out += f", the process's peak memory {measured['rss_mb']:,} MB"
     if measured.get("bytes") is not None:
         out += f" (the programme's table {measured['bytes'] / 2 ** 20:,.0f} MB)"
     return out
@@ -634,7 +635,7 @@ def wall_text(rec: dict) -> str:
 WALLS_TEXT = ("Each plan-setting as its largest attempt left it: the optimum found at any state cap, else where "
               "the attempt with the largest cap hit its wall: refused by the count before the work (certain where "
               "the count's lower bound is over the cap, else by the estimate, and not run), or cut during the work "
-              "by its states or time, with the states it stored, its CPU seconds and peak memory where the run "
+              "by its states or time, with the states it finished, its CPU seconds and the process's peak memory where the run "
               "recorded them.")
 
 

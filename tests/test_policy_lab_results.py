@@ -207,7 +207,7 @@ def test_a_skip_at_a_larger_cap_wins_over_one_at_a_smaller_in_any_order_of_the_l
         assert cell.walls["KILBRID"]["cap"] == 200_000_000
         text = policy_lab.wall_text(cell.walls["KILBRID"])
         assert text == ("over 1,500 s at the 200,000,000-state cap (about 38,064,092 states estimated; 21,000,000 "
-                        "states stored in 1,200.5 CPU s, peak memory 1,300 MB (the programme's table 900 MB))")
+                        "states finished in 1,200.5 CPU s, the process's peak memory 1,300 MB (the programme's table 900 MB))")
     cell = _single([(WALL + "2000000", COUNTED), (WALL + "60000000", ESTIMATED)])
     assert policy_lab.wall_text(cell.walls["KILBRID"]) == (
         "about 163,126,073 states estimated before the work, over the 60,000,000-state cap (at least 38,284,404 "
@@ -240,7 +240,7 @@ def test_an_optimum_cut_by_its_time_records_how_far_it_got():
     assert r["skipped"] == "optimum over 0 s" and r["low"] <= r["estimate"]
     measured = r["measured"]
     assert measured["states"] >= 0 and measured["cpu"] >= 0 and measured["bytes"] > 0 and measured["rss_mb"] > 0
-    assert "states stored in" in policy_lab.describe((1, 2, "uniform"), r, plan.name)
+    assert "states finished in" in policy_lab.describe((1, 2, "uniform"), r, plan.name)
 
 
 def test_a_policy_cut_by_its_states_records_how_far_its_evaluation_got():
@@ -250,7 +250,7 @@ def test_a_policy_cut_by_its_states_records_how_far_its_evaluation_got():
     assert 50 <= r["policy_measured"]["paper"]["states"] < 100      # the cut, and the finished states it adds
     cell = policy_lab.Cell([{**r, "plan": plan.name}], [])
     row = policy_lab.single_table({("The folder", (1, 2, "uniform")): cell}, ["paper"])[-1]
-    assert "evaluation over 50 states (" in row and "states stored in" in row
+    assert "evaluation over 50 states (" in row and "states finished in" in row
 
 
 def test_the_count_before_the_work_is_of_the_plan_the_programme_stores():
