@@ -165,9 +165,9 @@ def _optimum(engine, bin: str, settings: dict, python: bool) -> OptimalSolver:
 
 def _wall(optimum, cpu: float) -> dict:
     """What the optimum's programme (or a policy's evaluation) reached where it was cut (by its state cap or
-    its time): the states it stored (those whose value it finished), the CPU seconds it took, the process's peak resident memory in MB (a worker's peak since it
-    started: this plan-setting's where it ran alone) and the bytes the compiled programme held (None: the
-    Python programme's are not measured)."""
+    its time): the states it stored (those whose value it finished), the CPU seconds it took, the process's
+    peak resident memory in MB (a worker's peak since it started: this plan-setting's where it ran alone)
+    and the bytes the compiled programme held (None: the Python programme's are not measured)."""
     try:
         import resource         # Unix only
         rss_mb = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)     # kilobytes on Linux
@@ -214,7 +214,9 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
             seconds: float | None = None, only=None, python: bool = False, policy_states: int | None = None) -> dict:
     """One plan in one setting: the optimum, its states and each policy's gap over it (with the CPU seconds
     each took, the versions, the policies out of time or states and those worth the optimum); or
-    ``{"skipped": why, "estimate": states}`` where the optimum does not fit (counted first) or runs out of time.
+    ``{"skipped": why, "estimate": states, "low": proven}`` where the optimum does not fit (counted first), with
+    ``"measured"`` (:func:`_wall`) where it was cut during the work by its states or time; a policy cut so
+    has its ``"policy_measured"``.
     ``policy_states``: the states a policy's evaluation may store (counted work, the same cut on a loaded
     machine as on an idle one; None: ``max_states``)."""
     engine = OrderEngine(plan)
