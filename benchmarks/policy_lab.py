@@ -12,9 +12,11 @@ Settings.  ``--visible`` (1, 2, 3) × ``--capacities`` (1, 2, 3, unlimited) × `
 pile).  Each policy's exact expected time (:class:`~opportune.policies.evaluate.PolicyEvaluator` in
 the uniform bin, :class:`~opportune.policies.pile.PileSolver` in the pile) is divided by the optimum's
 (the compiled programme where the core is built; ``--python-optimum``: the Python one, the same values).
-The optimum's states are counted before the work (:func:`~opportune.policies.states.estimate_states`):
+The optimum's states are counted before the work (:func:`~opportune.policies.states.estimate_states`, on
+the plan the programme stores: interchangeable parts merged in the uniform bin's compiled optimum):
 a plan-setting whose optimum needs more than ``--max-states`` is skipped with that count, one whose
-optimum takes over ``--task-seconds`` likewise, and a policy whose evaluation takes over
+optimum is cut during the work by its states or ``--task-seconds`` likewise, with how far it got (the
+states stored, CPU seconds, peak memory: the wall), and a policy whose evaluation takes over
 ``--task-seconds`` or stores over ``--policy-states`` states (counted work: the same cut on a loaded
 machine as on an idle one) is left out of that column (said, never hidden).  Where the look-ahead decides by the
 optimum (its decisions say so), its value is the optimum's, as in ``opportune evaluate``.  No Monte
@@ -23,7 +25,8 @@ Carlo: every number is exact.
 Columns.  ``lookahead`` is the default policy; ``fallback`` the default with its exact optimum switched
 off (``Lookahead(optimal=False)``, ``evaluate --without-optimum``; asked for with ``--without-optimum``):
 what decides where the optimum's programme does not fit; ``paper`` the paper's rule.  The tables
-(``--table``, ``--readme``, ``--plot``) are written from ``--results`` alone, per size and setting.
+(``--table``, ``--readme``, ``--plot``) are written from ``--results`` alone, per size and setting, each
+plan-setting at the largest state cap it was attempted with (an optimum found at any cap wins).
 
 Results.  ``--results`` gets one JSON line per plan-setting as it finishes (an interrupted run goes on
 where it stopped); a later line adds its policies' gaps to an earlier one's, and only the policies a
@@ -69,10 +72,11 @@ from __future__ import annotations
 import argparse
 import json
 import random
+import re
 import statistics
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from opportune import load_plan, make_plan
@@ -87,9 +91,10 @@ from opportune.policies.optimal import (
     OptimalTooLarge,
     OutOfTime,
     optimal_solver,
+    optimum_engine,
 )
 from opportune.policies.pile import PileSolver, pile_solver
-from opportune.policies.states import estimate_states
+from opportune.policies.states import big, estimate_states
 from opportune.policies.variants import BinFirst, Slack
 
 HERE = Path(__file__).resolve().parent
@@ -161,6 +166,20 @@ def _optimum(engine, bin: str, settings: dict, python: bool) -> OptimalSolver:
     return OptimalSolver(engine, **settings) if python else optimal_solver(engine, **settings)
 
 
+def _wall(optimum, cpu: float) -> dict:
+    """What the optimum's programme (or a policy's evaluation) reached where it was cut (by its state cap or
+    its time): the states it stored (those whose value it finished), the CPU seconds it took, the process's
+    peak resident memory in MB (a worker's peak since it started: this plan-setting's where it ran alone)
+    and the bytes the compiled programme held (None: the Python programme's are not measured)."""
+    try:
+        import resource         # Unix only
+        rss_mb = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)     # kilobytes on Linux
+    except ImportError:
+        rss_mb = None
+    states = getattr(optimum, "policy_states", optimum.states)     # a policy's evaluation: the policy's own
+    return {"states": states, "cpu": round(cpu, 1), "rss_mb": rss_mb, "bytes": getattr(optimum, "bytes", None)}
+
+
 def _decides_by_pile_optimum(engine, policy, visible: int, deadline) -> bool:
     """Whether the look-ahead decides by the pile's optimum on this plan: its first decision prepares its
     programme and says which rule decided (the uniform bin's evaluator asks ``decides_by_optimum``)."""
@@ -172,8 +191,10 @@ def _decides_by_pile_optimum(engine, policy, visible: int, deadline) -> bool:
     return policy.deciding_rule == Lookahead.OPTIMAL_RULE
 
 
-def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | None, best: float) -> tuple[float, bool]:
-    """A policy's exact expected time, and whether it is the optimum's (the policy decides by it)."""
+def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | None, best: float,
+                  held: list | None = None) -> tuple[float, bool]:
+    """A policy's exact expected time, and whether it is the optimum's (the policy decides by it); its
+    evaluation's programme is put in ``held`` (to tell how far it got where it is cut)."""
     deadline = Deadline.after(seconds)
     if bin == "pile":
         if _decides_by_pile_optimum(engine, policy, settings["visible"], deadline):
@@ -186,6 +207,8 @@ def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | Non
             return best, True
         ev = PolicyEvaluator(engine, policy, **settings)
     ev.deadline = deadline
+    if held is not None:
+        held.append(ev)
     value = ev.value()
     return value, bool(getattr(ev, "by_optimum", False))
 
@@ -194,33 +217,39 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
             seconds: float | None = None, only=None, python: bool = False, policy_states: int | None = None) -> dict:
     """One plan in one setting: the optimum, its states and each policy's gap over it (with the CPU seconds
     each took, the versions, the policies out of time or states and those worth the optimum); or
-    ``{"skipped": why, "estimate": states}`` where the optimum does not fit (counted first) or runs out of time.
+    ``{"skipped": why, "estimate": states, "low": proven}`` where the optimum does not fit (counted first), with
+    ``"measured"`` (:func:`_wall`) where it was cut during the work by its states or time; a policy cut so
+    has its ``"policy_measured"``.
     ``policy_states``: the states a policy's evaluation may store (counted work, the same cut on a loaded
     machine as on an idle one; None: ``max_states``)."""
     engine = OrderEngine(plan)
-    est = estimate_states(engine, visible=visible, capacity=capacity, pile=bin == "pile", stop_above=max_states,
+    # counted on the plan the programme stores: the uniform bin's compiled optimum merges interchangeable
+    # parts (KILBRID with 2 locations: 27.5 million states merged against about 163 million as declared)
+    sized = engine if bin == "pile" or python else optimum_engine(engine)
+    est = estimate_states(sized, visible=visible, capacity=capacity, pile=bin == "pile", stop_above=max_states,
                           time_limit=ESTIMATE_SECONDS)
     if est.over(max_states):
-        return {"skipped": f"optimum over {max_states:,} states: {est.describe()}", "estimate": est.states}
+        return {"skipped": f"optimum over {max_states:,} states: {est.describe()}", "estimate": est.states,
+                "low": est.low}
     settings = dict(visible=visible, capacity=capacity, max_states=max_states)
     cpu = time.process_time()
     optimum = _optimum(engine, bin, settings, python)
     optimum.deadline = Deadline.after(seconds)
     try:
         best = optimum.value()
-    except OptimalTooLarge:
-        return {"skipped": f"optimum over {max_states:,} states", "estimate": est.states}
-    except OutOfTime:
-        return {"skipped": f"optimum over {seconds:g} s", "estimate": est.states}
+    except (OptimalTooLarge, OutOfTime) as exc:
+        cut = f"{max_states:,} states" if isinstance(exc, OptimalTooLarge) else f"{seconds:g} s"
+        return {"skipped": f"optimum over {cut}", "estimate": est.states, "low": est.low,
+                "measured": _wall(optimum, time.process_time() - cpu)}
     settings["max_states"] = policy_states or max_states
     out = {"optimum": best, "states": optimum.states, "gaps": {}, "policy_skipped": {}, "by_optimum": [],
            "cpu": {"optimum": round(time.process_time() - cpu, 3)}, "versions": {}}
     for name, policy in policies(visible, capacity, bin).items():
         if only is not None and name not in only:
             continue
-        cpu = time.process_time()
+        cpu, held = time.process_time(), []
         try:
-            value, by_optimum = _policy_value(engine, policy, bin, settings, seconds, best)
+            value, by_optimum = _policy_value(engine, policy, bin, settings, seconds, best, held)
             out["gaps"][name] = value / best - 1
             if by_optimum:
                 out["by_optimum"].append(name)
@@ -230,6 +259,8 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
             out["policy_skipped"][name] = f"over {settings['max_states']:,} states"
         except OutOfTime:
             out["policy_skipped"][name] = f"over {seconds:g} s"
+        if name in out["policy_skipped"] and held:      # how far its evaluation got
+            out.setdefault("policy_measured", {})[name] = _wall(held[0], time.process_time() - cpu)
         if name == "lookahead" and name in out["policy_skipped"] and policy.refusal:
             out["policy_skipped"][name] += f"; it did not decide by its optimum: {policy.refusal}"
         out["cpu"][name] = round(time.process_time() - cpu, 3)
@@ -373,9 +404,22 @@ def _missing(rec: dict | None, asked, redo_skipped: bool) -> tuple[str, ...]:
     return tuple(p for p in asked if p not in tried)
 
 
+def wall_words(measured: dict) -> str:
+    """What a cut programme reached (:func:`_wall`), in words: ``'2,000,001 states finished in 41.3 CPU s,
+    the process's peak memory 230 MB (the programme's table 96 MB)'`` (a state is stored once its value is known: a
+    programme that descends far before the first finishes may be cut with none)."""
+    out = f"{measured['states']:,} states finished in {measured['cpu']:,} CPU s"
+    if measured.get("rss_mb") is not None:
+        out += f", the process's peak memory {measured['rss_mb']:,} MB"
+    if measured.get("bytes") is not None:
+        out += f" (the programme's table {measured['bytes'] / 2 ** 20:,.0f} MB)"
+    return out
+
+
 def describe(setting, r: dict, name: str) -> str:
     if "skipped" in r:
-        return f"{setting_name(*setting)}: {name}: skipped ({r['skipped']})"
+        wall = f"; {wall_words(r['measured'])}" if "measured" in r else ""
+        return f"{setting_name(*setting)}: {name}: skipped ({r['skipped']}{wall})"
     measured = [f"{p} {100 * v:+.3f}%" for p, v in r["gaps"].items()]
     left = [f"{p} {why}" for p, why in r.get("policy_skipped", {}).items()]
     return (f"{setting_name(*setting)}: {name}: optimum {r['optimum']:.4f} ({r['states']:,} states); "
@@ -442,22 +486,41 @@ def pct(x: float) -> str:
 
 @dataclass
 class Cell:
-    """One group in one setting: the records with the optimum, and why the others were skipped."""
+    """One group in one setting: the records with the optimum, why the others were skipped, and each
+    skipped plan's record (its largest attempt, with its state cap: :func:`largest_attempts`)."""
     rows: list
     skipped: list
+    walls: dict = field(default_factory=dict)
 
     def gaps(self, name: str) -> list[float]:
         return [r["gaps"][name] for r in self.rows if name in r["gaps"]]
 
 
+def largest_attempts(done: dict) -> dict[str, dict]:
+    """Each plan-setting's skip at the largest state cap it was attempted with (by its key without the cap),
+    that cap put in as ``cap``: what the tables give where no cap found the optimum (an exact result,
+    filed under every cap by :func:`_keep`, wins over any skip)."""
+    out: dict[str, dict] = {}
+    for key, rec in done.items():
+        prefix, cap = key.rsplit(":", 1)
+        if "skipped" in rec and (prefix not in out or int(cap) > out[prefix]["cap"]):
+            out[prefix] = {**rec, "cap": int(cap)}
+    return out
+
+
 def cells(jobs: list[Job], done: dict) -> dict[tuple[str, tuple], Cell]:
-    """Every (group, setting) of the jobs, in the jobs' order, from the results (``not run`` where none)."""
+    """Every (group, setting) of the jobs, in the jobs' order, from the results: the optimum found at any
+    state cap, else the skip at the largest cap attempted (:func:`largest_attempts`), else ``not run``."""
     out: dict[tuple[str, tuple], Cell] = {}
+    walls = largest_attempts(done)
     for job in jobs:
         cell = out.setdefault((job.group, job.setting), Cell([], []))
-        rec = done.get(job.key, {"skipped": "not run"})
+        rec = done.get(job.key)
+        if rec is None or "skipped" in rec:
+            rec = walls.get(job.key.rsplit(":", 1)[0], {"skipped": "not run"})
         if "skipped" in rec:
             cell.skipped.append((job.plan.name, rec["skipped"]))
+            cell.walls[job.plan.name] = rec
         else:
             cell.rows.append({**rec, "plan": job.plan.name})
     groups = list(dict.fromkeys(g for g, _ in out))
@@ -533,17 +596,77 @@ def not_by_optimum(table: dict) -> list[str]:
     return out
 
 
+def _at_least(rec: dict) -> int | float | None:
+    """A skip's proven lower bound on the optimum's states: recorded (``low``), or in a line written before
+    it was, read from its reason (``'... at least 13,309,553)'``, ``'at least 3.5e+13'``)."""
+    if rec.get("low"):
+        return rec["low"]
+    found = re.search(r"at least ([\d,]+(?:\.\d+)?(?:e\+\d+)?)", rec["skipped"])
+    if found is None:
+        return None
+    text = found.group(1).replace(",", "")
+    return float(text) if "e" in text or "." in text else int(text)
+
+
+def wall_text(rec: dict) -> str:
+    """Where a skipped plan-setting's optimum hit its wall, in words, from its largest attempt
+    (:func:`largest_attempts`): over the state cap by the count before the work (certain where the count's
+    lower bound is over it, else estimated), or cut during the work by its states or time with what it
+    reached (:func:`wall_words`; lines written before that was recorded say so).
+
+    >>> wall_text({"skipped": "optimum over 1800 s", "estimate": 51047008, "cap": 60000000})
+    'over 1,800 s at the 60,000,000-state cap (about 51,047,008 states estimated; how far it got not recorded)'
+    """
+    why, cap = rec["skipped"], rec.get("cap")
+    if cap is None:
+        return why
+    low, estimate = _at_least(rec), rec.get("estimate")
+    about = f"about {big(estimate)} states estimated" if estimate else ""
+    if ": " in why:                 # refused by the count before the work: nothing run
+        if "(exact)" in why:
+            return f"{big(estimate)} states (counted before the work), over the {cap:,}-state cap"
+        if low is not None and low > cap:
+            return f"over {cap:,} states: at least {big(int(low))} counted before the work ({about})"
+        return (f"{about} before the work, over the {cap:,}-state cap (at least {big(int(low or 0))} counted); "
+                "not run")
+    cut = why.removeprefix("optimum ")
+    if cut.endswith(" s"):
+        cut = f"over {float(cut.split()[1]):,g} s at the {cap:,}-state cap"
+    measured = wall_words(rec["measured"]) if "measured" in rec else "how far it got not recorded"
+    return f"{cut} ({'; '.join(filter(None, [about, measured]))})"
+
+
+#: What a skipped row of a single plan's table says (docs/policy-lab.md).
+WALLS_TEXT = ("Each plan-setting as its largest attempt left it: the optimum found at any state cap, else where "
+              "the attempt with the largest cap hit its wall: refused by the count before the work (certain where "
+              "the count's lower bound is over the cap, else by the estimate, and not run), or cut during the work "
+              "by its states or time, with the states it finished, its CPU seconds and the process's peak memory where the run "
+              "recorded them.")
+
+
 def single_table(table: dict, names) -> list[str]:
-    """One plan per group (SALBP, the gearbox): its optimum and each policy's gap, or why it was skipped."""
+    """One plan per group (SALBP, the gearbox): its optimum and each policy's gap, or where its optimum hit
+    the wall (:func:`wall_text`)."""
     lines = ["| plan | setting | optimum | states | " + " | ".join(names) + " |",
              "| --- | --- | ---: | ---: | " + " | ".join("---:" for _ in names) + " |"]
     for (_, setting), cell in table.items():
         for plan, why in cell.skipped:
-            lines.append(f"| {plan} | {setting_name(*setting)} | skipped ({why}) | — | " + " | ".join("—" for _ in names) + " |")
+            wall = wall_text(cell.walls[plan]) if plan in cell.walls else why
+            lines.append(f"| {plan} | {setting_name(*setting)} | skipped: {wall} | — | " + " | ".join("—" for _ in names) + " |")
         for r in cell.rows:
             lines.append(f"| {r['plan']} | {setting_name(*setting)} | {r['optimum']:.4f} | {r['states']:,} | "
-                         + " | ".join(pct(r["gaps"][p]) if p in r["gaps"] else "—" for p in names) + " |")
+                         + " | ".join(_gap_or_cut(r, p) for p in names) + " |")
     return lines
+
+
+def _gap_or_cut(r: dict, name: str) -> str:
+    """A policy's gap in a single plan's row, or where its evaluation was cut and how far it got."""
+    if name in r["gaps"]:
+        return pct(r["gaps"][name])
+    if name not in r.get("policy_skipped", {}):
+        return "—"
+    measured = r.get("policy_measured", {}).get(name)
+    return f"evaluation {r['policy_skipped'][name]}" + (f" ({wall_words(measured)})" if measured else "")
 
 
 def _words(items: list) -> str:
@@ -684,7 +807,9 @@ def document(table: dict, groups: list[str], names, n_plans: int, done_cpu: floa
         out += ["", "## Policies out of time or states", "", *left]
     for group in dict.fromkeys(g for g, _ in table):
         if group not in groups:
-            out += ["", f"## {group}", "", *single_table({k: c for k, c in table.items() if k[0] == group}, names)]
+            part = {k: c for k, c in table.items() if k[0] == group}
+            walls = [WALLS_TEXT, ""] if any(c.skipped for c in part.values()) else []
+            out += ["", f"## {group}", "", *walls, *single_table(part, names)]
     out += ["", f"The results took {done_cpu / 3600:.1f} CPU hours (each plan-setting's optimum and policies)."]
     return "\n".join(out) + "\n"
 

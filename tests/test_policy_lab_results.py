@@ -185,3 +185,100 @@ def test_a_bins_own_version_keeps_its_own_one_strategy_gaps_only(monkeypatch):
     assert policy_lab._fresh({**one, "two_strategies": True})["gaps"] == {}
     assert policy_lab._fresh({**one, "versions": {"fallback": "old uniform"}})["gaps"] == {}
     assert policy_lab._fresh({**one, "versions": {"fallback": "new"}, "two_strategies": True})["gaps"] == {"fallback": 0.01}
+
+# ------------------------------------------------------------------ the SALBP walls: the largest attempt per plan-setting
+
+WALL = "0:salbp:KILBRID:1:2:uniform:"
+
+
+def _single(lines, cap=2_000_000):
+    """The SALBP table's cell for ``WALL`` read from synthetic lines, as the tables are written at ``cap``."""
+    from types import SimpleNamespace
+
+    done: dict = {}
+    for key, rec in lines:
+        policy_lab._keep(done, key, dict(rec), cap)
+    job = policy_lab.Job(WALL + str(cap), "SALBP", SimpleNamespace(name="KILBRID"), (1, 2, "uniform"), False)
+    (cell,) = policy_lab.cells([job], done).values()
+    return cell
+
+
+COUNTED = {"skipped": "optimum over 2,000,000 states: about 163,126,073 (estimated from the order's down-sets; "
+                      "at least 2,000,588)", "estimate": 163126073}
+TIMED = {"skipped": "optimum over 1500 s", "estimate": 38064092, "low": 13416529,
+         "measured": {"states": 21_000_000, "cpu": 1200.5, "rss_mb": 1300, "bytes": 900 * 2 ** 20}}
+ESTIMATED = {"skipped": "optimum over 60,000,000 states: about 163,126,073 (estimated from the order's down-sets; "
+                        "at least 38,284,404)", "estimate": 163126073}
+
+
+def test_a_skip_at_a_larger_cap_wins_over_one_at_a_smaller_in_any_order_of_the_lines():
+    for lines in ([(WALL + "2000000", COUNTED), (WALL + "200000000", TIMED), (WALL + "60000000", ESTIMATED)],
+                  [(WALL + "200000000", TIMED), (WALL + "60000000", ESTIMATED), (WALL + "2000000", COUNTED)]):
+        cell = _single(lines)
+        assert cell.rows == [] and cell.skipped == [("KILBRID", TIMED["skipped"])]
+        assert cell.walls["KILBRID"]["cap"] == 200_000_000
+        text = policy_lab.wall_text(cell.walls["KILBRID"])
+        assert text == ("over 1,500 s at the 200,000,000-state cap (about 38,064,092 states estimated; 21,000,000 "
+                        "states finished in 1,200.5 CPU s, the process's peak memory 1,300 MB (the programme's table 900 MB))")
+    cell = _single([(WALL + "2000000", COUNTED), (WALL + "60000000", ESTIMATED)])
+    assert policy_lab.wall_text(cell.walls["KILBRID"]) == (
+        "about 163,126,073 states estimated before the work, over the 60,000,000-state cap (at least 38,284,404 "
+        "counted); not run")
+
+
+def test_an_optimum_found_at_any_cap_wins_over_every_skip():
+    exact = {"optimum": 120.5, "states": 27_523_885, "gaps": {"lookahead": 0.0}}
+    for order in ((0, 1, 2), (2, 1, 0)):
+        lines = [(WALL + "2000000", COUNTED), (WALL + "40000000", exact), (WALL + "200000000", TIMED)]
+        cell = _single([lines[i] for i in order])
+        assert cell.skipped == [] and cell.walls == {}
+        assert [(r["optimum"], r["states"]) for r in cell.rows] == [(120.5, 27_523_885)]
+        table = policy_lab.single_table({("SALBP", (1, 2, "uniform")): cell}, ["lookahead"])
+        assert table[-1] == "| KILBRID | uniform, 1 visible, buffer 2 | 120.5000 | 27,523,885 | +0.000% |"
+
+
+def test_a_skip_counted_over_the_cap_is_certain_only_where_the_lower_bound_is_over_it():
+    over = {**ESTIMATED, "skipped": ESTIMATED["skipped"].replace("38,284,404", "60,001,037"), "cap": 60_000_000}
+    assert policy_lab.wall_text(over) == ("over 60,000,000 states: at least 60,001,037 counted before the work "
+                                          "(about 163,126,073 states estimated)")
+    big = {"skipped": "optimum over 2,000,000 states: about 1.1e+15 (estimated; at least 3.5e+13)",
+           "estimate": 10 ** 15, "cap": 2_000_000}
+    assert policy_lab.wall_text(big).startswith("over 2,000,000 states: at least 3.5e+13 counted before the work")
+
+
+def test_an_optimum_cut_by_its_time_records_how_far_it_got():
+    plan = policy_lab.random_plan(policy_lab.random.Random(1), 12, 1, 0.2)
+    r = policy_lab.measure(plan, 1, 2, seconds=0.0)
+    assert r["skipped"] == "optimum over 0 s" and r["low"] <= r["estimate"]
+    measured = r["measured"]
+    assert measured["states"] >= 0 and measured["cpu"] >= 0 and measured["bytes"] > 0 and measured["rss_mb"] > 0
+    assert "states finished in" in policy_lab.describe((1, 2, "uniform"), r, plan.name)
+
+
+def test_a_policy_cut_by_its_states_records_how_far_its_evaluation_got():
+    plan = policy_lab.random_plan(policy_lab.random.Random(1), 12, 1, 0.2)
+    r = policy_lab.measure(plan, 1, 2, only={"paper"}, policy_states=50)
+    assert r["policy_skipped"] == {"paper": "over 50 states"}
+    assert 50 <= r["policy_measured"]["paper"]["states"] < 100      # the cut, and the finished states it adds
+    cell = policy_lab.Cell([{**r, "plan": plan.name}], [])
+    row = policy_lab.single_table({("The folder", (1, 2, "uniform")): cell}, ["paper"])[-1]
+    assert "evaluation over 50 states (" in row and "states finished in" in row
+
+
+def test_the_count_before_the_work_is_of_the_plan_the_programme_stores():
+    """The compiled optimum merges interchangeable parts: a plan whose merged programme fits the cap is run,
+    though the plan as declared has more states."""
+    from opportune import make_plan
+    from opportune.engine import OrderEngine
+    from opportune.policies.optimal import optimum_engine
+    from opportune.policies.states import estimate_states
+
+    screws = make_plan(["base", *[f"s{i}" for i in range(6)], "lid"],
+                       {**{f"s{i}": ["base"] for i in range(6)}, "lid": [f"s{i}" for i in range(6)]})
+    engine = OrderEngine(screws)
+    merged = estimate_states(optimum_engine(engine), visible=1, capacity=2).states
+    declared = estimate_states(engine, visible=1, capacity=2).states
+    assert merged < declared
+    r = policy_lab.measure(screws, 1, 2, max_states=merged, only=())
+    assert "skipped" not in r and r["states"] == merged
+    assert "skipped" in policy_lab.measure(screws, 1, 2, max_states=merged, only=(), python=True)
