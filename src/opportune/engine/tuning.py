@@ -381,7 +381,8 @@ WINDOW_GROWTH_SEVERAL = 2
 #: there takes its best move over the windows (its own option), and the shake at this state's value from
 #: those moves; 1, the state's option taken off every such move (a buffering that fills a location was
 #: credited with the option of an empty one).  On the policy lab's 20-part two-strategy plans at 1
-#: visible and 2 locations: r29-20x2 +1.298% with 1, PLACEHOLDER with 2 (docs/decisions.md).
+#: visible and 2 locations the worst +1.298% (r29-20x2) with 1, +0.549% with 2 (r29-20x2 +0.135%; the
+#: mean +0.426% and +0.231%); 6-8 ms of CPU a state where two windows differ (docs/decisions.md).
 WINDOW_OPTION_LOOKS = 2
 #: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
