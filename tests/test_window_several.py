@@ -123,7 +123,7 @@ def test_the_option_looks_are_one_or_two_and_a_plan_of_one_strategy_decides_alik
     with pytest.raises(ValueError, match="option_looks: 1 or 2"):
         FrontierWindow(option_looks=3)
     rng = random.Random(5)
-    ids = [f"q{i}" for i in range(12)]
+    ids = [f"q{i}" for i in range(10)]
     plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.3] for j, b in enumerate(ids)})
     engine = OrderEngine(plan)
     for visible in (1, 2):
