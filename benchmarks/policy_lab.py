@@ -109,7 +109,7 @@ USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
 ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
-POLICY_VERSIONS = {"fallback": "windows of several strategies tried up to twice the cap by their growth"}
+POLICY_VERSIONS = {"fallback": "the option of several strategies two looks deep"}
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;
@@ -121,7 +121,8 @@ UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
 #: touches only plans of several strategies): their gaps on one-strategy plans are current.
 SAME_ON_ONE_STRATEGY = {"fallback": ("frontier window", "frontier window of each strategy, chosen by the look",
-                                     "windows of several strategies larger, with the look's option value")}
+                                     "windows of several strategies larger, with the look's option value",
+                                     "windows of several strategies tried up to twice the cap by their growth")}
 #: As :data:`SAME_ON_ONE_STRATEGY`, in a bin with a version of its own.
 BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",)}
 

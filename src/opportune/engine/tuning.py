@@ -376,6 +376,14 @@ WINDOW_PARTS_SEVERAL = (5, 8, 12, 16, 20)
 #: 17,777, and the windows of 8 parts saw the second strategy 1.7 worse than the first where it is 7.7
 #: worse, those of 12 parts 7.1): that plan's fallback +1.518% with 1, +0.429% with 2 (no limit: +0.427%).
 WINDOW_GROWTH_SEVERAL = 2
+#: How deep the look values keeping several strategies open where each open strategy's window decides:
+#: 2, a move that keeps several open at its motion and the value of the state it leads to where each look
+#: there takes its best move over the windows (its own option), and the shake at this state's value from
+#: those moves; 1, the state's option taken off every such move (a buffering that fills a location was
+#: credited with the option of an empty one).  On the policy lab's 20-part two-strategy plans at 1
+#: visible and 2 locations the worst +1.298% (r29-20x2) with 1, +0.549% with 2 (r29-20x2 +0.135%; the
+#: mean +0.426% and +0.231%); 6-8 ms of CPU a state where two windows differ (docs/decisions.md).
+WINDOW_OPTION_LOOKS = 2
 #: States the window's programme may hold, per size tried (so at most 3 × this a decision, and in practice
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.

@@ -21,7 +21,11 @@ are solved (larger ones there, :data:`~opportune.engine.tuning.WINDOW_PARTS_SEVE
 move of least expected cost over the windows, with its window's others a look and a move each after it,
 decides: the look chooses the strategy.  A window of one strategy's frontier values a state as if the
 others were closed, so the moves that keep several open (a buffering, an installation several allow, the
-shake) are worth the option of choosing later: :func:`option_value`, one look deep, is taken off them.
+shake) are worth the option of choosing later, two looks deep (:func:`two_looks`): each at the value of the
+state it leads to where each look there takes its best move over the windows (read from their programmes),
+the shake at this state's value from those moves.  (One look deep, :func:`option_value` of this state taken
+off every such move, for measurement: a buffering that fills a location was credited with the option of an
+empty one.)
 The sizes tried there grow while the states of the next, predicted from the growth of the two before, stay
 within :data:`~opportune.engine.tuning.WINDOW_GROWTH_SEVERAL` times the cap.  A *joint window*
 (``joint=True``, for measurement: nearer the optimum on some two-strategy plans, farther on others) is the
@@ -45,13 +49,13 @@ from opportune.engine import compiled_core
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 from opportune.engine.tuning import (  # tuning.py says why
-    WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_GROWTH_SEVERAL, WINDOW_PARTS, WINDOW_PARTS_SEVERAL, WINDOW_STATES,
-    WINDOW_STRATEGIES)
+    WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_GROWTH_SEVERAL, WINDOW_OPTION_LOOKS, WINDOW_PARTS, WINDOW_PARTS_SEVERAL,
+    WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "WindowTable", "frontier_window", "joint_window", "option_value", "outside_rest",
-           "window_available", "window_strategies"]
+__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "frontier_window", "joint_window", "option_value",
+           "outside_rest", "two_looks", "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -318,6 +322,10 @@ class FrontierWindow(DecidesOnMasks):
     option : bool
         Whether the look values keeping several strategies open (:func:`option_value`; the default) where
         several windows decide, or takes the least window's best move alone.
+    option_looks : {2, 1}
+        How deep the option is valued (:data:`~opportune.engine.tuning.WINDOW_OPTION_LOOKS`): 2, each move
+        that keeps several strategies open at its own state's option (:func:`two_looks`); 1, the state's
+        option taken off every such move (for measurement).
     joint : bool
         Whether the joint window of the open strategies decides where several are open and it fits (see
         the module; False, the default: the strategies' own windows with the option value decide).
@@ -353,13 +361,16 @@ class FrontierWindow(DecidesOnMasks):
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "buffer",
                  several: tuple[int, ...] = WINDOW_PARTS_SEVERAL, option: bool = True, joint: bool = False,
-                 growth: float = WINDOW_GROWTH_SEVERAL):
+                 growth: float = WINDOW_GROWTH_SEVERAL, option_looks: int = WINDOW_OPTION_LOOKS):
         from opportune.policies.variants import Slack
 
         self.base = base if base is not None else Slack()
         self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
         self.sizes, self.max_states = tuple(sizes), max_states
         self.several, self.option, self.joint, self.growth = tuple(several), option, joint, growth
+        if option_looks not in (1, 2):
+            raise ValueError(f"option_looks: 1 or 2 looks deep, not {option_looks!r}")
+        self.option_looks = option_looks
         self.others = others
         self.deadline: Deadline | None = None
         self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
@@ -428,6 +439,11 @@ class FrontierWindow(DecidesOnMasks):
         >>> t.parts, t.outside, t.rest      # three parts left outside: a look and a move each
         ((0, 1, 2), 3, 3.0)
         """
+        return self._kept(engine, mask, consistent, buffer)[0]
+
+    def _kept(self, engine, mask: int, consistent: int, buffer) -> tuple[tuple[WindowTable, ...], TwoLooks | None]:
+        """:meth:`tables` at a state with its moves two looks deep (:func:`two_looks`, where several windows
+        decide with the option two looks deep; else None), kept together."""
         if self._engine is not engine:
             self._engine, self._tables = engine, OrderedDict()
         key = (mask, consistent, tuple(sorted(buffer)))
@@ -436,22 +452,29 @@ class FrontierWindow(DecidesOnMasks):
             self._tables.move_to_end(key)
             return got
         several = consistent.bit_count() > 1
-        grown = self._grown(engine, mask, consistent, buffer)
-        got = ()
+        programmes: dict[tuple[int, ...], _Programme] = {}
+        grown = self._grown(engine, mask, consistent, buffer, programmes)
+        tables, deep = (), None
         if grown:
-            got = tuple({t.parts: t for t in grown[-1][1]}.values())
+            tables = tuple({t.parts: t for t in grown[-1][1]}.values())
             joint = self._joint(engine, mask, consistent, buffer, grown) if several and self.joint else None
-            got = got if joint is None else (joint,)
-        if got:
+            tables = tables if joint is None else (joint,)
+        if len(tables) > 1 and self.option and self.option_looks == 2:
+            deep = two_looks(engine, mask, consistent, buffer, tables, [programmes[t.parts] for t in tables],
+                             self.visible, self.costs, as_deadline(self.deadline))
+        got = (tables, deep)
+        if tables:
             self._tables[key] = got
             if len(self._tables) > WINDOW_CACHE:
                 self._tables.popitem(last=False)
         return got
 
-    def _grown(self, engine, mask: int, consistent: int, buffer) -> list[tuple[int, tuple[WindowTable, ...]]]:
+    def _grown(self, engine, mask: int, consistent: int, buffer,
+               programmes: dict | None = None) -> list[tuple[int, tuple[WindowTable, ...]]]:
         """Each size that fits (the smaller first: past the deadline or the cap, the largest finished ones
         decide) with the tables of the frontier windows of the first :data:`WINDOW_STRATEGIES` open
-        strategies, one a strategy in order (a window two share solved once); empty where none fits."""
+        strategies, one a strategy in order (a window two share solved once); empty where none fits.
+        ``programmes``, a dict: filled with the largest size's programmes by their parts."""
         out, grown = [], []
         several = consistent.bit_count() > 1
         for size in sorted(self.several if several else self.sizes):
@@ -459,12 +482,17 @@ class FrontierWindow(DecidesOnMasks):
                 break           # predicted past the cap by the growth of the last two: not tried
             windows = self._windows(engine, mask, consistent, buffer, size)
             solved: dict[tuple, WindowTable] = {}
+            solving: dict[tuple, _Programme] = {}
             try:
                 for parts, outside in windows:
                     if tuple(parts) not in solved:
-                        solved[tuple(parts)] = self._solve(engine, mask, consistent, buffer, parts, outside, size)
+                        solved[tuple(parts)] = self._solve(engine, mask, consistent, buffer, parts, outside, size,
+                                                           programmes=solving)
             except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
                 break
+            if programmes is not None:
+                programmes.clear()
+                programmes.update(solving)
             out.append((size, tuple(solved[tuple(parts)] for parts, _ in windows)))
             grown.append(max(t.states for t in solved.values()))
             if not all(t.outside for t in solved.values()):
@@ -504,13 +532,16 @@ class FrontierWindow(DecidesOnMasks):
                 for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]]
 
     def _solve(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
-               size: int, joint=None) -> WindowTable:
+               size: int, joint=None, programmes: dict | None = None) -> WindowTable:
         """The window of ``parts`` solved by the compiled core, in the open strategies it is closed in (the
         others' moves are not its own: inf, never chosen), or with ``joint`` (its ends and their costs,
-        :meth:`_joint`) in the first :data:`WINDOW_STRATEGIES` open ones: its table.  The work is counted."""
+        :meth:`_joint`) in the first :data:`WINDOW_STRATEGIES` open ones: its table.  The work is counted.
+        ``programmes``, a dict: its programme put there by its parts (read after a move: :func:`two_looks`)."""
         kept = (_first_bits(consistent, WINDOW_STRATEGIES) if joint
                 else window_strategies(engine, mask, consistent, parts))
         core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside, joint)
+        if programmes is not None:
+            programmes[tuple(parts)] = _Programme(core, mask, kept, tuple(parts), self.max_states)
         seconds = as_deadline(self.deadline).seconds()
         try:
             values = core.moves(0, (1 << kept.bit_count()) - 1, buf, others_buffered,
@@ -598,7 +629,7 @@ class FrontierWindow(DecidesOnMasks):
         """
         if mask == engine.full:
             return DONE
-        tables = self.tables(engine, mask, consistent, buffer)
+        tables, deep = self._kept(engine, mask, consistent, buffer)
         if not tables:
             self.last_table = None
             self.work["by_base"] += 1
@@ -608,6 +639,8 @@ class FrontierWindow(DecidesOnMasks):
         best = min(((value + t.rest, n), action, t) for n, t in enumerate(tables)
                    for value, action in [best_move(engine, mask, consistent, t, buffer, visible, self.costs.shake)])
         self.last_table = best[2]
+        if deep is not None:
+            return deep.choose(engine, buffer, visible, float(self.costs.shake))
         if len(tables) > 1 and self.option:
             return self._with_option(engine, mask, consistent, buffer, visible, tables)
         return best[1]
@@ -960,11 +993,16 @@ def option_value(engine, mask: int, consistent: int, buffer, tables, visible: in
     >>> option_value(engine, 0, 0b11, (), tables, 1, TimeModel()) > 0
     True
     """
+    value = _looks_over(engine, mask, buffer, tables, visible, costs)
+    least = min(t.values[-1] + t.rest for t in tables)
+    return max(0.0, least - value) if value < float("inf") else 0.0
+
+
+def _looks_over(engine, mask: int, buffer, tables, visible: int, costs: TimeModel) -> float:
+    """The state's value where each look takes its best move over the windows ``tables`` (their values at
+    this state), the shake loop over the looks.  O(parts × windows)."""
     plan, inf = engine.plan, float("inf")
-    counts = {i: (((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)}
-    for p in buffer:
-        counts[plan.index(p)] -= 1
-    best = {i: inf for i, c in counts.items() if c > 0}       # a part's best move on a look showing it
+    best = {i: inf for i in _in_bin(engine, mask, buffer)}
     from_buffer = inf
     for t in tables:
         index = {i: j for j, i in enumerate(t.parts)}
@@ -976,14 +1014,33 @@ def option_value(engine, mask: int, consistent: int, buffer, tables, visible: in
             j = index.get(plan.index(p))
             if j is not None:
                 from_buffer = min(from_buffer, t.rest + v[3 * j + 2])
-    least = min(t.values[-1] + t.rest for t in tables)
-    n = sum(counts[i] for i in best)
+    return _shake_loop(engine, mask, buffer, best, from_buffer, visible, costs)
+
+
+def _in_bin(engine, mask: int, buffer) -> dict[int, int]:
+    """Part -> its units in the bin (not installed, not buffered), of the parts that have some.  O(parts)."""
+    plan = engine.plan
+    counts = {i: (((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)}
+    for p in buffer:
+        counts[plan.index(p)] -= 1
+    return {i: c for i, c in counts.items() if c > 0}
+
+
+def _shake_loop(engine, mask: int, buffer, best: dict[int, float], from_buffer: float, visible: int,
+                costs: TimeModel) -> float:
+    """A state's value where a look showing part ``i`` (of those in the bin) takes a move of expected cost
+    ``best[i]`` and one from the buffer ``from_buffer`` (inf: none): looks as order statistics of the
+    parts' units, the shake loop over them, as the optimum's; inf where no look allows a move.  With every
+    unit left buffered, ``from_buffer``.  O(parts log parts)."""
+    inf = float("inf")
+    counts = _in_bin(engine, mask, buffer)
+    n = sum(counts.values())
     if n == 0:          # every unit left is buffered: no part is seen
-        return max(0.0, least - from_buffer) if from_buffer < inf else 0.0
+        return from_buffer
     k, rank, total = min(visible, n), 0, float(comb(n, min(visible, n)))
     acc_pm = acc_p = 0.0
     value = inf
-    for b, i in sorted((b, i) for i, b in best.items()):
+    for b, i in sorted((best.get(i, inf), i) for i in counts):
         m = min(b, from_buffer)
         if m == inf:
             break
@@ -991,4 +1048,211 @@ def option_value(engine, mask: int, consistent: int, buffer, tables, visible: in
         rank += counts[i]
         acc_pm, acc_p = acc_pm + p * m, acc_p + p
         value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
-    return max(0.0, least - value) if value < inf else 0.0
+    return value
+
+
+class _Programme:
+    """A window's solved programme, read at the states one move on (:func:`two_looks`): the state it was
+    solved at, its parts and the plan's strategies its programme keeps (its strategy bits in order)."""
+
+    def __init__(self, core, mask: int, kept: int, parts: tuple[int, ...], max_states: int):
+        self.core, self.mask, self.kept, self.parts, self.max_states = core, mask, kept, parts, max_states
+
+    def moves_at(self, engine, mask: int, consistent: int, buffer, seconds: float) -> tuple[float, ...] | None:
+        """The window's move values (as :attr:`WindowTable.values`) at a state its programme holds: more
+        units installed, all of them its own, some of its strategies open; None where it holds no such
+        state, or it passes the cap or the deadline.  O(window units) and the states it adds."""
+        unit_bit, units = {}, 0
+        for i in self.parts:
+            for u in range(engine.first[i], engine.first[i] + engine.plan.parts[i].quantity):
+                if not self.mask >> u & 1:
+                    unit_bit[u] = len(unit_bit)
+        for u in bits(mask & ~self.mask):
+            if u not in unit_bit:
+                return None         # an installation outside the window: not in its programme
+            units |= 1 << unit_bit[u]
+        strategies = sum(1 << n for n, s in enumerate(core_strategies(engine, self.kept)) if consistent >> s & 1)
+        if not strategies:
+            return None
+        index = {i: j for j, i in enumerate(self.parts)}
+        buf, others_buffered = [0] * len(self.parts), 0
+        for p in buffer:
+            j = index.get(engine.plan.index(p))
+            others_buffered += j is None
+            if j is not None:
+                buf[j] += 1
+        try:
+            return tuple(self.core.moves(units, strategies, buf, others_buffered, seconds=seconds,
+                                         max_states=self.max_states))
+        except (_native.WindowCoreTooLarge, _native.WindowCoreTimeout):
+            return None
+
+
+@dataclass(frozen=True)
+class TwoLooks:
+    """A state's moves valued two looks deep (:func:`two_looks`): what a decision there needs, whatever its
+    look.
+
+    Parameters
+    ----------
+    moves : dict
+        ``(kind, part index, source)`` -> the expected cost after that move (``("install", i, "bin")``,
+        ``("buffer", i, None)``, ``("install", i, "buffer")``), of the moves some window allows.
+    value : float
+        The state's expected cost where each look takes its best move of ``moves`` (the shake's
+        continuation).
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]},
+    ...                                                           "t": {"b": ["c"], "a": ["b"]}}))
+    >>> deep = FrontierWindow(visible=1, capacity=1, several=(2,))._kept(engine, 0, 0b11, ())[1]
+    >>> deep.choose(engine, (), ("d",), 1.0), deep.moves[("install", 3, "bin")] < deep.value + 1.0
+    (Action(kind='install', part='d', source='bin'), True)
+    """
+
+    moves: dict
+    value: float
+
+    def choose(self, engine, buffer, visible, shake: float) -> Action:
+        """The move of least expected cost on a look (ties: install, then buffer, then declaration order,
+        the bin before the buffer, as the optimum's), or a shake where none is cheaper than shaking by
+        1e-12.  O(visible + buffer).
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        buffer, visible : tuple of str
+            The buffered parts and the look.
+        shake : float
+            The shake's cost.
+
+        Returns
+        -------
+        Action
+            The action.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b"], {}))
+        >>> looks = TwoLooks({("install", 0, "bin"): 1.0, ("buffer", 0, None): 2.0}, 1.5)
+        >>> looks.choose(engine, (), ("a",), 1.0), looks.choose(engine, (), ("b",), 1.0)
+        (Action(kind='install', part='a', source='bin'), Action(kind='shake', part=None, source=None))
+        """
+        plan, ranked = engine.plan, []
+        for i in {plan.index(p) for p in visible}:
+            for kind, source, order in (("install", "bin", 0), ("buffer", None, 1)):
+                if (kind, i, source) in self.moves:
+                    ranked.append((self.moves[kind, i, source], (order, i, 0), Action(kind, plan.parts[i].id, source)))
+        for i in {plan.index(p) for p in buffer}:
+            if ("install", i, "buffer") in self.moves:
+                ranked.append((self.moves["install", i, "buffer"], (0, i, 1),
+                               Action("install", plan.parts[i].id, "buffer")))
+        if not ranked:
+            return SHAKE
+        best = min(ranked, key=lambda r: r[:2])
+        return SHAKE if best[0] > shake + self.value + 1e-12 else best[2]
+
+
+def two_looks(engine, mask: int, consistent: int, buffer, tables, programmes, visible: int, costs: TimeModel,
+              deadline: Deadline | None = None) -> TwoLooks:
+    """A state's moves where several strategies' windows decide, two looks deep: a move that closes all but
+    one strategy at its window's value (the least over the windows, with the parts outside a look and a
+    move each after it); one that keeps several open (a buffering, an installation several allow) at its
+    motion and the value of the state it leads to where each look there takes its best move over the
+    windows, read from their programmes at that state (the option of choosing later at that state, not at
+    this one: a buffering that fills a location keeps less of it).  The state's own value, the shake's
+    continuation, takes each look's best of these.  O(moves × (window parts + parts × windows)).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask, consistent : int
+        The installed units and the open strategies (several).
+    buffer : tuple of str
+        The buffered parts.
+    tables : sequence of WindowTable
+        The state's windows (:meth:`FrontierWindow.tables`).
+    programmes : sequence
+        Their programmes, in the same order (kept by :class:`FrontierWindow` while it solves them).
+    visible : int
+        Parts per look.
+    costs : TimeModel
+        The costs of a motion, a look and a shake.
+    deadline : Deadline, optional
+        Stops a programme that must add states; a window that cannot answer is left out there.
+
+    Returns
+    -------
+    TwoLooks
+        The moves' values and the state's.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]},
+    ...                                                           "t": {"b": ["c"], "a": ["b"]}}))
+    >>> tables, deep = FrontierWindow(visible=1, capacity=1, several=(2,))._kept(engine, 0, 0b11, ())
+    >>> len(tables), sorted(deep.moves)[:2]
+    (2, [('buffer', 0, None), ('buffer', 1, None)])
+    """
+    plan, inf = engine.plan, float("inf")
+    seconds = as_deadline(deadline).seconds()
+    moves: dict[tuple, float] = {}
+    after: dict[tuple, float] = {}          # a state one move on -> its value over the windows there
+    for t in tables:
+        for (kind, i, source), value in _window_moves(engine, mask, buffer, t):
+            mask2, buffer2 = mask, tuple(buffer)
+            keeps = consistent
+            if kind == "install":
+                u = engine.next_unit(mask, i)
+                keeps, mask2 = engine.consistent_after(mask, consistent, u), mask | 1 << u
+                if source == "buffer":
+                    rest = list(buffer)
+                    rest.remove(plan.parts[i].id)
+                    buffer2 = tuple(rest)
+            else:
+                buffer2 = (*buffer, plan.parts[i].id)
+            if keeps.bit_count() > 1:
+                state = (mask2, keeps, tuple(sorted(buffer2)))
+                if state not in after:
+                    read = [(t2, prog.moves_at(engine, mask2, keeps, buffer2, seconds))
+                            for t2, prog in zip(tables, programmes)]
+                    there = [WindowTable(t2.parts, v, t2.outside, t2.size, t2.states, t2.rest) for t2, v in read if v]
+                    after[state] = _looks_over(engine, mask2, buffer2, there, visible, costs) if there else inf
+                value = float(costs.move(plan.parts[i].id)) + after[state] if after[state] < inf else value + t.rest
+            elif keeps:
+                value += t.rest
+            else:
+                continue
+            moves[kind, i, source] = min(moves.get((kind, i, source), inf), value)
+    best = {i: min(moves.get(("install", i, "bin"), inf), moves.get(("buffer", i, None), inf))
+            for i in _in_bin(engine, mask, buffer)}
+    from_buffer = min((v for (kind, _, source), v in moves.items() if source == "buffer"), default=inf)
+    return TwoLooks(moves, _shake_loop(engine, mask, buffer, best, from_buffer, visible, costs))
+
+
+def _window_moves(engine, mask: int, buffer, table: WindowTable):
+    """A window's moves at its state, of finite value: ``((kind, part index, source), value)``, for every part
+    with a unit in the bin (installed or buffered; one outside the window buffered as an other) and every
+    buffered window part (installed from the buffer).  O(parts)."""
+    plan, inf = engine.plan, float("inf")
+    index = {i: j for j, i in enumerate(table.parts)}
+    v = table.values
+    out = []
+    for i in _in_bin(engine, mask, buffer):
+        j = index.get(i)
+        out += [(("install", i, "bin"), inf if j is None else v[3 * j]),
+                (("buffer", i, None), v[-2] if j is None else v[3 * j + 1])]
+    for i in {plan.index(p) for p in buffer}:
+        j = index.get(i)
+        if j is not None:
+            out.append((("install", i, "buffer"), v[3 * j + 2]))
+    return [(key, value) for key, value in out if value < inf]
