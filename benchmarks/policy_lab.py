@@ -114,8 +114,9 @@ POLICY_VERSIONS = {"fallback": "the option of several strategies two looks deep"
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;
 #: then its state cap went from 20,000 to 30,000 (the compiled core made it affordable); then a window per
-#: open strategy, each look taking the least of their moves with the option value of keeping several open.
-BIN_VERSIONS = {("fallback", "pile"): "pile window of each strategy, with the looks' option value"}
+#: open strategy, each look taking the least of their moves with the option value of keeping several open;
+#: then a move keeping several open valued a look deeper, by the windows of the state it leads to.
+BIN_VERSIONS = {("fallback", "pile"): "pile window of each strategy, a move keeping several open a look deeper"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
@@ -124,7 +125,8 @@ SAME_ON_ONE_STRATEGY = {"fallback": ("frontier window", "frontier window of each
                                      "windows of several strategies larger, with the look's option value",
                                      "windows of several strategies tried up to twice the cap by their growth")}
 #: As :data:`SAME_ON_ONE_STRATEGY`, in a bin with a version of its own.
-BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",)}
+BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",
+                                                   "pile window of each strategy, with the looks' option value")}
 
 
 def policy_version(name: str, bin: str) -> str | None:

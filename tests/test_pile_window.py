@@ -307,3 +307,46 @@ def test_a_two_strategy_plan_takes_each_strategys_window_by_the_look():
     best = pile_solver(engine, visible=1, capacity=1).value()
     value = PileSolver(engine, window, visible=1, capacity=1).value()
     assert best <= value <= best * 1.03
+
+
+def _kept_open_checked(engine, costs, visible, capacity, mask, cons, buffer) -> int:
+    """Every move keeping several strategies open at a state, valued a look deeper by windows holding the whole
+    plan, against the pile optimum's expected cost after it; how many were compared."""
+    plan = engine.plan
+    optimum = PileSolver(engine, visible=visible, capacity=capacity, costs=costs)
+    window = PileWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), max_states=10**6)
+    key = optimum.policy_key(mask, cons, buffer)
+    checked = 0
+    for look, _ in optimum._looks(optimum._bin_counts(key)):
+        for cost, nxt, action in optimum._moves(key, look):
+            keeps = cons if action.kind == "buffer" else engine.consistent_after(
+                mask, cons, engine.next_unit(mask, plan.index(action.part)))
+            if keeps.bit_count() < 2:
+                continue
+            got = window._kept_open(engine, mask, cons, buffer, tuple(plan.parts[i].id for i in look), action, keeps)
+            assert got == pytest.approx(cost + optimum._after(key, look, action, nxt), rel=1e-9, abs=1e-9), action
+            checked += 1
+    return checked
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(plan=random_plans(max_parts=5, max_units=6, max_strategies=2), seed=st.integers(0, 1000))
+def test_a_move_keeping_strategies_open_is_valued_a_look_deeper_as_the_optimum_values_it(plan, seed):
+    """Where the windows hold the whole plan, a move that keeps several strategies open, valued a look deeper
+    by the windows of the state it leads to (the new top drawn, each look's best move over them, or a shake
+    and a fresh look), is the pile optimum's expected cost after that move, in every setting, a few moves
+    in: the same recursion computed a second way."""
+    rng = random.Random(seed)
+    engine, costs = OrderEngine(plan), _costs(plan, rng)
+    visible, capacity = rng.choice(SETTINGS)
+    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 2))
+    if mask != engine.full and cons.bit_count() > 1:
+        _kept_open_checked(engine, costs, visible, capacity, mask, cons, buffer)
+
+
+@pytest.mark.parametrize("visible, capacity", SETTINGS)
+def test_the_look_deeper_is_checked_on_a_two_strategy_plan_at_its_start(visible, capacity):
+    """The check above on a plan of two strategies at its start, where every buffering keeps both open."""
+    engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]}, "t": {"b": ["c"], "a": ["b"]}}))
+    costs = TimeModel(shake=1.3, look=0.2, parts={"a": 1.0, "b": 1.7, "c": 0.35, "d": 1.0})
+    assert _kept_open_checked(engine, costs, visible, capacity, 0, engine.all_strategies, ()) > 0

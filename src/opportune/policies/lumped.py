@@ -378,9 +378,9 @@ class LumpedWindow(DecidesOnMasks):
         if len(decided) == 1:
             (value, action, shake), self.last_table = decided[0]
             return SHAKE if action is None or value > shake + 1e-12 else action
-        return self._over_windows(engine, mask, consistent, buffer, decided)
+        return self._over_windows(engine, mask, consistent, buffer, decided, visible)
 
-    def _over_windows(self, engine, mask: int, consistent: int, buffer, decided) -> Action:
+    def _over_windows(self, engine, mask: int, consistent: int, buffer, decided, visible=()) -> Action:
         """Where several strategies' windows decide (the look chooses the strategy, as on the real plan, where
         its installations close the others): each window's best move on the look with its rest, the value of
         keeping several strategies open (:meth:`_option`) taken off the moves that keep them (a buffering, an
@@ -397,13 +397,21 @@ class LumpedWindow(DecidesOnMasks):
             keeps = consistent
             if action.kind == "install":
                 keeps = engine.consistent_after(mask, consistent, engine.next_unit(mask, plan.index(action.part)))
-            ranked.append((value + t.rest - option * (keeps.bit_count() > 1), n, action, t))
+            deeper = self._kept_open(engine, mask, consistent, buffer, visible, action, keeps) \
+                if keeps.bit_count() > 1 else None
+            ranked.append((value + t.rest - option * (keeps.bit_count() > 1) if deeper is None else deeper,
+                           n, action, t))
         best = min(ranked, key=lambda r: r[:2]) if ranked else None
         if best is None or best[0] > float(self.costs.shake) + least.value + least.rest - option + 1e-12:
             self.last_table = least
             return SHAKE
         self.last_table = best[3]
         return best[2]
+
+    def _kept_open(self, engine, mask: int, consistent: int, buffer, visible, action, keeps) -> float | None:
+        """A move keeping several strategies open valued a look deeper, by the windows of the state it leads
+        to (a subclass's; None here: the option value decides)."""
+        return None
 
     def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
         """What keeping several strategies open is worth at a state, one look deep, by its windows (a

@@ -22,8 +22,10 @@ a window is decided when it is solved (:class:`PileWindowTable`; :meth:`PileWind
 call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
 successors.  Where several strategies are open, a window of each one's frontier decides the look by the
-least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), the value of keeping several
-open computed over the fresh looks of their parts (:func:`fresh_look_value`).  The window's size is the
+least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`): a move that keeps several open
+is valued a look deeper, by the windows of the state it leads to (:meth:`PileWindow._kept_open`), and
+the shake less the value of keeping several open, computed over the fresh looks of their parts
+(:func:`fresh_look_value`).  The window's size is the
 largest predicted to fit
 :data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
 counted states, the same decision on every machine); where none fits, or past the deadline, the base rule
@@ -281,6 +283,52 @@ class PileWindow(LumpedWindow):
         ids = set(visible)
         return value, Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids)), shake
 
+    #: Whether a move keeping several strategies open is valued a look deeper (False: the one-look option
+    #: value, for measurement).
+    two_looks = True
+
+    def _kept_open(self, engine, mask: int, consistent: int, buffer, visible, action, keeps) -> float | None:
+        """A move keeping several strategies open valued a look deeper: its motion, then the look after it
+        (the top less the unit taken and one drawn from the hidden units; the same top after an
+        installation from the buffer), each taking its best move over the windows of the state the move
+        leads to, or a shake and a fresh look there (:func:`fresh_look_value`).  None where no window fits
+        there (the deadline, or the cap): the one-look option decides.  O(parts × windows) and the windows
+        of that state (cached)."""
+        if not self.two_looks:
+            return None
+        plan = engine.plan
+        i = plan.index(action.part)
+        look, after = list(visible), list(buffer)
+        if action.kind == "install":
+            mask2 = mask | 1 << engine.next_unit(mask, i)
+            if action.source == "buffer":
+                after.remove(action.part)
+            else:
+                look.remove(action.part)
+        else:
+            mask2 = mask
+            after.append(action.part)
+            look.remove(action.part)
+        move = float(self.costs.move(action.part))
+        if mask2 == engine.full:
+            return move
+        tables = self.tables(engine, mask2, keeps, tuple(after))
+        if not tables:
+            return None
+        fresh = fresh_look_value(engine, mask2, after, tables, self.visible, self.costs, tuning.PILE_OPTION_LOOKS)
+        shake = float(self.costs.shake) + (fresh if fresh < float("inf") else min(t.value + t.rest for t in tables))
+        c_look = float(self.costs.look)
+        if action.kind == "install" and action.source == "buffer":
+            return move + c_look + min(shake, _best_over(engine, tables, look))
+        hidden = [(((1 << p.quantity) - 1) << engine.first[j] & ~mask2).bit_count() for j, p in enumerate(plan.parts)]
+        for p in after + look:
+            hidden[plan.index(p)] -= 1
+        total = sum(hidden)
+        if total <= 0:
+            return move + c_look + min(shake, _best_over(engine, tables, look))
+        return move + c_look + sum(c / total * min(shake, _best_over(engine, tables, look + [plan.parts[j].id]))
+                                   for j, c in enumerate(hidden) if c > 0)
+
     def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
         """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
         values with their rests less the state's value where each fresh look (a shake's: the bin's units
@@ -380,6 +428,18 @@ def fresh_look_value(engine, mask: int, buffer, tables, visible: int, costs: Tim
         acc_pm, acc_p = acc_pm + p * m, acc_p + p
         value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
     return value
+
+
+def _best_over(engine, tables, look) -> float:
+    """The least over the windows of their best move on ``look`` (part ids) with their rests; inf where
+    none has a move.  O(windows × visible)."""
+    plan, best = engine.plan, float("inf")
+    for t in tables:
+        index = {i: j for j, i in enumerate(t.parts)}
+        chosen = t.actions.get(tuple(sorted(index.get(plan.index(p), len(t.parts)) for p in look)))
+        if chosen is not None:
+            best = min(best, chosen[3] + t.rest)
+    return best
 
 
 def _looks(sizes: list[int], k: int, start: int = 0):
