@@ -18,6 +18,7 @@ from opportune.engine import OrderEngine
 from opportune.planning.costs import TimeModel
 from opportune.policies.lookahead import Lookahead
 from opportune.policies.pile import PileSolver, pile_solver
+from opportune.policies.base import Action
 from opportune.policies.lumped import OTHERS, window_engine, window_plan
 from opportune.policies.pile_window import (
     CompiledPileWindowSolver,
@@ -315,6 +316,7 @@ def _kept_open_checked(engine, costs, visible, capacity, mask, cons, buffer) -> 
     plan = engine.plan
     optimum = PileSolver(engine, visible=visible, capacity=capacity, costs=costs)
     window = PileWindow(visible=visible, capacity=capacity, costs=costs, sizes=(64,), max_states=10**6)
+    window.look_deeper_locations = float("inf")     # the mechanism in every setting (by default, 1 location)
     key = optimum.policy_key(mask, cons, buffer)
     checked = 0
     for look, _ in optimum._looks(optimum._bin_counts(key)):
@@ -350,3 +352,14 @@ def test_the_look_deeper_is_checked_on_a_two_strategy_plan_at_its_start(visible,
     engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]}, "t": {"b": ["c"], "a": ["b"]}}))
     costs = TimeModel(shake=1.3, look=0.2, parts={"a": 1.0, "b": 1.7, "c": 0.35, "d": 1.0})
     assert _kept_open_checked(engine, costs, visible, capacity, 0, engine.all_strategies, ()) > 0
+
+
+def test_a_move_is_valued_a_look_deeper_only_up_to_its_buffer_locations():
+    """By default only with one location (measured to pay there, to lose with two): past it the one-look
+    option decides (None), within it the look-deeper value."""
+    engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]}, "t": {"b": ["c"], "a": ["b"]}}))
+    action = Action("buffer", "d")
+    for capacity, deeper in ((1, True), (2, False), (None, False)):
+        window = PileWindow(visible=1, capacity=capacity)
+        got = window._kept_open(engine, 0, engine.all_strategies, (), ("d",), action, engine.all_strategies)
+        assert (got is not None) == deeper, capacity

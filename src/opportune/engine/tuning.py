@@ -472,6 +472,12 @@ PILE_WINDOW_CACHE = 512
 #: (at 3 visible, windows of about 20 parts) the value is 0 and each look takes the least of the windows'
 #: moves alone (policies/pile_window.py).  Each look costs a dictionary look-up a window.
 PILE_OPTION_LOOKS = 2_000
+#: Where several strategies are open, the pile window values a move that keeps them open a look deeper (by
+#: the windows of the state it leads to) with at most this many buffer locations; with more, by the one-look
+#: option value (policies/pile_window.py).  Measured: with 1 location, exact, the worst 20-part two-strategy
+#: plan +1.951% -> +0.776%; with 2 locations, along 40 seeded runs, it made r2-16x2 and r2-20x2 worse at 1-3
+#: visible (+0.67% -> +2.14% at 1 visible on r2-16x2; docs/decisions.md).
+PILE_LOOK_DEEPER_LOCATIONS = 1
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.

@@ -23,7 +23,8 @@ call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
 successors.  Where several strategies are open, a window of each one's frontier decides the look by the
 least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`): a move that keeps several open
-is valued a look deeper, by the windows of the state it leads to (:meth:`PileWindow._kept_open`), and
+is valued a look deeper, by the windows of the state it leads to (:meth:`PileWindow._kept_open`; with one
+buffer location, where it was measured to pay), and
 the shake less the value of keeping several open, computed over the fresh looks of their parts
 (:func:`fresh_look_value`).  The window's size is the
 largest predicted to fit
@@ -286,15 +287,19 @@ class PileWindow(LumpedWindow):
     #: Whether a move keeping several strategies open is valued a look deeper (False: the one-look option
     #: value, for measurement).
     two_looks = True
+    #: Buffer locations up to which it is (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`).
+    look_deeper_locations: float = tuning.PILE_LOOK_DEEPER_LOCATIONS
 
     def _kept_open(self, engine, mask: int, consistent: int, buffer, visible, action, keeps) -> float | None:
         """A move keeping several strategies open valued a look deeper: its motion, then the look after it
         (the top less the unit taken and one drawn from the hidden units; the same top after an
         installation from the buffer), each taking its best move over the windows of the state the move
         leads to, or a shake and a fresh look there (:func:`fresh_look_value`).  None where no window fits
-        there (the deadline, or the cap): the one-look option decides.  O(parts × windows) and the windows
+        there (the deadline, or the cap), or past :data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`
+        buffer locations: the one-look option decides.  O(parts × windows) and the windows
         of that state (cached)."""
-        if not self.two_looks:
+        locations = float("inf") if self.capacity is None else self.capacity
+        if not self.two_looks or locations > self.look_deeper_locations:
             return None
         plan = engine.plan
         i = plan.index(action.part)
@@ -407,7 +412,7 @@ def fresh_look_value(engine, mask: int, buffer, tables, visible: int, costs: Tim
         sizes.append(sum(counts) - sum(sizes))
     total = sum(sizes)
     k = min(visible, total)
-    if most is not None and comb(len(groups) + k - 1, k) > most:
+    if most is not None and k and comb(len(groups) + k - 1, k) > most:     # k = 0: every unit left buffered
         return float("inf")
     maps = [{i: j for j, i in enumerate(t.parts)} for t in tables]
     pairs = []
