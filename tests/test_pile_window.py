@@ -77,15 +77,21 @@ def _walk(engine, rng: random.Random, moves: int):
     return mask, cons, buffer
 
 
+def _somewhere(plan, seed: int, moves: int):
+    """The plan's engine, costs per part, a setting and a state up to ``moves`` random moves in, from
+    ``seed``."""
+    rng = random.Random(seed)
+    engine, costs = OrderEngine(plan), _costs(plan, rng)
+    visible, capacity = rng.choice(SETTINGS)
+    return engine, costs, visible, capacity, _walk(engine, rng, rng.randint(0, moves))
+
+
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(plan=random_plans(max_parts=5, max_units=7, max_strategies=3), seed=st.integers(0, 1000))
 def test_a_window_over_the_whole_plan_is_the_pile_optimum_to_the_last_bit(plan, seed):
     """Several strategies and quantities, costs per part, at the start and a few moves in: the window's value
     after a shake is the pile optimum's, the same doubles, and its action on every look is the optimum's."""
-    rng = random.Random(seed)
-    engine, costs = OrderEngine(plan), _costs(plan, rng)
-    visible, capacity = rng.choice(SETTINGS)
-    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 3))
+    engine, costs, visible, capacity, (mask, cons, buffer) = _somewhere(plan, seed, 3)
     if mask == engine.full:
         return
     optimum = pile_solver(engine, visible=visible, capacity=capacity, costs=costs)
@@ -280,10 +286,7 @@ def test_the_fresh_looks_over_one_window_give_its_own_value(plan, seed):
     them, give the window's value after a shake from its compiled programme (plus its rest): the looks'
     chances and the moves' values that the option of keeping several strategies open is built from, checked
     by a second method, in every setting, a few moves in."""
-    rng = random.Random(seed)
-    engine, costs = OrderEngine(plan), _costs(plan, rng)
-    visible, capacity = rng.choice(SETTINGS)
-    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 3))
+    engine, costs, visible, capacity, (mask, cons, buffer) = _somewhere(plan, seed, 3)
     if mask == engine.full:
         return
     window = PileWindow(visible=visible, capacity=capacity, costs=costs, sizes=(2, 3))
@@ -338,10 +341,7 @@ def test_a_move_keeping_strategies_open_is_valued_a_look_deeper_as_the_optimum_v
     by the windows of the state it leads to (the new top drawn, each look's best move over them, or a shake
     and a fresh look), is the pile optimum's expected cost after that move, in every setting, a few moves
     in: the same recursion computed a second way."""
-    rng = random.Random(seed)
-    engine, costs = OrderEngine(plan), _costs(plan, rng)
-    visible, capacity = rng.choice(SETTINGS)
-    mask, cons, buffer = _walk(engine, rng, rng.randint(0, 2))
+    engine, costs, visible, capacity, (mask, cons, buffer) = _somewhere(plan, seed, 2)
     if mask != engine.full and cons.bit_count() > 1:
         _kept_open_checked(engine, costs, visible, capacity, mask, cons, buffer)
 

@@ -380,7 +380,7 @@ class LumpedWindow(DecidesOnMasks):
             return SHAKE if action is None or value > shake + 1e-12 else action
         return self._over_windows(engine, mask, consistent, buffer, decided, visible)
 
-    def _over_windows(self, engine, mask: int, consistent: int, buffer, decided, visible=()) -> Action:
+    def _over_windows(self, engine, mask: int, consistent: int, buffer, decided, visible) -> Action:
         """Where several strategies' windows decide (the look chooses the strategy, as on the real plan, where
         its installations close the others): each window's best move on the look with its rest, the value of
         keeping several strategies open (:meth:`_option`) taken off the moves that keep them (a buffering, an

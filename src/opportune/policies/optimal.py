@@ -563,14 +563,7 @@ class OptimalSolver:
 
     def _shake_loop(self, best_per_look) -> float:
         """The least over prefixes of ``(m, p)`` pairs in increasing ``m`` (see the module's docstring)."""
-        c_look, c_shake = self.costs.look, self.costs.shake
-        acc_pm, acc_p, v = 0.0, 0.0, float("inf")
-        for m, p in best_per_look:
-            if m == float("inf"):
-                break
-            acc_pm += p * m
-            acc_p += p
-            v = min(v, (c_look + acc_pm + (1.0 - acc_p) * c_shake) / acc_p)
+        v = shake_loop(best_per_look, self.costs.look, self.costs.shake)
         if v == float("inf"):
             raise RuntimeError("no look allows any action: the assembly cannot proceed")
         return v
@@ -616,6 +609,41 @@ class OptimalSolver:
         if best is None or best_cost > shake_cost + 1e-12:
             return SHAKE, shake_cost
         return best[1], best_cost
+
+
+def shake_loop(best_per_look, look: float, shake: float) -> float:
+    """A state's value from its looks: each look of chance ``p`` taking a move of expected cost ``m`` or a
+    shake (and a fresh look), the looks acted on those of least ``m``: the least over prefixes of the
+    ``(m, p)`` pairs, given in increasing ``m``, of (look + Σ p·m + (1 − Σ p)·shake) / Σ p (see the
+    module's docstring); inf where no look has a move.  O(looks).
+
+    Parameters
+    ----------
+    best_per_look : iterable of (float, float)
+        Each look's best move's expected cost (inf: none) and its chance, in increasing cost.
+    look, shake : float
+        The costs of a look and of a shake.
+
+    Returns
+    -------
+    float
+        The value, or inf.
+
+    Examples
+    --------
+    >>> shake_loop([(1.0, 0.5), (5.0, 0.5)], 0.0, 1.0)      # act on the first look only: 1 + 1 = 2
+    2.0
+    >>> shake_loop([(float("inf"), 1.0)], 0.0, 1.0)
+    inf
+    """
+    acc_pm, acc_p, v = 0.0, 0.0, float("inf")
+    for m, p in best_per_look:
+        if m == float("inf"):
+            break
+        acc_pm += p * m
+        acc_p += p
+        v = min(v, (look + acc_pm + (1.0 - acc_p) * shake) / acc_p)
+    return v
 
 
 def same_action(a: Action, b: Action) -> bool:

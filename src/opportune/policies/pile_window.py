@@ -46,8 +46,9 @@ from opportune.engine.deadline import as_deadline
 from opportune.planning.costs import TimeModel
 from opportune.policies.base import Action
 from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
+from opportune.policies.optimal import shake_loop
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
-from opportune.policies.window import outside_rest
+from opportune.policies.window import in_bin, outside_rest
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "fresh_look_value",
            "pile_window_available", "pile_window_solver"]
@@ -284,10 +285,8 @@ class PileWindow(LumpedWindow):
         ids = set(visible)
         return value, Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids)), shake
 
-    #: Whether a move keeping several strategies open is valued a look deeper (False: the one-look option
-    #: value, for measurement).
-    two_looks = True
-    #: Buffer locations up to which it is (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`).
+    #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
+    #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).
     look_deeper_locations: float = tuning.PILE_LOOK_DEEPER_LOCATIONS
 
     def _kept_open(self, engine, mask: int, consistent: int, buffer, visible, action, keeps) -> float | None:
@@ -299,21 +298,14 @@ class PileWindow(LumpedWindow):
         buffer locations: the one-look option decides.  O(parts × windows) and the windows
         of that state (cached)."""
         locations = float("inf") if self.capacity is None else self.capacity
-        if not self.two_looks or locations > self.look_deeper_locations:
+        if locations > self.look_deeper_locations:
             return None
         plan = engine.plan
-        i = plan.index(action.part)
         look, after = list(visible), list(buffer)
-        if action.kind == "install":
-            mask2 = mask | 1 << engine.next_unit(mask, i)
-            if action.source == "buffer":
-                after.remove(action.part)
-            else:
-                look.remove(action.part)
-        else:
-            mask2 = mask
+        mask2 = mask | 1 << engine.next_unit(mask, plan.index(action.part)) if action.kind == "install" else mask
+        if action.kind == "buffer":
             after.append(action.part)
-            look.remove(action.part)
+        (after if action.source == "buffer" else look).remove(action.part)
         move = float(self.costs.move(action.part))
         if mask2 == engine.full:
             return move
@@ -322,17 +314,14 @@ class PileWindow(LumpedWindow):
             return None
         fresh = fresh_look_value(engine, mask2, after, tables, self.visible, self.costs, tuning.PILE_OPTION_LOOKS)
         shake = float(self.costs.shake) + (fresh if fresh < float("inf") else min(t.value + t.rest for t in tables))
-        c_look = float(self.costs.look)
-        if action.kind == "install" and action.source == "buffer":
-            return move + c_look + min(shake, _best_over(engine, tables, look))
-        hidden = [(((1 << p.quantity) - 1) << engine.first[j] & ~mask2).bit_count() for j, p in enumerate(plan.parts)]
-        for p in after + look:
-            hidden[plan.index(p)] -= 1
-        total = sum(hidden)
-        if total <= 0:
-            return move + c_look + min(shake, _best_over(engine, tables, look))
-        return move + c_look + sum(c / total * min(shake, _best_over(engine, tables, look + [plan.parts[j].id]))
-                                   for j, c in enumerate(hidden) if c > 0)
+        maps, top = _maps(tables), [plan.index(p) for p in look]
+        # an installation from the buffer leaves the top as it was; else a hidden unit takes the place taken
+        hidden = {} if action.source == "buffer" else in_bin(engine, mask2, after + look)
+        total = sum(hidden.values())
+        if not total:
+            return move + float(self.costs.look) + min(shake, _best_over(tables, maps, top))
+        return move + float(self.costs.look) + sum(c / total * min(shake, _best_over(tables, maps, top + [j]))
+                                                   for j, c in hidden.items())
 
     def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
         """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
@@ -401,47 +390,33 @@ def fresh_look_value(engine, mask: int, buffer, tables, visible: int, costs: Tim
     >>> round(fresh_look_value(engine, 0, (), [table], 1, window.costs), 9) == round(table.value, 9)
     True
     """
-    plan = engine.plan
-    counts = [(((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)]
-    for p in buffer:
-        counts[plan.index(p)] -= 1
-    groups: list = [i for i in sorted({i for t in tables for i in t.parts}) if counts[i] > 0]
+    counts = in_bin(engine, mask, buffer)
+    groups: list = [i for i in sorted({i for t in tables for i in t.parts}) if i in counts]
     sizes = [counts[i] for i in groups]
-    if sum(counts) > sum(sizes):
-        groups.append(None)         # the units of the parts outside every window
-        sizes.append(sum(counts) - sum(sizes))
+    if sum(counts.values()) > sum(sizes):
+        groups.append(-1)           # the units of the parts outside every window
+        sizes.append(sum(counts.values()) - sum(sizes))
     total = sum(sizes)
     k = min(visible, total)
     if most is not None and k and comb(len(groups) + k - 1, k) > most:     # k = 0: every unit left buffered
         return float("inf")
-    maps = [{i: j for j, i in enumerate(t.parts)} for t in tables]
-    pairs = []
-    for look, ways in _looks(sizes, k):
-        best = float("inf")
-        for t, index in zip(tables, maps):
-            n = len(t.parts)
-            chosen = t.actions.get(tuple(sorted(index.get(groups[g], n) for g in look)))
-            if chosen is not None:
-                best = min(best, chosen[3] + t.rest)
-        pairs.append((best, ways / comb(total, k)))
-    pairs.sort()
-    acc_pm = acc_p = 0.0
-    value = float("inf")
-    for m, p in pairs:
-        if m == float("inf"):
-            break
-        acc_pm, acc_p = acc_pm + p * m, acc_p + p
-        value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
-    return value
+    maps = _maps(tables)
+    pairs = sorted((_best_over(tables, maps, [groups[g] for g in look]), ways / comb(total, k))
+                   for look, ways in _looks(sizes, k))
+    return shake_loop(pairs, costs.look, costs.shake)
 
 
-def _best_over(engine, tables, look) -> float:
-    """The least over the windows of their best move on ``look`` (part ids) with their rests; inf where
-    none has a move.  O(windows × visible)."""
-    plan, best = engine.plan, float("inf")
-    for t in tables:
-        index = {i: j for j, i in enumerate(t.parts)}
-        chosen = t.actions.get(tuple(sorted(index.get(plan.index(p), len(t.parts)) for p in look)))
+def _maps(tables) -> list[dict[int, int]]:
+    """Per window, plan index -> its group (the others, ``len(parts)``, are the missing ones).  O(parts)."""
+    return [{i: j for j, i in enumerate(t.parts)} for t in tables]
+
+
+def _best_over(tables, maps, look) -> float:
+    """The least over the windows of their best move on ``look`` (plan indices; a part outside a window is
+    one of its others) with their rests; inf where none has a move.  O(windows × visible)."""
+    best = float("inf")
+    for t, index in zip(tables, maps):
+        chosen = t.actions.get(tuple(sorted(index.get(i, len(t.parts)) for i in look)))
         if chosen is not None:
             best = min(best, chosen[3] + t.rest)
     return best

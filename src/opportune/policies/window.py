@@ -52,10 +52,11 @@ from opportune.engine.tuning import (  # tuning.py says why
     WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_GROWTH_SEVERAL, WINDOW_OPTION_LOOKS, WINDOW_PARTS, WINDOW_PARTS_SEVERAL,
     WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
+from opportune.policies.optimal import shake_loop
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "frontier_window", "joint_window", "option_value",
-           "outside_rest", "two_looks", "window_available", "window_strategies"]
+__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "frontier_window", "joint_window", "in_bin",
+           "option_value", "outside_rest", "two_looks", "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -1002,7 +1003,7 @@ def _looks_over(engine, mask: int, buffer, tables, visible: int, costs: TimeMode
     """The state's value where each look takes its best move over the windows ``tables`` (their values at
     this state), the shake loop over the looks.  O(parts × windows)."""
     plan, inf = engine.plan, float("inf")
-    best = {i: inf for i in _in_bin(engine, mask, buffer)}
+    best = {i: inf for i in in_bin(engine, mask, buffer)}
     from_buffer = inf
     for t in tables:
         index = {i: j for j, i in enumerate(t.parts)}
@@ -1017,8 +1018,32 @@ def _looks_over(engine, mask: int, buffer, tables, visible: int, costs: TimeMode
     return _shake_loop(engine, mask, buffer, best, from_buffer, visible, costs)
 
 
-def _in_bin(engine, mask: int, buffer) -> dict[int, int]:
-    """Part -> its units in the bin (not installed, not buffered), of the parts that have some.  O(parts)."""
+def in_bin(engine, mask: int, buffer) -> dict[int, int]:
+    """Each part's units in the bin (not installed, not in ``buffer``), of the parts that have some.
+    O(parts).
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask : int
+        The installed units.
+    buffer : iterable of str
+        The parts out of the bin (buffered, or on a pile's top), a unit each, repeats counted.
+
+    Returns
+    -------
+    dict of int to int
+        Part index -> its units in the bin.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+    >>> in_bin(engine, 0b001, ("b",))       # a installed, b buffered
+    {2: 1}
+    """
     plan = engine.plan
     counts = {i: (((1 << p.quantity) - 1) << engine.first[i] & ~mask).bit_count() for i, p in enumerate(plan.parts)}
     for p in buffer:
@@ -1033,22 +1058,16 @@ def _shake_loop(engine, mask: int, buffer, best: dict[int, float], from_buffer: 
     parts' units, the shake loop over them, as the optimum's; inf where no look allows a move.  With every
     unit left buffered, ``from_buffer``.  O(parts log parts)."""
     inf = float("inf")
-    counts = _in_bin(engine, mask, buffer)
+    counts = in_bin(engine, mask, buffer)
     n = sum(counts.values())
     if n == 0:          # every unit left is buffered: no part is seen
         return from_buffer
     k, rank, total = min(visible, n), 0, float(comb(n, min(visible, n)))
-    acc_pm = acc_p = 0.0
-    value = inf
+    pairs = []      # the chance that a part is the best one seen: order statistics of the units
     for b, i in sorted((best.get(i, inf), i) for i in counts):
-        m = min(b, from_buffer)
-        if m == inf:
-            break
-        p = float(comb(n - rank, k) - comb(n - rank - counts[i], k)) / total
+        pairs.append((min(b, from_buffer), float(comb(n - rank, k) - comb(n - rank - counts[i], k)) / total))
         rank += counts[i]
-        acc_pm, acc_p = acc_pm + p * m, acc_p + p
-        value = min(value, (costs.look + acc_pm + (1.0 - acc_p) * costs.shake) / acc_p)
-    return value
+    return shake_loop(pairs, costs.look, costs.shake)
 
 
 class _Programme:
@@ -1234,7 +1253,7 @@ def two_looks(engine, mask: int, consistent: int, buffer, tables, programmes, vi
                 continue
             moves[kind, i, source] = min(moves.get((kind, i, source), inf), value)
     best = {i: min(moves.get(("install", i, "bin"), inf), moves.get(("buffer", i, None), inf))
-            for i in _in_bin(engine, mask, buffer)}
+            for i in in_bin(engine, mask, buffer)}
     from_buffer = min((v for (kind, _, source), v in moves.items() if source == "buffer"), default=inf)
     return TwoLooks(moves, _shake_loop(engine, mask, buffer, best, from_buffer, visible, costs))
 
@@ -1247,7 +1266,7 @@ def _window_moves(engine, mask: int, buffer, table: WindowTable):
     index = {i: j for j, i in enumerate(table.parts)}
     v = table.values
     out = []
-    for i in _in_bin(engine, mask, buffer):
+    for i in in_bin(engine, mask, buffer):
         j = index.get(i)
         out += [(("install", i, "bin"), inf if j is None else v[3 * j]),
                 (("buffer", i, None), v[-2] if j is None else v[3 * j + 1])]
