@@ -9,6 +9,12 @@ the server's RSS growth and the bytes the plan book accounts.
     .venv/bin/python benchmarks/bench_service_plans.py --memory 5 --cap-mb 600   # five 10,000-unit plans
     .venv/bin/python benchmarks/bench_service_plans.py salbp:ARC111 --before 20   # looks after 20 whole runs
 
+``--optimum CAPACITY`` instead times the look-ahead's optimum prepared in the background for runs with that
+many buffer locations: looks of seeded runs while it is under way (their latency, and who decided), the
+seconds until it is ready, and looks after it (the optimum deciding).
+
+    .venv/bin/python benchmarks/bench_service_plans.py salbp:KILBRID --optimum 1 --pause 0.5
+
 ``--before N`` drives N whole runs of each plan to completion first (one engine, as a long-running cell
 uses it) and times the looks of the run after them.
 
@@ -118,6 +124,52 @@ def bench_plans(names: list[str], looks: int, before: int = 0) -> None:
               f"{(loaded.nbytes >> 20) if loaded else 'evicted'} |")
 
 
+def drive_rules(app: App, pid: str, capacity: int, seed: int, pause: float = 0.0) -> tuple[list[float], int, int]:
+    """One whole seeded run with ``capacity`` buffer locations, ``pause`` seconds between an outcome and the next
+    look (the robot's motion): (look seconds, looks the optimum decided, looks)."""
+    from opportune.policies.lookahead import Lookahead
+
+    rng = random.Random(seed)
+    run = app.post("/runs", {"plan": pid, "buffer_capacity": capacity})[0].json()
+    times, optimum = [], 0
+    while run["status"] != "complete":
+        in_bin = [p for p, n in run["state"]["in_bin"].items() for _ in range(n)]
+        r, dt = app.post(f"/runs/{run['id']}/looks", {"visible": rng.sample(in_bin, min(2, len(in_bin)))})
+        if r.status_code != 200:
+            print("  look:", r.status_code, r.text[:200])
+            break
+        times.append(dt)
+        optimum += r.json()["decision"]["rule"] == Lookahead.OPTIMAL_RULE
+        run = app.post(f"/runs/{run['id']}/outcomes", {"outcome": "success"})[0].json()["run"]
+        time.sleep(pause)
+    return times, optimum, len(times)
+
+
+def bench_optimum(names: list[str], capacity: int, cap_mb: int | None, pause: float) -> None:
+    app = App(memory_cap=cap_mb << 20 if cap_mb else None)
+    print("| plan | buffer | runs while under way | looks | by the optimum | p50 ms | p99 ms | max ms | ready after s "
+          "| CPU s | state | looks after | by the optimum | p50 ms | p99 ms |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for name in names:
+        r, _ = app.post("/plans", plan_doc(name))
+        pid = r.json()["id"]
+        t0, c0 = time.perf_counter(), time.process_time()
+        app.post("/runs", {"plan": pid, "buffer_capacity": capacity})
+        loaded = {p.id: p for p in app.book.loaded()}[pid]
+        during, by, runs = [], 0, 0
+        while loaded.optima.get(("lookahead", capacity)) in ("waiting", "under way"):
+            times, opt, _ = drive_rules(app, pid, capacity, runs, pause)
+            during, by, runs = during + times, by + opt, runs + 1
+        ready, cpu = time.perf_counter() - t0, time.process_time() - c0
+        after, by_after = [], 0
+        for i in range(3):
+            times, opt, _ = drive_rules(app, pid, capacity, 1000 + i)
+            after, by_after = after + times, by_after + opt
+        print(f"| {name} | {capacity} | {runs} | {len(during)} | {by} | {ms(during, .5)} | {ms(during, .99)} | "
+              f"{ms(during, 1)} | {ready:.1f} | {cpu:.1f} | {loaded.optima[('lookahead', capacity)]} | {len(after)} | "
+              f"{by_after} | {ms(after, .5)} | {ms(after, .99)} |")
+
+
 def bench_memory(plans: int, cap_mb: int | None) -> None:
     app = App(memory_cap=cap_mb << 20 if cap_mb else None)
     print(f"cap {app.book.memory_cap >> 20} MB, a plan's share {app.book.share >> 20} MB")
@@ -139,12 +191,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--before", type=int, default=0, metavar="N",
                     help="whole runs of each plan driven to completion before the timed one (default 0)")
     ap.add_argument("--memory", type=int, metavar="N", help="instead: N distinct 10,000-unit plans, one after another")
-    ap.add_argument("--cap-mb", type=int, help="with --memory: the memory cap in MB (default: a quarter of the memory)")
+    ap.add_argument("--cap-mb", type=int, help="with --memory or --optimum: the memory cap in MB (default: a quarter "
+                                               "of the memory)")
+    ap.add_argument("--pause", type=float, default=0.0, help="with --optimum: seconds between an outcome and the "
+                                                             "next look while it is under way (default 0)")
+    ap.add_argument("--optimum", type=int, metavar="CAPACITY",
+                    help="instead: the look-ahead's optimum prepared in the background for runs of CAPACITY locations")
     args = ap.parse_args(argv)
     print(f"# {os.uname().machine}, {os.cpu_count()} cores, Python {sys.version.split()[0]}, "
           f"load average {os.getloadavg()[0]:.1f}")
     if args.memory:
         bench_memory(args.memory, args.cap_mb)
+    elif args.optimum is not None:
+        bench_optimum(args.plans or ["salbp:KILBRID"], args.optimum, args.cap_mb, args.pause)
     else:
         bench_plans(args.plans or ["free:10000"], args.looks, args.before)
     return 0

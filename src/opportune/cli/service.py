@@ -81,6 +81,10 @@ def serve(
     warm_up_seconds: float = typer.Option(30.0, "--warm-up-seconds", min=0.0, max=3600.0,
                                           help="Most seconds a plan's warm-up (counting its first state, once per "
                                                "plan, in the background) may take"),
+    optimum_seconds: float = typer.Option(600.0, "--optimum-seconds", min=0.0, max=86400.0,
+                                          help="With a decision budget, most seconds the preparation of the "
+                                               "look-ahead's exact optimum may take, in the background, once per "
+                                               "plan and setting (its runs decide by it once it is ready)"),
     poll_seconds: float = typer.Option(2.0, "--poll-seconds", min=0.05, max=86400.0,
                                        help="How often an event stream looks for changes made by other processes "
                                             "(PostgreSQL also pushes them at once)"),
@@ -135,7 +139,8 @@ def serve(
     try:
         run(db_url=store.url, host=host, port=port, max_body=max_body, access_log=access_log, workers=workers,
             settings={"memory_cap": None if memory_cap is None else memory_cap << 20,
-                      "warm_up_seconds": warm_up_seconds, "sse_poll_seconds": poll_seconds,
+                      "warm_up_seconds": warm_up_seconds, "optimum_seconds": optimum_seconds,
+                      "sse_poll_seconds": poll_seconds,
                       "request_seconds": request_seconds}, opcua=options, http=http)
     except Exception as exc:
         from opportune.service.opcua import OpcUaError

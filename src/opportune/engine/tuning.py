@@ -328,9 +328,14 @@ EVALUATE_BYTES = {"compiled": 96, "Python": BYTES_PER_STATE}
 # ------------------------------------------------------------ the look-ahead and the rollout (policies/lookahead.py, rollout.py)
 # Measured with benchmarks/bench_optimum.py, benchmarks/policy_lab.py and tests/test_pile_compiled.py.
 
-#: The compiled optimum decides on plans of up to this many states (about a million states a second
-#: without a budget: a warm-up of seconds); :attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`.
-LOOKAHEAD_COMPILED_STATES = 5_000_000
+#: The compiled optimum decides on plans of up to this many states, work done once per plan and setting
+#: and shared by its runs: at most 1.1 GB (a table of 2^26 16-byte slots, at most half full; the engine
+#: must grant the bytes), and 60-110 CPU seconds at the most (KILBRID with two buffer locations: 27,523,885
+#: states, 89 CPU s at load 2-4, where the frontier window was 4-8% from the optimum); plans of a few
+#: million states take seconds.  Without a budget it is solved in the first decision; with one, in the
+#: background (:meth:`~opportune.policies.lookahead.Lookahead.prepare`) while the window decides;
+#: :attr:`~opportune.policies.lookahead.Lookahead.COMPILED_STATES`.
+LOOKAHEAD_COMPILED_STATES = 32_000_000
 #: Where the optimum does not fit in a pile or weighted bin, plans of more units than this decide as the
 #: base does: the step over the base evaluates the base look by look in Python, hours on a 45-part plan.
 LOOKAHEAD_STEP_UNITS = 16

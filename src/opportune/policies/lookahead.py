@@ -43,8 +43,20 @@ from opportune.policies.window import FrontierWindow, window_available
 __all__ = ["Lookahead", "programme_bytes"]
 
 # The look-ahead's programmes are kept on their engine (OrderEngine.kept, freed with it), by settings:
-# see Lookahead._values.
+# see Lookahead._values.  Optima prepared as per-plan work (Lookahead.prepare): those under way, and
+# those finished, which a look-ahead with a budget takes up at its next decision.
 _KEPT = "lookahead programmes"
+_PREPARING = "lookahead optima under way"
+_READY = "lookahead optima ready"
+
+
+class _Preparation:
+    """An optimum under way (:meth:`Lookahead.prepare`): its listing, then its solver; or why it does not fit."""
+
+    def __init__(self, listing, cap: int):
+        self.listing, self.cap = listing, cap
+        self.solver = None
+        self.refusal: str | None = None
 
 
 def programme_bytes(engine) -> int:
@@ -294,16 +306,12 @@ class Lookahead(DecidesOnMasks):
                     return None         # the frontier window decides
                 if base is not None and engine.n_units > self.STEP_UNITS:
                     return None         # the step over the base is out of reach: the base decides
-                if self.pile:
-                    from opportune.policies.pile import PileSolver, pile_solver
+                if base is None:
+                    ev = self._optimum_solver(engine)
+                elif self.pile:
+                    from opportune.policies.pile import PileSolver
 
-                    if base is None:
-                        ev = pile_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
-                    else:
-                        ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
-                elif base is None:
-                    ev = optimal_solver(engine, max_states=self._optimum_cap(engine), merge=self._merges(engine),
-                                        **self.settings)
+                    ev = PileSolver(engine, base, max_states=self.max_states, **self.settings)
                 else:
                     ev = PolicyEvaluator(engine, base, max_states=self.max_states, **self.settings)
                 if base is None:
@@ -313,6 +321,14 @@ class Lookahead(DecidesOnMasks):
             self._evaluator = ev
             self._too_large = False
         return self._evaluator
+
+    def _optimum_solver(self, engine):
+        """The optimum's programme of this bin and settings on ``engine``, not started."""
+        if self.pile:
+            from opportune.policies.pile import pile_solver
+
+            return pile_solver(engine, max_states=self._optimum_cap(engine), **self.settings)
+        return optimal_solver(engine, max_states=self._optimum_cap(engine), merge=self._merges(engine), **self.settings)
 
     def _window_serves(self, engine) -> bool:
         """Whether the frontier window decides where the optimum does not fit: a uniform bin and the
@@ -406,7 +422,7 @@ class Lookahead(DecidesOnMasks):
         if not self.optimal:
             self.refusal = self.SWITCHED_OFF
             return False
-        from opportune.policies.states import big, estimate_states
+        from opportune.policies.states import estimate_states
 
         seconds = None if self.lookahead_budget is None else self.lookahead_budget / LOOKAHEAD_LISTING_PARTS
         # without a budget, a caller's deadline (evaluate --time-limit) stops the listing too: it is then out
@@ -418,20 +434,124 @@ class Lookahead(DecidesOnMasks):
         if self.lookahead_budget is None and not est.exact and est.low <= cap and until.expired():
             raise OutOfTime("the look-ahead's listing of its optimum's states passed its deadline")
         self._optimum_states = est.states
-        if est.exact and est.states <= cap:
-            pass
-        elif est.low > cap or est.states > cap:
-            self.refusal = f"its optimum needs {est.describe()} states, more than {cap:,}"
-            return False
-        else:       # only with a budget: the listing was cut by the clock, not by the cap
+        if not est.exact and est.low <= cap and est.states <= cap:
+            # only with a budget: the listing was cut by the clock, not by the cap
             self.refusal = (f"its states could not be listed within a third of the decision budget "
-                            f"({est.describe()} so far; the cap is {cap:,})")
+                            f"({est.describe()} so far; the cap is {cap:,}; prepare it as per-plan work: "
+                            "the service does so in the background)")
             return False
+        self.refusal = self._refusal(engine, est, cap)
+        return self.refusal is None
+
+    def _refusal(self, engine, est, cap: int) -> str | None:
+        """Why the optimum does not fit by a finished listing ``est`` (its states over ``cap``, or its bytes
+        not granted by the engine), else None with its bytes granted.  O(programmes)."""
+        if not est.exact or est.states > cap:
+            return f"its optimum needs {est.describe()} states, more than {cap:,}"
+        from opportune.policies.states import big
+
         need = self._optimum_bytes(engine, est)
         if not engine.reserve_programme(("lookahead optimum", self._share_key() or id(self)), need):
-            self.refusal = f"its optimum needs {big(need)} bytes, more than the plan's memory share grants"
+            return f"its optimum needs {big(need)} bytes, more than the plan's memory share grants"
+        return None
+
+    def prepare(self, engine, until=None) -> bool | None:
+        """Build the optimum's programme for ``engine`` and these settings as per-plan work, without a
+        decision budget: list its states, grant its bytes, solve it, going on where the last call stopped
+        (in slices, e.g. in a service's idle time); once finished it is shared with every look-ahead of the
+        same settings on ``engine``, and one with a budget that decides by its window because its listing did
+        not fit a third of the budget takes it up at its next decision.  The states and bytes it may take are
+        the decisions' own (:attr:`COMPILED_STATES`, the engine's grant).  O(states) in all.
+
+        Parameters
+        ----------
+        engine : OrderEngine
+            The plan's engine.
+        until : Deadline, float or None, optional
+            When to stop this call (a :class:`~opportune.engine.deadline.Deadline` or a ``perf_counter``
+            moment; None: never).
+
+        Returns
+        -------
+        bool or None
+            True once the optimum is ready; False where it does not fit, by states or bytes, or this
+            look-ahead takes none (its optimum switched off, or a base rule of the caller's); None when
+            ``until`` passed first (call again).
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> from opportune.engine import OrderEngine
+        >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]}))
+        >>> Lookahead(visible=1, capacity=1).prepare(engine)
+        True
+        >>> budgeted = Lookahead(visible=1, capacity=1, budget=1e-9)     # no time to list: it takes this one
+        >>> budgeted.choose_at(engine, 0, 1, (), 1.0, ("c",)), budgeted.deciding_rule
+        (Action(kind='buffer', part='c', source=None), 'the action with the least expected cost of finishing (the exact optimum)')
+        """
+        self._suit(engine)
+        key = self._share_key()
+        if not self.optimal or key is None:
             return False
+        if key in engine.kept.get(_READY, {}):
+            return True
+        jobs = engine.kept.setdefault(_PREPARING, {})
+        job = jobs.get(key)
+        if job is None:
+            job = jobs[key] = self._preparation(engine, key)
+        done = self._advance(engine, job, as_deadline(until))
+        if done:        # a refusal stays: asking again answers at once
+            del jobs[key]
+            engine.kept.setdefault(_READY, {})[key] = job.solver
+            engine.kept.setdefault(_KEPT, {})[key] = job.solver
+        return done
+
+    def _preparation(self, engine, key) -> _Preparation:
+        """A new preparation: a listing of the optimum's states, or the solver already under way for these
+        settings (a look-ahead with a budget whose listing fitted shares its own)."""
+        from opportune.policies.states import StateListing
+
+        cap = self._optimum_cap(engine)
+        listing = StateListing(self._sized(engine), visible=self.settings.get("visible", 2),
+                               capacity=self.settings.get("capacity"), pile=self.pile, stop_above=cap)
+        job = _Preparation(listing, cap)
+        shared = engine.kept.get(_KEPT, {}).get(key)
+        if shared is not None and getattr(shared, "policy", None) is None:
+            job.solver = shared
+        return job
+
+    def _advance(self, engine, job: _Preparation, until: Deadline) -> bool | None:
+        """One slice of a preparation: True when solved, False when it does not fit, None out of time."""
+        if job.refusal is not None:
+            return False
+        if job.solver is None:
+            est = job.listing.advance(until)
+            if est is None:
+                return None
+            job.refusal = self._refusal(engine, est, job.cap)
+            if job.refusal is not None:
+                return False
+            job.solver = self._optimum_solver(engine)
+            job.solver.reserve(est.states)     # compiled: no table doubling in a slice
+        job.solver.deadline = until
+        try:
+            job.solver.value()
+        except OutOfTime:
+            return None
+        except OptimalTooLarge as exc:
+            job.refusal = str(exc)
+            return False
+        finally:
+            job.solver.deadline = None
         return True
+
+    def _prepared(self, engine) -> bool:
+        """Whether an optimum prepared for these settings waits to be taken up (with a budget, deciding by
+        the window or the base because the programme did not fit).  O(settings)."""
+        if self.lookahead_budget is None or not self._too_large or not self.optimal:
+            return False
+        key = self._share_key()
+        return key is not None and key in engine.kept.get(_READY, {})
 
     def decides_by_optimum(self, engine, visible: int, capacity: int | None, costs, *, pile: bool = False) -> bool:
         """Whether on ``engine`` every decision of this look-ahead is an action of least expected cost in
@@ -621,6 +741,8 @@ class Lookahead(DecidesOnMasks):
         """The look-ahead's action, or None where the base rule decides (a large plan, or out of time)."""
         engine, mask, consistent, buffer, _, visible = look
         self.last_cost = None
+        if self._prepared(engine):      # prepared as per-plan work since: the optimum decides from now on
+            self._evaluator, self._too_large, self._by_window = None, False, False
         if not self._too_large:
             start = time.perf_counter()     # the programme's share counts from here: choosing it is inside
             ev = self._values(engine)
@@ -667,15 +789,20 @@ class Lookahead(DecidesOnMasks):
         plan = engine.plan
         look = tuple(sorted(plan.index(p) for p in visible))
         # the base's own action first, so that ties keep it (the improvement is then never worse)
-        base = self.base.choose_at(engine, mask, consistent, buffer,
-                                   float("inf") if ev.capacity is None else ev.capacity - len(buffer), visible)
+        try:
+            base = self.base.choose_at(engine, mask, consistent, buffer,
+                                       float("inf") if ev.capacity is None else ev.capacity - len(buffer), visible)
+        except BudgetExceeded:
+            if ev.policy is not None:
+                raise
+            base = None     # the optimum needs no base (a look's deadline cut its count): ties by kind and order
         best, best_cost = base, None
         kind_rank = {"install": 0, "buffer": 1}
         ranked = [(cost + ev._after(key, look, action, nxt), kind_rank[action.kind], plan.index(action.part), action)
                   for cost, nxt, action in ev.policy_moves(key, look)]
         ranked.append((ev.costs.shake + ev._after_shake(key), 2, 0, SHAKE))
         for total, _, _, action in ranked:
-            if same_action(action, base):
+            if base is not None and same_action(action, base):
                 best_cost = total
         total, _, _, action = min(ranked, key=lambda r: r[:3])
         if best_cost is None or total < best_cost - 1e-12:

@@ -45,7 +45,7 @@ from opportune.engine.deadline import Deadline, as_deadline, recursion_room
 from opportune.engine.poset import bits
 from opportune.engine.tuning import BYTES_PER_STATE, PROFILE_MAX_UNITS
 
-__all__ = ["BYTES_PER_STATE", "StateEstimate", "downset_profile", "estimate_from_downsets", "estimate_states",
+__all__ = ["BYTES_PER_STATE", "StateEstimate", "StateListing", "downset_profile", "estimate_from_downsets", "estimate_states",
            "looks_at_start", "orderings_factor", "reachable_keys"]
 
 
@@ -260,6 +260,72 @@ def _list_keys(engine, weigh: _Weigher, stop_above: int | None, until: Deadline)
         if total > limit or (check and until.expired()):
             return _Listed(total, keys, False)
     return _Listed(total, keys, not (check and until.expired()))
+
+
+class StateListing:
+    """The exact listing of :func:`estimate_states`, done in slices: each :meth:`advance` goes on where the
+    last one stopped (the level-by-level walk of :func:`reachable_keys` is kept between calls), so per-plan
+    work can list a large plan's states between other work.  The answer is the same as one call's.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine (the one the programme stores states of).
+    visible : int, default 2
+        Units seen at a look.
+    capacity : int or None, optional
+        Buffer locations (None: unlimited).
+    pile : bool, default False
+        The pile bin's states (a window each).
+    stop_above : int or None, optional
+        Stop once the count passes it: the answer is then "at least".
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> from opportune.engine.deadline import Deadline
+    >>> listing = StateListing(OrderEngine(make_plan(["a", "b"], {"b": ["a"]})), visible=1)
+    >>> listing.advance(Deadline.NEVER).describe()
+    '7 (exact)'
+    """
+
+    def __init__(self, engine, *, visible: int = 2, capacity: int | None = None, pile: bool = False,
+                 stop_above: int | None = None):
+        self._weigh = _Weigher(engine, visible, capacity, pile)
+        self._keys = reachable_keys(engine)      # never cut inside: the clock is read between keys
+        self._limit = float("inf") if stop_above is None else stop_above
+        self._looks = looks_at_start(engine, visible)
+        self.total = 0
+        self.keys = 0
+        self.result: StateEstimate | None = None
+
+    def advance(self, until: Deadline) -> StateEstimate | None:
+        """List until ``until`` passes (read at every key), the count passes ``stop_above``, or every key is
+        listed.  O(keys listed × units).
+
+        Parameters
+        ----------
+        until : Deadline
+            When to stop this slice.
+
+        Returns
+        -------
+        StateEstimate or None
+            The answer once known (exact, or "at least" past ``stop_above``); None: call again.
+        """
+        if self.result is not None:
+            return self.result
+        for mask, _ in self._keys:
+            self.keys += 1
+            self.total += self._weigh.of_mask(mask)
+            if self.total > self._limit:
+                self.result = StateEstimate(self.total, self.total, False, "listed in part", self.keys, self._looks)
+                return self.result
+            if until.expired():
+                return None
+        self.result = StateEstimate(self.total, self.total, True, "listed", self.keys, self._looks)
+        return self.result
 
 
 def reachable_keys(engine, until: Deadline = Deadline.NEVER):

@@ -99,6 +99,11 @@ class Settings:
     warm_up_seconds : float, default 30.0
         The most time the warm-up of one plan (counting its first state, once per plan and process,
         in the background) may take.
+    optimum_seconds : float or None, default 600.0
+        With a decision budget, the most time the background preparation of the look-ahead's exact optimum
+        may take, once per plan and setting (policy, buffer locations; its states and bytes bounded by the
+        policy's own cap and the plan's memory share): its runs decide by it once it is ready, by the
+        frontier window until then.  None: no limit.
 
     Raises
     ------
@@ -130,6 +135,7 @@ class Settings:
     memory_cap: int | None = None
     plan_share: float = 0.5
     warm_up_seconds: float = 30.0
+    optimum_seconds: float | None = 600.0
 
     def __post_init__(self):
         # a body larger than the readers' bound could only be refused after it was read

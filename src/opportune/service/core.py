@@ -45,5 +45,5 @@ def build(settings: Settings, store: Store | None = None, *, notify: Callable[[i
     auth = Authenticator(store, cache_seconds=settings.token_cache_seconds, ticket_seconds=settings.ticket_seconds)
     manager = RunManager(store, book, size=settings.live_runs, notify=notify,
                          keep_answers=settings.idempotency_seconds, budget=settings.decision_budget,
-                         warm_up=settings.warm_up_seconds)
+                         warm_up=settings.warm_up_seconds, optimum=settings.optimum_seconds)
     return Core(settings, store, book, auth, manager)

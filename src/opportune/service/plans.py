@@ -19,6 +19,7 @@ import time
 from collections import OrderedDict
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import partial
 
 from sqlalchemy import insert, select
 from sqlalchemy.exc import IntegrityError
@@ -284,6 +285,10 @@ class LoadedPlan:
     measured: float = float("-inf")  # time.monotonic() of the last measurement
     warm: str = "not started"       # the warm-up: not started, running, done, stopped (time or memory)
     warm_slices: int = 0            # slices of warm-up work done (each under the lock, within its deadline)
+    # the look-ahead optima prepared for its runs' settings (policy name, buffer locations): "waiting", "under
+    # way", "ready", "does not fit", "stopped" (time, eviction or memory); one at a time, in the order asked
+    optima: dict = field(default_factory=dict)
+    _to_prepare: list = field(default_factory=list)
     evicted: bool = False
     _stop: threading.Event = field(default_factory=threading.Event)
     _layouts: list | None = None
@@ -469,19 +474,75 @@ class PlanBook:
                 self.last_request = time.monotonic()
 
     def _warm_loop(self, loaded: LoadedPlan, end) -> None:
-        while not end.expired():
+        if not self._in_slices(end, lambda until: self._warm_slice(loaded, until)):
+            loaded.warm = "stopped"
+
+    def _in_slices(self, end, work) -> bool:
+        """Call ``work(until)`` in slices of :data:`WARM_SLICE` seconds until it returns True (then True) or
+        ``end`` passes (then False), requests first: a slice waits for the requests in progress, at most
+        :data:`WARM_YIELD`."""
+        over = False
+        while not over and not end.expired():
             waited = 0.0
             # requests first (a cell's next look follows its last answer closely); still, a slice per WARM_YIELD
             while (self.active or time.monotonic() - self.last_request < WARM_IDLE) and waited < WARM_YIELD:
                 time.sleep(WARM_GAP)
                 waited += WARM_GAP
-            if self._warm_slice(loaded, end.within(WARM_SLICE)):
-                break
+            over = work(end.within(WARM_SLICE))
             self.settle()
             time.sleep(WARM_GAP)
-        else:
-            loaded.warm = "stopped"
         self.settle()
+        return over
+
+    # ------------------------------------------------------------ the look-ahead's optimum, once per plan and setting
+
+    def prepare(self, loaded: LoadedPlan, policy, setting, seconds: float | None) -> None:
+        """Prepare the exact optimum of ``policy`` (a look-ahead without a budget, of the run's settings) on
+        the plan, once per plan and ``setting``, in a background thread, in slices of :data:`WARM_SLICE`
+        seconds under the plan's lock between requests, for at most ``seconds`` each (None: no limit); one
+        setting at a time per plan (one thread), the others waiting in the order asked.  Its states and bytes
+        are bounded by the policy (:meth:`~opportune.policies.lookahead.Lookahead.prepare`: its state cap and
+        the engine's grant, over every setting).  The runs' look-aheads with a budget take it up once it is
+        ready: until then their frontier window decides.  ``loaded.optima[setting]`` says how it went.  A
+        policy without ``prepare`` is left alone.  O(1) here."""
+        if getattr(policy, "prepare", None) is None:
+            return
+        with self._lock:
+            if setting in loaded.optima:
+                return
+            loaded.optima[setting] = "waiting"
+            loaded._to_prepare.append((policy, setting, seconds))
+            if len(loaded._to_prepare) > 1:
+                return          # the plan's thread takes it after those before it
+        threading.Thread(target=self._prepare_loop, args=(loaded,), name=f"optimum {loaded.id[:8]}",
+                         daemon=True).start()
+
+    def _prepare_loop(self, loaded: LoadedPlan) -> None:
+        """The plan's preparations, one after another, until none waits."""
+        while True:
+            with self._lock:
+                if not loaded._to_prepare:
+                    return
+                policy, setting, seconds = loaded._to_prepare[0]
+                loaded.optima[setting] = "under way"
+            if not self._in_slices(Deadline.after(seconds), partial(self._prepare_slice, loaded, policy, setting)):
+                loaded.optima[setting] = "stopped"
+            with self._lock:
+                loaded._to_prepare.pop(0)
+
+    def _prepare_slice(self, loaded: LoadedPlan, policy, setting, until) -> bool:
+        """One slice of an optimum's preparation (until the Deadline ``until``); True when it is over."""
+        with loaded.lock:
+            if loaded.evicted or loaded._stop.is_set():
+                loaded.optima[setting] = "stopped"
+                return True
+            try:
+                done = policy.prepare(loaded.engine, until)
+            except (MemoryError, RecursionError):   # beyond this process: the window goes on deciding
+                done = False
+            if done is not None:
+                loaded.optima[setting] = "ready" if done else "does not fit"
+            return done is not None
 
     # ------------------------------------------------------------ memory
 

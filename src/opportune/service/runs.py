@@ -49,7 +49,7 @@ import threading
 import time
 from collections import OrderedDict
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 from sqlalchemy import bindparam, case, func, insert, select, update
@@ -144,12 +144,14 @@ class RunManager:
     """Creates runs, applies commands to them, and answers questions about them."""
 
     def __init__(self, store: Store, book: PlanBook, *, size: int = 512, notify: Callable[[int], None] = lambda _: None,
-                 keep_answers: float = idem.KEEP_SECONDS, budget: float | None = None, warm_up: float | None = 10.0):
+                 keep_answers: float = idem.KEEP_SECONDS, budget: float | None = None, warm_up: float | None = 10.0,
+                 optimum: float | None = 600.0):
         self.store = store
         self.budget = budget        # seconds per decision (None: exact decisions)
         # what a look of each plan needs after its decision (learned): the decision gets the rest
         self.reserves = Reserves(budget) if budget is not None else None
         self.warm_up = warm_up      # seconds the warm-up of a plan (its first state's count) may take, once per plan
+        self.optimum = optimum      # seconds the preparation of a look-ahead's optimum may take, once per plan and setting
         self.book = book
         self.size = size
         self.notify = notify
@@ -252,9 +254,11 @@ class RunManager:
                 for ev in rows:
                     request = json.loads(ev.request)
                     recorded = json.loads(ev.response).get("decision", {}) if ev.kind == "look" else {}
-                    if recorded.get("exact") is False:
-                        # An estimated decision depends on time and chance: replay it as it was taken.
-                        live.sequencer.replay(request["visible"], Decision.recorded(recorded))
+                    if recorded.get("exact") is False or (ev.kind == "look" and self._decided_by_time(live)):
+                        # An estimated decision depends on time and chance, a budgeted look-ahead's on what it
+                        # had prepared by then (its window, or its optimum once ready): replay it as it was taken.
+                        taken = Decision.recorded(recorded)
+                        live.sequencer.replay(request["visible"], replace(taken, exact=recorded.get("exact", True)))
                         live.applied = ev.seq
                         continue
                     result = apply(live.sequencer, ev.kind, request)
@@ -273,6 +277,12 @@ class RunManager:
                 raise ApiError(500, "run_replay_mismatch",
                                f"run {live.id} cannot be resumed by this version of opportune: {exc}",
                                "finish the run with the version that started it, or start a new run") from None
+
+    def _decided_by_time(self, live: LiveRun) -> bool:
+        """Whether the run's looks were decided by what its policy had prepared by then: a look-ahead within a
+        decision budget, whose frontier window decides until its optimum, prepared in the background, is
+        ready (and whose window is cut by the look's deadline).  O(1)."""
+        return self.budget is not None and getattr(live.sequencer.policy, "prepare", None) is not None
 
     def _decide_exactly(self, live: LiveRun, loaded: LoadedPlan, visible: list, recorded: dict, seq: int) -> None:
         """Replay a decision recorded as exact that this process could only estimate within its budget.
@@ -425,6 +435,12 @@ class RunManager:
             self._live[run_id] = live
         self._changed(run_id)
         self.book.settle(loaded)
+        if self.budget is not None and products == 1:
+            # the look-ahead's optimum as per-plan work, in the background: its runs' decisions take it up once
+            # it is ready (their frontier window decides meanwhile)
+            capacity = body.get("buffer_capacity")
+            self.book.prepare(loaded, self._policy(loaded, capacity, policy, budget=None), (policy, capacity),
+                              self.optimum)
         return 201, text, False
 
     # ------------------------------------------------------------ commands
