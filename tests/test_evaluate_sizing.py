@@ -150,3 +150,25 @@ def test_in_the_pile_the_look_ahead_is_worth_the_pile_optimum_without_a_look_by_
     assert "the policy decides by the optimum" in texts["lookahead"], texts["lookahead"]
     rate = EVALUATE_RATES["rule pile"]
     assert f"stops at 100 states (under a second of CPU at ~{rate:,} states/s)" in texts["paper"], texts["paper"]
+
+
+def test_the_answer_does_not_depend_on_how_far_the_listing_got_in_its_seconds(tmp_path, monkeypatch):
+    """As on a loaded machine, the first listing stops at once: the estimate (47,131 on the merged plan) is over
+    a cap of the exact count, so the listing goes on by counted work and the evaluation runs (it used to be
+    refused on the estimate); under the count, refused as before, by the count."""
+    import opportune.policies.states as states
+
+    real = states.estimate_states
+
+    def loaded(*args, **kwargs):
+        if kwargs.get("time_limit") == 3.0:
+            kwargs["time_limit"] = 1e-9
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(states, "estimate_states", loaded)
+    path = _file(tmp_path, _plan12())
+    out = runner.invoke(app(), ["evaluate", path, "--visible", "2", "--json", "--max-states", "40398"])
+    assert out.exit_code == 0, out.output
+    assert json.loads(out.output)["estimate_exact"] and json.loads(out.output)["states"] == 40_398
+    out = runner.invoke(app(), ["evaluate", path, "--visible", "2", "--max-states", "30000"])
+    assert out.exit_code == 1 and "at least 30," in _text(out)

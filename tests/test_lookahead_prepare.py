@@ -8,6 +8,7 @@ from __future__ import annotations
 import random
 import time
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -210,3 +211,24 @@ def test_the_service_prepares_one_setting_at_a_time_per_plan(tmp_path):
         for c, run in runs.items():
             look = [plan.parts[-1].id, plan.parts[-2].id]
             assert cell.post(f"/runs/{run['id']}/looks", {"visible": look})["decision"]["rule"] == OPTIMUM
+
+
+@pytest.mark.parametrize("pile", [False, True])
+@pytest.mark.parametrize("ways", [False, True])
+def test_a_prepared_optimum_decides_as_the_look_ahead_without_a_budget_in_every_bin_and_kind(pile, ways):
+    """The pile's programme and a plan written as ways too: a budgeted look-ahead taking the prepared optimum
+    decides, with the same expected cost, as a look-ahead without a budget on a fresh engine, on every look
+    of one unit at the start."""
+    from test_ways_optimum import feasible_ways_plan
+
+    plan = feasible_ways_plan(5, 7) if ways else random_plan(5, 9, 0.25)
+    settings = dict(visible=1, capacity=1, **({"bin": "pile"} if pile else {}))
+    engine = OrderEngine(plan)
+    done, _ = prepared(Lookahead(**settings), engine)
+    assert done is True
+    for part in plan.parts:
+        budgeted, exact = Lookahead(budget=1e-9, **settings), Lookahead(**settings)
+        action = budgeted.choose_at(engine, 0, engine.all_strategies, (), 1.0, (part.id,))
+        fresh = OrderEngine(plan)
+        assert action == exact.choose_at(fresh, 0, fresh.all_strategies, (), 1.0, (part.id,))
+        assert budgeted.deciding_rule == OPTIMUM and budgeted.last_cost == exact.last_cost

@@ -254,12 +254,18 @@ class _Work:
 def _estimate(engine, config, work: _Work):
     """The states the evaluation needs, counted or estimated before any (a few seconds at most, and far cheaper
     per state than the programme); exit with the figure when they are out of reach or over the optimum's cap."""
+    from opportune.engine.tuning import EVALUATE_LIST_ON
     from opportune.policies.optimal import LOOK_CACHE_LOOKS
     from opportune.policies.states import estimate_states
 
     plan, chosen_bin = config.plan, config.bin
     estimate = estimate_states(engine, visible=config.visible, capacity=config.buffer_capacity,
                                pile=chosen_bin == "pile", stop_above=work.optimum_cap, time_limit=3.0)
+    if not estimate.exact and estimate.low <= work.optimum_cap < estimate.states <= EVALUATE_LIST_ON * work.optimum_cap:
+        # over the cap by the estimate alone (the listing ran out of its seconds, as on a loaded machine): the
+        # listing goes on by counted work up to the cap, so the answer is the same however loaded
+        estimate = estimate_states(engine, visible=config.visible, capacity=config.buffer_capacity,
+                                   pile=chosen_bin == "pile", stop_above=work.optimum_cap, time_limit=None)
     if estimate.looks > LOOK_CACHE_LOOKS:
         fail(f"the exact evaluation of {plan.name} would weigh {estimate.looks:,} distinct looks at every state "
              f"({plan.n_units:,} parts, {config.visible} visible), more than the {LOOK_CACHE_LOOKS:,} the programme "

@@ -324,6 +324,12 @@ EVALUATE_RATES = {
 #: runs of 10,000-120,000 states; a run of a few thousand shows its look cache's bytes as well, and a
 #: policy deciding by a look-ahead of its own its bounded window caches, :data:`WINDOW_CACHE`: 2.6-3.7 kB).
 EVALUATE_BYTES = {"compiled": 96, "Python": BYTES_PER_STATE}
+#: ``evaluate`` lists the optimum's states for 3 seconds; where that listing stops short and the estimate
+#: from the order's down-sets is over the cap by at most this factor, the listing goes on by counted work
+#: up to the cap instead of refusing on the estimate (KILBRID with two locations: 27,523,885 states, the
+#: estimate 38,064,092, the listing 2.2 CPU seconds idle and past 3 s at load 6); the estimate was 0.85-7.3
+#: times the true count on random plans (policies/states.py).
+EVALUATE_LIST_ON = 2.0
 
 # ------------------------------------------------------------ the look-ahead and the rollout (policies/lookahead.py, rollout.py)
 # Measured with benchmarks/bench_optimum.py, benchmarks/policy_lab.py and tests/test_pile_compiled.py.
