@@ -13,7 +13,8 @@ optimum's programme for the small plans and on its base (slack) for KILBRID.  Re
 uniform bin's optimum came to sum its looks as order statistics: every action the same, the optimum's
 printed expectations within 1e-4 (their last digit's rounding), and KILBRID's reason for deciding by
 the base in the words of states and bytes.  The look-ahead's KILBRID case recorded again when its fallback
-in the uniform bin became the frontier window's optimum (policies/window.py) instead of slack.
+in the uniform bin became the frontier window's optimum (policies/window.py) instead of slack, and when the
+optimum's state cap rose to 32,000,000 (every action the same; only the cap's figure in its reason).
 """
 
 from __future__ import annotations

@@ -112,14 +112,15 @@ def test_lookahead_decides_by_its_frontier_window_on_a_large_plan():
 
     plan = salbp("KILBRID")
     engine = OrderEngine(plan)
-    ahead, window = Lookahead(visible=2, capacity=2), FrontierWindow(visible=2, capacity=2)
+    # three locations: over a billion states (with two the optimum's 27.5 million fit its cap)
+    ahead, window = Lookahead(visible=2, capacity=3), FrontierWindow(visible=2, capacity=3)
     rng = random.Random(1)
     parts = plan.part_ids
     for _ in range(5):
         look = tuple(sorted(rng.sample(parts, 2), key=plan.index))
-        assert ahead.choose_at(engine, 0, engine.all_strategies, (), 2, look) == \
-            window.choose_at(engine, 0, engine.all_strategies, (), 2, look)
-    rule = Sequencer(plan, ahead, budget=None, buffer_capacity=2).decide(("1", "2")).rule
+        assert ahead.choose_at(engine, 0, engine.all_strategies, (), 3, look) == \
+            window.choose_at(engine, 0, engine.all_strategies, (), 3, look)
+    rule = Sequencer(plan, ahead, budget=None, buffer_capacity=3).decide(("1", "2")).rule
     assert rule.startswith("by its frontier window, because its optimum needs"), rule
 
 
