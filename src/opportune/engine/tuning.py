@@ -388,6 +388,15 @@ WINDOW_OPTION_LOOKS = 2
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
 WINDOW_STATES = 20_000
+#: The frontier window's parts are taken in the order of their remaining ancestors less this many times their
+#: remaining descendants (then declaration order): the parts whose installation unlocks the most come into
+#: the window with what they wait for.  Measured with the ready others (:data:`WINDOW_READY_CREDIT`)
+#: on KILBRID (benchmarks/bench_window_gap.py, 40 paired runs, 1 visible): PLACEHOLDER
+WINDOW_DESCENDANTS = 1.0
+#: A unit outside the frontier window whose remaining ancestors are all window parts (a *ready other*)
+#: is installed when seen once they are, and each saves this much of what the parts outside cost after
+#: the window (a move's cost is about 1; PLACEHOLDER
+WINDOW_READY_LOOKS = 3.0
 #: Windows kept, by state (a decision table is under 1 kB for a window of 12 parts, so at most about
 #: 4 MB a policy): a state's looks share it.
 WINDOW_CACHE = 4096
