@@ -12,6 +12,13 @@
 // is the same whatever the window's policy did, so it does not change a decision).  A state is
 // (installed window units, strategies, the window's buffer counts, others buffered).
 //
+// With `ready` (one mask a unit: the window units an other waits for, every one of its remaining
+// ancestors a window unit), an other is ready once its mask is installed, and a ready one seen is
+// installed (the others' move, `other_move`) less `ready_credit`, what it would cost after the window; one
+// not ready may be buffered as without.  The state counts the ready others installed (which ones is not kept: a look sees
+// one of the ready ones left, as many as are ready less those installed), so the window values installing
+// first what unlocks the parts outside it.
+//
 // A joint window (several strategies' frontier windows at once) has `ends`: one mask a strategy, the
 // units of that strategy's own window; a state of an open strategy whose end is installed is terminal,
 // its value the window's units left (a move each, and a look each one not buffered) and that strategy's
@@ -63,7 +70,7 @@ public:
           others_(others), other_move_(other_move), ends_(std::move(ends)), end_costs_(std::move(end_costs)),
           ready_(std::move(ready)), ready_credit_(ready_credit) {
         if ((int)ready_.size() > others_) throw std::invalid_argument("more ready others than others");
-        ready_move_ = other_move_;  // with ready others: their move when installed (they are not buffered)
+        ready_move_ = other_move_;  // with ready others: their move when installed
         if (!ready_.empty() && !(ready_move_ < INF)) throw std::invalid_argument("a ready other needs a finite move");
         for (uint64_t r : ready_)
             if (r & ~full_) throw std::invalid_argument("a ready other's window units are out of range");
@@ -136,8 +143,7 @@ public:
                 buf[i] += 1;
             }
         }
-        if (free && ob < others_ && other_move_ < INF && ready_.empty())
-            out[3 * parts_] = other_move_ + V(mask, cons, buf, ob + 1, 0);
+        if (free && ob < others_ && other_move_ < INF) out[3 * parts_] = other_move_ + V(mask, cons, buf, ob + 1, 0);
         out[3 * parts_ + 1] = V(mask, cons, buf, ob, 0);
         return out;
     }
@@ -208,7 +214,8 @@ private:
             int in_bin = others_ - ob - k, r = std::min(ready_count(mask) - k, in_bin);
             n += in_bin;
             if (r > 0) ranked.emplace_back(ready_move_ - ready_credit_ + V(mask, cons, buf, ob, k + 1), parts_, r);
-            if (in_bin - r > 0) ranked.emplace_back(INF, parts_ + 1, in_bin - r);
+            if (in_bin - r > 0)  // buffered if a location is free, as below
+                ranked.emplace_back(free ? other_move_ + V(mask, cons, buf, ob + 1, k) : INF, parts_ + 1, in_bin - r);
         } else if (others_ > ob) {  // the others in the bin: buffered if a location is free, else no move
             n += others_ - ob;
             bool take = free && other_move_ < INF;  // an infinite move: the others are seen as nothing

@@ -8,10 +8,17 @@ the open strategies it is closed in (:func:`window_strategies`): in another, a w
 part outside it, which the model installs only after the window.
 The plan's other remaining
 units are lumped into one count, the *others*: in the bin they dilute the looks as they do on the real
-plan (a look is ``visible`` units drawn from the window's bin units and the others), an other seen may be
-buffered (a free location, the others' mean move), and none is installed before the window is complete,
-the terminal state.  What the others cost after it does not depend on what was done in the window, so
-the terminal value is 0.  The window's exact optimum (the compiled ``WindowCore``,
+plan (a look is ``visible`` units drawn from the window's bin units and the others).  An other whose
+remaining ancestors are all window parts is *ready* once they are installed: seen then, it is installed (the
+others' mean move) and credited with what it would cost after the window, a move and
+:data:`~opportune.engine.tuning.WINDOW_READY_LOOKS` shakes and looks, so the window values installing first
+what unlocks the parts outside it; the programme counts the ready others installed, not which.  The
+others left are seen as nothing until the window is complete, the terminal state (value 0).  (The earlier
+window, ``others="buffer"``, installed no other and let one seen be buffered: on a long plan it filled its
+locations with parts the plan needs last.)  The parts are taken into the window in the order of their
+remaining ancestors less their remaining descendants
+(:data:`~opportune.engine.tuning.WINDOW_DESCENDANTS`), so a part that unlocks many comes in early with what
+it waits for.  The window's exact optimum (the compiled ``WindowCore``,
 ``src/native/window.cpp``: the optimum's recursion, looks as order statistics, the others one more
 group) is solved once per state, within :data:`WINDOW_STATES` states (counted, so the decision is the
 same on every machine), and the decision is its best action on the look: a visible part outside the
@@ -195,8 +202,9 @@ def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int
 def frontier_window(engine, mask: int, consistent: int, buffer, size: int, strategy: int | None = None,
                     descendants: float = WINDOW_DESCENDANTS) -> tuple[list[int], list[int]]:
     """The window of ``size`` parts at a state, the frontier of one open strategy: the buffered parts and the
-    remaining parts first in its topological order (fewest remaining ancestor units there, then declaration
-    order), each with its remaining ancestors in every open strategy where they fit the window, else there
+    remaining parts first in its order (fewest remaining ancestor units there less ``descendants`` times their
+    remaining descendant units, so a part that unlocks many comes early with what it waits for; then
+    declaration order), each with its remaining ancestors in every open strategy where they fit the window, else there
     (so the window is closed in it), at most 64 units; and the remaining parts outside it, in that order.  The last part taken may bring more than ``size`` parts;
     a buffered part whose ancestors would take the window past it is left out (lumped with the others).
     O(parts × strategies).
@@ -215,6 +223,9 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int, strat
     strategy : int, optional
         The open strategy whose frontier it is (default: the first open one).  The window is closed in it,
         and in the other strategies :func:`window_strategies` finds.
+    descendants : float
+        The weight of a part's remaining descendants in the order (:data:`WINDOW_DESCENDANTS`; 0: the
+        remaining ancestors alone).
 
     Returns
     -------
@@ -342,9 +353,17 @@ class FrontierWindow(DecidesOnMasks):
         the two before, are within this many times ``max_states`` (:data:`WINDOW_GROWTH_SEVERAL`).
     max_states : int
         States a window's programme may hold (:data:`WINDOW_STATES`).
-    others : {"buffer", "ignore"}
-        Whether an other seen may be buffered (a free location), as on the real plan (the default: nearer
-        the optimum, ``benchmarks/bench_fallback.py``), or is seen as nothing (for measurement).
+    others : {"ready", "buffer", "ignore"}
+        How the window's programme sees the parts outside it: ``"ready"`` (the default), an other whose
+        remaining ancestors are all window parts is installed when seen once they are, credited with a move
+        and ``ready_looks`` shakes and looks (what it would cost after the window), the rest seen as nothing;
+        ``"buffer"``, an other seen may be buffered (a free location), never installed (the earlier window);
+        ``"ignore"``, every other seen as nothing (for measurement).
+    ready_looks : float
+        The ready others' credit beyond their move, in shakes and looks (:data:`WINDOW_READY_LOOKS`).
+    descendants : float
+        The window takes the parts in the order of their remaining ancestors less this many times their
+        remaining descendants (:data:`WINDOW_DESCENDANTS`; 0: ancestors alone, the earlier order).
 
     Notes
     -----
