@@ -107,9 +107,11 @@ def run_losses(opt, policy, engine, rng: random.Random, pile: bool, weights: lis
 
 
 def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed: int,
-             window_states: int | None = None) -> dict:
+             window_states: int | None = None, earlier: bool = False) -> dict:
     """The fallback's gap over the optimum on ``runs`` seeded runs: mean, 95% half-width, the optimum;
-    ``window_states``: the window's state cap instead of its default (to measure the cap's trade-off)."""
+    ``window_states``: the window's state cap instead of its default (to measure the cap's trade-off);
+    ``earlier``: the uniform bin's earlier window (the others buffered as one, never installed; the parts
+    in the order of their remaining ancestors alone)."""
     engine = OrderEngine(plan)
     weights = {p.id: WEIGHTS[i % len(WEIGHTS)] for i, p in enumerate(plan.parts)} if bin == "weighted" else None
     settings = dict(visible=visible, capacity=capacity, max_states=20_000_000)
@@ -122,6 +124,8 @@ def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed
     if window_states is not None:
         policy._window_serves(engine)       # the weighted bin's window is made there
         policy.window.max_states = window_states
+    if earlier:
+        policy.window.others, policy.window.descendants = "buffer", 0.0
     w = [weights[p.id] for p in plan.parts] if weights else [1.0] * len(plan.parts)
     losses, cpu = [], time.process_time()
     for i in range(runs):
@@ -151,6 +155,8 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window-states", type=int, help="the window's state cap (default: the tuned one)")
+    ap.add_argument("--earlier", action="store_true", help="the uniform bin's earlier window (the others buffered "
+                    "as one, the order of remaining ancestors alone): the same runs, so the two are paired")
     args = ap.parse_args(argv)
     plans = lab_plans(args.plans.split(","), [int(s) for s in args.sizes.split(",")], args.lab_plans, 0)
     settings = [(int(v), None if c == "inf" else int(c)) for v, c in (s.split("x") for s in args.settings.split(","))]
@@ -158,7 +164,7 @@ def main(argv=None) -> int:
           "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |")
     for plan in plans:
         for visible, capacity in settings:
-            r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed, args.window_states)
+            r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed, args.window_states, args.earlier)
             print(f"| {plan.name} | {args.bin} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | "
                   f"{r['cap']:,} | {args.runs} | {100 * r['mean']:+.2f}% | ±{100 * r['half']:.2f} | {r['cpu']:.0f} |", flush=True)
     return 0
