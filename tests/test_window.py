@@ -232,7 +232,8 @@ def test_where_no_window_fits_its_states_the_base_decides_and_says_so():
     plan = load_plan("salbp:KILBRID")
     window = FrontierWindow(Slack(), visible=2, capacity=2, max_states=1)
     assert _run(window, plan, 2, 2, seed=1, steps=5) == _run(Slack(), plan, 2, 2, seed=1, steps=5)
-    assert window.work["by_base"] == 5 and window.work["windows"] == 5 and window.work["most_states"] <= 1
+    # each decision tried the window with ready others, then the earlier one: both past 1 state
+    assert window.work["by_base"] == 5 and window.work["windows"] == 10 and window.work["most_states"] <= 1
     seq = Sequencer(plan, policy=window)
     assert "no frontier window fitted its state cap (1)" in window.decide(seq.state, (plan.part_ids[0],)).rule
 
@@ -293,3 +294,14 @@ def test_on_long_chains_the_window_that_unlocks_and_counts_ready_others_is_near_
         gaps[name] = ev.value() / ev.optimal() - 1
         assert window.work["by_base"] == 0
     assert gaps["before"] > 0.08 and gaps["now"] < 0.05, gaps
+
+
+def test_with_an_unlimited_buffer_where_no_window_with_ready_others_fits_the_earlier_window_decides():
+    """One step outside the tuned settings: KILBRID with an unlimited buffer, where the others buffered and the
+    ready ones installed, both in the state, take some windows past their states.  The earlier window (no
+    ready others) decides there, never the base; without that retry a decision in these 60 was the base's."""
+    plan = load_plan("salbp:KILBRID")
+    policy = Lookahead(visible=1, capacity=None, optimal=False)
+    run = policy_run(policy, OrderEngine(plan), 1, float("inf"), random.Random(1), 60)
+    assert len(run) == 60 and policy.window.work["by_base"] == 0
+    assert policy.window.work["most_states"] <= policy.window.max_states
