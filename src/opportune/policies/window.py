@@ -15,7 +15,8 @@ others' mean move) and credited with what it would cost after the window, a move
 what unlocks the parts outside it; the programme counts the ready others installed, not which.  The
 others left are seen as nothing until the window is complete, the terminal state (value 0).  (The earlier
 window, ``others="buffer"``, installed no other and let one seen be buffered: on a long plan it filled its
-locations with parts the plan needs last.)  The parts are taken into the window in the order of their
+locations with parts the plan needs last.  It still decides on plans of several strategies, whose option
+values were tuned with it.)  The parts are taken into the window in the order of their
 remaining ancestors less their remaining descendants
 (:data:`~opportune.engine.tuning.WINDOW_DESCENDANTS`), so a part that unlocks many comes in early with what
 it waits for.  The window's exact optimum (the compiled ``WindowCore``,
@@ -485,7 +486,7 @@ class FrontierWindow(DecidesOnMasks):
         several = consistent.bit_count() > 1
         programmes: dict[tuple[int, ...], _Programme] = {}
         grown = self._grown(engine, mask, consistent, buffer, programmes)
-        if not grown and self._ready(consistent) and not as_deadline(self.deadline).expired():
+        if not grown and self._ready(engine) and not as_deadline(self.deadline).expired():
             # no window with the ready others fits (their count is part of the state): the earlier window
             self._plain = True
             try:
@@ -565,7 +566,7 @@ class FrontierWindow(DecidesOnMasks):
     def _windows(self, engine, mask: int, consistent: int, buffer, size: int) -> list[tuple[list[int], list[int]]]:
         """The frontier windows of ``size`` parts of the first :data:`WINDOW_STRATEGIES` open strategies,
         one a strategy in order.  O(parts × strategies²)."""
-        descendants = self.descendants if self._ready(consistent) else 0.0
+        descendants = self.descendants if self._ready(engine) else 0.0
         return [frontier_window(engine, mask, consistent, buffer, size, strategy=s, descendants=descendants)
                 for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]]
 
@@ -578,7 +579,7 @@ class FrontierWindow(DecidesOnMasks):
         kept = (_first_bits(consistent, WINDOW_STRATEGIES) if joint
                 else window_strategies(engine, mask, consistent, parts))
         core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside, joint,
-                                                self._ready(consistent))
+                                                self._ready(engine))
         if programmes is not None:
             programmes[tuple(parts)] = _Programme(core, mask, kept, tuple(parts), self.max_states)
         seconds = as_deadline(self.deadline).seconds()
@@ -591,7 +592,7 @@ class FrontierWindow(DecidesOnMasks):
             self.work["most_states"] = max(self.work["most_states"], core.states)
         rest = outside_rest(engine, mask, outside, self.costs)
         ready = float("inf")
-        if self._ready(consistent) and not joint:
+        if self._ready(engine) and not joint:
             ready = core.install_other(0, (1 << kept.bit_count()) - 1, buf, others_buffered, seconds=seconds,
                                        max_states=self.max_states)
         return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states, rest, ready)
@@ -642,14 +643,15 @@ class FrontierWindow(DecidesOnMasks):
                                   if ready else 0.0)
         return core, buf, others_buffered
 
-    def _ready(self, consistent: int) -> bool:
-        """Whether the ready others and the order by descendants serve at a state of these open strategies:
-        with ``others="ready"`` where one strategy is open.  Where several are, the earlier window decides
-        (the others buffered as one, the order of remaining ancestors): its option values were tuned with
-        it, and on a 16-part two-strategy plan of the policy lab at 1 visible and 2 locations the ready
-        others gave +0.87% over the optimum against +0.08%.  Nor where no window with them fits (with an
+    def _ready(self, engine) -> bool:
+        """Whether the ready others and the order by descendants serve: with ``others="ready"`` on a plan of
+        one strategy.  On a plan of several the earlier window decides (the others buffered as one, the
+        order of remaining ancestors): its option values were tuned with it, and on the policy lab's
+        16-part two-strategy plans the ready others gave +0.87% over the optimum against +0.08% (r2-16x2, 1
+        visible, 2 locations, where several strategies were open) and +0.27% against +0.01% (r5-16x2, 2
+        visible, 1 location, where one was left).  Nor where no window with them fits (with an
         unlimited buffer, the others buffered and the ready ones installed both counted in the state)."""
-        return self.others == "ready" and consistent.bit_count() == 1 and not self._plain
+        return self.others == "ready" and engine.k == 1 and not self._plain
 
     def choose_at(self, engine, mask: int, consistent: int, buffer: tuple[str, ...], free: float,
                   visible: tuple[str, ...]) -> Action:
