@@ -57,8 +57,8 @@ def test_the_looks_option_value_beats_the_per_strategy_choice_by_a_computed_marg
     rule) is 1.56% over the optimum; with the option of keeping both strategies open taken off the moves
     that keep them, 0.77%."""
     engine = OrderEngine(TWO)
-    old = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), option=False, joint=False), engine, 1, 1)
-    new = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), joint=False), engine, 1, 1)
+    old = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), option=False, joint=False, others="buffer", descendants=0.0), engine, 1, 1)
+    new = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), joint=False, others="buffer", descendants=0.0), engine, 1, 1)
     assert old == pytest.approx(0.015565, abs=1e-5)
     assert new == pytest.approx(0.007735, abs=1e-5)
     assert new < old - 0.005
@@ -80,7 +80,7 @@ def test_the_option_value_is_what_the_looks_choice_of_window_saves():
     looks; 0 with either window alone."""
     engine = OrderEngine(TWO)
     costs = TimeModel()
-    window = FrontierWindow(visible=1, capacity=1, sizes=(5,), several=(5,), joint=False)
+    window = FrontierWindow(visible=1, capacity=1, sizes=(5,), several=(5,), joint=False, others="buffer", descendants=0.0)
     tables = window.tables(engine, 0, engine.all_strategies, ())
     assert len(tables) == 2
     assert all(option_value(engine, 0, engine.all_strategies, (), (t,), 1, costs) == pytest.approx(0.0, abs=1e-9)
@@ -142,12 +142,13 @@ def test_a_size_predicted_past_the_cap_by_less_than_its_margin_is_tried_and_near
     gaps, work = [], []
     for growth in (1.0, WINDOW_GROWTH_SEVERAL):
         window = FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11), growth=growth,
-                                option_looks=1)
+                                option_looks=1, others="buffer", descendants=0.0)
         gaps.append(_gap(window, engine, 1, 2))
         work.append(window.work)
     assert gaps[0] == pytest.approx(0.02565, abs=1e-5) and gaps[1] == pytest.approx(0.01416, abs=1e-5)
     assert all(w["most_states"] <= 1200 and w["by_base"] == 0 for w in work)
-    sizes = [FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11), growth=g)
+    sizes = [FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11), growth=g,
+                            others="buffer", descendants=0.0)
              .tables(engine, 0, engine.all_strategies, ())[0].size for g in (1.0, WINDOW_GROWTH_SEVERAL)]
     assert sizes[0] < sizes[1]
 

@@ -399,6 +399,23 @@ WINDOW_OPTION_LOOKS = 2
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
 WINDOW_STATES = 20_000
+#: The frontier window's parts are taken in the order of their remaining ancestors less this many times their
+#: remaining descendants (then declaration order): the parts whose installation unlocks the most come into
+#: the window with what they wait for.  Measured on KILBRID at 1 visible (benchmarks/bench_window_gap.py,
+#: 40 paired runs, with ready others credited a move and 5 shakes, an other bufferable at the decision alone,
+#: the form these sweeps were run with; the final form's gaps are in docs/decisions.md): with 1 location 0 gave +2.76%
+#: over the optimum, 0.125 +0.76%, 0.25 +0.30%, 0.5 +0.16%, 1 +0.08%, 2 +0.06%, 4 +0.03%; with 2 locations
+#: 0.125 +2.93%, 0.25 +1.26%, 0.5 +0.97%, 1 +0.42%, 2 +0.43%, 4 +0.57%.  Without the ready others the
+#: order alone is worse (1 location: +8.4% at 1, +3.3% at 0): the window then holds parts it cannot see
+#: unlock anything.
+WINDOW_DESCENDANTS = 1.0
+#: A unit outside the frontier window whose remaining ancestors are all window parts (a *ready other*)
+#: is installed when seen once they are, credited with a move and this many shakes and looks: what it would
+#: cost after the window (KILBRID's optimum spends about 3-4 shakes a part at 1 visible).  Measured on
+#: KILBRID at 1 visible (40 paired runs, :data:`WINDOW_DESCENDANTS` 1, the same form; credits of a move and 1,
+#: 3, 5, 9, 19 shakes): with 1 location +0.10%, +0.09%, +0.08%, +0.12%, +0.34%; with 2 locations +0.51%, +0.40%,
+#: +0.42%, +0.97%, +1.47%.
+WINDOW_READY_LOOKS = 3.0
 #: Windows kept, by state (a decision table is under 1 kB for a window of 12 parts, so at most about
 #: 4 MB a policy): a state's looks share it.
 WINDOW_CACHE = 4096

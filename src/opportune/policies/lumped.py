@@ -312,11 +312,13 @@ class LumpedWindow(DecidesOnMasks):
     def _frontier(self, engine, mask: int, consistent: int, first: tuple, size: int, strategy: int):
         """:func:`~opportune.policies.window.frontier_window` of ``size`` parts of ``strategy``'s frontier with
         the parts ``first`` taken first, cached (the search asks each size in each of its rounds, and a
-        state's looks ask again)."""
+        state's looks ask again).  In the order of remaining ancestors alone: these programmes have no ready
+        others (the uniform window's order by descendants was measured with them)."""
         key = (mask, consistent, first, size, strategy)
         got = _cached(self._frontiers, key)
         return got if got is not None else _keep(
-            self._frontiers, key, frontier_window(engine, mask, consistent, first, size, strategy), self.cache)
+            self._frontiers, key, frontier_window(engine, mask, consistent, first, size, strategy, descendants=0.0),
+            self.cache)
 
     def _window_engine(self, engine, mask: int, consistent: int, parts: list[int]) -> OrderEngine:
         """:func:`window_engine`, cached (a window listed is then solved, and a state's looks share it)."""
