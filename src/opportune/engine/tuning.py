@@ -478,6 +478,19 @@ PILE_OPTION_LOOKS = 2_000
 #: plan +1.951% -> +0.776%; with 2 locations, along 40 seeded runs, it made r2-16x2 and r2-20x2 worse at 1-3
 #: visible (+0.67% -> +2.14% at 1 visible on r2-16x2; docs/decisions.md).
 PILE_LOOK_DEEPER_LOCATIONS = 1
+#: Where several strategies are open and the buffer has at least this many locations, a strategy's pile
+#: window takes first only the parts of a look that wait there for at most PILE_NEAR_UNITS remaining units; a
+#: part deeper in that strategy's order is one of its window's others (policies/pile_window.py).  Taken first,
+#: such a part brings its chain, the strategy's own frontier is lumped and never installed, and a move
+#: closing that strategy wins the look.  Measured along 40 seeded runs (bench_window_gap.py, 2 locations) on
+#: eight 16-20-part two-strategy plans: at 2 visible the mean gap +2.05% -> +1.56% (worst r5-20x2 +3.97% ->
+#: +1.87%), at 3 visible on seven +2.16% -> +1.50%; at 1 visible the same decisions on five plans; with one
+#: location not measured to pay (the exact lab's rows kept).
+PILE_NEAR_LOCATIONS = 2
+#: Remaining units a part of a look may wait for in a strategy and still be taken first by its pile window
+#: (see PILE_NEAR_LOCATIONS).  2 and 3 were alike at 2 visible (the mean gap over the eight plans -0.46 and
+#: -0.51 points), 2 the better at 3 visible (r5-20x2 +1.81% against +2.32%), 5 nearer the old rule.
+PILE_NEAR_UNITS = 2
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.
