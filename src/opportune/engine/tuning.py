@@ -483,9 +483,9 @@ PILE_LOOK_DEEPER_LOCATIONS = 1
 #: part deeper in that strategy's order is one of its window's others (policies/pile_window.py).  Taken first,
 #: such a part brings its chain, the strategy's own frontier is lumped and never installed, and a move
 #: closing that strategy wins the look.  Measured along 40 seeded runs (bench_window_gap.py, 2 locations) on
-#: eight 16-20-part two-strategy plans: at 2 visible the mean gap +2.05% -> +1.56% (worst r5-20x2 +3.97% ->
-#: +1.87%), at 3 visible on seven +2.16% -> +1.50%; at 1 visible the same decisions on five plans; with one
-#: location not measured to pay (the exact lab's rows kept).
+#: twelve 16-20-part two-strategy plans: at 2 visible the mean gap +1.68% -> +1.39% (the worst +3.97% ->
+#: +2.19%), at 3 visible +1.68% -> +1.25% (+3.57% -> +1.82%); at 1 visible the same decisions on five of
+#: them.  With one location it is off: not measured there (the exact lab's rows stand).
 PILE_NEAR_LOCATIONS = 2
 #: Remaining units a part of a look may wait for in a strategy and still be taken first by its pile window
 #: (see PILE_NEAR_LOCATIONS).  2 and 3 were alike at 2 visible (the mean gap over the eight plans -0.46 and
