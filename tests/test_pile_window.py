@@ -374,16 +374,18 @@ def _deep_and_near_plan():
 
 
 def test_with_two_locations_a_strategy_s_window_takes_first_only_the_seen_parts_near_its_frontier():
-    """Two strategies open and two locations: a part of the look deep in one strategy's order (p1, waiting
-    there for every other unit) is left to that window's others, and taken first by the window of the
-    strategy where it is near; with one location, or one strategy open, every part of the look is taken."""
+    """Two strategies open and two locations (or two parts a look): a part of the look deep in one strategy's
+    order (p1, waiting there for every other unit) is left to that window's others, and taken first by the
+    window of the strategy where it is near; at 1 visible with one location, or with one strategy open,
+    every part of the look is taken."""
     engine = OrderEngine(_deep_and_near_plan())
     plan, look = engine.plan, ("p1", "p7")
     window = PileWindow(visible=2, capacity=2)
     s0, s1 = (i for i, s in enumerate(plan.strategies) if s.name in ("s0", "s1"))
     assert window._forced_in(engine, 0, engine.all_strategies, look, s0) == ("p7",)
     assert window._forced_in(engine, 0, engine.all_strategies, look, s1) == look
-    assert PileWindow(visible=2, capacity=1)._forced_in(engine, 0, engine.all_strategies, look, s0) == look
+    assert PileWindow(visible=2, capacity=1)._forced_in(engine, 0, engine.all_strategies, look, s0) == ("p7",)
+    assert PileWindow(visible=1, capacity=1)._forced_in(engine, 0, engine.all_strategies, look, s0) == look
     assert window._forced_in(engine, 0, 1 << s0, look, s0) == look
 
 
