@@ -506,6 +506,25 @@ PILE_OPTION_LOOKS = 2_000
 #: plan +1.951% -> +0.776%; with 2 locations, along 40 seeded runs, it made r2-16x2 and r2-20x2 worse at 1-3
 #: visible (+0.67% -> +2.14% at 1 visible on r2-16x2; docs/decisions.md).
 PILE_LOOK_DEEPER_LOCATIONS = 1
+#: Where several strategies are open and the buffer has at least this many locations, a strategy's pile
+#: window takes first only the parts of a look that wait there for at most PILE_NEAR_UNITS remaining units; a
+#: part deeper in that strategy's order is one of its window's others (policies/pile_window.py).  Taken first,
+#: such a part brings its chain, the strategy's own frontier is lumped and never installed, and a move
+#: closing that strategy wins the look.  Measured along 40 seeded runs (bench_window_gap.py, 2 locations) on
+#: twelve 16-20-part two-strategy plans: at 2 visible the mean gap +1.68% -> +1.39% (the worst +3.97% ->
+#: +2.19%), at 3 visible +1.68% -> +1.25% (+3.57% -> +1.82%); at 1 visible the same decisions on five of
+#: them.  With one location see PILE_NEAR_VISIBLE.
+PILE_NEAR_LOCATIONS = 2
+#: Or with at least this many parts a look (one location): along the same runs at 2 visible and 1 location,
+#: r5-20x2 +2.55% -> +0.59%, r20-16x2 +1.69% -> +0.91%, r14-16x2 +0.89% -> +0.31%, r2-20x2 +0.59% -> +0.15%,
+#: r2-16x2 +0.83% -> +1.20%, r8-20x2 and r17-16x2 the same decisions; at 3 visible and 1 location the same
+#: decisions on three plans.  At 1 visible and 1 location it is off (there the exact
+#: lab's rows stand; along runs the same on r29-20x2 and r5-20x2, r20-16x2 +0.35% -> +0.42%).
+PILE_NEAR_VISIBLE = 2
+#: Remaining units a part of a look may wait for in a strategy and still be taken first by its pile window
+#: (see PILE_NEAR_LOCATIONS).  2 and 3 were alike at 2 visible (the mean gap over the eight plans -0.46 and
+#: -0.51 points), 2 the better at 3 visible (r5-20x2 +1.81% against +2.32%), 5 nearer the old rule.
+PILE_NEAR_UNITS = 2
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.

@@ -236,7 +236,8 @@ class LumpedWindow(DecidesOnMasks):
         if got is None:
             found: dict = {}
             for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]:
-                table = self._largest(engine, mask, consistent, buffer, tuple(buffer) + forced, s)
+                first = tuple(buffer) + self._forced_in(engine, mask, consistent, forced, s)
+                table = self._largest(engine, mask, consistent, buffer, first, s)
                 if table is not None:
                     found.setdefault(table.parts, table)
             got = tuple(found.values())
@@ -340,6 +341,11 @@ class LumpedWindow(DecidesOnMasks):
         the optimum without, +0.28% with, in a weighted bin).  Looks whose parts the state's window holds
         share its table (:meth:`_window` caches by the parts).  O(visible)."""
         return tuple(sorted(set(visible), key=engine.plan.index))
+
+    def _forced_in(self, engine, mask: int, consistent: int, forced: tuple[str, ...], strategy: int) -> tuple[str, ...]:
+        """The parts of a look ``strategy``'s window takes first (:meth:`_forced`): all of them here (a
+        subclass may leave some to the others).  O(1)."""
+        return forced
 
     def _count(self, solver) -> None:
         """The work of a window's programme, counted."""

@@ -24,7 +24,9 @@ share it: the exact evaluation of the policy asks each look of a state between t
 successors.  Where several strategies are open, a window of each one's frontier decides the look by the
 least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`): a move that keeps several open
 is valued a look deeper, by the windows of the state it leads to (:meth:`PileWindow._kept_open`; with one
-buffer location, where it was measured to pay), and
+buffer location, where it was measured to pay), and with two locations or more, or two parts a look or more,
+each strategy's window takes first only the parts of the look near its frontier (:meth:`PileWindow._forced_in`: a part deep in that
+strategy's order is one of its others, not the chain below it), and
 the shake less the value of keeping several open, computed over the fresh looks of their parts
 (:func:`fresh_look_value`).  The window's size is the
 largest predicted to fit
@@ -48,7 +50,7 @@ from opportune.policies.base import Action
 from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.optimal import shake_loop
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
-from opportune.policies.window import in_bin, outside_rest
+from opportune.policies.window import in_bin, near_parts, outside_rest
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "fresh_look_value",
            "pile_window_available", "pile_window_solver"]
@@ -284,6 +286,29 @@ class PileWindow(LumpedWindow):
         # an other: the one seen first in the window's topological order
         ids = set(visible)
         return value, Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids)), shake
+
+    #: Where several strategies are open, with at least this many buffer locations, or
+    #: :attr:`near_visible` parts a look, a strategy's window takes first only the parts of a look within
+    #: :attr:`near_units` of its frontier (:data:`~opportune.engine.tuning.PILE_NEAR_LOCATIONS`).
+    near_locations: float = tuning.PILE_NEAR_LOCATIONS
+    #: See :attr:`near_locations` (:data:`~opportune.engine.tuning.PILE_NEAR_VISIBLE`).
+    near_visible: int = tuning.PILE_NEAR_VISIBLE
+    #: Remaining units a part of a look may wait for in a strategy and still be taken first by its window
+    #: (:data:`~opportune.engine.tuning.PILE_NEAR_UNITS`).
+    near_units: int = tuning.PILE_NEAR_UNITS
+
+    def _forced_in(self, engine, mask: int, consistent: int, forced: tuple[str, ...], strategy: int) -> tuple[str, ...]:
+        """The parts of a look ``strategy``'s window takes first: all of them with one strategy open, or with
+        fewer than :attr:`near_locations` locations and :attr:`near_visible` parts a look (1 visible and 1
+        location: the exact lab's rows); else those within :attr:`near_units` remaining units of
+        its frontier (:func:`~opportune.policies.window.near_parts`), the others seen there lumped as others.
+        A part deep in one strategy's order, taken in with the chain below it, makes that strategy's window
+        its chain, the strategy's own frontier lumped and never installed: the window then values the
+        strategy far over what it costs, and a move closing it wins the look.  O(visible)."""
+        locations = float("inf") if self.capacity is None else self.capacity
+        if consistent.bit_count() < 2 or (locations < self.near_locations and self.visible < self.near_visible):
+            return forced
+        return near_parts(engine, mask, strategy, forced, self.near_units)
 
     #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
     #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).

@@ -63,7 +63,7 @@ from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decisio
 from opportune.policies.optimal import shake_loop
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "frontier_window", "joint_window", "in_bin",
+__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "frontier_window", "joint_window", "in_bin", "near_parts",
            "option_value", "outside_rest", "two_looks", "window_available", "window_strategies"]
 
 _native = compiled_core()
@@ -198,6 +198,41 @@ def _closure(i: int, every: dict[int, int], part_of, window: set[int], most: int
         todo.extend(part_of[u] for u in bits(every[j]))
     return new
 
+
+def near_parts(engine, mask: int, strategy: int, parts, most: int) -> tuple[str, ...]:
+    """The parts of ``parts`` that wait in ``strategy`` for at most ``most`` remaining units (their remaining
+    ancestors there, transitive), in their order: those a window of that strategy's frontier may take first
+    without taking in the chain below them.  O(len(parts)) once the state's ancestors are kept.
+
+    Parameters
+    ----------
+    engine : OrderEngine
+        The plan's engine.
+    mask : int
+        The installed units.
+    strategy : int
+        The strategy (index).
+    parts : sequence of str
+        Part ids.
+    most : int
+        Remaining units a part may wait for.
+
+    Returns
+    -------
+    tuple of str
+        The parts of ``parts`` within ``most`` units of the strategy's frontier.
+
+    Examples
+    --------
+    >>> from opportune import make_plan
+    >>> from opportune.engine import OrderEngine
+    >>> engine = OrderEngine(make_plan(["a", "b", "c"], {"b": ["a"], "c": ["b"]}))
+    >>> near_parts(engine, 0, 0, ("a", "b", "c"), 1)
+    ('a', 'b')
+    """
+    below, _ = _ancestors_of(engine, mask, 1 << strategy)
+    plan = engine.plan
+    return tuple(p for p in parts if below.get(plan.index(p), 0).bit_count() <= most)
 
 
 def frontier_window(engine, mask: int, consistent: int, buffer, size: int, strategy: int | None = None,
