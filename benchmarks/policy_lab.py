@@ -109,24 +109,33 @@ USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
 ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
-POLICY_VERSIONS = {"fallback": "the option of several strategies two looks deep"}
+POLICY_VERSIONS = {"fallback": "one strategy: parts by descendants, the ready others installed"}
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;
 #: then its state cap went from 20,000 to 30,000 (the compiled core made it affordable); then a window per
 #: open strategy, each look taking the least of their moves with the option value of keeping several open;
 #: then a move keeping several open valued a look deeper, by the windows of the state it leads to.
-BIN_VERSIONS = {("fallback", "pile"): "pile window of each strategy, a move keeping several open a look deeper"}
+#: Then, with several strategies open and 2 visible or 2 locations, the look's parts near each strategy's
+#: frontier taken first.
+BIN_VERSIONS = {("fallback", "pile"): "pile window, the look near each strategy's frontier first"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
 #: touches only plans of several strategies): their gaps on one-strategy plans are current.
-SAME_ON_ONE_STRATEGY = {"fallback": ("frontier window", "frontier window of each strategy, chosen by the look",
-                                     "windows of several strategies larger, with the look's option value",
-                                     "windows of several strategies tried up to twice the cap by their growth")}
+SAME_ON_ONE_STRATEGY = {"fallback": ()}     # the current version changed the decisions on one strategy
 #: As :data:`SAME_ON_ONE_STRATEGY`, in a bin with a version of its own.
 BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",
-                                                   "pile window of each strategy, with the looks' option value")}
+                                                   "pile window of each strategy, with the looks' option value",
+                                                   "pile window of each strategy, a move keeping several open a "
+                                                   "look deeper")}
+#: Earlier versions whose decisions on plans of several strategies are the current version's (a change that
+#: touches only plans of one strategy), in a bin without a version of its own.
+SAME_ON_SEVERAL_STRATEGIES = {"fallback": ("the option of several strategies two looks deep",)}
+#: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin:
+#: the pile's look near each strategy's frontier applies from 2 visible or 2 locations.
+BIN_SAME_AT = {("fallback", "pile"): {(1, 1): ("pile window of each strategy, a move keeping several open a "
+                                               "look deeper",)}}
 
 
 def policy_version(name: str, bin: str) -> str | None:
@@ -348,9 +357,13 @@ def _fresh(rec: dict) -> dict:
         v, bin = versions.get(n), rec.get("bin", "uniform")
         if v == policy_version(n, bin):
             return True
+        if v in BIN_SAME_AT.get((n, bin), {}).get((rec.get("visible"), rec.get("capacity")), ()):
+            return True         # a change that touched other settings only
+        own = (n, bin) in BIN_VERSIONS
+        if rec.get("two_strategies"):   # a change that touched only plans of one strategy
+            return not own and v in SAME_ON_SEVERAL_STRATEGIES.get(n, ())
         # a change that touched only plans of several strategies
-        same = BIN_SAME_ON_ONE_STRATEGY.get((n, bin), ()) if (n, bin) in BIN_VERSIONS else SAME_ON_ONE_STRATEGY.get(n, ())
-        return not rec.get("two_strategies") and v in same
+        return v in (BIN_SAME_ON_ONE_STRATEGY.get((n, bin), ()) if own else SAME_ON_ONE_STRATEGY.get(n, ()))
 
     gaps = {n: g for n, g in rec["gaps"].items() if current(n)}
     return {**rec, "gaps": gaps}
