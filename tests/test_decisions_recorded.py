@@ -14,7 +14,9 @@ uniform bin's optimum came to sum its looks as order statistics: every action th
 printed expectations within 1e-4 (their last digit's rounding), and KILBRID's reason for deciding by
 the base in the words of states and bytes.  The look-ahead's KILBRID case recorded again when its fallback
 in the uniform bin became the frontier window's optimum (policies/window.py) instead of slack, and when the
-optimum's state cap rose to 32,000,000 (every action the same; only the cap's figure in its reason).
+optimum's state cap rose to 32,000,000 (every action the same; only the cap's figure in its reason), and when
+the window on plans of one strategy came to take the parts that unlock the most first and to install the ready
+parts outside it (its decisions changed by design: docs/decisions.md measures them against the optimum).
 """
 
 from __future__ import annotations

@@ -186,6 +186,25 @@ def test_a_bins_own_version_keeps_its_own_one_strategy_gaps_only(monkeypatch):
     assert policy_lab._fresh({**one, "versions": {"fallback": "old uniform"}})["gaps"] == {}
     assert policy_lab._fresh({**one, "versions": {"fallback": "new"}, "two_strategies": True})["gaps"] == {"fallback": 0.01}
 
+
+def test_a_change_of_one_strategys_decisions_keeps_the_gaps_of_several_and_of_settings_it_did_not_touch(monkeypatch):
+    """A new fallback deciding otherwise on one-strategy plans alone: the older gaps on two-strategy plans
+    count (SAME_ON_SEVERAL_STRATEGIES), those on one-strategy plans do not; in a bin with a version of its own,
+    an older version counts in the settings BIN_SAME_AT names and nowhere else."""
+    monkeypatch.setitem(policy_lab.POLICY_VERSIONS, "fallback", "new")
+    monkeypatch.setitem(policy_lab.SAME_ON_SEVERAL_STRATEGIES, "fallback", ("old",))
+    monkeypatch.setitem(policy_lab.SAME_ON_ONE_STRATEGY, "fallback", ())
+    two = {"gaps": {"fallback": 0.01}, "versions": {"fallback": "old"}, "two_strategies": True, "bin": "uniform"}
+    assert policy_lab._fresh(two)["gaps"] == {"fallback": 0.01}
+    assert policy_lab._fresh({**two, "two_strategies": False})["gaps"] == {}
+    assert policy_lab._fresh({**two, "versions": {"fallback": "older"}})["gaps"] == {}
+    monkeypatch.setitem(policy_lab.BIN_VERSIONS, ("fallback", "pile"), "new pile")
+    monkeypatch.setitem(policy_lab.BIN_SAME_AT, ("fallback", "pile"), {(1, 1): ("old pile",)})
+    pile = {**two, "bin": "pile", "versions": {"fallback": "old pile"}, "visible": 1, "capacity": 1}
+    assert policy_lab._fresh(pile)["gaps"] == {"fallback": 0.01}
+    assert policy_lab._fresh({**pile, "visible": 2})["gaps"] == {}
+    assert policy_lab._fresh({**pile, "versions": {"fallback": "old"}})["gaps"] == {}    # the uniform list: not here
+
 # ------------------------------------------------------------------ the SALBP walls: the largest attempt per plan-setting
 
 WALL = "0:salbp:KILBRID:1:2:uniform:"

@@ -119,6 +119,9 @@ class WindowTable:
     rest : float, default 0.0
         What the parts outside cost after the window (a look and a move a unit): windows of different
         strategies' frontiers compare by ``values[-1] + rest``.
+    ready_install : float, default inf
+        The expected cost after installing a ready other (a part outside the window whose remaining
+        ancestors are all installed) seen at the state; ``inf``: the window installs none.
 
     Examples
     --------
