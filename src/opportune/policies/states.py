@@ -110,19 +110,19 @@ def estimate_states(engine, *, visible: int = 2, capacity: int | None = None, pi
     8
     """
     until = as_deadline(deadline).within(time_limit)
-    weigh = _Weigher(engine, visible, capacity, pile)
-    looks = looks_at_start(engine, visible)
+    listing = StateListing(engine, visible=visible, capacity=capacity, pile=pile, stop_above=stop_above)
     # the listing gets part of the time: where it cannot finish, the estimate needs the rest
-    listed = _list_keys(engine, weigh, stop_above, until.share(0.6))
-    if listed.complete:
-        return StateEstimate(listed.total, listed.total, True, "listed", listed.keys, looks)
+    listed = listing.advance(until.share(0.6))
+    if listed is not None and listed.exact:
+        return listed
+    looks = listing.looks
     # every set of minimal units is a down-set, so a key: a bound where the listing saw little
     minimal = max((sum(1 for b in poset.below if not b) for poset in engine.posets), default=0)
-    low = max(listed.total, (1 << minimal) - 1)
-    profile = estimate_from_downsets(engine, deadline=until, weigh=weigh)
+    low = max(listing.total, (1 << minimal) - 1)
+    profile = estimate_from_downsets(engine, deadline=until, weigh=listing.weigh)
     if profile is None or profile <= low:
-        return StateEstimate(low, low, False, "listed in part", listed.keys, looks)
-    return StateEstimate(profile, low, False, "estimated from the order's down-sets", listed.keys, looks)
+        return StateEstimate(low, low, False, "listed in part", listing.keys, looks)
+    return StateEstimate(profile, low, False, "estimated from the order's down-sets", listing.keys, looks)
 
 
 def looks_at_start(engine, visible: int) -> int:
@@ -239,29 +239,6 @@ def _times_run(poly: list[int], r: int, cap: int) -> list[int]:
 # ---------------------------------------------------------------- listing the keys
 
 
-@dataclass
-class _Listed:
-    total: int
-    keys: int
-    complete: bool
-
-
-def _list_keys(engine, weigh: _Weigher, stop_above: int | None, until: Deadline) -> _Listed:
-    """Every (installed units, consistent strategies) key the programmes can reach, weighed
-    (:func:`reachable_keys`); stops past ``stop_above`` states or ``until``."""
-    total = 0
-    keys = 0
-    limit = float("inf") if stop_above is None else stop_above
-    check = until.finite
-    for mask, _ in reachable_keys(engine, until):
-        keys += 1
-        total += weigh.of_mask(mask)
-        # the clock at every key: a key costs O(units), thousands of operations on a large plan
-        if total > limit or (check and until.expired()):
-            return _Listed(total, keys, False)
-    return _Listed(total, keys, not (check and until.expired()))
-
-
 class StateListing:
     """The exact listing of :func:`estimate_states`, done in slices: each :meth:`advance` goes on where the
     last one stopped (the level-by-level walk of :func:`reachable_keys` is kept between calls), so per-plan
@@ -280,6 +257,13 @@ class StateListing:
     stop_above : int or None, optional
         Stop once the count passes it: the answer is then "at least".
 
+    Attributes
+    ----------
+    total, keys : int
+        The states and the (installed, strategies) keys listed so far.
+    looks : int
+        The distinct looks at the start (:func:`looks_at_start`).
+
     Examples
     --------
     >>> from opportune import make_plan
@@ -292,10 +276,10 @@ class StateListing:
 
     def __init__(self, engine, *, visible: int = 2, capacity: int | None = None, pile: bool = False,
                  stop_above: int | None = None):
-        self._weigh = _Weigher(engine, visible, capacity, pile)
+        self.weigh = _Weigher(engine, visible, capacity, pile)
         self._keys = reachable_keys(engine)      # never cut inside: the clock is read between keys
         self._limit = float("inf") if stop_above is None else stop_above
-        self._looks = looks_at_start(engine, visible)
+        self.looks = looks_at_start(engine, visible)
         self.total = 0
         self.keys = 0
         self.result: StateEstimate | None = None
@@ -318,13 +302,13 @@ class StateListing:
             return self.result
         for mask, _ in self._keys:
             self.keys += 1
-            self.total += self._weigh.of_mask(mask)
+            self.total += self.weigh.of_mask(mask)
             if self.total > self._limit:
-                self.result = StateEstimate(self.total, self.total, False, "listed in part", self.keys, self._looks)
+                self.result = StateEstimate(self.total, self.total, False, "listed in part", self.keys, self.looks)
                 return self.result
             if until.expired():
                 return None
-        self.result = StateEstimate(self.total, self.total, True, "listed", self.keys, self._looks)
+        self.result = StateEstimate(self.total, self.total, True, "listed", self.keys, self.looks)
         return self.result
 
 
