@@ -232,3 +232,39 @@ def test_a_prepared_optimum_decides_as_the_look_ahead_without_a_budget_in_every_
         fresh = OrderEngine(plan)
         assert action == exact.choose_at(fresh, 0, fresh.all_strategies, (), 1.0, (part.id,))
         assert budgeted.deciding_rule == OPTIMUM and budgeted.last_cost == exact.last_cost
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 10_000), n=st.integers(2, 9), visible=st.integers(1, 3), capacity=st.integers(1, 2))
+def test_the_optimum_asks_its_base_only_to_break_a_tie(seed, n, visible, capacity):
+    """Where the optimum decides, the base rule's count (early in a large plan, a look's whole budget) is
+    asked only where several actions are equally least; the decision is the base's action among the least,
+    else the least by kind and order: an action of least expected cost (an independent solver's values)."""
+    plan = random_plan(seed, n, 0.3)
+    engine = OrderEngine(plan)
+    policy = Lookahead(visible=visible, capacity=capacity)
+    asked = []
+    choose = policy.base.choose_at
+    policy.base.choose_at = lambda *a, **k: asked.append(a[5]) or choose(*a, **k)
+    own = optimal_solver(OrderEngine(plan), visible=visible, capacity=capacity, merge=False)
+    rng = random.Random(seed)
+    mask, buffer = 0, ()
+    while mask != (1 << engine.n_units) - 1:
+        in_bin = [p.id for i, p in enumerate(plan.parts) if not mask >> engine.first[i] & 1 and p.id not in buffer]
+        look = tuple(sorted(rng.sample(in_bin, min(visible, len(in_bin))))) if in_bin else ()
+        action = policy.choose_at(engine, mask, 1, buffer, capacity - len(buffer), look)
+        assert policy.deciding_rule == OPTIMUM
+        key = own.policy_key(mask, 1, buffer)
+        idx = tuple(sorted(plan.index(p) for p in look))
+        values = {str(a): c + own._after(key, idx, a, nxt) for c, nxt, a in own.policy_moves(key, idx)}
+        values["shake"] = own.costs.shake + own._after_shake(key)
+        least = min(values.values())
+        tied = [a for a, v in values.items() if v <= least + 1e-12]
+        assert abs(values[str(action)] - least) < 1e-9
+        assert (look in asked) == (len(tied) > 1)
+        asked.clear()
+        if action.kind == "install":
+            mask |= 1 << engine.first[plan.index(action.part)]
+            buffer = tuple(b for b in buffer if b != action.part) if action.source == "buffer" else buffer
+        elif action.kind == "buffer":
+            buffer = tuple(sorted(buffer + (action.part,)))

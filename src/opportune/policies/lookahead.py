@@ -784,11 +784,19 @@ class Lookahead(DecidesOnMasks):
         return f"{self.refusal}; {base}" if self.refusal else base
 
     def _best(self, ev, engine, key: tuple, buffer: tuple[str, ...], visible: tuple[str, ...]):
-        """``(action, its expected cost)``: the least of cost plus the base's cost to go after it."""
+        """``(action, its expected cost)``: the least of cost plus the base's cost to go after it; of equal
+        ones the base's own action (the improvement is then never worse), else by kind and declaration order."""
         mask, consistent, _ = key
         plan = engine.plan
         look = tuple(sorted(plan.index(p) for p in visible))
-        # the base's own action first, so that ties keep it (the improvement is then never worse)
+        kind_rank = {"install": 0, "buffer": 1}
+        ranked = [(cost + ev._after(key, look, action, nxt), kind_rank[action.kind], plan.index(action.part), action)
+                  for cost, nxt, action in ev.policy_moves(key, look)]
+        ranked.append((ev.costs.shake + ev._after_shake(key), 2, 0, SHAKE))
+        least = min(ranked, key=lambda r: r[:3])
+        tied = [r for r in ranked if r[0] <= least[0] + 1e-12]
+        if ev.policy is None and len(tied) == 1:
+            return least[3], least[0]   # the optimum's one best: the base's count (a look's budget early on) not asked
         try:
             base = self.base.choose_at(engine, mask, consistent, buffer,
                                        float("inf") if ev.capacity is None else ev.capacity - len(buffer), visible)
@@ -796,18 +804,10 @@ class Lookahead(DecidesOnMasks):
             if ev.policy is not None:
                 raise
             base = None     # the optimum needs no base (a look's deadline cut its count): ties by kind and order
-        best, best_cost = base, None
-        kind_rank = {"install": 0, "buffer": 1}
-        ranked = [(cost + ev._after(key, look, action, nxt), kind_rank[action.kind], plan.index(action.part), action)
-                  for cost, nxt, action in ev.policy_moves(key, look)]
-        ranked.append((ev.costs.shake + ev._after_shake(key), 2, 0, SHAKE))
-        for total, _, _, action in ranked:
+        for total, _, _, action in tied:
             if base is not None and same_action(action, base):
-                best_cost = total
-        total, _, _, action = min(ranked, key=lambda r: r[:3])
-        if best_cost is None or total < best_cost - 1e-12:
-            best, best_cost = action, total
-        return best, best_cost
+                return base, total
+        return least[3], least[0]
 
     def decide(self, state, visible: tuple[str, ...]) -> Decision:
         """The decision with its reasons: the rule that decided (the optimum, the step over the base, the
