@@ -57,8 +57,8 @@ def test_the_looks_option_value_beats_the_per_strategy_choice_by_a_computed_marg
     rule) is 1.56% over the optimum; with the option of keeping both strategies open taken off the moves
     that keep them, 0.77%."""
     engine = OrderEngine(TWO)
-    old = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), option=False, joint=False, others="buffer", descendants=0.0), engine, 1, 1)
-    new = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), several=(8,), joint=False, others="buffer", descendants=0.0), engine, 1, 1)
+    old = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), more=(), several=(8,), option=False, joint=False, others="buffer", descendants=0.0), engine, 1, 1)
+    new = _gap(FrontierWindow(visible=1, capacity=1, sizes=(8,), more=(), several=(8,), joint=False, others="buffer", descendants=0.0), engine, 1, 1)
     assert old == pytest.approx(0.015565, abs=1e-5)
     assert new == pytest.approx(0.007735, abs=1e-5)
     assert new < old - 0.005
@@ -80,7 +80,7 @@ def test_the_option_value_is_what_the_looks_choice_of_window_saves():
     looks; 0 with either window alone."""
     engine = OrderEngine(TWO)
     costs = TimeModel()
-    window = FrontierWindow(visible=1, capacity=1, sizes=(5,), several=(5,), joint=False, others="buffer", descendants=0.0)
+    window = FrontierWindow(visible=1, capacity=1, sizes=(5,), more=(), several=(5,), joint=False, others="buffer", descendants=0.0)
     tables = window.tables(engine, 0, engine.all_strategies, ())
     assert len(tables) == 2
     assert all(option_value(engine, 0, engine.all_strategies, (), (t,), 1, costs) == pytest.approx(0.0, abs=1e-9)
@@ -127,7 +127,7 @@ def test_the_option_looks_are_one_or_two_and_a_plan_of_one_strategy_decides_alik
     plan = make_plan(ids, {b: [a for a in ids[:j] if rng.random() < 0.3] for j, b in enumerate(ids)})
     engine = OrderEngine(plan)
     for visible in (1, 2):
-        values = [PolicyEvaluator(engine, FrontierWindow(visible=visible, capacity=2, sizes=(5,), option_looks=k),
+        values = [PolicyEvaluator(engine, FrontierWindow(visible=visible, capacity=2, sizes=(5,), more=(), option_looks=k),
                                   visible=visible, capacity=2).value() for k in (1, 2)]
         assert values[0] == values[1]
 

@@ -371,6 +371,18 @@ ROLLOUT_SHARE = 0.8
 #: within 0.24% of the optimum on 16-30-part plans (8 within 1.7%, 5 about 4%), and the smaller ones keep a
 #: window on wide plans, whose frontier's down-sets are many, and within a budget on a slow machine.
 WINDOW_PARTS = (5, 8, 12)
+#: Larger sizes tried after them where one strategy is open, each unless its states, predicted from the
+#: growth of the two before, pass :data:`WINDOW_GROWTH_SEVERAL` times :data:`WINDOW_STATES` (a window that
+#: does not fit stops at the cap, and the largest that did decides, as before).  With one location a window
+#: of 16-20 parts fits in a few thousand states.  The policy lab's worst one-strategy rows, exact: r27-25 at
+#: 3 visible and 1 location +0.862% -> +0.000%, r21-25 at 2 visible +0.783% -> 0, r9-20 at 2 visible
+#: +0.753% -> 0, r3-30 at 3 visible +0.652% -> 0, r19-16 at 2 visible and 2 locations +0.463% -> 0, r3-20
+#: at 1 visible and 2 locations +0.122% -> +0.104%; the evaluations took less CPU than without the growth
+#: check.  Decision CPU along one run, no budget (benchmarks/bench_fallback.py --decisions, load 2-3): the
+#: largest 24.8 ms on TONGE70 and 39.8 ms on ARC111 at 1 visible and 1 location, 19-28 ms at 2-3 visible
+#: and 2 locations (before: at most 29 ms); the mean 0.8-4.4 ms.  With a budget the deadline stops the
+#: largest window first.
+WINDOW_PARTS_MORE = (16, 20)
 #: The sizes tried at a state where several strategies are open (each open strategy's frontier window),
 #: a larger one skipped where its states, predicted from the two before (their growth), pass
 #: :data:`WINDOW_STATES`: a window closed in several strategies keeps the option of choosing among them,

@@ -40,7 +40,8 @@ within :data:`~opportune.engine.tuning.WINDOW_GROWTH_SEVERAL` times the cap.  A 
 union of the strategies' frontier windows (:func:`joint_window`) solved in all of them at once (a unit
 waiting there for a part outside is never installed in that strategy), ending in a strategy once that
 strategy's own window is installed, at the cost its largest window adds to its own window of that size.
-Where the window does not fit in states (a smaller window is tried, :data:`WINDOW_PARTS`) or in its time,
+Where one strategy is open, larger windows (:data:`WINDOW_PARTS_MORE`) are tried after :data:`WINDOW_PARTS`
+while predicted to fit.  Where the window does not fit in states (a smaller window is tried) or in its time,
 the base rule decides.
 
 Measured against the optimum on 16-30-part plans and per decision on the SALBP plans:
@@ -58,7 +59,7 @@ from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 from opportune.engine.tuning import (  # tuning.py says why
     WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_DESCENDANTS, WINDOW_GROWTH_SEVERAL, WINDOW_OPTION_LOOKS, WINDOW_PARTS,
-    WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_STATES, WINDOW_STRATEGIES)
+    WINDOW_PARTS_MORE, WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.optimal import shake_loop
 from opportune.planning.costs import TimeModel
@@ -128,7 +129,7 @@ class WindowTable:
     >>> from opportune import make_plan
     >>> from opportune.engine import OrderEngine
     >>> engine = OrderEngine(make_plan(list("abcdefghij"), {"j": list("abcdefghi")}))
-    >>> table = FrontierWindow(visible=2, capacity=1, sizes=(3,)).table(engine, 0, 1, ())
+    >>> table = FrontierWindow(visible=2, capacity=1, sizes=(3,), more=()).table(engine, 0, 1, ())
     >>> table.parts, table.outside, len(table.values) == 3 * len(table.parts) + 2
     ((0, 1, 2), 7, True)
     """
@@ -377,6 +378,9 @@ class FrontierWindow(DecidesOnMasks):
     several : tuple of int
         The sizes tried where several strategies are open, a size predicted past ``max_states`` skipped
         (:data:`WINDOW_PARTS_SEVERAL`).
+    more : tuple of int
+        Where one strategy is open, the sizes tried after ``sizes``, each unless predicted past the cap
+        (:data:`WINDOW_PARTS_MORE`).
     option : bool
         Whether the look values keeping several strategies open (:func:`option_value`; the default) where
         several windows decide, or takes the least window's best move alone.
@@ -426,14 +430,15 @@ class FrontierWindow(DecidesOnMasks):
 
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = WINDOW_PARTS, max_states: int = WINDOW_STATES, others: str = "ready",
-                 several: tuple[int, ...] = WINDOW_PARTS_SEVERAL, option: bool = True, joint: bool = False,
+                 several: tuple[int, ...] = WINDOW_PARTS_SEVERAL, more: tuple[int, ...] = WINDOW_PARTS_MORE,
+                 option: bool = True, joint: bool = False,
                  growth: float = WINDOW_GROWTH_SEVERAL, option_looks: int = WINDOW_OPTION_LOOKS,
                  ready_looks: float = WINDOW_READY_LOOKS, descendants: float = WINDOW_DESCENDANTS):
         from opportune.policies.variants import Slack
 
         self.base = base if base is not None else Slack()
         self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
-        self.sizes, self.max_states = tuple(sizes), max_states
+        self.sizes, self.max_states, self.more = tuple(sizes), max_states, tuple(more)
         self.several, self.option, self.joint, self.growth = tuple(several), option, joint, growth
         if option_looks not in (1, 2):
             raise ValueError(f"option_looks: 1 or 2 looks deep, not {option_looks!r}")
@@ -505,7 +510,7 @@ class FrontierWindow(DecidesOnMasks):
         >>> from opportune import make_plan
         >>> from opportune.engine import OrderEngine
         >>> engine = OrderEngine(make_plan(list("abcdef"), {"f": ["a", "b"]}))
-        >>> (t,) = FrontierWindow(visible=2, capacity=1, sizes=(3,)).tables(engine, 0, 1, ())
+        >>> (t,) = FrontierWindow(visible=2, capacity=1, sizes=(3,), more=()).tables(engine, 0, 1, ())
         >>> t.parts, t.outside, t.rest      # three parts left outside: a look and a move each
         ((0, 1, 2), 3, 3.0)
         """
@@ -554,8 +559,8 @@ class FrontierWindow(DecidesOnMasks):
         ``programmes``, a dict: filled with the largest size's programmes by their parts."""
         out, grown = [], []
         several = consistent.bit_count() > 1
-        for size in sorted(self.several if several else self.sizes):
-            if several and _past_cap(grown, self.growth * self.max_states):
+        for size in sorted(self.several if several else self.sizes + self.more):
+            if (several or size in self.more) and _past_cap(grown, self.growth * self.max_states):
                 break           # predicted past the cap by the growth of the last two: not tried
             windows = self._windows(engine, mask, consistent, buffer, size)
             solved: dict[tuple, WindowTable] = {}
