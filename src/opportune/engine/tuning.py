@@ -535,9 +535,10 @@ PILE_SEVERAL_LOCATIONS = 2
 #: 16-20-part two-strategy plans: at 2 visible the mean gap +1.39% -> +0.98% (plans over 1%: 9 -> 4, the worst
 #: +2.19% -> +1.83%), at 3 visible +1.25% -> +0.96% (7 -> 4, +1.82% -> +1.67%); on r20-16x2 at 2 visible the loss with both
 #: strategies open +1.42% -> +0.68% (windows of 8 parts -> 9-12).  It costs the decisions with several open
-#: (a run's first few): on r2-30x2 at 2 visible the first decision 43 -> 229 ms of CPU, the mean of the
-#: others alike (12.1 and 9.9 ms, load 6); within a budget each strategy's windows get their share of the
-#: window's time (policies/lumped.py) and a larger window cut by it leaves the last size finished.
+#: (a run's first few): on r2-30x2 at 2 visible and 2 locations the first decision's windows 24 -> 137 ms
+#: of CPU (load 5), the later decisions alike (a mean of 12.1 and 9.9 ms); within a budget the deadline
+#: stops a larger window (the last size finished decides) and each open strategy's windows get their share
+#: of the time left (policies/lumped.py).
 PILE_SEVERAL_FACTOR = 3
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
