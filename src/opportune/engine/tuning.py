@@ -533,8 +533,9 @@ PILE_NEAR_UNITS = 2
 PILE_SEVERAL_LOCATIONS = 2
 #: See PILE_SEVERAL_LOCATIONS.  Measured along 40 seeded runs (bench_window_gap.py, 2 locations) on the twelve
 #: 16-20-part two-strategy plans: at 2 visible the mean gap +1.39% -> +0.98% (plans over 1%: 9 -> 4, the worst
-#: +2.19% -> +1.83%), at 3 visible +1.25% -> +0.96% (7 -> 4, +1.82% -> +1.67%); on r20-16x2 at 2 visible the loss with both
-#: strategies open +1.42% -> +0.68% (windows of 8 parts -> 9-12).  It costs the decisions with several open
+#: +2.19% -> +1.83%), at 3 visible +1.25% -> +0.96% (7 -> 4, +1.82% -> +1.67%); on r20-16x2 at 2 visible
+#: the loss with both strategies open +1.42% -> +0.68% (windows of 8 parts -> 9-12); with 3 locations at 2
+#: visible +1.45% -> +1.15% (eleven plans).  It costs the decisions with several open
 #: (a run's first few): on r2-30x2 at 2 visible and 2 locations the first decision's windows 24 -> 137 ms
 #: of CPU (load 5), the later decisions alike (a mean of 12.1 and 9.9 ms); within a budget the deadline
 #: stops a larger window (the last size finished decides) and each open strategy's windows get their share
