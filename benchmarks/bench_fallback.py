@@ -60,15 +60,19 @@ def draw_plans(n: int, count: int, seed: int, max_states: int, settings=SETTINGS
     return plans
 
 
-def decisions(name: str, settings, seed: int, budget: float | None, bin: str = "uniform") -> None:
+def decisions(name: str, settings, seed: int, budget: float | None, bin: str = "uniform",
+              several_factor: int | None = None) -> None:
     """CPU time of each decision of the default policy along one seeded run of a plan too large for its
-    optimum (a fresh state at most moves), and the window's counted work."""
+    optimum (a fresh state at most moves), and the window's counted work; ``several_factor``: the pile
+    window's factor on its cap where several strategies are open (default: the tuned one)."""
     plan = load_plan(name)
     for visible, capacity in settings:
         engine, rng = OrderEngine(plan), random.Random(seed)
         weights = {p: 1.0 + i % 3 for i, p in enumerate(plan.part_ids)} if bin == "weighted" else None
         policy = Lookahead(visible=visible, capacity=capacity, budget=budget, bin="pile" if bin == "pile" else "uniform",
                            weights=weights)
+        if several_factor is not None:
+            policy.window.several_factor = several_factor
         mask, consistent, buffer, times, walls = 0, engine.all_strategies, (), [], []
         while mask != engine.full:
             in_bin = [p for i, p in enumerate(plan.part_ids) if engine.next_unit(mask, i) is not None and p not in buffer]
@@ -108,6 +112,8 @@ def main(argv=None) -> int:
     ap.add_argument("--budget", type=float, help="with --decisions: the policy's decision budget (s; default none)")
     ap.add_argument("--bin", default="uniform", choices=("uniform", "pile", "weighted"),
                     help="the bin (default uniform; weighted: with --decisions, part i of weight 1 + i mod 3)")
+    ap.add_argument("--several-factor", type=int, help="with --decisions --bin pile: the window's factor on its cap "
+                    "where several strategies are open and 2 locations or more (default: the tuned one; 1: none)")
     args = ap.parse_args(argv)
     if args.bin == "weighted" and not args.decisions:
         ap.error("--bin weighted times decisions only (--decisions): the policy lab has no weighted bin")
@@ -117,7 +123,7 @@ def main(argv=None) -> int:
         print("| plan | setting | decisions | first, ms | mean, ms | 99th percentile, ms | largest, ms | largest wall, ms | windows | "
               "most states | by slack |\n| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
         for name in args.decisions.split(","):
-            decisions(name, settings, args.seed, args.budget, args.bin)
+            decisions(name, settings, args.seed, args.budget, args.bin, args.several_factor)
         return 0
     rows = []
     for n in map(int, args.sizes.split(",")):

@@ -107,9 +107,11 @@ def run_losses(opt, policy, engine, rng: random.Random, pile: bool, weights: lis
 
 
 def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed: int,
-             window_states: int | None = None, earlier: bool = False) -> dict:
+             window_states: int | None = None, earlier: bool = False, several_factor: int | None = None) -> dict:
     """The fallback's gap over the optimum on ``runs`` seeded runs: mean, 95% half-width, the optimum;
     ``window_states``: the window's state cap instead of its default (to measure the cap's trade-off);
+    ``several_factor``: the pile window's factor on its cap where several strategies are open
+    (:data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`; 1: the cap alone, as before it);
     ``earlier``: the uniform bin's earlier window (the others buffered as one, never installed; the parts
     in the order of their remaining ancestors alone)."""
     engine = OrderEngine(plan)
@@ -124,6 +126,8 @@ def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed
     if window_states is not None:
         policy._window_serves(engine)       # the weighted bin's window is made there
         policy.window.max_states = window_states
+    if several_factor is not None:
+        policy.window.several_factor = several_factor
     if earlier:
         policy.window.others, policy.window.descendants = "buffer", 0.0
     w = [weights[p.id] for p in plan.parts] if weights else [1.0] * len(plan.parts)
@@ -134,6 +138,7 @@ def estimate(plan, visible: int, capacity: int | None, bin: str, runs: int, seed
     mean = statistics.mean(losses)
     half = (t975(runs - 1) * statistics.stdev(losses) / runs ** 0.5) if runs > 1 else float("inf")
     return {"mean": mean, "half": half, "optimum": best, "cpu": time.process_time() - cpu, "cap": policy.window.max_states,
+            "factor": getattr(policy.window, "several_factor", 1),
             "window": policy.window.work if policy.window is not None else {}}
 
 
@@ -155,6 +160,8 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window-states", type=int, help="the window's state cap (default: the tuned one)")
+    ap.add_argument("--several-factor", type=int, help="the pile window's factor on its cap where several "
+                    "strategies are open and 2 locations or more (default: the tuned one; 1: none)")
     ap.add_argument("--earlier", action="store_true", help="the uniform bin's earlier window (the others buffered "
                     "as one, the order of remaining ancestors alone): the same runs, so the two are paired")
     args = ap.parse_args(argv)
@@ -164,9 +171,11 @@ def main(argv=None) -> int:
           "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |")
     for plan in plans:
         for visible, capacity in settings:
-            r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed, args.window_states, args.earlier)
+            r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed, args.window_states, args.earlier,
+                         args.several_factor)
+            cap = f"{r['cap']:,}" + (f" (×{r['factor']} with several open)" if r["factor"] != 1 else "")
             print(f"| {plan.name} | {args.bin} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | "
-                  f"{r['cap']:,} | {args.runs} | {100 * r['mean']:+.2f}% | ±{100 * r['half']:.2f} | {r['cpu']:.0f} |", flush=True)
+                  f"{cap} | {args.runs} | {100 * r['mean']:+.2f}% | ±{100 * r['half']:.2f} | {r['cpu']:.0f} |", flush=True)
     return 0
 
 

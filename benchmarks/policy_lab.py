@@ -117,8 +117,11 @@ POLICY_VERSIONS = {"fallback": "one strategy: parts by descendants, the ready ot
 #: open strategy, each look taking the least of their moves with the option value of keeping several open;
 #: then a move keeping several open valued a look deeper, by the windows of the state it leads to.
 #: Then, with several strategies open and 2 visible or 2 locations, the look's parts near each strategy's
-#: frontier taken first.
-BIN_VERSIONS = {("fallback", "pile"): "pile window, the look near each strategy's frontier first"}
+#: frontier taken first.  Then, with several strategies open and 2 locations or more, three times the states
+#: a window (one strategy, or one location: the same decisions).
+BIN_VERSIONS = {("fallback", "pile"): "pile window, three times the states with several open and 2 locations"}
+#: The pile's fallback version before it (its decisions on one strategy and with one location are the current's).
+_PILE_NEAR = "pile window, the look near each strategy's frontier first"
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
@@ -128,14 +131,16 @@ SAME_ON_ONE_STRATEGY = {"fallback": ()}     # the current version changed the de
 BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",
                                                    "pile window of each strategy, with the looks' option value",
                                                    "pile window of each strategy, a move keeping several open a "
-                                                   "look deeper")}
+                                                   "look deeper", _PILE_NEAR)}
 #: Earlier versions whose decisions on plans of several strategies are the current version's (a change that
 #: touches only plans of one strategy), in a bin without a version of its own.
 SAME_ON_SEVERAL_STRATEGIES = {"fallback": ("the option of several strategies two looks deep",)}
 #: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin:
-#: the pile's look near each strategy's frontier applies from 2 visible or 2 locations.
+#: the pile's look near each strategy's frontier applies from 2 visible or 2 locations, its larger windows
+#: from 2 locations.
 BIN_SAME_AT = {("fallback", "pile"): {(1, 1): ("pile window of each strategy, a move keeping several open a "
-                                               "look deeper",)}}
+                                               "look deeper", _PILE_NEAR),
+                                      (2, 1): (_PILE_NEAR,), (3, 1): (_PILE_NEAR,)}}
 
 
 def policy_version(name: str, bin: str) -> str | None:

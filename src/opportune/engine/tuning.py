@@ -537,6 +537,22 @@ PILE_NEAR_VISIBLE = 2
 #: (see PILE_NEAR_LOCATIONS).  2 and 3 were alike at 2 visible (the mean gap over the eight plans -0.46 and
 #: -0.51 points), 2 the better at 3 visible (r5-20x2 +1.81% against +2.32%), 5 nearer the old rule.
 PILE_NEAR_UNITS = 2
+#: Where several strategies are open and the buffer has at least this many locations, the pile window's
+#: programme may hold PILE_SEVERAL_FACTOR times PILE_WINDOW_STATES (policies/pile_window.py): there a window
+#: of one strategy's frontier keeps the strategies it is closed in and every buffered combination, so the
+#: cap holds 8-10 parts where the gap is made (the moves that close a strategy, at a run's first units).
+#: With one location, or one strategy open, the cap and the decisions are as before.
+PILE_SEVERAL_LOCATIONS = 2
+#: See PILE_SEVERAL_LOCATIONS.  Measured along 40 seeded runs (bench_window_gap.py, 2 locations) on the twelve
+#: 16-20-part two-strategy plans: at 2 visible the mean gap +1.39% -> +0.98% (plans over 1%: 9 -> 4, the worst
+#: +2.19% -> +1.83%), at 3 visible +1.25% -> +0.96% (7 -> 4, +1.82% -> +1.67%); on r20-16x2 at 2 visible
+#: the loss with both strategies open +1.42% -> +0.68% (windows of 8 parts -> 9-12); with 3 locations at 2
+#: visible +1.45% -> +1.15% (eleven plans).  It costs the decisions with several open
+#: (a run's first few): on r2-30x2 at 2 visible and 2 locations the first decision's windows 24 -> 137 ms
+#: of CPU (load 5), the later decisions alike (a mean of 12.1 and 9.9 ms); within a budget the deadline
+#: stops a larger window (the last size finished decides) and each open strategy's windows get their share
+#: of the time left (policies/lumped.py).
+PILE_SEVERAL_FACTOR = 3
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.

@@ -28,7 +28,7 @@ from collections import OrderedDict
 from dataclasses import replace as _replace
 
 from opportune.engine import OrderEngine
-from opportune.engine.deadline import Deadline
+from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.tuning import WINDOW_ENGINES, WINDOW_STRATEGIES
 from opportune.engine.tuning import WINDOW_REFINE as REFINE
 from opportune.planning.costs import TimeModel
@@ -235,11 +235,19 @@ class LumpedWindow(DecidesOnMasks):
         got = _cached(self._tables, key)
         if got is None:
             found: dict = {}
-            for s in core_strategies(engine, consistent)[:WINDOW_STRATEGIES]:
-                first = tuple(buffer) + self._forced_in(engine, mask, consistent, forced, s)
-                table = self._largest(engine, mask, consistent, buffer, first, s)
-                if table is not None:
-                    found.setdefault(table.parts, table)
+            strategies, given = core_strategies(engine, consistent)[:WINDOW_STRATEGIES], self.deadline
+            try:
+                for n, s in enumerate(strategies):
+                    # each strategy's windows their share of the time left (none: no deadline, the same
+                    # decisions): a window the deadline cuts leaves its strategy the last size finished, and
+                    # the later strategies still get theirs, not the time the first one's larger windows took
+                    self.deadline = as_deadline(given).share(1 / (len(strategies) - n))
+                    first = tuple(buffer) + self._forced_in(engine, mask, consistent, forced, s)
+                    table = self._largest(engine, mask, consistent, buffer, first, s)
+                    if table is not None:
+                        found.setdefault(table.parts, table)
+            finally:
+                self.deadline = given
             got = tuple(found.values())
             if got:
                 _keep(self._tables, key, got, self.cache)
@@ -259,13 +267,14 @@ class LumpedWindow(DecidesOnMasks):
         if got is None:
             return None
         for _ in range(REFINE if outside else 0):
-            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts, self._cap(len(parts))))
+            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts,
+                                                           self._cap(len(parts), consistent)))
             pick = None
             for size in (s for s in sizes if s > got.size):
                 more, rest = self._frontier(engine, mask, consistent, first, size, strategy)
                 if more == (pick[1] if pick else parts):
                     continue
-                cap = self._cap(len(more))
+                cap = self._cap(len(more), consistent)
                 if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
                     break
                 pick = (size, more, rest)
@@ -330,8 +339,9 @@ class LumpedWindow(DecidesOnMasks):
             got = _keep(self._engines, key, window_engine(engine, mask, kept, parts), WINDOW_ENGINES)
         return got
 
-    def _cap(self, parts: int) -> int:
-        """The states a window of ``parts`` parts may hold (``max_states``)."""
+    def _cap(self, parts: int, consistent: int) -> int:
+        """The states a window of ``parts`` parts may hold at a state of these open strategies
+        (``max_states``; a subclass may grant more where several are open)."""
         return self.max_states
 
     def _forced(self, engine, visible) -> tuple[str, ...]:

@@ -31,7 +31,10 @@ the shake less the value of keeping several open, computed over the fresh looks 
 (:func:`fresh_look_value`).  The window's size is the
 largest predicted to fit
 :data:`~opportune.engine.tuning.PILE_WINDOW_STATES` (:class:`~opportune.policies.lumped.LumpedWindow`:
-counted states, the same decision on every machine); where none fits, or past the deadline, the base rule
+counted states, the same decision on every machine), :data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`
+times more where several strategies are open and the buffer has two locations or more
+(:meth:`PileWindow._cap`: there a window keeps every strategy it is closed in and each buffered combination,
+and the moves that close a strategy are decided); where none fits, or past the deadline, the base rule
 decides.
 
 Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
@@ -250,7 +253,7 @@ class PileWindow(LumpedWindow):
         key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
         sub = self._window_engine(engine, mask, consistent, parts)
         solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
-                                    max_states=self._cap(len(parts)), others=others, other_move=other_move)
+                                    max_states=self._cap(len(parts), consistent), others=others, other_move=other_move)
         solver.deadline = as_deadline(self.deadline)
         key = (0, sub.all_strategies, key)
         try:
@@ -309,6 +312,23 @@ class PileWindow(LumpedWindow):
         if consistent.bit_count() < 2 or (locations < self.near_locations and self.visible < self.near_visible):
             return forced
         return near_parts(engine, mask, strategy, forced, self.near_units)
+
+    #: Where several strategies are open and the buffer has at least this many locations, a window's
+    #: programme may hold :attr:`several_factor` times ``max_states``
+    #: (:data:`~opportune.engine.tuning.PILE_SEVERAL_LOCATIONS`).
+    several_locations: float = tuning.PILE_SEVERAL_LOCATIONS
+    #: See :attr:`several_locations` (:data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`; 1: no more).
+    several_factor: int = tuning.PILE_SEVERAL_FACTOR
+
+    def _cap(self, parts: int, consistent: int) -> int:
+        """``max_states``, times :attr:`several_factor` where several strategies are open and the buffer has
+        :attr:`several_locations` or more: there a window of one strategy's frontier keeps every strategy
+        it is closed in and each buffered combination, so the same cap holds fewer parts, while the
+        decisions that close a strategy are the ones the gap comes from (a run meets few such states).
+        O(1)."""
+        locations = float("inf") if self.capacity is None else self.capacity
+        several = consistent.bit_count() > 1 and locations >= self.several_locations
+        return self.max_states * (self.several_factor if several else 1)
 
     #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
     #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).
