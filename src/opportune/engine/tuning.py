@@ -550,9 +550,9 @@ WEIGHTED_WINDOW_LOOKS = 500_000
 #: Where several strategies are open, the weighted window values keeping them open by the state's looks
 #: drawn by the parts' weights (window.best_seen_chances: the draws enumerated over the distinct weights),
 #: enumerating at most this many draws (parts × distinct weights^visible; more: no option value).  30 parts
-#: of 4 weights at 3 visible are 1,920 draws, under 2 ms of Python; 4,000 keeps a decision's option within a
-#: few ms.  Measured along 40 seeded runs (bench_window_gap.py --bin weighted) on eight 16-20-part
-#: two-strategy plans: the mean gap at 2 visible and 1 location +1.14% -> +1.01%, at 3 visible +1.59% ->
+#: of 4 weights at 3 visible are 1,920 draws, 0.8 ms of CPU, 62 parts 3,968 draws, 1.7 ms (load 2.6 of 2
+#: cores): so a decision's option stays within 2 ms, a twentieth of the window's share.  Measured along 40
+#: seeded runs (bench_window_gap.py --bin weighted) on eight 16-20-part two-strategy plans: the mean gap at 2 visible and 1 location +1.14% -> +1.01%, at 3 visible +1.59% ->
 #: +1.37% (r11-16x2 at 2 visible and 2 locations +1.34% -> +0.82%); at 1 visible the same on these runs.
 #: The looks drawn evenly instead (the uniform bin's option) made the window worse (docs/decisions.md).
 WEIGHTED_OPTION_DRAWS = 4_000
