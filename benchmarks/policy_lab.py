@@ -109,7 +109,9 @@ USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
 ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
-POLICY_VERSIONS = {"fallback": "one strategy: parts by descendants, the ready others installed"}
+#: Uniform bin: with one strategy open, windows of 16 and 20 parts tried while predicted to fit; with several,
+#: the option's value of a state where every unit left is buffered takes its look (as the optimum's).
+POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-buffered look"}
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;
@@ -134,7 +136,7 @@ BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",
                                                    "look deeper", _PILE_NEAR)}
 #: Earlier versions whose decisions on plans of several strategies are the current version's (a change that
 #: touches only plans of one strategy), in a bin without a version of its own.
-SAME_ON_SEVERAL_STRATEGIES = {"fallback": ("the option of several strategies two looks deep",)}
+SAME_ON_SEVERAL_STRATEGIES = {"fallback": ()}     # the current version changed those too
 #: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin:
 #: the pile's look near each strategy's frontier applies from 2 visible or 2 locations, its larger windows
 #: from 2 locations.

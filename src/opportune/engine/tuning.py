@@ -575,6 +575,31 @@ WEIGHTED_WINDOW_STATES = 10_000
 #: And at most this many looks over its states (a state enumerates its bin's looks, about 7 ns each: on
 #: KILBRID at 3 visible the state cap alone let a decision take 121 ms of CPU; bench_fallback --bin weighted).
 WEIGHTED_WINDOW_LOOKS = 500_000
+#: Where several strategies are open, the weighted window values keeping them open by the state's looks
+#: drawn by the parts' weights (window.best_seen_chances: the draws enumerated over the distinct weights),
+#: enumerating at most this many draws (parts × distinct weights^visible; more: no option value).  30 parts
+#: of 4 weights at 3 visible are 1,920 draws, 0.8 ms of CPU, 62 parts 3,968 draws, 1.7 ms (load 2.6 of 2
+#: cores): so a decision's option stays within 2 ms, a twentieth of the window's share.  Measured along 40
+#: seeded runs (bench_window_gap.py --bin weighted) on eight 16-20-part two-strategy plans: the mean gap at 2 visible and 1 location +1.14% -> +1.01%, at 3 visible +1.59% ->
+#: +1.37% (r11-16x2 at 2 visible and 2 locations +1.34% -> +0.82%); at 1 visible the same on these runs.
+#: The looks drawn evenly instead (the uniform bin's option) made the window worse (docs/decisions.md).
+WEIGHTED_OPTION_DRAWS = 4_000
+#: Where several strategies are open, with at least this many buffer locations or WEIGHTED_NEAR_VISIBLE parts
+#: a look, a strategy's weighted window takes first only the parts of a look that wait there for at most
+#: WEIGHTED_NEAR_UNITS remaining units (the pile's rule, PILE_NEAR_LOCATIONS; policies/lumped.py).  With the
+#: option value, along the same 40 runs on the eight two-strategy plans, the mean gap at 3 visible and 2
+#: locations +3.47% -> +2.38% (r5-20x2 +7.53% -> +1.77%), at 3 visible and 1 location +1.37% -> +0.99%, at 2
+#: visible and 1 location +1.01% -> +0.79%, at 1 visible and 2 locations +1.95% -> +1.66%, at 2 visible and 2
+#: locations +1.48% -> +1.41% (r2-16x2 +1.32% -> +2.48%, r8-20x2 +5.38% -> +3.97%).  At 1 visible and 1
+#: location it is off (every part of the look taken first, as before).
+WEIGHTED_NEAR_LOCATIONS = 2
+#: See WEIGHTED_NEAR_LOCATIONS.
+WEIGHTED_NEAR_VISIBLE = 2
+#: Remaining units a part of a look may wait for in a strategy and still be taken first by its weighted
+#: window (see WEIGHTED_NEAR_LOCATIONS): 3 was better than 2 (the mean gap over seven of the plans at 2
+#: locations and 1, 2, 3 visible +1.90%, +1.59%, +2.61% against +2.02%, +1.79%, +2.74%; over the eight at 1
+#: location and 2, 3 visible +0.79%, +0.99% against +0.82%, +1.07%).
+WEIGHTED_NEAR_UNITS = 3
 
 # ------------------------------------------------------------ the frontier window (policies/window.py)
 

@@ -19,7 +19,10 @@ it (:func:`~opportune.policies.window.outside_rest`), less the value of keeping 
 on the moves that keep them: a window of one strategy's frontier values a state as if the others were
 closed.  Taking the first open strategy's frontier alone, the others credited with the parts outside it,
 cost up to +6.7% over the optimum in the pile and +34% in a weighted bin on 16-part two-strategy plans
-(docs/decisions.md).
+(docs/decisions.md).  Each bin's subclass values that option over its own looks (:meth:`LumpedWindow._option`,
+cached by the state and its windows), and may have a strategy's window take first only the parts of the
+look near that strategy's frontier (:meth:`LumpedWindow._forced_in`): a part deep in its order would bring
+in the chain below it, and the strategy's own frontier would be lumped.
 """
 
 from __future__ import annotations
@@ -36,7 +39,8 @@ from opportune.planning.plan import Plan, Strategy
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.evaluate import OutOfTime
 from opportune.policies.optimal import OptimalTooLarge
-from opportune.policies.window import core_strategies, frontier_window, window_decision, window_strategies
+from opportune.policies.window import (core_strategies, frontier_window, near_parts, window_decision,
+                                       window_strategies)
 
 __all__ = ["OTHERS", "CompiledOthers", "LumpedWindow", "OthersGroup", "window_plan"]
 
@@ -178,6 +182,7 @@ class LumpedWindow(DecidesOnMasks):
         self._frontiers: OrderedDict = OrderedDict()   # by (installed, strategies, parts first, size)
         self._engines: OrderedDict = OrderedDict()     # by (installed, strategies, parts): the window plan's engine
         self._listings: OrderedDict = OrderedDict()    # by (installed, strategies, parts): its states listed, the most asked
+        self._options: OrderedDict = OrderedDict()     # by state and windows: the option of several strategies
         self._engine = None
         self.last_table = None
 
@@ -229,7 +234,7 @@ class LumpedWindow(DecidesOnMasks):
         """
         if self._engine is not engine:
             self._engine = engine
-            for cache in (self._tables, self._windows, self._frontiers, self._engines, self._listings):
+            for cache in (self._tables, self._windows, self._frontiers, self._engines, self._listings, self._options):
                 cache.clear()
         key = (mask, consistent, tuple(sorted(buffer)), forced)
         got = _cached(self._tables, key)
@@ -352,10 +357,29 @@ class LumpedWindow(DecidesOnMasks):
         share its table (:meth:`_window` caches by the parts).  O(visible)."""
         return tuple(sorted(set(visible), key=engine.plan.index))
 
+    #: Where several strategies are open, with at least this many buffer locations, or :attr:`near_visible`
+    #: parts a look, a strategy's window takes first only the parts of a look within :attr:`near_units` of
+    #: its frontier (:meth:`_forced_in`).
+    near_locations: float = float("inf")
+    #: See :attr:`near_locations`.
+    near_visible: int = 2
+    #: Remaining units a part of a look may wait for in a strategy and still be taken first by its window
+    #: (None: every part of the look is taken first, whatever the settings).
+    near_units: int | None = None
+
     def _forced_in(self, engine, mask: int, consistent: int, forced: tuple[str, ...], strategy: int) -> tuple[str, ...]:
-        """The parts of a look ``strategy``'s window takes first (:meth:`_forced`): all of them here (a
-        subclass may leave some to the others).  O(1)."""
-        return forced
+        """The parts of a look ``strategy``'s window takes first (:meth:`_forced`): all of them with one
+        strategy open, or with fewer than :attr:`near_locations` locations and :attr:`near_visible` parts a
+        look, or without :attr:`near_units`; else those within :attr:`near_units` remaining units of its
+        frontier (:func:`~opportune.policies.window.near_parts`), the others seen there lumped as others.
+        A part deep in one strategy's order, taken in with the chain below it, makes that strategy's window
+        its chain, the strategy's own frontier lumped and never installed: the window then values the
+        strategy far over what it costs, and a move closing it wins the look.  O(visible)."""
+        locations = float("inf") if self.capacity is None else self.capacity
+        if self.near_units is None or consistent.bit_count() < 2 or (
+                locations < self.near_locations and self.visible < self.near_visible):
+            return forced
+        return near_parts(engine, mask, strategy, forced, self.near_units)
 
     def _count(self, solver) -> None:
         """The work of a window's programme, counted."""
@@ -432,8 +456,16 @@ class LumpedWindow(DecidesOnMasks):
         return None
 
     def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
-        """What keeping several strategies open is worth at a state, one look deep, by its windows (a
-        subclass's; 0 here: each look takes the least of the windows' moves)."""
+        """What keeping several strategies open is worth at a state, one look deep, by its windows
+        (:meth:`_option_at`), cached by the state and the windows (a state's looks ask again).  O(1) cached."""
+        key = (mask, consistent, tuple(sorted(buffer)), tuple(t.parts for t in tables))
+        got = _cached(self._options, key)
+        if got is None:
+            got = _keep(self._options, key, self._option_at(engine, mask, consistent, buffer, tables), self.cache)
+        return got
+
+    def _option_at(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """:meth:`_option` computed (a subclass's; 0 here: each look takes the least of the windows' moves)."""
         return 0.0
 
     def decide(self, state, visible: tuple[str, ...], because: str = "") -> Decision:

@@ -53,7 +53,7 @@ from opportune.policies.base import Action
 from opportune.policies.lumped import OTHERS, CompiledOthers, LumpedWindow, OthersGroup
 from opportune.policies.optimal import shake_loop
 from opportune.policies.pile import CompiledPileSolver, PileSolver, compiled_pile_available
-from opportune.policies.window import in_bin, near_parts, outside_rest
+from opportune.policies.window import in_bin, outside_rest
 
 __all__ = ["CompiledPileWindowSolver", "PileWindow", "PileWindowSolver", "PileWindowTable", "fresh_look_value",
            "pile_window_available", "pile_window_solver"]
@@ -245,8 +245,6 @@ class PileWindow(LumpedWindow):
     def __init__(self, base=None, *, visible: int = 2, capacity: int | None = None, costs: TimeModel | None = None,
                  sizes: tuple[int, ...] = tuning.PILE_WINDOW_PARTS, max_states: int = tuning.PILE_WINDOW_STATES):
         super().__init__(base, visible=visible, capacity=capacity, costs=costs, sizes=sizes, max_states=max_states)
-        self._options: dict = {}
-        self._options_engine = None
 
     def _solved(self, engine, mask: int, consistent: int, buffer, parts, outside, size: int) -> PileWindowTable:
         """The window of ``size`` parts solved, every look of the state decided.  The work is counted."""
@@ -290,28 +288,12 @@ class PileWindow(LumpedWindow):
         ids = set(visible)
         return value, Action("buffer", next(plan.parts[i].id for i in table.outside if plan.parts[i].id in ids)), shake
 
-    #: Where several strategies are open, with at least this many buffer locations, or
-    #: :attr:`near_visible` parts a look, a strategy's window takes first only the parts of a look within
-    #: :attr:`near_units` of its frontier (:data:`~opportune.engine.tuning.PILE_NEAR_LOCATIONS`).
+    #: The look's parts near a strategy's frontier (:meth:`~opportune.policies.lumped.LumpedWindow._forced_in`):
+    #: :data:`~opportune.engine.tuning.PILE_NEAR_LOCATIONS`, :data:`~opportune.engine.tuning.PILE_NEAR_VISIBLE`,
+    #: :data:`~opportune.engine.tuning.PILE_NEAR_UNITS`.
     near_locations: float = tuning.PILE_NEAR_LOCATIONS
-    #: See :attr:`near_locations` (:data:`~opportune.engine.tuning.PILE_NEAR_VISIBLE`).
     near_visible: int = tuning.PILE_NEAR_VISIBLE
-    #: Remaining units a part of a look may wait for in a strategy and still be taken first by its window
-    #: (:data:`~opportune.engine.tuning.PILE_NEAR_UNITS`).
-    near_units: int = tuning.PILE_NEAR_UNITS
-
-    def _forced_in(self, engine, mask: int, consistent: int, forced: tuple[str, ...], strategy: int) -> tuple[str, ...]:
-        """The parts of a look ``strategy``'s window takes first: all of them with one strategy open, or with
-        fewer than :attr:`near_locations` locations and :attr:`near_visible` parts a look (1 visible and 1
-        location: the exact lab's rows); else those within :attr:`near_units` remaining units of
-        its frontier (:func:`~opportune.policies.window.near_parts`), the others seen there lumped as others.
-        A part deep in one strategy's order, taken in with the chain below it, makes that strategy's window
-        its chain, the strategy's own frontier lumped and never installed: the window then values the
-        strategy far over what it costs, and a move closing it wins the look.  O(visible)."""
-        locations = float("inf") if self.capacity is None else self.capacity
-        if consistent.bit_count() < 2 or (locations < self.near_locations and self.visible < self.near_visible):
-            return forced
-        return near_parts(engine, mask, strategy, forced, self.near_units)
+    near_units: int | None = tuning.PILE_NEAR_UNITS
 
     #: Where several strategies are open and the buffer has at least this many locations, a window's
     #: programme may hold :attr:`several_factor` times ``max_states``
@@ -368,21 +350,13 @@ class PileWindow(LumpedWindow):
         return move + float(self.costs.look) + sum(c / total * min(shake, _best_over(tables, maps, top + [j]))
                                                    for j, c in hidden.items())
 
-    def _option(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+    def _option_at(self, engine, mask: int, consistent: int, buffer, tables) -> float:
         """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
         values with their rests less the state's value where each fresh look (a shake's: the bin's units
         drawn evenly) takes its best move over all the windows, the shake loop over them (as the pile's
-        optimum's).  0 where the looks are more than :data:`~opportune.engine.tuning.PILE_OPTION_LOOKS`
-        (cached by the state and the windows).  O(looks × windows)."""
-        key = (mask, consistent, tuple(sorted(buffer)), tuple(t.parts for t in tables))
-        got = self._options.get(key) if self._options_engine is engine else None
-        if got is None:
-            if self._options_engine is not engine:
-                self._options_engine, self._options = engine, {}
-            got = self._options[key] = _pile_option(engine, mask, buffer, tables, self.visible, self.costs)
-            if len(self._options) > self.cache:
-                self._options.pop(next(iter(self._options)))
-        return got
+        optimum's).  0 where the looks are more than :data:`~opportune.engine.tuning.PILE_OPTION_LOOKS`.
+        O(looks × windows)."""
+        return _pile_option(engine, mask, buffer, tables, self.visible, self.costs)
 
     def _note(self, table: PileWindowTable) -> str:
         return f"expected cost of the window after a shake {table.value:.4f}"

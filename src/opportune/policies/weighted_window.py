@@ -14,9 +14,12 @@ decision on a look is the uniform window's rule over them
 (:func:`~opportune.policies.window.best_move`: the best of :func:`~opportune.policies.window.moves_on_look`, or a shake).  Its states are counted
 (:data:`~opportune.engine.tuning.WEIGHTED_WINDOW_STATES` a size tried); where no window fits, or past the
 deadline, the base rule decides.  Where several strategies are open, a window of each one's frontier
-decides the look by the least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), with no
-value of keeping several open: the uniform bin's (:func:`~opportune.policies.window.option_value`, its
-looks drawn evenly) made it worse in a weighted bin (docs/decisions.md).
+decides the look by the least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`), less the
+value of keeping several open on the moves that keep them (:meth:`WeightedWindow._option_at`: the uniform
+bin's :func:`~opportune.policies.window.option_value` with the state's looks drawn by the weights, as the
+weighted bin draws them; drawn evenly it made the window worse), and with two buffer locations or more, or
+two parts a look or more, each strategy's window takes first only the parts of the look near its frontier
+(the pile's rule, :meth:`~opportune.policies.lumped.LumpedWindow._forced_in`).  Measured in docs/decisions.md.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from opportune.policies.optimal import (
     OptimalSolver,
     compiled_optimal_available,
 )
-from opportune.policies.window import WindowTable, moves_on_look, outside_rest
+from opportune.policies.window import WindowTable, moves_on_look, option_value, outside_rest
 
 __all__ = ["CompiledWeightedWindowSolver", "WeightedWindow", "WeightedWindowSolver", "weighted_window_available",
            "weighted_window_solver"]
@@ -199,6 +202,27 @@ class WeightedWindow(LumpedWindow):
             return float("inf"), None, shake
         value, _, action = min(ranked, key=lambda r: r[:2])
         return value, action, shake
+
+    #: Whether the looks value keeping several strategies open (:meth:`_option_at`; False: each look takes
+    #: the least of the windows' moves, for measurement).
+    option: bool = True
+    #: The look's parts near a strategy's frontier (:meth:`~opportune.policies.lumped.LumpedWindow._forced_in`):
+    #: :data:`~opportune.engine.tuning.WEIGHTED_NEAR_LOCATIONS`,
+    #: :data:`~opportune.engine.tuning.WEIGHTED_NEAR_VISIBLE`, :data:`~opportune.engine.tuning.WEIGHTED_NEAR_UNITS`.
+    near_locations: float = tuning.WEIGHTED_NEAR_LOCATIONS
+    near_visible: int = tuning.WEIGHTED_NEAR_VISIBLE
+    near_units: int | None = tuning.WEIGHTED_NEAR_UNITS
+
+    def _option_at(self, engine, mask: int, consistent: int, buffer, tables) -> float:
+        """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
+        values with their rests less the state's value where each look, drawn by the parts' weights as the
+        weighted bin's, takes its best move over all the windows (:func:`~opportune.policies.window.option_value`
+        with the weights; 0 past :data:`~opportune.engine.tuning.WEIGHTED_OPTION_DRAWS`).
+        O(parts × windows + parts × weights^visible)."""
+        if not self.option:
+            return 0.0
+        weights = [float(self.weights.get(p.id, 1.0)) for p in engine.plan.parts]
+        return option_value(engine, mask, consistent, buffer, tables, self.visible, self.costs, weights)
 
     def _note(self, table: WindowTable) -> str:
         return f"expected cost of the window {table.values[-1]:.4f}"

@@ -59,13 +59,14 @@ from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 from opportune.engine.tuning import (  # tuning.py says why
     WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_DESCENDANTS, WINDOW_GROWTH_SEVERAL, WINDOW_OPTION_LOOKS, WINDOW_PARTS,
-    WINDOW_PARTS_MORE, WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_STATES, WINDOW_STRATEGIES)
+    WEIGHTED_OPTION_DRAWS, WINDOW_PARTS_MORE, WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_STATES,
+    WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.optimal import shake_loop
 from opportune.planning.costs import TimeModel
 
-__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "frontier_window", "joint_window", "in_bin", "near_parts",
-           "option_value", "outside_rest", "two_looks", "window_available", "window_strategies"]
+__all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "best_seen_chances", "frontier_window", "joint_window",
+           "in_bin", "near_parts", "option_value", "outside_rest", "two_looks", "window_available", "window_strategies"]
 
 _native = compiled_core()
 
@@ -1079,11 +1080,14 @@ def moves_on_look(engine, mask: int, consistent: int, table: WindowTable, buffer
     return [r for r in ranked if r[0] != float("inf")]
 
 
-def option_value(engine, mask: int, consistent: int, buffer, tables, visible: int, costs: TimeModel) -> float:
+def option_value(engine, mask: int, consistent: int, buffer, tables, visible: int, costs: TimeModel,
+                 weights: list[float] | None = None) -> float:
     """What keeping several strategies open is worth at a state, one look deep: the least of the windows'
     values (each window one strategy's frontier, valued as if the others were closed) less the state's
     value where each look takes its best move over all the windows (the look chooses the strategy; looks as
-    order statistics, the shake loop over them, as the optimum's).  0 with one window.  O(parts × windows).
+    order statistics, or drawn by ``weights`` in a weighted bin, the shake loop over them, as the optimum's).
+    0 with one window, and in a weighted bin past :data:`~opportune.engine.tuning.WEIGHTED_OPTION_DRAWS`.
+    O(parts × windows), and O(parts × weights^visible) in a weighted bin.
 
     Parameters
     ----------
@@ -1099,6 +1103,8 @@ def option_value(engine, mask: int, consistent: int, buffer, tables, visible: in
         Parts per look.
     costs : TimeModel
         The costs of a look and a shake.
+    weights : list of float, optional
+        Per part (plan index), its weight in a weighted bin (None, or all equal: the uniform bin).
 
     Returns
     -------
@@ -1119,14 +1125,15 @@ def option_value(engine, mask: int, consistent: int, buffer, tables, visible: in
     >>> option_value(engine, 0, 0b11, (), tables, 1, TimeModel()) > 0
     True
     """
-    value = _looks_over(engine, mask, buffer, tables, visible, costs)
+    value = _looks_over(engine, mask, buffer, tables, visible, costs, weights)
     least = min(t.values[-1] + t.rest for t in tables)
     return max(0.0, least - value) if value < float("inf") else 0.0
 
 
-def _looks_over(engine, mask: int, buffer, tables, visible: int, costs: TimeModel) -> float:
+def _looks_over(engine, mask: int, buffer, tables, visible: int, costs: TimeModel,
+                weights: list[float] | None = None) -> float:
     """The state's value where each look takes its best move over the windows ``tables`` (their values at
-    this state), the shake loop over the looks.  O(parts × windows)."""
+    this state), the shake loop over the looks (drawn by ``weights``, where given).  O(parts × windows)."""
     plan, inf = engine.plan, float("inf")
     best = {i: inf for i in in_bin(engine, mask, buffer)}
     from_buffer = inf
@@ -1140,7 +1147,7 @@ def _looks_over(engine, mask: int, buffer, tables, visible: int, costs: TimeMode
             j = index.get(plan.index(p))
             if j is not None:
                 from_buffer = min(from_buffer, t.rest + v[3 * j + 2])
-    return _shake_loop(engine, mask, buffer, best, from_buffer, visible, costs)
+    return _shake_loop(engine, mask, buffer, best, from_buffer, visible, costs, weights)
 
 
 def in_bin(engine, mask: int, buffer) -> dict[int, int]:
@@ -1177,22 +1184,95 @@ def in_bin(engine, mask: int, buffer) -> dict[int, int]:
 
 
 def _shake_loop(engine, mask: int, buffer, best: dict[int, float], from_buffer: float, visible: int,
-                costs: TimeModel) -> float:
+                costs: TimeModel, weights: list[float] | None = None) -> float:
     """A state's value where a look showing part ``i`` (of those in the bin) takes a move of expected cost
     ``best[i]`` and one from the buffer ``from_buffer`` (inf: none): looks as order statistics of the
-    parts' units, the shake loop over them, as the optimum's; inf where no look allows a move.  With every
-    unit left buffered, ``from_buffer``.  O(parts log parts)."""
+    parts' units (drawn by ``weights``, per plan index, where they differ: :func:`best_seen_chances`), the
+    shake loop over them, as the optimum's; inf where no look allows a move, or past
+    :data:`~opportune.engine.tuning.WEIGHTED_OPTION_DRAWS`.  With every unit left buffered, a look and ``from_buffer``.
+    O(parts log parts), and O(parts × weights^visible) in a weighted bin."""
     inf = float("inf")
     counts = in_bin(engine, mask, buffer)
     n = sum(counts.values())
-    if n == 0:          # every unit left is buffered: no part is seen
-        return from_buffer
-    k, rank, total = min(visible, n), 0, float(comb(n, min(visible, n)))
-    pairs = []      # the chance that a part is the best one seen: order statistics of the units
-    for b, i in sorted((best.get(i, inf), i) for i in counts):
-        pairs.append((min(b, from_buffer), float(comb(n - rank, k) - comb(n - rank - counts[i], k)) / total))
-        rank += counts[i]
-    return shake_loop(pairs, costs.look, costs.shake)
+    if n == 0:          # every unit left is buffered: no part is seen, the look taken as the optimum's
+        return shake_loop([(from_buffer, 1.0)], costs.look, costs.shake)
+    ranked = sorted((best.get(i, inf), i) for i in counts)
+    k = min(visible, n)
+    if weights is not None and len({weights[i] for i in counts}) > 1:
+        chances = best_seen_chances([counts[i] for _, i in ranked], [weights[i] for _, i in ranked], k,
+                                    WEIGHTED_OPTION_DRAWS)
+        if chances is None:
+            return inf
+    else:           # the chance that a part is the best one seen: order statistics of the units
+        chances, rank, total = [], 0, float(comb(n, k))
+        for _, i in ranked:
+            chances.append(float(comb(n - rank, k) - comb(n - rank - counts[i], k)) / total)
+            rank += counts[i]
+    return shake_loop([(min(b, from_buffer), p) for (b, _), p in zip(ranked, chances)], costs.look, costs.shake)
+
+
+def best_seen_chances(sizes: list[int], weights: list[float], k: int, most: int | None = None) -> list[float] | None:
+    """Each group's chance of being the first seen in its order, where ``k`` units are drawn without
+    replacement, a unit of group ``g`` (of ``sizes[g]`` units) with chance proportional to ``weights[g]``
+    (a weighted bin's look, as the optimum's): the chance that every unit drawn is of group ``g`` or later,
+    less that of ``g + 1`` or later.  A draw depends on a unit's weight alone, so the draws are enumerated
+    over the distinct weights, not the groups.  O(groups × weights^k).
+
+    Parameters
+    ----------
+    sizes : list of int
+        Units per group, in the order of preference.
+    weights : list of float
+        Each group's weight (positive).
+    k : int
+        Units drawn (at most ``sum(sizes)``).
+    most : int, optional
+        Draws enumerated at most (groups × distinct weights^k): None past it (default: no limit).
+
+    Returns
+    -------
+    list of float or None
+        Per group, the chance that it is the first group seen; None past ``most``.
+
+    Examples
+    --------
+    >>> best_seen_chances([1, 1], [1.0, 3.0], 1)         # the second seen 3 times in 4
+    [0.25, 0.75]
+    >>> [round(p, 4) for p in best_seen_chances([1, 1, 1], [1.0, 1.0, 2.0], 2)]    # two of three units seen
+    [0.5833, 0.4167, 0.0]
+    """
+    classes = sorted(set(weights))
+    if most is not None and len(sizes) * len(classes) ** k > most:
+        return None
+    index = {w: c for c, w in enumerate(classes)}
+    left = [0] * len(classes)
+    for size, w in zip(sizes, weights):
+        left[index[w]] += size
+    inside = list(left)
+    all_in = []         # the chance that every unit drawn is of group g or later
+    for size, w in zip(sizes, weights):
+        all_in.append(_drawn_within(inside, list(left), classes, k))
+        inside[index[w]] -= size
+    all_in.append(0.0 if k else 1.0)
+    return [a - b for a, b in zip(all_in, all_in[1:])]
+
+
+def _drawn_within(inside: list[int], left: list[int], classes: list[float], k: int) -> float:
+    """The chance that ``k`` units drawn from ``left`` (units per weight class) are all of ``inside`` (units
+    per class, within ``left``), a unit drawn with chance proportional to its class's weight.  O(classes^k)."""
+    if k == 0:
+        return 1.0
+    mass = 0.0
+    for n, w in zip(left, classes):
+        mass += n * w
+    got = 0.0
+    for c, w in enumerate(classes):
+        n = inside[c]
+        if n:
+            inside[c], left[c] = n - 1, left[c] - 1
+            got += n * w / mass * _drawn_within(inside, left, classes, k - 1)
+            inside[c], left[c] = n, left[c] + 1
+    return got
 
 
 class _Programme:
