@@ -435,12 +435,11 @@ class RunManager:
             self._live[run_id] = live
         self._changed(run_id)
         self.book.settle(loaded)
-        if self.budget is not None and products == 1:
+        setting = (policy, body.get("buffer_capacity"))
+        if self.budget is not None and products == 1 and setting not in loaded.optima:
             # the look-ahead's optimum as per-plan work, in the background: its runs' decisions take it up once
-            # it is ready (their frontier window decides meanwhile)
-            capacity = body.get("buffer_capacity")
-            self.book.prepare(loaded, self._policy(loaded, capacity, policy, budget=None), (policy, capacity),
-                              self.optimum)
+            # it is ready (their frontier window decides meanwhile); asked once per setting, not at every run
+            self.book.prepare(loaded, self._policy(loaded, setting[1], policy, budget=None), setting, self.optimum)
         return 201, text, False
 
     # ------------------------------------------------------------ commands
