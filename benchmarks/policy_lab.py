@@ -120,29 +120,23 @@ POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-bu
 #: then a move keeping several open valued a look deeper, by the windows of the state it leads to.
 #: Then, with several strategies open and 2 visible or 2 locations, the look's parts near each strategy's
 #: frontier taken first.  Then, with several strategies open and 2 locations or more, three times the states
-#: a window (one strategy, or one location: the same decisions).
-BIN_VERSIONS = {("fallback", "pile"): "pile window, three times the states with several open and 2 locations"}
-#: The pile's fallback version before it (its decisions on one strategy and with one location are the current's).
-_PILE_NEAR = "pile window, the look near each strategy's frontier first"
+#: a window (one strategy, or one location: the same decisions).  Then sizes up to 20 parts (up to 12 with
+#: several strategies open and one location), and a window predicted to fit that does not raises the
+#: prediction for a smaller one (every setting).
+BIN_VERSIONS = {("fallback", "pile"): ("pile window, sizes up to 20 parts (12 at 1 location with several open), "
+                                        "a missed prediction retried smaller")}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
 #: touches only plans of several strategies): their gaps on one-strategy plans are current.
 SAME_ON_ONE_STRATEGY = {"fallback": ()}     # the current version changed the decisions on one strategy
 #: As :data:`SAME_ON_ONE_STRATEGY`, in a bin with a version of its own.
-BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ("pile window, 30,000 states",
-                                                   "pile window of each strategy, with the looks' option value",
-                                                   "pile window of each strategy, a move keeping several open a "
-                                                   "look deeper", _PILE_NEAR)}
+BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ()}     # the current version changed those too
 #: Earlier versions whose decisions on plans of several strategies are the current version's (a change that
 #: touches only plans of one strategy), in a bin without a version of its own.
 SAME_ON_SEVERAL_STRATEGIES = {"fallback": ()}     # the current version changed those too
-#: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin:
-#: the pile's look near each strategy's frontier applies from 2 visible or 2 locations, its larger windows
-#: from 2 locations.
-BIN_SAME_AT = {("fallback", "pile"): {(1, 1): ("pile window of each strategy, a move keeping several open a "
-                                               "look deeper", _PILE_NEAR),
-                                      (2, 1): (_PILE_NEAR,), (3, 1): (_PILE_NEAR,)}}
+#: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin.
+BIN_SAME_AT: dict = {("fallback", "pile"): {}}     # the current version changed every setting
 
 
 def policy_version(name: str, bin: str) -> str | None:
@@ -355,7 +349,8 @@ def _key(seed: int, group: str, plan, setting, max_states: int) -> str:
 
 
 def _fresh(rec: dict) -> dict:
-    """``rec`` without the gaps measured at another version of their policy (:data:`POLICY_VERSIONS`)."""
+    """``rec`` without the gaps measured, and the policies skipped, at another version of their policy
+    (:data:`POLICY_VERSIONS`)."""
     if "gaps" not in rec:
         return rec
     versions = {**UNTAGGED, **rec.get("versions", {})}
@@ -373,7 +368,9 @@ def _fresh(rec: dict) -> dict:
         return v in (BIN_SAME_ON_ONE_STRATEGY.get((n, bin), ()) if own else SAME_ON_ONE_STRATEGY.get(n, ()))
 
     gaps = {n: g for n, g in rec["gaps"].items() if current(n)}
-    return {**rec, "gaps": gaps}
+    # a policy skipped (out of time, or past a counted cut) at another version is to be run again, as a gap is
+    skipped = {n: w for n, w in rec.get("policy_skipped", {}).items() if current(n)}
+    return {**rec, "gaps": gaps, **({"policy_skipped": skipped} if "policy_skipped" in rec else {})}
 
 
 def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:

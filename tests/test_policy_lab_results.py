@@ -205,6 +205,22 @@ def test_a_change_of_one_strategys_decisions_keeps_the_gaps_of_several_and_of_se
     assert policy_lab._fresh({**pile, "visible": 2})["gaps"] == {}
     assert policy_lab._fresh({**pile, "versions": {"fallback": "old"}})["gaps"] == {}    # the uniform list: not here
 
+def test_a_policy_skipped_at_another_version_is_run_again(monkeypatch):
+    """A policy skipped (out of time, or past a counted cut) at an earlier version is not a reason to leave its
+    plan-setting alone: the skip is dropped as a stale gap is, and the policy is missing again; a skip at the
+    current version stands, and a policy without versions keeps its skips."""
+    monkeypatch.setitem(policy_lab.BIN_VERSIONS, ("fallback", "pile"), "new pile")
+    rec = {"gaps": {"paper": 0.1}, "policy_skipped": {"fallback": "over 12,000 states", "lookahead": "over 600 s"},
+           "versions": {"fallback": "old pile"}, "two_strategies": True, "bin": "pile", "visible": 1, "capacity": 1}
+    done: dict = {}
+    policy_lab._keep(done, "0:16-16:r2-16x2:1:1:pile:2000000", dict(rec), 2_000_000)
+    (fresh,) = done.values()
+    assert fresh["policy_skipped"] == {"lookahead": "over 600 s"}
+    assert policy_lab._missing(fresh, ("fallback", "lookahead", "paper"), False) == ("fallback",)
+    current = {**rec, "versions": {"fallback": "new pile"}}
+    assert policy_lab._fresh(current)["policy_skipped"] == rec["policy_skipped"]
+    assert policy_lab._missing(policy_lab._fresh(current), ("fallback",), False) == ()
+
 # ------------------------------------------------------------------ the SALBP walls: the largest attempt per plan-setting
 
 WALL = "0:salbp:KILBRID:1:2:uniform:"

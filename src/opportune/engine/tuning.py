@@ -495,8 +495,11 @@ WAYS_LOCK_EVERY = 4
 #: The pile window's sizes (parts, buffered ones and ancestors included): the smallest is solved at a state,
 #: and the largest whose states, predicted from it, fit PILE_WINDOW_STATES (policies/lumped.py).  Every size
 #: between: a size smaller than the largest that fits costs the gap (on a 16-part plan at 1 visible and 2
-#: locations, sizes 5, 8, 12 were +2.8%, 5-12 by one +0.8%, a cap three times larger +0.25%).
-PILE_WINDOW_PARTS = (4, 5, 6, 7, 8, 9, 10, 11, 12)
+#: locations, sizes 5, 8, 12 were +2.8%, 5-12 by one +0.8%, a cap three times larger +0.25%).  Up to 20: where
+#: the states allow (a narrow frontier, or several strategies open with the larger cap of
+#: PILE_SEVERAL_FACTOR), a window of 13-16 parts is solved (exact, on a 16-part two-strategy plan at 2
+#: locations: sizes up to 12 +1.120% and +1.156% at 1 and 2 visible, up to 20 +0.427% and +0.983%).
+PILE_WINDOW_PARTS = tuple(range(4, 21))
 #: Values (a state's looks and its value after a shake) the pile window's programme may hold per size
 #: tried: counted, not timed, so the decision is the same everywhere.  30,000 take about the CPU 20,000
 #: took before the compiled core kept its expectations per successor state (KILBRID at 3 visible, counted
@@ -518,6 +521,13 @@ PILE_OPTION_LOOKS = 2_000
 #: plan +1.951% -> +0.776%; with 2 locations, along 40 seeded runs, it made r2-16x2 and r2-20x2 worse at 1-3
 #: visible (+0.67% -> +2.14% at 1 visible on r2-16x2; docs/decisions.md).
 PILE_LOOK_DEEPER_LOCATIONS = 1
+#: Where a move keeping several strategies open is valued a look deeper (see PILE_LOOK_DEEPER_LOCATIONS), the
+#: pile window's sizes stop at this many parts: the move is valued by the windows of the state it leads to,
+#: the shake by the state's own, and larger windows make the two differ more.  With sizes up to 20 there,
+#: exact at 1 visible and 1 location, r20-20x2 +0.525% -> +3.789%, r5-20x2 +0.158% -> +2.252%, r17-20x2
+#: +0.151% -> +2.038% (at the start a buffering valued by a window of the whole plan, exact, against a
+#: shake valued by windows of 18 of the 20 parts, 8% over the optimum's value).
+PILE_DEEPER_PARTS = 12
 #: Where several strategies are open and the buffer has at least this many locations, a strategy's pile
 #: window takes first only the parts of a look that wait there for at most PILE_NEAR_UNITS remaining units; a
 #: part deeper in that strategy's order is one of its window's others (policies/pile_window.py).  Taken first,
@@ -557,6 +567,12 @@ PILE_SEVERAL_FACTOR = 3
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.
 WINDOW_REFINE = 2
+#: Windows predicted to fit that did not (their programme passed the cap) a state's search for its largest
+#: window may meet, in the pile's and the weighted bin's windows (policies/lumped.py): after each, the
+#: prediction is raised to what the miss proved and the next size is at most halfway from the last window
+#: solved.  Before, a miss ended the search with the last window solved, often the smallest: with sizes up to
+#: 20, on a 20-part two-strategy plan in the pile at 1 visible and 1 location, +5.81% against +0.13%.
+WINDOW_MISSES = 3
 #: Window plans' engines the pile's and the weighted bin's windows keep (by state and parts, policies/lumped.py):
 #: a window's plan is listed to predict its states, then solved, and a state's looks ask for it again.
 WINDOW_ENGINES = 64

@@ -33,6 +33,7 @@ from dataclasses import replace as _replace
 from opportune.engine import OrderEngine
 from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.tuning import WINDOW_ENGINES, WINDOW_STRATEGIES
+from opportune.engine.tuning import WINDOW_MISSES as MISSES
 from opportune.engine.tuning import WINDOW_REFINE as REFINE
 from opportune.planning.costs import TimeModel
 from opportune.planning.plan import Plan, Strategy
@@ -154,7 +155,8 @@ class LumpedWindow(DecidesOnMasks):
     where it values keeping several strategies open.  Where several strategies are open, a window of each
     one's frontier is solved, and each look takes the least of their moves (:meth:`_over_windows`).
 
-    The attribute ``work`` counts windows solved, the states they held, and decisions left to the base.
+    The attribute ``work`` counts windows solved, the states they held, decisions left to the base, and
+    windows predicted to fit that did not (``missed``; :meth:`_largest`).
     The attribute ``deadline``, a :class:`~opportune.engine.deadline.Deadline` or None, stops a window's
     programme; the base decides then.
     """
@@ -174,7 +176,7 @@ class LumpedWindow(DecidesOnMasks):
         self.visible, self.capacity, self.costs = visible, capacity, costs or TimeModel()
         self.sizes, self.max_states = tuple(sorted(sizes)), max_states
         self.deadline: Deadline | None = None
-        self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0}
+        self.work = {"windows": 0, "states": 0, "most_states": 0, "by_base": 0, "missed": 0}
         self._tables: OrderedDict = OrderedDict()      # by state and forced parts: the window that decides
         self._windows: OrderedDict = OrderedDict()     # by state and window: the window solved
         # what the search for a state's largest window asks again (across its sizes, its rounds and a state's
@@ -260,38 +262,59 @@ class LumpedWindow(DecidesOnMasks):
 
     def _largest(self, engine, mask: int, consistent: int, buffer, first: tuple, strategy: int):
         """The largest window predicted to fit, solved: the smallest size is solved, then in turn the largest
-        size whose states are predicted within ``max_states``, the prediction being the states listed for its
-        plan (:func:`~opportune.policies.states.estimate_states`, without the others: under a millisecond)
-        scaled by the last window solved's states over its own listed states; a window that does not fit after
-        all ends the search (the last one solved decides), as do :data:`~opportune.engine.tuning.WINDOW_REFINE` predictions.  So a state
-        costs a few windows, not every size.  Each window is ``strategy``'s frontier.  None where the smallest
-        does not fit."""
-        sizes = self.sizes
-        parts, outside = self._frontier(engine, mask, consistent, first, sizes[0], strategy)
-        got = self._window(engine, mask, consistent, buffer, parts, outside, sizes[0])
+        size whose states are predicted within its cap (:meth:`_pick`), up to
+        :data:`~opportune.engine.tuning.WINDOW_REFINE` windows solved.  A window predicted to fit that does
+        not (its programme passed the cap) is a miss: the prediction's ratio is raised to what the miss proved,
+        the next pick is at most halfway from the last window solved to the missed one, and no later pick is
+        the missed size or larger, up to :data:`~opportune.engine.tuning.WINDOW_MISSES` misses (a miss no
+        longer leaves the smallest window deciding where the largest sizes are far from it); past the
+        deadline the last window solved decides.  So a state costs a few windows, not every size.  Each
+        window is ``strategy``'s frontier.  None where the smallest does not fit."""
+        parts, outside = self._frontier(engine, mask, consistent, first, self.sizes[0], strategy)
+        got = self._window(engine, mask, consistent, buffer, parts, outside, self.sizes[0])
         if got is None:
             return None
-        for _ in range(REFINE if outside else 0):
-            ratio = got.states / max(1, self._listed(engine, mask, consistent, parts,
-                                                           self._cap(len(parts), consistent)))
-            pick = None
-            for size in (s for s in sizes if s > got.size):
-                more, rest = self._frontier(engine, mask, consistent, first, size, strategy)
-                if more == (pick[1] if pick else parts):
-                    continue
-                cap = self._cap(len(more), consistent)
-                if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
-                    break
-                pick = (size, more, rest)
-                if not rest:
-                    break
-            bigger = None if pick is None else self._window(engine, mask, consistent, buffer, pick[1], pick[2], pick[0])
+        solved = missed = 0
+        floor, missed_size, below = 0.0, float("inf"), float("inf")     # what the misses proved
+        while outside and solved < REFINE and missed < MISSES:
+            ratio = max(floor, got.states / max(1, self._listed(engine, mask, consistent, parts,
+                                                                 self._cap(len(parts), consistent))))
+            pick = self._pick(engine, mask, consistent, first, strategy, got.size, below, parts, ratio)
+            if pick is None:
+                break
+            bigger = self._window(engine, mask, consistent, buffer, pick[1], pick[2], pick[0])
+            if bigger is None and as_deadline(self.deadline).expired():
+                break               # out of time, not a miss: the last window solved decides
             if bigger is None:
-                break
-            got, (_, parts, outside) = bigger, pick
-            if not outside:
-                break
+                missed += 1
+                self.work["missed"] += 1
+                cap = self._cap(len(pick[1]), consistent)
+                floor = max(ratio, (cap + 1) / max(1, self._listed(engine, mask, consistent, pick[1], cap)))
+                missed_size, below = min(missed_size, pick[0]), (got.size + pick[0]) // 2 + 1
+                continue
+            solved += 1
+            got, (_, parts, outside), below = bigger, pick, missed_size
         return got
+
+    def _pick(self, engine, mask: int, consistent: int, first: tuple, strategy: int, above: int, below: float,
+              parts, ratio: float):
+        """The largest size over ``above`` and under ``below`` whose window's states are predicted within its
+        cap (the states listed for its plan, :func:`~opportune.policies.states.estimate_states` without the
+        others, times ``ratio``), the sizes tried in turn until one is predicted over it: ``(size, parts,
+        outside)``, or None where no larger window is predicted to fit.  O(sizes) listings, each stopped at
+        the cap."""
+        pick = None
+        for size in (s for s in self._sizes(consistent) if above < s < below):
+            more, rest = self._frontier(engine, mask, consistent, first, size, strategy)
+            if more == (pick[1] if pick else parts):
+                continue
+            cap = self._cap(len(more), consistent)
+            if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
+                break
+            pick = (size, more, rest)
+            if not rest:
+                break
+        return pick
 
     def _window(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int], size: int):
         """The window of these parts solved (cached by state and parts: looks that force parts already in it
@@ -348,6 +371,11 @@ class LumpedWindow(DecidesOnMasks):
         """The states a window of ``parts`` parts may hold at a state of these open strategies
         (``max_states``; a subclass may grant more where several are open)."""
         return self.max_states
+
+    def _sizes(self, consistent: int) -> tuple[int, ...]:
+        """The window sizes tried at a state of these open strategies (``sizes``; a subclass may try fewer
+        where several are open)."""
+        return self.sizes
 
     def _forced(self, engine, visible) -> tuple[str, ...]:
         """The parts of a look the window takes first, with their ancestors where they fit, as it takes the

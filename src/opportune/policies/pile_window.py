@@ -34,8 +34,9 @@ largest predicted to fit
 counted states, the same decision on every machine), :data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`
 times more where several strategies are open and the buffer has two locations or more
 (:meth:`PileWindow._cap`: there a window keeps every strategy it is closed in and each buffered combination,
-and the moves that close a strategy are decided); where none fits, or past the deadline, the base rule
-decides.
+and the moves that close a strategy are decided), of at most
+:data:`~opportune.engine.tuning.PILE_DEEPER_PARTS` parts where a move keeping several open is valued a look
+deeper (:meth:`PileWindow._sizes`); where none fits, or past the deadline, the base rule decides.
 
 Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
 --policies fallback``) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
@@ -315,6 +316,20 @@ class PileWindow(LumpedWindow):
     #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
     #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).
     look_deeper_locations: float = tuning.PILE_LOOK_DEEPER_LOCATIONS
+    #: The largest window where a move keeping several strategies open is valued a look deeper
+    #: (:data:`~opportune.engine.tuning.PILE_DEEPER_PARTS`).
+    deeper_parts: int = tuning.PILE_DEEPER_PARTS
+
+    def _sizes(self, consistent: int) -> tuple[int, ...]:
+        """``sizes``, at most :attr:`deeper_parts` where several strategies are open and a move keeping them
+        is valued a look deeper (:meth:`_kept_open`): there the move is valued by the windows of the state it
+        leads to and a shake by the state's own, and the larger the windows, the more the two differ (a
+        buffering valued by a window of the whole plan, exact, against a shake valued by windows of 18 of
+        20 parts whose lumped others wait unused). O(sizes)."""
+        locations = float("inf") if self.capacity is None else self.capacity
+        if consistent.bit_count() > 1 and locations <= self.look_deeper_locations:
+            return tuple(s for s in self.sizes if s <= self.deeper_parts)
+        return self.sizes
 
     def _kept_open(self, engine, mask: int, consistent: int, buffer, visible, action, keeps) -> float | None:
         """A move keeping several strategies open valued a look deeper: its motion, then the look after it
