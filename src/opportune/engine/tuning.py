@@ -571,7 +571,8 @@ WINDOW_REFINE = 2
 #: window may meet, in the pile's and the weighted bin's windows (policies/lumped.py): after each, the
 #: prediction is raised to what the miss proved and the next size is at most halfway from the last window
 #: solved.  Before, a miss ended the search with the last window solved, often the smallest: with sizes up to
-#: 20, on a 20-part two-strategy plan in the pile at 1 visible and 1 location, +5.81% against +0.13%.
+#: 20, on a 20-part two-strategy plan in the pile at 1 visible and 1 location, +5.81% over the optimum (exact)
+#: against +0.13% with the retries (along 60 seeded runs).
 WINDOW_MISSES = 3
 #: Window plans' engines the pile's and the weighted bin's windows keep (by state and parts, policies/lumped.py):
 #: a window's plan is listed to predict its states, then solved, and a state's looks ask for it again.
