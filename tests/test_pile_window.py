@@ -446,6 +446,16 @@ def test_each_strategy_s_windows_get_their_share_of_the_time_left(monkeypatch):
     assert window.deadline is whole
 
 
+def _lab_plan(name: str):
+    """One of the policy lab's 20-part plans (``benchmarks/policy_lab.py``'s seed-0 plans), by name."""
+    lab = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if lab not in sys.path:
+        sys.path.insert(0, lab)
+    from policy_lab import generate
+
+    return {p.name: p for p, _ in generate(0, 30, 20, 20)}[name]
+
+
 def test_a_window_that_misses_its_prediction_leaves_a_smaller_one_not_the_smallest():
     """The listed states predict each larger window's; where a window predicted to fit does not (on the policy
     lab's r2-20x2, two strategies, at 1 visible and 1 location, nothing installed and p5 buffered), the
@@ -455,10 +465,7 @@ def test_a_window_that_misses_its_prediction_leaves_a_smaller_one_not_the_smalle
     in the lab against +0.13% (estimated along 60 runs)."""
     from opportune.engine.tuning import WINDOW_MISSES, WINDOW_REFINE
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from policy_lab import generate
-
-    plan = {p.name: p for p, _ in generate(0, 30, 20, 20)}["r2-20x2"]
+    plan = _lab_plan("r2-20x2")
     engine = OrderEngine(plan)
     window = PileWindow(visible=1, capacity=1, sizes=tuple(range(4, 21)))
     window.deeper_parts = 20            # the search alone (see the next test for the sizes at one location)
@@ -478,10 +485,7 @@ def test_where_a_move_keeping_strategies_open_is_valued_a_look_deeper_the_window
     PILE_DEEPER_PARTS; with one strategy left, or two locations, they go on."""
     from opportune.engine.tuning import PILE_DEEPER_PARTS
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from policy_lab import generate
-
-    plan = {p.name: p for p, _ in generate(0, 30, 20, 20)}["r20-20x2"]
+    plan = _lab_plan("r20-20x2")
     engine = OrderEngine(plan)
     window = PileWindow(visible=1, capacity=1, sizes=tuple(range(4, 21)))
     both = window.tables(engine, 0, engine.all_strategies, ())
