@@ -122,9 +122,9 @@ POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-bu
 #: frontier taken first.  Then, with several strategies open and 2 locations or more, three times the states
 #: a window (one strategy, or one location: the same decisions).  Then sizes up to 20 parts (up to 12 with
 #: several strategies open and one location), and a window predicted to fit that does not raises the
-#: prediction for a smaller one (every setting).
+#: prediction for a smaller one (every setting).  Then ten times the states before a run's first installation.
 BIN_VERSIONS = {("fallback", "pile"): ("pile window, sizes up to 20 parts (12 at 1 location with several open), "
-                                        "a missed prediction retried smaller")}
+                                        "a missed prediction retried smaller, ten times the states before a run's first installation")}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that

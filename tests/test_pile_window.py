@@ -166,7 +166,7 @@ def test_the_default_decides_by_the_pile_window_with_its_work_counted_and_bounde
                           for look in (("1", "2"), ("3", "1"), ("2", "7"), ("9", "12"))])
         work = policy.window.work
         assert work["windows"] > 0 and work["by_base"] == 0
-        assert work["most_states"] <= policy.window.max_states
+        assert work["most_states"] <= policy.window.max_states * policy.window.start_factor    # a run's start
     assert decisions[0] == decisions[1]
     rule = Sequencer(plan, policy=Lookahead(visible=2, capacity=2, bin="pile", optimal=False)).decide(["1", "2"]).rule
     assert "frontier window" in rule and "pile" in rule, rule
@@ -417,7 +417,7 @@ def test_with_several_strategies_open_and_two_locations_the_window_holds_more_st
     values, work = [], []
     for factor in (1, PileWindow.several_factor):
         window = PileWindow(visible=visible, capacity=capacity, sizes=(4, 5, 6, 7, 8), max_states=3_000)
-        window.several_factor = factor
+        window.several_factor, window.start_factor = factor, 1      # the start's own cap: its test
         values.append(PileSolver(engine, window, visible=visible, capacity=capacity).value())
         work.append(window.work["most_states"])
     assert PileWindow.several_factor == 3
@@ -447,13 +447,15 @@ def test_each_strategy_s_windows_get_their_share_of_the_time_left(monkeypatch):
 
 
 def _lab_plan(name: str):
-    """One of the policy lab's 20-part plans (``benchmarks/policy_lab.py``'s seed-0 plans), by name."""
+    """One of the policy lab's plans (``benchmarks/policy_lab.py``'s seed-0 plans), by name (r2-20x2: of 20
+    parts, two strategies)."""
     lab = str(Path(__file__).resolve().parents[1] / "benchmarks")
     if lab not in sys.path:
         sys.path.insert(0, lab)
     from policy_lab import generate
 
-    return {p.name: p for p, _ in generate(0, 30, 20, 20)}[name]
+    size = int(name.split("-")[1].split("x")[0])
+    return {p.name: p for p, _ in generate(0, 30, size, size)}[name]
 
 
 def test_a_window_that_misses_its_prediction_leaves_a_smaller_one_not_the_smallest():
@@ -469,6 +471,7 @@ def test_a_window_that_misses_its_prediction_leaves_a_smaller_one_not_the_smalle
     engine = OrderEngine(plan)
     window = PileWindow(visible=1, capacity=1, sizes=tuple(range(4, 21)))
     window.deeper_parts = 20            # the search alone (see the next test for the sizes at one location)
+    window.start_factor = 1             # and its usual cap (nothing is installed here)
     solve, solved = window._window, []
     window._window = lambda *a: solved.append(solve(*a)) or solved[-1]
     tables = window.tables(engine, 0, engine.all_strategies, ("p5",))
@@ -520,3 +523,40 @@ def test_a_window_stopped_by_the_deadline_is_not_a_miss():
     (table,) = window.tables(engine, 0, engine.all_strategies, ())
     assert len(solved) == 2 and solved[1] is None and window.work["missed"] == 0
     assert table is solved[0] and table.size == 4
+
+
+def test_before_a_run_s_first_installation_without_a_deadline_the_windows_hold_more_states():
+    """The states before a run's first installation (nothing installed, a few parts buffered at most) are
+    met by every run, its start again after each shake there: without a deadline their windows may hold
+    PILE_START_FACTOR times the states.  On the lab's r2-16x2 at 2 visible and 2 locations, both strategies
+    open, each strategy's window at the start grows from 11 parts to 15, and on the look (p6, p13) the
+    window installs p6, as the optimum does; with the usual cap it installed p13, 1.48 more expected time in
+    the optimum's values (the lab's +1.05% over the optimum went to +0.46%).  With a deadline, and after
+    the first installation, the cap is the usual one."""
+    from opportune.engine.tuning import PILE_START_FACTOR
+
+    plan = _lab_plan("r2-16x2")
+    engine = OrderEngine(plan)
+    start, look = (0, engine.all_strategies, ()), ("p6", "p13")
+    usual = PileWindow(visible=2, capacity=2)
+    usual.start_factor = 1
+    larger = PileWindow(visible=2, capacity=2)
+    assert PILE_START_FACTOR == larger.start_factor == 10
+    cap = usual.max_states * usual.several_factor
+    assert {t.size for t in usual.tables(engine, *start)} == {11} and usual.work["most_states"] <= cap
+    assert {t.size for t in larger.tables(engine, *start)} == {15}
+    assert cap < larger.work["most_states"] <= 10 * cap
+    assert (usual.choose_at(engine, *start, 2, look).part, larger.choose_at(engine, *start, 2, look).part) == (
+        "p13", "p6")
+    best = pile_solver(engine, visible=2, capacity=2, max_states=2_000_000)       # 796,709
+    key, seen = best.start_key(), tuple(sorted(plan.index(p) for p in look))
+    assert best.best_action(key, seen)[0] == Action("install", "p6", "bin")
+    buffered = PileWindow(visible=2, capacity=2)
+    assert min(t.size for t in buffered.tables(engine, 0, engine.all_strategies, ("p9",))) > 11
+    timed = PileWindow(visible=2, capacity=2)
+    timed.deadline = Deadline.after(1000.0)
+    assert {t.size for t in timed.tables(engine, *start)} == {11}
+    after = PileWindow(visible=2, capacity=2)
+    unit = engine.next_unit(0, plan.index("p6"))
+    after.tables(engine, 1 << unit, engine.consistent_after(0, engine.all_strategies, unit), ())
+    assert after.work["most_states"] <= cap

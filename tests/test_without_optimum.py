@@ -3,6 +3,8 @@
 worth less than the optimum; with the optimum on, where it fits, it is worth exactly the optimum."""
 
 import json
+import sys
+from pathlib import Path
 
 import pytest
 import yaml
@@ -160,3 +162,32 @@ def test_the_shared_programme_goes_with_its_engine():
     del engine, first, second, state, policy
     gc.collect()
     assert alive() is None
+
+
+@pytest.mark.parametrize("visible, capacity", [(1, 1), (2, 1), (1, 2)])
+def test_the_pile_diagnosis_sums_to_the_fallback_s_own_value(visible, capacity):
+    """benchmarks/fallback_diagnosis.py --bin pile: along the fallback's path (each state's looks, fresh or
+    left by a move, each met as often as its run meets it) the looks' costs sum to the fallback's exact
+    value, computed by its own evaluation, and the terms where it acts otherwise than the optimum sum to its
+    gap; windows of 2-3 parts on two-strategy plans of 7 parts, so the fallback is not the optimum."""
+    lab = str(Path(__file__).resolve().parent.parent / "benchmarks")
+    if lab not in sys.path:
+        sys.path.insert(0, lab)
+    import random
+
+    from fallback_diagnosis import pile_differences
+    from policy_lab import random_plan
+
+    from opportune.policies.pile import PileSolver
+
+    gaps = []
+    for seed in range(3):
+        engine = OrderEngine(random_plan(random.Random(seed), 7, 2, 0.3))
+        fallback = Lookahead(optimal=False, visible=visible, capacity=capacity, bin="pile")
+        fallback.window.sizes, fallback.window.max_states = (2, 3), 10 ** 6
+        best, value, gap, rows = pile_differences(engine, visible, capacity, fallback)
+        exact = PileSolver(engine, fallback, visible=visible, capacity=capacity).value()
+        assert value == pytest.approx(exact, rel=1e-9) and best + gap == pytest.approx(value, rel=1e-9)
+        assert all(row["advantage"] > 0 and row["looks"] > 0 for row in rows)
+        gaps.append(gap)
+    assert max(gaps) > 0.01 * best

@@ -187,6 +187,7 @@ class LumpedWindow(DecidesOnMasks):
         self._options: OrderedDict = OrderedDict()     # by state and windows: the option of several strategies
         self._engine = None
         self.last_table = None
+        self._at_start = False      # the state being solved is before a run's first installation, without a deadline
 
     def table(self, engine, mask: int, consistent: int, buffer, forced: tuple[str, ...] = ()):
         """The state's window solved (cached), or None where no window fits (states, or the deadline): of the
@@ -243,6 +244,7 @@ class LumpedWindow(DecidesOnMasks):
         if got is None:
             found: dict = {}
             strategies, given = core_strategies(engine, consistent)[:WINDOW_STRATEGIES], self.deadline
+            self._at_start = mask == 0 and as_deadline(given).at == float("inf")
             try:
                 for n, s in enumerate(strategies):
                     # each strategy's windows their share of the time left (none: no deadline, the same
@@ -254,7 +256,7 @@ class LumpedWindow(DecidesOnMasks):
                     if table is not None:
                         found.setdefault(table.parts, table)
             finally:
-                self.deadline = given
+                self.deadline, self._at_start = given, False
             got = tuple(found.values())
             if got:
                 _keep(self._tables, key, got, self.cache)

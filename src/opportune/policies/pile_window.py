@@ -36,7 +36,10 @@ times more where several strategies are open and the buffer has two locations or
 (:meth:`PileWindow._cap`: there a window keeps every strategy it is closed in and each buffered combination,
 and the moves that close a strategy are decided), of at most
 :data:`~opportune.engine.tuning.PILE_DEEPER_PARTS` parts where a move keeping several open is valued a look
-deeper (:meth:`PileWindow._sizes`); where none fits, or past the deadline, the base rule decides.
+deeper (:meth:`PileWindow._sizes`), and :data:`~opportune.engine.tuning.PILE_START_FACTOR` times more
+before a run's first installation, without a deadline (nothing installed: the states every run passes
+through, its start again after each shake there; within a budget the cap is the usual one); where none
+fits, or past the deadline, the base rule decides.
 
 Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
 --policies fallback``) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
@@ -308,10 +311,15 @@ class PileWindow(LumpedWindow):
         :attr:`several_locations` or more: there a window of one strategy's frontier keeps every strategy
         it is closed in and each buffered combination, so the same cap holds fewer parts, while the
         decisions that close a strategy are the ones the gap comes from (a run meets few such states).
-        O(1)."""
+        Times :attr:`start_factor` before a run's first installation without a deadline (as
+        :meth:`~opportune.policies.lumped.LumpedWindow.tables` marks the state it solves).  O(1)."""
         locations = float("inf") if self.capacity is None else self.capacity
         several = consistent.bit_count() > 1 and locations >= self.several_locations
-        return self.max_states * (self.several_factor if several else 1)
+        return self.max_states * (self.several_factor if several else 1) * (self.start_factor if self._at_start else 1)
+
+    #: Before a run's first installation (nothing installed), without a deadline, a window's programme may
+    #: hold this many times more (:data:`~opportune.engine.tuning.PILE_START_FACTOR`; 1: no more).
+    start_factor: int = tuning.PILE_START_FACTOR
 
     #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
     #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).
