@@ -132,16 +132,20 @@ def pile_differences(engine, visible: int, capacity: int | None,
         if key[0] == engine.full:
             continue
         okey = optimum.policy_key(key[0], key[1], ev._buffered(key))
-        drawn = list(ev._looks(ev._bin_counts(key)))
-        moves = {look: ev._policy_move(fallback, key, look) for look in set(came) | {w for w, _ in drawn}}
+        moves = {look: ev._policy_move(fallback, key, look) for look in came}
         f += sum(m for look, m in came.items() if moves[look] is None)     # a shake: a fresh pile here
-        p_shake = sum(p for look, p in drawn if moves[look] is None)
         mass = dict(came)
-        for look, p in drawn:
-            mass[look] = mass.get(look, 0.0) + f * p / (1.0 - p_shake)
+        if f:           # the fresh looks, where a shake or the start leads here (else none is met)
+            drawn = list(ev._looks(ev._bin_counts(key)))
+            for look, _ in drawn:
+                if look not in moves:
+                    moves[look] = ev._policy_move(fallback, key, look)
+            acted = sum(p for look, p in drawn if moves[look] is not None)
+            if acted <= 1e-15:
+                raise RuntimeError("the fallback shakes at every look of a state it reaches: it never finishes")
+            for look, p in drawn:
+                mass[look] = mass.get(look, 0.0) + f * p / acted
         for look, m in mass.items():
-            if not m:
-                continue            # a look drawn only where no fresh pile comes
             move = moves[look]
             value += m * (optimum.costs.look + (optimum.costs.shake if move is None else move[0]))
             mine = optimum.best_action(okey, look)[0]
