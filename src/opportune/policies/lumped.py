@@ -187,7 +187,6 @@ class LumpedWindow(DecidesOnMasks):
         self._options: OrderedDict = OrderedDict()     # by state and windows: the option of several strategies
         self._engine = None
         self.last_table = None
-        self._at_start = False      # the state being solved is before a run's first installation, without a deadline
 
     def table(self, engine, mask: int, consistent: int, buffer, forced: tuple[str, ...] = ()):
         """The state's window solved (cached), or None where no window fits (states, or the deadline): of the
@@ -244,7 +243,6 @@ class LumpedWindow(DecidesOnMasks):
         if got is None:
             found: dict = {}
             strategies, given = core_strategies(engine, consistent)[:WINDOW_STRATEGIES], self.deadline
-            self._at_start = mask == 0 and as_deadline(given).at == float("inf")
             try:
                 for n, s in enumerate(strategies):
                     # each strategy's windows their share of the time left (none: no deadline, the same
@@ -256,7 +254,7 @@ class LumpedWindow(DecidesOnMasks):
                     if table is not None:
                         found.setdefault(table.parts, table)
             finally:
-                self.deadline, self._at_start = given, False
+                self.deadline = given
             got = tuple(found.values())
             if got:
                 _keep(self._tables, key, got, self.cache)
@@ -280,7 +278,7 @@ class LumpedWindow(DecidesOnMasks):
         floor, missed_size, below = 0.0, float("inf"), float("inf")     # what the misses proved
         while outside and solved < REFINE and missed < MISSES:
             ratio = max(floor, got.states / max(1, self._listed(engine, mask, consistent, parts,
-                                                                 self._cap(len(parts), consistent))))
+                                                                 self._cap(len(parts), consistent, mask))))
             pick = self._pick(engine, mask, consistent, first, strategy, got.size, below, parts, ratio)
             if pick is None:
                 break
@@ -290,7 +288,7 @@ class LumpedWindow(DecidesOnMasks):
             if bigger is None:
                 missed += 1
                 self.work["missed"] += 1
-                cap = self._cap(len(pick[1]), consistent)
+                cap = self._cap(len(pick[1]), consistent, mask)
                 floor = max(ratio, (cap + 1) / max(1, self._listed(engine, mask, consistent, pick[1], cap)))
                 missed_size, below = min(missed_size, pick[0]), (got.size + pick[0]) // 2 + 1
                 continue
@@ -310,7 +308,7 @@ class LumpedWindow(DecidesOnMasks):
             more, rest = self._frontier(engine, mask, consistent, first, size, strategy)
             if more == (pick[1] if pick else parts):
                 continue
-            cap = self._cap(len(more), consistent)
+            cap = self._cap(len(more), consistent, mask)
             if ratio * self._listed(engine, mask, consistent, more, int(cap / ratio) + 1) > cap:
                 break
             pick = (size, more, rest)
@@ -369,10 +367,20 @@ class LumpedWindow(DecidesOnMasks):
             got = _keep(self._engines, key, window_engine(engine, mask, kept, parts), WINDOW_ENGINES)
         return got
 
-    def _cap(self, parts: int, consistent: int) -> int:
-        """The states a window of ``parts`` parts may hold at a state of these open strategies
-        (``max_states``; a subclass may grant more where several are open)."""
-        return self.max_states
+    def _cap(self, parts: int, consistent: int, mask: int) -> int:
+        """The states a window of ``parts`` parts may hold at a state of these open strategies and installed
+        units: ``max_states``, times :meth:`_start` (a subclass may grant more where several are open)."""
+        return self.max_states * self._start(mask)
+
+    #: Before a run's first installation, without a deadline, a window's programme may hold this many times
+    #: more (1: no more; the pile's :data:`~opportune.engine.tuning.PILE_START_FACTOR`).
+    start_factor: int = 1
+
+    def _start(self, mask: int) -> int:
+        """:attr:`start_factor` at a state before a run's first installation (nothing installed: the states
+        every run passes through, its start again after each shake there) where there is no deadline, else
+        1: within a budget the cap is the usual one.  O(1)."""
+        return self.start_factor if mask == 0 and as_deadline(self.deadline).at == float("inf") else 1
 
     def _sizes(self, consistent: int) -> tuple[int, ...]:
         """The window sizes tried at a state of these open strategies (``sizes``; a subclass may try fewer

@@ -255,7 +255,7 @@ class PileWindow(LumpedWindow):
         key, others, other_move, _ = self._window_key(engine, buffer, parts, outside, mask)
         sub = self._window_engine(engine, mask, consistent, parts)
         solver = pile_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
-                                    max_states=self._cap(len(parts), consistent), others=others, other_move=other_move)
+                                    max_states=self._cap(len(parts), consistent, mask), others=others, other_move=other_move)
         solver.deadline = as_deadline(self.deadline)
         key = (0, sub.all_strategies, key)
         try:
@@ -306,16 +306,16 @@ class PileWindow(LumpedWindow):
     #: See :attr:`several_locations` (:data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`; 1: no more).
     several_factor: int = tuning.PILE_SEVERAL_FACTOR
 
-    def _cap(self, parts: int, consistent: int) -> int:
+    def _cap(self, parts: int, consistent: int, mask: int) -> int:
         """``max_states``, times :attr:`several_factor` where several strategies are open and the buffer has
         :attr:`several_locations` or more: there a window of one strategy's frontier keeps every strategy
         it is closed in and each buffered combination, so the same cap holds fewer parts, while the
         decisions that close a strategy are the ones the gap comes from (a run meets few such states).
-        Times :attr:`start_factor` before a run's first installation without a deadline (as
-        :meth:`~opportune.policies.lumped.LumpedWindow.tables` marks the state it solves).  O(1)."""
+        Times :meth:`~opportune.policies.lumped.LumpedWindow._start` (before a run's first installation,
+        without a deadline).  O(1)."""
         locations = float("inf") if self.capacity is None else self.capacity
         several = consistent.bit_count() > 1 and locations >= self.several_locations
-        return self.max_states * (self.several_factor if several else 1) * (self.start_factor if self._at_start else 1)
+        return self.max_states * (self.several_factor if several else 1) * self._start(mask)
 
     #: Before a run's first installation (nothing installed), without a deadline, a window's programme may
     #: hold this many times more (:data:`~opportune.engine.tuning.PILE_START_FACTOR`; 1: no more).

@@ -179,7 +179,7 @@ class WeightedWindow(LumpedWindow):
         sub = self._window_engine(engine, mask, consistent, parts)
         solver = weighted_window_solver(sub, visible=self.visible, capacity=self.capacity, costs=self.costs,
                                         weights={p.id: self.weights.get(p.id, 1.0) for p in sub.plan.parts},
-                                        max_states=self._cap(len(parts), consistent), others=others, other_move=other_move,
+                                        max_states=self._cap(len(parts), consistent, mask), others=others, other_move=other_move,
                                         other_weight=other_weight)
         solver.deadline = as_deadline(self.deadline)
         try:
@@ -189,10 +189,12 @@ class WeightedWindow(LumpedWindow):
         return WindowTable(tuple(parts), tuple(values), len(outside), size, solver.states,
                            outside_rest(engine, mask, outside, self.costs))
 
-    def _cap(self, parts: int, consistent: int) -> int:
-        """``max_states``, and at most :data:`~opportune.engine.tuning.WEIGHTED_WINDOW_LOOKS` looks over the
-        states (each state enumerates its bin's looks: at most those of the window's parts and the others)."""
-        return min(self.max_states, tuning.WEIGHTED_WINDOW_LOOKS // comb(parts + self.visible, self.visible))
+    def _cap(self, parts: int, consistent: int, mask: int) -> int:
+        """``max_states`` (times :meth:`~opportune.policies.lumped.LumpedWindow._start`), and at most
+        :data:`~opportune.engine.tuning.WEIGHTED_WINDOW_LOOKS` looks over the states (each state enumerates its
+        bin's looks: at most those of the window's parts and the others)."""
+        return min(self.max_states * self._start(mask),
+                   tuning.WEIGHTED_WINDOW_LOOKS // comb(parts + self.visible, self.visible))
 
     def _decide(self, engine, mask: int, consistent: int, table: WindowTable, buffer,
                 visible) -> tuple[float, Action | None, float]:
