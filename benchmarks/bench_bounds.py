@@ -13,15 +13,18 @@ replaces them between the page's ``<!-- bound-small -->`` and ``<!-- bound-large
   mean time with its 95% interval (``simulate``'s way of deciding: within 50 ms per decision where the
   first exact counts take too long), the bound with each penalty, and the default's gap over the better
   bound (the policy's mean over the bound, less one: how far above the optimum it can be at most, up to
-  Monte Carlo error), with the bounds' CPU seconds.
+  Monte Carlo error), with the bounds' CPU seconds; where the policy lab's results (``--lab-results``) hold
+  the plan's exact optimum in the setting, that optimum too, and whether the bound is at most it.
 
     python benchmarks/bench_bounds.py [--small] [--large] [--plans salbp:KILBRID,...] [--settings 2:-,2:1]
                                       [--trials 100] [--bound-trials 40] [--nodes 2000] [--write docs/lower-bounds.md]
+                                      [--lab-results benchmarks/policy_lab_results.jsonl]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import random
 import re
 import time
@@ -115,24 +118,46 @@ def policy_mean(plan, visible: int, capacity, trials: int) -> tuple[float, float
     return t["mean"], (high - low) / 2, how
 
 
+def lab_optima(path: Path | None) -> dict[tuple, tuple[float, float | None]]:
+    """The exact optima the policy lab computed (uniform bin), with the default's exact value where the lab
+    measured its gap (else None), by (plan name, visible, locations)."""
+    found: dict[tuple, tuple[float, float | None]] = {}
+    if path is None or not path.exists():
+        return found
+    for line in path.read_text(encoding="utf-8").splitlines():
+        r = json.loads(line)
+        if r.get("bin", "uniform") == "uniform" and r.get("optimum"):
+            key, gap = (r["plan"], r["visible"], r["capacity"]), r.get("gaps", {}).get("lookahead")
+            exact = None if gap is None else r["optimum"] * (1 + gap)
+            found[key] = (r["optimum"], exact if exact is not None else found.get(key, (0, None))[1])
+    return found
+
+
 def large_table(args) -> list[str]:
+    optima = lab_optima(args.lab_results)
     lines = [f"uniform bin, seed 0; the policy on {args.trials} bins, the bound on {args.bound_trials} (at most "
-             f"{args.nodes:,} nodes per bin); the bounds' CPU seconds", "",
-             "| plan | visible | locations | default policy | motions bound | relaxed bound | gap | bound s |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             f"{args.nodes:,} nodes per bin); the bounds' CPU seconds; the optimum where the policy lab computed it. "
+             "The gap is the default's value over the larger bound, less one: its exact value where the lab measured "
+             "it (then marked *exact*), else its mean",
+             "",
+             "| plan | visible | locations | default policy | optimum | motions bound | relaxed bound | gap | bound s |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for spec in args.plans.split(","):
         plan = load_plan(spec)
         for setting in args.settings.split(","):
             visible, capacity = (int(x) if x != "-" else None for x in setting.split(":"))
             mean, half, how = policy_mean(plan, visible, capacity, args.trials)
-            cells, best, bsecs = [], 0.0, 0.0
+            cells, best, bsecs, low = [], 0.0, 0.0, float("-inf")
             for penalty in PENALTIES:
-                text, value, _, s = bound_cell(plan, visible, capacity, penalty, args)
+                text, value, lo, s = bound_cell(plan, visible, capacity, penalty, args)
                 cells.append(text)
-                best, bsecs = max(best, value), bsecs + s
+                best, bsecs, low = max(best, value), bsecs + s, max(low, lo)
+            optimum, exact = optima.get((plan.name, visible, capacity), (None, None))
+            known = "—" if optimum is None else f"{optimum:.2f}" + ("" if low <= optimum + 1e-9 else " (**bound above**)")
             note = "" if how == "exact" else f" ({how})"
+            gap = f"{100 * (mean / best - 1):+.1f}%" if exact is None else f"{100 * (exact / best - 1):+.1f}% (exact)"
             lines.append(f"| {plan.name} ({plan.n_units}) | {visible} | {cap_text(capacity)} | {mean:.2f} ± {half:.2f}"
-                         f"{note} | {' | '.join(cells)} | {100 * (mean / best - 1):+.1f}% | {bsecs:.0f} |")
+                         f"{note} | {known} | {' | '.join(cells)} | {gap} | {bsecs:.0f} |")
             print(lines[-1], flush=True)
     return lines
 
@@ -160,6 +185,8 @@ def main(argv=None) -> int:
                     help="states of the relaxed plan in the small table's middle column, as a share of the optimum's "
                          "(a partial relaxation)")
     ap.add_argument("--policy-seconds", type=float, default=60.0, help="the default's exact programme, at most")
+    ap.add_argument("--lab-results", type=Path, default=Path(__file__).resolve().parent / "policy_lab_results.jsonl",
+                    help="the policy lab's results: the exact optima it computed, shown beside the bounds")
     ap.add_argument("--write", type=Path,
                     help="a page whose <!-- bound-small --> / <!-- bound-large --> tables to replace")
     args = ap.parse_args(argv)

@@ -46,6 +46,11 @@ from policy_lab import POLICIES, gaps, random_plan  # noqa: E402
 SETTINGS = ((1, 1), (2, 2), (3, 2))      # (visible, buffer locations)
 
 
+def _locations(capacity) -> str:
+    """Buffer locations in words (None: an unlimited buffer)."""
+    return "unlimited buffer" if capacity is None else f"{capacity} location{'s' * (capacity != 1)}"
+
+
 def draw_plans(n: int, count: int, seed: int, max_states: int, settings=SETTINGS, strategies: int = 1) -> list:
     """``count`` plans of ``n`` parts (of ``strategies`` strategies) whose optimum holds at most ``max_states``
     states in every setting."""
@@ -91,7 +96,7 @@ def decisions(name: str, settings, seed: int, budget: float | None, bin: str = "
                     buffer = tuple(sorted(buffer, key=lambda p: p != action.part))[1:]
         later = sorted(times[1:])       # the first decision also lists the optimum's states (a second at most)
         work = policy.window.work
-        print(f"| {plan.name}{f' ({bin})' * (bin != 'uniform')} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | {len(times)} | "
+        print(f"| {plan.name}{f' ({bin})' * (bin != 'uniform')} | {visible} visible, {_locations(capacity)} | {len(times)} | "
               f"{1000 * times[0]:.0f} | {1000 * statistics.mean(later):.1f} | {1000 * later[int(0.99 * len(later))]:.1f} | "
               f"{1000 * later[-1]:.1f} | {1000 * max(walls[1:]):.1f} | {work['windows']:,} | {work['most_states']:,} | "
               f"{work['by_base']} |", flush=True)
@@ -134,11 +139,11 @@ def main(argv=None) -> int:
                     g, best, states = gaps(plan, visible, capacity, args.bin, only=names, seconds=args.task_seconds,
                                            max_states=10 * args.max_optimum_states)
                 except Exception as exc:        # said, never hidden: a row with why
-                    print(f"{n} parts, {plan.name}, {visible} visible, {capacity} locations: skipped ({exc})")
+                    print(f"{n} parts, {plan.name}, {visible} visible, {_locations(capacity)}: skipped ({exc})")
                     continue
                 cpu = time.process_time() - start
                 rows.append((n, visible, capacity, g))
-                print(f"{n} parts, {plan.name}, {visible} visible, {capacity} locations: optimum {best:.4f} "
+                print(f"{n} parts, {plan.name}, {visible} visible, {_locations(capacity)}: optimum {best:.4f} "
                       f"({states:,} states); " + ", ".join(f"{k} {100 * v:+.3f}%" for k, v in g.items())
                       + f" ({cpu:.1f} s CPU)", flush=True)
     print("\n| parts | setting | plans | " + " | ".join(f"{k} mean | {k} max" for k in names) + " |")
@@ -147,7 +152,7 @@ def main(argv=None) -> int:
         got = [r[3] for r in rows if r[:3] == key]
         cells = " | ".join(f"{100 * statistics.mean(g[k] for g in got):+.2f}% | {100 * max(g[k] for g in got):+.2f}%"
                            for k in names)
-        print(f"| {key[0]} | {key[1]} visible, {key[2]} location{'s' * (key[2] != 1)} | {len(got)} | {cells} |")
+        print(f"| {key[0]} | {key[1]} visible, {_locations(key[2])} | {len(got)} | {cells} |")
     return 0
 
 

@@ -174,7 +174,8 @@ def main(argv=None) -> int:
             r = estimate(plan, visible, capacity, args.bin, args.runs, args.seed, args.window_states, args.earlier,
                          args.several_factor)
             cap = f"{r['cap']:,}" + (f" (×{r['factor']} with several open)" if r["factor"] != 1 else "")
-            print(f"| {plan.name} | {args.bin} | {visible} visible, {capacity} location{'s' * (capacity != 1)} | "
+            locations = "unlimited buffer" if capacity is None else f"{capacity} location{'s' * (capacity != 1)}"
+            print(f"| {plan.name} | {args.bin} | {visible} visible, {locations} | "
                   f"{cap} | {args.runs} | {100 * r['mean']:+.2f}% | ±{100 * r['half']:.2f} | {r['cpu']:.0f} |", flush=True)
     return 0
 

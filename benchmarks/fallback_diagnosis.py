@@ -179,14 +179,15 @@ def split(rows: list[dict], by) -> list[tuple]:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", type=int, required=True, help="the lab's plans of this many parts")
+    ap.add_argument("--size", required=True, help="the lab's plans of this many parts, or its group of LOW-HIGH parts (8-12)")
     ap.add_argument("--plan", required=True, help="the plan's name in the lab (r20-16x2, ...)")
     ap.add_argument("--visible", type=int, default=1)
     ap.add_argument("--capacity", default="1", help="buffer locations (inf: unlimited)")
     ap.add_argument("--top", type=int, default=8, help="the largest terms shown")
     ap.add_argument("--bin", choices=("uniform", "pile"), default="uniform")
     args = ap.parse_args(argv)
-    plans = {plan.name: plan for plan, _ in generate(0, 30, args.size, args.size)}
+    lo, _, hi = args.size.partition("-")
+    plans = {plan.name: plan for plan, _ in generate(0, 30, int(lo), int(hi or lo))}
     if args.plan not in plans:
         ap.error(f"--plan: none named {args.plan!r} of {args.size} parts (r0-{args.size}, ...)")
     capacity = None if args.capacity == "inf" else int(args.capacity)

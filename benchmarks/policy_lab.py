@@ -110,8 +110,10 @@ ESTIMATE_SECONDS = 5.0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
 #: Uniform bin: with one strategy open, windows of 16 and 20 parts tried while predicted to fit; with several,
-#: the option's value of a state where every unit left is buffered takes its look (as the optimum's).
-POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-buffered look"}
+#: the option's value of a state where every unit left is buffered takes its look (as the optimum's).  Then
+#: ten times the states a window before a run's first installation (as the pile's).
+POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-buffered look; ten times the states "
+                               "before a run's first installation"}
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;
@@ -608,7 +610,8 @@ def not_by_optimum(table: dict) -> list[str]:
     for (group, setting), cell in table.items():
         for r in cell.rows:
             cut = r.get("policy_skipped", {}).get("lookahead", "")
-            if "lookahead" in r["gaps"] and r.get("cpu") and "lookahead" not in r.get("by_optimum", []):
+            # a line that records the default's CPU records whether it decided by its optimum (older ones neither)
+            if "lookahead" in r["gaps"] and "lookahead" in r.get("cpu", {}) and "lookahead" not in r.get("by_optimum", []):
                 why = r.get("refusals", {}).get("lookahead") or f"refusal not recorded; the optimum: {r['states']:,} states"
                 out.append(f"- {group}, {setting_name(*setting)}, {r['plan']}: {pct(r['gaps']['lookahead'])} ({why})")
             elif "did not decide by its optimum" in cut:

@@ -16,7 +16,9 @@ the base in the words of states and bytes.  The look-ahead's KILBRID case record
 in the uniform bin became the frontier window's optimum (policies/window.py) instead of slack, and when the
 optimum's state cap rose to 32,000,000 (every action the same; only the cap's figure in its reason), and when
 the window on plans of one strategy came to take the parts that unlock the most first and to install the ready
-parts outside it (its decisions changed by design: docs/decisions.md measures them against the optimum).
+parts outside it (its decisions changed by design: docs/decisions.md measures them against the optimum), and
+when its windows before a run's first installation came to hold more states (every action the same; the
+first two decisions' notes name the larger window).
 """
 
 from __future__ import annotations

@@ -224,14 +224,16 @@ def test_on_a_large_plan_its_decisions_are_deterministic_and_its_work_is_counted
         runs.append(_run(policy, plan, 2, 2, seed=3, steps=40))
         work = policy.window.work
         assert work["windows"] > 0 and work["by_base"] == 0
-        assert work["most_states"] <= policy.window.max_states
-        assert work["states"] <= len(policy.window.sizes) * policy.window.max_states * work["windows"]
+        cap = policy.window.max_states * policy.window.start_factor       # a run's start may hold more
+        assert work["most_states"] <= cap
+        assert work["states"] <= len(policy.window.sizes + policy.window.more) * cap * work["windows"]
     assert runs[0] == runs[1]
 
 
 def test_where_no_window_fits_its_states_the_base_decides_and_says_so():
     plan = load_plan("salbp:KILBRID")
     window = FrontierWindow(Slack(), visible=2, capacity=2, max_states=1)
+    window.start_factor = 1             # not even the start's larger cap (its own test)
     assert _run(window, plan, 2, 2, seed=1, steps=5) == _run(Slack(), plan, 2, 2, seed=1, steps=5)
     # each decision tried the window with ready others, then the earlier one: both past 1 state
     assert window.work["by_base"] == 5 and window.work["windows"] == 10 and window.work["most_states"] <= 1
@@ -305,7 +307,7 @@ def test_with_an_unlimited_buffer_where_no_window_with_ready_others_fits_the_ear
     policy = Lookahead(visible=1, capacity=None, optimal=False)
     run = policy_run(policy, OrderEngine(plan), 1, float("inf"), random.Random(1), 60)
     assert len(run) == 60 and policy.window.work["by_base"] == 0
-    assert policy.window.work["most_states"] <= policy.window.max_states
+    assert policy.window.work["most_states"] <= policy.window.max_states * policy.window.start_factor
 
 
 def test_where_one_strategy_is_open_larger_windows_that_fit_are_tried():
@@ -320,3 +322,56 @@ def test_where_one_strategy_is_open_larger_windows_that_fit_are_tried():
         gaps[more], most[more] = ev.value() / ev.optimal() - 1, window.work["most_states"]
     assert gaps[()] > 1e-4 and abs(gaps[WINDOW_PARTS_MORE]) < 1e-9, gaps
     assert most[()] < most[WINDOW_PARTS_MORE] <= WINDOW_STATES
+
+
+def _lab_plan(name: str, low: int, high: int):
+    """One of the policy lab's seed-0 plans of ``low``-``high`` parts (``benchmarks/policy_lab.py``), by name."""
+    import sys
+    from pathlib import Path
+
+    lab = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if lab not in sys.path:
+        sys.path.insert(0, lab)
+    from policy_lab import generate
+
+    return {p.name: p for p, _ in generate(0, 30, low, high)}[name]
+
+
+def test_before_a_run_s_first_installation_without_a_deadline_the_windows_hold_more_states():
+    """The states before a run's first installation are met by every run, its start again after each shake
+    there: without a deadline their windows may hold WINDOW_START_FACTOR times the states.  On the lab's
+    r3-11 at 1 visible with an unlimited buffer, the usual window at the start holds 8 of the 11 parts and
+    shakes on seeing p1, which it lumps with the others (a part that is never installed is not worth a
+    move to the buffer); the larger one holds the whole plan, so its value is the optimum's, and it buffers
+    p1, as the optimum does (the lab's +1.75% over the optimum went to +0.000%).  With a deadline, and after
+    the first installation, the cap is the usual one."""
+    from opportune.engine.deadline import Deadline
+    from opportune.engine.tuning import WINDOW_START_FACTOR
+
+    plan = _lab_plan("r3-11", 8, 12)
+    engine = OrderEngine(plan)
+    start, look = (0, engine.all_strategies, ()), ("p1",)
+    usual = FrontierWindow(visible=1, capacity=None)
+    usual.start_factor = 1
+    larger = FrontierWindow(visible=1, capacity=None)
+    assert WINDOW_START_FACTOR == larger.start_factor == 10
+    (small,) = usual.tables(engine, *start)
+    (whole,) = larger.tables(engine, *start)
+    assert len(small.parts) == 8 and small.outside == 3 and usual.work["most_states"] <= WINDOW_STATES
+    assert len(whole.parts) == 11 and whole.outside == 0
+    assert WINDOW_STATES < larger.work["most_states"] <= WINDOW_START_FACTOR * WINDOW_STATES
+    best = optimal_solver(engine, visible=1, capacity=None)
+    assert whole.values[-1] == pytest.approx(best.value(), abs=1e-9)
+    optimum = Lookahead(visible=1, capacity=None)
+    assert optimum.choose_at(engine, *start, float("inf"), look) == larger.choose_at(engine, *start, float("inf"), look)
+    assert larger.choose_at(engine, *start, float("inf"), look).kind == "buffer"
+    assert usual.choose_at(engine, *start, float("inf"), look).kind == "shake"
+    timed = FrontierWindow(visible=1, capacity=None)
+    timed.deadline = Deadline.after(1000.0)
+    assert {len(t.parts) for t in timed.tables(engine, *start)} == {8}
+    after = FrontierWindow(visible=1, capacity=None)
+    unit = next(u for u in (engine.next_unit(0, i) for i in range(len(plan.parts)))
+                if engine.consistent_after(0, engine.all_strategies, u))      # a part that goes in first
+    assert after.tables(engine, 1 << unit, engine.consistent_after(0, engine.all_strategies, unit), ())
+    assert after.work["most_states"] <= WINDOW_STATES
+

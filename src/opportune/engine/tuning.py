@@ -411,6 +411,17 @@ WINDOW_OPTION_LOOKS = 2
 #: the largest window's and a few hundred more): 20,000 take about 20 ms of CPU, so a decision's window
 #: keeps within its share of a 50 ms budget (35 ms).  Counted, not timed: the same decision everywhere.
 WINDOW_STATES = 20_000
+#: Before a run's first installation (nothing installed: states every run passes through, its start again
+#: after each shake there), without a deadline, the uniform bin's window programme may hold this many times
+#: :data:`WINDOW_STATES` (policies/window.py), as the pile's (:data:`PILE_START_FACTOR`).  With an unlimited
+#: buffer a window's states grow with every buffer content, so the usual windows are smallest there: on the
+#: policy lab's 8-12-part plans at 1 visible the fallback was +0.526% over the optimum on average and +3.497%
+#: at worst (exact), all of it before the first installation, where a window of 8 of 11 parts shook on
+#: seeing a lumped part the optimum buffers; now +0.020% and +0.223% (2 visible: +0.188% / +1.722% ->
+#: +0.005% / +0.096%; the 27 and 26 plans the earlier version reached; over all of them two plans stay
+#: over 1%, docs/decisions.md).  Without a budget the largest decision along a run on KILBRID and TONGE70 with an
+#: unlimited buffer took 204-278 ms of CPU (18-20 ms before); within a budget the cap is the usual one.
+WINDOW_START_FACTOR = 10
 #: The frontier window's parts are taken in the order of their remaining ancestors less this many times their
 #: remaining descendants (then declaration order): the parts whose installation unlocks the most come into
 #: the window with what they wait for.  Measured on KILBRID at 1 visible (benchmarks/bench_window_gap.py,

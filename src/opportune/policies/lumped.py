@@ -40,8 +40,8 @@ from opportune.planning.plan import Plan, Strategy
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.evaluate import OutOfTime
 from opportune.policies.optimal import OptimalTooLarge
-from opportune.policies.window import (core_strategies, frontier_window, near_parts, window_decision,
-                                       window_strategies)
+from opportune.policies.window import (core_strategies, frontier_window, near_parts, start_factor_applies,
+                                       window_decision, window_strategies)
 
 __all__ = ["OTHERS", "CompiledOthers", "LumpedWindow", "OthersGroup", "window_plan"]
 
@@ -380,7 +380,7 @@ class LumpedWindow(DecidesOnMasks):
         """:attr:`start_factor` at a state before a run's first installation (nothing installed: the states
         every run passes through, its start again after each shake there) where there is no deadline, else
         1: within a budget the cap is the usual one.  O(1)."""
-        return self.start_factor if mask == 0 and as_deadline(self.deadline).at == float("inf") else 1
+        return self.start_factor if start_factor_applies(mask, self.deadline) else 1
 
     def _sizes(self, consistent: int) -> tuple[int, ...]:
         """The window sizes tried at a state of these open strategies (``sizes``; a subclass may try fewer

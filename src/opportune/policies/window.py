@@ -59,14 +59,15 @@ from opportune.engine.deadline import Deadline, as_deadline
 from opportune.engine.poset import bits
 from opportune.engine.tuning import (  # tuning.py says why
     WINDOW_ANCESTORS, WINDOW_CACHE, WINDOW_DESCENDANTS, WINDOW_GROWTH_SEVERAL, WINDOW_OPTION_LOOKS, WINDOW_PARTS,
-    WEIGHTED_OPTION_DRAWS, WINDOW_PARTS_MORE, WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_STATES,
-    WINDOW_STRATEGIES)
+    WEIGHTED_OPTION_DRAWS, WINDOW_PARTS_MORE, WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_START_FACTOR,
+    WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
 from opportune.policies.optimal import shake_loop
 from opportune.planning.costs import TimeModel
 
 __all__ = ["FrontierWindow", "TwoLooks", "WindowTable", "best_seen_chances", "frontier_window", "joint_window",
-           "in_bin", "near_parts", "option_value", "outside_rest", "two_looks", "window_available", "window_strategies"]
+           "in_bin", "near_parts", "option_value", "outside_rest", "start_factor_applies", "two_looks", "window_available",
+           "window_strategies"]
 
 _native = compiled_core()
 
@@ -293,6 +294,32 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int, strat
     return sorted(window), [i for i in order if i not in window]
 
 
+def start_factor_applies(mask: int, deadline) -> bool:
+    """Whether a window's programme may hold its start factor's states: before a run's first installation
+    (nothing installed: the states every run passes through, its start again after each shake there) and
+    without a deadline (within a budget the cap is the usual one).  O(1).
+
+    Parameters
+    ----------
+    mask : int
+        The installed units.
+    deadline : Deadline, float or None
+        The decision's deadline (None: none).
+
+    Returns
+    -------
+    bool
+        True where the window's cap is its start factor times the usual one.
+
+    Examples
+    --------
+    >>> from opportune.engine.deadline import Deadline
+    >>> start_factor_applies(0, None), start_factor_applies(0b1, None), start_factor_applies(0, Deadline.after(1.0))
+    (True, False, False)
+    """
+    return mask == 0 and as_deadline(deadline).at == float("inf")
+
+
 def _descendants(engine, mask: int, strategy: int, i: int) -> int:
     """Part ``i``'s remaining descendant units in ``strategy`` (its own units left out).  O(1)."""
     own = ((1 << engine.plan.parts[i].quantity) - 1) << engine.first[i]
@@ -396,7 +423,8 @@ class FrontierWindow(DecidesOnMasks):
         Where several strategies are open, a size is tried while its states, predicted from the growth of
         the two before, are within this many times ``max_states`` (:data:`WINDOW_GROWTH_SEVERAL`).
     max_states : int
-        States a window's programme may hold (:data:`WINDOW_STATES`).
+        States a window's programme may hold (:data:`WINDOW_STATES`; :attr:`start_factor` times that before a
+        run's first installation, without a deadline).
     others : {"ready", "buffer", "ignore"}
         How the window's programme sees the parts outside it: ``"ready"`` (the default), an other whose
         remaining ancestors are all window parts is installed when seen once they are, credited with a move
@@ -561,7 +589,7 @@ class FrontierWindow(DecidesOnMasks):
         out, grown = [], []
         several = consistent.bit_count() > 1
         for size in sorted(self.several if several else self.sizes + self.more):
-            if (several or size in self.more) and _past_cap(grown, self.growth * self.max_states):
+            if (several or size in self.more) and _past_cap(grown, self.growth * self._cap(mask)):
                 break           # predicted past the cap by the growth of the last two: not tried
             windows = self._windows(engine, mask, consistent, buffer, size)
             solved: dict[tuple, WindowTable] = {}
@@ -591,7 +619,7 @@ class FrontierWindow(DecidesOnMasks):
         largest = grown[-1][1]
         got, states = None, []
         for size, own in grown:
-            if _past_cap(states, self.max_states):
+            if _past_cap(states, self._cap(mask)):
                 break
             parts, outside = joint_window(engine, mask, consistent, own)
             if sum(_left(engine, mask, i) for i in parts) > 64:
@@ -625,11 +653,11 @@ class FrontierWindow(DecidesOnMasks):
         core, buf, others_buffered = self._core(engine, mask, kept, buffer, parts, outside, joint,
                                                 self._ready(engine))
         if programmes is not None:
-            programmes[tuple(parts)] = _Programme(core, mask, kept, tuple(parts), self.max_states)
+            programmes[tuple(parts)] = _Programme(core, mask, kept, tuple(parts), self._cap(mask))
         seconds = as_deadline(self.deadline).seconds()
         try:
             values = core.moves(0, (1 << kept.bit_count()) - 1, buf, others_buffered,
-                                seconds=seconds, max_states=self.max_states)
+                                seconds=seconds, max_states=self._cap(mask))
         finally:
             self.work["windows"] += 1
             self.work["states"] += core.states
@@ -638,7 +666,7 @@ class FrontierWindow(DecidesOnMasks):
         ready = float("inf")
         if self._ready(engine) and not joint:
             ready = core.install_other(0, (1 << kept.bit_count()) - 1, buf, others_buffered, seconds=seconds,
-                                       max_states=self.max_states)
+                                       max_states=self._cap(mask))
         return WindowTable(tuple(parts), tuple(values), len(outside), size, core.states, rest, ready)
 
     def _core(self, engine, mask: int, consistent: int, buffer, parts: list[int], outside: list[int],
@@ -686,6 +714,15 @@ class FrontierWindow(DecidesOnMasks):
                                   ready, float(other_move + self.ready_looks * (self.costs.shake + self.costs.look))
                                   if ready else 0.0)
         return core, buf, others_buffered
+
+    #: Before a run's first installation, without a deadline, a window's programme may hold this many times
+    #: ``max_states`` (:data:`~opportune.engine.tuning.WINDOW_START_FACTOR`; :meth:`_cap`).
+    start_factor: int = WINDOW_START_FACTOR
+
+    def _cap(self, mask: int) -> int:
+        """The states a window's programme may hold at a state of installed units ``mask``: ``max_states``,
+        times :attr:`start_factor` where :func:`start_factor_applies`.  O(1)."""
+        return self.max_states * (self.start_factor if start_factor_applies(mask, self.deadline) else 1)
 
     def _ready(self, engine) -> bool:
         """Whether the ready others and the order by descendants serve: with ``others="ready"`` on a plan of
