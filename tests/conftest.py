@@ -16,6 +16,28 @@ EXAMPLES = REPO / "examples"
 GEARBOX = EXAMPLES / "gearbox.yaml"
 
 
+BENCHMARKS = REPO / "benchmarks"
+
+
+def benchmark(module: str):
+    """A module of ``benchmarks/`` (the policy lab, the fallback's diagnosis), imported with that folder on
+    the path (the scripts import one another by name)."""
+    import importlib
+    import sys
+
+    if str(BENCHMARKS) not in sys.path:
+        sys.path.insert(0, str(BENCHMARKS))
+    return importlib.import_module(module)
+
+
+def lab_plan(name: str, low: int | None = None, high: int | None = None):
+    """One of the policy lab's seed-0 plans by name (r2-16x2: of 16 parts, two strategies), drawn as the lab
+    draws its group of ``low``-``high`` parts (default: the size in its name; r3-11 is of the 8-12 group)."""
+    size = int(name.split("-")[1].split("x")[0])
+    plans = benchmark("policy_lab").generate(0, 30, low or size, high or size)
+    return {p.name: p for p, _ in plans}[name]
+
+
 def salbp_dir() -> Path:
     """The SALBP graphs shipped inside the package (opportune/datasets/salbp)."""
     from opportune import datasets

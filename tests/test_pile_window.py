@@ -7,11 +7,9 @@ default's decisions by it with its work counted and bounded."""
 from __future__ import annotations
 
 import random
-import sys
-from pathlib import Path
 
 import pytest
-from conftest import random_plans
+from conftest import lab_plan, random_plans
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -446,18 +444,6 @@ def test_each_strategy_s_windows_get_their_share_of_the_time_left(monkeypatch):
     assert window.deadline is whole
 
 
-def _lab_plan(name: str):
-    """One of the policy lab's plans (``benchmarks/policy_lab.py``'s seed-0 plans), by name (r2-20x2: of 20
-    parts, two strategies)."""
-    lab = str(Path(__file__).resolve().parents[1] / "benchmarks")
-    if lab not in sys.path:
-        sys.path.insert(0, lab)
-    from policy_lab import generate
-
-    size = int(name.split("-")[1].split("x")[0])
-    return {p.name: p for p, _ in generate(0, 30, size, size)}[name]
-
-
 def test_a_window_that_misses_its_prediction_leaves_a_smaller_one_not_the_smallest():
     """The listed states predict each larger window's; where a window predicted to fit does not (on the policy
     lab's r2-20x2, two strategies, at 1 visible and 1 location, nothing installed and p5 buffered), the
@@ -467,7 +453,7 @@ def test_a_window_that_misses_its_prediction_leaves_a_smaller_one_not_the_smalle
     in the lab against +0.13% (estimated along 60 runs)."""
     from opportune.engine.tuning import WINDOW_MISSES, WINDOW_REFINE
 
-    plan = _lab_plan("r2-20x2")
+    plan = lab_plan("r2-20x2")
     engine = OrderEngine(plan)
     window = PileWindow(visible=1, capacity=1, sizes=tuple(range(4, 21)))
     window.deeper_parts = 20            # the search alone (see the next test for the sizes at one location)
@@ -488,7 +474,7 @@ def test_where_a_move_keeping_strategies_open_is_valued_a_look_deeper_the_window
     PILE_DEEPER_PARTS; with one strategy left, or two locations, they go on."""
     from opportune.engine.tuning import PILE_DEEPER_PARTS
 
-    plan = _lab_plan("r20-20x2")
+    plan = lab_plan("r20-20x2")
     engine = OrderEngine(plan)
     window = PileWindow(visible=1, capacity=1, sizes=tuple(range(4, 21)))
     both = window.tables(engine, 0, engine.all_strategies, ())
@@ -535,7 +521,7 @@ def test_before_a_run_s_first_installation_without_a_deadline_the_windows_hold_m
     the first installation, the cap is the usual one."""
     from opportune.engine.tuning import PILE_START_FACTOR
 
-    plan = _lab_plan("r2-16x2")
+    plan = lab_plan("r2-16x2")
     engine = OrderEngine(plan)
     start, look = (0, engine.all_strategies, ()), ("p6", "p13")
     usual = PileWindow(visible=2, capacity=2)

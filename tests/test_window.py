@@ -8,7 +8,7 @@ from __future__ import annotations
 import random
 
 import pytest
-from conftest import policy_run, random_plans
+from conftest import lab_plan, policy_run, random_plans
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -324,31 +324,17 @@ def test_where_one_strategy_is_open_larger_windows_that_fit_are_tried():
     assert most[()] < most[WINDOW_PARTS_MORE] <= WINDOW_STATES
 
 
-def _lab_plan(name: str, low: int, high: int):
-    """One of the policy lab's seed-0 plans of ``low``-``high`` parts (``benchmarks/policy_lab.py``), by name."""
-    import sys
-    from pathlib import Path
-
-    lab = str(Path(__file__).resolve().parents[1] / "benchmarks")
-    if lab not in sys.path:
-        sys.path.insert(0, lab)
-    from policy_lab import generate
-
-    return {p.name: p for p, _ in generate(0, 30, low, high)}[name]
-
-
 def test_before_a_run_s_first_installation_without_a_deadline_the_windows_hold_more_states():
     """The states before a run's first installation are met by every run, its start again after each shake
     there: without a deadline their windows may hold WINDOW_START_FACTOR times the states.  On the lab's
     r3-11 at 1 visible with an unlimited buffer, the usual window at the start holds 8 of the 11 parts and
-    shakes on seeing p1, which it lumps with the others (a part that is never installed is not worth a
-    move to the buffer); the larger one holds the whole plan, so its value is the optimum's, and it buffers
+    shakes on seeing p1, which it lumps with the others; the larger one holds the whole plan, so its value is the optimum's, and it buffers
     p1, as the optimum does (the lab's +1.75% over the optimum went to +0.000%).  With a deadline, and after
     the first installation, the cap is the usual one."""
     from opportune.engine.deadline import Deadline
     from opportune.engine.tuning import WINDOW_START_FACTOR
 
-    plan = _lab_plan("r3-11", 8, 12)
+    plan = lab_plan("r3-11", 8, 12)
     engine = OrderEngine(plan)
     start, look = (0, engine.all_strategies, ()), ("p1",)
     usual = FrontierWindow(visible=1, capacity=None)
@@ -374,4 +360,3 @@ def test_before_a_run_s_first_installation_without_a_deadline_the_windows_hold_m
                 if engine.consistent_after(0, engine.all_strategies, u))      # a part that goes in first
     assert after.tables(engine, 1 << unit, engine.consistent_after(0, engine.all_strategies, unit), ())
     assert after.work["most_states"] <= WINDOW_STATES
-

@@ -3,11 +3,10 @@
 worth less than the optimum; with the optimum on, where it fits, it is worth exactly the optimum."""
 
 import json
-import sys
-from pathlib import Path
 
 import pytest
 import yaml
+from conftest import benchmark
 from typer.testing import CliRunner
 
 from opportune import make_plan
@@ -170,15 +169,11 @@ def test_the_pile_diagnosis_sums_to_the_fallback_s_own_value(visible, capacity):
     left by a move, each met as often as its run meets it) the looks' costs sum to the fallback's exact
     value, computed by its own evaluation, and the terms where it acts otherwise than the optimum sum to its
     gap; windows of 2-3 parts on two-strategy plans of 7 parts, so the fallback is not the optimum."""
-    lab = str(Path(__file__).resolve().parent.parent / "benchmarks")
-    if lab not in sys.path:
-        sys.path.insert(0, lab)
     import random
 
-    from fallback_diagnosis import pile_differences
-    from policy_lab import random_plan
-
     from opportune.policies.pile import PileSolver
+
+    pile_differences, random_plan = benchmark("fallback_diagnosis").pile_differences, benchmark("policy_lab").random_plan
 
     gaps = []
     for seed in range(3):
