@@ -111,9 +111,12 @@ ESTIMATE_SECONDS = 5.0
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
 #: Uniform bin: with one strategy open, windows of 16 and 20 parts tried while predicted to fit; with several,
 #: the option's value of a state where every unit left is buffered takes its look (as the optimum's).  Then
-#: ten times the states a window before a run's first installation (as the pile's).
+#: ten times the states a window before a run's first installation (as the pile's).  Then the parts
+#: interchangeable at the state merged in a window's programme, and no shake or buffering that passes over an
+#: installation (or, with an unlimited buffer, over a part seen) as the optimum never does.
 POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-buffered look; ten times the states "
-                               "before a run's first installation"}
+                               "before a run's first installation; interchangeable parts merged, no installation "
+                               "passed over"}
 #: Versions of a policy in one bin where it differs from :data:`POLICY_VERSIONS` there: the pile's fallback
 #: became the pile's own frontier window (``policies/pile_window.py``) while the uniform bin's decisions
 #: stayed, so pile rows measured before (tagged "frontier window", the step over slack in fact) are stale;

@@ -18,7 +18,10 @@ optimum's state cap rose to 32,000,000 (every action the same; only the cap's fi
 the window on plans of one strategy came to take the parts that unlock the most first and to install the ready
 parts outside it (its decisions changed by design: docs/decisions.md measures them against the optimum), and
 when its windows before a run's first installation came to hold more states (every action the same; the
-first two decisions' notes name the larger window).
+first two decisions' notes name the larger window), and when its programme came to count the parts
+interchangeable at a state as one part's units and the window stopped passing over an installation (or,
+with an unlimited buffer, over a part seen) as the optimum never does (its decisions changed by design from
+the 41st; the assembly took 62 decisions instead of 64).
 """
 
 from __future__ import annotations

@@ -147,18 +147,19 @@ def test_a_size_predicted_past_the_cap_by_less_than_its_margin_is_tried_and_near
     before predicts the next past the cap where it would fit.  Tried up to twice the cap (the default
     margin), the window is larger where both strategies are open and the fallback nearer the optimum than
     where a size predicted past the cap is not tried (exact evaluation, the option one look deep, as these
-    gaps were measured: 2.565% and 1.416%)."""
+    gaps were measured: 2.565% and 1.416% then, each part its own in the programme as then; 2.363% and 1.150%
+    since the window stopped passing over an installation, install_first)."""
     engine = OrderEngine(TWO)
     gaps, work = [], []
     for growth in (1.0, WINDOW_GROWTH_SEVERAL):
         window = _usual(FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11),
-                                       growth=growth, option_looks=1, others="buffer", descendants=0.0))
+                                       growth=growth, option_looks=1, others="buffer", descendants=0.0, merge=False))
         gaps.append(_gap(window, engine, 1, 2))
         work.append(window.work)
-    assert gaps[0] == pytest.approx(0.02565, abs=1e-5) and gaps[1] == pytest.approx(0.01416, abs=1e-5)
+    assert gaps[0] == pytest.approx(0.02363, abs=1e-5) and gaps[1] == pytest.approx(0.01150, abs=1e-5)
     assert all(w["most_states"] <= 1200 and w["by_base"] == 0 for w in work)
     sizes = [_usual(FrontierWindow(visible=1, capacity=2, max_states=1200, several=(3, 5, 7, 9, 11), growth=g,
-                                   others="buffer", descendants=0.0))
+                                   others="buffer", descendants=0.0, merge=False))
              .tables(engine, 0, engine.all_strategies, ())[0].size for g in (1.0, WINDOW_GROWTH_SEVERAL)]
     assert sizes[0] < sizes[1]
 
