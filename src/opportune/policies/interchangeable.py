@@ -42,9 +42,14 @@ _MERGED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def interchangeable_groups(engine: OrderEngine, costs: TimeModel | None = None,
-                           weights: dict[str, float] | None = None) -> list[list[int]]:
+                           weights: dict[str, float] | None = None, *, mask: int = 0, parts=None,
+                           strategies=None) -> list[list[int]]:
     """The plan's parts (indices) grouped by interchangeability (see the module's docstring), each
-    group in declaration order, the groups by their first part.  O(strategies × parts × units / 64).
+    group in declaration order, the groups by their first part.  At a state: ``mask`` the installed
+    units, left out of both sides (so parts told apart only by installed ones are grouped too),
+    ``parts`` those with a unit left to group (default every part), ``strategies`` the strategies
+    (indices) that must not tell them apart (default every one), as the frontier window's programme
+    groups its parts (:func:`~opportune.policies.window.twin_groups`).  O(strategies × parts × units / 64).
 
     >>> from opportune import make_plan
     >>> interchangeable_groups(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})))
@@ -55,14 +60,17 @@ def interchangeable_groups(engine: OrderEngine, costs: TimeModel | None = None,
     """
     costs = costs or TimeModel()
     plan = engine.plan
+    parts = range(len(plan.parts)) if parts is None else parts
     if plan.is_ways:    # no orders to compare: each part its own group (a part of a plan of ways is one unit)
-        return [[i] for i in range(len(plan.parts))]
+        return [[i] for i in parts]
+    posets = engine.posets if strategies is None else [engine.posets[s] for s in strategies]
     groups: dict[tuple, list[int]] = {}
-    for i, part in enumerate(plan.parts):
-        # the units before the part's first unit and after its last are whole parts' units (a part's
+    for i in parts:
+        part = plan.parts[i]
+        # the units before the part's next unit and after its last are whole parts' units (a part's
         # units are chained), so equal masks are equal sets of parts, and neither part is in the other's
-        first, last = engine.first[i], engine.first[i] + part.quantity - 1
-        sides = tuple((poset.below[first], poset.above[last]) for poset in engine.posets)
+        first, last = engine.next_unit(mask, i), engine.first[i] + part.quantity - 1
+        sides = tuple((poset.below[first] & ~mask, poset.above[last] & ~mask) for poset in posets)
         weight = float((weights or {}).get(part.id, 1.0))
         groups.setdefault((sides, float(costs.move(part.id)), weight), []).append(i)
     return sorted(groups.values())

@@ -68,6 +68,7 @@ from opportune.engine.tuning import (  # tuning.py says why
     WEIGHTED_OPTION_DRAWS, WINDOW_PARTS_MORE, WINDOW_PARTS_SEVERAL, WINDOW_READY_LOOKS, WINDOW_START_FACTOR,
     WINDOW_STATES, WINDOW_STRATEGIES)
 from opportune.policies.base import DONE, SHAKE, Action, DecidesOnMasks, Decision
+from opportune.policies.interchangeable import interchangeable_groups
 from opportune.policies.optimal import shake_loop
 from opportune.planning.costs import TimeModel
 
@@ -375,6 +376,17 @@ class Groups:
                         unit_bit[u] = len(unit_bit)
         return unit_bit, first
 
+    def buffered(self, engine, buffer) -> tuple[list[int], int]:
+        """The buffered units of each group, and those of parts outside the window.  O(buffer)."""
+        index, out, others = self.index, [0] * len(self.members), 0
+        for p in buffer:
+            n = index.get(engine.plan.index(p))
+            if n is None:
+                others += 1
+            else:
+                out[n] += 1
+        return out, others
+
     def expand(self, values, engine, mask: int, buffer) -> tuple[float, ...]:
         """The programme's move values (three per group, then the other's buffering and the state's value)
         as :attr:`WindowTable.values` at the state of installed units ``mask`` and ``buffer``, three per
@@ -399,7 +411,8 @@ def twin_groups(engine, mask: int, consistent: int, parts, costs: TimeModel) -> 
     costs, the chances of a look) onto itself, so its values depend only on how many of a group's units
     are installed and buffered: the programme counts them as one part's, in fewer states.  As
     :mod:`~opportune.policies.interchangeable` does for the whole plan, here at the state: parts told apart
-    only by installed ones are merged too.  O(parts × strategies).
+    only by installed ones are merged too (:func:`~opportune.policies.interchangeable.interchangeable_groups`
+    at the state).  O(parts × strategies).
 
     Parameters
     ----------
@@ -427,14 +440,9 @@ def twin_groups(engine, mask: int, consistent: int, parts, costs: TimeModel) -> 
     >>> twin_groups(engine, 0b0001, 1, [1, 2], TimeModel()).members        # a installed: b and c alike
     ((1, 2),)
     """
-    strategies = core_strategies(engine, consistent)
-    groups: dict[tuple, list[int]] = {}
-    for i in parts:
-        first, last = engine.next_unit(mask, i), engine.first[i] + engine.plan.parts[i].quantity - 1
-        key = (costs.move(engine.plan.parts[i].id),
-               tuple((engine.posets[s].below[first] & ~mask, engine.posets[s].above[last] & ~mask) for s in strategies))
-        groups.setdefault(key, []).append(i)
-    return Groups(tuple(parts), tuple(tuple(g) for g in sorted(groups.values())))
+    groups = interchangeable_groups(engine, costs, mask=mask, parts=parts,
+                                    strategies=core_strategies(engine, consistent))
+    return Groups(tuple(parts), tuple(tuple(g) for g in groups))
 
 
 def _descendants(engine, mask: int, strategy: int, i: int) -> int:
@@ -801,10 +809,9 @@ class FrontierWindow(DecidesOnMasks):
         others buffered.  ``joint``: None, or a joint window's ends (each strategy's parts) and their costs
         (:meth:`_joint`).  O(units² × strategies)."""
         plan = engine.plan
-        (unit_bit, first), quantity, move = groups.units(engine, mask), [], []
-        for members in groups.members:
-            quantity.append(sum(_left(engine, mask, i) for i in members))
-            move.append(float(self.costs.move(plan.parts[members[0]].id)))
+        unit_bit, first = groups.units(engine, mask)
+        quantity = [end - start for start, end in zip(first, first[1:] + [len(unit_bit)])]
+        move = [float(self.costs.move(plan.parts[members[0]].id)) for members in groups.members]
         below, units = [], sum(1 << u for u in unit_bit)
         for s in core_strategies(engine, consistent):
             # the window is closed in these strategies (window_strategies): its units' remaining ancestors
@@ -814,15 +821,7 @@ class FrontierWindow(DecidesOnMasks):
                           | (engine.posets[s].below[u] & ~mask & ~units != 0) << n for n, u in enumerate(unit_bit)])
         ends = [] if joint is None else [_window_bits(sum(((1 << plan.parts[i].quantity) - 1) << engine.first[i]
                                                           for i in own), unit_bit) for own in joint[0]]
-        index = groups.index
-        buf = [0] * len(groups.members)
-        others_buffered = 0
-        for p in buffer:
-            j = index.get(plan.index(p))
-            if j is None:
-                others_buffered += 1
-            else:
-                buf[j] += 1
+        buf, others_buffered = groups.buffered(engine, buffer)
         other_units = [u for i in outside for u in range(engine.first[i], engine.first[i] + plan.parts[i].quantity)
                        if not mask >> u & 1]
         other_move = (float("inf") if self.others == "ignore" else       # an infinite move: never buffered
@@ -1535,12 +1534,7 @@ class _Programme:
         strategies = sum(1 << n for n, s in enumerate(core_strategies(engine, self.kept)) if consistent >> s & 1)
         if not strategies:
             return None
-        buf, others_buffered = [0] * len(groups.members), 0
-        for p in buffer:
-            j = index.get(engine.plan.index(p))
-            others_buffered += j is None
-            if j is not None:
-                buf[j] += 1
+        buf, others_buffered = groups.buffered(engine, buffer)
         try:
             return groups.expand(self.core.moves(units, strategies, buf, others_buffered, seconds=seconds,
                                                  max_states=self.max_states), engine, mask, buffer)
