@@ -20,7 +20,9 @@ states stored, CPU seconds, peak memory: the wall), and a policy whose evaluatio
 ``--task-seconds`` or stores over ``--policy-states`` states (counted work: the same cut on a loaded
 machine as on an idle one) is left out of that column (said, never hidden).  Where the look-ahead decides by the
 optimum (its decisions say so), its value is the optimum's, as in ``opportune evaluate``.  No Monte
-Carlo: every number is exact.
+Carlo: every number is exact, except where ``--estimate-runs`` is given: there a policy whose exact evaluation
+would take too long (the optimum over ``--estimate-above`` states) has its gap estimated from seeded runs by
+its regrets over the optimum (unbiased, with its standard error; listed as such in the tables).
 
 Columns.  ``lookahead`` is the default policy; ``fallback`` the default with its exact optimum switched
 off (``Lookahead(optimal=False)``, ``evaluate --without-optimum``; asked for with ``--without-optimum``):
@@ -49,6 +51,8 @@ The whole lab (hours; resumable), and the order it was run in (the cheap columns
     python benchmarks/policy_lab.py --results R --policies fallback --paired "" --only ...
     python benchmarks/policy_lab.py --results R --policies fallback --sizes 16,20,25,30 --plans 6 --salbp "" \
         --paired "" --only r0-16,r1-16,r3-16,... --policy-states 12000 --cheapest-first   # a counted cut
+    python benchmarks/policy_lab.py --results R --policies fallback --bins pile --sizes 25 --visible 3 \
+        --capacities 1 --salbp "" --paired "" --estimate-runs 1000 --estimate-above 1000000   # estimated gaps
     python benchmarks/policy_lab.py --results R --no-run --table docs/policy-lab.md --readme README.md \\
         --plot docs/img/policy-lab.png --paired ""                                   # the tables alone
 
@@ -94,6 +98,7 @@ from opportune.policies.optimal import (
     optimum_engine,
 )
 from opportune.policies.pile import PileSolver, pile_solver
+from opportune.policies.regret import estimate_gap
 from opportune.policies.states import big, estimate_states
 from opportune.policies.variants import BinFirst, Slack
 
@@ -107,6 +112,8 @@ DENSITIES = (0.1, 0.2, 0.3)
 USER_DENSITIES = (0.2, 0.25, 0.3, 0.35)
 #: Seconds for counting the optimum's states before the work (past it, the down-set estimate).
 ESTIMATE_SECONDS = 5.0
+#: The seed of the runs that estimate a policy's gap (``--estimate-runs``): every row's the same.
+ESTIMATE_SEED = 0
 #: The version of what each policy decides, stored with its gaps: bump one when its decisions change and
 #: rerun ``--policies NAME``; gaps measured at another version are stale (dropped from the tables).
 #: Uniform bin: with one strategy open, windows of 16 and 20 parts tried while predicted to fit; with several,
@@ -209,21 +216,23 @@ def _decides_by_pile_optimum(engine, policy, visible: int, deadline) -> bool:
     return policy.deciding_rule == Lookahead.OPTIMAL_RULE
 
 
+def _by_optimum(engine, policy, bin: str, settings: dict, deadline) -> bool:
+    """Whether the policy decides by the optimum on this plan and setting (then its value is the optimum's)."""
+    if bin == "pile":
+        return _decides_by_pile_optimum(engine, policy, settings["visible"], deadline)
+    # as PolicyEvaluator.takes_optimum, without solving the optimum a second time
+    decides = getattr(policy, "decides_by_optimum", None)
+    return decides is not None and decides(engine, settings["visible"], settings["capacity"], TimeModel())
+
+
 def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | None, best: float,
                   held: list | None = None) -> tuple[float, bool]:
     """A policy's exact expected time, and whether it is the optimum's (the policy decides by it); its
     evaluation's programme is put in ``held`` (to tell how far it got where it is cut)."""
     deadline = Deadline.after(seconds)
-    if bin == "pile":
-        if _decides_by_pile_optimum(engine, policy, settings["visible"], deadline):
-            return best, True
-        ev = PileSolver(engine, policy, **settings)
-    else:
-        # as PolicyEvaluator.takes_optimum, without solving the optimum a second time
-        decides = getattr(policy, "decides_by_optimum", None)
-        if decides is not None and decides(engine, settings["visible"], settings["capacity"], TimeModel()):
-            return best, True
-        ev = PolicyEvaluator(engine, policy, **settings)
+    if _by_optimum(engine, policy, bin, settings, deadline):
+        return best, True
+    ev = (PileSolver if bin == "pile" else PolicyEvaluator)(engine, policy, **settings)
     ev.deadline = deadline
     if held is not None:
         held.append(ev)
@@ -231,15 +240,31 @@ def _policy_value(engine, policy, bin: str, settings: dict, seconds: float | Non
     return value, bool(getattr(ev, "by_optimum", False))
 
 
+def _policy_estimate(engine, policy, bin: str, settings: dict, seconds: float | None, optimum,
+                     runs: int) -> dict | None:
+    """A policy's gap estimated from ``runs`` seeded runs by its regrets over the optimum
+    (:func:`~opportune.policies.regret.estimate_gap`: unbiased, its standard error given), in place of its exact
+    evaluation; None where it decides by the optimum (its gap 0, exactly)."""
+    deadline = Deadline.after(seconds)
+    if _by_optimum(engine, policy, bin, settings, deadline):
+        return None
+    est = estimate_gap(optimum, policy, runs=runs, seed=ESTIMATE_SEED, pile=bin == "pile", deadline=deadline)
+    return {"gap": est.gap, "se": est.se, "runs": est.runs, "seed": est.seed, "looks": est.looks,
+            "differing": est.differing, "cost_gap": est.cost / est.optimum - 1, "cost_se": est.cost_se / est.optimum}
+
+
 def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_states: int = 2_000_000,
-            seconds: float | None = None, only=None, python: bool = False, policy_states: int | None = None) -> dict:
+            seconds: float | None = None, only=None, python: bool = False, policy_states: int | None = None,
+            estimate: tuple[int, int] | None = None) -> dict:
     """One plan in one setting: the optimum, its states and each policy's gap over it (with the CPU seconds
     each took, the versions, the policies out of time or states and those worth the optimum); or
     ``{"skipped": why, "estimate": states, "low": proven}`` where the optimum does not fit (counted first), with
     ``"measured"`` (:func:`_wall`) where it was cut during the work by its states or time; a policy cut so
     has its ``"policy_measured"``.
     ``policy_states``: the states a policy's evaluation may store (counted work, the same cut on a loaded
-    machine as on an idle one; None: ``max_states``)."""
+    machine as on an idle one; None: ``max_states``).  ``estimate``: ``(runs, states)``: where the optimum
+    has more than ``states`` states, a policy's gap is estimated from ``runs`` seeded runs
+    (:func:`_policy_estimate`) instead of evaluated exactly, and recorded under ``"estimated"`` too."""
     engine = OrderEngine(plan)
     # counted on the plan the programme stores: the uniform bin's compiled optimum merges interchangeable
     # parts (KILBRID with 2 locations: 27.5 million states merged against about 163 million as declared)
@@ -267,8 +292,15 @@ def measure(plan, visible: int, capacity: int | None, bin: str = "uniform", *, m
             continue
         cpu, held = time.process_time(), []
         try:
-            value, by_optimum = _policy_value(engine, policy, bin, settings, seconds, best, held)
-            out["gaps"][name] = value / best - 1
+            if estimate is not None and optimum.states > estimate[1]:
+                est = _policy_estimate(engine, policy, bin, settings, seconds, optimum, estimate[0])
+                by_optimum = est is None
+                out["gaps"][name] = 0.0 if by_optimum else est["gap"]
+                if est is not None:
+                    out.setdefault("estimated", {})[name] = est
+            else:
+                value, by_optimum = _policy_value(engine, policy, bin, settings, seconds, best, held)
+                out["gaps"][name] = value / best - 1
             if by_optimum:
                 out["by_optimum"].append(name)
             elif name == "lookahead" and policy.refusal:     # the default did not decide by its optimum: why
@@ -302,9 +334,9 @@ def gaps(plan, visible: int, capacity: int | None, bin: str = "uniform", *, max_
 
 def _task(job):
     """One plan in one setting (a worker's job): :func:`measure`'s record."""
-    plan, visible, capacity, bin, max_states, seconds, only, python, policy_states = job
+    plan, visible, capacity, bin, max_states, seconds, only, python, policy_states, estimate = job
     return measure(plan, visible, capacity, bin, max_states=max_states, seconds=seconds, only=only, python=python,
-                   policy_states=policy_states)
+                   policy_states=policy_states, estimate=estimate)
 
 
 # ------------------------------------------------------------------ the jobs and the results file
@@ -375,7 +407,9 @@ def _fresh(rec: dict) -> dict:
     gaps = {n: g for n, g in rec["gaps"].items() if current(n)}
     # a policy skipped (out of time, or past a counted cut) at another version is to be run again, as a gap is
     skipped = {n: w for n, w in rec.get("policy_skipped", {}).items() if current(n)}
-    return {**rec, "gaps": gaps, **({"policy_skipped": skipped} if "policy_skipped" in rec else {})}
+    estimated = {n: e for n, e in rec.get("estimated", {}).items() if n in gaps}
+    return {**rec, "gaps": gaps, **({"policy_skipped": skipped} if "policy_skipped" in rec else {}),
+            **({"estimated": estimated} if "estimated" in rec else {})}
 
 
 def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:
@@ -396,7 +430,10 @@ def _keep(done: dict, key: str, rec: dict, max_states: int) -> None:
         skipped = {n: w for n, w in {**old.get("policy_skipped", {}), **rec.get("policy_skipped", {})}.items()
                    if n not in gaps}
         refusals = {**{n: w for n, w in old.get("refusals", {}).items() if n not in rec["gaps"]}, **rec.get("refusals", {})}
-        rec = {**old, **rec, "gaps": gaps, "policy_skipped": skipped, "refusals": refusals,
+        # a gap measured again replaces the earlier one's estimate (exact now, or estimated again)
+        estimated = {**{n: e for n, e in old.get("estimated", {}).items() if n not in rec["gaps"]},
+                     **rec.get("estimated", {})}
+        rec = {**old, **rec, "gaps": gaps, "policy_skipped": skipped, "refusals": refusals, "estimated": estimated,
                "by_optimum": sorted(set(old.get("by_optimum", [])) | set(rec.get("by_optimum", []))),
                "cpu": {**old.get("cpu", {}), **rec.get("cpu", {})},
                "versions": {**old.get("versions", {}), **rec.get("versions", {})}}
@@ -466,8 +503,9 @@ def _run_jobs(jobs: list[Job], args, done: dict, sink) -> None:
             sink.write(json.dumps({"key": job.key, **rec}) + "\n")
             sink.flush()
 
-    tasks = [(job.plan, *job.setting, args.max_states, args.task_seconds, need, args.python_optimum, args.policy_states)
-             for job, need in todo]
+    estimate = (args.estimate_runs, args.estimate_above) if args.estimate_runs else None
+    tasks = [(job.plan, *job.setting, args.max_states, args.task_seconds, need, args.python_optimum, args.policy_states,
+              estimate) for job, need in todo]
     if args.workers > 1 and len(todo) > 1:
         from concurrent.futures import ProcessPoolExecutor, as_completed
 
@@ -605,6 +643,21 @@ def missing_policies(table: dict, names) -> list[str]:
     return out
 
 
+def estimated_text(table: dict, names) -> list[str]:
+    """Each gap estimated from seeded runs (``--estimate-runs``) rather than evaluated exactly: its standard
+    error, the runs and looks, and the runs' own mean time (a second estimate of the same gap, wider)."""
+    out = []
+    for (group, setting), cell in table.items():
+        for r in cell.rows:
+            for p, e in r.get("estimated", {}).items():
+                if p in names and p in r["gaps"]:
+                    out.append(f"- {group}, {setting_name(*setting)}, {r['plan']}, {p}: {pct(e['gap'])}, standard "
+                               f"error {100 * e['se']:.3f}% ({e['runs']:,} runs of seed {e['seed']}, {e['looks']:,} "
+                               f"looks, {e['differing']:,} where its action is not the optimum's; the runs' own "
+                               f"mean time {pct(e['cost_gap'])}, standard error {100 * e['cost_se']:.3f}%)")
+    return out
+
+
 def not_by_optimum(table: dict) -> list[str]:
     """The plan-settings where the default did not decide by its optimum, though the lab's optimum fits: its
     gap (or that its evaluation was cut) and why (its refusal; where the run did not record it, the optimum's
@@ -670,6 +723,11 @@ WALLS_TEXT = ("Each plan-setting as its largest attempt left it: the optimum fou
               "recorded them.")
 
 
+#: What a single plan's table says where a gap is estimated from runs (docs/policy-lab.md).
+ESTIMATED_TEXT = ("A gap given with ± is estimated from seeded runs by the policy's regrets over the optimum "
+                  "(`--estimate-runs`; unbiased, ± its standard error), not evaluated exactly.")
+
+
 def single_table(table: dict, names) -> list[str]:
     """One plan per group (SALBP, the gearbox): its optimum and each policy's gap, or where its optimum hit
     the wall (:func:`wall_text`)."""
@@ -686,7 +744,11 @@ def single_table(table: dict, names) -> list[str]:
 
 
 def _gap_or_cut(r: dict, name: str) -> str:
-    """A policy's gap in a single plan's row, or where its evaluation was cut and how far it got."""
+    """A policy's gap in a single plan's row (estimated from runs: with its standard error), or where its
+    evaluation was cut and how far it got."""
+    est = r.get("estimated", {}).get(name)
+    if name in r["gaps"] and est is not None:
+        return f"{pct(r['gaps'][name])} ± {100 * est['se']:.3f}% ({est['runs']:,} runs)"
     if name in r["gaps"]:
         return pct(r["gaps"][name])
     if name not in r.get("policy_skipped", {}):
@@ -773,6 +835,11 @@ def readme_block(table: dict, groups: list[str], settings: list[tuple], args) ->
             count = sum(len(table[k].gaps(n)) for k in keys)
             claim.append(f"{CLAIM_LABELS[n]} within mean {pct(w[0])} (the worst setting's) and max {pct(w[1])} of the "
                          f"optimum over {_count(count, 'plan-setting')};")
+    est = [e for k in keys for r in table[k].rows for p, e in r.get("estimated", {}).items()
+           if p in names and p in r["gaps"]]
+    if est:
+        claim.append(f"{_count(len(est), 'gap')} of these estimated from seeded runs, not evaluated exactly "
+                     f"(standard error at most {100 * max(e['se'] for e in est):.3f}%);")
     refused = not_by_optimum({k: table[k] for k in keys})
     if refused:
         claim.append(f"in {_count(len(refused), 'plan-setting')} the default did not decide by its optimum (its "
@@ -829,12 +896,23 @@ def document(table: dict, groups: list[str], names, n_plans: int, done_cpu: floa
                 "The lab's optimum fits, but the default's own check did not let it decide (it lists the states "
                 "within a second of wall-clock time, which a loaded machine may not give it); it then decided by "
                 "its fallback:", "", *refused]
+    if estimated := estimated_text(random_cells, names):
+        out += ["", "## Gaps estimated from runs", "",
+                "Where the optimum's programme fits but a policy's exact evaluation would take long (it asks the "
+                "policy at every state and look it reaches: 1.2-1.9 million in the pile's largest rows, over an "
+                "hour), its gap is estimated from seeded runs in the programme's own bin (`--estimate-runs`): each "
+                "run adds up its regrets, the optimum's expected time "
+                "after the policy's action less its least over the actions, at every look (0 wherever the policy "
+                "does what the optimum does); their mean is an unbiased estimate of the gap "
+                "(`opportune.policies.regret`). The table takes these estimates as the gaps:", "", *estimated]
     if left := missing_policies(random_cells, names):
         out += ["", "## Policies out of time or states", "", *left]
     for group in dict.fromkeys(g for g, _ in table):
         if group not in groups:
             part = {k: c for k, c in table.items() if k[0] == group}
             walls = [WALLS_TEXT, ""] if any(c.skipped for c in part.values()) else []
+            if any(r.get("estimated") for c in part.values() for r in c.rows):
+                walls += [ESTIMATED_TEXT, ""]
             out += ["", f"## {group}", "", *walls, *single_table(part, names)]
     out += ["", f"The results took {done_cpu / 3600:.1f} CPU hours (each plan-setting's optimum and policies)."]
     return "\n".join(out) + "\n"
@@ -941,6 +1019,12 @@ def parser() -> argparse.ArgumentParser:
     ap.add_argument("--policy-states", type=int,
                     help="states of one policy's evaluation, at most (counted work: the same cut whatever the load; "
                          "default: --max-states); past it the policy is left out of that plan-setting's column")
+    ap.add_argument("--estimate-runs", type=int, default=0,
+                    help="where the optimum has more than --estimate-above states, estimate each policy's gap from "
+                         "this many seeded runs by its regrets over the optimum (unbiased; its standard error "
+                         "recorded and listed) instead of evaluating it exactly (0: always exactly)")
+    ap.add_argument("--estimate-above", type=int, default=1_000_000,
+                    help="the optimum's states past which --estimate-runs applies")
     ap.add_argument("--cheapest-first", action="store_true",
                     help="run the plan-settings in order of the optimum's states --results has for them (those it "
                          "lacks last): the most columns filled in a short run")

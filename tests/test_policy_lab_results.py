@@ -317,3 +317,33 @@ def test_the_count_before_the_work_is_of_the_plan_the_programme_stores():
     r = policy_lab.measure(screws, 1, 2, max_states=merged, only=())
     assert "skipped" not in r and r["states"] == merged
     assert "skipped" in policy_lab.measure(screws, 1, 2, max_states=merged, only=(), python=True)
+
+
+def test_a_gap_estimated_from_runs_is_recorded_as_such_and_near_the_exact_one():
+    """``--estimate-runs``: past ``--estimate-above`` states the fallback's gap comes from seeded runs, with
+    its standard error; it agrees with the exact evaluation, and the documents say which gaps are estimated."""
+    plan = policy_lab.random_plan(policy_lab.random.Random(4), 9, 1, 0.2)
+    exact = policy_lab.measure(plan, 2, 1, "pile", only={"paper"})
+    est = policy_lab.measure(plan, 2, 1, "pile", only={"paper"}, estimate=(300, 0))
+    assert "estimated" not in exact and exact["gaps"]["paper"] > 0
+    e = est["estimated"]["paper"]
+    assert est["gaps"]["paper"] == e["gap"] and e["runs"] == 300 and e["seed"] == policy_lab.ESTIMATE_SEED
+    assert abs(e["gap"] - exact["gaps"]["paper"]) <= 4 * e["se"]
+    assert "estimated" not in policy_lab.measure(plan, 2, 1, "pile", only={"paper"}, estimate=(300, est["states"]))
+    cell = policy_lab.Cell([{**est, "plan": plan.name}], [])
+    (line,) = policy_lab.estimated_text({("9", (2, 1, "pile")): cell}, ["paper"])
+    assert line.startswith(f"- 9, pile, 2 visible, buffer 1, {plan.name}, paper: {policy_lab.pct(e['gap'])}, standard error")
+    row = policy_lab.single_table({("The folder", (2, 1, "pile")): cell}, ["paper"])[-1]
+    assert f"| {policy_lab.pct(e['gap'])} ± {100 * e['se']:.3f}% (300 runs) |" in row
+
+
+def test_an_exact_gap_measured_later_drops_the_earlier_estimate():
+    versions = {"fallback": policy_lab.policy_version("fallback", "pile")}
+    est = {"gaps": {"fallback": 0.004, "paper": 0.02}, "optimum": 2.0, "states": 9, "bin": "pile", "versions": versions,
+           "estimated": {"fallback": {"gap": 0.004, "se": 0.001}}}
+    done = _read([(KEY + "2000000", est),
+                  (KEY + "2000000", {"gaps": {"fallback": 0.003}, "optimum": 2.0, "states": 9, "bin": "pile", "versions": versions})])
+    rec = done[KEY + "2000000"]
+    assert rec["gaps"] == {"fallback": 0.003, "paper": 0.02} and rec["estimated"] == {}
+    kept = _read([(KEY + "2000000", est), (KEY + "2000000", {"gaps": {"lookahead": 0.0}, "optimum": 2.0, "states": 9})])
+    assert kept[KEY + "2000000"]["estimated"] == est["estimated"]

@@ -53,6 +53,7 @@ MAX_LOOK_PARTS = 2_000_000       # part ids in all the looks of one file
 MAX_SEQUENCE_BYTES = 32 << 20    # one sequences file (32 MiB)
 MAX_SEQUENCES = 100_000          # sequences in one file
 MAX_SEQUENCE_ITEMS = 2_000_000   # installations in all the sequences of one file (about 2 s to read)
+MAX_ESTIMATE_RUNS = 100_000      # seeded runs of one estimate (`evaluate --runs`; 1,000 give a standard error near 0.05%)
 
 # ---------------------------------------------------------------- geometry (`opportune derive`)
 MAX_MESH_BYTES = 64 << 20        # one part's mesh file (64 MiB), checked before it is read
@@ -135,6 +136,8 @@ LIMITS = {limit.key: limit for limit in (
     Limit("sequence_bytes", MAX_SEQUENCE_BYTES, "bytes", "a sequences file", "command line"),
     Limit("sequences", MAX_SEQUENCES, "sequences", "sequences in one file", "command line"),
     Limit("sequence_items", MAX_SEQUENCE_ITEMS, "installations", "installations in all the sequences of one file",
+          "command line"),
+    Limit("estimate_runs", MAX_ESTIMATE_RUNS, "runs", "seeded runs of one estimate of a policy's gap (`evaluate --runs`)",
           "command line"),
     Limit("mesh_bytes", MAX_MESH_BYTES, "bytes", "one part's mesh file (`derive`)", "command line"),
     Limit("triangles", MAX_TRIANGLES, "triangles", "triangles of one part's mesh (`derive`)", "command line"),

@@ -518,6 +518,9 @@ PILE_WINDOW_PARTS = tuple(range(4, 21))
 #: a mean of 6-19 ms a decision, within the window's 35 ms share of a 50 ms budget) and bring the gap on
 #: r1-16 under 1% at 1-3 visible; 40,000 cost a quarter more again (docs/decisions.md).
 PILE_WINDOW_STATES = 30_000
+#: Looks one run of a gap's estimate (policies/regret.py) may take before the policy is said not to finish
+#: (it shakes at a state forever): a run of a 111-part plan with one location takes about 1,200.
+REGRET_RUN_LOOKS = 1_000_000
 #: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
 #: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
 PILE_WINDOW_CACHE = 512

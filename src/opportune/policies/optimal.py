@@ -611,6 +611,70 @@ class OptimalSolver:
         return best[1], best_cost
 
 
+    def action_value(self, key: tuple, look: tuple[int, ...], action: Action) -> tuple[float, tuple | None]:
+        """The expected cost to the end of taking ``action`` at a state and look and acting optimally after
+        (the value :meth:`best_action` takes the least of), and the state it leads to.
+
+        Parameters
+        ----------
+        key : tuple
+            The state (:meth:`policy_key`).
+        look : tuple of int
+            The visible units' parts, as plan indices (sorted).
+        action : Action
+            An installation, a buffering or a shake.
+
+        Returns
+        -------
+        (float, tuple or None)
+            The expected cost (the look's own cost not included, as in :meth:`best_action`) and the key
+            after the action (None for a shake: the same state, a fresh look).
+
+        Raises
+        ------
+        ValueError
+            The action is not legal at this state and look.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), visible=1, capacity=1)
+        >>> solver.action_value(solver.start_key(), (2,), Action("buffer", "c"))
+        (4.0, (0, 1, (0, 0, 1)))
+        >>> value, after = solver.action_value(solver.start_key(), (2,), SHAKE)      # dearer than buffering c
+        >>> round(value, 4), after
+        (4.6667, None)
+        """
+        if action.kind == "shake":
+            return self.costs.shake + self._after_shake(key), None
+        for cost, nxt, move in self._moves(key, look):
+            if same_action(move, action):
+                return cost + self._after(key, look, move, nxt), nxt
+        raise ValueError(f"{action} is not a legal move at this state and look")
+
+    def bin_counts(self, key: tuple) -> tuple[int, ...]:
+        """The units of each part still in the bin at a state (not installed, not buffered).
+
+        Parameters
+        ----------
+        key : tuple
+            The state (:meth:`policy_key`).
+
+        Returns
+        -------
+        tuple of int
+            Units per part, in the plan's declaration order.
+
+        Examples
+        --------
+        >>> from opportune import make_plan
+        >>> solver = OptimalSolver(OrderEngine(make_plan(["a", "b", "c"], {"c": ["a", "b"]})), capacity=1)
+        >>> solver.bin_counts(solver.policy_key(0b001, 1, ["c"]))     # a installed, c buffered
+        (0, 1, 0)
+        """
+        return self._bin_counts(key)
+
+
 def shake_loop(best_per_look, look: float, shake: float) -> float:
     """A state's value from its looks: each look of chance ``p`` taking a move of expected cost ``m`` or a
     shake (and a fresh look), the looks acted on those of least ``m``: the least over prefixes of the
