@@ -610,7 +610,6 @@ class OptimalSolver:
             return SHAKE, shake_cost
         return best[1], best_cost
 
-
     def action_value(self, key: tuple, look: tuple[int, ...], action: Action) -> tuple[float, tuple | None]:
         """The expected cost to the end of taking ``action`` at a state and look and acting optimally after
         (the value :meth:`best_action` takes the least of), and the state it leads to.

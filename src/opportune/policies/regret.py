@@ -32,6 +32,10 @@ from opportune.policies.optimal import OutOfTime
 
 __all__ = ["GapEstimate", "estimate_gap"]
 
+#: A regret this small is a tie to rounding (as :meth:`~opportune.policies.optimal.OptimalSolver.best_action`
+#: shakes only where no move is cheaper by more): it counts 0.
+TIE = 1e-12
+
 
 @dataclass(frozen=True)
 class GapEstimate:
@@ -111,8 +115,9 @@ def _run(optimum, policy, rng: random.Random, pile: bool) -> tuple[float, float,
         if window is None or not pile:
             window = tuple(sorted(_draw(rng, in_bin, optimum.weights, optimum.visible)))
         r, action, nxt = _look_regret(optimum, policy, (mask, cons, buffer), window)
+        r = r if r > TIE else 0.0       # within the optimum's own tie tolerance: the same value, to rounding
         looks += 1
-        differing += r > 1e-12
+        differing += r > 0.0
         regret += r
         cost += costs.look
         if nxt is None:
