@@ -521,6 +521,9 @@ PILE_WINDOW_STATES = 30_000
 #: Looks one run of a gap's estimate (policies/regret.py) may take before the policy is said not to finish
 #: (it shakes at a state forever): a run of a 111-part plan with one location takes about 1,200.
 REGRET_RUN_LOOKS = 1_000_000
+#: A regret (policies/regret.py) this small is a tie to rounding, as the optimum's ``best_action`` shakes
+#: only where no move is cheaper by more: it counts 0 (and the look as the optimum's action).
+REGRET_TIE = 1e-12
 #: States whose solved window (every look's action, under 50 kB at 3 visible) the pile window keeps: the
 #: exact evaluation asks a state's looks between its successors', so the recursion's path must fit.
 PILE_WINDOW_CACHE = 512

@@ -26,15 +26,11 @@ from dataclasses import dataclass
 from math import sqrt
 
 from opportune.engine.deadline import as_deadline
-from opportune.engine.tuning import REGRET_RUN_LOOKS
+from opportune.engine.tuning import REGRET_RUN_LOOKS, REGRET_TIE
 from opportune.policies.evaluate import PolicyStuck
 from opportune.policies.optimal import OutOfTime
 
 __all__ = ["GapEstimate", "estimate_gap"]
-
-#: A regret this small is a tie to rounding (as :meth:`~opportune.policies.optimal.OptimalSolver.best_action`
-#: shakes only where no move is cheaper by more): it counts 0.
-TIE = 1e-12
 
 
 @dataclass(frozen=True)
@@ -115,7 +111,7 @@ def _run(optimum, policy, rng: random.Random, pile: bool) -> tuple[float, float,
         if window is None or not pile:
             window = tuple(sorted(_draw(rng, in_bin, optimum.weights, optimum.visible)))
         r, action, nxt = _look_regret(optimum, policy, (mask, cons, buffer), window)
-        r = r if r > TIE else 0.0       # within the optimum's own tie tolerance: the same value, to rounding
+        r = r if r > REGRET_TIE else 0.0       # within the optimum's own tie tolerance: the same value, to rounding
         looks += 1
         differing += r > 0.0
         regret += r
