@@ -24,6 +24,7 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass
 from math import sqrt
+from statistics import fmean, stdev
 
 from opportune.engine.deadline import as_deadline
 from opportune.engine.tuning import REGRET_RUN_LOOKS, REGRET_TIE
@@ -210,8 +211,7 @@ def estimate_gap(optimum, policy, *, runs: int, seed: int = 0, pile: bool = Fals
                        looks=looks, differing=differing, seed=seed)
 
 
+
 def _mean_se(values: list[float]) -> tuple[float, float]:
-    n = len(values)
-    mean = sum(values) / n
-    var = sum((v - mean) ** 2 for v in values) / (n - 1)
-    return mean, sqrt(var / n)
+    """The mean and its standard error (at least 2 values)."""
+    return fmean(values), stdev(values) / sqrt(len(values))
