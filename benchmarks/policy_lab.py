@@ -135,8 +135,10 @@ POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-bu
 #: a window (one strategy, or one location: the same decisions).  Then sizes up to 20 parts (up to 12 with
 #: several strategies open and one location), and a window predicted to fit that does not raises the
 #: prediction for a smaller one (every setting).  Then ten times the states before a run's first installation.
-BIN_VERSIONS = {("fallback", "pile"): ("pile window, sizes up to 20 parts (12 at 1 location with several open), "
-                                        "a missed prediction retried smaller, ten times the states before a run's first installation")}
+#: Then, with two locations or more and no deadline, three times the states a window (one location as before).
+_PILE_BEFORE_LOCATIONS = ("pile window, sizes up to 20 parts (12 at 1 location with several open), "
+                          "a missed prediction retried smaller, ten times the states before a run's first installation")
+BIN_VERSIONS = {("fallback", "pile"): _PILE_BEFORE_LOCATIONS + "; three times the states with two locations or more"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
@@ -148,7 +150,7 @@ BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ()}     # the current version 
 #: touches only plans of one strategy), in a bin without a version of its own.
 SAME_ON_SEVERAL_STRATEGIES = {"fallback": ()}     # the current version changed those too
 #: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin.
-BIN_SAME_AT: dict = {("fallback", "pile"): {}}     # the current version changed every setting
+BIN_SAME_AT: dict = {("fallback", "pile"): {(visible, 1): (_PILE_BEFORE_LOCATIONS,) for visible in (1, 2, 3)}}
 
 
 def policy_version(name: str, bin: str) -> str | None:
@@ -885,7 +887,10 @@ def document(table: dict, groups: list[str], names, n_plans: int, done_cpu: floa
            f"Gap of each policy's exact expected time to the optimum's, per size and setting, over {n_plans} random "
            "plans a size (a third with two strategies): the mean and the largest. `lookahead` is the default "
            "policy; `fallback` the default with its exact optimum switched off (`--without-optimum`): what "
-           "decides where the optimum's programme does not fit; `paper` the paper's rule. A plan-setting is "
+           "decides where the optimum's programme does not fit; `paper` the paper's rule. Each decides without a "
+           "decision budget (within one, the frontier windows keep their usual state caps: without one they hold "
+           "more before a run's first installation, and in the pile with two buffer locations or more; "
+           "`opportune.engine.tuning`). A plan-setting is "
            "skipped when the optimum's programme is over the lab's state cap (counted before the work) or time, "
            "or was not run, and listed below; a number in brackets is how many plans a column covers where "
            "fewer than the row's.", "", *full_table(random_cells, names)]

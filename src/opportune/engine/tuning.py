@@ -580,6 +580,22 @@ PILE_SEVERAL_LOCATIONS = 2
 #: stops a larger window (the last size finished decides) and each open strategy's windows get their share
 #: of the time left (policies/lumped.py).
 PILE_SEVERAL_FACTOR = 3
+#: Where the buffer has at least this many locations, without a deadline, the pile window's programme may
+#: hold PILE_LOCATIONS_FACTOR times the states it may hold elsewhere (policies/pile_window.py): each location
+#: multiplies the buffered combinations a window keeps, so the same cap holds fewer parts, and the gap is made
+#: where a window too small buffers a part the optimum would not (a shake is dearer to it than to the
+#: optimum: its lumped others wait unused).  Within a budget the cap is the usual one (the deadline would cut
+#: the larger window and leave the smallest deciding).  With one location the cap and the decisions are as before.
+PILE_MORE_LOCATIONS = 2
+#: See PILE_MORE_LOCATIONS.  Along 200 seeded runs (regrets over the pile's optimum, policies/regret.py) a cap
+#: of 100,000 (the other factors on top) put r26-20x2 at 1 visible and 3 locations at +0.107% from +0.903%.
+#: Three times the cap, in the policy lab (benchmarks/policy_lab.py, the rows above 150,000 states estimated
+#: from 500 runs): r26-20x2 +0.916% -> +0.171%, r2-20x2 there +0.711% -> +0.112%, r23-16x2 at 3 visible and
+#: 2 locations +0.729% -> +0.072%, r25-20 at 2 and 3 +0.696% -> +0.266%, r23-16x2 at 2 and 3 +0.688% ->
+#: +0.013%, r17-20x2 at 1 and 2 +0.682% -> +0.113%, r12-20 at 2 and 2 +0.559% -> +0.041%.  It costs the
+#: decisions without a budget: along a seeded run on KILBRID a mean of 9-13 ms -> 22-81 ms of CPU (TONGE70
+#: 27-60 ms), the largest under 1 s; within a 50 ms budget as before (docs/decisions.md).
+PILE_LOCATIONS_FACTOR = 3
 #: Before a run's first installation (nothing installed: states every run passes through, its start again
 #: after each shake there), without a deadline, a pile window's programme may hold PILE_START_FACTOR times
 #: the states it may hold elsewhere (policies/pile_window.py).  Exact in the policy lab

@@ -34,7 +34,9 @@ largest predicted to fit
 counted states, the same decision on every machine), :data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`
 times more where several strategies are open and the buffer has two locations or more
 (:meth:`PileWindow._cap`: there a window keeps every strategy it is closed in and each buffered combination,
-and the moves that close a strategy are decided), of at most
+and the moves that close a strategy are decided), :data:`~opportune.engine.tuning.PILE_LOCATIONS_FACTOR`
+times more again where the buffer has two locations or more and there is no deadline (each location
+multiplies the buffered combinations a window keeps; within a budget the cap is the usual one), of at most
 :data:`~opportune.engine.tuning.PILE_DEEPER_PARTS` parts where a move keeping several open is valued a look
 deeper (:meth:`PileWindow._sizes`), and :data:`~opportune.engine.tuning.PILE_START_FACTOR` times more
 before a run's first installation, without a deadline (nothing installed: the states every run passes
@@ -306,16 +308,26 @@ class PileWindow(LumpedWindow):
     #: See :attr:`several_locations` (:data:`~opportune.engine.tuning.PILE_SEVERAL_FACTOR`; 1: no more).
     several_factor: int = tuning.PILE_SEVERAL_FACTOR
 
+    #: Where the buffer has at least this many locations, without a deadline, a window's programme may hold
+    #: :attr:`locations_factor` times ``max_states`` (:data:`~opportune.engine.tuning.PILE_MORE_LOCATIONS`).
+    more_locations: float = tuning.PILE_MORE_LOCATIONS
+    #: See :attr:`more_locations` (:data:`~opportune.engine.tuning.PILE_LOCATIONS_FACTOR`; 1: no more).
+    locations_factor: int = tuning.PILE_LOCATIONS_FACTOR
+
     def _cap(self, parts: int, consistent: int, mask: int) -> int:
         """``max_states``, times :attr:`several_factor` where several strategies are open and the buffer has
         :attr:`several_locations` or more: there a window of one strategy's frontier keeps every strategy
         it is closed in and each buffered combination, so the same cap holds fewer parts, while the
         decisions that close a strategy are the ones the gap comes from (a run meets few such states).
-        Times :meth:`~opportune.policies.lumped.LumpedWindow._start` (before a run's first installation,
-        without a deadline).  O(1)."""
+        Times :attr:`locations_factor` where the buffer has :attr:`more_locations` or more and there is no
+        deadline (each location multiplies the buffered combinations; within a budget the deadline would cut
+        the larger window).  Times :meth:`~opportune.policies.lumped.LumpedWindow._start` (before a run's
+        first installation, without a deadline).  O(1)."""
         locations = float("inf") if self.capacity is None else self.capacity
         several = consistent.bit_count() > 1 and locations >= self.several_locations
-        return self.max_states * (self.several_factor if several else 1) * self._start(mask)
+        more = locations >= self.more_locations and as_deadline(self.deadline).at == float("inf")
+        return (self.max_states * (self.several_factor if several else 1) * (self.locations_factor if more else 1)
+                * self._start(mask))
 
     #: Before a run's first installation (nothing installed), without a deadline, a window's programme may
     #: hold this many times more (:data:`~opportune.engine.tuning.PILE_START_FACTOR`; 1: no more).
