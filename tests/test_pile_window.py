@@ -552,8 +552,8 @@ def test_before_a_run_s_first_installation_without_a_deadline_the_windows_hold_m
 def test_with_two_locations_or_more_and_no_deadline_the_window_holds_more_states():
     """Each buffer location multiplies the buffered combinations a window keeps, so the same cap holds fewer
     parts: with three locations and no deadline the window's programme may hold PILE_LOCATIONS_FACTOR times
-    the states, exact on a 12-part plan of the lab's (1 visible, a cap of 1,500 states): +1.32% over the pile
-    optimum -> +0.54%.  With a deadline (a budget) the cap and every decision are the usual ones (the deadline
+    the states, exact on a 12-part plan drawn by the lab's generator (1 visible, a cap of 1,500 states):
+    +1.32% over the pile optimum -> +0.54%.  With a deadline (a budget) the cap and every decision are the usual ones (the deadline
     would cut the larger window), and so they are with one location."""
     from opportune.engine.tuning import PILE_LOCATIONS_FACTOR
 
