@@ -50,8 +50,17 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def _distinct_free_ports() -> tuple[int, int]:
+    """Two TCP ports free on 127.0.0.1 now and different from each other (both held while picking)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as a, socket.socket(socket.AF_INET, socket.SOCK_STREAM) as b:
+        a.bind(("127.0.0.1", 0))
+        b.bind(("127.0.0.1", 0))
+        return a.getsockname()[1], b.getsockname()[1]
+
+
 def _healthy(url: str) -> bool:
     """True if ``GET url`` answers 200 within a second (standard library only)."""
+    import http.client
     import urllib.error
     import urllib.request
 
@@ -59,7 +68,8 @@ def _healthy(url: str) -> bool:
     try:
         with opener.open(url, timeout=1.0) as r:
             return r.status == 200
-    except (urllib.error.URLError, OSError, ValueError):
+    except (urllib.error.URLError, OSError, ValueError, http.client.HTTPException):
+        # HTTPException: another server (an OPC UA one, say) took the port and answered in its own protocol
         return False
 
 
@@ -170,7 +180,7 @@ class ServiceProcess:
         >>> service.stop()
         """
         for _attempt in range(3):  # another process may take the free port first
-            self.port = free_port()
+            self.port, opcua_port = _distinct_free_ports()
             args = [sys.executable, "-m", "opportune.cli", "serve", "--db", self.db,
                     "--host", "127.0.0.1", "--port", str(self.port), *self.extra_args]
             if self.workers != 1:
@@ -178,7 +188,7 @@ class ServiceProcess:
             if self.max_body:
                 args += ["--max-body", str(self.max_body)]
             if self.opcua:   # it listens before HTTP does: a healthy server is listening on both
-                self.opcua_port = free_port()
+                self.opcua_port = opcua_port
                 args += ["--opcua", "--opcua-endpoint", self.opcua_endpoint, "--opcua-pki", str(self.pki)]
             log = open(self.log_path, "ab")
             # Its own process group: kill() reaches the workers of --workers N too.
