@@ -136,9 +136,12 @@ POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-bu
 #: several strategies open and one location), and a window predicted to fit that does not raises the
 #: prediction for a smaller one (every setting).  Then ten times the states before a run's first installation.
 #: Then, with two locations or more and no deadline, three times the states a window (one location as before).
+#: Then, with one location and several strategies open, a move keeping them open valued by the one-look option
+#: value (as with two locations or more), not a look deeper, and so windows up to 20 parts there too.
 _PILE_BEFORE_LOCATIONS = ("pile window, sizes up to 20 parts (12 at 1 location with several open), "
                           "a missed prediction retried smaller, ten times the states before a run's first installation")
-BIN_VERSIONS = {("fallback", "pile"): _PILE_BEFORE_LOCATIONS + "; three times the states with two locations or more"}
+_PILE_BEFORE_ONE_LOOK = _PILE_BEFORE_LOCATIONS + "; three times the states with two locations or more"
+BIN_VERSIONS = {("fallback", "pile"): _PILE_BEFORE_ONE_LOOK + "; the one-look option value at one location"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
@@ -149,8 +152,14 @@ BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ()}     # the current version 
 #: Earlier versions whose decisions on plans of several strategies are the current version's (a change that
 #: touches only plans of one strategy), in a bin without a version of its own.
 SAME_ON_SEVERAL_STRATEGIES = {"fallback": ()}     # the current version changed those too
-#: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin.
-BIN_SAME_AT: dict = {("fallback", "pile"): {(visible, 1): (_PILE_BEFORE_LOCATIONS,) for visible in (1, 2, 3)}}
+#: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin:
+#: with two locations or more (or unlimited) the look deeper never applied.
+BIN_SAME_AT: dict = {("fallback", "pile"): {(visible, capacity): (_PILE_BEFORE_ONE_LOOK,)
+                                            for visible in (1, 2, 3) for capacity in (2, 3, None)}}
+#: As :data:`BIN_SAME_AT`, on plans of one strategy only: with one location a change of the several-strategy
+#: valuation leaves them, and the locations' factor never touched one location.
+BIN_SAME_AT_ON_ONE_STRATEGY: dict = {("fallback", "pile"): {(visible, 1): (_PILE_BEFORE_ONE_LOOK, _PILE_BEFORE_LOCATIONS)
+                                                            for visible in (1, 2, 3)}}
 
 
 def policy_version(name: str, bin: str) -> str | None:
@@ -398,8 +407,11 @@ def _fresh(rec: dict) -> dict:
         v, bin = versions.get(n), rec.get("bin", "uniform")
         if v == policy_version(n, bin):
             return True
-        if v in BIN_SAME_AT.get((n, bin), {}).get((rec.get("visible"), rec.get("capacity")), ()):
+        setting = (rec.get("visible"), rec.get("capacity"))
+        if v in BIN_SAME_AT.get((n, bin), {}).get(setting, ()):
             return True         # a change that touched other settings only
+        if not rec.get("two_strategies") and v in BIN_SAME_AT_ON_ONE_STRATEGY.get((n, bin), {}).get(setting, ()):
+            return True         # a change that touched other settings' plans of one strategy only
         own = (n, bin) in BIN_VERSIONS
         if rec.get("two_strategies"):   # a change that touched only plans of one strategy
             return not own and v in SAME_ON_SEVERAL_STRATEGIES.get(n, ())

@@ -358,14 +358,18 @@ def test_the_look_deeper_is_checked_on_a_two_strategy_plan_at_its_start(visible,
 
 
 def test_a_move_is_valued_a_look_deeper_only_up_to_its_buffer_locations():
-    """By default only with one location (measured to pay there, to lose with two): past it the one-look
-    option decides (None), within it the look-deeper value."""
+    """By default never (measured to lose with two locations, and since windows go to 20 parts with one
+    too): the one-look option decides (None); with ``look_deeper_locations`` = 1, within one location the
+    look-deeper value, past it the one-look option."""
     engine = OrderEngine(make_plan(list("abcd"), strategies={"s": {"b": ["a"], "c": ["b"]}, "t": {"b": ["c"], "a": ["b"]}}))
     action = Action("buffer", "d")
-    for capacity, deeper in ((1, True), (2, False), (None, False)):
+    for locations, capacity, deeper in ((None, 1, False), (None, 2, False), (1, 1, True), (1, 2, False),
+                                        (1, None, False)):
         window = PileWindow(visible=1, capacity=capacity)
+        if locations is not None:
+            window.look_deeper_locations = locations
         got = window._kept_open(engine, 0, engine.all_strategies, (), ("d",), action, engine.all_strategies)
-        assert (got is not None) == deeper, capacity
+        assert (got is not None) == deeper, (locations, capacity)
 
 
 def _deep_and_near_plan():
@@ -474,12 +478,14 @@ def test_where_a_move_keeping_strategies_open_is_valued_a_look_deeper_the_window
     to and a shake by the state's own: on r20-20x2 at its start, sizes up to 20 valued a buffering by a window
     of the whole plan (exact) against a shake by windows of 18 parts, 8% over the optimum's value, and the
     window buffered where the optimum shakes (+3.8% over the optimum in the lab).  There the sizes stop at
-    PILE_DEEPER_PARTS; with one strategy left, or two locations, they go on."""
+    PILE_DEEPER_PARTS; with one strategy left, or two locations, they go on.  (The look deeper is off by
+    default, PILE_LOOK_DEEPER_LOCATIONS = 0; here on, as a caller may set it.)"""
     from opportune.engine.tuning import PILE_DEEPER_PARTS
 
     plan = lab_plan("r20-20x2")
     engine = OrderEngine(plan)
     window = PileWindow(visible=1, capacity=1, sizes=tuple(range(4, 21)))
+    window.look_deeper_locations = 1
     both = window.tables(engine, 0, engine.all_strategies, ())
     assert PILE_DEEPER_PARTS == 12 and max(t.size for t in both) == 12
     assert window.choose_at(engine, 0, engine.all_strategies, (), 1, ("p18",)).kind == "shake"
@@ -574,3 +580,22 @@ def test_with_two_locations_or_more_and_no_deadline_the_window_holds_more_states
             assert values[2] == values[0] and work[2] == work[0]       # within a budget: the usual cap
         else:
             assert values[0] == values[1] and work[0] == work[1] <= 1_500
+
+
+def test_by_default_a_move_keeping_strategies_open_takes_the_one_look_option_value_at_one_location():
+    """Valued a look deeper (by the windows of the state it leads to) a buffering at one location beat shakes
+    the optimum makes, since windows go to 20 parts: exact on the lab's r29-16x2 (two strategies, 1 visible,
+    1 location), +0.325% over the pile optimum with the look deeper, +0.000% with the one-look option value,
+    the default (PILE_LOOK_DEEPER_LOCATIONS = 0)."""
+    from opportune.engine.tuning import PILE_LOOK_DEEPER_LOCATIONS
+
+    assert PileWindow.look_deeper_locations == PILE_LOOK_DEEPER_LOCATIONS == 0
+    engine = OrderEngine(lab_plan("r29-16x2", 16, 16))
+    best = pile_solver(engine, visible=1, capacity=1).value()
+    values = {}
+    for locations in (1, PILE_LOOK_DEEPER_LOCATIONS):
+        window = PileWindow(visible=1, capacity=1)
+        window.look_deeper_locations = locations
+        values[locations] = PileSolver(engine, window, visible=1, capacity=1).value()
+    assert best * (1 + 1e-9) >= values[0] >= best * (1 - 1e-9)
+    assert values[1] > best * 1.002

@@ -205,6 +205,36 @@ def test_a_change_of_one_strategys_decisions_keeps_the_gaps_of_several_and_of_se
     assert policy_lab._fresh({**pile, "visible": 2})["gaps"] == {}
     assert policy_lab._fresh({**pile, "versions": {"fallback": "old"}})["gaps"] == {}    # the uniform list: not here
 
+def test_an_older_version_counts_on_one_strategy_plans_in_the_settings_named_for_them_alone(monkeypatch):
+    """A change of the several-strategy decisions at one location: BIN_SAME_AT_ON_ONE_STRATEGY keeps the older
+    gaps of one-strategy plans in the settings it names, not those of two-strategy plans, nor elsewhere."""
+    monkeypatch.setitem(policy_lab.BIN_VERSIONS, ("fallback", "pile"), "new pile")
+    monkeypatch.setitem(policy_lab.BIN_SAME_AT, ("fallback", "pile"), {})
+    monkeypatch.setitem(policy_lab.BIN_SAME_AT_ON_ONE_STRATEGY, ("fallback", "pile"), {(1, 1): ("old pile",)})
+    one = {"gaps": {"fallback": 0.01}, "versions": {"fallback": "old pile"}, "two_strategies": False, "bin": "pile",
+           "visible": 1, "capacity": 1}
+    assert policy_lab._fresh(one)["gaps"] == {"fallback": 0.01}
+    assert policy_lab._fresh({**one, "two_strategies": True})["gaps"] == {}
+    assert policy_lab._fresh({**one, "capacity": 2})["gaps"] == {}
+    assert policy_lab._fresh({**one, "versions": {"fallback": "older"}})["gaps"] == {}
+
+
+def test_the_current_pile_version_keeps_what_its_change_did_not_touch():
+    """The one-look option at one location changed only two-strategy plans there: every other pile gap of the
+    version before stays current, and at two locations or more the one before that (the locations' factor)
+    does not."""
+    before = policy_lab._PILE_BEFORE_ONE_LOOK
+    rec = {"gaps": {"fallback": 0.01}, "versions": {"fallback": before}, "bin": "pile"}
+    for visible in (1, 2, 3):
+        for capacity in (1, 2, 3, None):
+            for two in (False, True):
+                kept = policy_lab._fresh({**rec, "visible": visible, "capacity": capacity, "two_strategies": two})
+                assert (kept["gaps"] != {}) == (capacity != 1 or not two), (visible, capacity, two)
+    older = {**rec, "versions": {"fallback": policy_lab._PILE_BEFORE_LOCATIONS}, "visible": 1, "two_strategies": False}
+    assert policy_lab._fresh({**older, "capacity": 1})["gaps"] == {"fallback": 0.01}
+    assert policy_lab._fresh({**older, "capacity": 2})["gaps"] == {}
+
+
 def test_a_policy_skipped_at_another_version_is_run_again(monkeypatch):
     """A policy skipped (out of time, or past a counted cut) at an earlier version is not a reason to leave its
     plan-setting alone: the skip is dropped as a stale gap is, and the policy is missing again; a skip at the

@@ -536,8 +536,14 @@ PILE_OPTION_LOOKS = 2_000
 #: the windows of the state it leads to) with at most this many buffer locations; with more, by the one-look
 #: option value (policies/pile_window.py).  Measured: with 1 location, exact, the worst 20-part two-strategy
 #: plan +1.951% -> +0.776%; with 2 locations, along 40 seeded runs, it made r2-16x2 and r2-20x2 worse at 1-3
-#: visible (+0.67% -> +2.14% at 1 visible on r2-16x2; docs/decisions.md).
-PILE_LOOK_DEEPER_LOCATIONS = 1
+#: visible (+0.67% -> +2.14% at 1 visible on r2-16x2; docs/decisions.md).  Since the look's parts near a
+#: frontier are taken first and windows go to 20 parts, it costs at one location too: along 40 seeded runs at
+#: 1 visible on the lab's 40 two-strategy plans of 16-30 parts, off (0) took the mean gap at 16 parts +0.29%
+#: -> +0.05% (the worst +1.17% -> +0.18%), at 20 +0.51% -> +0.07% (+1.52% -> +0.26%), on seven 25-part
+#: plans +2.04% -> +0.99%, and at 30 r14-30x2 +2.89% -> +0.00%, r17-30x2 +3.74% -> +0.78%, r20-30x2 +1.79%
+#: -> +0.00% (r8-30x2 +0.23% -> +1.09%); at 2 visible the mean +0.30% -> +0.18% at 16 parts, +0.40% ->
+#: +0.37% at 20.  So 0: the one-look option value everywhere (docs/decisions.md).
+PILE_LOOK_DEEPER_LOCATIONS = 0
 #: Where a move keeping several strategies open is valued a look deeper (see PILE_LOOK_DEEPER_LOCATIONS), the
 #: pile window's sizes stop at this many parts: the move is valued by the windows of the state it leads to,
 #: the shake by the state's own, and larger windows make the two differ more.  With sizes up to 20 there,

@@ -23,8 +23,9 @@ call to the compiled core), and looks whose parts one window holds
 share it: the exact evaluation of the policy asks each look of a state between the looks of its
 successors.  Where several strategies are open, a window of each one's frontier decides the look by the
 least of their moves (:class:`~opportune.policies.lumped.LumpedWindow`): a move that keeps several open
-is valued a look deeper, by the windows of the state it leads to (:meth:`PileWindow._kept_open`; with one
-buffer location, where it was measured to pay), and with two locations or more, or two parts a look or more,
+is valued with the one-look option value (or, where a caller sets :attr:`PileWindow.look_deeper_locations`,
+a look deeper, by the windows of the state it leads to: :meth:`PileWindow._kept_open`; measured to lose by
+default, :data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`), and with two locations or more, or two parts a look or more,
 each strategy's window takes first only the parts of the look near its frontier (:meth:`PileWindow._forced_in`: a part deep in that
 strategy's order is one of its others, not the chain below it), and
 the shake less the value of keeping several open, computed over the fresh looks of their parts
@@ -44,7 +45,7 @@ through, its start again after each shake there; within a budget the cap is the 
 fits, or past the deadline, the base rule decides.
 
 Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
---policies fallback``) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
+--policies fallback``; 16-30 parts) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
 """
 
 from __future__ import annotations

@@ -59,18 +59,23 @@ def _distinct_free_ports() -> tuple[int, int]:
 
 
 def _healthy(url: str) -> bool:
-    """True if ``GET url`` answers 200 within a second (standard library only)."""
+    """True if ``GET url`` answers 200 within a second (standard library only; loopback, so no proxy).  A
+    server that answers in another protocol (an OPC UA one took the port first, say) is not healthy."""
     import http.client
-    import urllib.error
-    import urllib.request
+    import urllib.parse
 
-    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # loopback: never through a proxy
+    where = urllib.parse.urlsplit(url)
     try:
-        with opener.open(url, timeout=1.0) as r:
-            return r.status == 200
-    except (urllib.error.URLError, OSError, ValueError, http.client.HTTPException):
-        # HTTPException: another server (an OPC UA one, say) took the port and answered in its own protocol
+        conn = http.client.HTTPConnection(where.hostname, where.port, timeout=1.0)
+    except (ValueError, OSError):
         return False
+    try:
+        conn.request("GET", where.path or "/")
+        return conn.getresponse().status == 200
+    except (OSError, ValueError, http.client.HTTPException):
+        return False
+    finally:
+        conn.close()         # whatever answered: no socket left to the garbage collector
 
 
 def _listening(port: int) -> bool:
