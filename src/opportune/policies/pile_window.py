@@ -44,8 +44,8 @@ before a run's first installation, without a deadline (nothing installed: the st
 through, its start again after each shake there; within a budget the cap is the usual one); where none
 fits, or past the deadline, the base rule decides.
 
-Measured against the pile's optimum on 16-20-part plans (``benchmarks/policy_lab.py --bins pile
---policies fallback``; 16-30 parts) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
+Measured against the pile's optimum on the lab's plans of 16-30 parts (``benchmarks/policy_lab.py --bins pile
+--policies fallback``) and per decision on KILBRID (``benchmarks/bench_fallback.py``).
 """
 
 from __future__ import annotations
