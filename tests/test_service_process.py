@@ -39,8 +39,8 @@ class ForeignServer:
                 return
             with conn:
                 conn.recv(4096)
+                self.answered += 1      # before the reply: the client may be done as soon as it has it
                 conn.sendall(self.REPLY)
-                self.answered += 1
 
     def close(self):
         self.sock.close()
@@ -60,15 +60,15 @@ def test_a_port_answered_in_another_protocol_is_not_healthy(foreign):
 
 def test_the_two_ports_picked_for_http_and_opcua_differ():
     for _ in range(200):
-        http_port, opcua_port = testing._distinct_free_ports()
+        http_port, opcua_port = testing._free_ports(2)
         assert http_port != opcua_port
 
 
 def test_the_service_starts_again_when_its_first_port_was_taken_by_another_protocol(foreign, tmp_path,
                                                                                    monkeypatch):
-    real = testing._distinct_free_ports
-    picks = [(foreign.port, real()[1])]
-    monkeypatch.setattr(testing, "_distinct_free_ports", lambda: picks.pop() if picks else real())
+    real = testing._free_ports
+    picks = [(foreign.port, real(2)[1])]
+    monkeypatch.setattr(testing, "_free_ports", lambda n: picks.pop() if picks else real(n))
     with testing.ServiceProcess(tmp_path / "s.db") as service:
         assert service.port != foreign.port
         assert testing._healthy(service.url + "/healthz")

@@ -22,6 +22,7 @@ the supervisor and every worker at once.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -45,17 +46,16 @@ def free_port() -> int:
     >>> 0 < free_port() < 65536
     True
     """
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return _free_ports(1)[0]
 
 
-def _distinct_free_ports() -> tuple[int, int]:
-    """Two TCP ports free on 127.0.0.1 now and different from each other (both held while picking)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as a, socket.socket(socket.AF_INET, socket.SOCK_STREAM) as b:
-        a.bind(("127.0.0.1", 0))
-        b.bind(("127.0.0.1", 0))
-        return a.getsockname()[1], b.getsockname()[1]
+def _free_ports(n: int) -> tuple[int, ...]:
+    """``n`` TCP ports free on 127.0.0.1 now, all different (every socket held while the next is picked)."""
+    with contextlib.ExitStack() as held:
+        socks = [held.enter_context(socket.socket(socket.AF_INET, socket.SOCK_STREAM)) for _ in range(n)]
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return tuple(s.getsockname()[1] for s in socks)
 
 
 def _healthy(url: str) -> bool:
@@ -67,7 +67,7 @@ def _healthy(url: str) -> bool:
     where = urllib.parse.urlsplit(url)
     try:
         conn = http.client.HTTPConnection(where.hostname, where.port, timeout=1.0)
-    except (ValueError, OSError):
+    except ValueError:          # not a port number in the URL
         return False
     try:
         conn.request("GET", where.path or "/")
@@ -185,7 +185,7 @@ class ServiceProcess:
         >>> service.stop()
         """
         for _attempt in range(3):  # another process may take the free port first
-            self.port, opcua_port = _distinct_free_ports()
+            self.port, opcua_port = _free_ports(2)
             args = [sys.executable, "-m", "opportune.cli", "serve", "--db", self.db,
                     "--host", "127.0.0.1", "--port", str(self.port), *self.extra_args]
             if self.workers != 1:
