@@ -220,19 +220,22 @@ def test_an_older_version_counts_on_one_strategy_plans_in_the_settings_named_for
 
 
 def test_the_current_pile_version_keeps_what_its_change_did_not_touch():
-    """The one-look option at one location changed only two-strategy plans there: every other pile gap of the
-    version before stays current, and at two locations or more the one before that (the locations' factor)
-    does not."""
-    before = policy_lab._PILE_BEFORE_ONE_LOOK
-    rec = {"gaps": {"fallback": 0.01}, "versions": {"fallback": before}, "bin": "pile"}
-    for visible in (1, 2, 3):
-        for capacity in (1, 2, 3, None):
-            for two in (False, True):
-                kept = policy_lab._fresh({**rec, "visible": visible, "capacity": capacity, "two_strategies": two})
-                assert (kept["gaps"] != {}) == (capacity != 1 or not two), (visible, capacity, two)
+    """The locations' factor at one location changed every plan there: every pile gap of the two versions
+    before stays current with two locations or more (or unlimited), none with one location; the version before
+    those (the locations' factor at two or more) nowhere."""
+    rec = {"gaps": {"fallback": 0.01}, "bin": "pile"}
+    for before in (policy_lab._PILE_BEFORE_ONE_LOCATION, policy_lab._PILE_BEFORE_ONE_LOOK):
+        for visible in (1, 2, 3):
+            for capacity in (1, 2, 3, None):
+                for two in (False, True):
+                    kept = policy_lab._fresh({**rec, "versions": {"fallback": before}, "visible": visible,
+                                              "capacity": capacity, "two_strategies": two})
+                    assert (kept["gaps"] != {}) == (capacity != 1), (before, visible, capacity, two)
     older = {**rec, "versions": {"fallback": policy_lab._PILE_BEFORE_LOCATIONS}, "visible": 1, "two_strategies": False}
-    assert policy_lab._fresh({**older, "capacity": 1})["gaps"] == {"fallback": 0.01}
-    assert policy_lab._fresh({**older, "capacity": 2})["gaps"] == {}
+    for capacity in (1, 2, None):
+        assert policy_lab._fresh({**older, "capacity": capacity})["gaps"] == {}
+    assert policy_lab.policy_version("fallback", "pile") not in (policy_lab._PILE_BEFORE_ONE_LOCATION,
+                                                                 policy_lab._PILE_BEFORE_ONE_LOOK)
 
 
 def test_a_policy_skipped_at_another_version_is_run_again(monkeypatch):

@@ -591,8 +591,15 @@ PILE_SEVERAL_FACTOR = 3
 #: multiplies the buffered combinations a window keeps, so the same cap holds fewer parts, and the gap is made
 #: where a window too small buffers a part the optimum would not (a shake is dearer to it than to the
 #: optimum: its lumped others wait unused).  Within a budget the cap is the usual one (the deadline would cut
-#: the larger window and leave the smallest deciding).  With one location the cap and the decisions are as before.
-PILE_MORE_LOCATIONS = 2
+#: the larger window and leave the smallest deciding).  1: with one location too (2 before, where it was
+#: first measured).  Along 40 seeded runs with one location on the lab's two-strategy plans (bench_window_gap.py's
+#: estimate, paired; the mean of 10 plans, the worst): at 1 visible, 16 parts +0.05% -> +0.00% (+0.18% ->
+#: +0.00%), 20 parts +0.07% -> +0.00% (+0.26% -> +0.02%), 25 parts +0.78% -> +0.31% (+2.63% -> +1.43%;
+#: r17-25x2 +2.01% -> +0.80%), 30 parts +0.34% -> +0.34%; at 2 visible 16 parts +0.18% -> +0.03%, 20 parts
+#: +0.37% -> +0.07%; at 3 visible 16 parts +0.30% -> +0.11%, 20 parts (7 plans) +0.64% -> +0.17%
+#: (docs/decisions.md).  It costs decisions without a budget as with more locations (KILBRID, TONGE70 at 1-3
+#: visible: a mean of 12-25 ms -> 19-77 ms of CPU, the largest about 1 s).
+PILE_MORE_LOCATIONS = 1
 #: See PILE_MORE_LOCATIONS.  Along 200 seeded runs (regrets over the pile's optimum, policies/regret.py) a cap
 #: of 100,000 (the other factors on top) put r26-20x2 at 1 visible and 3 locations at +0.107% from +0.903%.
 #: Three times the cap, in the policy lab (benchmarks/policy_lab.py, the rows above 150,000 states estimated

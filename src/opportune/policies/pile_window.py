@@ -36,8 +36,9 @@ counted states, the same decision on every machine), :data:`~opportune.engine.tu
 times more where several strategies are open and the buffer has two locations or more
 (:meth:`PileWindow._cap`: there a window keeps every strategy it is closed in and each buffered combination,
 and the moves that close a strategy are decided), :data:`~opportune.engine.tuning.PILE_LOCATIONS_FACTOR`
-times more again where the buffer has two locations or more and there is no deadline (each location
-multiplies the buffered combinations a window keeps; within a budget the cap is the usual one), of at most
+times more again where there is no deadline and the buffer has a location or more
+(:data:`~opportune.engine.tuning.PILE_MORE_LOCATIONS`: each location multiplies the buffered combinations a
+window keeps, so the same cap holds fewer parts; within a budget the cap is the usual one), of at most
 :data:`~opportune.engine.tuning.PILE_DEEPER_PARTS` parts where a move keeping several open is valued a look
 deeper (:meth:`PileWindow._sizes`), and :data:`~opportune.engine.tuning.PILE_START_FACTOR` times more
 before a run's first installation, without a deadline (nothing installed: the states every run passes
