@@ -138,12 +138,14 @@ POLICY_VERSIONS = {"fallback": "one strategy: windows up to 20 parts; the all-bu
 #: Then, with two locations or more and no deadline, three times the states a window (one location as before).
 #: Then, with one location and several strategies open, a move keeping them open valued by the one-look option
 #: value (as with two locations or more), not a look deeper, and so windows up to 20 parts there too.  Then
-#: three times the states a window with one location too (no deadline).
+#: three times the states a window with one location too (no deadline).  Then, with one location, the start's
+#: ten times the states until three units are installed (no deadline).
 _PILE_BEFORE_LOCATIONS = ("pile window, sizes up to 20 parts (12 at 1 location with several open), "
                           "a missed prediction retried smaller, ten times the states before a run's first installation")
 _PILE_BEFORE_ONE_LOOK = _PILE_BEFORE_LOCATIONS + "; three times the states with two locations or more"
 _PILE_BEFORE_ONE_LOCATION = _PILE_BEFORE_ONE_LOOK + "; the one-look option value at one location"
-BIN_VERSIONS = {("fallback", "pile"): _PILE_BEFORE_ONE_LOCATION + "; three times the states with one location too"}
+_PILE_BEFORE_EARLY = _PILE_BEFORE_ONE_LOCATION + "; three times the states with one location too"
+BIN_VERSIONS = {("fallback", "pile"): _PILE_BEFORE_EARLY + "; at one location the start's cap until three units are installed"}
 #: The version a results line without one measured (lines written before versions were stored).
 UNTAGGED = {"fallback": "step over slack"}
 #: Earlier versions whose decisions on plans of one strategy are the current version's (a change that
@@ -155,8 +157,10 @@ BIN_SAME_ON_ONE_STRATEGY = {("fallback", "pile"): ()}     # the current version 
 #: touches only plans of one strategy), in a bin without a version of its own.
 SAME_ON_SEVERAL_STRATEGIES = {"fallback": ()}     # the current version changed those too
 #: Earlier versions whose decisions in these settings ((visible, capacity)) are the current version's, by bin:
-#: with two locations or more (or unlimited) the look deeper never applied and the locations' factor already did.
-BIN_SAME_AT: dict = {("fallback", "pile"): {(visible, capacity): (_PILE_BEFORE_ONE_LOCATION, _PILE_BEFORE_ONE_LOOK)
+#: with two locations or more (or unlimited) the look deeper never applied, the locations' factor already did,
+#: and the start's cap holds before the first installation only.
+BIN_SAME_AT: dict = {("fallback", "pile"): {(visible, capacity): (_PILE_BEFORE_EARLY, _PILE_BEFORE_ONE_LOCATION,
+                                                                  _PILE_BEFORE_ONE_LOOK)
                                             for visible in (1, 2, 3) for capacity in (2, 3, None)}}
 #: As :data:`BIN_SAME_AT`, on plans of one strategy only (a change of the several-strategy valuation at one
 #: location leaves them); the locations' factor at one location touched them too: none.

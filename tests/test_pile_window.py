@@ -581,6 +581,33 @@ def test_with_a_location_or_more_and_no_deadline_the_window_holds_more_states():
         assert values[2] == values[0] and work[2] == work[0]       # within a budget: the usual cap
 
 
+def test_with_one_location_the_start_s_larger_cap_holds_for_the_first_installations():
+    """With one location and no deadline the start's larger cap (PILE_START_FACTOR) holds until
+    PILE_EARLY_UNITS units are installed: a part buffered early blocks the one location for long, and the
+    usual window misjudges it.  Exact on a 12-part plan drawn by the lab's generator (1 visible, a cap of 1,500
+    states, the locations' factor off): +0.418% over the pile optimum -> +0.000%.  With a deadline every
+    decision is the usual one; with two locations the start's cap holds before the first installation only."""
+    from opportune.engine.tuning import PILE_EARLY_LOCATIONS, PILE_EARLY_UNITS
+
+    engine = OrderEngine(lab_plan("r12-12", 10, 12))
+    assert (PileWindow.early_units, PileWindow.early_locations) == (PILE_EARLY_UNITS, PILE_EARLY_LOCATIONS) == (3, 1)
+
+    def value(capacity, units, deadline=None):
+        window = PileWindow(visible=1, capacity=capacity, sizes=tuple(range(4, 13)), max_states=1_500)
+        window.early_units, window.locations_factor = units, 1          # the locations' own cap: its test
+        window.deadline = None if deadline is None else Deadline.after(deadline)
+        return PileSolver(engine, window, visible=1, capacity=capacity).value(), window
+
+    (usual, _), (early, window) = value(1, 0), value(1, 3)
+    best = pile_solver(engine, visible=1, capacity=1).value()
+    assert best <= early < usual - 0.003 * best
+    assert 1_500 < window.work["most_states"] <= 10 * 1_500
+    assert window._start(0b111) == 10 and window._start(0b1111) == 1
+    assert value(1, 3, 1000.0)[0] == value(1, 0, 1000.0)[0]  # within a budget: the usual cap
+    two = PileWindow(visible=1, capacity=2)
+    assert (two._start(0), two._start(0b1)) == (10, 1)      # two locations: the start's cap at the start only
+
+
 def test_by_default_a_move_keeping_strategies_open_takes_the_one_look_option_value_at_one_location():
     """Valued a look deeper (by the windows of the state it leads to) a buffering at one location beat shakes
     the optimum makes, since windows go to 20 parts: exact on the lab's r29-16x2 (two strategies, 1 visible,

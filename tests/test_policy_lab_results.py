@@ -220,11 +220,13 @@ def test_an_older_version_counts_on_one_strategy_plans_in_the_settings_named_for
 
 
 def test_the_current_pile_version_keeps_what_its_change_did_not_touch():
-    """The locations' factor at one location changed every plan there: every pile gap of the two versions
-    before stays current with two locations or more (or unlimited), none with one location; the version before
-    those (the locations' factor at two or more) nowhere."""
+    """The start's cap for the first installations at one location changed every plan there (as the locations'
+    factor at one location did before it): every pile gap of the three versions before stays current with two
+    locations or more (or unlimited), none with one location; the version before those (the locations' factor
+    at two or more) nowhere."""
     rec = {"gaps": {"fallback": 0.01}, "bin": "pile"}
-    for before in (policy_lab._PILE_BEFORE_ONE_LOCATION, policy_lab._PILE_BEFORE_ONE_LOOK):
+    befores = (policy_lab._PILE_BEFORE_EARLY, policy_lab._PILE_BEFORE_ONE_LOCATION, policy_lab._PILE_BEFORE_ONE_LOOK)
+    for before in befores:
         for visible in (1, 2, 3):
             for capacity in (1, 2, 3, None):
                 for two in (False, True):
@@ -234,8 +236,7 @@ def test_the_current_pile_version_keeps_what_its_change_did_not_touch():
     older = {**rec, "versions": {"fallback": policy_lab._PILE_BEFORE_LOCATIONS}, "visible": 1, "two_strategies": False}
     for capacity in (1, 2, None):
         assert policy_lab._fresh({**older, "capacity": capacity})["gaps"] == {}
-    assert policy_lab.policy_version("fallback", "pile") not in (policy_lab._PILE_BEFORE_ONE_LOCATION,
-                                                                 policy_lab._PILE_BEFORE_ONE_LOOK)
+    assert policy_lab.policy_version("fallback", "pile") not in befores
 
 
 def test_a_policy_skipped_at_another_version_is_run_again(monkeypatch):

@@ -622,6 +622,18 @@ PILE_LOCATIONS_FACTOR = 3
 #: seeded run on KILBRID and TONGE70 took 74-158 ms of CPU (21-51 ms before); within a budget the cap is
 #: the usual one.
 PILE_START_FACTOR = 10
+#: With at most PILE_EARLY_LOCATIONS buffer locations the start's larger cap (PILE_START_FACTOR, no deadline)
+#: holds until PILE_EARLY_UNITS units are installed (policies/pile_window.py): the states of a run's first
+#: installations are few, every run passes through them, and with one location a part buffered there early
+#: blocks it for long (a window of 12 of 24 parts, the others lumped and never installed before it is
+#: complete, valued buffering a deep part above a shake).  Along 40 seeded runs (the lab's two-strategy plans,
+#: one location; docs/decisions.md): 25 parts, 1 visible, a mean of +0.310% -> +0.143% (r11-25x2 +1.43% ->
+#: +0.40%, r17-25x2 +0.80% -> +0.17%), none further; 20 parts at 2 visible +0.073% -> +0.014%; 16 parts at
+#: 3 visible +0.110% -> +0.030%.
+PILE_EARLY_UNITS = 3
+#: See PILE_EARLY_UNITS: the buffer locations up to which it applies (measured at one location; with more,
+#: the other factors already multiply the cap nine times, and the early states are many more).
+PILE_EARLY_LOCATIONS = 1
 #: Predictions of a larger window that fits after the smallest, in the pile's and the weighted bin's
 #: windows (policies/lumped.py; each solves one window, at most the state cap): trying 5, 8, 12 in turn
 #: instead gave +2.8% on a 16-part two-strategy plan.

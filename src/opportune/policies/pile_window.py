@@ -42,7 +42,8 @@ window keeps, so the same cap holds fewer parts; within a budget the cap is the 
 :data:`~opportune.engine.tuning.PILE_DEEPER_PARTS` parts where a move keeping several open is valued a look
 deeper (:meth:`PileWindow._sizes`), and :data:`~opportune.engine.tuning.PILE_START_FACTOR` times more
 before a run's first installation, without a deadline (nothing installed: the states every run passes
-through, its start again after each shake there; within a budget the cap is the usual one); where none
+through, its start again after each shake there; within a budget the cap is the usual one), and with one
+location until :data:`~opportune.engine.tuning.PILE_EARLY_UNITS` units are installed; where none
 fits, or past the deadline, the base rule decides.
 
 Measured against the pile's optimum on the lab's plans of 16-30 parts (``benchmarks/policy_lab.py --bins pile
@@ -334,6 +335,22 @@ class PileWindow(LumpedWindow):
     #: Before a run's first installation (nothing installed), without a deadline, a window's programme may
     #: hold this many times more (:data:`~opportune.engine.tuning.PILE_START_FACTOR`; 1: no more).
     start_factor: int = tuning.PILE_START_FACTOR
+    #: With at most :attr:`early_locations` buffer locations, the start factor holds until this many units are
+    #: installed (:data:`~opportune.engine.tuning.PILE_EARLY_UNITS`; 0: before the first installation only).
+    early_units: int = tuning.PILE_EARLY_UNITS
+    #: See :attr:`early_units` (:data:`~opportune.engine.tuning.PILE_EARLY_LOCATIONS`).
+    early_locations: float = tuning.PILE_EARLY_LOCATIONS
+
+    def _start(self, mask: int) -> int:
+        """:attr:`start_factor` before a run's first installation without a deadline
+        (:meth:`~opportune.policies.lumped.LumpedWindow._start`), and with at most :attr:`early_locations`
+        buffer locations until :attr:`early_units` units are installed (few states, every run passes through
+        them, and a part buffered early blocks the one location for long).  O(1)."""
+        locations = float("inf") if self.capacity is None else self.capacity
+        if (locations <= self.early_locations and mask.bit_count() <= self.early_units
+                and as_deadline(self.deadline).at == float("inf")):
+            return self.start_factor
+        return super()._start(mask)
 
     #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
     #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).
