@@ -380,7 +380,12 @@ class LumpedWindow(DecidesOnMasks):
         """:attr:`start_factor` at a state before a run's first installation (nothing installed: the states
         every run passes through, its start again after each shake there) where there is no deadline, else
         1: within a budget the cap is the usual one.  O(1)."""
-        return self.start_factor if start_factor_applies(mask, self.deadline) else 1
+        return self.start_factor if start_factor_applies(mask, self.deadline, self._start_units()) else 1
+
+    def _start_units(self) -> int:
+        """The installed units up to which :meth:`_start` grants the start factor (0: before the first
+        installation only; a subclass may grant it longer).  O(1)."""
+        return 0
 
     def _sizes(self, consistent: int) -> tuple[int, ...]:
         """The window sizes tried at a state of these open strategies (``sizes``; a subclass may try fewer
@@ -405,6 +410,11 @@ class LumpedWindow(DecidesOnMasks):
     #: (None: every part of the look is taken first, whatever the settings).
     near_units: int | None = None
 
+    @property
+    def locations(self) -> float:
+        """The buffer's locations (infinite where unlimited), as the settings' thresholds compare them.  O(1)."""
+        return float("inf") if self.capacity is None else self.capacity
+
     def _forced_in(self, engine, mask: int, consistent: int, forced: tuple[str, ...], strategy: int) -> tuple[str, ...]:
         """The parts of a look ``strategy``'s window takes first (:meth:`_forced`): all of them with one
         strategy open, or with fewer than :attr:`near_locations` locations and :attr:`near_visible` parts a
@@ -413,9 +423,8 @@ class LumpedWindow(DecidesOnMasks):
         A part deep in one strategy's order, taken in with the chain below it, makes that strategy's window
         its chain, the strategy's own frontier lumped and never installed: the window then values the
         strategy far over what it costs, and a move closing it wins the look.  O(visible)."""
-        locations = float("inf") if self.capacity is None else self.capacity
         if self.near_units is None or consistent.bit_count() < 2 or (
-                locations < self.near_locations and self.visible < self.near_visible):
+                self.locations < self.near_locations and self.visible < self.near_visible):
             return forced
         return near_parts(engine, mask, strategy, forced, self.near_units)
 

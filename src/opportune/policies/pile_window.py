@@ -325,10 +325,10 @@ class PileWindow(LumpedWindow):
         Times :attr:`locations_factor` where the buffer has :attr:`more_locations` or more and there is no
         deadline (each location multiplies the buffered combinations; within a budget the deadline would cut
         the larger window).  Times :meth:`~opportune.policies.lumped.LumpedWindow._start` (before a run's
-        first installation, without a deadline).  O(1)."""
-        locations = float("inf") if self.capacity is None else self.capacity
-        several = consistent.bit_count() > 1 and locations >= self.several_locations
-        more = locations >= self.more_locations and as_deadline(self.deadline).at == float("inf")
+        first installation, without a deadline; with one location until :attr:`early_units` are installed).
+        O(1)."""
+        several = consistent.bit_count() > 1 and self.locations >= self.several_locations
+        more = self.locations >= self.more_locations and as_deadline(self.deadline).at == float("inf")
         return (self.max_states * (self.several_factor if several else 1) * (self.locations_factor if more else 1)
                 * self._start(mask))
 
@@ -341,16 +341,11 @@ class PileWindow(LumpedWindow):
     #: See :attr:`early_units` (:data:`~opportune.engine.tuning.PILE_EARLY_LOCATIONS`).
     early_locations: float = tuning.PILE_EARLY_LOCATIONS
 
-    def _start(self, mask: int) -> int:
-        """:attr:`start_factor` before a run's first installation without a deadline
-        (:meth:`~opportune.policies.lumped.LumpedWindow._start`), and with at most :attr:`early_locations`
-        buffer locations until :attr:`early_units` units are installed (few states, every run passes through
-        them, and a part buffered early blocks the one location for long).  O(1)."""
-        locations = float("inf") if self.capacity is None else self.capacity
-        if (locations <= self.early_locations and mask.bit_count() <= self.early_units
-                and as_deadline(self.deadline).at == float("inf")):
-            return self.start_factor
-        return super()._start(mask)
+    def _start_units(self) -> int:
+        """:attr:`early_units` with at most :attr:`early_locations` buffer locations (few states, every run
+        passes through them, and a part buffered early blocks the one location for long), else 0: the start's
+        cap before the first installation only.  O(1)."""
+        return self.early_units if self.locations <= self.early_locations else 0
 
     #: Buffer locations up to which a move keeping several strategies open is valued a look deeper
     #: (:data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`; 0: never, the one-look option value).
@@ -365,8 +360,7 @@ class PileWindow(LumpedWindow):
         leads to and a shake by the state's own, and the larger the windows, the more the two differ (a
         buffering valued by a window of the whole plan, exact, against a shake valued by windows of 18 of
         20 parts whose lumped others wait unused). O(sizes)."""
-        locations = float("inf") if self.capacity is None else self.capacity
-        if consistent.bit_count() > 1 and locations <= self.look_deeper_locations:
+        if consistent.bit_count() > 1 and self.locations <= self.look_deeper_locations:
             return tuple(s for s in self.sizes if s <= self.deeper_parts)
         return self.sizes
 
@@ -378,8 +372,7 @@ class PileWindow(LumpedWindow):
         there (the deadline, or the cap), or past :data:`~opportune.engine.tuning.PILE_LOOK_DEEPER_LOCATIONS`
         buffer locations: the one-look option decides.  O(parts × windows) and the windows
         of that state (cached)."""
-        locations = float("inf") if self.capacity is None else self.capacity
-        if locations > self.look_deeper_locations:
+        if self.locations > self.look_deeper_locations:
             return None
         plan = engine.plan
         look, after = list(visible), list(buffer)

@@ -301,10 +301,11 @@ def frontier_window(engine, mask: int, consistent: int, buffer, size: int, strat
     return sorted(window), [i for i in order if i not in window]
 
 
-def start_factor_applies(mask: int, deadline) -> bool:
+def start_factor_applies(mask: int, deadline, units: int = 0) -> bool:
     """Whether a window's programme may hold its start factor's states: before a run's first installation
-    (nothing installed: the states every run passes through, its start again after each shake there) and
-    without a deadline (within a budget the cap is the usual one).  O(1).
+    (nothing installed: the states every run passes through, its start again after each shake there), or
+    until ``units`` units are installed, and without a deadline (within a budget the cap is the usual one).
+    O(1).
 
     Parameters
     ----------
@@ -312,6 +313,8 @@ def start_factor_applies(mask: int, deadline) -> bool:
         The installed units.
     deadline : Deadline, float or None
         The decision's deadline (None: none).
+    units : int
+        The installed units up to which it applies (0: before the first installation only).
 
     Returns
     -------
@@ -323,8 +326,10 @@ def start_factor_applies(mask: int, deadline) -> bool:
     >>> from opportune.engine.deadline import Deadline
     >>> start_factor_applies(0, None), start_factor_applies(0b1, None), start_factor_applies(0, Deadline.after(1.0))
     (True, False, False)
+    >>> start_factor_applies(0b111, None, units=3), start_factor_applies(0b1111, None, units=3)
+    (True, False)
     """
-    return mask == 0 and as_deadline(deadline).at == float("inf")
+    return mask.bit_count() <= units and as_deadline(deadline).at == float("inf")
 
 
 @dataclass(frozen=True)
